@@ -1,0 +1,99 @@
+#include "io/file_writer.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <algorithm>
+#include <cstring>
+
+#include "core/status.h"
+
+namespace lodstream::io {
+
+namespace {
+[[noreturn]] void io_fail(const std::string& path, const char* what, int err) {
+  fail(Status::io_error, path + ": cannot " + what + ": " + std::strerror(err));
+}
+}  // namespace
+
+FileWriter::~FileWriter() { discard(); }
+
+void FileWriter::open(const std::string& path, size_t buffer_bytes) {
+  discard();
+  path_ = path;
+  const std::string partial = path + ".partial";
+  fd_ = ::open(partial.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) io_fail(partial, "create", errno);
+  buffer_.resize(buffer_bytes < 4096 ? 4096 : buffer_bytes);
+  used_ = 0;
+  written_ = 0;
+}
+
+void FileWriter::flush() {
+  size_t done = 0;
+  while (done < used_) {
+    const ssize_t n = ::write(fd_, buffer_.data() + done, used_ - done);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      io_fail(path_ + ".partial", "write", errno);
+    }
+    if (n == 0) io_fail(path_ + ".partial", "write", ENOSPC);
+    done += static_cast<size_t>(n);
+  }
+  used_ = 0;
+}
+
+void FileWriter::write(const void* data, size_t bytes) {
+  const char* p = static_cast<const char*>(data);
+  written_ += bytes;
+  while (bytes > 0) {
+    if (used_ == buffer_.size()) flush();
+    const size_t n = std::min(bytes, buffer_.size() - used_);
+    std::memcpy(buffer_.data() + used_, p, n);
+    used_ += n;
+    p += n;
+    bytes -= n;
+  }
+}
+
+void FileWriter::commit() {
+  if (fd_ < 0) return;
+  flush();
+  const std::string partial = path_ + ".partial";
+  if (::close(fd_) != 0) {
+    fd_ = -1;
+    io_fail(partial, "close", errno);
+  }
+  fd_ = -1;
+  if (std::rename(partial.c_str(), path_.c_str()) != 0) io_fail(path_, "rename into place", errno);
+}
+
+void FileWriter::discard() {
+  if (fd_ < 0) return;
+  ::close(fd_);
+  fd_ = -1;
+  ::unlink((path_ + ".partial").c_str());
+}
+
+void write_file_atomic(const std::string& path, std::string_view contents) {
+  FileWriter w(path, contents.size() + 1);
+  w.write(contents);
+  w.commit();
+}
+
+std::string read_small_file(const std::string& path) {
+  FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) io_fail(path, "read", errno);
+  std::string s;
+  char buf[65536];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) s.append(buf, n);
+  const bool bad = std::ferror(f);
+  std::fclose(f);
+  if (bad) io_fail(path, "read", EIO);
+  return s;
+}
+
+}  // namespace lodstream::io

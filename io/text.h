@@ -1,0 +1,76 @@
+// Small, allocation-free helpers for parsing text records in place. Every function takes [p, end) and
+// never reads past end; none of them needs a terminating NUL.
+#pragma once
+
+#include <charconv>
+#include <cstdint>
+#include <cstring>
+#include <string_view>
+
+namespace lodstream::io::text {
+
+inline bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+
+// Bytes that may appear in a text model file: printable ASCII, tabs, line breaks and UTF-8 (>= 0x80).
+inline bool is_text_byte(unsigned char c) { return c >= 0x20 || c == '\t' || c == '\n' || c == '\r' || c == '\f' || c == '\v'; }
+
+inline const char* skip_blanks(const char* p, const char* end) {
+  while (p < end && is_blank(*p)) ++p;
+  return p;
+}
+
+// End of the current line (pointer to its '\n', or end).
+inline const char* line_end(const char* p, const char* end) {
+  const void* nl = std::memchr(p, '\n', static_cast<size_t>(end - p));
+  return nl ? static_cast<const char*>(nl) : end;
+}
+
+// The next blank-separated token of [p, end); advances p past it. Empty at end.
+inline std::string_view next_token(const char*& p, const char* end) {
+  p = skip_blanks(p, end);
+  const char* b = p;
+  while (p < end && !is_blank(*p) && *p != '\n') ++p;
+  return {b, static_cast<size_t>(p - b)};
+}
+
+// Parses a decimal or scientific number at p (after blanks); accepts a leading '+'. Advances p. Returns
+// false if no number starts there or it is followed by something other than a blank or line end.
+// Infinite or NaN spellings ("inf", "nan") parse, so the caller can report them by value.
+inline bool parse_double(const char*& p, const char* end, double* out) {
+  p = skip_blanks(p, end);
+  if (p < end && *p == '+') ++p;
+  auto [q, ec] = std::from_chars(p, end, *out, std::chars_format::general);
+  if (ec != std::errc() && ec != std::errc::result_out_of_range) return false;
+  if (ec == std::errc::result_out_of_range) return false;
+  if (q < end && !is_blank(*q) && *q != '\n') return false;
+  p = q;
+  return true;
+}
+
+// Parses a signed decimal integer at p (after blanks); stops at a non-digit, which the caller checks.
+inline bool parse_int64(const char*& p, const char* end, int64_t* out) {
+  p = skip_blanks(p, end);
+  if (p < end && *p == '+') ++p;
+  auto [q, ec] = std::from_chars(p, end, *out);
+  if (ec != std::errc()) return false;
+  p = q;
+  return true;
+}
+
+inline uint64_t count_newlines(const char* p, const char* end) {
+  uint64_t n = 0;
+  while (p < end) {
+    const void* nl = std::memchr(p, '\n', static_cast<size_t>(end - p));
+    if (!nl) break;
+    ++n;
+    p = static_cast<const char*>(nl) + 1;
+  }
+  return n;
+}
+
+inline bool finite3(const double* v) {
+  // x - x is 0 for finite x and NaN for NaN or infinity.
+  return (v[0] - v[0]) == 0 && (v[1] - v[1]) == 0 && (v[2] - v[2]) == 0;
+}
+
+}  // namespace lodstream::io::text

@@ -1,0 +1,94 @@
+// lodstream: out-of-core level-of-detail generation for huge CAD and architectural scenes.
+//
+// The public interface of the engine. Every entry point returns a Result: no exception crosses this
+// boundary (std::bad_alloc becomes Status::internal with a message). Everything here is safe to call
+// from several threads on distinct inputs and work directories.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace lodstream {
+
+// Process exit codes follow sysexits.h; the CLI returns them unchanged.
+enum class Status : int {
+  ok = 0,
+  usage = 64,      // bad options, unsupported or unrecognised file format
+  bad_data = 65,   // malformed input; the message names the file and the line or byte offset
+  no_input = 66,   // input missing, unreadable, or a directory
+  internal = 70,   // a bug in lodstream (or out of memory); please report it
+  io_error = 74,   // cannot write output or work directory (disk full included)
+  cancelled = 130, // the progress callback returned false (the CLI maps SIGINT to this)
+};
+
+// A short stable name for a status ("ok", "usage", "bad_data", ...).
+const char* status_name(Status status);
+
+// Progress and cancellation. `stage` is a stage name ("ingest", "weld", ...), `fraction` the part of that
+// stage done, in [0, 1]. The callback may be called from several threads at once and must be thread-safe.
+// Returning false cancels the job: the call returns Status::cancelled and leaves no file behind under a
+// final name.
+using ProgressFn = bool (*)(void* user, const char* stage, double fraction);
+
+struct Options {
+  // Worker threads; 0 = all hardware threads. Output bytes never depend on it.
+  unsigned threads = 0;
+  // Cap on the process's peak resident memory (VmHWM, mapped file pages included), in bytes.
+  // 0 = half of physical memory. Minimum: min_memory_bytes. Output bytes never depend on it.
+  uint64_t memory_bytes = 0;
+  // Input bytes per parse chunk; 0 = derived from memory_bytes. Tests force tiny values (down to 1);
+  // output bytes never depend on it.
+  uint64_t chunk_bytes = 0;
+  // Work directory holding the scene store and intermediate files. Empty = a fresh directory under
+  // $TMPDIR (or /tmp), removed when the call returns. A given directory is kept, and a stage whose inputs
+  // and options are unchanged is not redone when the same job runs again on it.
+  std::string work_dir;
+  ProgressFn progress = nullptr;
+  void* progress_user = nullptr;
+};
+
+inline constexpr uint64_t min_memory_bytes = 64ull << 20;
+
+struct Result {
+  Status status = Status::ok;
+  std::string message;  // one line, empty when ok
+  bool ok() const { return status == Status::ok; }
+};
+
+struct StageStats {
+  std::string name;
+  double seconds = 0;
+  uint64_t peak_rss_bytes = 0;  // VmHWM during the stage
+  bool reused = false;          // the stage's output was already in the work directory
+};
+
+// What `lodstream info` reports: ingest statistics of one input file.
+struct SceneInfo {
+  std::string path;
+  std::string format;            // "obj", "ply-ascii", "ply-binary-le", "ply-binary-be", "stl-binary", "stl-ascii"
+  uint64_t file_bytes = 0;
+  uint64_t vertices = 0;         // vertex records as stored (for STL: after welding corners by exact position)
+  uint64_t vertices_welded = 0;  // distinct positions among stored vertices
+  uint64_t unused_vertices = 0;  // stored vertices no triangle, line or point refers to
+  uint64_t polygons = 0;         // input faces (STL facets, OBJ f, PLY face records)
+  uint64_t triangles = 0;        // triangles kept, after fan triangulation and degenerate removal
+  uint64_t degenerate = 0;       // fan triangles dropped: two corners name the same vertex
+  uint64_t lines = 0;            // line segments (OBJ l, PLY edge elements)
+  uint64_t points = 0;           // points (OBJ p)
+  uint64_t objects = 0;          // objects that own at least one primitive (OBJ o/g, STL solids)
+  uint64_t skipped_statements = 0; // recognised but unused records (OBJ vt/vn/usemtl..., PLY other elements)
+  double bbox_min[3] = {0, 0, 0};
+  double bbox_max[3] = {0, 0, 0};
+  std::vector<StageStats> stages;
+  double seconds = 0;
+  uint64_t peak_rss_bytes = 0;
+};
+
+// Ingests `path` into the scene store of the work directory and reports its statistics.
+Result info(const std::string& path, const Options& options, SceneInfo* out);
+
+// Peak resident memory of this process so far (VmHWM), in bytes; 0 if unknown.
+uint64_t peak_rss_bytes();
+
+}  // namespace lodstream
