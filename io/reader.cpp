@@ -75,10 +75,13 @@ std::string lower_extension(const std::string& path) {
   return ext;
 }
 
+// "solid" in any case, after an optional UTF-8 byte-order mark and blanks.
 bool starts_with_solid(std::string_view head) {
-  size_t i = 0;
+  size_t i = head.substr(0, 3) == "\xEF\xBB\xBF" ? 3 : 0;
   while (i < head.size() && text::is_blank(head[i])) ++i;
-  if (head.substr(i, 5) != "solid") return false;
+  if (head.size() < i + 5) return false;
+  for (size_t k = 0; k < 5; ++k)
+    if (std::tolower(static_cast<unsigned char>(head[i + k])) != "solid"[k]) return false;
   return i + 5 == head.size() || text::is_blank(head[i + 5]) || head[i + 5] == '\n';
 }
 

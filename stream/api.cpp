@@ -1,5 +1,120 @@
+// The public entry points: each runs its stages under one task arena and one memory plan, measures
+// time and peak memory per stage, and turns every exception into a Result.
+#include <chrono>
+#include <new>
+
+#include <nlohmann/json.hpp>
+#include <tbb/task_arena.h>
+
+#include "core/status.h"
+#include "io/file_writer.h"
 #include "lodstream/lodstream.h"
+#include "stream/ingest.h"
+#include "stream/memory.h"
+#include "stream/progress.h"
+#include "stream/work_dir.h"
+
 namespace lodstream {
-Result info(const std::string&, const Options&, SceneInfo*) { return {Status::internal, "not yet"}; }
-uint64_t peak_rss_bytes() { return 0; }
+
+namespace {
+
+// Runs `body` as the named stage and appends its time and peak memory to `stages`.
+template <class Body>
+auto run_stage(std::vector<StageStats>* stages, const char* name, Body&& body) {
+  stream::reset_peak_rss();
+  const auto t0 = std::chrono::steady_clock::now();
+  StageStats st;
+  st.name = name;
+  auto finish = [&] {
+    st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    st.peak_rss_bytes = stream::peak_rss_bytes();
+    stages->push_back(st);
+  };
+  if constexpr (std::is_void_v<decltype(body(st))>) {
+    body(st);
+    finish();
+  } else {
+    auto r = body(st);
+    finish();
+    return r;
+  }
 }
+
+template <class Job>
+Result guarded(Job&& job) {
+  try {
+    job();
+    return {};
+  } catch (const Failure& f) {
+    return {f.status(), f.what()};
+  } catch (const std::bad_alloc&) {
+    return {Status::internal, "out of memory (raise --memory or free memory)"};
+  } catch (const std::exception& e) {
+    return {Status::internal, std::string("internal error: ") + e.what()};
+  } catch (...) {
+    return {Status::internal, "internal error"};
+  }
+}
+
+}  // namespace
+
+uint64_t peak_rss_bytes() { return stream::peak_rss_bytes(); }
+
+Result info(const std::string& path, const Options& options, SceneInfo* out) {
+  return guarded([&] {
+    const auto t0 = std::chrono::steady_clock::now();
+    const stream::MemoryPlan plan = stream::plan_memory(options);
+    stream::Progress progress(options);
+    stream::WorkDir work(options.work_dir);
+    const std::string store_dir = work.subdir("store");
+    SceneInfo info;
+    info.path = path;
+    tbb::task_arena arena(static_cast<int>(plan.threads));
+    arena.execute([&] {
+      bool reused = false;
+      const stream::StoreMeta meta = run_stage(&info.stages, "ingest", [&](StageStats& st) {
+        auto m = stream::ingest(path, store_dir, plan, work, progress, &reused);
+        st.reused = reused;
+        return m;
+      });
+      info.vertices_welded = run_stage(&info.stages, "weld-count", [&](StageStats& st) -> uint64_t {
+        if (meta.format.rfind("stl", 0) == 0) return meta.vertices;  // welded during ingest
+        const std::string cache = store_dir + "/weld_count.json";
+        if (reused) {
+          try {
+            const auto j = nlohmann::json::parse(io::read_small_file(cache));
+            st.reused = true;
+            return j.at("vertices_welded").get<uint64_t>();
+          } catch (const std::exception&) {
+          }
+        }
+        const uint64_t n = stream::count_distinct_positions(store_dir, meta, plan, work, progress);
+        io::write_file_atomic(cache, nlohmann::json{{"vertices_welded", n}}.dump() + "\n");
+        return n;
+      });
+      info.format = meta.format;
+      info.file_bytes = meta.source.bytes;
+      info.vertex_records = meta.vertex_records;
+      info.vertices = meta.vertices;
+      info.degenerate_segments = meta.degenerate_segments;
+      info.unused_vertices = meta.unused_vertices;
+      info.polygons = meta.polygons;
+      info.triangles = meta.triangles;
+      info.degenerate = meta.degenerate;
+      info.lines = meta.lines;
+      info.points = meta.points;
+      info.objects = meta.objects_used;
+      info.skipped_statements = meta.skipped;
+      for (int k = 0; k < 3; ++k) {
+        info.bbox_min[k] = meta.bbox.min[k];
+        info.bbox_max[k] = meta.bbox.max[k];
+      }
+    });
+    info.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    info.peak_rss_bytes = 0;
+    for (const StageStats& s : info.stages) info.peak_rss_bytes = std::max(info.peak_rss_bytes, s.peak_rss_bytes);
+    *out = std::move(info);
+  });
+}
+
+}  // namespace lodstream

@@ -1,1 +1,151 @@
-// placeholder
+#include "stream/scene_store.h"
+
+#include <algorithm>
+#include <filesystem>
+
+#include <nlohmann/json.hpp>
+
+#include "core/status.h"
+
+namespace lodstream::stream {
+
+using nlohmann::ordered_json;
+
+StoreWriter::StoreWriter(const std::string& dir) : dir_(dir) {
+  positions_.open(dir + "/positions.f64", 8 << 20);
+  triangles_.open(dir + "/triangles.u32", 8 << 20);
+  triangle_objects_.open(dir + "/triangle_objects.u32", 2 << 20);
+  lines_.open(dir + "/lines.u32");
+  line_objects_.open(dir + "/line_objects.u32");
+  points_.open(dir + "/points.u32");
+  point_objects_.open(dir + "/point_objects.u32");
+}
+
+void StoreWriter::add_vertices(std::span<const double> xyz) {
+  positions_.write_array(xyz);
+  for (size_t i = 0; i < xyz.size(); i += 3) {
+    const uint64_t chunk = vertices_ / store_chunk_elements;
+    if (chunk == vertex_chunk_bbox_.size()) vertex_chunk_bbox_.emplace_back();
+    vertex_chunk_bbox_.back().add(&xyz[i]);
+    bbox_.add(&xyz[i]);
+    ++vertices_;
+  }
+}
+
+void StoreWriter::add_triangles(std::span<const uint32_t> ids, std::span<const uint32_t> objects) {
+  triangles_.write_array(ids);
+  triangle_objects_.write_array(objects);
+  for (size_t i = 0; i < ids.size(); i += 3) {
+    const uint64_t chunk = triangles_count_ / store_chunk_elements;
+    if (chunk == triangle_chunk_range_.size()) triangle_chunk_range_.push_back({UINT32_MAX, 0});
+    auto& r = triangle_chunk_range_.back();
+    const uint32_t lo = std::min({ids[i], ids[i + 1], ids[i + 2]});
+    const uint32_t hi = std::max({ids[i], ids[i + 1], ids[i + 2]});
+    r[0] = std::min(r[0], lo);
+    r[1] = std::max(r[1], hi);
+    ++triangles_count_;
+  }
+}
+
+void StoreWriter::add_lines(std::span<const uint32_t> ids, std::span<const uint32_t> objects) {
+  lines_.write_array(ids);
+  line_objects_.write_array(objects);
+  lines_count_ += ids.size() / 2;
+}
+
+void StoreWriter::add_points(std::span<const uint32_t> ids, std::span<const uint32_t> objects) {
+  points_.write_array(ids);
+  point_objects_.write_array(objects);
+  points_count_ += ids.size();
+}
+
+void StoreWriter::commit(StoreMeta meta) {
+  for (io::FileWriter* w : {&positions_, &triangles_, &triangle_objects_, &lines_, &line_objects_, &points_,
+                            &point_objects_})
+    w->commit();
+  meta.vertices = vertices_;
+  meta.triangles = triangles_count_;
+  meta.lines = lines_count_;
+  meta.points = points_count_;
+  meta.bbox = bbox_;
+  meta.vertex_chunk_bbox = vertex_chunk_bbox_;
+  meta.triangle_chunk_vertex_range = triangle_chunk_range_;
+  io::write_file_atomic(dir_ + "/store.json", store_meta_json(meta));
+}
+
+namespace {
+ordered_json bbox_json(const Bbox& b) {
+  return ordered_json{{"min", b.empty ? std::array<double, 3>{0, 0, 0} : b.min},
+                      {"max", b.empty ? std::array<double, 3>{0, 0, 0} : b.max}};
+}
+}  // namespace
+
+std::string store_meta_json(const StoreMeta& m) {
+  ordered_json j;
+  j["version"] = store_version;
+  j["chunk_elements"] = store_chunk_elements;
+  j["source"] = {{"path", m.source.path}, {"bytes", m.source.bytes}, {"mtime_ns", m.source.mtime_ns}};
+  j["format"] = m.format;
+  j["vertices"] = m.vertices;
+  j["vertex_records"] = m.vertex_records;
+  j["unused_vertices"] = m.unused_vertices;
+  j["triangles"] = m.triangles;
+  j["lines"] = m.lines;
+  j["points"] = m.points;
+  j["polygons"] = m.polygons;
+  j["degenerate"] = m.degenerate;
+  j["degenerate_segments"] = m.degenerate_segments;
+  j["skipped"] = m.skipped;
+  j["objects_used"] = m.objects_used;
+  j["bbox"] = bbox_json(m.bbox);
+  j["object_names"] = m.object_names;
+  ordered_json vc = ordered_json::array();
+  for (const Bbox& b : m.vertex_chunk_bbox) vc.push_back(bbox_json(b));
+  j["vertex_chunks"] = vc;
+  j["triangle_chunks"] = m.triangle_chunk_vertex_range;
+  return j.dump(1) + "\n";
+}
+
+bool read_store_meta(const std::string& dir, StoreMeta* m) {
+  const std::string path = dir + "/store.json";
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) return false;
+  try {
+    const ordered_json j = ordered_json::parse(io::read_small_file(path));
+    if (j.at("version").get<int>() != store_version) return false;
+    if (j.at("chunk_elements").get<uint64_t>() != store_chunk_elements) return false;
+    m->source.path = j.at("source").at("path").get<std::string>();
+    m->source.bytes = j.at("source").at("bytes").get<uint64_t>();
+    m->source.mtime_ns = j.at("source").at("mtime_ns").get<int64_t>();
+    m->format = j.at("format").get<std::string>();
+    m->vertices = j.at("vertices").get<uint64_t>();
+    m->vertex_records = j.at("vertex_records").get<uint64_t>();
+    m->unused_vertices = j.at("unused_vertices").get<uint64_t>();
+    m->triangles = j.at("triangles").get<uint64_t>();
+    m->lines = j.at("lines").get<uint64_t>();
+    m->points = j.at("points").get<uint64_t>();
+    m->polygons = j.at("polygons").get<uint64_t>();
+    m->degenerate = j.at("degenerate").get<uint64_t>();
+    m->degenerate_segments = j.at("degenerate_segments").get<uint64_t>();
+    m->skipped = j.at("skipped").get<uint64_t>();
+    m->objects_used = j.at("objects_used").get<uint64_t>();
+    m->object_names = j.at("object_names").get<std::vector<std::string>>();
+    auto read_bbox = [](const ordered_json& b) {
+      Bbox r;
+      r.min = b.at("min").get<std::array<double, 3>>();
+      r.max = b.at("max").get<std::array<double, 3>>();
+      r.empty = false;
+      return r;
+    };
+    m->bbox = read_bbox(j.at("bbox"));
+    m->bbox.empty = m->vertices == 0;
+    m->vertex_chunk_bbox.clear();
+    for (const auto& b : j.at("vertex_chunks")) m->vertex_chunk_bbox.push_back(read_bbox(b));
+    m->triangle_chunk_vertex_range = j.at("triangle_chunks").get<std::vector<std::array<uint32_t, 2>>>();
+  } catch (const std::exception&) {
+    return false;
+  }
+  return true;
+}
+
+}  // namespace lodstream::stream

@@ -1,1 +1,60 @@
-// placeholder
+#include "stream/work_dir.h"
+
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <system_error>
+
+#include "core/status.h"
+
+namespace lodstream::stream {
+
+namespace fs = std::filesystem;
+
+namespace {
+void make_dirs(const std::string& path) {
+  std::error_code ec;
+  fs::create_directories(path, ec);
+  if (ec) fail(Status::io_error, path + ": cannot create work directory: " + ec.message());
+  if (!fs::is_directory(path, ec)) fail(Status::io_error, path + ": work directory is not a directory");
+  if (access(path.c_str(), W_OK) != 0)
+    fail(Status::io_error, path + ": work directory is not writable: " + std::strerror(errno));
+}
+}  // namespace
+
+WorkDir::WorkDir(const std::string& path) {
+  if (!path.empty()) {
+    path_ = path;
+    make_dirs(path_);
+    return;
+  }
+  const char* base = std::getenv("TMPDIR");
+  std::string tmpl = std::string(base && *base ? base : "/tmp") + "/lodstream-XXXXXX";
+  if (!mkdtemp(tmpl.data()))
+    fail(Status::io_error, tmpl + ": cannot create temporary work directory: " + std::strerror(errno));
+  path_ = tmpl;
+  temporary_ = true;
+}
+
+WorkDir::~WorkDir() {
+  if (temporary_) {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+}
+
+std::string WorkDir::subdir(std::string_view name) const {
+  const std::string p = file(name);
+  make_dirs(p);
+  return p;
+}
+
+std::string WorkDir::scratch(std::string_view stem) const {
+  return file(std::string("scratch-") + std::string(stem) + "-" + std::to_string(getpid()) + "-" +
+              std::to_string(scratch_counter_++));
+}
+
+}  // namespace lodstream::stream

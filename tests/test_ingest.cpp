@@ -1,1 +1,248 @@
+// Pipeline-level tests of ingest: the scene store's bytes for every thread count, memory budget and
+// chunk size; soup welding; degenerate and unused accounting; resuming; cancelling.
 #include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "lodstream/lodstream.h"
+#include "test_util.h"
+
+namespace lodstream {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::map<std::string, std::string> read_dir(const fs::path& dir) {
+  std::map<std::string, std::string> files;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    std::ifstream f(e.path(), std::ios::binary);
+    std::stringstream ss;
+    ss << f.rdbuf();
+    files[e.path().filename().string()] = ss.str();
+  }
+  return files;
+}
+
+SceneInfo run_info(const std::string& input, const std::string& work, unsigned threads, uint64_t memory,
+                   uint64_t chunk) {
+  Options o;
+  o.threads = threads;
+  o.memory_bytes = memory;
+  o.chunk_bytes = chunk;
+  o.work_dir = work;
+  SceneInfo info;
+  const Result r = lodstream::info(input, o, &info);
+  EXPECT_TRUE(r.ok()) << r.message;
+  return info;
+}
+
+// Every combination of {1, 2 threads} x {tiny, default chunks} x {minimum, large memory} gives the same
+// store bytes and the same counts.
+void expect_same_store_everywhere(const std::string& input, const std::vector<uint64_t>& chunk_sizes) {
+  test::TempDir tmp;
+  std::map<std::string, std::string> reference;
+  SceneInfo ref_info;
+  int n = 0;
+  for (unsigned threads : {1u, 2u})
+    for (uint64_t chunk : chunk_sizes)
+      for (uint64_t memory : {min_memory_bytes, uint64_t{2} << 30}) {
+        const std::string work = tmp.file("w" + std::to_string(n++));
+        const SceneInfo info = run_info(input, work, threads, memory, chunk);
+        auto files = read_dir(fs::path(work) / "store");
+        files.erase("weld_count.json");
+        if (reference.empty()) {
+          reference = files;
+          ref_info = info;
+          continue;
+        }
+        SCOPED_TRACE("threads " + std::to_string(threads) + " chunk " + std::to_string(chunk) + " memory " +
+                     std::to_string(memory));
+        EXPECT_EQ(info.triangles, ref_info.triangles);
+        EXPECT_EQ(info.vertices, ref_info.vertices);
+        EXPECT_EQ(info.vertices_welded, ref_info.vertices_welded);
+        ASSERT_EQ(files.size(), reference.size());
+        for (const auto& [name, bytes] : reference) EXPECT_TRUE(files[name] == bytes) << name << " differs";
+      }
+}
+
+TEST(Ingest, SampleSceneStoreIsIdenticalForThreadsChunksAndMemory) {
+  const std::string sample = test::source_dir() + "/tests/data/sample-room.ply";
+  if (!fs::exists(sample)) GTEST_SKIP() << "sample scene not present";
+  expect_same_store_everywhere(sample, {4096, 0});
+}
+
+TEST(Ingest, ObjStoreIsIdenticalForEveryChunkSize) {
+  test::TempDir tmp;
+  std::string obj = "# test\no first\n";
+  for (int i = 0; i < 40; ++i) obj += "v " + std::to_string(i) + " " + std::to_string(i % 7) + " 0.5e1\n";
+  for (int i = 1; i + 2 <= 40; ++i) obj += "f " + std::to_string(i) + " " + std::to_string(i + 1) + " -1\n";
+  obj += "g second\nl 1 2 3\np 4 5\nf 1 1 2\n";
+  const std::string path = tmp.write("scene.obj", obj);
+  expect_same_store_everywhere(path, {1, 7, 64, 0});
+}
+
+TEST(Ingest, StoreColumnsHoldExactlyTheInput) {
+  test::TempDir tmp;
+  // Two squares as quads (4 triangles), a degenerate triangle, a polyline of 3 vertices, a point, an
+  // unused vertex, and two objects.
+  const std::string path = tmp.write("s.obj",
+                                     "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 5 5 5\n"
+                                     "o a\nf 1 2 3 4\nf 1 1 2\n"
+                                     "o b\nf 4 3 2 1\nl 1 2 3\np 4\n");
+  const std::string work = tmp.file("w");
+  const SceneInfo info = run_info(path, work, 2, 0, 0);
+  EXPECT_EQ(info.vertices, 5u);
+  EXPECT_EQ(info.vertices_welded, 5u);
+  EXPECT_EQ(info.unused_vertices, 1u);
+  EXPECT_EQ(info.polygons, 3u);
+  EXPECT_EQ(info.triangles, 4u);
+  EXPECT_EQ(info.degenerate, 1u);
+  EXPECT_EQ(info.lines, 2u);
+  EXPECT_EQ(info.points, 1u);
+  EXPECT_EQ(info.objects, 2u);
+  EXPECT_EQ(info.bbox_max[0], 5.0);
+  auto files = read_dir(fs::path(work) / "store");
+  const std::vector<uint32_t> tri = {0, 1, 2, 0, 2, 3, 3, 2, 1, 3, 1, 0};
+  ASSERT_EQ(files["triangles.u32"].size(), tri.size() * 4);
+  EXPECT_EQ(std::memcmp(files["triangles.u32"].data(), tri.data(), tri.size() * 4), 0);
+  const std::vector<uint32_t> objects = {1, 1, 2, 2};
+  ASSERT_EQ(files["triangle_objects.u32"].size(), 16u);
+  EXPECT_EQ(std::memcmp(files["triangle_objects.u32"].data(), objects.data(), 16), 0);
+  const std::vector<uint32_t> lines = {0, 1, 1, 2};
+  ASSERT_EQ(files["lines.u32"].size(), 16u);
+  EXPECT_EQ(std::memcmp(files["lines.u32"].data(), lines.data(), 16), 0);
+  ASSERT_EQ(files["positions.f64"].size(), 5u * 24);
+  double p[15];
+  std::memcpy(p, files["positions.f64"].data(), sizeof p);
+  EXPECT_EQ(p[6], 1.0);
+  EXPECT_EQ(p[14], 5.0);
+}
+
+TEST(Ingest, WeldCountsDistinctPositionsWithSignedZeroAsOne) {
+  test::TempDir tmp;
+  const std::string path = tmp.write("d.obj", "v 0 0 0\nv -0 0 0\nv 1 0 0\nv 1 0 0\nv 0 1 0\nf 1 3 5\nf 2 4 5\n");
+  const SceneInfo info = run_info(path, tmp.file("w"), 1, 0, 0);
+  EXPECT_EQ(info.vertices, 5u);
+  EXPECT_EQ(info.vertices_welded, 3u);
+  EXPECT_EQ(info.triangles, 2u);
+}
+
+// A binary STL soup: a tetrahedron (4 facets, 12 corners, 4 distinct positions) plus a facet whose
+// corners collapse onto two positions (degenerate after welding).
+std::string tetra_stl() {
+  const float v[4][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  const int f[5][3] = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}, {1, 1, 2}};
+  std::string s(80, ' ');
+  const uint32_t n = 5;
+  s.append(reinterpret_cast<const char*>(&n), 4);
+  for (const auto& t : f) {
+    const float normal[3] = {0, 0, 0};
+    s.append(reinterpret_cast<const char*>(normal), 12);
+    for (int k = 0; k < 3; ++k) s.append(reinterpret_cast<const char*>(v[t[k]]), 12);
+    s.append(2, '\0');
+  }
+  return s;
+}
+
+TEST(Ingest, StlSoupIsWeldedByExactPositionInPositionOrder) {
+  test::TempDir tmp;
+  const std::string path = tmp.write("t.stl", tetra_stl());
+  const std::string work = tmp.file("w");
+  const SceneInfo info = run_info(path, work, 2, 0, 0);
+  EXPECT_EQ(info.vertex_records, 15u);
+  EXPECT_EQ(info.vertices, 4u);
+  EXPECT_EQ(info.vertices_welded, 4u);
+  EXPECT_EQ(info.polygons, 5u);
+  EXPECT_EQ(info.triangles, 4u);
+  EXPECT_EQ(info.degenerate, 1u);
+  auto files = read_dir(fs::path(work) / "store");
+  // Position order: (0,0,0) (0,0,1) (0,1,0) (1,0,0) -> input vertex 0,3,2,1 get ids 0,3,2,1 -> 0,1->3, ...
+  const double expect_pos[12] = {0, 0, 0, 0, 0, 1, 0, 1, 0, 1, 0, 0};
+  ASSERT_EQ(files["positions.f64"].size(), sizeof expect_pos);
+  EXPECT_EQ(std::memcmp(files["positions.f64"].data(), expect_pos, sizeof expect_pos), 0);
+  const uint32_t expect_tri[12] = {0, 2, 3, 0, 3, 1, 3, 2, 1, 0, 1, 2};
+  ASSERT_EQ(files["triangles.u32"].size(), sizeof expect_tri);
+  EXPECT_EQ(std::memcmp(files["triangles.u32"].data(), expect_tri, sizeof expect_tri), 0);
+  expect_same_store_everywhere(path, {1, 50, 0});
+}
+
+TEST(Ingest, SecondRunReusesTheStore) {
+  test::TempDir tmp;
+  const std::string path = tmp.write("r.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  const std::string work = tmp.file("w");
+  const SceneInfo first = run_info(path, work, 1, 0, 0);
+  ASSERT_FALSE(first.stages.empty());
+  EXPECT_FALSE(first.stages[0].reused);
+  const SceneInfo second = run_info(path, work, 1, 0, 0);
+  EXPECT_TRUE(second.stages[0].reused);
+  EXPECT_EQ(second.triangles, 1u);
+  EXPECT_EQ(second.vertices_welded, 3u);
+  // A changed input is ingested again.
+  tmp.write("r.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n");
+  fs::last_write_time(path, fs::last_write_time(path) + std::chrono::seconds(2));
+  const SceneInfo third = run_info(path, work, 1, 0, 0);
+  EXPECT_FALSE(third.stages[0].reused);
+  EXPECT_EQ(third.triangles, 2u);
+}
+
+struct CancelAt {
+  int calls = 0;
+  int cancel_at = 0;
+};
+bool cancel_progress(void* user, const char*, double) {
+  auto* c = static_cast<CancelAt*>(user);
+  return ++c->calls < c->cancel_at;
+}
+
+TEST(Ingest, CancelEndsWithStatusCancelledAndLeavesNoPartialFile) {
+  const std::string sample = test::source_dir() + "/tests/data/sample-room.ply";
+  if (!fs::exists(sample)) GTEST_SKIP() << "sample scene not present";
+  for (int at : {1, 2, 5, 20}) {
+    test::TempDir tmp;
+    CancelAt c;
+    c.cancel_at = at;
+    Options o;
+    o.chunk_bytes = 16384;
+    o.work_dir = tmp.file("w");
+    o.progress = cancel_progress;
+    o.progress_user = &c;
+    SceneInfo info;
+    const Result r = lodstream::info(sample, o, &info);
+    EXPECT_EQ(r.status, Status::cancelled) << "at " << at << ": " << r.message;
+    for (const auto& e : fs::recursive_directory_iterator(tmp.path())) {
+      const std::string name = e.path().filename().string();
+      EXPECT_EQ(name.find(".partial"), std::string::npos) << name;
+      EXPECT_NE(name, "store.json");
+      EXPECT_EQ(name.find("scratch-"), std::string::npos) << name;
+    }
+  }
+}
+
+TEST(Ingest, MemoryBelowMinimumIsAUsageError) {
+  test::TempDir tmp;
+  const std::string path = tmp.write("m.obj", "v 0 0 0\n");
+  Options o;
+  o.memory_bytes = 1 << 20;
+  SceneInfo info;
+  EXPECT_EQ(lodstream::info(path, o, &info).status, Status::usage);
+}
+
+TEST(Ingest, TemporaryWorkDirectoryIsRemoved) {
+  test::TempDir tmp;
+  const std::string path = tmp.write("m.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  const std::string tmpdir = tmp.file("tmp");
+  fs::create_directories(tmpdir);
+  setenv("TMPDIR", tmpdir.c_str(), 1);
+  SceneInfo info;
+  const Result r = lodstream::info(path, Options{}, &info);
+  unsetenv("TMPDIR");
+  ASSERT_TRUE(r.ok()) << r.message;
+  EXPECT_TRUE(fs::is_empty(tmpdir));
+}
+
+}  // namespace
+}  // namespace lodstream

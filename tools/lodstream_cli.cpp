@@ -1,1 +1,213 @@
-int main() { return 0; }
+// lodstream command-line interface: a thin layer over lodstream/lodstream.h.
+// Exit codes are the library's Status values (sysexits.h): 0, 64 usage, 65 bad data, 66 no input,
+// 70 internal, 74 I/O, 130 cancelled.
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <mutex>
+#include <string>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "lodstream/lodstream.h"
+
+namespace {
+
+std::atomic<bool> g_interrupted{false};
+extern "C" void on_sigint(int) { g_interrupted.store(true); }
+
+enum class ProgressMode { automatic, bar, json, none };
+
+struct ProgressState {
+  ProgressMode mode = ProgressMode::none;
+  std::mutex mutex;
+  std::string last_stage;
+  int last_percent = -1;
+  std::chrono::steady_clock::time_point last_time{};
+  bool bar_open = false;
+};
+
+bool on_progress(void* user, const char* stage, double fraction) {
+  auto* st = static_cast<ProgressState*>(user);
+  if (st->mode == ProgressMode::none) return !g_interrupted.load();
+  std::lock_guard lock(st->mutex);
+  const int percent = static_cast<int>(fraction * 100.0);
+  const bool new_stage = st->last_stage != stage;
+  if (!new_stage && percent == st->last_percent) return !g_interrupted.load();
+  const auto now = std::chrono::steady_clock::now();
+  if (!new_stage && percent < 100 && now - st->last_time < std::chrono::milliseconds(100))
+    return !g_interrupted.load();
+  st->last_time = now;
+  st->last_percent = percent;
+  if (st->mode == ProgressMode::json) {
+    std::fprintf(stderr, "%s\n", nlohmann::json{{"stage", stage}, {"fraction", fraction}}.dump().c_str());
+  } else {
+    if (new_stage && st->bar_open) std::fputc('\n', stderr);
+    const int width = 30, filled = percent * width / 100;
+    std::fprintf(stderr, "\r%-12s [%s%s] %3d%%", stage, std::string(static_cast<size_t>(filled), '#').c_str(),
+                 std::string(static_cast<size_t>(width - filled), ' ').c_str(), percent);
+    st->bar_open = true;
+  }
+  st->last_stage = stage;
+  std::fflush(stderr);
+  return !g_interrupted.load();
+}
+
+// "1G", "512M", "64k", "1.5GiB", "1000000" -> bytes (binary multiples).
+bool parse_size(const std::string& text, uint64_t* out) {
+  size_t used = 0;
+  double v = 0;
+  try {
+    v = std::stod(text, &used);
+  } catch (const std::exception&) {
+    return false;
+  }
+  std::string unit = text.substr(used);
+  for (char& c : unit) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  double mult = 1;
+  if (unit.empty() || unit == "b") mult = 1;
+  else if (unit == "k" || unit == "kb" || unit == "kib") mult = 1024.0;
+  else if (unit == "m" || unit == "mb" || unit == "mib") mult = 1024.0 * 1024;
+  else if (unit == "g" || unit == "gb" || unit == "gib") mult = 1024.0 * 1024 * 1024;
+  else if (unit == "t" || unit == "tb" || unit == "tib") mult = 1024.0 * 1024 * 1024 * 1024;
+  else return false;
+  if (!(v >= 0) || v * mult > 1.8e19) return false;
+  *out = static_cast<uint64_t>(v * mult);
+  return true;
+}
+
+std::string human_bytes(uint64_t b) {
+  if (b >= (1ull << 30)) return fmt::format("{:.2f} GiB", static_cast<double>(b) / (1ull << 30));
+  if (b >= (1ull << 20)) return fmt::format("{:.1f} MiB", static_cast<double>(b) / (1ull << 20));
+  if (b >= (1ull << 10)) return fmt::format("{:.1f} KiB", static_cast<double>(b) / (1ull << 10));
+  return fmt::format("{} B", b);
+}
+
+std::string grouped(uint64_t n) {
+  const std::string digits = std::to_string(n);
+  std::string s;
+  for (size_t i = 0; i < digits.size(); ++i) {
+    if (i > 0 && (digits.size() - i) % 3 == 0) s += ',';
+    s += digits[i];
+  }
+  return s;
+}
+
+nlohmann::ordered_json info_json(const lodstream::SceneInfo& in) {
+  nlohmann::ordered_json stages = nlohmann::ordered_json::array();
+  for (const auto& s : in.stages)
+    stages.push_back({{"name", s.name}, {"seconds", s.seconds}, {"peak_rss_bytes", s.peak_rss_bytes}, {"reused", s.reused}});
+  return {{"path", in.path},
+          {"format", in.format},
+          {"file_bytes", in.file_bytes},
+          {"vertex_records", in.vertex_records},
+          {"vertices", in.vertices},
+          {"vertices_welded", in.vertices_welded},
+          {"unused_vertices", in.unused_vertices},
+          {"polygons", in.polygons},
+          {"triangles", in.triangles},
+          {"degenerate", in.degenerate},
+          {"degenerate_segments", in.degenerate_segments},
+          {"lines", in.lines},
+          {"points", in.points},
+          {"objects", in.objects},
+          {"skipped_statements", in.skipped_statements},
+          {"bbox", {{"min", in.bbox_min}, {"max", in.bbox_max}}},
+          {"seconds", in.seconds},
+          {"peak_rss_bytes", in.peak_rss_bytes},
+          {"stages", stages}};
+}
+
+void print_info(const lodstream::SceneInfo& in) {
+  std::printf("file         %s (%s, %s)\n", in.path.c_str(), in.format.c_str(), human_bytes(in.file_bytes).c_str());
+  std::printf("vertices     %s stored, %s after welding by exact position", grouped(in.vertices).c_str(),
+              grouped(in.vertices_welded).c_str());
+  if (in.vertex_records != in.vertices) std::printf(" (%s vertex records in the file)", grouped(in.vertex_records).c_str());
+  if (in.unused_vertices) std::printf(", %s unused", grouped(in.unused_vertices).c_str());
+  std::printf("\n");
+  std::printf("triangles    %s from %s polygons, %s degenerate dropped\n", grouped(in.triangles).c_str(),
+              grouped(in.polygons).c_str(), grouped(in.degenerate).c_str());
+  std::printf("lines        %s", grouped(in.lines).c_str());
+  if (in.degenerate_segments) std::printf(" (%s zero-length dropped)", grouped(in.degenerate_segments).c_str());
+  std::printf("\npoints       %s\n", grouped(in.points).c_str());
+  std::printf("objects      %s\n", grouped(in.objects).c_str());
+  if (in.skipped_statements) std::printf("skipped      %s records not used (texture coordinates, normals, materials, ...)\n", grouped(in.skipped_statements).c_str());
+  std::printf("bbox         min (%g, %g, %g)  max (%g, %g, %g)\n", in.bbox_min[0], in.bbox_min[1], in.bbox_min[2],
+              in.bbox_max[0], in.bbox_max[1], in.bbox_max[2]);
+  for (const auto& s : in.stages)
+    std::printf("stage        %-10s %8.3f s  peak %s%s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str(),
+                s.reused ? "  (reused from work directory)" : "");
+  std::printf("total        %.3f s, peak %s\n", in.seconds, human_bytes(in.peak_rss_bytes).c_str());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"lodstream: out-of-core levels of detail for huge CAD and architectural scenes"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "lodstream 0.1.0");
+
+  lodstream::Options options;
+  std::string memory_text, chunk_text, progress_text = "auto";
+  auto add_common = [&](CLI::App* cmd) {
+    cmd->add_option("--threads", options.threads, "Worker threads (0 = all cores)");
+    cmd->add_option("--memory", memory_text, "Cap on peak resident memory, e.g. 1G (default: half of RAM)");
+    cmd->add_option("--chunk-bytes", chunk_text, "Input bytes per parse chunk (default: from --memory)");
+    cmd->add_option("--work", options.work_dir, "Work directory, kept for inspection and resuming (default: temporary)");
+    cmd->add_option("--progress", progress_text, "Progress on stderr: auto (bar on a terminal), bar, json (NDJSON), none")
+        ->check(CLI::IsMember({"auto", "bar", "json", "none"}));
+  };
+
+  CLI::App* info_cmd = app.add_subcommand("info", "Ingest a scene and print its statistics");
+  std::string input;
+  bool json = false;
+  info_cmd->add_option("FILE", input, "Input scene (.obj, .ply, .stl)")->required();
+  info_cmd->add_flag("--json", json, "Print one JSON object instead of text");
+  add_common(info_cmd);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::fprintf(stderr, "lodstream: %s (see lodstream --help)\n", e.what());
+    return static_cast<int>(lodstream::Status::usage);
+  }
+  if (!memory_text.empty() && !parse_size(memory_text, &options.memory_bytes)) {
+    std::fprintf(stderr, "lodstream: --memory: cannot read '%s' as a size (e.g. 1G, 512M)\n", memory_text.c_str());
+    return static_cast<int>(lodstream::Status::usage);
+  }
+  if (!chunk_text.empty() && (!parse_size(chunk_text, &options.chunk_bytes) || options.chunk_bytes == 0)) {
+    std::fprintf(stderr, "lodstream: --chunk-bytes: cannot read '%s' as a positive size\n", chunk_text.c_str());
+    return static_cast<int>(lodstream::Status::usage);
+  }
+
+  ProgressState progress;
+  progress.mode = progress_text == "json"   ? ProgressMode::json
+                  : progress_text == "bar"  ? ProgressMode::bar
+                  : progress_text == "none" ? ProgressMode::none
+                  : isatty(STDERR_FILENO)   ? ProgressMode::bar
+                                            : ProgressMode::none;
+  options.progress = on_progress;
+  options.progress_user = &progress;
+  std::signal(SIGINT, on_sigint);
+  std::signal(SIGTERM, on_sigint);
+
+  lodstream::SceneInfo info;
+  const lodstream::Result r = lodstream::info(input, options, &info);
+  if (progress.bar_open) std::fputc('\n', stderr);
+  if (!r.ok()) {
+    std::fprintf(stderr, "lodstream: %s\n", r.message.c_str());
+    return static_cast<int>(r.status);
+  }
+  if (json) std::printf("%s\n", info_json(info).dump().c_str());
+  else print_info(info);
+  return 0;
+}

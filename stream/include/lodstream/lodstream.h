@@ -68,12 +68,14 @@ struct SceneInfo {
   std::string path;
   std::string format;            // "obj", "ply-ascii", "ply-binary-le", "ply-binary-be", "stl-binary", "stl-ascii"
   uint64_t file_bytes = 0;
-  uint64_t vertices = 0;         // vertex records as stored (for STL: after welding corners by exact position)
+  uint64_t vertex_records = 0;   // vertex records in the file (for STL: triangle corners)
+  uint64_t vertices = 0;         // vertices as stored (for STL: after welding corners by exact position)
   uint64_t vertices_welded = 0;  // distinct positions among stored vertices
   uint64_t unused_vertices = 0;  // stored vertices no triangle, line or point refers to
   uint64_t polygons = 0;         // input faces (STL facets, OBJ f, PLY face records)
   uint64_t triangles = 0;        // triangles kept, after fan triangulation and degenerate removal
   uint64_t degenerate = 0;       // fan triangles dropped: two corners name the same vertex
+  uint64_t degenerate_segments = 0; // line segments dropped: both ends name the same vertex
   uint64_t lines = 0;            // line segments (OBJ l, PLY edge elements)
   uint64_t points = 0;           // points (OBJ p)
   uint64_t objects = 0;          // objects that own at least one primitive (OBJ o/g, STL solids)
@@ -86,6 +88,8 @@ struct SceneInfo {
 };
 
 // Ingests `path` into the scene store of the work directory and reports its statistics.
+// To measure each stage's peak on its own, the process's VmHWM is reset at each stage boundary
+// (Linux /proc/self/clear_refs); read peak_rss_bytes() before calling if you need the earlier peak.
 Result info(const std::string& path, const Options& options, SceneInfo* out);
 
 // Peak resident memory of this process so far (VmHWM), in bytes; 0 if unknown.

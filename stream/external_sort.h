@@ -1,0 +1,183 @@
+// External merge sort of fixed-size records under a memory budget.
+//
+// Records are pushed into one in-memory buffer; a full buffer is sorted (tbb::parallel_sort) and written
+// to a run file. merge() visits every record in order: straight from the buffer when nothing spilled,
+// otherwise by a k-way heap merge of the runs with one read buffer per run; each run file is deleted as
+// soon as it is exhausted (DuckDB's "free merged runs behind the readers").
+//
+// Determinism: `Less` must be a total order on everything that distinguishes two records (break ties by
+// an id), so the output is the same whatever the buffer size, i.e. whatever the memory budget.
+#pragma once
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdint>
+#include <cstring>
+#include <span>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include <tbb/parallel_sort.h>
+
+#include "core/status.h"
+#include "io/file_writer.h"
+#include "stream/work_dir.h"
+
+namespace lodstream::stream {
+
+template <class Rec, class Less>
+class ExternalSorter {
+  static_assert(std::is_trivially_copyable_v<Rec>, "records are written to disk as bytes");
+
+ public:
+  ExternalSorter(const WorkDir& dir, std::string name, uint64_t memory_bytes, Less less = Less())
+      : dir_(dir), name_(std::move(name)), less_(less) {
+    capacity_ = std::max<uint64_t>(memory_bytes / sizeof(Rec), 1024);
+  }
+  ExternalSorter(const ExternalSorter&) = delete;
+  ExternalSorter& operator=(const ExternalSorter&) = delete;
+  ~ExternalSorter() {
+    for (const Run& r : runs_) ::unlink(r.path.c_str());
+  }
+
+  void push(const Rec& r) {
+    if (buffer_.size() == capacity_) spill();
+    // Reserving does not make pages resident; growing by doubling would briefly hold 1.5x the buffer.
+    if (buffer_.capacity() == 0) buffer_.reserve(static_cast<size_t>(capacity_));
+    buffer_.push_back(r);
+    ++size_;
+  }
+  void push(std::span<const Rec> records) {
+    for (const Rec& r : records) push(r);
+  }
+  uint64_t size() const { return size_; }
+  size_t runs() const { return runs_.size(); }
+
+  // Calls visit(const Rec&) for every record in sorted order. Can be called once.
+  template <class Visit>
+  void merge(Visit&& visit) {
+    if (runs_.empty()) {
+      tbb::parallel_sort(buffer_.begin(), buffer_.end(), less_);
+      for (const Rec& r : buffer_) visit(r);
+      release(buffer_);
+      return;
+    }
+    if (!buffer_.empty()) spill();
+    release(buffer_);
+    const size_t k = runs_.size();
+    const uint64_t per_run = std::max<uint64_t>(capacity_ / (k + 1), 256);
+    std::vector<Reader> readers(k);
+    for (size_t i = 0; i < k; ++i) readers[i].open(runs_[i], per_run);
+    // Min-heap of run indices on their current record; ties go to the lower run so equal records
+    // keep a fixed order.
+    std::vector<size_t> heap;
+    auto greater = [&](size_t a, size_t b) {
+      const Rec& ra = readers[a].current();
+      const Rec& rb = readers[b].current();
+      if (less_(rb, ra)) return true;
+      if (less_(ra, rb)) return false;
+      return a > b;
+    };
+    for (size_t i = 0; i < k; ++i)
+      if (readers[i].valid()) heap.push_back(i);
+    std::make_heap(heap.begin(), heap.end(), greater);
+    while (!heap.empty()) {
+      std::pop_heap(heap.begin(), heap.end(), greater);
+      const size_t i = heap.back();
+      visit(readers[i].current());
+      if (readers[i].advance()) {
+        std::push_heap(heap.begin(), heap.end(), greater);
+      } else {
+        heap.pop_back();
+        readers[i].close();
+      }
+    }
+    runs_.clear();
+  }
+
+ private:
+  struct Run {
+    std::string path;
+    uint64_t records = 0;
+  };
+
+  // Reads one run sequentially through a buffer of `records` records and deletes it when done.
+  class Reader {
+   public:
+    ~Reader() { close(); }
+    void open(const Run& run, uint64_t records) {
+      path_ = run.path;
+      left_ = run.records;
+      fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+      if (fd_ < 0) fail(Status::io_error, path_ + ": cannot open sort run: " + std::strerror(errno));
+      buf_.resize(static_cast<size_t>(std::min<uint64_t>(records, std::max<uint64_t>(left_, 1))));
+      refill();
+    }
+    bool valid() const { return pos_ < len_; }
+    const Rec& current() const { return buf_[pos_]; }
+    bool advance() {
+      if (++pos_ < len_) return true;
+      refill();
+      return pos_ < len_;
+    }
+    void close() {
+      if (fd_ >= 0) {
+        ::close(fd_);
+        ::unlink(path_.c_str());
+        fd_ = -1;
+      }
+      release(buf_);
+    }
+
+   private:
+    void refill() {
+      pos_ = len_ = 0;
+      if (left_ == 0) return;
+      const size_t n = static_cast<size_t>(std::min<uint64_t>(left_, buf_.size()));
+      char* p = reinterpret_cast<char*>(buf_.data());
+      size_t want = n * sizeof(Rec), got = 0;
+      while (got < want) {
+        const ssize_t r = ::read(fd_, p + got, want - got);
+        if (r < 0 && errno == EINTR) continue;
+        if (r <= 0) fail(Status::io_error, path_ + ": cannot read sort run: " + std::strerror(r < 0 ? errno : EIO));
+        got += static_cast<size_t>(r);
+      }
+      len_ = n;
+      left_ -= n;
+    }
+    std::string path_;
+    int fd_ = -1;
+    uint64_t left_ = 0;
+    std::vector<Rec> buf_;
+    size_t pos_ = 0, len_ = 0;
+  };
+
+  template <class V>
+  static void release(V& v) {
+    V().swap(v);
+  }
+
+  void spill() {
+    tbb::parallel_sort(buffer_.begin(), buffer_.end(), less_);
+    Run run{dir_.scratch("sort-" + name_), buffer_.size()};
+    io::FileWriter w(run.path, 4 << 20);
+    w.write(buffer_.data(), buffer_.size() * sizeof(Rec));
+    w.commit();
+    runs_.push_back(std::move(run));
+    buffer_.clear();
+  }
+
+  const WorkDir& dir_;
+  std::string name_;
+  Less less_;
+  uint64_t capacity_ = 0;
+  uint64_t size_ = 0;
+  std::vector<Rec> buffer_;
+  std::vector<Run> runs_;
+};
+
+}  // namespace lodstream::stream

@@ -1,0 +1,95 @@
+// The scene store: what ingest writes and every later stage reads.
+//
+// One directory of flat little-endian columns, each cut into fixed-size chunks of `chunk_elements`
+// elements (the last one shorter), plus store.json with counts, bounding box, object names, the chunk
+// table and the identity of the source file. The chunk size is a constant of the store format, not of the
+// job: the store's bytes are the same for any thread count, memory budget or parse chunk size.
+//
+//   positions.f64          x y z per vertex (double: every input precision is kept exactly)
+//   triangles.u32          3 vertex ids per triangle, input order, degenerate triangles removed
+//   triangle_objects.u32   object id per triangle
+//   lines.u32 / line_objects.u32, points.u32 / point_objects.u32   likewise
+//   store.json             written last: its presence means the store is complete
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "io/file_writer.h"
+
+namespace lodstream::stream {
+
+inline constexpr uint64_t store_chunk_elements = 1 << 20;
+inline constexpr int store_version = 1;
+
+struct Bbox {
+  std::array<double, 3> min{0, 0, 0}, max{0, 0, 0};
+  bool empty = true;
+  void add(const double* p) {
+    if (empty) {
+      min = max = {p[0], p[1], p[2]};
+      empty = false;
+      return;
+    }
+    for (int k = 0; k < 3; ++k) {
+      if (p[k] < min[k]) min[k] = p[k];
+      if (p[k] > max[k]) max[k] = p[k];
+    }
+  }
+};
+
+// Identity of the input a store was made from; a store is reused only when it matches.
+struct SourceId {
+  std::string path;  // absolute
+  uint64_t bytes = 0;
+  int64_t mtime_ns = 0;
+  bool operator==(const SourceId&) const = default;
+};
+
+struct StoreMeta {
+  SourceId source;
+  std::string format;
+  uint64_t vertices = 0, triangles = 0, lines = 0, points = 0;
+  uint64_t vertex_records = 0;  // vertex records in the file (STL: triangle corners before welding)
+  uint64_t polygons = 0, degenerate = 0, degenerate_segments = 0, skipped = 0;
+  uint64_t unused_vertices = 0;
+  std::vector<std::string> object_names;
+  uint64_t objects_used = 0;
+  Bbox bbox;
+  // Chunk table: per vertex chunk its bounding box; per triangle chunk the range of vertex ids it uses.
+  std::vector<Bbox> vertex_chunk_bbox;
+  std::vector<std::array<uint32_t, 2>> triangle_chunk_vertex_range;
+};
+
+class StoreWriter {
+ public:
+  explicit StoreWriter(const std::string& dir);
+  void add_vertices(std::span<const double> xyz);
+  void add_triangles(std::span<const uint32_t> ids, std::span<const uint32_t> objects);
+  void add_lines(std::span<const uint32_t> ids, std::span<const uint32_t> objects);
+  void add_points(std::span<const uint32_t> ids, std::span<const uint32_t> objects);
+  // Renames every column into place, then writes store.json. `meta`'s counts, bbox and chunk table are
+  // filled in from what was written.
+  void commit(StoreMeta meta);
+  uint64_t vertices() const { return vertices_; }
+  const Bbox& bbox() const { return bbox_; }
+
+ private:
+  std::string dir_;
+  io::FileWriter positions_, triangles_, triangle_objects_, lines_, line_objects_, points_, point_objects_;
+  uint64_t vertices_ = 0, triangles_count_ = 0, lines_count_ = 0, points_count_ = 0;
+  Bbox bbox_;
+  std::vector<Bbox> vertex_chunk_bbox_;
+  std::vector<std::array<uint32_t, 2>> triangle_chunk_range_;
+};
+
+// Reads store.json of a complete store; returns false when there is none (or it is unreadable or of
+// another format version), so that the caller rebuilds it.
+bool read_store_meta(const std::string& dir, StoreMeta* meta);
+
+std::string store_meta_json(const StoreMeta& meta);
+
+}  // namespace lodstream::stream

@@ -1,0 +1,34 @@
+// The job's work directory: the scene store and every intermediate file live here, so a stage can be
+// rerun, resumed or inspected on its own. A temporary work directory is removed with the object.
+#pragma once
+
+#include <atomic>
+#include <string>
+#include <string_view>
+
+namespace lodstream::stream {
+
+class WorkDir {
+ public:
+  // Uses `path`, creating it if needed; an empty path makes a fresh temporary directory.
+  // Throws Failure(io_error) if it cannot be created or written.
+  explicit WorkDir(const std::string& path);
+  WorkDir(const WorkDir&) = delete;
+  WorkDir& operator=(const WorkDir&) = delete;
+  ~WorkDir();
+
+  const std::string& path() const { return path_; }
+  std::string file(std::string_view name) const { return path_ + "/" + std::string(name); }
+  // A subdirectory, created if needed.
+  std::string subdir(std::string_view name) const;
+  // A fresh name for a scratch file inside the directory (not created).
+  std::string scratch(std::string_view stem) const;
+  bool temporary() const { return temporary_; }
+
+ private:
+  std::string path_;
+  bool temporary_ = false;
+  mutable std::atomic<uint64_t> scratch_counter_{0};
+};
+
+}  // namespace lodstream::stream
