@@ -31,10 +31,10 @@ void FileWriter::open(const std::string& path, size_t buffer_bytes) {
   written_ = 0;
 }
 
-void FileWriter::flush() {
+void FileWriter::write_through(const char* p, size_t bytes) {
   size_t done = 0;
-  while (done < used_) {
-    const ssize_t n = ::write(fd_, buffer_.data() + done, used_ - done);
+  while (done < bytes) {
+    const ssize_t n = ::write(fd_, p + done, bytes - done);
     if (n < 0) {
       if (errno == EINTR) continue;
       io_fail(path_ + ".partial", "write", errno);
@@ -42,12 +42,22 @@ void FileWriter::flush() {
     if (n == 0) io_fail(path_ + ".partial", "write", ENOSPC);
     done += static_cast<size_t>(n);
   }
+}
+
+void FileWriter::flush() {
+  write_through(buffer_.data(), used_);
   used_ = 0;
 }
 
 void FileWriter::write(const void* data, size_t bytes) {
   const char* p = static_cast<const char*>(data);
   written_ += bytes;
+  if (bytes >= buffer_.size()) {
+    // Large spans go straight to the kernel: copying them through the buffer first costs a memcpy.
+    flush();
+    write_through(p, bytes);
+    return;
+  }
   while (bytes > 0) {
     if (used_ == buffer_.size()) flush();
     const size_t n = std::min(bytes, buffer_.size() - used_);

@@ -34,6 +34,7 @@ class FileWriter {
 
  private:
   void flush();
+  void write_through(const char* p, size_t bytes);
   std::string path_;
   int fd_ = -1;
   std::vector<char> buffer_;

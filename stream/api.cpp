@@ -77,27 +77,28 @@ Result info(const std::string& path, const Options& options, SceneInfo* out) {
         st.reused = reused;
         return m;
       });
-      info.vertices_welded = run_stage(&info.stages, "weld-count", [&](StageStats& st) -> uint64_t {
-        if (meta.format.rfind("stl", 0) == 0) return meta.vertices;  // welded during ingest
-        const std::string cache = store_dir + "/weld_count.json";
+      const stream::Census census = run_stage(&info.stages, "census", [&](StageStats& st) {
+        const std::string cache = store_dir + "/census.json";
         if (reused) {
           try {
             const auto j = nlohmann::json::parse(io::read_small_file(cache));
             st.reused = true;
-            return j.at("vertices_welded").get<uint64_t>();
+            return stream::Census{j.at("vertices_welded").get<uint64_t>(), j.at("unused_vertices").get<uint64_t>()};
           } catch (const std::exception&) {
           }
         }
-        const uint64_t n = stream::count_distinct_positions(store_dir, meta, plan, work, progress);
-        io::write_file_atomic(cache, nlohmann::json{{"vertices_welded", n}}.dump() + "\n");
-        return n;
+        const stream::Census c = stream::census(store_dir, meta, plan, work, progress);
+        io::write_file_atomic(cache, nlohmann::json{{"vertices_welded", c.vertices_welded},
+                                                    {"unused_vertices", c.unused_vertices}}.dump() + "\n");
+        return c;
       });
+      info.vertices_welded = census.vertices_welded;
+      info.unused_vertices = census.unused_vertices;
       info.format = meta.format;
       info.file_bytes = meta.source.bytes;
       info.vertex_records = meta.vertex_records;
       info.vertices = meta.vertices;
       info.degenerate_segments = meta.degenerate_segments;
-      info.unused_vertices = meta.unused_vertices;
       info.polygons = meta.polygons;
       info.triangles = meta.triangles;
       info.degenerate = meta.degenerate;

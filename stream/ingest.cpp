@@ -33,64 +33,99 @@ namespace {
 // Ids are stored as uint32; UINT32_MAX stays free as a marker for later stages.
 constexpr int64_t max_vertices = int64_t{UINT32_MAX};
 
-// Checks references, drops degenerate primitives, narrows ids to uint32 and appends to the store.
-// Also marks which vertices are used, for the unused-vertex count.
+// A chunk's primitives ready for the store: references checked and narrowed to uint32, degenerate
+// primitives dropped and counted. Built in parallel, appended in file order.
+struct Prepared {
+  std::vector<uint32_t> triangles, triangle_objects, lines, line_objects, points, point_objects;
+  std::vector<std::pair<uint64_t, Bbox>> vertex_boxes;
+  std::vector<uint32_t> objects;  // object ids used, in order of change (a small list)
+  uint64_t degenerate = 0, degenerate_segments = 0;
+  int64_t max_ref = -1;
+  bool negative_ref = false;
+
+  void clear() {
+    for (auto* v : {&triangles, &triangle_objects, &lines, &line_objects, &points, &point_objects, &objects}) v->clear();
+    vertex_boxes.clear();
+    degenerate = degenerate_segments = 0;
+    max_ref = -1;
+    negative_ref = false;
+  }
+};
+
+// Narrows `n` primitives of `arity` references each, dropping those that name a vertex twice.
+template <int arity>
+uint64_t narrow_primitives(const std::vector<int64_t>& refs, const std::vector<uint32_t>& objects,
+                           std::vector<uint32_t>* ids, std::vector<uint32_t>* objs, Prepared* p) {
+  const size_t n = objects.size();
+  ids->resize(arity * n);
+  objs->resize(n);
+  uint32_t* out = ids->data();
+  uint32_t* out_obj = objs->data();
+  uint64_t dropped = 0;
+  int64_t hi = p->max_ref, lo = 0;
+  uint32_t last_object = p->objects.empty() ? UINT32_MAX : p->objects.back();
+  for (size_t i = 0; i < n; ++i) {
+    const int64_t* r = &refs[arity * i];
+    bool degenerate = false;
+    if constexpr (arity == 3) degenerate = r[0] == r[1] || r[1] == r[2] || r[0] == r[2];
+    if constexpr (arity == 2) degenerate = r[0] == r[1];
+    if (degenerate) {
+      ++dropped;
+      continue;
+    }
+    for (int k = 0; k < arity; ++k) {
+      hi = std::max(hi, r[k]);
+      lo = std::min(lo, r[k]);
+      *out++ = static_cast<uint32_t>(r[k]);
+    }
+    const uint32_t object = objects[i];
+    if (object != last_object) p->objects.push_back(last_object = object);
+    *out_obj++ = object;
+  }
+  ids->resize(static_cast<size_t>(out - ids->data()));
+  objs->resize(static_cast<size_t>(out_obj - objs->data()));
+  p->max_ref = hi;
+  if (lo < 0) p->negative_ref = true;
+  return dropped;
+}
+
+void prepare(const io::ParsedChunk& c, bool soup, uint64_t first_vertex, Prepared* p) {
+  p->clear();
+  if (!soup) {
+    p->vertex_boxes = vertex_chunk_boxes(c.positions, first_vertex);
+    p->degenerate = narrow_primitives<3>(c.triangles, c.triangle_objects, &p->triangles, &p->triangle_objects, p);
+  }
+  p->degenerate_segments = narrow_primitives<2>(c.lines, c.line_objects, &p->lines, &p->line_objects, p);
+  narrow_primitives<1>(c.points, c.point_objects, &p->points, &p->point_objects, p);
+}
+
+// Appends prepared primitives to the store in file order and keeps the totals.
 class Feeder {
  public:
   explicit Feeder(StoreWriter& store) : store_(store) {}
 
-  void triangles(const std::vector<int64_t>& refs, const std::vector<uint32_t>& objects) {
-    ids_.clear();
-    obj_.clear();
-    for (size_t t = 0, n = objects.size(); t < n; ++t) {
-      const int64_t a = refs[3 * t], b = refs[3 * t + 1], c = refs[3 * t + 2];
-      if (a == b || b == c || a == c) {
-        ++degenerate_;
-        continue;
-      }
-      ids_.push_back(narrow(a));
-      ids_.push_back(narrow(b));
-      ids_.push_back(narrow(c));
-      obj_.push_back(use_object(objects[t]));
+  void add(const Prepared& p) {
+    if (p.negative_ref) fail(Status::internal, "a reader let through a negative vertex reference");
+    if (p.max_ref >= max_vertices) fail(Status::usage, "more than 4,294,967,295 vertices are not supported");
+    max_ref_ = std::max(max_ref_, p.max_ref);
+    degenerate_ += p.degenerate;
+    degenerate_segments_ += p.degenerate_segments;
+    for (uint32_t object : p.objects) {
+      if (object >= objects_used_.size()) objects_used_.resize(std::max<size_t>(object + 1, objects_used_.size() * 2), 0);
+      objects_used_[object] = 1;
     }
-    store_.add_triangles(ids_, obj_);
-  }
-
-  void lines(const std::vector<int64_t>& refs, const std::vector<uint32_t>& objects) {
-    ids_.clear();
-    obj_.clear();
-    for (size_t s = 0, n = objects.size(); s < n; ++s) {
-      if (refs[2 * s] == refs[2 * s + 1]) {
-        ++degenerate_segments_;
-        continue;
-      }
-      ids_.push_back(narrow(refs[2 * s]));
-      ids_.push_back(narrow(refs[2 * s + 1]));
-      obj_.push_back(use_object(objects[s]));
-    }
-    store_.add_lines(ids_, obj_);
-  }
-
-  void points(const std::vector<int64_t>& refs, const std::vector<uint32_t>& objects) {
-    ids_.clear();
-    obj_.clear();
-    for (size_t p = 0, n = objects.size(); p < n; ++p) {
-      ids_.push_back(narrow(refs[p]));
-      obj_.push_back(use_object(objects[p]));
-    }
-    store_.add_points(ids_, obj_);
+    if (!p.triangles.empty()) store_.add_triangles(p.triangles, p.triangle_objects);
+    if (!p.lines.empty()) store_.add_lines(p.lines, p.line_objects);
+    if (!p.points.empty()) store_.add_points(p.points, p.point_objects);
   }
 
   // After the last primitive, with the final vertex count: a reference past it means a reader let one
   // through, which is a bug, not bad data (readers report bad references with their location).
   void finish(StoreMeta* meta) {
     const uint64_t v = store_.vertices();
-    if (v > 0 && max_ref_ >= static_cast<int64_t>(v))
+    if (max_ref_ >= static_cast<int64_t>(v))
       fail(Status::internal, "a reader let through vertex reference " + std::to_string(max_ref_) + " of " +
                                  std::to_string(v));
-    uint64_t used = 0;
-    for (size_t w = 0; w < used_.size(); ++w) used += static_cast<uint64_t>(std::popcount(used_[w]));
-    meta->unused_vertices = v - used;
     meta->degenerate = degenerate_;
     meta->degenerate_segments = degenerate_segments_;
     meta->objects_used = 0;
@@ -98,24 +133,7 @@ class Feeder {
   }
 
  private:
-  uint32_t narrow(int64_t id) {
-    if (id < 0) fail(Status::internal, "a reader let through a negative vertex reference");
-    if (id >= max_vertices) fail(Status::usage, "more than 4,294,967,295 vertices are not supported");
-    if (id > max_ref_) max_ref_ = id;
-    const size_t word = static_cast<size_t>(id >> 6);
-    if (word >= used_.size()) used_.resize(std::max(word + 1, used_.size() * 2), 0);
-    used_[word] |= uint64_t{1} << (id & 63);
-    return static_cast<uint32_t>(id);
-  }
-  uint32_t use_object(uint32_t object) {
-    if (object >= objects_used_.size()) objects_used_.resize(std::max<size_t>(object + 1, objects_used_.size() * 2), 0);
-    objects_used_[object] = 1;
-    return object;
-  }
-
   StoreWriter& store_;
-  std::vector<uint32_t> ids_, obj_;
-  std::vector<uint64_t> used_;
   std::vector<uint8_t> objects_used_;
   int64_t max_ref_ = -1;
   uint64_t degenerate_ = 0, degenerate_segments_ = 0;
@@ -187,11 +205,14 @@ class SoupWelder {
     std::vector<uint32_t> objs;
     refs.reserve(3 * 65536);
     uint64_t triangle = 0;
+    Prepared prepared;
     auto flush = [&] {
       if (objs.empty()) return;
       const io::Window w = objects_file.map((triangle - objs.size()) * 4, triangle * 4);
       std::memcpy(objs.data(), w.data(), objs.size() * 4);
-      feeder.triangles(refs, objs);
+      prepared.clear();
+      prepared.degenerate = narrow_primitives<3>(refs, objs, &prepared.triangles, &prepared.triangle_objects, &prepared);
+      feeder.add(prepared);
       refs.clear();
       objs.clear();
     };
@@ -221,6 +242,9 @@ class SoupWelder {
 struct Slot {
   io::Chunk chunk;
   io::ParsedChunk parsed;
+  uint64_t first_vertex = 0;  // global id of the chunk's first vertex, set when resolved
+  uint64_t end_offset = 0;    // file offset where the chunk ends, for progress
+  Prepared prepared;
 };
 
 }  // namespace
@@ -261,22 +285,28 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   const double file_bytes = static_cast<double>(std::max<uint64_t>(file.size(), 1));
 
   progress.report("ingest", 0);
+  const bool soup = reader->soup();
+  auto take_slot = [&]() {
+    std::lock_guard lock(free_mutex);
+    Slot* s = free_slots.back();
+    free_slots.pop_back();
+    return s;
+  };
+  auto give_slot = [&](Slot* s) {
+    std::lock_guard lock(free_mutex);
+    free_slots.push_back(s);
+  };
+  // Five stages; the serial ones do only what needs file order, so both cores stay busy.
   tbb::parallel_pipeline(
       plan.tokens,
       tbb::make_filter<void, Slot*>(tbb::filter_mode::serial_in_order,
                                     [&](tbb::flow_control& fc) -> Slot* {
                                       progress.check();
-                                      Slot* s;
-                                      {
-                                        std::lock_guard lock(free_mutex);
-                                        s = free_slots.back();
-                                        free_slots.pop_back();
-                                      }
+                                      Slot* s = take_slot();
                                       s->chunk = io::Chunk{};
                                       s->chunk.seq = seq;
                                       if (!reader->next_chunk(plan.chunk_bytes, &s->chunk)) {
-                                        std::lock_guard lock(free_mutex);
-                                        free_slots.push_back(s);
+                                        give_slot(s);
                                         fc.stop();
                                         return nullptr;
                                       }
@@ -288,28 +318,31 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
                                            s->parsed.clear();
                                            s->parsed.seq = s->chunk.seq;
                                            reader->parse(s->chunk, &s->parsed);
+                                           s->end_offset = s->chunk.bytes.end();
+                                           s->chunk.bytes.reset();  // release the mapped input pages
+                                           return s;
+                                         }) &
+          tbb::make_filter<Slot*, Slot*>(tbb::filter_mode::serial_in_order,
+                                         [&](Slot* s) {
+                                           reader->resolve(&s->parsed);
+                                           s->first_vertex = vertex_records;
+                                           vertex_records += s->parsed.positions.size() / 3;
+                                           return s;
+                                         }) &
+          tbb::make_filter<Slot*, Slot*>(tbb::filter_mode::parallel,
+                                         [&](Slot* s) {
+                                           prepare(s->parsed, soup, s->first_vertex, &s->prepared);
                                            return s;
                                          }) &
           tbb::make_filter<Slot*, void>(tbb::filter_mode::serial_in_order, [&](Slot* s) {
-            const uint64_t done = s->chunk.bytes.end();
-            s->chunk.bytes.reset();  // release the mapped input pages before resolving
-            io::ParsedChunk& c = s->parsed;
-            reader->resolve(&c);
+            const io::ParsedChunk& c = s->parsed;
             meta.polygons += c.polygons;
             meta.skipped += c.skipped;
-            vertex_records += c.positions.size() / 3;
-            if (welder) {
-              welder->add(c);
-            } else {
-              store.add_vertices(c.positions);
-              feeder.triangles(c.triangles, c.triangle_objects);
-            }
-            feeder.lines(c.lines, c.line_objects);
-            feeder.points(c.points, c.point_objects);
-            {
-              std::lock_guard lock(free_mutex);
-              free_slots.push_back(s);
-            }
+            if (welder) welder->add(c);
+            else store.add_vertices(c.positions, s->prepared.vertex_boxes);
+            feeder.add(s->prepared);
+            const uint64_t done = s->end_offset;
+            give_slot(s);
             progress.report("ingest", static_cast<double>(done) / file_bytes);
           }));
   reader->finish(reader->soup() ? 0 : vertex_records);
@@ -340,9 +373,35 @@ struct PosLess {
 };
 }  // namespace
 
-uint64_t count_distinct_positions(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan,
-                                  const WorkDir& work, Progress& progress) {
-  if (meta.vertices == 0) return 0;
+namespace {
+// Marks the vertices a column of uint32 references uses.
+void mark_used(const std::string& path, std::vector<uint64_t>* used, Progress& progress) {
+  io::MappedFile column(path);
+  const uint64_t step = 4 * store_chunk_elements;
+  for (uint64_t at = 0; at < column.size(); at += step) {
+    progress.check();
+    const io::Window w = column.map(at, at + step);
+    const uint32_t* ids = reinterpret_cast<const uint32_t*>(w.data());
+    for (uint64_t i = 0, n = w.size() / 4; i < n; ++i) (*used)[ids[i] >> 6] |= uint64_t{1} << (ids[i] & 63);
+  }
+}
+}  // namespace
+
+Census census(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan, const WorkDir& work,
+              Progress& progress) {
+  Census c;
+  if (meta.vertices == 0) return c;
+  std::vector<uint64_t> used((meta.vertices + 63) / 64, 0);
+  for (const char* column : {"triangles.u32", "lines.u32", "points.u32"}) mark_used(store_dir + "/" + column, &used, progress);
+  uint64_t n_used = 0;
+  for (uint64_t w : used) n_used += static_cast<uint64_t>(std::popcount(w));
+  c.unused_vertices = meta.vertices - n_used;
+  std::vector<uint64_t>().swap(used);
+
+  if (meta.format.rfind("stl", 0) == 0) {
+    c.vertices_welded = meta.vertices;  // welded by exact position during ingest
+    return c;
+  }
   io::MappedFile positions(store_dir + "/positions.f64");
   if (positions.size() != meta.vertices * 24) fail(Status::io_error, positions.path() + ": size does not match store.json");
   ExternalSorter<Pos, PosLess> sorter(work, "positions", plan.sort_bytes);
@@ -354,17 +413,18 @@ uint64_t count_distinct_positions(const std::string& store_dir, const StoreMeta&
       auto z = [](double v) { return v == 0 ? 0.0 : v; };
       sorter.push({z(p[3 * i]), z(p[3 * i + 1]), z(p[3 * i + 2])});
     }
-    progress.report("weld-count", 0.5 * static_cast<double>(at + w.size()) / static_cast<double>(positions.size()));
+    progress.report("census", 0.5 * static_cast<double>(at + w.size()) / static_cast<double>(positions.size()));
   }
   uint64_t distinct = 0, seen = 0;
   Pos last{};
   sorter.merge([&](const Pos& p) {
     if (distinct == 0 || p.x != last.x || p.y != last.y || p.z != last.z) ++distinct, last = p;
     if ((++seen & 0xFFFFF) == 0)
-      progress.report("weld-count", 0.5 + 0.5 * static_cast<double>(seen) / static_cast<double>(meta.vertices));
+      progress.report("census", 0.5 + 0.5 * static_cast<double>(seen) / static_cast<double>(meta.vertices));
   });
-  progress.report("weld-count", 1);
-  return distinct;
+  progress.report("census", 1);
+  c.vertices_welded = distinct;
+  return c;
 }
 
 }  // namespace lodstream::stream

@@ -15,9 +15,13 @@ namespace lodstream::stream {
 StoreMeta ingest(const std::string& input, const std::string& store_dir, const MemoryPlan& plan,
                  const WorkDir& work, Progress& progress, bool* reused);
 
-// Number of distinct positions among the store's vertices (exact comparison; -0 equals +0), by an
-// external sort under plan.sort_bytes.
-uint64_t count_distinct_positions(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan,
-                                  const WorkDir& work, Progress& progress);
+// Statistics of a store that only `info` needs: distinct positions among the vertices (exact comparison,
+// -0 equals +0; by an external sort under plan.sort_bytes) and vertices no primitive uses.
+struct Census {
+  uint64_t vertices_welded = 0;
+  uint64_t unused_vertices = 0;
+};
+Census census(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan, const WorkDir& work,
+              Progress& progress);
 
 }  // namespace lodstream::stream

@@ -21,30 +21,37 @@ StoreWriter::StoreWriter(const std::string& dir) : dir_(dir) {
   point_objects_.open(dir + "/point_objects.u32");
 }
 
-void StoreWriter::add_vertices(std::span<const double> xyz) {
-  positions_.write_array(xyz);
-  for (size_t i = 0; i < xyz.size(); i += 3) {
-    const uint64_t chunk = vertices_ / store_chunk_elements;
-    if (chunk == vertex_chunk_bbox_.size()) vertex_chunk_bbox_.emplace_back();
-    vertex_chunk_bbox_.back().add(&xyz[i]);
-    bbox_.add(&xyz[i]);
-    ++vertices_;
+std::vector<std::pair<uint64_t, Bbox>> vertex_chunk_boxes(std::span<const double> xyz, uint64_t first_vertex) {
+  std::vector<std::pair<uint64_t, Bbox>> boxes;
+  const uint64_t n = xyz.size() / 3;
+  for (uint64_t i = 0; i < n;) {
+    const uint64_t chunk = (first_vertex + i) / store_chunk_elements;
+    const uint64_t end = std::min(n, (chunk + 1) * store_chunk_elements - first_vertex);
+    Bbox b;
+    for (; i < end; ++i) b.add(&xyz[3 * i]);
+    boxes.emplace_back(chunk, b);
   }
+  return boxes;
+}
+
+void StoreWriter::add_vertices(std::span<const double> xyz, std::span<const std::pair<uint64_t, Bbox>> chunk_boxes) {
+  positions_.write_array(xyz);
+  for (const auto& [chunk, box] : chunk_boxes) {
+    if (chunk >= vertex_chunk_bbox_.size()) vertex_chunk_bbox_.resize(chunk + 1);
+    vertex_chunk_bbox_[chunk].add(box);
+    bbox_.add(box);
+  }
+  vertices_ += xyz.size() / 3;
+}
+
+void StoreWriter::add_vertices(std::span<const double> xyz) {
+  add_vertices(xyz, vertex_chunk_boxes(xyz, vertices_));
 }
 
 void StoreWriter::add_triangles(std::span<const uint32_t> ids, std::span<const uint32_t> objects) {
   triangles_.write_array(ids);
   triangle_objects_.write_array(objects);
-  for (size_t i = 0; i < ids.size(); i += 3) {
-    const uint64_t chunk = triangles_count_ / store_chunk_elements;
-    if (chunk == triangle_chunk_range_.size()) triangle_chunk_range_.push_back({UINT32_MAX, 0});
-    auto& r = triangle_chunk_range_.back();
-    const uint32_t lo = std::min({ids[i], ids[i + 1], ids[i + 2]});
-    const uint32_t hi = std::max({ids[i], ids[i + 1], ids[i + 2]});
-    r[0] = std::min(r[0], lo);
-    r[1] = std::max(r[1], hi);
-    ++triangles_count_;
-  }
+  triangles_count_ += ids.size() / 3;
 }
 
 void StoreWriter::add_lines(std::span<const uint32_t> ids, std::span<const uint32_t> objects) {
@@ -69,7 +76,6 @@ void StoreWriter::commit(StoreMeta meta) {
   meta.points = points_count_;
   meta.bbox = bbox_;
   meta.vertex_chunk_bbox = vertex_chunk_bbox_;
-  meta.triangle_chunk_vertex_range = triangle_chunk_range_;
   io::write_file_atomic(dir_ + "/store.json", store_meta_json(meta));
 }
 
@@ -88,7 +94,6 @@ std::string store_meta_json(const StoreMeta& m) {
   j["format"] = m.format;
   j["vertices"] = m.vertices;
   j["vertex_records"] = m.vertex_records;
-  j["unused_vertices"] = m.unused_vertices;
   j["triangles"] = m.triangles;
   j["lines"] = m.lines;
   j["points"] = m.points;
@@ -102,7 +107,6 @@ std::string store_meta_json(const StoreMeta& m) {
   ordered_json vc = ordered_json::array();
   for (const Bbox& b : m.vertex_chunk_bbox) vc.push_back(bbox_json(b));
   j["vertex_chunks"] = vc;
-  j["triangle_chunks"] = m.triangle_chunk_vertex_range;
   return j.dump(1) + "\n";
 }
 
@@ -120,7 +124,6 @@ bool read_store_meta(const std::string& dir, StoreMeta* m) {
     m->format = j.at("format").get<std::string>();
     m->vertices = j.at("vertices").get<uint64_t>();
     m->vertex_records = j.at("vertex_records").get<uint64_t>();
-    m->unused_vertices = j.at("unused_vertices").get<uint64_t>();
     m->triangles = j.at("triangles").get<uint64_t>();
     m->lines = j.at("lines").get<uint64_t>();
     m->points = j.at("points").get<uint64_t>();
@@ -141,7 +144,6 @@ bool read_store_meta(const std::string& dir, StoreMeta* m) {
     m->bbox.empty = m->vertices == 0;
     m->vertex_chunk_bbox.clear();
     for (const auto& b : j.at("vertex_chunks")) m->vertex_chunk_bbox.push_back(read_bbox(b));
-    m->triangle_chunk_vertex_range = j.at("triangle_chunks").get<std::vector<std::array<uint32_t, 2>>>();
   } catch (const std::exception&) {
     return false;
   }

@@ -2,7 +2,7 @@
 //
 // One directory of flat little-endian columns, each cut into fixed-size chunks of `chunk_elements`
 // elements (the last one shorter), plus store.json with counts, bounding box, object names, the chunk
-// table and the identity of the source file. The chunk size is a constant of the store format, not of the
+// table (per vertex chunk its bounding box) and the identity of the source file. The chunk size is a constant of the store format, not of the
 // job: the store's bytes are the same for any thread count, memory budget or parse chunk size.
 //
 //   positions.f64          x y z per vertex (double: every input precision is kept exactly)
@@ -28,6 +28,11 @@ inline constexpr int store_version = 1;
 struct Bbox {
   std::array<double, 3> min{0, 0, 0}, max{0, 0, 0};
   bool empty = true;
+  void add(const Bbox& b) {
+    if (b.empty) return;
+    add(b.min.data());
+    add(b.max.data());
+  }
   void add(const double* p) {
     if (empty) {
       min = max = {p[0], p[1], p[2]};
@@ -55,18 +60,20 @@ struct StoreMeta {
   uint64_t vertices = 0, triangles = 0, lines = 0, points = 0;
   uint64_t vertex_records = 0;  // vertex records in the file (STL: triangle corners before welding)
   uint64_t polygons = 0, degenerate = 0, degenerate_segments = 0, skipped = 0;
-  uint64_t unused_vertices = 0;
   std::vector<std::string> object_names;
   uint64_t objects_used = 0;
   Bbox bbox;
-  // Chunk table: per vertex chunk its bounding box; per triangle chunk the range of vertex ids it uses.
+  // Chunk table: the bounding box of each vertex chunk.
   std::vector<Bbox> vertex_chunk_bbox;
-  std::vector<std::array<uint32_t, 2>> triangle_chunk_vertex_range;
 };
 
 class StoreWriter {
  public:
   explicit StoreWriter(const std::string& dir);
+  // Appends vertices. `chunk_boxes` holds the bounding boxes of their parts that fall in each store
+  // chunk, as {store chunk index, box}, computed by the caller (in parallel); without it they are
+  // computed here.
+  void add_vertices(std::span<const double> xyz, std::span<const std::pair<uint64_t, Bbox>> chunk_boxes);
   void add_vertices(std::span<const double> xyz);
   void add_triangles(std::span<const uint32_t> ids, std::span<const uint32_t> objects);
   void add_lines(std::span<const uint32_t> ids, std::span<const uint32_t> objects);
@@ -83,8 +90,10 @@ class StoreWriter {
   uint64_t vertices_ = 0, triangles_count_ = 0, lines_count_ = 0, points_count_ = 0;
   Bbox bbox_;
   std::vector<Bbox> vertex_chunk_bbox_;
-  std::vector<std::array<uint32_t, 2>> triangle_chunk_range_;
 };
+
+// Bounding boxes of the parts of `xyz` (vertices first_vertex, first_vertex + 1, ...) in each store chunk.
+std::vector<std::pair<uint64_t, Bbox>> vertex_chunk_boxes(std::span<const double> xyz, uint64_t first_vertex);
 
 // Reads store.json of a complete store; returns false when there is none (or it is unreadable or of
 // another format version), so that the caller rebuilds it.

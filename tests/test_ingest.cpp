@@ -53,7 +53,7 @@ void expect_same_store_everywhere(const std::string& input, const std::vector<ui
         const std::string work = tmp.file("w" + std::to_string(n++));
         const SceneInfo info = run_info(input, work, threads, memory, chunk);
         auto files = read_dir(fs::path(work) / "store");
-        files.erase("weld_count.json");
+        files.erase("census.json");
         if (reference.empty()) {
           reference = files;
           ref_info = info;
