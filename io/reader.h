@@ -68,6 +68,9 @@ class Reader {
   // True when positions are per triangle corner with no shared indices (STL): the pipeline welds them by
   // exact position, and triangles/lines/points stay empty.
   virtual bool soup() const { return false; }
+  // True when every coordinate the file can hold is a 32-bit float (PLY float x/y/z, STL): the store then
+  // keeps positions as float, which is exact and half the bytes. Known after open().
+  virtual bool single_precision() const { return false; }
   // Reads and checks the header, if any. Throws Failure(bad_data) with a location.
   virtual void open() {}
   // Cuts the next chunk of whole records starting where the previous one ended, of about `target_bytes`

@@ -55,6 +55,7 @@ class BinaryStlReader final : public Reader {
 
   std::string format() const override { return "stl-binary"; }
   bool soup() const override { return true; }
+  bool single_precision() const override { return true; }
 
   void open() override {
     if (file_.size() < kHeaderBytes) {
@@ -196,6 +197,7 @@ class AsciiStlReader final : public Reader {
 
   std::string format() const override { return "stl-ascii"; }
   bool soup() const override { return true; }
+  bool single_precision() const override { return true; }
 
   // Cuts right after the first `endfacet` line that ends at or past cursor + target_bytes - 1, or at the
   // end of the file: every chunk holds whole facets (at least one, when there is one).

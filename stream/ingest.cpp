@@ -36,15 +36,18 @@ constexpr int64_t max_vertices = int64_t{UINT32_MAX};
 // A chunk's primitives ready for the store: references checked and narrowed to uint32, degenerate
 // primitives dropped and counted. Built in parallel, appended in file order.
 struct Prepared {
-  std::vector<uint32_t> triangles, triangle_objects, lines, line_objects, points, point_objects;
+  std::vector<uint32_t> triangles, lines, points;
+  std::vector<LocalRun> triangle_runs, line_runs, point_runs;
+  std::vector<float> positions32;  // for single-precision stores
   std::vector<std::pair<uint64_t, Bbox>> vertex_boxes;
-  std::vector<uint32_t> objects;  // object ids used, in order of change (a small list)
   uint64_t degenerate = 0, degenerate_segments = 0;
   int64_t max_ref = -1;
   bool negative_ref = false;
 
   void clear() {
-    for (auto* v : {&triangles, &triangle_objects, &lines, &line_objects, &points, &point_objects, &objects}) v->clear();
+    for (auto* v : {&triangles, &lines, &points}) v->clear();
+    for (auto* v : {&triangle_runs, &line_runs, &point_runs}) v->clear();
+    positions32.clear();
     vertex_boxes.clear();
     degenerate = degenerate_segments = 0;
     max_ref = -1;
@@ -53,17 +56,16 @@ struct Prepared {
 };
 
 // Narrows `n` primitives of `arity` references each, dropping those that name a vertex twice.
+// Object ids become runs (one per change of object, `first` counted among the kept primitives).
 template <int arity>
 uint64_t narrow_primitives(const std::vector<int64_t>& refs, const std::vector<uint32_t>& objects,
-                           std::vector<uint32_t>* ids, std::vector<uint32_t>* objs, Prepared* p) {
+                           std::vector<uint32_t>* ids, std::vector<LocalRun>* runs, Prepared* p) {
   const size_t n = objects.size();
   ids->resize(arity * n);
-  objs->resize(n);
   uint32_t* out = ids->data();
-  uint32_t* out_obj = objs->data();
-  uint64_t dropped = 0;
+  uint64_t dropped = 0, kept = 0;
   int64_t hi = p->max_ref, lo = 0;
-  uint32_t last_object = p->objects.empty() ? UINT32_MAX : p->objects.back();
+  uint32_t last_object = UINT32_MAX;
   for (size_t i = 0; i < n; ++i) {
     const int64_t* r = &refs[arity * i];
     bool degenerate = false;
@@ -79,24 +81,27 @@ uint64_t narrow_primitives(const std::vector<int64_t>& refs, const std::vector<u
       *out++ = static_cast<uint32_t>(r[k]);
     }
     const uint32_t object = objects[i];
-    if (object != last_object) p->objects.push_back(last_object = object);
-    *out_obj++ = object;
+    if (object != last_object) runs->push_back({kept, last_object = object});
+    ++kept;
   }
   ids->resize(static_cast<size_t>(out - ids->data()));
-  objs->resize(static_cast<size_t>(out_obj - objs->data()));
   p->max_ref = hi;
   if (lo < 0) p->negative_ref = true;
   return dropped;
 }
 
-void prepare(const io::ParsedChunk& c, bool soup, uint64_t first_vertex, Prepared* p) {
+void prepare(const io::ParsedChunk& c, bool soup, bool single, uint64_t first_vertex, Prepared* p) {
   p->clear();
   if (!soup) {
     p->vertex_boxes = vertex_chunk_boxes(c.positions, first_vertex);
-    p->degenerate = narrow_primitives<3>(c.triangles, c.triangle_objects, &p->triangles, &p->triangle_objects, p);
+    if (single) {
+      p->positions32.resize(c.positions.size());
+      for (size_t i = 0; i < c.positions.size(); ++i) p->positions32[i] = static_cast<float>(c.positions[i]);
+    }
+    p->degenerate = narrow_primitives<3>(c.triangles, c.triangle_objects, &p->triangles, &p->triangle_runs, p);
   }
-  p->degenerate_segments = narrow_primitives<2>(c.lines, c.line_objects, &p->lines, &p->line_objects, p);
-  narrow_primitives<1>(c.points, c.point_objects, &p->points, &p->point_objects, p);
+  p->degenerate_segments = narrow_primitives<2>(c.lines, c.line_objects, &p->lines, &p->line_runs, p);
+  narrow_primitives<1>(c.points, c.point_objects, &p->points, &p->point_runs, p);
 }
 
 // Appends prepared primitives to the store in file order and keeps the totals.
@@ -110,13 +115,14 @@ class Feeder {
     max_ref_ = std::max(max_ref_, p.max_ref);
     degenerate_ += p.degenerate;
     degenerate_segments_ += p.degenerate_segments;
-    for (uint32_t object : p.objects) {
-      if (object >= objects_used_.size()) objects_used_.resize(std::max<size_t>(object + 1, objects_used_.size() * 2), 0);
-      objects_used_[object] = 1;
-    }
-    if (!p.triangles.empty()) store_.add_triangles(p.triangles, p.triangle_objects);
-    if (!p.lines.empty()) store_.add_lines(p.lines, p.line_objects);
-    if (!p.points.empty()) store_.add_points(p.points, p.point_objects);
+    for (const auto* runs : {&p.triangle_runs, &p.line_runs, &p.point_runs})
+      for (const LocalRun& r : *runs) {
+        if (r.object >= objects_used_.size()) objects_used_.resize(std::max<size_t>(r.object + 1, objects_used_.size() * 2), 0);
+        objects_used_[r.object] = 1;
+      }
+    if (!p.triangles.empty()) store_.add_triangles(p.triangles, p.triangle_runs);
+    if (!p.lines.empty()) store_.add_lines(p.lines, p.line_runs);
+    if (!p.points.empty()) store_.add_points(p.points, p.point_runs);
   }
 
   // After the last primitive, with the final vertex count: a reference past it means a reader let one
@@ -211,7 +217,7 @@ class SoupWelder {
       const io::Window w = objects_file.map((triangle - objs.size()) * 4, triangle * 4);
       std::memcpy(objs.data(), w.data(), objs.size() * 4);
       prepared.clear();
-      prepared.degenerate = narrow_primitives<3>(refs, objs, &prepared.triangles, &prepared.triangle_objects, &prepared);
+      prepared.degenerate = narrow_primitives<3>(refs, objs, &prepared.triangles, &prepared.triangle_runs, &prepared);
       feeder.add(prepared);
       refs.clear();
       objs.clear();
@@ -269,7 +275,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   meta.source = source;
   meta.format = reader->format();
 
-  StoreWriter store(store_dir);
+  StoreWriter store(store_dir, reader->single_precision());
   Feeder feeder(store);
   std::unique_ptr<SoupWelder> welder;
   if (reader->soup()) welder = std::make_unique<SoupWelder>(work, plan);
@@ -286,6 +292,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
 
   progress.report("ingest", 0);
   const bool soup = reader->soup();
+  const bool single = reader->single_precision();
   auto take_slot = [&]() {
     std::lock_guard lock(free_mutex);
     Slot* s = free_slots.back();
@@ -331,7 +338,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
                                          }) &
           tbb::make_filter<Slot*, Slot*>(tbb::filter_mode::parallel,
                                          [&](Slot* s) {
-                                           prepare(s->parsed, soup, s->first_vertex, &s->prepared);
+                                           prepare(s->parsed, soup, single, s->first_vertex, &s->prepared);
                                            return s;
                                          }) &
           tbb::make_filter<Slot*, void>(tbb::filter_mode::serial_in_order, [&](Slot* s) {
@@ -339,7 +346,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
             meta.polygons += c.polygons;
             meta.skipped += c.skipped;
             if (welder) welder->add(c);
-            else store.add_vertices(c.positions, s->prepared.vertex_boxes);
+            else store.add_vertices(c.positions, s->prepared.positions32, s->prepared.vertex_boxes);
             feeder.add(s->prepared);
             const uint64_t done = s->end_offset;
             give_slot(s);
@@ -402,16 +409,22 @@ Census census(const std::string& store_dir, const StoreMeta& meta, const MemoryP
     c.vertices_welded = meta.vertices;  // welded by exact position during ingest
     return c;
   }
-  io::MappedFile positions(store_dir + "/positions.f64");
-  if (positions.size() != meta.vertices * 24) fail(Status::io_error, positions.path() + ": size does not match store.json");
+  const uint64_t stride = meta.single_precision ? 12 : 24;
+  io::MappedFile positions(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"));
+  if (positions.size() != meta.vertices * stride) fail(Status::io_error, positions.path() + ": size does not match store.json");
   ExternalSorter<Pos, PosLess> sorter(work, "positions", plan.sort_bytes);
-  const uint64_t step = 24 * store_chunk_elements;
+  const uint64_t step = stride * store_chunk_elements;
+  auto z = [](double v) { return v == 0 ? 0.0 : v; };
   for (uint64_t at = 0; at < positions.size(); at += step) {
+    progress.check();
     const io::Window w = positions.map(at, at + step);
-    const double* p = reinterpret_cast<const double*>(w.data());
-    for (uint64_t i = 0, n = w.size() / 24; i < n; ++i) {
-      auto z = [](double v) { return v == 0 ? 0.0 : v; };
-      sorter.push({z(p[3 * i]), z(p[3 * i + 1]), z(p[3 * i + 2])});
+    const uint64_t n = w.size() / stride;
+    if (meta.single_precision) {
+      const float* p = reinterpret_cast<const float*>(w.data());
+      for (uint64_t i = 0; i < n; ++i) sorter.push({z(p[3 * i]), z(p[3 * i + 1]), z(p[3 * i + 2])});
+    } else {
+      const double* p = reinterpret_cast<const double*>(w.data());
+      for (uint64_t i = 0; i < n; ++i) sorter.push({z(p[3 * i]), z(p[3 * i + 1]), z(p[3 * i + 2])});
     }
     progress.report("census", 0.5 * static_cast<double>(at + w.size()) / static_cast<double>(positions.size()));
   }

@@ -11,14 +11,25 @@ namespace lodstream::stream {
 
 using nlohmann::ordered_json;
 
-StoreWriter::StoreWriter(const std::string& dir) : dir_(dir) {
-  positions_.open(dir + "/positions.f64", 8 << 20);
-  triangles_.open(dir + "/triangles.u32", 8 << 20);
-  triangle_objects_.open(dir + "/triangle_objects.u32", 2 << 20);
-  lines_.open(dir + "/lines.u32");
-  line_objects_.open(dir + "/line_objects.u32");
-  points_.open(dir + "/points.u32");
-  point_objects_.open(dir + "/point_objects.u32");
+StoreWriter::StoreWriter(const std::string& dir, bool single_precision) : dir_(dir), single_(single_precision) {
+  positions_.open(dir + (single_ ? "/positions.f32" : "/positions.f64"), 8 << 20);
+  triangles_.ids.open(dir + "/triangles.u32", 8 << 20);
+  triangles_.runs.open(dir + "/triangle_objects.runs", 1 << 16);
+  lines_.ids.open(dir + "/lines.u32");
+  lines_.runs.open(dir + "/line_objects.runs", 1 << 16);
+  points_.ids.open(dir + "/points.u32");
+  points_.runs.open(dir + "/point_objects.runs", 1 << 16);
+}
+
+void StoreWriter::Column::add(std::span<const uint32_t> values, int arity, std::span<const LocalRun> local_runs) {
+  ids.write_array(values);
+  for (const LocalRun& r : local_runs) {
+    if (r.object == last_object) continue;  // continues the previous batch's run
+    const ObjectRun run{count + r.first, r.object, 0};
+    runs.write(&run, sizeof run);
+    last_object = r.object;
+  }
+  count += values.size() / static_cast<size_t>(arity);
 }
 
 std::vector<std::pair<uint64_t, Bbox>> vertex_chunk_boxes(std::span<const double> xyz, uint64_t first_vertex) {
@@ -34,8 +45,14 @@ std::vector<std::pair<uint64_t, Bbox>> vertex_chunk_boxes(std::span<const double
   return boxes;
 }
 
-void StoreWriter::add_vertices(std::span<const double> xyz, std::span<const std::pair<uint64_t, Bbox>> chunk_boxes) {
-  positions_.write_array(xyz);
+void StoreWriter::add_vertices(std::span<const double> xyz, std::span<const float> xyz32,
+                               std::span<const std::pair<uint64_t, Bbox>> chunk_boxes) {
+  if (single_) {
+    if (xyz32.size() != xyz.size()) fail(Status::internal, "single-precision store given no float coordinates");
+    positions_.write_array(xyz32);
+  } else {
+    positions_.write_array(xyz);
+  }
   for (const auto& [chunk, box] : chunk_boxes) {
     if (chunk >= vertex_chunk_bbox_.size()) vertex_chunk_bbox_.resize(chunk + 1);
     vertex_chunk_bbox_[chunk].add(box);
@@ -45,35 +62,25 @@ void StoreWriter::add_vertices(std::span<const double> xyz, std::span<const std:
 }
 
 void StoreWriter::add_vertices(std::span<const double> xyz) {
-  add_vertices(xyz, vertex_chunk_boxes(xyz, vertices_));
+  scratch32_.clear();
+  if (single_)
+    for (double v : xyz) scratch32_.push_back(static_cast<float>(v));
+  add_vertices(xyz, scratch32_, vertex_chunk_boxes(xyz, vertices_));
 }
 
-void StoreWriter::add_triangles(std::span<const uint32_t> ids, std::span<const uint32_t> objects) {
-  triangles_.write_array(ids);
-  triangle_objects_.write_array(objects);
-  triangles_count_ += ids.size() / 3;
-}
-
-void StoreWriter::add_lines(std::span<const uint32_t> ids, std::span<const uint32_t> objects) {
-  lines_.write_array(ids);
-  line_objects_.write_array(objects);
-  lines_count_ += ids.size() / 2;
-}
-
-void StoreWriter::add_points(std::span<const uint32_t> ids, std::span<const uint32_t> objects) {
-  points_.write_array(ids);
-  point_objects_.write_array(objects);
-  points_count_ += ids.size();
-}
+void StoreWriter::add_triangles(std::span<const uint32_t> ids, std::span<const LocalRun> runs) { triangles_.add(ids, 3, runs); }
+void StoreWriter::add_lines(std::span<const uint32_t> ids, std::span<const LocalRun> runs) { lines_.add(ids, 2, runs); }
+void StoreWriter::add_points(std::span<const uint32_t> ids, std::span<const LocalRun> runs) { points_.add(ids, 1, runs); }
 
 void StoreWriter::commit(StoreMeta meta) {
-  for (io::FileWriter* w : {&positions_, &triangles_, &triangle_objects_, &lines_, &line_objects_, &points_,
-                            &point_objects_})
+  for (io::FileWriter* w : {&positions_, &triangles_.ids, &triangles_.runs, &lines_.ids, &lines_.runs, &points_.ids,
+                            &points_.runs})
     w->commit();
+  meta.single_precision = single_;
   meta.vertices = vertices_;
-  meta.triangles = triangles_count_;
-  meta.lines = lines_count_;
-  meta.points = points_count_;
+  meta.triangles = triangles_.count;
+  meta.lines = lines_.count;
+  meta.points = points_.count;
   meta.bbox = bbox_;
   meta.vertex_chunk_bbox = vertex_chunk_bbox_;
   io::write_file_atomic(dir_ + "/store.json", store_meta_json(meta));
@@ -92,6 +99,7 @@ std::string store_meta_json(const StoreMeta& m) {
   j["chunk_elements"] = store_chunk_elements;
   j["source"] = {{"path", m.source.path}, {"bytes", m.source.bytes}, {"mtime_ns", m.source.mtime_ns}};
   j["format"] = m.format;
+  j["positions"] = m.single_precision ? "f32" : "f64";
   j["vertices"] = m.vertices;
   j["vertex_records"] = m.vertex_records;
   j["triangles"] = m.triangles;
@@ -122,6 +130,7 @@ bool read_store_meta(const std::string& dir, StoreMeta* m) {
     m->source.bytes = j.at("source").at("bytes").get<uint64_t>();
     m->source.mtime_ns = j.at("source").at("mtime_ns").get<int64_t>();
     m->format = j.at("format").get<std::string>();
+    m->single_precision = j.at("positions").get<std::string>() == "f32";
     m->vertices = j.at("vertices").get<uint64_t>();
     m->vertex_records = j.at("vertex_records").get<uint64_t>();
     m->triangles = j.at("triangles").get<uint64_t>();

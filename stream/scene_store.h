@@ -5,10 +5,11 @@
 // table (per vertex chunk its bounding box) and the identity of the source file. The chunk size is a constant of the store format, not of the
 // job: the store's bytes are the same for any thread count, memory budget or parse chunk size.
 //
-//   positions.f64          x y z per vertex (double: every input precision is kept exactly)
+//   positions.f32|.f64     x y z per vertex: float when the input's coordinates are all 32-bit floats
+//                          (PLY float, STL), else double, so every input value is kept exactly
 //   triangles.u32          3 vertex ids per triangle, input order, degenerate triangles removed
-//   triangle_objects.u32   object id per triangle
-//   lines.u32 / line_objects.u32, points.u32 / point_objects.u32   likewise
+//   triangle_objects.runs  object ids as runs: ObjectRun records, one per change of object
+//   lines.u32 / line_objects.runs, points.u32 / point_objects.runs   likewise
 //   store.json             written last: its presence means the store is complete
 #pragma once
 
@@ -23,7 +24,20 @@
 namespace lodstream::stream {
 
 inline constexpr uint64_t store_chunk_elements = 1 << 20;
-inline constexpr int store_version = 1;
+inline constexpr int store_version = 2;
+
+// Elements first, first + 1, ... up to the next run's `first` belong to `object`.
+struct ObjectRun {
+  uint64_t first;
+  uint32_t object;
+  uint32_t reserved;  // 0
+};
+
+// A run of objects within a batch of primitives: `first` counts from the batch's first primitive.
+struct LocalRun {
+  uint64_t first;
+  uint32_t object;
+};
 
 struct Bbox {
   std::array<double, 3> min{0, 0, 0}, max{0, 0, 0};
@@ -57,6 +71,7 @@ struct SourceId {
 struct StoreMeta {
   SourceId source;
   std::string format;
+  bool single_precision = false;  // positions.f32 rather than positions.f64
   uint64_t vertices = 0, triangles = 0, lines = 0, points = 0;
   uint64_t vertex_records = 0;  // vertex records in the file (STL: triangle corners before welding)
   uint64_t polygons = 0, degenerate = 0, degenerate_segments = 0, skipped = 0;
@@ -69,15 +84,17 @@ struct StoreMeta {
 
 class StoreWriter {
  public:
-  explicit StoreWriter(const std::string& dir);
+  StoreWriter(const std::string& dir, bool single_precision);
   // Appends vertices. `chunk_boxes` holds the bounding boxes of their parts that fall in each store
-  // chunk, as {store chunk index, box}, computed by the caller (in parallel); without it they are
-  // computed here.
-  void add_vertices(std::span<const double> xyz, std::span<const std::pair<uint64_t, Bbox>> chunk_boxes);
+  // chunk, as {store chunk index, box}, computed by the caller (in parallel). `xyz32` is the same
+  // coordinates as float, given (by the caller, in parallel) when the store is single precision.
+  void add_vertices(std::span<const double> xyz, std::span<const float> xyz32,
+                    std::span<const std::pair<uint64_t, Bbox>> chunk_boxes);
   void add_vertices(std::span<const double> xyz);
-  void add_triangles(std::span<const uint32_t> ids, std::span<const uint32_t> objects);
-  void add_lines(std::span<const uint32_t> ids, std::span<const uint32_t> objects);
-  void add_points(std::span<const uint32_t> ids, std::span<const uint32_t> objects);
+  // Appends primitives with their object runs (run `first` relative to ids' first primitive).
+  void add_triangles(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
+  void add_lines(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
+  void add_points(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
   // Renames every column into place, then writes store.json. `meta`'s counts, bbox and chunk table are
   // filled in from what was written.
   void commit(StoreMeta meta);
@@ -85,9 +102,18 @@ class StoreWriter {
   const Bbox& bbox() const { return bbox_; }
 
  private:
+  struct Column {
+    io::FileWriter ids, runs;
+    uint64_t count = 0;
+    uint32_t last_object = UINT32_MAX;
+    void add(std::span<const uint32_t> values, int arity, std::span<const LocalRun> local_runs);
+  };
   std::string dir_;
-  io::FileWriter positions_, triangles_, triangle_objects_, lines_, line_objects_, points_, point_objects_;
-  uint64_t vertices_ = 0, triangles_count_ = 0, lines_count_ = 0, points_count_ = 0;
+  bool single_;
+  io::FileWriter positions_;
+  Column triangles_, lines_, points_;
+  uint64_t vertices_ = 0;
+  std::vector<float> scratch32_;
   Bbox bbox_;
   std::vector<Bbox> vertex_chunk_bbox_;
 };

@@ -109,9 +109,11 @@ TEST(Ingest, StoreColumnsHoldExactlyTheInput) {
   const std::vector<uint32_t> tri = {0, 1, 2, 0, 2, 3, 3, 2, 1, 3, 1, 0};
   ASSERT_EQ(files["triangles.u32"].size(), tri.size() * 4);
   EXPECT_EQ(std::memcmp(files["triangles.u32"].data(), tri.data(), tri.size() * 4), 0);
-  const std::vector<uint32_t> objects = {1, 1, 2, 2};
-  ASSERT_EQ(files["triangle_objects.u32"].size(), 16u);
-  EXPECT_EQ(std::memcmp(files["triangle_objects.u32"].data(), objects.data(), 16), 0);
+  // Object runs: triangles 0.. in object 1 ("a"), 2.. in object 2 ("b").
+  const uint32_t runs[8] = {0, 0, 1, 0, 2, 0, 2, 0};
+  ASSERT_EQ(files["triangle_objects.runs"].size(), sizeof runs);
+  EXPECT_EQ(std::memcmp(files["triangle_objects.runs"].data(), runs, sizeof runs), 0);
+  EXPECT_EQ(files.count("positions.f32"), 0u);  // OBJ text keeps double precision
   const std::vector<uint32_t> lines = {0, 1, 1, 2};
   ASSERT_EQ(files["lines.u32"].size(), 16u);
   EXPECT_EQ(std::memcmp(files["lines.u32"].data(), lines.data(), 16), 0);
@@ -161,9 +163,9 @@ TEST(Ingest, StlSoupIsWeldedByExactPositionInPositionOrder) {
   EXPECT_EQ(info.degenerate, 1u);
   auto files = read_dir(fs::path(work) / "store");
   // Position order: (0,0,0) (0,0,1) (0,1,0) (1,0,0) -> input vertex 0,3,2,1 get ids 0,3,2,1 -> 0,1->3, ...
-  const double expect_pos[12] = {0, 0, 0, 0, 0, 1, 0, 1, 0, 1, 0, 0};
-  ASSERT_EQ(files["positions.f64"].size(), sizeof expect_pos);
-  EXPECT_EQ(std::memcmp(files["positions.f64"].data(), expect_pos, sizeof expect_pos), 0);
+  const float expect_pos[12] = {0, 0, 0, 0, 0, 1, 0, 1, 0, 1, 0, 0};  // STL is single precision
+  ASSERT_EQ(files["positions.f32"].size(), sizeof expect_pos);
+  EXPECT_EQ(std::memcmp(files["positions.f32"].data(), expect_pos, sizeof expect_pos), 0);
   const uint32_t expect_tri[12] = {0, 2, 3, 0, 3, 1, 3, 2, 1, 0, 1, 2};
   ASSERT_EQ(files["triangles.u32"].size(), sizeof expect_tri);
   EXPECT_EQ(std::memcmp(files["triangles.u32"].data(), expect_tri, sizeof expect_tri), 0);
