@@ -1,8 +1,1244 @@
+// PLY reader: ascii, binary_little_endian and binary_big_endian, any elements in any order.
+//
+// open() parses the header into element layouts and rejects counts the file cannot hold. next_chunk()
+// cuts whole records of one element at a time: by arithmetic for fixed-size binary records, by walking
+// the list counts for variable-size binary records, and by lines for ascii. parse() turns vertex records
+// into positions, face records into fan-triangulated triangles (PLY indices are absolute, so they are
+// final after parse), edge records into lines, and only counts the records of any other element.
+//
+// Truncation and broken list counts are never thrown by next_chunk(): it hands parse() a chunk that claims
+// one record more than the bytes hold, so the error is raised by resolve() in file order, after any earlier
+// error, whatever the chunk size.
+#include <algorithm>
+#include <charconv>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <string_view>
+#include <type_traits>
+#include <vector>
+
 #include "core/status.h"
 #include "io/reader.h"
+#include "io/text.h"
 
 namespace lodstream::io {
-std::unique_ptr<Reader> make_ply_reader(const MappedFile& file) {
-  fail(Status::usage, file.path() + ": ply reader not written yet");
+namespace {
+
+// ---------------------------------------------------------------------------------------------- types
+
+enum class Type : uint8_t { none, i8, u8, i16, u16, i32, u32, f32, f64 };
+
+Type type_from_name(std::string_view s) {
+  if (s == "char" || s == "int8") return Type::i8;
+  if (s == "uchar" || s == "uint8") return Type::u8;
+  if (s == "short" || s == "int16") return Type::i16;
+  if (s == "ushort" || s == "uint16") return Type::u16;
+  if (s == "int" || s == "int32") return Type::i32;
+  if (s == "uint" || s == "uint32") return Type::u32;
+  if (s == "float" || s == "float32") return Type::f32;
+  if (s == "double" || s == "float64") return Type::f64;
+  return Type::none;
 }
+
+const char* type_name(Type t) {
+  switch (t) {
+    case Type::i8: return "char";
+    case Type::u8: return "uchar";
+    case Type::i16: return "short";
+    case Type::u16: return "ushort";
+    case Type::i32: return "int";
+    case Type::u32: return "uint";
+    case Type::f32: return "float";
+    case Type::f64: return "double";
+    default: return "?";
+  }
+}
+
+unsigned type_size(Type t) {
+  switch (t) {
+    case Type::i8:
+    case Type::u8: return 1;
+    case Type::i16:
+    case Type::u16: return 2;
+    case Type::i32:
+    case Type::u32:
+    case Type::f32: return 4;
+    case Type::f64: return 8;
+    default: return 0;
+  }
+}
+
+bool is_integer(Type t) { return t != Type::none && t != Type::f32 && t != Type::f64; }
+
+int64_t type_min(Type t) {
+  switch (t) {
+    case Type::i8: return std::numeric_limits<int8_t>::min();
+    case Type::i16: return std::numeric_limits<int16_t>::min();
+    case Type::i32: return std::numeric_limits<int32_t>::min();
+    default: return 0;
+  }
+}
+
+int64_t type_max(Type t) {
+  switch (t) {
+    case Type::i8: return std::numeric_limits<int8_t>::max();
+    case Type::u8: return std::numeric_limits<uint8_t>::max();
+    case Type::i16: return std::numeric_limits<int16_t>::max();
+    case Type::u16: return std::numeric_limits<uint16_t>::max();
+    case Type::i32: return std::numeric_limits<int32_t>::max();
+    case Type::u32: return std::numeric_limits<uint32_t>::max();
+    default: return 0;
+  }
+}
+
+template <typename T, bool Swap>
+inline T load(const char* p) {
+  T v;
+  if constexpr (!Swap || sizeof(T) == 1) {
+    std::memcpy(&v, p, sizeof v);
+  } else if constexpr (sizeof(T) == 2) {
+    uint16_t u;
+    std::memcpy(&u, p, 2);
+    u = __builtin_bswap16(u);
+    std::memcpy(&v, &u, 2);
+  } else if constexpr (sizeof(T) == 4) {
+    uint32_t u;
+    std::memcpy(&u, p, 4);
+    u = __builtin_bswap32(u);
+    std::memcpy(&v, &u, 4);
+  } else {
+    uint64_t u;
+    std::memcpy(&u, p, 8);
+    u = __builtin_bswap64(u);
+    std::memcpy(&v, &u, 8);
+  }
+  return v;
+}
+
+template <bool Swap>
+inline int64_t load_int(const char* p, Type t) {
+  switch (t) {
+    case Type::i8: return load<int8_t, Swap>(p);
+    case Type::u8: return load<uint8_t, Swap>(p);
+    case Type::i16: return load<int16_t, Swap>(p);
+    case Type::u16: return load<uint16_t, Swap>(p);
+    case Type::i32: return load<int32_t, Swap>(p);
+    case Type::u32: return load<uint32_t, Swap>(p);
+    default: return 0;  // float types never reach here: the header rejects them where integers are needed
+  }
+}
+
+template <bool Swap>
+inline double load_double(const char* p, Type t) {
+  switch (t) {
+    case Type::f32: return load<float, Swap>(p);
+    case Type::f64: return load<double, Swap>(p);
+    default: return static_cast<double>(load_int<Swap>(p, t));
+  }
+}
+
+// ------------------------------------------------------------------------------------------- layout
+
+enum class Kind : uint8_t { vertex, face, edge, other };
+enum class Role : uint8_t { none, x, y, z, indices, v1, v2 };
+
+struct Property {
+  std::string name;
+  bool list = false;
+  Type count_type = Type::none;  // lists only
+  Type type = Type::none;        // scalar type, or the list's item type
+  Role role = Role::none;
+  uint32_t offset = 0;  // byte offset within a fixed-size binary record
+};
+
+struct Element {
+  std::string name;
+  uint64_t count = 0;
+  uint64_t header_line = 0;
+  std::vector<Property> props;
+  Kind kind = Kind::other;
+  bool fixed = true;         // binary records of one size (no list property)
+  uint64_t record_size = 0;  // binary, fixed only
+  uint64_t min_size = 0;     // binary: the smallest possible record (every list empty)
+  int px = -1, py = -1, pz = -1, pv1 = -1, pv2 = -1;
+  // Fast paths: vertex with x, y, z all float (1) or all double (2) in fixed records; face whose only
+  // property is `list (u)char (u)int` (1 = int items, 2 = uint items).
+  uint8_t fast_vertex = 0;
+  uint8_t fast_face = 0;
+};
+
+// A header token or line for an error message: at most 40 bytes, unprintable bytes as '?'.
+std::string quoted(std::string_view s) {
+  std::string r = "'";
+  for (size_t i = 0; i < s.size() && i < 40; ++i) {
+    const unsigned char c = static_cast<unsigned char>(s[i]);
+    r += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
+  }
+  if (s.size() > 40) r += "...";
+  return r + "'";
+}
+
+bool has_binary_bytes(const char* p, const char* end) {
+  for (; p < end; ++p)
+    if (!text::is_text_byte(static_cast<unsigned char>(*p))) return true;
+  return false;
+}
+
+std::string record_text(uint64_t k, const Element& e) {
+  return "record " + std::to_string(k) + " of " + std::to_string(e.count) + " of element '" + e.name + "'";
+}
+
+void set_error(ParsedChunk* out, uint64_t offset, uint64_t line, std::string message) {
+  if (out->error.set) return;
+  out->error.set = true;
+  out->error.offset = offset;
+  out->error.line = line;
+  out->error.message = std::move(message);
+}
+
+std::string not_finite_message(const double* v) {
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "vertex coordinate is not finite (%g, %g, %g)", v[0], v[1], v[2]);
+  return buf;
+}
+
+std::string index_message(int64_t index, uint64_t vertex_count) {
+  return "vertex index " + std::to_string(index) + " out of range: the file has " + std::to_string(vertex_count) +
+         (vertex_count == 1 ? " vertex" : " vertices");
+}
+
+std::string small_face_message(uint64_t n) {
+  return "face with " + std::to_string(n) + (n == 1 ? " vertex" : " vertices") + " (a face needs at least 2)";
+}
+
+enum class Rec : uint8_t { ok, truncated, negative_count };
+
+// Walks one binary record at p (never past end), extracting what the element's roles ask for when
+// Extract. On negative_count, p is left just past the offending count.
+template <bool Swap, bool Extract>
+inline Rec read_binary_record(const char*& p, const char* end, const Element& e, double* xyz, int64_t* v12,
+                              std::vector<int64_t>* idx) {
+  for (const Property& pr : e.props) {
+    if (pr.list) {
+      const unsigned cs = type_size(pr.count_type);
+      if (static_cast<size_t>(end - p) < cs) return Rec::truncated;
+      const int64_t n = load_int<Swap>(p, pr.count_type);
+      p += cs;
+      if (n < 0) return Rec::negative_count;
+      const unsigned is = type_size(pr.type);
+      if (static_cast<uint64_t>(end - p) / is < static_cast<uint64_t>(n)) return Rec::truncated;
+      if constexpr (Extract) {
+        if (pr.role == Role::indices) {
+          idx->clear();
+          for (int64_t i = 0; i < n; ++i) idx->push_back(load_int<Swap>(p + i * is, pr.type));
+        }
+      }
+      p += static_cast<uint64_t>(n) * is;
+    } else {
+      const unsigned s = type_size(pr.type);
+      if (static_cast<size_t>(end - p) < s) return Rec::truncated;
+      if constexpr (Extract) {
+        switch (pr.role) {
+          case Role::x: xyz[0] = load_double<Swap>(p, pr.type); break;
+          case Role::y: xyz[1] = load_double<Swap>(p, pr.type); break;
+          case Role::z: xyz[2] = load_double<Swap>(p, pr.type); break;
+          case Role::v1: v12[0] = load_int<Swap>(p, pr.type); break;
+          case Role::v2: v12[1] = load_int<Swap>(p, pr.type); break;
+          default: break;
+        }
+      }
+      p += s;
+    }
+  }
+  return Rec::ok;
+}
+
+// Reads one ascii value of type t at p (within a line ending at e). Integers must be integers in range;
+// float values are rounded to float as the file declares them.
+enum class Val : uint8_t { ok, missing, bad, range };
+
+inline Val ascii_value(const char*& p, const char* e, Type t, double* d, int64_t* i) {
+  p = text::skip_blanks(p, e);
+  if (p == e) return Val::missing;
+  if (is_integer(t)) {
+    int64_t v = 0;
+    const char* q = p;
+    if (!text::parse_int64(q, e, &v)) return Val::bad;
+    if (q < e && !text::is_blank(*q)) return Val::bad;
+    if (v < type_min(t) || v > type_max(t)) return Val::range;
+    p = q;
+    *i = v;
+    *d = static_cast<double>(v);
+    return Val::ok;
+  }
+  double v = 0;
+  const char* q = p;
+  if (!text::parse_double(q, e, &v)) return Val::bad;
+  if (t == Type::f32) v = static_cast<double>(static_cast<float>(v));
+  p = q;
+  *d = v;
+  *i = 0;
+  return Val::ok;
+}
+
+class PlyReader final : public Reader {
+ public:
+  explicit PlyReader(const MappedFile& file) : Reader(file) { peek_format(); }
+
+  std::string format() const override {
+    switch (fmt_) {
+      case Fmt::ascii: return "ply-ascii";
+      case Fmt::le: return "ply-binary-le";
+      case Fmt::be: return "ply-binary-be";
+    }
+    return "ply";
+  }
+
+  void open() override;
+  bool single_precision() const override { return single_; }
+  bool next_chunk(uint64_t target_bytes, Chunk* chunk) override;
+  void parse(const Chunk& chunk, ParsedChunk* out) const override;
+  void resolve(ParsedChunk* chunk) override;
+  void finish(uint64_t vertex_records) override;
+
+ private:
+  enum class Fmt : uint8_t { ascii, le, be };
+
+  void peek_format();
+  bool parse_header(std::string_view head, bool at_eof);
+  void finalize_header();
+  [[noreturn]] void header_error(uint64_t line, const std::string& message) const {
+    fail_at_line(file_, line, message);
+  }
+
+  // Splitting.
+  const char* scan(uint64_t offset, uint64_t min_bytes);
+  void cut_fixed(const Element& e, uint64_t target, Chunk* chunk);
+  template <bool Swap>
+  void cut_variable(const Element& e, uint64_t target, Chunk* chunk);
+  void cut_ascii(const Element& e, uint64_t target, Chunk* chunk);
+
+  // Parsing.
+  template <bool Swap>
+  void parse_binary(const Chunk& chunk, const Element& e, ParsedChunk* out) const;
+  template <typename T, bool Swap>
+  void fast_vertices(const char* p, uint64_t n, const Element& e, uint64_t base, ParsedChunk* out) const;
+  template <typename T, bool Swap>
+  void fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* out) const;
+  void parse_ascii(const Chunk& chunk, const Element& e, ParsedChunk* out) const;
+  bool emit_face(const int64_t* idx, uint64_t n, ParsedChunk* out, std::string* message) const;
+  std::string truncation_message(const Element& e, uint64_t record, uint64_t offset) const;
+
+  Fmt fmt_ = Fmt::ascii;
+  bool opened_ = false;
+  bool saw_format_ = false;
+  std::vector<Element> elements_;
+  uint64_t data_start_ = 0;
+  uint64_t data_line_ = 1;  // 1-based line of the first data byte (ascii)
+  uint64_t header_lines_ = 0;
+  uint64_t vertex_count_ = 0;
+  int vertex_element_ = -1;
+  bool single_ = false;  // x, y and z all of a type float holds exactly
+
+  // Splitter state.
+  size_t elem_ = 0;
+  uint64_t rec_ = 0;     // records of elements_[elem_] already cut
+  uint64_t cursor_ = 0;  // byte offset of the next record
+  uint64_t line_ = 1;    // ascii: line of cursor_
+  bool broken_ = false;  // the last chunk ends in a truncated or broken record: no more chunks
+  Window scan_;          // read-ahead window of the splitter
+  uint64_t scan_bytes_ = 4096;
+};
+
+// ------------------------------------------------------------------------------------------- header
+
+void PlyReader::peek_format() {
+  // A lenient look at the format line so format() means something before open(); open() checks it.
+  const Window w = file_.map(0, 4096);
+  const std::string_view head = w.view();
+  const size_t at = head.find("\nformat ");
+  if (at == std::string_view::npos) return;
+  const std::string_view rest = head.substr(at + 8, 24);
+  if (rest.substr(0, 20) == "binary_little_endian") fmt_ = Fmt::le;
+  else if (rest.substr(0, 17) == "binary_big_endian") fmt_ = Fmt::be;
+}
+
+// Parses the header in `head` (the first bytes of the file). Returns false when the header runs past the
+// end of `head` and more of the file exists; throws for a malformed header.
+bool PlyReader::parse_header(std::string_view head, bool at_eof) {
+  elements_.clear();
+  saw_format_ = false;
+  const char* const base = head.data();
+  const char* const end = base + head.size();
+  const char* p = base;
+  uint64_t line = 0;
+  bool last_unterminated = false;
+  while (p < end) {
+    const char* nl = static_cast<const char*>(std::memchr(p, '\n', static_cast<size_t>(end - p)));
+    if (!nl && !at_eof) {
+      // Read more of the file for this line, unless it is already binary (a missing end_header).
+      if (has_binary_bytes(p, end))
+        header_error(line + 1, "binary data in the PLY header (is end_header missing?)");
+      return false;
+    }
+    const char* le = nl ? nl : end;
+    last_unterminated = !nl;
+    ++line;
+    const char* lp = p;
+    p = nl ? nl + 1 : end;
+    const std::string_view whole(lp, static_cast<size_t>(le - lp));
+    if (has_binary_bytes(lp, le))
+      header_error(line, "binary data in the PLY header (is end_header missing?): " + quoted(whole));
+    const std::string_view keyword = text::next_token(lp, le);
+    auto expect_end = [&](const char* what) {
+      const std::string_view extra = text::next_token(lp, le);
+      if (!extra.empty()) header_error(line, std::string("unexpected ") + quoted(extra) + " after " + what);
+    };
+    if (line == 1) {
+      if (keyword != "ply") header_error(line, "not a PLY file: the first line must be 'ply'");
+      expect_end("'ply'");
+      continue;
+    }
+    if (keyword.empty()) continue;  // tolerate blank header lines
+    if (keyword == "comment" || keyword == "obj_info") continue;
+    if (keyword == "format") {
+      if (saw_format_) header_error(line, "second format line");
+      const std::string_view f = text::next_token(lp, le);
+      const std::string_view version = text::next_token(lp, le);
+      if (f == "ascii") fmt_ = Fmt::ascii;
+      else if (f == "binary_little_endian") fmt_ = Fmt::le;
+      else if (f == "binary_big_endian") fmt_ = Fmt::be;
+      else
+        header_error(line, "unknown PLY format " + quoted(f) +
+                               " (expected ascii, binary_little_endian or binary_big_endian)");
+      if (version != "1.0") header_error(line, "unsupported PLY version " + quoted(version) + " (expected 1.0)");
+      expect_end("the format line");
+      saw_format_ = true;
+      continue;
+    }
+    if (keyword == "element") {
+      if (!saw_format_) header_error(line, "element before the format line");
+      const std::string_view name = text::next_token(lp, le);
+      const std::string_view count = text::next_token(lp, le);
+      if (name.empty() || count.empty()) header_error(line, "bad element line: expected 'element NAME COUNT'");
+      uint64_t n = 0;
+      const auto [q, ec] = std::from_chars(count.data(), count.data() + count.size(), n);
+      if (ec != std::errc() || q != count.data() + count.size())
+        header_error(line, "bad element count " + quoted(count) + " for element " + quoted(name));
+      expect_end("the element line");
+      for (const Element& e : elements_)
+        if (e.name == name) header_error(line, "second element named " + quoted(name));
+      Element e;
+      e.name = std::string(name);
+      e.count = n;
+      e.header_line = line;
+      elements_.push_back(std::move(e));
+      continue;
+    }
+    if (keyword == "property") {
+      if (elements_.empty()) header_error(line, "property before any element");
+      Property pr;
+      std::string_view t = text::next_token(lp, le);
+      if (t == "list") {
+        pr.list = true;
+        const std::string_view ct = text::next_token(lp, le);
+        pr.count_type = type_from_name(ct);
+        if (ct.empty()) header_error(line, "bad list property: expected 'property list COUNTTYPE ITEMTYPE NAME'");
+        if (pr.count_type == Type::none) header_error(line, "unknown property type " + quoted(ct));
+        if (!is_integer(pr.count_type))
+          header_error(line, "list count type must be an integer type, not " + quoted(ct));
+        t = text::next_token(lp, le);
+      }
+      if (t.empty()) header_error(line, "bad property line: expected 'property TYPE NAME'");
+      pr.type = type_from_name(t);
+      if (pr.type == Type::none) header_error(line, "unknown property type " + quoted(t));
+      const std::string_view name = text::next_token(lp, le);
+      if (name.empty()) header_error(line, "property without a name");
+      expect_end("the property line");
+      Element& e = elements_.back();
+      for (const Property& other : e.props)
+        if (other.name == name)
+          header_error(line, "second property named " + quoted(name) + " in element " + quoted(e.name));
+      pr.name = std::string(name);
+      e.props.push_back(std::move(pr));
+      continue;
+    }
+    if (keyword == "end_header") {
+      expect_end("end_header");
+      if (!saw_format_) header_error(line, "no format line before end_header");
+      data_start_ = static_cast<uint64_t>(p - base);
+      header_lines_ = line;
+      data_line_ = line + 1;
+      return true;
+    }
+    header_error(line, "unknown PLY header line " + quoted(whole));
+  }
+  if (!at_eof) return false;
+  header_error(line + (last_unterminated ? 0 : 1), "the PLY header has no end_header line");
+}
+
+void PlyReader::finalize_header() {
+  const bool binary = fmt_ != Fmt::ascii;
+  for (size_t k = 0; k < elements_.size(); ++k) {
+    Element& e = elements_[k];
+    auto find = [&](std::string_view name) -> int {
+      for (size_t i = 0; i < e.props.size(); ++i)
+        if (e.props[i].name == name) return static_cast<int>(i);
+      return -1;
+    };
+    if (e.count > 0 && e.props.empty())
+      header_error(e.header_line, "element " + quoted(e.name) + " has records but no properties");
+    if (e.name == "vertex") {
+      e.kind = Kind::vertex;
+      vertex_element_ = static_cast<int>(k);
+      vertex_count_ = e.count;
+      const char* names[3] = {"x", "y", "z"};
+      int* slots[3] = {&e.px, &e.py, &e.pz};
+      const Role roles[3] = {Role::x, Role::y, Role::z};
+      for (int c = 0; c < 3; ++c) {
+        const int i = find(names[c]);
+        if (i < 0) header_error(e.header_line, std::string("element 'vertex' has no property '") + names[c] + "'");
+        if (e.props[i].list)
+          header_error(e.header_line, std::string("property '") + names[c] + "' of element 'vertex' is a list");
+        e.props[i].role = roles[c];
+        *slots[c] = i;
+      }
+      single_ = true;
+      for (int c = 0; c < 3; ++c) {
+        const Type t = e.props[*slots[c]].type;
+        if (t != Type::f32 && t != Type::i8 && t != Type::u8 && t != Type::i16 && t != Type::u16) single_ = false;
+      }
+    } else if (e.name == "face") {
+      e.kind = Kind::face;
+      int i = find("vertex_indices");
+      if (i < 0) i = find("vertex_index");
+      if (i < 0) header_error(e.header_line, "element 'face' has no list property 'vertex_indices'");
+      Property& pr = e.props[i];
+      if (!pr.list) header_error(e.header_line, "property " + quoted(pr.name) + " of element 'face' is not a list");
+      if (!is_integer(pr.type))
+        header_error(e.header_line, "face indices must have an integer type, not " + std::string(type_name(pr.type)));
+      pr.role = Role::indices;
+    } else if (e.name == "edge") {
+      const int a = find("vertex1"), b = find("vertex2");
+      if (a >= 0 && b >= 0) {
+        for (int i : {a, b})
+          if (e.props[i].list || !is_integer(e.props[i].type))
+            header_error(e.header_line, "property " + quoted(e.props[i].name) +
+                                            " of element 'edge' must be a scalar integer");
+        e.kind = Kind::edge;
+        e.pv1 = a;
+        e.pv2 = b;
+        e.props[a].role = Role::v1;
+        e.props[b].role = Role::v2;
+      }
+    }
+    // Binary layout.
+    uint64_t offset = 0, min_size = 0;
+    for (Property& pr : e.props) {
+      pr.offset = static_cast<uint32_t>(offset);
+      if (pr.list) {
+        e.fixed = false;
+        min_size += type_size(pr.count_type);
+      } else {
+        min_size += type_size(pr.type);
+        offset += type_size(pr.type);
+      }
+    }
+    e.min_size = min_size;
+    e.record_size = e.fixed ? min_size : 0;
+    if (e.kind == Kind::vertex && e.fixed) {
+      const Type t = e.props[e.px].type;
+      if (e.props[e.py].type == t && e.props[e.pz].type == t)
+        e.fast_vertex = t == Type::f32 ? 1 : t == Type::f64 ? 2 : 0;
+    }
+    if (e.kind == Kind::face && e.props.size() == 1 && type_size(e.props[0].count_type) == 1 &&
+        (e.props[0].type == Type::i32 || e.props[0].type == Type::u32))
+      e.fast_face = e.props[0].type == Type::i32 ? 1 : 2;
+  }
+  if (vertex_element_ < 0) header_error(header_lines_, "the PLY header declares no element 'vertex'");
+
+  // Counts the remaining bytes cannot hold: checked before any data is read, so a lying count costs
+  // nothing. A binary record takes at least min_size bytes; an ascii record of k properties at least 2k
+  // (k one-character tokens, k-1 separators, a line end that the very last record may lack).
+  const uint64_t avail = file_.size() - data_start_;
+  uint64_t used = 0;
+  for (const Element& e : elements_) {
+    if (e.count == 0) continue;
+    const uint64_t per = binary ? e.min_size : 2 * e.props.size();
+    const uint64_t room = avail - used + (binary ? 0 : 1);
+    if (e.count > room / per) {
+      header_error(e.header_line,
+                   "element " + quoted(e.name) + " declares " + std::to_string(e.count) + " records of at least " +
+                       std::to_string(per) + " bytes each, but only " + std::to_string(avail - std::min(avail, used)) +
+                       " bytes of data remain for it (from byte " + std::to_string(data_start_ + std::min(avail, used)) +
+                       "): the file is truncated or the count is wrong");
+    }
+    used += e.count * per;
+  }
+
+  // An ascii header over binary data: say so instead of reporting garbage numbers.
+  if (!binary && avail > 0) {
+    const Window w = file_.map(data_start_, data_start_ + std::min<uint64_t>(avail, 4096));
+    const char* d = w.data();
+    for (uint64_t i = 0; i < w.size(); ++i) {
+      if (!text::is_text_byte(static_cast<unsigned char>(d[i]))) {
+        char hex[8];
+        std::snprintf(hex, sizeof hex, "0x%02x", static_cast<unsigned char>(d[i]));
+        fail_at_offset(file_, data_start_ + i,
+                       std::string("binary data (byte ") + hex +
+                           ") in a file whose header says 'format ascii': is it binary PLY under a wrong header?");
+      }
+    }
+  }
+}
+
+void PlyReader::open() {
+  if (opened_) return;
+  uint64_t want = 64 * 1024;
+  for (;;) {
+    const Window w = file_.map(0, want);
+    if (parse_header(w.view(), w.end() >= file_.size())) break;
+    want *= 2;
+  }
+  finalize_header();
+  cursor_ = data_start_;
+  line_ = data_line_;
+  elem_ = 0;
+  rec_ = 0;
+  opened_ = true;
+}
+
+// ---------------------------------------------------------------------------------------- splitting
+
+// The splitter reads ahead through a window of about 8 chunks, 4 KiB to 64 MiB.
+constexpr uint64_t kMinScanBytes = 4096, kMaxScanBytes = 64ull << 20;
+
+// A pointer to `offset` in the scan window, remapping it so that [offset, offset + min_bytes) is covered
+// (or as much of it as the file holds).
+const char* PlyReader::scan(uint64_t offset, uint64_t min_bytes) {
+  const uint64_t want_end = std::min(file_.size(), offset + min_bytes);
+  if (scan_.data() == nullptr || offset < scan_.begin() || want_end > scan_.end() ||
+      (offset == scan_.end() && offset < file_.size())) {
+    scan_.reset();
+    scan_ = file_.map(offset, offset + std::max(min_bytes, scan_bytes_));
+  }
+  return scan_.data() + (offset - scan_.begin());
+}
+
+std::string PlyReader::truncation_message(const Element& e, uint64_t record, uint64_t offset) const {
+  return std::string("truncated: the file ends ") + (offset >= file_.size() ? "before " : "inside ") +
+         record_text(record, e);
+}
+
+bool PlyReader::next_chunk(uint64_t target_bytes, Chunk* chunk) {
+  if (!opened_) open();
+  if (broken_) return false;
+  while (elem_ < elements_.size() && rec_ >= elements_[elem_].count) {
+    ++elem_;
+    rec_ = 0;
+  }
+  if (elem_ >= elements_.size()) {
+    scan_.reset();
+    return false;
+  }
+  if (target_bytes == 0) target_bytes = 1;
+  scan_bytes_ = std::clamp(target_bytes < kMaxScanBytes / 8 ? 8 * target_bytes : kMaxScanBytes, kMinScanBytes,
+                           kMaxScanBytes);
+  const Element& e = elements_[elem_];
+  chunk->section = static_cast<uint32_t>(elem_);
+  chunk->first_record = rec_;
+  chunk->first_line = 0;
+  if (fmt_ == Fmt::ascii) cut_ascii(e, target_bytes, chunk);
+  else if (e.fixed) cut_fixed(e, target_bytes, chunk);
+  else if (fmt_ == Fmt::be) cut_variable<true>(e, target_bytes, chunk);
+  else cut_variable<false>(e, target_bytes, chunk);
+  return true;
+}
+
+void PlyReader::cut_fixed(const Element& e, uint64_t target, Chunk* chunk) {
+  const uint64_t rs = e.record_size;
+  const uint64_t left = e.count - rec_;
+  uint64_t n = std::min(left, std::max<uint64_t>(1, target / rs));
+  const uint64_t avail = (file_.size() - cursor_) / rs;
+  if (avail == 0) {
+    // Not one whole record left: a chunk claiming one record over the tail, for parse() to report.
+    chunk->bytes = file_.map(cursor_, file_.size());
+    chunk->record_count = 1;
+    broken_ = true;
+    return;
+  }
+  n = std::min(n, avail);
+  chunk->bytes = file_.map(cursor_, cursor_ + n * rs);
+  chunk->record_count = n;
+  cursor_ += n * rs;
+  rec_ += n;
+}
+
+template <bool Swap>
+void PlyReader::cut_variable(const Element& e, uint64_t target, Chunk* chunk) {
+  const uint64_t left = e.count - rec_;
+  const uint64_t begin = cursor_;
+  uint64_t o = begin;
+  uint64_t k = 0;
+  uint64_t need = 1;
+  bool broken = false;
+  uint64_t broken_end = 0;
+  while (k < left) {
+    const char* p0 = scan(o, need);
+    const char* p = p0;
+    const char* const wend = scan_.data() + scan_.size();
+    const bool window_at_eof = scan_.end() >= file_.size();
+    bool stop = false;
+    if (e.fast_face) {
+      // A single `list (u)char ...` property: hop from count to count. Runs of faces of one size (all
+      // triangles, all quads) are confirmed 16 at a time with independent loads, not a chain of hops.
+      const bool negative_ok = e.props[0].count_type == Type::u8;
+      const uint64_t done_before = o - begin;
+      while (k < left) {
+        if (p >= wend) break;
+        const unsigned n = static_cast<unsigned char>(*p);
+        const uint64_t size = 1 + 4 * static_cast<uint64_t>(n);
+        if (negative_ok || n <= 127) {
+          constexpr uint64_t kRun = 16;
+          bool run = false;
+          while (left - k >= kRun && static_cast<uint64_t>(wend - p) >= kRun * size) {
+            unsigned diff = 0;
+            for (uint64_t j = 1; j < kRun; ++j) diff |= static_cast<unsigned char>(p[j * size]) ^ n;
+            if (diff != 0) break;
+            run = true;
+            p += kRun * size;
+            k += kRun;
+            if (done_before + static_cast<uint64_t>(p - p0) >= target) break;
+          }
+          if (run) {
+            if (done_before + static_cast<uint64_t>(p - p0) >= target) {
+              stop = true;
+              break;
+            }
+            continue;
+          }
+        }
+        if (!negative_ok && n > 127) {
+          broken = true;
+          broken_end = o + static_cast<uint64_t>(p - p0) + 1;
+          break;
+        }
+        if (static_cast<uint64_t>(wend - p) < size) break;
+        p += size;
+        ++k;
+        if (done_before + static_cast<uint64_t>(p - p0) >= target) {
+          stop = true;
+          break;
+        }
+      }
+    } else {
+      while (k < left) {
+        const char* q = p;
+        const Rec r = read_binary_record<Swap, false>(q, wend, e, nullptr, nullptr, nullptr);
+        if (r == Rec::truncated) break;
+        if (r == Rec::negative_count) {
+          broken = true;
+          broken_end = o + static_cast<uint64_t>(q - p0);
+          break;
+        }
+        p = q;
+        ++k;
+        if (static_cast<uint64_t>(o - begin) + static_cast<uint64_t>(p - p0) >= target) {
+          stop = true;
+          break;
+        }
+      }
+    }
+    o += static_cast<uint64_t>(p - p0);
+    if (stop || broken || k == left) break;
+    // The next record runs past the scan window: past the end of the file, or remap and go on.
+    if (window_at_eof) {
+      broken = true;
+      broken_end = file_.size();
+      break;
+    }
+    need = 2 * static_cast<uint64_t>(wend - p) + 1;
+  }
+  if (broken) {
+    // A truncated record, or one with a negative list count: claim it, so parse() reports it.
+    chunk->bytes = file_.map(begin, broken_end);
+    chunk->record_count = k + 1;
+    broken_ = true;
+    return;
+  }
+  chunk->bytes = file_.map(begin, o);
+  chunk->record_count = k;
+  cursor_ = o;
+  rec_ += k;
+}
+
+void PlyReader::cut_ascii(const Element& e, uint64_t target, Chunk* chunk) {
+  const uint64_t left = e.count - rec_;
+  const uint64_t begin = cursor_;
+  const uint64_t size = file_.size();
+  uint64_t o = begin;
+  uint64_t k = 0, lines = 0;
+  uint64_t need = 1;
+  while (k < left && o < size) {
+    const char* p = scan(o, need);
+    const char* const wend = scan_.data() + scan_.size();
+    const bool window_at_eof = scan_.end() >= size;
+    bool more = false;
+    while (k < left && p < wend) {
+      const char* nl = static_cast<const char*>(std::memchr(p, '\n', static_cast<size_t>(wend - p)));
+      if (!nl && !window_at_eof) {
+        // A line longer than what is left of the window: remap from its start.
+        need = 2 * static_cast<uint64_t>(wend - p) + 1;
+        more = true;
+        break;
+      }
+      const char* le = nl ? nl : wend;
+      if (text::skip_blanks(p, le) != le) ++k;
+      p = nl ? nl + 1 : wend;
+      if (nl) ++lines;
+      o = scan_.begin() + static_cast<uint64_t>(p - scan_.data());
+      if (o - begin >= target && k > 0) break;
+    }
+    if (!more && (k == left || (k > 0 && o - begin >= target) || o >= size)) break;
+  }
+  chunk->first_line = line_;
+  if (k < left && o >= size) {
+    // The file ends before the element does: claim one record more for parse() to report.
+    chunk->bytes = file_.map(begin, size);
+    chunk->record_count = k + 1;
+    broken_ = true;
+    return;
+  }
+  chunk->bytes = file_.map(begin, o);
+  chunk->record_count = k;
+  cursor_ = o;
+  line_ += lines;
+  rec_ += k;
+}
+
+// ------------------------------------------------------------------------------------------ parsing
+
+void PlyReader::parse(const Chunk& chunk, ParsedChunk* out) const {
+  out->reader_state = static_cast<int64_t>(chunk.first_line);
+  if (chunk.section >= elements_.size()) return;
+  const Element& e = elements_[chunk.section];
+  if (fmt_ == Fmt::ascii) parse_ascii(chunk, e, out);
+  else if (fmt_ == Fmt::be) parse_binary<true>(chunk, e, out);
+  else parse_binary<false>(chunk, e, out);
+  out->triangle_objects.resize(out->triangles.size() / 3, 0);
+  out->line_objects.resize(out->lines.size() / 2, 0);  // edge elements and two-index faces
+}
+
+bool PlyReader::emit_face(const int64_t* idx, uint64_t n, ParsedChunk* out, std::string* message) const {
+  if (n < 2) {
+    *message = small_face_message(n);
+    return false;
+  }
+  for (uint64_t i = 0; i < n; ++i) {
+    if (static_cast<uint64_t>(idx[i]) >= vertex_count_) {
+      *message = index_message(idx[i], vertex_count_);
+      return false;
+    }
+  }
+  if (n == 2) {
+    // A two-index face is an edge (as OBJ exporters write loose edges): kept as a line segment.
+    out->lines.push_back(idx[0]);
+    out->lines.push_back(idx[1]);
+    return true;
+  }
+  for (uint64_t i = 1; i + 1 < n; ++i) {
+    out->triangles.push_back(idx[0]);
+    out->triangles.push_back(idx[i]);
+    out->triangles.push_back(idx[i + 1]);
+  }
+  ++out->polygons;
+  return true;
+}
+
+template <typename T, bool Swap>
+void PlyReader::fast_vertices(const char* p, uint64_t n, const Element& e, uint64_t base, ParsedChunk* out) const {
+  const uint64_t rs = e.record_size;
+  const uint32_t ox = e.props[e.px].offset, oy = e.props[e.py].offset, oz = e.props[e.pz].offset;
+  const bool packed = rs == 3 * sizeof(T) && ox == 0 && oy == sizeof(T) && oz == 2 * sizeof(T);
+  std::vector<double>& pos = out->positions;
+  pos.reserve(pos.size() + 3 * n);
+  // Converted through a small buffer: appending whole batches avoids both a zero-filling resize and a
+  // capacity check per value.
+  constexpr uint64_t kBatch = 512;
+  double buf[3 * kBatch];
+  for (uint64_t i0 = 0; i0 < n; i0 += kBatch) {
+    const uint64_t m = std::min(kBatch, n - i0);
+    const char* r = p + i0 * rs;
+    bool finite = true;
+    if (packed) {
+      // x y z are the whole record, in order: one flat conversion the compiler vectorizes.
+      // Finiteness is tested on the bits (exponent all ones), which vectorizes where a float compare does not.
+      using U = std::conditional_t<sizeof(T) == 4, uint32_t, uint64_t>;
+      constexpr U kExponent = sizeof(T) == 4 ? U(0x7f800000u) : U(0x7ff0000000000000ull);
+      U bad = 0;
+      for (uint64_t j = 0; j < 3 * m; ++j) {
+        const U u = load<U, Swap>(r + j * sizeof(T));
+        T v;
+        std::memcpy(&v, &u, sizeof v);
+        buf[j] = v;
+        bad |= static_cast<U>((u & kExponent) == kExponent);
+      }
+      finite = bad == 0;
+    } else {
+      for (uint64_t i = 0; i < m; ++i, r += rs) {
+      const double x = load<T, Swap>(r + ox), y = load<T, Swap>(r + oy), z = load<T, Swap>(r + oz);
+      buf[3 * i] = x;
+      buf[3 * i + 1] = y;
+      buf[3 * i + 2] = z;
+      finite &= ((x - x) == 0) & ((y - y) == 0) & ((z - z) == 0);
+      }
+    }
+    if (!finite) [[unlikely]] {
+      for (uint64_t i = 0; i < m; ++i) {
+        if (!text::finite3(buf + 3 * i)) {
+          pos.insert(pos.end(), buf, buf + 3 * i);
+          set_error(out, base + (i0 + i) * rs, 0, not_finite_message(buf + 3 * i));
+          return;
+        }
+      }
+    }
+    pos.insert(pos.end(), buf, buf + 3 * m);
+  }
+}
+
+template <typename T, bool Swap>
+void PlyReader::fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* out) const {
+  const char* const b = chunk.bytes.data();
+  const char* const end = b + chunk.bytes.size();
+  const uint64_t base = chunk.bytes.begin();
+  const uint64_t rc = chunk.record_count;
+  const uint64_t vc = vertex_count_;
+  const bool signed_count = e.props[0].count_type == Type::i8;
+  std::vector<int64_t>& tri = out->triangles;
+  tri.reserve(tri.size() + 3 * rc);
+  // Triangles go through a small buffer, appended a batch at a time (see fast_vertices).
+  constexpr size_t kBatch = 3 * 512;
+  int64_t buf[kBatch + 3 * 253];
+  size_t t = 0;
+  const char* p = b;
+  uint64_t i = 0;
+  for (; i < rc; ++i) {
+    if (t >= kBatch) {
+      tri.insert(tri.end(), buf, buf + t);
+      t = 0;
+    }
+    __builtin_prefetch(p + 1024);
+    if (end - p >= 13 && *p == 3) {
+      const int64_t a = load<T, Swap>(p + 1), c1 = load<T, Swap>(p + 5), c2 = load<T, Swap>(p + 9);
+      if ((static_cast<uint64_t>(a) < vc) & (static_cast<uint64_t>(c1) < vc) & (static_cast<uint64_t>(c2) < vc)) {
+        buf[t] = a;
+        buf[t + 1] = c1;
+        buf[t + 2] = c2;
+        t += 3;
+        p += 13;
+        continue;
+      }
+    }
+    // Anything else: other sizes, truncation, bad counts and bad indices.
+    const uint64_t offset = base + static_cast<uint64_t>(p - b);
+    if (p >= end) {
+      set_error(out, offset, 0, truncation_message(e, chunk.first_record + i + 1, offset));
+      break;
+    }
+    const unsigned n = static_cast<unsigned char>(*p);
+    if (signed_count && n > 127) {
+      set_error(out, offset, 0, "negative list count " + std::to_string(static_cast<int>(static_cast<int8_t>(n))));
+      break;
+    }
+    if (static_cast<uint64_t>(end - p - 1) / 4 < n) {
+      set_error(out, offset, 0, truncation_message(e, chunk.first_record + i + 1, offset));
+      break;
+    }
+    int64_t idx[255];
+    for (unsigned j = 0; j < n; ++j) idx[j] = load<T, Swap>(p + 1 + 4 * j);
+    if (n < 3) {
+      set_error(out, offset, 0, small_face_message(n));
+      break;
+    }
+    bool ok = true;
+    for (unsigned j = 0; j < n; ++j) {
+      if (static_cast<uint64_t>(idx[j]) >= vc) {
+        set_error(out, offset, 0, index_message(idx[j], vc));
+        ok = false;
+        break;
+      }
+    }
+    if (!ok) break;
+    for (unsigned j = 1; j + 1 < n; ++j) {  // at most 253 triangles: the buffer has room past kBatch
+      buf[t] = idx[0];
+      buf[t + 1] = idx[j];
+      buf[t + 2] = idx[j + 1];
+      t += 3;
+    }
+    p += 1 + 4 * static_cast<uint64_t>(n);
+  }
+  tri.insert(tri.end(), buf, buf + t);
+  out->polygons += i;
+}
+
+template <bool Swap>
+void PlyReader::parse_binary(const Chunk& chunk, const Element& e, ParsedChunk* out) const {
+  const char* const b = chunk.bytes.data();
+  const uint64_t bytes = chunk.bytes.size();
+  const char* const end = b + bytes;
+  const uint64_t base = chunk.bytes.begin();
+  const uint64_t rc = chunk.record_count;
+
+  if (e.fixed) {
+    const uint64_t rs = e.record_size;
+    const uint64_t complete = std::min(rc, bytes / rs);
+    if (e.kind == Kind::vertex) {
+      if (e.fast_vertex == 1) {
+        fast_vertices<float, Swap>(b, complete, e, base, out);
+      } else if (e.fast_vertex == 2) {
+        fast_vertices<double, Swap>(b, complete, e, base, out);
+      } else {
+        const Property &px = e.props[e.px], &py = e.props[e.py], &pz = e.props[e.pz];
+        for (uint64_t i = 0; i < complete; ++i) {
+          const char* r = b + i * rs;
+          const double v[3] = {load_double<Swap>(r + px.offset, px.type), load_double<Swap>(r + py.offset, py.type),
+                               load_double<Swap>(r + pz.offset, pz.type)};
+          if (!text::finite3(v)) {
+            set_error(out, base + i * rs, 0, not_finite_message(v));
+            return;
+          }
+          out->positions.insert(out->positions.end(), v, v + 3);
+        }
+      }
+      if (out->error.set) return;
+    } else if (e.kind == Kind::edge) {
+      const Property &p1 = e.props[e.pv1], &p2 = e.props[e.pv2];
+      for (uint64_t i = 0; i < complete; ++i) {
+        const char* r = b + i * rs;
+        const int64_t v[2] = {load_int<Swap>(r + p1.offset, p1.type), load_int<Swap>(r + p2.offset, p2.type)};
+        for (int64_t x : v) {
+          if (static_cast<uint64_t>(x) >= vertex_count_) {
+            set_error(out, base + i * rs, 0, "edge " + index_message(x, vertex_count_));
+            return;
+          }
+        }
+        out->lines.push_back(v[0]);
+        out->lines.push_back(v[1]);
+      }
+    } else {
+      out->skipped += complete;
+    }
+    if (complete < rc) {
+      const uint64_t offset = base + complete * rs;
+      set_error(out, offset, 0, truncation_message(e, chunk.first_record + complete + 1, offset));
+    }
+    return;
+  }
+
+  if (e.fast_face == 1) return fast_faces<int32_t, Swap>(chunk, e, out);
+  if (e.fast_face == 2) return fast_faces<uint32_t, Swap>(chunk, e, out);
+
+  // Variable-size records, any element.
+  std::vector<int64_t> idx;
+  double xyz[3] = {0, 0, 0};
+  int64_t v12[2] = {0, 0};
+  std::string message;
+  const char* p = b;
+  for (uint64_t i = 0; i < rc; ++i) {
+    const char* r = p;
+    const uint64_t offset = base + static_cast<uint64_t>(r - b);
+    const Rec st = read_binary_record<Swap, true>(p, end, e, xyz, v12, &idx);
+    if (st == Rec::truncated) {
+      set_error(out, offset, 0, truncation_message(e, chunk.first_record + i + 1, offset));
+      return;
+    }
+    if (st == Rec::negative_count) {
+      set_error(out, offset, 0, "negative list count in " + record_text(chunk.first_record + i + 1, e));
+      return;
+    }
+    switch (e.kind) {
+      case Kind::vertex:
+        if (!text::finite3(xyz)) {
+          set_error(out, offset, 0, not_finite_message(xyz));
+          return;
+        }
+        out->positions.insert(out->positions.end(), xyz, xyz + 3);
+        break;
+      case Kind::face:
+        if (!emit_face(idx.data(), idx.size(), out, &message)) {
+          set_error(out, offset, 0, message);
+          return;
+        }
+        break;
+      case Kind::edge:
+        for (int64_t x : v12) {
+          if (static_cast<uint64_t>(x) >= vertex_count_) {
+            set_error(out, offset, 0, "edge " + index_message(x, vertex_count_));
+            return;
+          }
+        }
+        out->lines.push_back(v12[0]);
+        out->lines.push_back(v12[1]);
+        break;
+      case Kind::other: ++out->skipped; break;
+    }
+  }
+}
+
+void PlyReader::parse_ascii(const Chunk& chunk, const Element& e, ParsedChunk* out) const {
+  const char* const b = chunk.bytes.data();
+  const char* const end = b + chunk.bytes.size();
+  const uint64_t base = chunk.bytes.begin();
+  const uint64_t rc = chunk.record_count;
+  std::vector<int64_t> idx;
+  std::string message;
+  const char* p = b;
+  uint64_t line = 1, done = 0;
+  while (p < end) {
+    const char* const le = text::line_end(p, end);
+    const char* q = text::skip_blanks(p, le);
+    if (q != le) {
+      const uint64_t offset = base + static_cast<uint64_t>(p - b);
+      if (done == rc) {  // cannot happen with chunks cut by next_chunk()
+        set_error(out, offset, line, "unexpected record after the records of element '" + e.name + "'");
+        return;
+      }
+      auto fail_line = [&](std::string m) {
+        if (has_binary_bytes(p, le))
+          m = "binary data in an ascii PLY file (the header says 'format ascii'): " + m;
+        set_error(out, offset, line, std::move(m));
+      };
+      double xyz[3] = {0, 0, 0};
+      int64_t v12[2] = {0, 0};
+      idx.clear();
+      for (const Property& pr : e.props) {
+        double d = 0;
+        int64_t iv = 0;
+        auto value = [&](Type t, const std::string& what) -> bool {
+          const char* tok = text::skip_blanks(q, le);
+          const Val r = ascii_value(q, le, t, &d, &iv);
+          if (r == Val::ok) return true;
+          if (r == Val::missing) {
+            fail_line("too few values in " + record_text(chunk.first_record + done + 1, e) + ": no value for " + what);
+          } else {
+            const char* te = tok;
+            while (te < le && !text::is_blank(*te)) ++te;
+            fail_line(std::string(r == Val::range ? "value out of range for " : "bad value for ") + what + " (" +
+                      type_name(t) + "): " + quoted(std::string_view(tok, static_cast<size_t>(te - tok))));
+          }
+          return false;
+        };
+        if (pr.list) {
+          if (!value(pr.count_type, "the count of list '" + pr.name + "'")) return;
+          if (iv < 0) {
+            fail_line("negative list count " + std::to_string(iv) + " for list '" + pr.name + "'");
+            return;
+          }
+          const int64_t n = iv;
+          for (int64_t j = 0; j < n; ++j) {
+            if (!value(pr.type, "item " + std::to_string(j + 1) + " of list '" + pr.name + "'")) return;
+            if (pr.role == Role::indices) idx.push_back(iv);
+          }
+        } else {
+          if (!value(pr.type, "property '" + pr.name + "'")) return;
+          switch (pr.role) {
+            case Role::x: xyz[0] = d; break;
+            case Role::y: xyz[1] = d; break;
+            case Role::z: xyz[2] = d; break;
+            case Role::v1: v12[0] = iv; break;
+            case Role::v2: v12[1] = iv; break;
+            default: break;
+          }
+        }
+      }
+      q = text::skip_blanks(q, le);
+      if (q != le) {
+        fail_line("extra values after the last property of element '" + e.name + "': " +
+                  quoted(std::string_view(q, static_cast<size_t>(le - q))));
+        return;
+      }
+      switch (e.kind) {
+        case Kind::vertex:
+          if (!text::finite3(xyz)) {
+            set_error(out, offset, line, not_finite_message(xyz));
+            return;
+          }
+          out->positions.insert(out->positions.end(), xyz, xyz + 3);
+          break;
+        case Kind::face:
+          if (!emit_face(idx.data(), idx.size(), out, &message)) {
+            set_error(out, offset, line, message);
+            return;
+          }
+          break;
+        case Kind::edge:
+          for (int64_t x : v12) {
+            if (static_cast<uint64_t>(x) >= vertex_count_) {
+              set_error(out, offset, line, "edge " + index_message(x, vertex_count_));
+              return;
+            }
+          }
+          out->lines.push_back(v12[0]);
+          out->lines.push_back(v12[1]);
+          break;
+        case Kind::other: ++out->skipped; break;
+      }
+      ++done;
+    }
+    if (le == end) break;
+    p = le + 1;
+    ++line;
+  }
+  out->newlines = line - 1;
+  if (done < rc) {
+    // Only the last chunk of a file that ends early claims a record it does not hold.
+    set_error(out, base + chunk.bytes.size(), line,
+              "truncated: the file ends before " + record_text(chunk.first_record + done + 1, e));
+  }
+}
+
+// ---------------------------------------------------------------------------------- resolve, finish
+
+void PlyReader::resolve(ParsedChunk* chunk) {
+  const ParseError& err = chunk->error;
+  if (!err.set) return;
+  if (err.line != 0) fail_at_line(file_, static_cast<uint64_t>(chunk->reader_state) + err.line - 1, err.message);
+  fail_at_offset(file_, err.offset, err.message);
+}
+
+void PlyReader::finish(uint64_t vertex_records) {
+  if (broken_) fail_at_offset(file_, cursor_, "the data ends before the records the header declares");
+  if (elem_ < elements_.size())
+    fail_at_offset(file_, cursor_, "the data ends before " + record_text(rec_ + 1, elements_[elem_]));
+  if (vertex_records != vertex_count_)
+    fail_at_offset(file_, cursor_, "the file holds " + std::to_string(vertex_records) +
+                                       " vertex records but the header declares " + std::to_string(vertex_count_));
+  const uint64_t size = file_.size();
+  if (cursor_ >= size) return;
+  if (fmt_ != Fmt::ascii)
+    fail_at_offset(file_, cursor_, std::to_string(size - cursor_) + " bytes after the last element");
+  // Ascii: whitespace may follow the last record, nothing else.
+  uint64_t line = line_;
+  for (uint64_t o = cursor_; o < size;) {
+    const Window w = file_.map(o, o + kMaxScanBytes);
+    const char* d = w.data();
+    for (uint64_t i = 0; i < w.size(); ++i) {
+      if (d[i] == '\n') {
+        ++line;
+      } else if (!text::is_blank(d[i])) {
+        fail_at_line(file_, line, "data after the last element the header declares (element '" +
+                                      elements_.back().name + "' has " + std::to_string(elements_.back().count) +
+                                      " records)");
+      }
+    }
+    o = w.end();
+  }
+}
+
+}  // namespace
+
+std::unique_ptr<Reader> make_ply_reader(const MappedFile& file) { return std::make_unique<PlyReader>(file); }
+
 }  // namespace lodstream::io
