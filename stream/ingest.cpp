@@ -24,6 +24,7 @@
 #include "io/file_writer.h"
 #include "io/mapped_file.h"
 #include "io/reader.h"
+#include "stream/distinct_count.h"
 #include "stream/external_sort.h"
 
 namespace lodstream::stream {
@@ -367,18 +368,6 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   return written;
 }
 
-namespace {
-struct Pos {
-  double x, y, z;
-};
-struct PosLess {
-  bool operator()(const Pos& a, const Pos& b) const {
-    if (a.x != b.x) return a.x < b.x;
-    if (a.y != b.y) return a.y < b.y;
-    return a.z < b.z;
-  }
-};
-}  // namespace
 
 namespace {
 // Marks the vertices a column of uint32 references uses.
@@ -409,34 +398,10 @@ Census census(const std::string& store_dir, const StoreMeta& meta, const MemoryP
     c.vertices_welded = meta.vertices;  // welded by exact position during ingest
     return c;
   }
-  const uint64_t stride = meta.single_precision ? 12 : 24;
-  io::MappedFile positions(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"));
-  if (positions.size() != meta.vertices * stride) fail(Status::io_error, positions.path() + ": size does not match store.json");
-  ExternalSorter<Pos, PosLess> sorter(work, "positions", plan.sort_bytes);
-  const uint64_t step = stride * store_chunk_elements;
-  auto z = [](double v) { return v == 0 ? 0.0 : v; };
-  for (uint64_t at = 0; at < positions.size(); at += step) {
-    progress.check();
-    const io::Window w = positions.map(at, at + step);
-    const uint64_t n = w.size() / stride;
-    if (meta.single_precision) {
-      const float* p = reinterpret_cast<const float*>(w.data());
-      for (uint64_t i = 0; i < n; ++i) sorter.push({z(p[3 * i]), z(p[3 * i + 1]), z(p[3 * i + 2])});
-    } else {
-      const double* p = reinterpret_cast<const double*>(w.data());
-      for (uint64_t i = 0; i < n; ++i) sorter.push({z(p[3 * i]), z(p[3 * i + 1]), z(p[3 * i + 2])});
-    }
-    progress.report("census", 0.5 * static_cast<double>(at + w.size()) / static_cast<double>(positions.size()));
-  }
-  uint64_t distinct = 0, seen = 0;
-  Pos last{};
-  sorter.merge([&](const Pos& p) {
-    if (distinct == 0 || p.x != last.x || p.y != last.y || p.z != last.z) ++distinct, last = p;
-    if ((++seen & 0xFFFFF) == 0)
-      progress.report("census", 0.5 + 0.5 * static_cast<double>(seen) / static_cast<double>(meta.vertices));
-  });
+  c.vertices_welded = count_distinct_positions(
+      store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), meta.vertices, meta.single_precision,
+      plan.stage_bytes, progress);
   progress.report("census", 1);
-  c.vertices_welded = distinct;
   return c;
 }
 

@@ -16,7 +16,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
                  const WorkDir& work, Progress& progress, bool* reused);
 
 // Statistics of a store that only `info` needs: distinct positions among the vertices (exact comparison,
-// -0 equals +0; by an external sort under plan.sort_bytes) and vertices no primitive uses.
+// -0 equals +0; see distinct_count.h) and vertices no primitive uses.
 struct Census {
   uint64_t vertices_welded = 0;
   uint64_t unused_vertices = 0;

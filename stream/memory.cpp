@@ -70,6 +70,7 @@ MemoryPlan plan_memory(const Options& options) {
   plan.chunk_bytes = options.chunk_bytes ? options.chunk_bytes
                                          : std::clamp<uint64_t>(per_slot, 64ull << 10, 1ull << 20);
   plan.sort_bytes = std::max<uint64_t>(usable / 2, 4ull << 20);
+  plan.stage_bytes = std::max<uint64_t>(usable, 8ull << 20);
   return plan;
 }
 

@@ -21,7 +21,8 @@ struct MemoryPlan {
   unsigned threads = 1;
   unsigned tokens = 2;       // chunks in flight in a pipeline
   uint64_t chunk_bytes = 0;  // input bytes per parse chunk
-  uint64_t sort_bytes = 0;   // in-memory buffer of an external sort
+  uint64_t sort_bytes = 0;   // in-memory buffer of an external sort that runs beside a pipeline
+  uint64_t stage_bytes = 0;  // working memory of a stage that runs alone
 };
 
 // Throws Failure(usage) for a budget below min_memory_bytes.
