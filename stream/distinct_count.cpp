@@ -97,7 +97,10 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
   io::MappedFile file(path);
   const uint64_t stride = 3 * sizeof(T);
   if (file.size() != count * stride) fail(Status::io_error, path + ": size does not match store.json");
-  const uint64_t step = stride * store_chunk_elements;
+  // Mapped pages count as resident: small windows, and their bytes come out of the tables' budget.
+  const uint64_t step = stride * 65536;
+  const uint64_t windows = step * std::max(threads, 1u);
+  memory_bytes = memory_bytes > 2 * windows ? memory_bytes - windows : memory_bytes / 2;
 
   // Partition p holds the keys whose hash falls in the p-th of P equal ranges (the table indexes by the
   // low bits). Each partition is one read-only pass over the column; partitions run in parallel, each

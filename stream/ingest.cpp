@@ -373,7 +373,7 @@ namespace {
 // Marks the vertices a column of uint32 references uses.
 void mark_used(const std::string& path, std::vector<uint64_t>* used, Progress& progress) {
   io::MappedFile column(path);
-  const uint64_t step = 4 * store_chunk_elements;
+  const uint64_t step = 4 << 18;  // 1 MiB windows: mapped pages count as resident
   for (uint64_t at = 0; at < column.size(); at += step) {
     progress.check();
     const io::Window w = column.map(at, at + step);

@@ -59,14 +59,14 @@ MemoryPlan plan_memory(const Options& options) {
   const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
   plan.threads = options.threads ? options.threads : hw;
   plan.tokens = 4 * plan.threads;
-  // The process itself (code, TBB, buffers of the writers) needs about 40 MiB; the rest is split between
-  // the chunks in flight and one external-sort buffer, which never run at full size at the same time
-  // beyond this split. A parsed chunk can be up to ~8x its input bytes (short text records become
-  // 8-byte references and doubles), so a chunk slot costs 9x its input bytes. Chunks of about 1 MiB
+  // The process itself (code and libraries ~28 MiB resident, TBB, the store writers' ~3 MiB of buffers)
+  // needs up to 40 MiB; the rest is split between the chunks in flight and one external-sort buffer. A
+  // parsed chunk can be up to ~8x its input bytes (short text records become 8-byte references and
+  // doubles), and its prepared form up to 4x more, so a chunk slot costs 13x its input. Chunks of about 1 MiB
   // keep a chunk's parsed output in cache between the stages that touch it; larger ones measured slower
   // (city scene, binary PLY: 0.55 s at 1 MiB, 0.61 s at 4 MiB, 0.81 s at 16 MiB).
   const uint64_t usable = plan.budget - std::min<uint64_t>(plan.budget / 2, 40ull << 20);
-  const uint64_t per_slot = usable / 2 / plan.tokens / 9;
+  const uint64_t per_slot = usable / 2 / plan.tokens / 13;
   plan.chunk_bytes = options.chunk_bytes ? options.chunk_bytes
                                          : std::clamp<uint64_t>(per_slot, 64ull << 10, 1ull << 20);
   plan.sort_bytes = std::max<uint64_t>(usable / 2, 4ull << 20);

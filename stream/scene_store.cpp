@@ -12,12 +12,13 @@ namespace lodstream::stream {
 using nlohmann::ordered_json;
 
 StoreWriter::StoreWriter(const std::string& dir, bool single_precision) : dir_(dir), single_(single_precision) {
-  positions_.open(dir + (single_ ? "/positions.f32" : "/positions.f64"), 8 << 20);
-  triangles_.ids.open(dir + "/triangles.u32", 8 << 20);
+  // Buffers count against the memory budget (see memory.cpp); chunks larger than a buffer bypass it.
+  positions_.open(dir + (single_ ? "/positions.f32" : "/positions.f64"), 1 << 20);
+  triangles_.ids.open(dir + "/triangles.u32", 1 << 20);
   triangles_.runs.open(dir + "/triangle_objects.runs", 1 << 16);
-  lines_.ids.open(dir + "/lines.u32");
+  lines_.ids.open(dir + "/lines.u32", 1 << 18);
   lines_.runs.open(dir + "/line_objects.runs", 1 << 16);
-  points_.ids.open(dir + "/points.u32");
+  points_.ids.open(dir + "/points.u32", 1 << 18);
   points_.runs.open(dir + "/point_objects.runs", 1 << 16);
 }
 

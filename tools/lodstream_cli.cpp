@@ -40,7 +40,8 @@ bool on_progress(void* user, const char* stage, double fraction) {
   const bool new_stage = st->last_stage != stage;
   if (!new_stage && percent == st->last_percent) return !g_interrupted.load();
   const auto now = std::chrono::steady_clock::now();
-  if (!new_stage && percent < 100 && now - st->last_time < std::chrono::milliseconds(100))
+  // The bar redraws at most every 100 ms; NDJSON has one line per percent step.
+  if (st->mode == ProgressMode::bar && !new_stage && percent < 100 && now - st->last_time < std::chrono::milliseconds(100))
     return !g_interrupted.load();
   st->last_time = now;
   st->last_percent = percent;

@@ -1,0 +1,160 @@
+// The lodstream CLI as a user runs it: exit codes, JSON output, the memory cap, SIGINT.
+#include <gtest/gtest.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "test_util.h"
+
+extern char** environ;
+
+namespace lodstream {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct CliRun {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+CliRun run_cli(std::vector<std::string> args, const test::TempDir& tmp, int sigint_after_ms = -1) {
+  args.insert(args.begin(), LODSTREAM_CLI);
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  const std::string out = tmp.file("stdout"), err = tmp.file("stderr");
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_addopen(&fa, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  pid_t pid;
+  EXPECT_EQ(posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ), 0);
+  posix_spawn_file_actions_destroy(&fa);
+  if (sigint_after_ms >= 0) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(sigint_after_ms));
+    kill(pid, SIGINT);
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  CliRun r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  auto slurp = [](const std::string& p) {
+    std::ifstream f(p);
+    std::stringstream ss;
+    ss << f.rdbuf();
+    return ss.str();
+  };
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+// An OBJ grid of n x n quads, about 60 bytes per quad.
+std::string grid_obj(const test::TempDir& tmp, int n) {
+  const std::string path = tmp.file("grid.obj");
+  std::ofstream f(path);
+  f << "o grid\n";
+  for (int y = 0; y <= n; ++y)
+    for (int x = 0; x <= n; ++x) f << "v " << x * 0.25 << ' ' << y * 0.5 << ' ' << ((x * 7 + y * 3) % 11) * 0.1 << '\n';
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      const int a = y * (n + 1) + x + 1;
+      f << "f " << a << ' ' << a + 1 << ' ' << a + n + 2 << ' ' << a + n + 1 << '\n';
+    }
+  return path;
+}
+
+TEST(Cli, InfoJsonHasTheDocumentedKeys) {
+  test::TempDir tmp;
+  const std::string obj = tmp.write("t.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 1 0\nf 1 2 3\nl 1 2\np 3\n");
+  const CliRun r = run_cli({"info", obj, "--json"}, tmp);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  for (const char* key : {"vertices", "triangles", "lines", "points", "objects", "degenerate", "bbox", "seconds", "peak_rss_bytes"})
+    EXPECT_TRUE(j.contains(key)) << key;
+  EXPECT_EQ(j["vertices"], 4);
+  EXPECT_EQ(j["vertices_welded"], 3);
+  EXPECT_EQ(j["unused_vertices"], 1);
+  EXPECT_EQ(j["triangles"], 1);
+  EXPECT_EQ(j["lines"], 1);
+  EXPECT_EQ(j["points"], 1);
+  EXPECT_EQ(j["bbox"]["max"][1], 1.0);
+  EXPECT_TRUE(r.err.empty()) << r.err;  // quiet when stderr is not a terminal
+}
+
+TEST(Cli, UsageErrorsExit64) {
+  test::TempDir tmp;
+  const std::string obj = tmp.write("t.obj", "v 0 0 0\n");
+  EXPECT_EQ(run_cli({}, tmp).exit_code, 64);
+  EXPECT_EQ(run_cli({"frobnicate"}, tmp).exit_code, 64);
+  EXPECT_EQ(run_cli({"info"}, tmp).exit_code, 64);
+  EXPECT_EQ(run_cli({"info", obj, "--memory", "lots"}, tmp).exit_code, 64);
+  EXPECT_EQ(run_cli({"info", obj, "--memory", "1M"}, tmp).exit_code, 64);
+  EXPECT_EQ(run_cli({"info", obj, "--threads", "-3"}, tmp).exit_code, 64);
+  EXPECT_EQ(run_cli({"info", obj, "--progress", "loud"}, tmp).exit_code, 64);
+  const CliRun r = run_cli({"info", tmp.write("scene.xyz", "1 2 3\n")}, tmp);
+  EXPECT_EQ(r.exit_code, 64);
+  EXPECT_NE(r.err.find("unrecognised format"), std::string::npos) << r.err;
+}
+
+TEST(Cli, ProgressJsonIsOneObjectPerLine) {
+  test::TempDir tmp;
+  const CliRun r = run_cli({"info", grid_obj(tmp, 100), "--progress", "json", "--chunk-bytes", "4K"}, tmp);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::istringstream lines(r.err);
+  std::string line;
+  int n = 0;
+  double last_ingest = -1;
+  while (std::getline(lines, line)) {
+    const auto j = nlohmann::json::parse(line);
+    ASSERT_TRUE(j.contains("stage") && j.contains("fraction")) << line;
+    if (j["stage"] == "ingest") {
+      EXPECT_GE(j["fraction"].get<double>(), last_ingest);
+      last_ingest = j["fraction"].get<double>();
+    }
+    ++n;
+  }
+  EXPECT_GT(n, 3);
+  EXPECT_EQ(last_ingest, 1.0);
+}
+
+// --memory caps VmHWM (mapped pages included) for an input several times larger than the cap.
+TEST(Cli, PeakMemoryStaysUnderTheCap) {
+  test::TempDir tmp;
+  const std::string obj = grid_obj(tmp, 1200);  // ~1.44 M quads, ~100 MB of OBJ
+  ASSERT_GT(fs::file_size(obj), 64u << 20);
+  const CliRun r = run_cli({"info", obj, "--json", "--memory", "64M"}, tmp);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["triangles"], 2 * 1200 * 1200);
+  EXPECT_LE(j["peak_rss_bytes"].get<uint64_t>(), uint64_t{64} << 20);
+  for (const auto& s : j["stages"]) EXPECT_LE(s["peak_rss_bytes"].get<uint64_t>(), uint64_t{64} << 20) << s["name"];
+}
+
+TEST(Cli, SigintExits130AndLeavesNoPartialFile) {
+  test::TempDir tmp;
+  const std::string obj = grid_obj(tmp, 1200);
+  const std::string work = tmp.file("work");
+  const CliRun r = run_cli({"info", obj, "--work", work, "--chunk-bytes", "64K", "--threads", "1"}, tmp, 150);
+  ASSERT_EQ(r.exit_code, 130) << r.err;
+  EXPECT_NE(r.err.find("cancelled"), std::string::npos) << r.err;
+  for (const auto& e : fs::recursive_directory_iterator(work)) {
+    const std::string name = e.path().filename().string();
+    EXPECT_EQ(name.find(".partial"), std::string::npos) << name;
+    EXPECT_NE(name, "store.json");
+  }
+}
+
+}  // namespace
+}  // namespace lodstream
