@@ -7,6 +7,7 @@
 #include <memory>
 #include <vector>
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -51,84 +52,100 @@ inline Key<2> make_key(const float* p) {
 }
 inline Key<3> make_key(const double* p) { return {{bits(p[0]), bits(p[1]), bits(p[2])}}; }
 
-// Open addressing with linear probing; counts keys on first insertion. Sized for the expected number
-// of keys at load <= 1/2, it doubles only if more arrive (then briefly holding old and new tables).
+// Open addressing with linear probing, sized for `keys` at load <= 1/2; counts keys on first insertion.
 template <int W>
 class Table {
  public:
-  explicit Table(uint64_t expected_keys) { allocate(std::bit_ceil(std::max<uint64_t>(2 * expected_keys, 1 << 12))); }
-  void insert(const Key<W>& k) {
-    if (2 * (count_ + 1) > mask_ + 1) grow();
-    if (place(k)) ++count_;
+  void reset(uint64_t keys) {
+    const uint64_t slots = std::bit_ceil(std::max<uint64_t>(2 * keys, 16));
+    if (slots > capacity_) {
+      slots_ = std::make_unique_for_overwrite<Key<W>[]>(slots);
+      capacity_ = slots;
+    }
+    mask_ = slots - 1;
+    for (uint64_t i = 0; i < slots; ++i) slots_[i].w[0] = empty_word;
+    count_ = 0;
+  }
+  void insert(const Key<W>& k, uint64_t h) {
+    for (uint64_t i = h & mask_;; i = (i + 1) & mask_) {
+      Key<W>& s = slots_[i];
+      if (s.w[0] == empty_word) {
+        s = k;
+        ++count_;
+        return;
+      }
+      if (s == k) return;
+    }
   }
   uint64_t count() const { return count_; }
 
  private:
-  void allocate(uint64_t slots) {
-    mask_ = slots - 1;
-    slots_ = std::make_unique_for_overwrite<Key<W>[]>(slots);
-    for (uint64_t i = 0; i < slots; ++i) slots_[i].w[0] = empty_word;
-  }
-  bool place(const Key<W>& k) {
-    for (uint64_t i = hash(k) & mask_;; i = (i + 1) & mask_) {
-      Key<W>& s = slots_[i];
-      if (s.w[0] == empty_word) {
-        s = k;
-        return true;
-      }
-      if (s == k) return false;
-    }
-  }
-  void grow() {
-    std::unique_ptr<Key<W>[]> old = std::move(slots_);
-    const uint64_t old_slots = mask_ + 1;
-    allocate(2 * old_slots);
-    for (uint64_t i = 0; i < old_slots; ++i)
-      if (old[i].w[0] != empty_word) place(old[i]);
-  }
-  uint64_t mask_ = 0;
   std::unique_ptr<Key<W>[]> slots_;
-  uint64_t count_ = 0;
+  uint64_t capacity_ = 0, mask_ = 0, count_ = 0;
 };
 
+// 256 buckets by the top 8 bits of the hash; a bucket's table indexes by the low bits.
+constexpr int bucket_bits = 8;
+constexpr uint64_t buckets = uint64_t{1} << bucket_bits;
+
 template <class T, int W>
-uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_bytes, unsigned threads,
-                    Progress& progress) {
+uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_bytes, Progress& progress) {
   io::MappedFile file(path);
   const uint64_t stride = 3 * sizeof(T);
   if (file.size() != count * stride) fail(Status::io_error, path + ": size does not match store.json");
-  // Mapped pages count as resident: small windows, and their bytes come out of the tables' budget.
+  // Mapped pages count as resident: small windows.
   const uint64_t step = stride * 65536;
-  const uint64_t windows = step * std::max(threads, 1u);
-  memory_bytes = memory_bytes > 2 * windows ? memory_bytes - windows : memory_bytes / 2;
-
-  // Partition p holds the keys whose hash falls in the p-th of P equal ranges (the table indexes by the
-  // low bits). Each partition is one read-only pass over the column; partitions run in parallel, each
-  // with memory_bytes / threads. Under uniform hashing a partition has at most count / P distinct keys.
-  // bit_ceil(2 n) slots is at most 4 n.
-  const uint64_t per_key = 4 * sizeof(Key<W>);
-  const uint64_t per_table = std::max<uint64_t>(memory_bytes / std::max(threads, 1u), 1 << 20);
-  const uint64_t partitions = std::max<uint64_t>(1, (count * per_key + per_table - 1) / per_table);
-  std::vector<uint64_t> distinct(partitions, 0);
-  std::atomic<uint64_t> done{0};
-  tbb::parallel_for(uint64_t{0}, partitions, [&](uint64_t p) {
-    Table<W> table(count / partitions + count / partitions / 8);
+  auto scan = [&](auto&& visit) {
     for (uint64_t at = 0; at < file.size(); at += step) {
       progress.check();
       const io::Window w = file.map(at, at + step);
       const T* xyz = reinterpret_cast<const T*>(w.data());
       for (uint64_t i = 0, n = w.size() / stride; i < n; ++i) {
         const Key<W> k = make_key(xyz + 3 * i);
-        if (partitions == 1 || static_cast<uint64_t>((static_cast<unsigned __int128>(hash(k)) * partitions) >> 64) == p)
-          table.insert(k);
+        visit(k, hash(k));
       }
-      progress.report("census", static_cast<double>(done += w.size()) / static_cast<double>(file.size() * partitions));
     }
-    distinct[p] = table.count();
-  });
-  uint64_t total = 0;
-  for (uint64_t d : distinct) total += d;
-  return total;
+  };
+
+  // Pass 1: the exact size of every bucket.
+  std::vector<uint64_t> size(buckets, 0);
+  scan([&](const Key<W>&, uint64_t h) { ++size[h >> (64 - bucket_bits)]; });
+  progress.report("census", 0.2);
+
+  // Then, for as many consecutive buckets as the budget holds at a time (keys plus one table per
+  // thread, each at most 4 slots per key of the largest bucket): scatter their keys into one array at
+  // bucket offsets, and count each bucket's distinct keys in its own small table, in parallel.
+  const unsigned threads = static_cast<unsigned>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  const uint64_t largest = *std::max_element(size.begin(), size.end());
+  const uint64_t tables = threads * 4 * largest * sizeof(Key<W>);
+  const uint64_t key_budget = std::max<uint64_t>(memory_bytes > tables + step ? memory_bytes - tables - step : 0,
+                                                 largest * sizeof(Key<W>));
+  uint64_t distinct = 0;
+  for (uint64_t first = 0; first < buckets;) {
+    uint64_t last = first, bytes = 0;
+    while (last < buckets && (last == first || bytes + size[last] * sizeof(Key<W>) <= key_budget))
+      bytes += size[last++] * sizeof(Key<W>);
+    std::vector<uint64_t> offset(buckets + 1, 0);
+    for (uint64_t b = first; b < last; ++b) offset[b + 1] = offset[b] + size[b];
+    std::vector<uint64_t> fill(offset.begin(), offset.end() - 1);
+    auto keys = std::make_unique_for_overwrite<Key<W>[]>(std::max<uint64_t>(offset[last], 1));
+    scan([&](const Key<W>& k, uint64_t h) {
+      const uint64_t b = h >> (64 - bucket_bits);
+      if (b >= first && b < last) keys[fill[b]++] = k;
+    });
+    std::atomic<uint64_t> found{0};
+    tbb::enumerable_thread_specific<Table<W>> table;
+    tbb::parallel_for(first, last, [&](uint64_t b) {
+      Table<W>& t = table.local();
+      t.reset(size[b]);
+      for (uint64_t i = offset[b]; i < offset[b + 1]; ++i) t.insert(keys[i], hash(keys[i]));
+      found += t.count();
+    });
+    distinct += found;
+    first = last;
+    progress.report("census", 0.2 + 0.8 * static_cast<double>(first) / static_cast<double>(buckets));
+  }
+  return distinct;
 }
 
 }  // namespace
@@ -136,9 +153,8 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
 uint64_t count_distinct_positions(const std::string& path, uint64_t count, bool single_precision,
                                   uint64_t memory_bytes, Progress& progress) {
   if (count == 0) return 0;
-  const unsigned threads = static_cast<unsigned>(tbb::this_task_arena::max_concurrency());
-  return single_precision ? count_keys<float, 2>(path, count, memory_bytes, threads, progress)
-                          : count_keys<double, 3>(path, count, memory_bytes, threads, progress);
+  return single_precision ? count_keys<float, 2>(path, count, memory_bytes, progress)
+                          : count_keys<double, 3>(path, count, memory_bytes, progress);
 }
 
 }  // namespace lodstream::stream

@@ -1,10 +1,11 @@
 // Exact count of distinct positions in a store's position column, under a memory budget.
 //
 // Positions become fixed-width bit keys (-0 normalised to +0, so exact equality of coordinates is
-// equality of keys), counted in open-addressing hash tables. When the tables would not fit in
-// `memory_bytes`, keys are split by the top bits of their hash into P partitions, each counted in its own
-// read-only pass over the column (in parallel, in the calling task arena): equal keys always fall in the
-// same partition, so the sum is exact and does not depend on the budget. Nothing is written to disk.
+// equality of keys). One pass counts the keys of each of 256 buckets (top bits of the key's hash); then,
+// as many consecutive buckets as `memory_bytes` holds at a time are scattered into one array and each
+// bucket's distinct keys are counted in its own small, cache-friendly hash table, buckets in parallel (in
+// the calling task arena). Equal keys always share a bucket, so the sum is exact and does not depend on
+// the budget, which only decides how many read-only passes over the column are made. Nothing is written.
 #pragma once
 
 #include <cstdint>

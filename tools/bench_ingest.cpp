@@ -92,7 +92,7 @@ int main(int argc, char** argv) {
   fmt::print("lodstream ingest benchmark: {} runs each, --memory {}, --threads {}, {} cores\n", runs, memory, threads,
              sysconf(_SC_NPROCESSORS_ONLN));
   fmt::print("{:<28} {:>9} {:>8} {:>9} {:>8} {:>9} {:>7} {:>9} {:>10} {:>10}\n", "file", "MB", "cat s", "cat MB/s",
-             "ingest s", "MB/s", "ratio", "info s", "weld s", "peak MB");
+             "ingest s", "MB/s", "ratio", "info s", "census s", "peak MB");
   for (const std::string& file : files) {
     const double mb = static_cast<double>(std::filesystem::file_size(file)) / 1e6;
     spawn({"cat", file}, "/dev/null");  // warm the page cache
@@ -109,7 +109,7 @@ int main(int argc, char** argv) {
       info_s.push_back(l.seconds);
       for (const auto& s : j.at("stages")) {
         if (s.at("name") == "ingest") ingest_s.push_back(s.at("seconds").get<double>());
-        if (s.at("name") == "weld-count") weld_s.push_back(s.at("seconds").get<double>());
+        if (s.at("name") == "census") weld_s.push_back(s.at("seconds").get<double>());
       }
       peak.push_back(static_cast<double>(l.max_rss) / 1e6);
     }
