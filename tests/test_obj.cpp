@@ -16,18 +16,7 @@ namespace {
 constexpr uint64_t kOneChunk = uint64_t(1) << 40;
 
 void expect_same(const ReadAll& a, const ReadAll& b, uint64_t target) {
-  SCOPED_TRACE("target_bytes " + std::to_string(target));
-  EXPECT_EQ(a.format, b.format);
-  EXPECT_EQ(a.positions, b.positions);
-  EXPECT_EQ(a.triangles, b.triangles);
-  EXPECT_EQ(a.lines, b.lines);
-  EXPECT_EQ(a.points, b.points);
-  EXPECT_EQ(a.triangle_objects, b.triangle_objects);
-  EXPECT_EQ(a.line_objects, b.line_objects);
-  EXPECT_EQ(a.point_objects, b.point_objects);
-  EXPECT_EQ(a.object_names, b.object_names);
-  EXPECT_EQ(a.polygons, b.polygons);
-  EXPECT_EQ(a.skipped, b.skipped);
+  test::expect_same(a, b, "target_bytes " + std::to_string(target));
 }
 
 // Reads `contents` in one chunk and checks that every chunk size from 1 byte up gives the same result.
@@ -312,40 +301,8 @@ TEST(ObjReader, ParallelParseMatchesSerial) {
   const std::string path = dir.write("par.obj", text);
   const ReadAll serial = read_all(path, kOneChunk);
 
-  io::MappedFile file(path);
-  auto reader = io::open_reader(file);
-  reader->open();
-  std::vector<io::Chunk> chunks;
-  for (;;) {
-    io::Chunk c;
-    c.seq = chunks.size();
-    if (!reader->next_chunk(97, &c)) break;
-    chunks.push_back(std::move(c));
-  }
-  std::vector<io::ParsedChunk> parsed(chunks.size());
-  std::vector<std::thread> threads;
-  for (int t = 0; t < 4; ++t) {
-    threads.emplace_back([&, t] {
-      for (size_t i = chunks.size(); i-- > 0;) {
-        if (i % 4 != static_cast<size_t>(t)) continue;
-        parsed[i].seq = i;
-        reader->parse(chunks[i], &parsed[i]);
-      }
-    });
-  }
-  for (auto& th : threads) th.join();
-  ReadAll r;
-  r.format = serial.format;
-  for (auto& p : parsed) {
-    reader->resolve(&p);
-    r.positions.insert(r.positions.end(), p.positions.begin(), p.positions.end());
-    r.triangles.insert(r.triangles.end(), p.triangles.begin(), p.triangles.end());
-    r.triangle_objects.insert(r.triangle_objects.end(), p.triangle_objects.begin(), p.triangle_objects.end());
-    r.polygons += p.polygons;
-  }
-  reader->finish(r.positions.size() / 3);
-  r.object_names = reader->object_names();
-  EXPECT_GT(chunks.size(), 20u);
+  const ReadAll r = read_parallel(path, 97, 4);
+  EXPECT_GT(r.chunks, 20u);
   expect_same(serial, r, 97);
 }
 

@@ -396,38 +396,7 @@ TEST(PlyReader, ParseIsThreadSafe) {
   for (Fmt f : {Fmt::ascii, Fmt::le, Fmt::be}) {
     const std::string path = dir.write(std::string("mt-") + fmt_name(f) + ".ply", ply(f, rich_model("float", "uchar", "int")));
     const ReadAll want = read_all(path, 1 << 20);
-    io::MappedFile file(path);
-    auto reader = io::open_reader(file);
-    reader->open();
-    std::vector<io::Chunk> chunks;
-    for (;;) {
-      io::Chunk c;
-      c.seq = chunks.size();
-      if (!reader->next_chunk(3, &c)) break;
-      chunks.push_back(std::move(c));
-    }
-    std::vector<io::ParsedChunk> parsed(chunks.size());
-    std::vector<std::thread> threads;
-    for (int t = 0; t < 4; ++t) {
-      threads.emplace_back([&, t] {
-        for (size_t i = static_cast<size_t>(t); i < chunks.size(); i += 4) {
-          parsed[i].seq = i;
-          reader->parse(chunks[i], &parsed[i]);
-        }
-      });
-    }
-    for (auto& th : threads) th.join();
-    ReadAll r;
-    for (auto& p : parsed) {
-      reader->resolve(&p);
-      r.positions.insert(r.positions.end(), p.positions.begin(), p.positions.end());
-      r.triangles.insert(r.triangles.end(), p.triangles.begin(), p.triangles.end());
-      r.lines.insert(r.lines.end(), p.lines.begin(), p.lines.end());
-    }
-    reader->finish(r.positions.size() / 3);
-    EXPECT_EQ(r.positions, want.positions);
-    EXPECT_EQ(r.triangles, want.triangles);
-    EXPECT_EQ(r.lines, want.lines);
+    expect_same(want, read_parallel(path, 3, 4), fmt_name(f));
   }
 }
 
