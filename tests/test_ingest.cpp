@@ -172,6 +172,40 @@ TEST(Ingest, StlSoupIsWeldedByExactPositionInPositionOrder) {
   expect_same_store_everywhere(path, {1, 50, 0});
 }
 
+// A binary STL grid of 2 n^2 facets sharing (n+1)^2 positions.
+std::string grid_stl(int n) {
+  std::string s(80, ' ');
+  const uint32_t count = static_cast<uint32_t>(2 * n * n);
+  s.append(reinterpret_cast<const char*>(&count), 4);
+  auto corner = [&](int x, int y) {
+    const float p[3] = {static_cast<float>(x) * 0.5f, static_cast<float>(y), static_cast<float>((x * 3 + y) % 5)};
+    s.append(reinterpret_cast<const char*>(p), 12);
+  };
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x)
+      for (int t = 0; t < 2; ++t) {
+        s.append(12, '\0');
+        corner(x, y);
+        if (t == 0) corner(x + 1, y), corner(x + 1, y + 1);
+        else corner(x + 1, y + 1), corner(x, y + 1);
+        s.append(2, '\0');
+      }
+  return s;
+}
+
+// At the minimum budget the weld's external sorts spill runs to disk; the store must not change.
+TEST(Ingest, StlWeldSpillingToDiskGivesTheSameStore) {
+  test::TempDir tmp;
+  const int n = 245;  // 120,050 facets, 360,150 corners: more than the sort buffer at 64 MiB
+  const std::string path = tmp.write("grid.stl", grid_stl(n));
+  const SceneInfo info = run_info(path, tmp.file("w"), 2, min_memory_bytes, 0);
+  EXPECT_EQ(info.vertices, static_cast<uint64_t>((n + 1) * (n + 1)));
+  EXPECT_EQ(info.triangles, static_cast<uint64_t>(2 * n * n));
+  EXPECT_EQ(info.degenerate, 0u);
+  EXPECT_EQ(info.unused_vertices, 0u);
+  expect_same_store_everywhere(path, {0});
+}
+
 TEST(Ingest, SecondRunReusesTheStore) {
   test::TempDir tmp;
   const std::string path = tmp.write("r.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
