@@ -4,7 +4,7 @@
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 "$root/tools/install-deps.sh"
-"$root/tools/build.sh"
+"$root/tools/build.sh" -DLODSTREAM_BUILD_TESTS=OFF -DLODSTREAM_BUILD_TOOLS=OFF
 out="$root/out/quickstart"
 mkdir -p "$out"
 "$root/build/lodstream" info "$root/tests/data/sample-room.ply" --work "$out/work"

@@ -4,6 +4,6 @@
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 "$root/tools/install-deps.sh" --test
-"$root/tools/build.sh" -DLODSTREAM_BUILD_TESTS=ON
+"$root/tools/build.sh" -DLODSTREAM_BUILD_TESTS=ON -DLODSTREAM_BUILD_TOOLS=ON
 cd "$root/build"
 ctest --output-on-failure -j "$(nproc)" --timeout 900
