@@ -40,8 +40,9 @@ class TempDir {
 // ../shared/data beside the repository, or empty when absent (a user's machine). LODSTREAM_SHARED_DATA
 // overrides. Tests that need it call GTEST_SKIP() with a notice when this is empty.
 inline std::string shared_data_dir() {
-  if (const char* env = std::getenv("LODSTREAM_SHARED_DATA")) return env;
-  const std::filesystem::path p = std::filesystem::path(LODSTREAM_SOURCE_DIR) / ".." / "shared" / "data";
+  const char* env = std::getenv("LODSTREAM_SHARED_DATA");
+  const std::filesystem::path p =
+      env && *env ? std::filesystem::path(env) : std::filesystem::path(LODSTREAM_SOURCE_DIR) / ".." / "shared" / "data";
   return std::filesystem::is_directory(p) ? std::filesystem::canonical(p).string() : std::string();
 }
 
