@@ -38,47 +38,60 @@ DEFAULT_OUT = os.path.join(REPO, "tests", "data", "sample-room.ply")
 MAX_BYTES = 5 * 1000 * 1000          # the file must stay at most 5 MB
 TRIANGLE_RANGE = (200_000, 300_000)  # wanted size of the scene, in triangles after fan triangulation
 
-# The room, about 7 m x 5.5 m, front of the room toward -Y.  Before rotation a model's front looks toward -Y
-# (Sweet Home 3D models face +Z in their Y-up frame).  A rotation of 90 turns the front toward +X, 180 toward
-# +Y, 270 toward -X.
+# The room: about 7.2 m (x, west to east) by 5.6 m (y, south to north), floor at z = 0, corner at the origin.
+# Living area in the west half (TV on the north wall, sofa facing it), a desk and shelves in the north-east,
+# a second desk on the east wall and a dining table in the south-east.  Before rotation a model's front looks
+# toward -Y (Sweet Home 3D models face +Z in their Y-up frame); a rotation of 90 turns it toward +X, 180
+# toward +Y, 270 toward -X.  Chairs stand pulled out, clear of their tables, so no two bounding boxes meet.
 #
 # Entry: (name, model folder, x, y, rotation in degrees, support name or None)
-#   x, y  centre of the footprint in metres (for an object on a support, the point it stands on)
-#   support  another entry's name: the object stands on the highest horizontal face of that entry under it
+#   x, y     centre of the footprint in metres (for an object on a support, the point it stands on)
+#   support  an earlier entry's name: the object stands on the highest horizontal face of that entry under it
 LAYOUT = [
-    # living area, left half
-    ("sofa", "couch", -2.0, 2.25, 0, None),
-    ("coffee_table", "oakTable", -2.0, 0.85, 0, None),
-    ("armchair_west", "armchair", -3.15, 0.85, 90, None),
-    ("armchair_east", "armchair2", -0.75, 0.85, 270, None),
-    ("tv_cabinet", "televisionCabinet", -2.0, -2.35, 180, None),
-    ("speaker_left", "speaker2", -3.0, -2.45, 180, None),
-    ("speaker_right", "speaker2", -1.0, -2.45, 180, None),
-    ("plant_corner", "plant", -3.5, 2.3, 0, None),
-    ("bookcase", "bookcase", -0.45, 2.55, 0, None),
-    ("glass", "beerGlass", -2.25, 0.75, 0, "coffee_table"),
-    ("cup", "plasticCup", -1.75, 0.95, 0, "coffee_table"),
-    ("table_lamp", "desklamp", -1.0, -1.3, 0, None),
-    ("bin_living", "dustbin", -3.2, -1.3, 0, None),
-    # home office, right half
-    ("desk", "desk", 2.0, 2.4, 0, None),
-    ("desk_chair", "chair", 2.0, 1.65, 180, None),
-    ("desk_lamp", "desklamp", 2.45, 2.45, 0, "desk"),
-    ("headphones", "headphones", 1.6, 2.4, 0, "desk"),
-    ("cabinet_tall", "highCabinet", 3.15, 1.25, 270, None),
-    ("drawers", "drawersCabinet", 0.8, 2.4, 0, None),
-    ("cupboard", "cupboard", 2.3, -2.5, 180, None),
-    ("coffee_brewer", "coffeeBrewer", 2.1, -2.5, 90, "cupboard"),
-    ("bin_office", "dustbin", 0.9, 1.4, 0, None),
-    ("extinguisher", "fireExtinguisher", 3.3, -1.6, 0, None),
-    ("whiteboard", "whiteBoard", 0.95, -2.35, 180, None),
-    ("briefcase", "briefcase", 1.25, 0.6, 0, None),
-    ("meeting_table", "oakTable", 2.2, -0.5, 0, None),
-    ("meeting_chair_n", "osakaChair", 2.2, 0.45, 180, None),
-    ("meeting_chair_s", "osakaChair", 2.2, -1.45, 0, None),
-    ("meeting_chair_w", "osakaChair", 1.25, -0.5, 90, None),
-    ("meeting_chair_e", "osakaChair", 3.15, -0.5, 270, None),
-    ("pot_plant", "littlePlant", 2.55, -0.3, 0, "meeting_table"),
+    # --- living area (west half): sofa facing the TV on the north wall, two armchairs around a low table
+    ("tv_stand",      "shelves",         1.80, 5.405,   0, None),
+    ("tv",            "led_tv",          1.80, 5.42,    0, "tv_stand"),
+    ("speaker_left",  "speaker3",        1.15, 5.45,    0, None),
+    ("speaker_right", "speaker3",        2.45, 5.45,    0, None),
+    ("bookcase_west", "bookcase",        0.50, 5.42,    0, None),
+    ("palm",          "plant",           3.20, 5.20,   30, None),
+    ("sofa",          "couch",           1.80, 2.60,  180, None),
+    ("low_table",     "bedsideTable2",   1.80, 3.75,   45, None),
+    ("armchair_west", "armchair2",       0.55, 3.90,   90, None),
+    ("armchair_east", "armchair2",       3.05, 3.90,  270, None),
+    ("side_table",    "bedsideTable2",   0.45, 2.60,    0, None),
+    ("floor_lantern", "lantern",         3.15, 2.60,    0, None),
+    ("pot_plant",     "littlePlant",     0.45, 2.60,    0, "side_table"),
+    ("cards",         "cardGame",        1.74, 3.80,   20, "low_table"),
+    ("coffee",        "caffe_final",     1.88, 3.66,    0, "low_table"),
+    # --- office (north-east): a desk with a swivel chair, cabinet, shelves on the east wall
+    ("desk_main",     "lbDesk",          5.00, 5.20,    0, None),
+    ("desk_chair",    "designChair",     5.00, 4.43,  165, None),
+    ("drawers",       "drawersCabinet",  6.20, 5.29,    0, None),
+    ("bookcase_east", "bookcase",        7.02, 5.00,  270, None),
+    ("tall_shelves",  "verticalShelves", 7.005, 3.95, 270, None),
+    ("bin",           "dustbin",         4.00, 5.35,    0, None),
+    ("briefcase",     "briefcase",       6.30, 4.00,  -15, None),
+    ("desk_lamp",     "desklamp",        4.45, 5.38,    0, "desk_main"),
+    ("headphones",    "headphones",      4.80, 5.42,   90, "desk_main"),
+    ("calendar",      "kalender",        5.62, 5.45,  -20, "desk_main"),
+    ("cactus",        "cactus",          5.35, 5.45,    0, "desk_main"),
+    ("marker",        "textMarker",      5.15, 5.00,   60, "desk_main"),
+    ("scissors",      "cissors_swap",    5.45, 5.05,   10, "desk_main"),
+    # --- second workplace on the east wall: a computer desk with a hutch and a chair
+    ("desk_hutch",    "desk",            6.93, 2.90,  270, None),
+    ("hutch_chair",   "osakaChair",      6.20, 2.90,   90, None),
+    ("hutch_lamp",    "desklamp",        6.95, 3.40,    0, "desk_hutch"),
+    ("ruler",         "ruler",           6.85, 3.05,   90, "desk_hutch"),
+    # --- dining (south-east): a round table, four chairs, drinks on the table
+    ("dining_table",  "oakTable",        5.00, 1.20,    0, None),
+    ("chair_south",   "chair2",          5.00, 0.30,  180, None),
+    ("chair_north",   "chair2",          5.00, 2.10,    0, None),
+    ("chair_west",    "chair2",          4.10, 1.20,   90, None),
+    ("chair_east",    "chair2",          5.90, 1.20,  270, None),
+    ("glass_1",       "beerGlass",       4.80, 1.05,   30, "dining_table"),
+    ("glass_2",       "beerGlass",       5.20, 1.40,  200, "dining_table"),
+    ("milk",          "tetrapak",        5.05, 1.25,    0, "dining_table"),
 ]
 
 
@@ -140,7 +153,7 @@ def read_obj(path):
                 elif k < 0:
                     k += nv
                     if k < 0:
-                        raise ObjError("%s:%d: relative index %s before the first vertex" % (path, lineno, head))
+                        raise ObjError("%s:%d: relative index %d before the first vertex" % (path, lineno, int(head)))
                 else:
                     raise ObjError("%s:%d: face index 0" % (path, lineno))
                 poly.append(k)
