@@ -27,13 +27,11 @@
 // resolve() maps names to global ids in order of first appearance.
 #include <algorithm>
 #include <charconv>
-#include <clocale>
 #include <cstdio>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
-#include <locale.h>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -104,16 +102,6 @@ inline const char* continuation(const char* p, const char* end) {
   if (q < end && *q == '\r') ++q;
   if (q == end) return end;
   return *q == '\n' ? q + 1 : nullptr;
-}
-
-// strtod in the C locale, for the rare numbers from_chars reports out of range.
-double strtod_c(const char* b, const char* e) {
-  static const locale_t c_locale = newlocale(LC_ALL_MASK, "C", static_cast<locale_t>(nullptr));
-  char buf[512];
-  const size_t n = std::min(static_cast<size_t>(e - b), sizeof(buf) - 1);
-  std::memcpy(buf, b, n);
-  buf[n] = 0;
-  return strtod_l(buf, nullptr, c_locale);
 }
 
 std::string printable(std::string_view s) {
@@ -277,7 +265,7 @@ class Parser {
     }
     auto [q, ec] = std::from_chars(b, end_, *out, std::chars_format::general);
     if (ec == std::errc::result_out_of_range) {
-      *out = strtod_c(b, q);  // underflow gives 0 or a denormal, overflow infinity
+      *out = text::out_of_range_value(b, q);  // underflow gives 0 or a denormal, overflow infinity
     } else if (ec != std::errc()) {
       return false;
     }

@@ -26,6 +26,15 @@
 namespace lodstream::io {
 namespace {
 
+// The splitter reads ahead through a window of about 8 chunks, kMinScanBytes to kMaxScanBytes; the header
+// is read through a window that doubles from kHeaderBytes. The fuzz build (tools/fuzz) makes them tiny so
+// that its small inputs cross window boundaries.
+#ifdef LODSTREAM_FUZZ_SMALL_WINDOWS
+constexpr uint64_t kMinScanBytes = 16, kMaxScanBytes = 64ull << 20, kHeaderBytes = 32;
+#else
+constexpr uint64_t kMinScanBytes = 4096, kMaxScanBytes = 64ull << 20, kHeaderBytes = 64 * 1024;
+#endif
+
 // ---------------------------------------------------------------------------------------------- types
 
 enum class Type : uint8_t { none, i8, u8, i16, u16, i32, u32, f32, f64 };
@@ -349,7 +358,7 @@ class PlyReader final : public Reader {
   uint64_t line_ = 1;    // ascii: line of cursor_
   bool broken_ = false;  // the last chunk ends in a truncated or broken record: no more chunks
   Window scan_;          // read-ahead window of the splitter
-  uint64_t scan_bytes_ = 4096;
+  uint64_t scan_bytes_ = kMinScanBytes;
 };
 
 // ------------------------------------------------------------------------------------------- header
@@ -596,7 +605,7 @@ void PlyReader::finalize_header() {
 
 void PlyReader::open() {
   if (opened_) return;
-  uint64_t want = 64 * 1024;
+  uint64_t want = kHeaderBytes;
   for (;;) {
     const Window w = file_.map(0, want);
     if (parse_header(w.view(), w.end() >= file_.size())) break;
@@ -611,9 +620,6 @@ void PlyReader::open() {
 }
 
 // ---------------------------------------------------------------------------------------- splitting
-
-// The splitter reads ahead through a window of about 8 chunks, 4 KiB to 64 MiB.
-constexpr uint64_t kMinScanBytes = 4096, kMaxScanBytes = 64ull << 20;
 
 // A pointer to `offset` in the scan window, remapping it so that [offset, offset + min_bytes) is covered
 // (or as much of it as the file holds).
@@ -923,7 +929,7 @@ void PlyReader::fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* ou
   int64_t buf[kBatch + 3 * 253];
   size_t t = 0;
   const char* p = b;
-  uint64_t i = 0;
+  uint64_t i = 0, edges = 0;
   for (; i < rc; ++i) {
     if (t >= kBatch) {
       tri.insert(tri.end(), buf, buf + t);
@@ -958,7 +964,7 @@ void PlyReader::fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* ou
     }
     int64_t idx[255];
     for (unsigned j = 0; j < n; ++j) idx[j] = load<T, Swap>(p + 1 + 4 * j);
-    if (n < 3) {
+    if (n < 2) {
       set_error(out, offset, 0, small_face_message(n));
       break;
     }
@@ -971,6 +977,13 @@ void PlyReader::fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* ou
       }
     }
     if (!ok) break;
+    if (n == 2) {  // an edge, as in emit_face()
+      out->lines.push_back(idx[0]);
+      out->lines.push_back(idx[1]);
+      ++edges;
+      p += 9;
+      continue;
+    }
     for (unsigned j = 1; j + 1 < n; ++j) {  // at most 253 triangles: the buffer has room past kBatch
       buf[t] = idx[0];
       buf[t + 1] = idx[j];
@@ -980,7 +993,7 @@ void PlyReader::fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* ou
     p += 1 + 4 * static_cast<uint64_t>(n);
   }
   tri.insert(tri.end(), buf, buf + t);
-  out->polygons += i;
+  out->polygons += i - edges;
 }
 
 template <bool Swap>

@@ -109,7 +109,7 @@ bool looks_like_obj(std::string_view head) {
 }  // namespace
 
 std::unique_ptr<Reader> open_reader(const MappedFile& file) {
-  if (file.size() == 0) fail(Status::bad_data, file.path() + ": empty file");
+  if (file.size() == 0) fail_at_offset(file, 0, "empty file");
   const Window head_window = file.map(0, 4096);
   const std::string_view head = head_window.view();
   const std::string ext = lower_extension(file.path());

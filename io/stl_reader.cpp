@@ -26,6 +26,17 @@ namespace {
 
 constexpr uint64_t kHeaderBytes = 84;
 constexpr uint64_t kRecordBytes = 50;
+// ASCII: bytes mapped past the target to find the next `endfacet` line (tiny in the fuzz build, so that
+// small inputs need the window to grow).
+#ifdef LODSTREAM_FUZZ_SMALL_WINDOWS
+constexpr uint64_t kLookAheadBytes = 16;
+constexpr uint64_t kMaxFacetBytes = 256;
+#else
+constexpr uint64_t kLookAheadBytes = 4096;
+// A facet is seven short lines; no `endfacet` this far past the target means the file is not facets,
+// and searching on would map (and make resident) the rest of a possibly huge file.
+constexpr uint64_t kMaxFacetBytes = uint64_t{1} << 20;
+#endif
 
 inline uint32_t load_u32_le(const unsigned char* p) {
   uint32_t v;
@@ -212,7 +223,7 @@ class AsciiStlReader final : public Reader {
     bool mapped = false;
     if (target_bytes < rest) {
       uint64_t scan = begin + target_bytes - 1;  // first byte where the cutting '\n' may be
-      uint64_t want = target_bytes + 4096;
+      uint64_t want = target_bytes + kLookAheadBytes;
       for (;;) {
         const uint64_t end = want < rest ? begin + want : size;
         Window w = file_.map(begin, end);
@@ -242,6 +253,14 @@ class AsciiStlReader final : public Reader {
           break;
         }
         if (end == size) break;  // no endfacet to the end of the file: take it all
+        if (want >= target_bytes + kMaxFacetBytes) {
+          // Cut at the window's last line break: parse reports the facet that does not end.
+          const void* last = memrchr(d, '\n', static_cast<size_t>(end - begin));
+          if (last) {
+            cut = begin + static_cast<uint64_t>(static_cast<const char*>(last) - d) + 1;
+            break;
+          }
+        }
         want = want > rest ? rest : want * 2;
       }
     }
@@ -415,7 +434,8 @@ void AsciiStlReader::parse(const Chunk& chunk, ParsedChunk* out) const {
     // Chunks end after an `endfacet` line or at the end of the file, so this is a truncated file.
     line = facet_line;
     line_begin = chunk.bytes.data() + (facet_offset - base);
-    error(at_eof ? "the file ends inside this facet (no 'endfacet')" : "the chunk ends inside this facet");
+    error(at_eof ? "the file ends inside this facet (no 'endfacet')"
+                 : "no 'endfacet' within " + std::to_string(kMaxFacetBytes) + " bytes of this facet");
   }
 }
 

@@ -2,9 +2,13 @@
 // never reads past end; none of them needs a terminating NUL.
 #pragma once
 
+#include <locale.h>
+
 #include <charconv>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
+#include <string>
 #include <string_view>
 
 namespace lodstream::io::text {
@@ -33,16 +37,25 @@ inline std::string_view next_token(const char*& p, const char* end) {
   return {b, static_cast<size_t>(p - b)};
 }
 
+// The correctly rounded value of a number std::from_chars found out of range: 0 or a denormal for an
+// underflow, infinity for an overflow (strtod in the C locale; the whole token, however long).
+inline double out_of_range_value(const char* b, const char* e) {
+  static const locale_t c_locale = newlocale(LC_ALL_MASK, "C", static_cast<locale_t>(nullptr));
+  const std::string token(b, e);
+  return strtod_l(token.c_str(), nullptr, c_locale);
+}
+
 // Parses a decimal or scientific number at p (after blanks); accepts a leading '+'. Advances p. Returns
 // false if no number starts there or it is followed by something other than a blank or line end.
-// Infinite or NaN spellings ("inf", "nan") parse, so the caller can report them by value.
+// Infinite or NaN spellings ("inf", "nan") and overflowing numbers ("1e999") parse as infinity or NaN,
+// so the caller reports them by value; an underflowing number ("1e-400") is its rounded value, 0.
 inline bool parse_double(const char*& p, const char* end, double* out) {
   p = skip_blanks(p, end);
   if (p < end && *p == '+') ++p;
   auto [q, ec] = std::from_chars(p, end, *out, std::chars_format::general);
   if (ec != std::errc() && ec != std::errc::result_out_of_range) return false;
-  if (ec == std::errc::result_out_of_range) return false;
   if (q < end && !is_blank(*q) && *q != '\n') return false;
+  if (ec == std::errc::result_out_of_range) *out = out_of_range_value(p, q);
   p = q;
   return true;
 }

@@ -442,5 +442,14 @@ TEST(ObjMalformed, FirstErrorInFileOrder) {
   expect_bad("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\nf 1 2 3\nv 1 2 x\nf 0 1 2\n", 6, "bad vertex coordinate 'x'");
 }
 
+// A number from_chars reports out of range is read again whole: a long mantissa with a large negative
+// exponent underflows to 0 (it used to be cut at 511 bytes, which read 1000...0 as infinity).
+TEST(ObjReader, LongOutOfRangeNumbers) {
+  const std::string zeros(600, '0');
+  const ReadAll r = read_obj("v 1" + zeros + "e-1000 0 0\nv 0 1" + zeros + "e-700 0\nv 0 0 1\nf 1 2 3\n");
+  EXPECT_EQ(r.positions, (std::vector<double>{0, 0, 0, 0, 1e-100, 0, 0, 0, 1}));
+  expect_bad("v 0." + zeros + "1e1000 0 0\n", 1, "not finite");
+}
+
 }  // namespace
 }  // namespace lodstream::test

@@ -772,5 +772,34 @@ TEST(PlyReader, TwoIndexFaceIsALineSegmentAndPrecisionIsReported) {
   }
 }
 
+
+// The same for binary faces whose only property is `list uchar int` (the fast path), which used to
+// refuse two-index faces ("face with 2 vertices (a face needs at least 2)").
+TEST(PlyReader, BinaryTwoIndexFaceIsALineSegment) {
+  test::TempDir dir;
+  for (const char* item : {"int", "uint"}) {
+    std::string data = std::string("ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+                                   "property float y\nproperty float z\nelement face 3\nproperty list uchar ") +
+                       item + " vertex_indices\nend_header\n";
+    const float xyz[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    data.append(reinterpret_cast<const char*>(xyz), sizeof xyz);
+    auto face = [&](std::vector<int32_t> idx) {
+      data += static_cast<char>(idx.size());
+      data.append(reinterpret_cast<const char*>(idx.data()), 4 * idx.size());
+    };
+    face({0, 2});
+    face({0, 1, 2});
+    face({1, 2});
+    const std::string path = dir.write(std::string("edge-") + item + ".ply", data);
+    for (uint64_t chunk : {uint64_t(1), uint64_t(1) << 20}) {
+      const test::ReadAll r = test::read_all(path, chunk);
+      EXPECT_EQ(r.lines, (std::vector<int64_t>{0, 2, 1, 2}));
+      EXPECT_EQ(r.line_objects, (std::vector<uint32_t>{0, 0}));
+      EXPECT_EQ(r.triangles, (std::vector<int64_t>{0, 1, 2}));
+      EXPECT_EQ(r.polygons, 1u);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace lodstream

@@ -39,13 +39,25 @@ TEST(Text, ParseDoubleRejects) {
   EXPECT_FALSE(parse("", &v));
   EXPECT_FALSE(parse("x", &v));
   EXPECT_FALSE(parse("1.5x", &v));
-  EXPECT_FALSE(parse("1e999", &v));
   EXPECT_FALSE(parse("--1", &v));
   // Never reads past the end: "1" followed by bytes outside the range.
   const std::string s = "12345";
   const char* p = s.data();
   EXPECT_TRUE(parse_double(p, s.data() + 2, &v));
   EXPECT_EQ(v, 12.0);
+}
+
+TEST(Text, OutOfRangeNumbersRoundLikeStrtod) {
+  double v = 1;
+  EXPECT_TRUE(parse("1e-400", &v));
+  EXPECT_EQ(v, 0.0);
+  EXPECT_TRUE(parse("-4e-320", &v));  // a denormal
+  EXPECT_EQ(v, -4e-320);
+  EXPECT_TRUE(parse("1e999", &v));  // overflow is infinity: readers report it as not finite
+  EXPECT_TRUE(std::isinf(v));
+  const std::string long_tiny = "0." + std::string(600, '0') + "1";
+  EXPECT_TRUE(parse(long_tiny, &v));
+  EXPECT_EQ(v, 0.0);
 }
 
 TEST(Text, Int64AndNewlines) {
