@@ -567,6 +567,9 @@ void PlyReader::finalize_header() {
       e.fast_face = e.props[0].type == Type::i32 ? 1 : 2;
   }
   if (vertex_element_ < 0) header_error(header_lines_, "the PLY header declares no element 'vertex'");
+  // Fast faces emit 32-bit ids (ParsedChunk::triangles32); beyond 2^32 vertices the general path keeps 64.
+  if (vertex_count_ > (uint64_t{1} << 32))
+    for (Element& e : elements_) e.fast_face = 0;
 
   // Counts the remaining bytes cannot hold: checked before any data is read, so a lying count costs
   // nothing. A binary record takes at least min_size bytes; an ascii record of k properties at least 2k
@@ -833,7 +836,7 @@ void PlyReader::parse(const Chunk& chunk, ParsedChunk* out) const {
   if (fmt_ == Fmt::ascii) parse_ascii(chunk, e, out);
   else if (fmt_ == Fmt::be) parse_binary<true>(chunk, e, out);
   else parse_binary<false>(chunk, e, out);
-  out->triangle_objects.resize(out->triangles.size() / 3, 0);
+  out->triangle_objects.resize((out->triangles.size() + out->triangles32.size()) / 3, 0);
   out->line_objects.resize(out->lines.size() / 2, 0);  // edge elements and two-index faces
 }
 
@@ -868,12 +871,16 @@ void PlyReader::fast_vertices(const char* p, uint64_t n, const Element& e, uint6
   const uint64_t rs = e.record_size;
   const uint32_t ox = e.props[e.px].offset, oy = e.props[e.py].offset, oz = e.props[e.pz].offset;
   const bool packed = rs == 3 * sizeof(T) && ox == 0 && oy == sizeof(T) && oz == 2 * sizeof(T);
-  std::vector<double>& pos = out->positions;
+  // float coordinates go to the exact compact form (see ParsedChunk::positions32), doubles as they are.
+  std::vector<T>* target;
+  if constexpr (std::is_same_v<T, float>) target = &out->positions32;
+  else target = &out->positions;
+  std::vector<T>& pos = *target;
   pos.reserve(pos.size() + 3 * n);
   // Converted through a small buffer: appending whole batches avoids both a zero-filling resize and a
   // capacity check per value.
   constexpr uint64_t kBatch = 512;
-  double buf[3 * kBatch];
+  T buf[3 * kBatch];
   for (uint64_t i0 = 0; i0 < n; i0 += kBatch) {
     const uint64_t m = std::min(kBatch, n - i0);
     const char* r = p + i0 * rs;
@@ -894,7 +901,7 @@ void PlyReader::fast_vertices(const char* p, uint64_t n, const Element& e, uint6
       finite = bad == 0;
     } else {
       for (uint64_t i = 0; i < m; ++i, r += rs) {
-      const double x = load<T, Swap>(r + ox), y = load<T, Swap>(r + oy), z = load<T, Swap>(r + oz);
+      const T x = load<T, Swap>(r + ox), y = load<T, Swap>(r + oy), z = load<T, Swap>(r + oz);
       buf[3 * i] = x;
       buf[3 * i + 1] = y;
       buf[3 * i + 2] = z;
@@ -903,9 +910,10 @@ void PlyReader::fast_vertices(const char* p, uint64_t n, const Element& e, uint6
     }
     if (!finite) [[unlikely]] {
       for (uint64_t i = 0; i < m; ++i) {
-        if (!text::finite3(buf + 3 * i)) {
+        const double v[3] = {buf[3 * i], buf[3 * i + 1], buf[3 * i + 2]};
+        if (!text::finite3(v)) {
           pos.insert(pos.end(), buf, buf + 3 * i);
-          set_error(out, base + (i0 + i) * rs, 0, not_finite_message(buf + 3 * i));
+          set_error(out, base + (i0 + i) * rs, 0, not_finite_message(v));
           return;
         }
       }
@@ -922,11 +930,13 @@ void PlyReader::fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* ou
   const uint64_t rc = chunk.record_count;
   const uint64_t vc = vertex_count_;
   const bool signed_count = e.props[0].count_type == Type::i8;
-  std::vector<int64_t>& tri = out->triangles;
+  // Indices are checked against the vertex count here, so they go straight to the final compact form
+  // (ParsedChunk::triangles32); the header check keeps fast faces for vertex counts that fit 32 bits.
+  std::vector<uint32_t>& tri = out->triangles32;
   tri.reserve(tri.size() + 3 * rc);
   // Triangles go through a small buffer, appended a batch at a time (see fast_vertices).
   constexpr size_t kBatch = 3 * 512;
-  int64_t buf[kBatch + 3 * 253];
+  uint32_t buf[kBatch + 3 * 253];
   size_t t = 0;
   const char* p = b;
   uint64_t i = 0, edges = 0;
@@ -939,9 +949,9 @@ void PlyReader::fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* ou
     if (end - p >= 13 && *p == 3) {
       const int64_t a = load<T, Swap>(p + 1), c1 = load<T, Swap>(p + 5), c2 = load<T, Swap>(p + 9);
       if ((static_cast<uint64_t>(a) < vc) & (static_cast<uint64_t>(c1) < vc) & (static_cast<uint64_t>(c2) < vc)) {
-        buf[t] = a;
-        buf[t + 1] = c1;
-        buf[t + 2] = c2;
+        buf[t] = static_cast<uint32_t>(a);
+        buf[t + 1] = static_cast<uint32_t>(c1);
+        buf[t + 2] = static_cast<uint32_t>(c2);
         t += 3;
         p += 13;
         continue;
@@ -985,9 +995,9 @@ void PlyReader::fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* ou
       continue;
     }
     for (unsigned j = 1; j + 1 < n; ++j) {  // at most 253 triangles: the buffer has room past kBatch
-      buf[t] = idx[0];
-      buf[t + 1] = idx[j];
-      buf[t + 2] = idx[j + 1];
+      buf[t] = static_cast<uint32_t>(idx[0]);
+      buf[t + 1] = static_cast<uint32_t>(idx[j]);
+      buf[t + 2] = static_cast<uint32_t>(idx[j + 1]);
       t += 3;
     }
     p += 1 + 4 * static_cast<uint64_t>(n);

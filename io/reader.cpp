@@ -12,6 +12,8 @@ namespace lodstream::io {
 void ParsedChunk::clear() {
   positions.clear();
   triangles.clear();
+  positions32.clear();
+  triangles32.clear();
   lines.clear();
   points.clear();
   triangle_objects.clear();

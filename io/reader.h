@@ -43,6 +43,12 @@ struct ParsedChunk {
   uint64_t seq = 0;
   std::vector<double> positions;   // x, y, z per vertex record (per triangle corner for soup readers)
   std::vector<int64_t> triangles;  // 3 references per triangle, polygons already fan-triangulated
+  // Compact forms a non-soup reader may fill instead, to save the widening and narrowing copies on hot
+  // paths: positions32 (only when single_precision(); exact) in place of positions, and triangles32 in
+  // place of triangles, holding final global vertex ids already checked against the vertex count. A chunk
+  // uses one form of each pair, never both.
+  std::vector<float> positions32;
+  std::vector<uint32_t> triangles32;
   std::vector<int64_t> lines;      // 2 references per segment (polylines already split)
   std::vector<int64_t> points;     // 1 reference per point
   std::vector<uint32_t> triangle_objects;  // one per triangle (per soup triangle)

@@ -58,8 +58,8 @@ struct Prepared {
 
 // Narrows `n` primitives of `arity` references each, dropping those that name a vertex twice.
 // Object ids become runs (one per change of object, `first` counted among the kept primitives).
-template <int arity>
-uint64_t narrow_primitives(const std::vector<int64_t>& refs, const std::vector<uint32_t>& objects,
+template <int arity, class Ref>
+uint64_t narrow_primitives(const std::vector<Ref>& refs, const std::vector<uint32_t>& objects,
                            std::vector<uint32_t>* ids, std::vector<LocalRun>* runs, Prepared* p) {
   const size_t n = objects.size();
   ids->resize(arity * n);
@@ -68,7 +68,7 @@ uint64_t narrow_primitives(const std::vector<int64_t>& refs, const std::vector<u
   int64_t hi = p->max_ref, lo = 0;
   uint32_t last_object = UINT32_MAX;
   for (size_t i = 0; i < n; ++i) {
-    const int64_t* r = &refs[arity * i];
+    const Ref* r = &refs[arity * i];
     bool degenerate = false;
     if constexpr (arity == 3) degenerate = r[0] == r[1] || r[1] == r[2] || r[0] == r[2];
     if constexpr (arity == 2) degenerate = r[0] == r[1];
@@ -77,9 +77,10 @@ uint64_t narrow_primitives(const std::vector<int64_t>& refs, const std::vector<u
       continue;
     }
     for (int k = 0; k < arity; ++k) {
-      hi = std::max(hi, r[k]);
-      lo = std::min(lo, r[k]);
-      *out++ = static_cast<uint32_t>(r[k]);
+      const int64_t id = static_cast<int64_t>(r[k]);
+      hi = std::max(hi, id);
+      lo = std::min(lo, id);
+      *out++ = static_cast<uint32_t>(id);
     }
     const uint32_t object = objects[i];
     if (object != last_object) runs->push_back({kept, last_object = object});
@@ -94,12 +95,19 @@ uint64_t narrow_primitives(const std::vector<int64_t>& refs, const std::vector<u
 void prepare(const io::ParsedChunk& c, bool soup, bool single, uint64_t first_vertex, Prepared* p) {
   p->clear();
   if (!soup) {
-    p->vertex_boxes = vertex_chunk_boxes(c.positions, first_vertex);
-    if (single) {
-      p->positions32.resize(c.positions.size());
-      for (size_t i = 0; i < c.positions.size(); ++i) p->positions32[i] = static_cast<float>(c.positions[i]);
+    if (!c.positions32.empty()) {
+      // The reader gave floats already (exact): only the chunk boxes to compute.
+      p->vertex_boxes = vertex_chunk_boxes(c.positions32, first_vertex);
+    } else {
+      p->vertex_boxes = vertex_chunk_boxes(c.positions, first_vertex);
+      if (single) {
+        p->positions32.resize(c.positions.size());
+        for (size_t i = 0; i < c.positions.size(); ++i) p->positions32[i] = static_cast<float>(c.positions[i]);
+      }
     }
-    p->degenerate = narrow_primitives<3>(c.triangles, c.triangle_objects, &p->triangles, &p->triangle_runs, p);
+    p->degenerate = c.triangles32.empty()
+                        ? narrow_primitives<3>(c.triangles, c.triangle_objects, &p->triangles, &p->triangle_runs, p)
+                        : narrow_primitives<3>(c.triangles32, c.triangle_objects, &p->triangles, &p->triangle_runs, p);
   }
   p->degenerate_segments = narrow_primitives<2>(c.lines, c.line_objects, &p->lines, &p->line_runs, p);
   narrow_primitives<1>(c.points, c.point_objects, &p->points, &p->point_runs, p);
@@ -334,7 +342,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
                                          [&](Slot* s) {
                                            reader->resolve(&s->parsed);
                                            s->first_vertex = vertex_records;
-                                           vertex_records += s->parsed.positions.size() / 3;
+                                           vertex_records += (s->parsed.positions.size() + s->parsed.positions32.size()) / 3;
                                            return s;
                                          }) &
           tbb::make_filter<Slot*, Slot*>(tbb::filter_mode::parallel,
@@ -347,6 +355,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
             meta.polygons += c.polygons;
             meta.skipped += c.skipped;
             if (welder) welder->add(c);
+            else if (!c.positions32.empty()) store.add_vertices32(c.positions32, s->prepared.vertex_boxes);
             else store.add_vertices(c.positions, s->prepared.positions32, s->prepared.vertex_boxes);
             feeder.add(s->prepared);
             const uint64_t done = s->end_offset;

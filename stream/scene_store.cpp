@@ -33,17 +33,37 @@ void StoreWriter::Column::add(std::span<const uint32_t> values, int arity, std::
   count += values.size() / static_cast<size_t>(arity);
 }
 
-std::vector<std::pair<uint64_t, Bbox>> vertex_chunk_boxes(std::span<const double> xyz, uint64_t first_vertex) {
+namespace {
+// Min/max per axis in the coordinates' own type (no conversion per vertex), widened once per part.
+template <class T>
+std::vector<std::pair<uint64_t, Bbox>> chunk_boxes(std::span<const T> xyz, uint64_t first_vertex) {
   std::vector<std::pair<uint64_t, Bbox>> boxes;
   const uint64_t n = xyz.size() / 3;
   for (uint64_t i = 0; i < n;) {
     const uint64_t chunk = (first_vertex + i) / store_chunk_elements;
     const uint64_t end = std::min(n, (chunk + 1) * store_chunk_elements - first_vertex);
+    T lo[3] = {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]}, hi[3] = {lo[0], lo[1], lo[2]};
+    for (; i < end; ++i)
+      for (int k = 0; k < 3; ++k) {
+        const T v = xyz[3 * i + k];
+        lo[k] = v < lo[k] ? v : lo[k];
+        hi[k] = v > hi[k] ? v : hi[k];
+      }
     Bbox b;
-    for (; i < end; ++i) b.add(&xyz[3 * i]);
+    b.add(lo);
+    b.add(hi);
     boxes.emplace_back(chunk, b);
   }
   return boxes;
+}
+}  // namespace
+
+std::vector<std::pair<uint64_t, Bbox>> vertex_chunk_boxes(std::span<const float> xyz, uint64_t first_vertex) {
+  return chunk_boxes(xyz, first_vertex);
+}
+
+std::vector<std::pair<uint64_t, Bbox>> vertex_chunk_boxes(std::span<const double> xyz, uint64_t first_vertex) {
+  return chunk_boxes(xyz, first_vertex);
 }
 
 void StoreWriter::add_vertices(std::span<const double> xyz, std::span<const float> xyz32,
@@ -54,12 +74,23 @@ void StoreWriter::add_vertices(std::span<const double> xyz, std::span<const floa
   } else {
     positions_.write_array(xyz);
   }
+  add_boxes(chunk_boxes);
+  vertices_ += xyz.size() / 3;
+}
+
+void StoreWriter::add_boxes(std::span<const std::pair<uint64_t, Bbox>> chunk_boxes) {
   for (const auto& [chunk, box] : chunk_boxes) {
     if (chunk >= vertex_chunk_bbox_.size()) vertex_chunk_bbox_.resize(chunk + 1);
     vertex_chunk_bbox_[chunk].add(box);
     bbox_.add(box);
   }
-  vertices_ += xyz.size() / 3;
+}
+
+void StoreWriter::add_vertices32(std::span<const float> xyz32, std::span<const std::pair<uint64_t, Bbox>> chunk_boxes) {
+  if (!single_) fail(Status::internal, "float coordinates given to a double-precision store");
+  positions_.write_array(xyz32);
+  add_boxes(chunk_boxes);
+  vertices_ += xyz32.size() / 3;
 }
 
 void StoreWriter::add_vertices(std::span<const double> xyz) {

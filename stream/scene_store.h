@@ -47,6 +47,10 @@ struct Bbox {
     add(b.min.data());
     add(b.max.data());
   }
+  void add(const float* p) {
+    const double d[3] = {p[0], p[1], p[2]};
+    add(d);
+  }
   void add(const double* p) {
     if (empty) {
       min = max = {p[0], p[1], p[2]};
@@ -91,6 +95,8 @@ class StoreWriter {
   void add_vertices(std::span<const double> xyz, std::span<const float> xyz32,
                     std::span<const std::pair<uint64_t, Bbox>> chunk_boxes);
   void add_vertices(std::span<const double> xyz);
+  // Appends vertices given as floats (single-precision stores only).
+  void add_vertices32(std::span<const float> xyz32, std::span<const std::pair<uint64_t, Bbox>> chunk_boxes);
   // Appends primitives with their object runs (run `first` relative to ids' first primitive).
   void add_triangles(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
   void add_lines(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
@@ -102,6 +108,7 @@ class StoreWriter {
   const Bbox& bbox() const { return bbox_; }
 
  private:
+  void add_boxes(std::span<const std::pair<uint64_t, Bbox>> chunk_boxes);
   struct Column {
     io::FileWriter ids, runs;
     uint64_t count = 0;
@@ -120,6 +127,7 @@ class StoreWriter {
 
 // Bounding boxes of the parts of `xyz` (vertices first_vertex, first_vertex + 1, ...) in each store chunk.
 std::vector<std::pair<uint64_t, Bbox>> vertex_chunk_boxes(std::span<const double> xyz, uint64_t first_vertex);
+std::vector<std::pair<uint64_t, Bbox>> vertex_chunk_boxes(std::span<const float> xyz, uint64_t first_vertex);
 
 // Reads store.json of a complete store; returns false when there is none (or it is unreadable or of
 // another format version), so that the caller rebuilds it.

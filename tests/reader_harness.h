@@ -27,7 +27,9 @@ struct ReadAll {
 inline void append(ReadAll* r, const io::ParsedChunk& parsed) {
   auto add = [](auto& to, const auto& from) { to.insert(to.end(), from.begin(), from.end()); };
   add(r->positions, parsed.positions);
+  add(r->positions, parsed.positions32);  // widened: exact
   add(r->triangles, parsed.triangles);
+  add(r->triangles, parsed.triangles32);
   add(r->lines, parsed.lines);
   add(r->points, parsed.points);
   add(r->triangle_objects, parsed.triangle_objects);

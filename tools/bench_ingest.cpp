@@ -2,8 +2,11 @@
 // process tree, alternately, several times; prints medians, throughputs, their ratio, and the peak
 // resident memory of the lodstream child (ru_maxrss, i.e. its VmHWM, mapped pages included).
 //
-// usage: bench_ingest [--runs N] [--memory 1G] [--threads N] [--lodstream PATH] FILE...
+// usage: bench_ingest [--runs N] [--memory 1G] [--threads N] [--lodstream PATH] [--work-root DIR]... FILE...
 // The first run of each file also warms the page cache; the benchmark measures files in page cache.
+// Each --work-root (default: $TMPDIR or /tmp) is measured in turn: the store lodstream writes (about as
+// many bytes as it reads) goes through that file system, so a disk-backed one and a tmpfs one (/dev/shm)
+// separate lodstream's own time from the machine's writeback.
 #include <fcntl.h>
 #include <spawn.h>
 #include <sys/resource.h>
@@ -13,6 +16,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <string>
@@ -75,32 +79,38 @@ int main(int argc, char** argv) {
   int runs = 3;
   std::string memory = "1G", threads = "0";
   std::string lodstream = (std::filesystem::path(argv[0]).parent_path() / "lodstream").string();
-  std::vector<std::string> files;
+  std::vector<std::string> files, roots;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--runs" && i + 1 < argc) runs = std::atoi(argv[++i]);
     else if (a == "--memory" && i + 1 < argc) memory = argv[++i];
     else if (a == "--threads" && i + 1 < argc) threads = argv[++i];
     else if (a == "--lodstream" && i + 1 < argc) lodstream = argv[++i];
+    else if (a == "--work-root" && i + 1 < argc) roots.push_back(argv[++i]);
     else files.push_back(a);
   }
   if (files.empty()) {
-    std::fprintf(stderr, "usage: bench_ingest [--runs N] [--memory 1G] [--threads N] [--lodstream PATH] FILE...\n");
+    std::fprintf(stderr, "usage: bench_ingest [--runs N] [--memory 1G] [--threads N] [--lodstream PATH] [--work-root DIR]... FILE...\n");
     return 64;
   }
+  if (roots.empty()) roots.push_back(std::getenv("TMPDIR") ? std::getenv("TMPDIR") : "/tmp");
   const std::string out_path = std::filesystem::temp_directory_path() / ("bench_ingest." + std::to_string(getpid()) + ".json");
   fmt::print("lodstream ingest benchmark: {} runs each, --memory {}, --threads {}, {} cores\n", runs, memory, threads,
              sysconf(_SC_NPROCESSORS_ONLN));
-  fmt::print("{:<28} {:>9} {:>8} {:>9} {:>8} {:>9} {:>7} {:>9} {:>10} {:>10}\n", "file", "MB", "cat s", "cat MB/s",
-             "ingest s", "MB/s", "ratio", "info s", "census s", "peak MB");
+  fmt::print("{:<16} {:<12} {:>6} {:>7} {:>8} {:>8} {:>7} {:>6} {:>7} {:>8} {:>8}\n", "file", "work root", "MB", "cat s",
+             "cat MB/s", "ingest s", "MB/s", "ratio", "info s", "census s", "peak MB");
+  for (const std::string& root : roots)
   for (const std::string& file : files) {
     const double mb = static_cast<double>(std::filesystem::file_size(file)) / 1e6;
     spawn({"cat", file}, "/dev/null");  // warm the page cache
     std::vector<double> cat_s, ingest_s, info_s, weld_s, peak;
     for (int r = 0; r < runs; ++r) {
       cat_s.push_back(spawn({"cat", file}, "/dev/null").seconds);
-      const Run l = spawn({lodstream, "info", file, "--json", "--progress", "none", "--memory", memory, "--threads", threads},
+      const std::string work = root + "/bench_ingest.work." + std::to_string(getpid());
+      const Run l = spawn({lodstream, "info", file, "--json", "--progress", "none", "--memory", memory, "--threads", threads,
+                           "--work", work},
                           out_path);
+      std::filesystem::remove_all(work);
       if (!WIFEXITED(l.status) || WEXITSTATUS(l.status) != 0) {
         std::fprintf(stderr, "lodstream failed on %s (status %d)\n", file.c_str(), l.status);
         return 1;
@@ -114,8 +124,8 @@ int main(int argc, char** argv) {
       peak.push_back(static_cast<double>(l.max_rss) / 1e6);
     }
     const double cat = median(cat_s), ing = median(ingest_s);
-    fmt::print("{:<28} {:>9.0f} {:>8.3f} {:>9.0f} {:>8.3f} {:>9.0f} {:>6.0f}% {:>9.3f} {:>10.3f} {:>10.0f}\n",
-               std::filesystem::path(file).filename().string(), mb, cat, mb / cat, ing, mb / ing,
+    fmt::print("{:<16} {:<12} {:>6.0f} {:>7.3f} {:>8.0f} {:>8.3f} {:>7.0f} {:>5.0f}% {:>7.3f} {:>8.3f} {:>8.0f}\n",
+               std::filesystem::path(file).filename().string(), root, mb, cat, mb / cat, ing, mb / ing,
                100.0 * (mb / ing) / (mb / cat), median(info_s), median(weld_s), *std::max_element(peak.begin(), peak.end()));
   }
   std::filesystem::remove(out_path);
