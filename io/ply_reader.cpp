@@ -328,6 +328,8 @@ class PlyReader final : public Reader {
   template <bool Swap>
   void cut_variable(const Element& e, uint64_t target, Chunk* chunk);
   void cut_ascii(const Element& e, uint64_t target, Chunk* chunk);
+  // Ends a cut: [begin, end) holds `records` whole records, or, when `broken`, one more that parse() reports.
+  void end_cut(Chunk* chunk, uint64_t begin, uint64_t end, uint64_t records, bool broken);
 
   // Parsing.
   template <bool Swap>
@@ -770,17 +772,20 @@ void PlyReader::cut_variable(const Element& e, uint64_t target, Chunk* chunk) {
     }
     need = 2 * static_cast<uint64_t>(wend - p) + 1;
   }
+  // A truncated record, or one with a negative list count: claim it, so parse() reports it.
+  end_cut(chunk, begin, broken ? broken_end : o, k, broken);
+}
+
+void PlyReader::end_cut(Chunk* chunk, uint64_t begin, uint64_t end, uint64_t records, bool broken) {
+  chunk->bytes = file_.map(begin, end);
   if (broken) {
-    // A truncated record, or one with a negative list count: claim it, so parse() reports it.
-    chunk->bytes = file_.map(begin, broken_end);
-    chunk->record_count = k + 1;
+    chunk->record_count = records + 1;
     broken_ = true;
     return;
   }
-  chunk->bytes = file_.map(begin, o);
-  chunk->record_count = k;
-  cursor_ = o;
-  rec_ += k;
+  chunk->record_count = records;
+  cursor_ = end;
+  rec_ += records;
 }
 
 void PlyReader::cut_ascii(const Element& e, uint64_t target, Chunk* chunk) {
@@ -813,18 +818,10 @@ void PlyReader::cut_ascii(const Element& e, uint64_t target, Chunk* chunk) {
     if (!more && (k == left || (k > 0 && o - begin >= target) || o >= size)) break;
   }
   chunk->first_line = line_;
-  if (k < left && o >= size) {
-    // The file ends before the element does: claim one record more for parse() to report.
-    chunk->bytes = file_.map(begin, size);
-    chunk->record_count = k + 1;
-    broken_ = true;
-    return;
-  }
-  chunk->bytes = file_.map(begin, o);
-  chunk->record_count = k;
-  cursor_ = o;
-  line_ += lines;
-  rec_ += k;
+  // If the file ends before the element does, claim one record more for parse() to report.
+  const bool broken = k < left && o >= size;
+  end_cut(chunk, begin, broken ? size : o, k, broken);
+  if (!broken) line_ += lines;
 }
 
 // ------------------------------------------------------------------------------------------ parsing
