@@ -2,10 +2,12 @@
 #include <gtest/gtest.h>
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/mount.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -154,6 +156,26 @@ TEST(Cli, SigintExits130AndLeavesNoPartialFile) {
     EXPECT_EQ(name.find(".partial"), std::string::npos) << name;
     EXPECT_NE(name, "store.json");
   }
+}
+
+// A full disk while writing the store: exit 74, one line naming the file, nothing left under a final
+// name and no partial file. Needs a 2 MiB tmpfs, so it runs only where mounting is allowed (root).
+TEST(Cli, DiskFullExits74AndLeavesNothingBehind) {
+  test::TempDir tmp;
+  const std::string mnt = tmp.file("tiny");
+  fs::create_directories(mnt);
+  if (geteuid() != 0 || mount("tmpfs", mnt.c_str(), "tmpfs", 0, "size=2m") != 0)
+    GTEST_SKIP() << "skipped: cannot mount a small tmpfs here (needs root)";
+  const std::string sample = test::source_dir() + "/tests/data/sample-room.ply";
+  const CliRun r = run_cli({"info", sample, "--work", mnt + "/w"}, tmp);
+  std::vector<std::string> left;
+  for (const auto& e : fs::recursive_directory_iterator(mnt))
+    if (e.is_regular_file()) left.push_back(e.path().filename().string());
+  umount(mnt.c_str());
+  EXPECT_EQ(r.exit_code, 74) << r.err;
+  EXPECT_NE(r.err.find("No space left on device"), std::string::npos) << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  EXPECT_TRUE(left.empty()) << "left behind: " << left.front();
 }
 
 }  // namespace
