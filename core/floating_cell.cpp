@@ -1,0 +1,235 @@
+// Vertex clustering (pipeline stage 4). This work is based on:
+// Kok-Lim Low and Tiow-Seng Tan. Model Simplification Using Vertex-Clustering. I3D 1997, §3.2 and §4
+// Jarek Rossignac and Paul Borrel. Multi-resolution 3D approximations for rendering complex scenes. 1993
+//
+// A pass guarantees: a vertex joins a cell exactly when it is inside it (the exact tests of
+// floating_cell.h), it starts a cell exactly when it is inside none, and the choice among several cells
+// depends only on distances and ids — never on the hash table's layout — so the ids are a function of the
+// vertex order and positions alone.
+//
+// The square of a coordinate is computed from its half-square index floor(x / (c/2)): the square is that
+// index >> 1 and its low bit tells which half the coordinate lies in, i.e. which neighbour square along
+// that axis can hold a center within c/2. One division per axis serves both.
+#include "core/floating_cell.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "core/status.h"
+
+namespace lodstream::core {
+namespace {
+
+using Cell = Clusterer::Cell;
+using Slot = Clusterer::Slot;
+
+static_assert(sizeof(Cell) == 32 && sizeof(Slot) == 32, "records sized for two per cache line");
+
+constexpr size_t kInitialSlots = 16;
+
+[[noreturn]] void out_of_range(double x, double size) {
+  fail(Status::usage, "clustering: coordinate " + std::to_string(x) + " is too far from the origin (or not finite) "
+                      "for cell size " + std::to_string(size) + " (at most 2^49 half-cells per axis)");
+}
+
+// floor(x / h) exactly, for |x / h| < kMaxSquaresPerAxis. The rounded quotient can only be wrong when the
+// exact one lies just below an integer and rounds onto it (a non-integer rounded quotient has the same
+// floor, since integers of this size are doubles); then x − q·h, evaluated with one rounding by fma, is
+// negative, and its sign is exact. The fma is a library call on targets without the instruction, but it
+// runs only for quotients that are exact integers (points on a half-square boundary).
+inline int64_t half_index(double x, double h, double size) {
+  const double r = x / h;
+  if (!(std::fabs(r) < kMaxSquaresPerAxis)) out_of_range(x, size);
+  double q = std::floor(r);
+  if (q == r && std::fma(-q, h, x) < 0) q -= 1;
+  return static_cast<int64_t>(q);
+}
+
+// |x − cx| <= h on the exact difference, given d = fl(x − cx). Rounding is monotone and h is a double, so
+// |d| < h and |d| > h already decide; only |d| == h needs the rounding error, which TwoSum gives exactly.
+// This matters beyond the boundary points themselves: the 2×2×2 query relies on every accepted center
+// being truly within h per axis.
+inline bool within(double x, double cx, double d, double h) {
+  const double a = std::fabs(d);
+  if (a != h) return a < h;
+  const double b = -cx;
+  const double bv = d - x;
+  const double err = (x - (d - bv)) + (b - bv);  // exact: (x − cx) − d
+  return d > 0 ? err <= 0 : err >= 0;
+}
+
+inline uint64_t hash_square(int64_t x, int64_t y, int64_t z) {
+  uint64_t k = static_cast<uint64_t>(x) * 0x9E3779B97F4A7C15ull + static_cast<uint64_t>(y) * 0xC2B2AE3D27D4EB4Full +
+               static_cast<uint64_t>(z) * 0x165667B19E3779F9ull;
+  // murmur3's finaliser: the linear mix above leaves neighbouring squares in neighbouring low bits.
+  k ^= k >> 33;
+  k *= 0xFF51AFD7ED558CCDull;
+  k ^= k >> 33;
+  k *= 0xC4CEB9FE1A85EC53ull;
+  k ^= k >> 33;
+  return k;
+}
+
+inline const Slot* find(const Slot* table, uint64_t mask, int64_t x, int64_t y, int64_t z) {
+  for (uint64_t i = hash_square(x, y, z) & mask;; i = (i + 1) & mask) {
+    const Slot& s = table[i];
+    if (s.count == 0) return nullptr;  // the table is never full, so every probe ends
+    if (s.square[0] == x && s.square[1] == y && s.square[2] == z) return &s;
+  }
+}
+
+// The slot of square xyz in `table`, inserting an empty-listed one (count 0 → 1 is the caller's) if
+// absent; doubles the table first when an insert would make it more than half full.
+Slot& find_or_insert(std::vector<Slot>& table, uint64_t& used, const int64_t xyz[3], bool& inserted) {
+  uint64_t mask = table.size() - 1;
+  uint64_t i = hash_square(xyz[0], xyz[1], xyz[2]) & mask;
+  for (;; i = (i + 1) & mask) {
+    Slot& s = table[i];
+    if (s.count == 0) break;
+    if (s.square[0] == xyz[0] && s.square[1] == xyz[1] && s.square[2] == xyz[2]) {
+      inserted = false;
+      return s;
+    }
+  }
+  if (2 * (used + 1) > table.size()) {
+    std::vector<Slot> grown(2 * table.size(), Slot{{0, 0, 0}, kNoCell, 0});
+    const uint64_t grown_mask = grown.size() - 1;
+    for (const Slot& s : table) {
+      if (s.count == 0) continue;
+      uint64_t j = hash_square(s.square[0], s.square[1], s.square[2]) & grown_mask;
+      while (grown[j].count != 0) j = (j + 1) & grown_mask;
+      grown[j] = s;
+    }
+    table.swap(grown);
+    mask = grown_mask;
+    i = hash_square(xyz[0], xyz[1], xyz[2]) & mask;
+    while (table[i].count != 0) i = (i + 1) & mask;
+  }
+  ++used;
+  Slot& s = table[i];
+  s.square[0] = xyz[0], s.square[1] = xyz[1], s.square[2] = xyz[2];
+  s.head = kNoCell;
+  inserted = true;
+  return s;
+}
+
+uint32_t new_cell(std::vector<Cell>& cells, uint32_t vertex_id, const double* p, uint32_t next) {
+  // Cell ids share uint32 with vertex ids and kNoCell is reserved; a pass creates at most one cell per
+  // vertex, so reaching it means the caller fed more than 2^32 − 1 vertices.
+  if (cells.size() >= kNoCell) fail(Status::internal, "clustering: more than 2^32 - 1 cells in one level");
+  cells.push_back(Cell{{p[0], p[1], p[2]}, vertex_id, next});
+  return static_cast<uint32_t>(cells.size() - 1);
+}
+
+}  // namespace
+
+int64_t grid_square(double x, double size) {
+  if (!(size >= kMinCellSize && size <= kMaxCellSize))
+    fail(Status::usage, "clustering: cell size " + std::to_string(size) + " out of range");
+  return half_index(x, size / 2, size) >> 1;
+}
+
+Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options) : options_(options) {
+  if (cell_sizes.empty()) fail(Status::usage, "clustering: no level (no cell size)");
+  levels_.resize(cell_sizes.size());
+  for (size_t l = 0; l < cell_sizes.size(); ++l) {
+    const double c = cell_sizes[l];
+    if (!(c >= kMinCellSize && c <= kMaxCellSize))
+      fail(Status::usage, "clustering: cell size " + std::to_string(c) + " out of range");
+    if (l > 0 && !(c > cell_sizes[l - 1]))
+      fail(Status::usage, "clustering: cell sizes must be strictly increasing");
+    Level& level = levels_[l];
+    level.size = c;
+    level.half = c / 2;  // exact: c is normal
+    level.half_sq = level.half * level.half;
+    level.table.assign(kInitialSlots, Slot{{0, 0, 0}, kNoCell, 0});
+  }
+}
+
+void Clusterer::assign(uint32_t vertex_id, std::span<const double, 3> position, std::span<uint32_t> cells) {
+  if (cells.size() != levels_.size()) fail(Status::internal, "Clusterer::assign: cells.size() != levels()");
+  const double p[3] = {position[0], position[1], position[2]};
+  if (options_.clustering == Clustering::floating) {
+    for (size_t l = 0; l < levels_.size(); ++l) cells[l] = assign_floating(levels_[l], vertex_id, p);
+  } else {
+    for (size_t l = 0; l < levels_.size(); ++l) cells[l] = assign_uniform(levels_[l], vertex_id, p);
+  }
+}
+
+uint32_t Clusterer::assign_floating(Level& level, uint32_t vertex_id, const double* p) {
+  const double h = level.half;
+  int64_t own[3], other[3];
+  for (int a = 0; a < 3; ++a) {
+    const int64_t k = half_index(p[a], h, level.size);
+    own[a] = k >> 1;  // arithmetic shift: floor division by 2 at negative indices too
+    // A center within c/2 of p lies in p's square or in the neighbour on the side of p's half.
+    other[a] = own[a] + ((k & 1) ? 1 : -1);
+  }
+
+  const Cell* cells = level.cells.data();
+  const Slot* table = level.table.data();
+  const uint64_t mask = level.table.size() - 1;
+  const bool sphere = options_.shape == CellShape::sphere;
+  const bool nearest = options_.choice == CellChoice::nearest;
+  uint32_t best = kNoCell;
+  double best_d2 = 0;
+  for (int i = 0; i < 8; ++i) {
+    const Slot* s = find(table, mask, (i & 1) ? other[0] : own[0], (i & 2) ? other[1] : own[1],
+                         (i & 4) ? other[2] : own[2]);
+    if (s == nullptr) continue;
+    for (uint32_t c = s->head; c != kNoCell; c = cells[c].next) {
+      const double* q = cells[c].position;
+      const double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
+      // One well-predicted branch for the common cases; the exact test only when an axis rounds onto h.
+      const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
+      if (m > h) continue;
+      if (m == h && !(within(p[0], q[0], dx, h) && within(p[1], q[1], dy, h) && within(p[2], q[2], dz, h)))
+        continue;
+      const double d2 = dx * dx + dy * dy + dz * dz;
+      if (sphere && d2 > level.half_sq) continue;
+      // Squares and lists come in no particular id order: distances and ids alone decide.
+      const bool better = best == kNoCell || (nearest ? (d2 < best_d2 || (d2 == best_d2 && c < best)) : c < best);
+      if (better) best = c, best_d2 = d2;
+    }
+  }
+  if (best != kNoCell) return best;
+
+  // Inside no cell: p starts one, attached to its own square.
+  bool inserted = false;
+  Slot& slot = find_or_insert(level.table, level.used, own, inserted);
+  const uint32_t id = new_cell(level.cells, vertex_id, p, slot.head);
+  slot.head = id;
+  ++slot.count;
+  // invariant: slot.count <= kMaxCubeCellsPerSquare (cubes) or kMaxSphereCellsPerSquare (spheres); see the
+  // header for the proof. It rests on the exact square and inside tests above, so a violation is a bug.
+  const uint32_t bound = sphere ? kMaxSphereCellsPerSquare : kMaxCubeCellsPerSquare;
+  if (slot.count > bound)
+    fail(Status::internal, "clustering: " + std::to_string(slot.count) + " cells attached to one grid square (bound " +
+                               std::to_string(bound) + ")");
+  if (slot.count > level.max_per_square) level.max_per_square = slot.count;
+  return id;
+}
+
+uint32_t Clusterer::assign_uniform(Level& level, uint32_t vertex_id, const double* p) {
+  int64_t square[3];
+  for (int a = 0; a < 3; ++a) square[a] = half_index(p[a], level.half, level.size) >> 1;
+  bool inserted = false;
+  Slot& slot = find_or_insert(level.table, level.used, square, inserted);
+  if (inserted) {
+    // The first vertex to reach a square is its heaviest: it names the cell and numbers it.
+    slot.head = new_cell(level.cells, vertex_id, p, kNoCell);
+    slot.count = 1;
+    level.max_per_square = 1;
+  }
+  return slot.head;
+}
+
+uint64_t Clusterer::memory_bytes() const {
+  uint64_t bytes = sizeof(*this) + levels_.capacity() * sizeof(Level);
+  for (const Level& level : levels_)
+    bytes += level.cells.capacity() * sizeof(Cell) + level.table.capacity() * sizeof(Slot);
+  return bytes;
+}
+
+}  // namespace lodstream::core

@@ -1,0 +1,159 @@
+// Vertex clustering, pipeline stage 4: one pass over the vertices in weight order assigns every vertex to a
+// cell in every level at once.
+//
+// Low & Tan, "Model Simplification Using Vertex-Clustering", I3D 1997, §3.2 and §4:
+//   floating cells — visit vertices in non-increasing weight; a vertex inside no existing cell becomes the
+//   center of a new cell (a cube of side c, or a ball); a later vertex inside one or more cells joins one of
+//   them: the heaviest center (the original method) or the nearest center (the §3.2.3 variant, which keeps
+//   the thin triangle of their Figure 4 thin). Cells are found through a uniform grid of squares of side c.
+// Rossignac & Borrel, "Multi-resolution 3D approximations for rendering complex scenes", 1993 (Low & Tan's
+// reference [13]), kept as the baseline:
+//   uniform subdivision — a vertex's cell is the grid square of side c holding it. Unlike the paper, the
+//   grid is anchored at the origin, not at the bounding box, so adding a distant object changes nothing.
+//
+// Units: positions and cell sizes in scene units, double precision. Cell ids are per level, 0, 1, 2, ... in
+// order of creation; since the vertex order is fixed (non-increasing grade, ties by vertex id), so are the
+// ids, whatever the chunking, the thread count or the memory budget of the caller.
+//
+// Definitions (every comparison is exact unless stated; "d" is the vertex minus the center):
+// - Grid square of a coordinate x for size c: floor(x / c) as int64, evaluated exactly (the rounded
+//   quotient is corrected when it lands on an integer), so a square is the half-open [k·c, (k+1)·c) of the
+//   real line: a point exactly on a square boundary belongs to the square above it, at negative
+//   coordinates too.
+// - Cube cell: closed. Inside when max(|dx|, |dy|, |dz|) <= c/2, with |d| <= c/2 decided on the exact
+//   difference (a point exactly c/2 away on an axis is inside).
+// - Sphere cell: the closed ball of diameter c (radius c/2), so it fits in the cube cell of the same c.
+//   Inside when the cube test holds and fl(dx² + dy² + dz²) <= fl((c/2)²): the surface is decided up to
+//   rounding of the sum of squares (exact for exactly representable sums, e.g. a 3-4-5 triangle).
+// - Nearest: the containing cell with the smallest fl(dx² + dy² + dz²), ties by lowest id. Heaviest: the
+//   containing cell with the lowest id (its center came first in weight order).
+//
+// Invariants (where they hold: Clusterer::assign in floating_cell.cpp):
+// - A cell's center lies in no earlier cell, so any two cube centers are more than c/2 apart on some axis,
+//   and any two sphere centers more than c/2 apart. Hence a vertex's candidate cells are attached to the
+//   2×2×2 block of squares nearest it (its own square and, per axis, the neighbour on the side of the half
+//   it lies in).
+// - At most kMaxCubeCellsPerSquare = 8 cube cells attach to one square (split the square into 8 half-open
+//   sub-cubes of side c/2: two centers in one would be within c/2 on every axis). For spheres the bound is
+//   larger: at least 14 fit (8 near the corners and 6 near the face centers; the tests build it) and at
+//   most kMaxSphereCellsPerSquare = 48 (split the square into 3×4×4 boxes of c/3 × c/4 × c/4, whose
+//   diagonal √(1/9 + 1/16 + 1/16)·c ≈ 0.486·c is below c/2). A square stores its cells as a list threaded
+//   through the cell records, so no per-square capacity is reserved; assign checks the bound and throws
+//   Failure(Status::internal) if it is ever exceeded (a bug, never bad input).
+// - Memory grows with the number of cells, not of vertices: per level one 32-byte record per cell and an
+//   open-addressing hash table of 32-byte slots, one per occupied square, at most half full. Nothing per
+//   vertex is kept: the caller receives the cell ids and writes them out.
+//
+// Limits (Failure(Status::usage) from the constructor or assign, as the stream stage should have checked
+// them against the scene's bounding box first): cell sizes finite, in [kMinCellSize, kMaxCellSize] and
+// strictly increasing; every coordinate within kMaxSquaresPerAxis · c/2 of the origin for every level c
+// (about 5.6e14 half-squares: a 1 km scene at 1 nm cells). NaN and infinities fail the same check.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace lodstream::core {
+
+enum class Clustering {
+  floating,  // Low & Tan §3.2: cells centred on the heaviest vertices
+  uniform,   // Rossignac & Borrel: the grid square of side c, grid anchored at the origin
+};
+
+enum class CellShape {
+  cube,    // axis-aligned cube of side c centred on the center vertex
+  sphere,  // ball of diameter c centred on the center vertex
+};
+
+enum class CellChoice {
+  nearest,   // Low & Tan §3.2.3: the cell whose center is nearest (ties: lowest id); the default
+  heaviest,  // Low & Tan §3.2 original: the cell whose center came first (lowest id)
+};
+
+struct ClusterOptions {
+  Clustering clustering = Clustering::floating;
+  CellShape shape = CellShape::cube;       // floating only
+  CellChoice choice = CellChoice::nearest;  // floating only
+};
+
+inline constexpr uint32_t kNoCell = UINT32_MAX;
+inline constexpr uint32_t kMaxCubeCellsPerSquare = 8;
+inline constexpr uint32_t kMaxSphereCellsPerSquare = 48;
+// Coordinates satisfy |x| < kMaxSquaresPerAxis · (c/2): below 2^53, so that every half-square index and
+// its neighbours are exact in a double, with room to spare.
+inline constexpr double kMaxSquaresPerAxis = 0x1p49;
+// Cell sizes keep c/2 and (c/2)² normal and 3 · (c/2)² finite.
+inline constexpr double kMinCellSize = 0x1p-480;
+inline constexpr double kMaxCellSize = 0x1p480;
+
+// floor(x / size) as int64, exact (see "Grid square" above). Same limits as the Clusterer: size within
+// [kMinCellSize, kMaxCellSize] and |x| < kMaxSquaresPerAxis · size / 2; otherwise throws
+// Failure(Status::usage).
+int64_t grid_square(double x, double size);
+
+// One clustering pass, all levels at once. Not thread-safe (one pass is inherently sequential: each
+// vertex's cell depends on every heavier vertex). Levels are independent, though: a Clusterer per level
+// (one cell size each), run on separate threads over the same vertex order, gives the same ids.
+class Clusterer {
+ public:
+  // cell_sizes: c_0 < c_1 < ..., one level each, at least one. Copied.
+  Clusterer(std::span<const double> cell_sizes, ClusterOptions options = {});
+
+  // Assigns the next vertex in weight order (non-increasing grade, ties by vertex id: the caller's
+  // guarantee; the clusterer cannot check it) at `position` (xyz) in every level, and writes its cell id in
+  // level l to cells[l]. cells.size() must equal levels() (else Failure(Status::internal)). A vertex that
+  // starts a cell becomes its center vertex. Cost per level: O(1) hash probes (8 for floating cells, 1 for
+  // uniform) and the cells attached to the probed squares (at most 64 cubes; about 10 in a dense random cloud).
+  // Allocates only when a level's cell array or hash table grows (doubling).
+  void assign(uint32_t vertex_id, std::span<const double, 3> position, std::span<uint32_t> cells);
+
+  size_t levels() const { return levels_.size(); }
+  double cell_size(size_t level) const { return levels_[level].size; }
+  const ClusterOptions& options() const { return options_; }
+  uint32_t cell_count(size_t level) const { return static_cast<uint32_t>(levels_[level].cells.size()); }
+  // The vertex that created the cell (floating: its center; uniform: the first, i.e. heaviest, vertex that
+  // fell in the square) and that vertex's position. cell < cell_count(level); the span stays valid until
+  // the next assign.
+  uint32_t center_vertex(size_t level, uint32_t cell) const { return levels_[level].cells[cell].vertex; }
+  std::span<const double, 3> center_position(size_t level, uint32_t cell) const {
+    return std::span<const double, 3>(levels_[level].cells[cell].position, 3);
+  }
+  // Most cells attached to one grid square so far in a level (uniform: 1 once a vertex was assigned).
+  uint32_t max_cells_per_square(size_t level) const { return levels_[level].max_per_square; }
+  // Bytes held now (capacity of every array, plus the object), for the stream stage's budget. A growth
+  // step briefly holds the old and the new array of one level: up to 1.5× a level's table or cell array.
+  uint64_t memory_bytes() const;
+
+  // Exposed for tests and the documentation above: 32 bytes each.
+  struct Cell {
+    double position[3];
+    uint32_t vertex;
+    uint32_t next;  // floating: the next cell attached to the same square (kNoCell ends the list)
+  };
+  struct Slot {
+    int64_t square[3];
+    uint32_t head;   // floating: the newest cell attached to the square; uniform: the square's cell
+    uint32_t count;  // cells attached; 0 marks an empty slot
+  };
+
+ private:
+  struct Level {
+    double size = 0;
+    double half = 0;     // c/2, exact
+    double half_sq = 0;  // fl((c/2)²)
+    std::vector<Cell> cells;
+    std::vector<Slot> table;  // power-of-two size, linear probing, at most half full
+    uint64_t used = 0;        // occupied slots
+    uint32_t max_per_square = 0;
+  };
+
+  uint32_t assign_floating(Level& level, uint32_t vertex_id, const double* p);
+  uint32_t assign_uniform(Level& level, uint32_t vertex_id, const double* p);
+
+  ClusterOptions options_;
+  std::vector<Level> levels_;
+};
+
+}  // namespace lodstream::core

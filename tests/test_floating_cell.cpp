@@ -1,0 +1,462 @@
+// Vertex clustering (core/floating_cell.h): hand-placed configurations with exact cell ids, Low & Tan's
+// Figure 4 and Plate 5, levels run together or apart, and a brute-force reference on random and lattice
+// clouds. In every test the vertex ids are 0, 1, 2, ... in weight order (heaviest first).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <map>
+#include <numeric>
+#include <random>
+#include <span>
+#include <tuple>
+#include <vector>
+
+#include "core/floating_cell.h"
+#include "core/status.h"
+
+namespace lodstream {
+namespace {
+
+using core::CellChoice;
+using core::CellShape;
+using core::Clusterer;
+using core::ClusterOptions;
+using core::Clustering;
+using P = std::array<double, 3>;
+
+constexpr ClusterOptions kCubeNearest{Clustering::floating, CellShape::cube, CellChoice::nearest};
+constexpr ClusterOptions kCubeHeaviest{Clustering::floating, CellShape::cube, CellChoice::heaviest};
+constexpr ClusterOptions kSphereNearest{Clustering::floating, CellShape::sphere, CellChoice::nearest};
+constexpr ClusterOptions kSphereHeaviest{Clustering::floating, CellShape::sphere, CellChoice::heaviest};
+constexpr ClusterOptions kUniform{Clustering::uniform, CellShape::cube, CellChoice::nearest};
+constexpr ClusterOptions kFloatingVariants[] = {kCubeNearest, kCubeHeaviest, kSphereNearest, kSphereHeaviest};
+
+// cells[l][v]: the cell of vertex v (id v, in weight order) in level l.
+std::vector<std::vector<uint32_t>> run(Clusterer& clusterer, const std::vector<P>& points) {
+  std::vector<std::vector<uint32_t>> cells(clusterer.levels(), std::vector<uint32_t>(points.size()));
+  std::vector<uint32_t> out(clusterer.levels());
+  for (size_t v = 0; v < points.size(); ++v) {
+    clusterer.assign(static_cast<uint32_t>(v), points[v], out);
+    for (size_t l = 0; l < out.size(); ++l) cells[l][v] = out[l];
+  }
+  return cells;
+}
+
+std::vector<uint32_t> run1(double size, ClusterOptions options, const std::vector<P>& points) {
+  Clusterer clusterer(std::span<const double>(&size, 1), options);
+  return run(clusterer, points)[0];
+}
+
+std::vector<P> random_cloud(size_t n, uint32_t seed, double lo = 0, double hi = 1) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(lo, hi);
+  std::vector<P> points(n);
+  for (P& p : points) p = {u(rng), u(rng), u(rng)};
+  return points;
+}
+
+// The definition in floating_cell.h, cell by cell over every cell: O(n · cells). Cell ids are creation
+// order. Per-axis differences use fabs(fl(x − cx)) <= h, which equals the exact test whenever the
+// differences are exact (the lattice) and differs only with probability ~2^-52 elsewhere (random clouds).
+std::vector<uint32_t> brute_force(double size, ClusterOptions options, const std::vector<P>& points) {
+  const double h = size / 2;
+  std::vector<P> centers;
+  std::vector<uint32_t> cells;
+  for (const P& p : points) {
+    uint32_t best = core::kNoCell;
+    double best_d2 = 0;
+    for (uint32_t c = 0; c < centers.size(); ++c) {
+      const double dx = p[0] - centers[c][0], dy = p[1] - centers[c][1], dz = p[2] - centers[c][2];
+      if (std::fabs(dx) > h || std::fabs(dy) > h || std::fabs(dz) > h) continue;
+      const double d2 = dx * dx + dy * dy + dz * dz;
+      if (options.shape == CellShape::sphere && d2 > h * h) continue;
+      if (best == core::kNoCell) {
+        best = c, best_d2 = d2;  // lowest id first: heaviest needs nothing more
+      } else if (options.choice == CellChoice::nearest && d2 < best_d2) {
+        best = c, best_d2 = d2;
+      }
+    }
+    if (best == core::kNoCell) {
+      best = static_cast<uint32_t>(centers.size());
+      centers.push_back(p);
+    }
+    cells.push_back(best);
+  }
+  return cells;
+}
+
+// Most cell centers in one grid square, tallied independently of the clusterer's own counter.
+uint32_t max_centers_per_square(const Clusterer& clusterer, size_t level) {
+  std::map<std::tuple<int64_t, int64_t, int64_t>, uint32_t> count;
+  uint32_t most = 0;
+  const double c = clusterer.cell_size(level);
+  for (uint32_t cell = 0; cell < clusterer.cell_count(level); ++cell) {
+    const auto q = clusterer.center_position(level, cell);
+    most = std::max(most, ++count[{core::grid_square(q[0], c), core::grid_square(q[1], c),
+                                   core::grid_square(q[2], c)}]);
+  }
+  return most;
+}
+
+TEST(FloatingCell, CubeHandPlaced) {
+  // c = 2, so a cube cell reaches 1 from its center on each axis (boundary inside). Seen along z = 0
+  // (x to the right), centers marked C:
+  //
+  //   v7 just beyond (-1,-1,-1)   C0=v0 ---- v6 v3 ---- C1=v2 ---- v5 ---- C2=v4
+  //                              x=0      0.75 0.9     1.5      2.5       3
+  //   v1 = (1, 1, 1): the corner of cell 0, exactly on its boundary.
+  //   v3 is in cells 0 and 1, nearer 1. v5 = (2.5, 0.5, 0) is in cell 1 (exactly at dx = 1) and cell 2,
+  //   nearer 2. v6 is exactly as near to cell 0 as to cell 1: the lower id wins in both modes.
+  const std::vector<P> points = {
+      {0, 0, 0},   {1, 1, 1},   {1.5, 0, 0},    {0.9, 0, 0},
+      {3, 0, 0},   {2.5, 0.5, 0}, {0.75, 0, 0}, {-1, -1, std::nextafter(-1.0, -2.0)},
+  };
+  EXPECT_EQ(run1(2, kCubeNearest, points), (std::vector<uint32_t>{0, 0, 1, 1, 2, 2, 0, 3}));
+  EXPECT_EQ(run1(2, kCubeHeaviest, points), (std::vector<uint32_t>{0, 0, 1, 0, 2, 1, 0, 3}));
+
+  Clusterer clusterer(std::vector<double>{2}, kCubeNearest);
+  run(clusterer, points);
+  ASSERT_EQ(clusterer.cell_count(0), 4u);
+  EXPECT_EQ(clusterer.center_vertex(0, 0), 0u);
+  EXPECT_EQ(clusterer.center_vertex(0, 1), 2u);
+  EXPECT_EQ(clusterer.center_vertex(0, 2), 4u);
+  EXPECT_EQ(clusterer.center_vertex(0, 3), 7u);
+  EXPECT_EQ(clusterer.center_position(0, 1)[0], 1.5);
+  EXPECT_EQ(clusterer.center_position(0, 3)[2], std::nextafter(-1.0, -2.0));
+}
+
+TEST(FloatingCell, SphereHandPlaced) {
+  // c = 10: balls of radius 5. In the plane z = 0:
+  //
+  //        y
+  //   4 |        v1 (3,4)  C1=v2 (4,4)        v1 is exactly on ball 0's surface (3-4-5): inside.
+  //   3 |           v3 (3,3)                  v2 is inside cube 0 but outside ball 0 (√32 > 5): a center.
+  //     C0=v0 ----------- x                   v3 is in both balls, nearer ball 1.
+  //  -4 | v4 (-3,-4)                          v4: on the surface again, at negative coordinates.
+  //   v5 = (0, 0, 5) on the surface; v6 one ulp beyond it: a new cell.
+  const double beyond = std::nextafter(5.0, 6.0);
+  const std::vector<P> points = {{0, 0, 0},   {3, 4, 0}, {4, 4, 0},     {3, 3, 0},
+                                 {-3, -4, 0}, {0, 0, 5}, {0, 0, beyond}};
+  EXPECT_EQ(run1(10, kSphereNearest, points), (std::vector<uint32_t>{0, 0, 1, 1, 0, 0, 2}));
+  EXPECT_EQ(run1(10, kSphereHeaviest, points), (std::vector<uint32_t>{0, 0, 1, 0, 0, 0, 2}));
+  // The cube of side 10 holds all but the last.
+  EXPECT_EQ(run1(10, kCubeNearest, points), (std::vector<uint32_t>{0, 0, 0, 0, 0, 0, 1}));
+}
+
+TEST(FloatingCell, BoundaryDecidedOnTheExactDifference) {
+  // fl(x − cx) can round onto c/2 when the exact difference is just beyond it. c = 2, center at 2^-60:
+  // the vertex at 1 is 1 − 2^-60 away (inside, and fl(1 − 2^-60) = 1); the vertex at −1 is 1 + 2^-60 away
+  // (outside, although fl(−1 − 2^-60) = −1 as well).
+  const double tiny = 0x1p-60;
+  ASSERT_EQ(-1.0 - tiny, -1.0);
+  const std::vector<P> points = {{tiny, 0, 0}, {1, 0, 0}, {-1, 0, 0}};
+  for (const ClusterOptions& o : kFloatingVariants) EXPECT_EQ(run1(2, o, points), (std::vector<uint32_t>{0, 0, 1}));
+}
+
+TEST(FloatingCell, Figure4ThinTriangleStaysThin) {
+  // Low & Tan's Figure 4, c = 2 (cubes reach 1 from their centers):
+  //
+  //   V1 ------------------- V3 ---------- V2      V1 = (0, 0, 0) heavier than V2 = (1.6, 0, 0);
+  //   |<-------- C1 -------->|                     V3 = (0.95, 0.05, 0) lies in both cells,
+  //                  |<-------- C2 -------->|      0.95 from V1 but 0.65 from V2.
+  //
+  // heaviest puts V3 with V1: the representatives (means) R1 = (V1 + V3)/2 and R2 = V2 then span a wide
+  // triangle with the rest of the mesh; nearest puts V3 with V2, keeping the thin triangle thin.
+  const std::vector<P> points = {{0, 0, 0}, {1.6, 0, 0}, {0.95, 0.05, 0}};
+  EXPECT_EQ(run1(2, kCubeHeaviest, points), (std::vector<uint32_t>{0, 1, 0}));
+  EXPECT_EQ(run1(2, kCubeNearest, points), (std::vector<uint32_t>{0, 1, 1}));
+  EXPECT_EQ(run1(2, kSphereHeaviest, points), (std::vector<uint32_t>{0, 1, 0}));
+  EXPECT_EQ(run1(2, kSphereNearest, points), (std::vector<uint32_t>{0, 1, 1}));
+}
+
+TEST(FloatingCell, LevelsTogetherEqualLevelsApart) {
+  const std::vector<P> points = random_cloud(20000, 7);
+  const std::vector<double> sizes = {0.02, 0.05, 0.1, 0.2, 0.4};
+  for (const ClusterOptions& o : {kCubeNearest, kCubeHeaviest, kSphereNearest, kSphereHeaviest, kUniform}) {
+    Clusterer together(sizes, o);
+    const auto all = run(together, points);
+    for (size_t l = 0; l < sizes.size(); ++l) {
+      Clusterer alone(std::span<const double>(&sizes[l], 1), o);
+      EXPECT_EQ(run(alone, points)[0], all[l]) << "level " << l;
+      EXPECT_EQ(alone.cell_count(0), together.cell_count(l));
+    }
+  }
+}
+
+// A's vertices (ids 0 .. nA−1 in A's own weight order) clustered alone and interleaved with B's.
+struct Plate5 {
+  std::vector<P> a, b;
+  std::vector<P> merged;              // the weight order of A ∪ B
+  std::vector<uint32_t> merged_of_a;  // position of A's vertex i in `merged`
+};
+
+Plate5 make_plate5(double size) {
+  Plate5 s;
+  s.a = random_cloud(3000, 11);                              // the tree: a unit cube of points
+  s.b = random_cloud(3000, 12, -1000 * size, -999 * size);  // the pot, 1000 cell sizes away
+  // Interleave by random grades: A keeps its own relative order, as it would in a sort of A ∪ B.
+  std::mt19937_64 rng(13);
+  std::vector<bool> from_a(s.a.size() + s.b.size(), false);
+  std::fill(from_a.begin(), from_a.begin() + static_cast<std::ptrdiff_t>(s.a.size()), true);
+  std::shuffle(from_a.begin(), from_a.end(), rng);
+  size_t ia = 0, ib = 0;
+  for (bool is_a : from_a) {
+    if (is_a) {
+      s.merged_of_a.push_back(static_cast<uint32_t>(s.merged.size()));
+      s.merged.push_back(s.a[ia++]);
+    } else {
+      s.merged.push_back(s.b[ib++]);
+    }
+  }
+  return s;
+}
+
+// For each vertex of A: the position of its cell's center. Equal vectors mean equal cells (centers differ
+// between cells of a level) and equal grouping, whatever the ids.
+std::vector<P> centers_of_a(const Clusterer& clusterer, const std::vector<uint32_t>& cells,
+                            const std::vector<uint32_t>& index_of_a) {
+  std::vector<P> out;
+  for (uint32_t i : index_of_a) {
+    const auto q = clusterer.center_position(0, cells[i]);
+    out.push_back({q[0], q[1], q[2]});
+  }
+  return out;
+}
+
+TEST(FloatingCell, Plate5DistantObjectChangesNothing) {
+  const double size = 0.1;
+  const Plate5 s = make_plate5(size);
+  std::vector<uint32_t> identity(s.a.size());
+  std::iota(identity.begin(), identity.end(), 0u);
+  for (const ClusterOptions& o : {kCubeNearest, kCubeHeaviest, kSphereNearest, kSphereHeaviest, kUniform}) {
+    Clusterer alone(std::span<const double>(&size, 1), o), both(std::span<const double>(&size, 1), o);
+    const auto cells_alone = run(alone, s.a)[0];
+    const auto cells_both = run(both, s.merged)[0];
+    EXPECT_EQ(centers_of_a(alone, cells_alone, identity), centers_of_a(both, cells_both, s.merged_of_a));
+    EXPECT_GT(both.cell_count(0), alone.cell_count(0));  // B did get cells of its own
+  }
+}
+
+TEST(FloatingCell, Plate5BoundingBoxAnchoredGridWouldChange) {
+  // Uniform subdivision with c = 0.25 of the tree A = {x = 0.1, 0.3} (y = z = 0), with and without the pot
+  // B at x = −1000.05:
+  //   anchored at A's bounding box (min x = 0.1):      (0.1 − 0.1)/0.25 = 0,  (0.3 − 0.1)/0.25 = 0.8
+  //                                                     → both in square 0: one cluster;
+  //   anchored at A ∪ B's box (min x = −1000.05):      1000.15/0.25 = 4000.6, 1000.35/0.25 = 4001.4
+  //                                                     → squares 4000 and 4001: two clusters;
+  //   anchored at the origin, with or without B:        0.1/0.25 = 0.4, 0.3/0.25 = 1.2 → squares 0 and 1.
+  const double c = 0.25;
+  auto square = [&](double x, double anchor) { return static_cast<int64_t>(std::floor((x - anchor) / c)); };
+  EXPECT_EQ(square(0.1, 0.1), square(0.3, 0.1));
+  EXPECT_NE(square(0.1, -1000.05), square(0.3, -1000.05));
+
+  const std::vector<P> a = {{0.1, 0, 0}, {0.3, 0, 0}};
+  const std::vector<P> ab = {{0.1, 0, 0}, {-1000.05, 0, 0}, {0.3, 0, 0}};
+  EXPECT_EQ(run1(c, kUniform, a), (std::vector<uint32_t>{0, 1}));
+  EXPECT_EQ(run1(c, kUniform, ab), (std::vector<uint32_t>{0, 1, 2}));
+  Clusterer alone(std::span<const double>(&c, 1), kUniform), both(std::span<const double>(&c, 1), kUniform);
+  run(alone, a);
+  run(both, ab);
+  EXPECT_EQ(alone.center_vertex(0, 1), 1u);
+  EXPECT_EQ(both.center_vertex(0, 2), 2u);  // the same vertex (A's second) names the same square
+}
+
+TEST(FloatingCell, MatchesBruteForceOnRandomCloud) {
+  const std::vector<P> points = random_cloud(4000, 21);
+  const std::vector<double> sizes = {0.03, 0.1, 0.3};
+  for (const ClusterOptions& o : kFloatingVariants) {
+    Clusterer clusterer(sizes, o);
+    const auto cells = run(clusterer, points);
+    for (size_t l = 0; l < sizes.size(); ++l) {
+      const auto expected = brute_force(sizes[l], o, points);
+      EXPECT_EQ(cells[l], expected) << "shape " << int(o.shape) << " choice " << int(o.choice) << " level " << l;
+      EXPECT_EQ(clusterer.cell_count(l), *std::max_element(expected.begin(), expected.end()) + 1);
+    }
+  }
+}
+
+TEST(FloatingCell, MatchesBruteForceOnLattice) {
+  // Points of a lattice of spacing 1/8 in [−1, 1]³, shuffled (not by position), with c a multiple of the
+  // spacing: every difference is exact, many points lie exactly on cell boundaries and on grid-square
+  // boundaries, and many are equally near to two centers.
+  std::vector<P> points;
+  for (int i = -8; i <= 8; ++i)
+    for (int j = -8; j <= 8; ++j)
+      for (int k = -8; k <= 8; ++k) points.push_back({i / 8.0, j / 8.0, k / 8.0});
+  std::shuffle(points.begin(), points.end(), std::mt19937_64(5));
+  const std::vector<double> sizes = {0.25, 0.375, 0.5, 1};
+  for (const ClusterOptions& o : kFloatingVariants) {
+    Clusterer clusterer(sizes, o);
+    const auto cells = run(clusterer, points);
+    for (size_t l = 0; l < sizes.size(); ++l)
+      EXPECT_EQ(cells[l], brute_force(sizes[l], o, points))
+          << "shape " << int(o.shape) << " choice " << int(o.choice) << " level " << l;
+  }
+}
+
+TEST(FloatingCell, AtMostEightCubesPerSquareOnDenseCloud) {
+  const std::vector<P> points = random_cloud(100000, 31);
+  const std::vector<double> sizes = {0.01, 0.03, 0.1, 0.3};
+  for (const ClusterOptions& o : kFloatingVariants) {
+    Clusterer clusterer(sizes, o);
+    run(clusterer, points);  // would throw Failure(internal) past the bound
+    for (size_t l = 0; l < sizes.size(); ++l) {
+      const uint32_t most = max_centers_per_square(clusterer, l);
+      EXPECT_EQ(clusterer.max_cells_per_square(l), most);
+      EXPECT_LE(most, o.shape == CellShape::cube ? core::kMaxCubeCellsPerSquare : core::kMaxSphereCellsPerSquare);
+      if (o.shape == CellShape::cube) {
+        EXPECT_GE(most, 2u);  // the bound is exercised, not vacuous
+      }
+    }
+  }
+}
+
+TEST(FloatingCell, SphereSquareCanHoldMoreThanEight) {
+  // c = 1 (balls of radius 0.5), all in grid square (0, 0, 0) = [0, 1)³: the 8 corners of [0, 0.99]³ and
+  // the 6 face centers (0.495 on the two other axes). Corners are ≥ 0.99 apart, a face center is ≥ 0.70
+  // from a corner and from another face center: all more than 0.5 apart, so 14 sphere centers attach to
+  // one square — more than the 8 of cubes. As cubes, a face center is within 0.5 of a corner per axis.
+  std::vector<P> points;
+  for (int i = 0; i < 8; ++i) points.push_back({(i & 1) * 0.99, (i & 2) * 0.495, (i & 4) * 0.2475});
+  for (int a = 0; a < 3; ++a)
+    for (double side : {0.0, 0.99}) {
+      P p = {0.495, 0.495, 0.495};
+      p[a] = side;
+      points.push_back(p);
+    }
+  const double c = 1;
+  Clusterer sphere(std::span<const double>(&c, 1), kSphereNearest);
+  std::vector<uint32_t> ids(14);
+  std::iota(ids.begin(), ids.end(), 0u);
+  EXPECT_EQ(run(sphere, points)[0], ids);
+  EXPECT_EQ(sphere.max_cells_per_square(0), 14u);
+  Clusterer cube(std::span<const double>(&c, 1), kCubeNearest);
+  run(cube, points);
+  EXPECT_EQ(cube.cell_count(0), 8u);
+  EXPECT_EQ(cube.max_cells_per_square(0), 8u);  // the cube bound, reached
+}
+
+TEST(FloatingCell, GridSquareFloorSemantics) {
+  EXPECT_EQ(core::grid_square(0.0, 1), 0);
+  EXPECT_EQ(core::grid_square(-0.0, 1), 0);
+  EXPECT_EQ(core::grid_square(-1e-300, 1), -1);
+  EXPECT_EQ(core::grid_square(0.999, 1), 0);
+  EXPECT_EQ(core::grid_square(1, 1), 1);   // a boundary belongs to the square above
+  EXPECT_EQ(core::grid_square(-1, 1), -1);
+  EXPECT_EQ(core::grid_square(std::nextafter(-1.0, -2.0), 1), -2);
+  EXPECT_EQ(core::grid_square(-2.5, 1), -3);
+  // 0.5 / 0.1 rounds to 5.0, but the double 0.5 is below 5 × (the double 0.1 = 0.1000000000000000055...):
+  // the exact floor is 4. Likewise 1.0 / 0.1.
+  ASSERT_EQ(0.5 / 0.1, 5.0);
+  EXPECT_EQ(core::grid_square(0.5, 0.1), 4);
+  EXPECT_EQ(core::grid_square(1.0, 0.1), 9);
+  EXPECT_EQ(core::grid_square(-0.5, 0.1), -5);
+  EXPECT_EQ(core::grid_square(0.75, 0.25), 3);
+  EXPECT_EQ(core::grid_square(-0.75, 0.25), -3);
+}
+
+TEST(FloatingCell, UniformNegativeCoordinatesAndBoundaries) {
+  // c = 1, squares [k, k+1): ids in order of first appearance; the first vertex of a square names it.
+  const std::vector<P> points = {
+      {-0.5, 0, 0},                           // square (−1, 0, 0): cell 0
+      {0, 0, 0},                              // (0, 0, 0): cell 1
+      {-1, 0.999, 0.5},                       // (−1, 0, 0): cell 0
+      {std::nextafter(-1.0, -2.0), 0, 0},     // (−2, 0, 0): cell 2
+      {-0.0, -0.0, -0.0},                     // (0, 0, 0): cell 1
+      {1, 0, 0},                              // (1, 0, 0): cell 3
+      {0.5, -1e-300, 0},                      // (0, −1, 0): cell 4
+  };
+  const double c = 1;
+  Clusterer clusterer(std::span<const double>(&c, 1), kUniform);
+  EXPECT_EQ(run(clusterer, points)[0], (std::vector<uint32_t>{0, 1, 0, 2, 1, 3, 4}));
+  EXPECT_EQ(clusterer.center_vertex(0, 0), 0u);
+  EXPECT_EQ(clusterer.center_vertex(0, 4), 6u);
+  EXPECT_EQ(clusterer.center_position(0, 0)[0], -0.5);
+}
+
+TEST(FloatingCell, FloatingNegativeCoordinatesAcrossSquares) {
+  // c = 1: cell 0 at (−0.125, −0.125, −0.125) sits in square (−1, −1, −1); (0.375, 0.375, 0.375) is in
+  // square (0, 0, 0) yet exactly 0.5 away per axis, so inside (its query block reaches back into square
+  // −1). (−0.625, …) is 0.5 away the other way (inside). One ulp beyond 0.375 is a new cell. Decimal
+  // values would not do: the doubles 0.4 and −0.1 are 0.50000000000000002776 apart, outside.
+  const std::vector<P> points = {{-0.125, -0.125, -0.125},
+                                 {0.375, 0.375, 0.375},
+                                 {-0.625, -0.625, -0.625},
+                                 {std::nextafter(0.375, 1.0), 0.375, 0.375},
+                                 {0.4, 0.4, 0.4},
+                                 {-0.1, -0.1, -0.1}};
+  // The last two: 0.4 joins cell 1 at 0.375 (0.025 away); −0.1 joins cell 0 (0.025 away), not cell 1.
+  for (const ClusterOptions& o : {kCubeNearest, kCubeHeaviest})
+    EXPECT_EQ(run1(1, o, points), (std::vector<uint32_t>{0, 0, 0, 1, 1, 0}));
+  EXPECT_EQ(core::grid_square(-0.125, 1), -1);
+  EXPECT_EQ(core::grid_square(0.375, 1), 0);
+}
+
+TEST(FloatingCell, MemoryGrowsWithCellsNotVertices) {
+  const double c = 1;
+  for (const ClusterOptions& o : {kCubeNearest, kSphereHeaviest, kUniform}) {
+    Clusterer clusterer(std::span<const double>(&c, 1), o);
+    std::vector<uint32_t> cell(1);
+    const P first = {0.5, 0.5, 0.5};
+    clusterer.assign(0, first, cell);
+    const uint64_t after_one = clusterer.memory_bytes();
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<double> u(0.35, 0.65);  // all within 0.15 of the first: one cell
+    for (uint32_t v = 1; v < 100000; ++v) {
+      const P p = {u(rng), u(rng), u(rng)};
+      clusterer.assign(v, p, cell);
+      ASSERT_EQ(cell[0], 0u);
+    }
+    EXPECT_EQ(clusterer.cell_count(0), 1u);
+    EXPECT_EQ(clusterer.memory_bytes(), after_one);
+    EXPECT_LT(clusterer.memory_bytes(), 2048u);
+
+    // 10000 vertices 2 apart: 10000 cells, at least 32 bytes each.
+    for (uint32_t v = 0; v < 10000; ++v) {
+      const P p = {10.0 + 2.0 * v, 0, 0};
+      clusterer.assign(100000 + v, p, cell);
+    }
+    EXPECT_EQ(clusterer.cell_count(0), 10001u);
+    EXPECT_GE(clusterer.memory_bytes(), after_one + 10000 * sizeof(Clusterer::Cell));
+    // Cells: capacity below 2n records; table: below 4n slots (at most half full, doubling).
+    EXPECT_LT(clusterer.memory_bytes(), 10001 * 6 * 32 + 4096u);
+  }
+}
+
+TEST(FloatingCell, RejectsBadInput) {
+  auto status_of = [](auto&& f) {
+    try {
+      f();
+    } catch (const Failure& e) {
+      return e.status();
+    }
+    return Status::ok;
+  };
+  EXPECT_EQ(status_of([] { Clusterer(std::vector<double>{}, {}); }), Status::usage);
+  EXPECT_EQ(status_of([] { Clusterer(std::vector<double>{0.0}, {}); }), Status::usage);
+  EXPECT_EQ(status_of([] { Clusterer(std::vector<double>{-1.0}, {}); }), Status::usage);
+  EXPECT_EQ(status_of([] { Clusterer(std::vector<double>{std::nan("")}, {}); }), Status::usage);
+  EXPECT_EQ(status_of([] { Clusterer(std::vector<double>{0.2, 0.1}, {}); }), Status::usage);
+  EXPECT_EQ(status_of([] { Clusterer(std::vector<double>{0.1, 0.1}, {}); }), Status::usage);
+
+  for (const ClusterOptions& o : {kCubeNearest, kUniform}) {
+    Clusterer clusterer(std::vector<double>{0.001, 1}, o);
+    std::vector<uint32_t> two(2), one(1);
+    const P ok = {1, 2, 3};
+    EXPECT_EQ(status_of([&] { clusterer.assign(0, ok, one); }), Status::internal);
+    const P far = {1e12, 0, 0};  // 2e15 half-cells of 0.001 from the origin
+    EXPECT_EQ(status_of([&] { clusterer.assign(0, far, two); }), Status::usage);
+    const P nan = {0, std::nan(""), 0};
+    EXPECT_EQ(status_of([&] { clusterer.assign(0, nan, two); }), Status::usage);
+    const P inf = {0, 0, -std::numeric_limits<double>::infinity()};
+    EXPECT_EQ(status_of([&] { clusterer.assign(0, inf, two); }), Status::usage);
+    EXPECT_EQ(status_of([&] { clusterer.assign(0, ok, two); }), Status::ok);
+  }
+}
+
+}  // namespace
+}  // namespace lodstream
