@@ -11,6 +11,7 @@
 // index >> 1 and its low bit tells which half the coordinate lies in, i.e. which neighbour square along
 // that axis can hold a center within c/2. One division per axis serves both.
 #include "core/floating_cell.h"
+#include "core/hash.h"
 
 #include <algorithm>
 #include <cmath>
@@ -62,13 +63,8 @@ inline bool within(double x, double cx, double d, double h) {
 inline uint64_t hash_square(int64_t x, int64_t y, int64_t z) {
   uint64_t k = static_cast<uint64_t>(x) * 0x9E3779B97F4A7C15ull + static_cast<uint64_t>(y) * 0xC2B2AE3D27D4EB4Full +
                static_cast<uint64_t>(z) * 0x165667B19E3779F9ull;
-  // murmur3's finaliser: the linear mix above leaves neighbouring squares in neighbouring low bits.
-  k ^= k >> 33;
-  k *= 0xFF51AFD7ED558CCDull;
-  k ^= k >> 33;
-  k *= 0xC4CEB9FE1A85EC53ull;
-  k ^= k >> 33;
-  return k;
+  // The linear mix above leaves neighbouring squares in neighbouring low bits: finish with fmix64.
+  return fmix64(k);
 }
 
 inline const Slot* find(const Slot* table, uint64_t mask, int64_t x, int64_t y, int64_t z) {

@@ -11,6 +11,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "core/hash.h"
 #include "core/status.h"
 #include "io/mapped_file.h"
 #include "stream/scene_store.h"
@@ -28,14 +29,7 @@ struct Key {
 };
 constexpr uint64_t empty_word = ~uint64_t{0};
 
-inline uint64_t fmix64(uint64_t k) {  // MurmurHash3's finaliser
-  k ^= k >> 33;
-  k *= 0xff51afd7ed558ccdULL;
-  k ^= k >> 33;
-  k *= 0xc4ceb9fe1a85ec53ULL;
-  k ^= k >> 33;
-  return k;
-}
+using core::fmix64;
 
 template <int W>
 inline uint64_t hash(const Key<W>& k) {
