@@ -10,11 +10,23 @@
 // The square of a coordinate is computed from its half-square index floor(x / (c/2)): the square is that
 // index >> 1 and its low bit tells which half the coordinate lies in, i.e. which neighbour square along
 // that axis can hold a center within c/2. One division per axis serves both.
+//
+// Speed: a query reads 8 table slots and their runs per level, mostly cache misses in the fine levels.
+// assign therefore works in passes over all levels — prefetch every slot, then read the slots and prefetch
+// the runs, then test the candidates — so that the misses of all levels overlap; runs keep a square's
+// candidates in one or two cache lines; and the large arrays sit on huge pages (HugePageAllocator), so
+// the random reads do not also miss the TLB. None of this affects the result.
 #include "core/floating_cell.h"
 #include "core/hash.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdlib>
+#include <new>
+#if __has_include(<sys/mman.h>)
+#include <sys/mman.h>
+#endif
 #include <string>
 
 #include "core/status.h"
@@ -67,17 +79,18 @@ inline uint64_t hash_square(int64_t x, int64_t y, int64_t z) {
   return fmix64(k);
 }
 
-inline const Slot* find(const Slot* table, uint64_t mask, int64_t x, int64_t y, int64_t z) {
-  for (uint64_t i = hash_square(x, y, z) & mask;; i = (i + 1) & mask) {
+// The slot of square xyz, or nullptr if absent; `i` is its hash & mask.
+inline const Slot* find(const Slot* table, uint64_t mask, uint64_t i, const int64_t xyz[3]) {
+  for (;; i = (i + 1) & mask) {
     const Slot& s = table[i];
     if (s.count == 0) return nullptr;  // the table is never full, so every probe ends
-    if (s.square[0] == x && s.square[1] == y && s.square[2] == z) return &s;
+    if (s.square[0] == xyz[0] && s.square[1] == xyz[1] && s.square[2] == xyz[2]) return &s;
   }
 }
 
 // The slot of square xyz in `table`, inserting an empty-listed one (count 0 → 1 is the caller's) if
 // absent; doubles the table first when an insert would make it more than half full.
-Slot& find_or_insert(std::vector<Slot>& table, uint64_t& used, const int64_t xyz[3], bool& inserted) {
+Slot& find_or_insert(std::vector<Slot, HugePageAllocator<Slot>>& table, uint64_t& used, const int64_t xyz[3], bool& inserted) {
   uint64_t mask = table.size() - 1;
   uint64_t i = hash_square(xyz[0], xyz[1], xyz[2]) & mask;
   for (;; i = (i + 1) & mask) {
@@ -89,7 +102,7 @@ Slot& find_or_insert(std::vector<Slot>& table, uint64_t& used, const int64_t xyz
     }
   }
   if (2 * (used + 1) > table.size()) {
-    std::vector<Slot> grown(2 * table.size(), Slot{{0, 0, 0}, kNoCell, 0});
+    std::vector<Slot, HugePageAllocator<Slot>> grown(2 * table.size(), Slot{{0, 0, 0}, kNoCell, 0});
     const uint64_t grown_mask = grown.size() - 1;
     for (const Slot& s : table) {
       if (s.count == 0) continue;
@@ -105,20 +118,40 @@ Slot& find_or_insert(std::vector<Slot>& table, uint64_t& used, const int64_t xyz
   ++used;
   Slot& s = table[i];
   s.square[0] = xyz[0], s.square[1] = xyz[1], s.square[2] = xyz[2];
-  s.head = kNoCell;
+  s.run = kNoCell;
   inserted = true;
   return s;
 }
 
-uint32_t new_cell(std::vector<Cell>& cells, uint32_t vertex_id, const double* p, uint32_t next) {
-  // Cell ids share uint32 with vertex ids and kNoCell is reserved; a pass creates at most one cell per
-  // vertex, so reaching it means the caller fed more than 2^32 − 1 vertices.
-  if (cells.size() >= kNoCell) fail(Status::internal, "clustering: more than 2^32 - 1 cells in one level");
-  cells.push_back(Cell{{p[0], p[1], p[2]}, vertex_id, next});
-  return static_cast<uint32_t>(cells.size() - 1);
-}
+constexpr size_t kHugePage = size_t{2} << 20;
 
 }  // namespace
+
+template <class T>
+T* HugePageAllocator<T>::allocate(size_t n) {
+  if (n > SIZE_MAX / sizeof(T)) throw std::bad_alloc();
+  const size_t bytes = n * sizeof(T);
+  if (bytes < kHugePage) return static_cast<T*>(::operator new(bytes));
+  const size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
+  void* p = std::aligned_alloc(kHugePage, rounded);
+  if (p == nullptr) throw std::bad_alloc();
+#ifdef MADV_HUGEPAGE
+  madvise(p, rounded, MADV_HUGEPAGE);  // a hint: failure only costs speed
+#endif
+  return static_cast<T*>(p);
+}
+
+template <class T>
+void HugePageAllocator<T>::deallocate(T* p, size_t n) {
+  if (n * sizeof(T) < kHugePage)
+    ::operator delete(p);
+  else
+    std::free(p);
+}
+
+template struct HugePageAllocator<Clusterer::Cell>;
+template struct HugePageAllocator<Clusterer::Slot>;
+template struct HugePageAllocator<uint32_t>;
 
 int64_t grid_square(double x, double size) {
   if (!(size >= kMinCellSize && size <= kMaxCellSize))
@@ -141,46 +174,79 @@ Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options)
     level.half_sq = level.half * level.half;
     level.table.assign(kInitialSlots, Slot{{0, 0, 0}, kNoCell, 0});
   }
+  if (options_.clustering == Clustering::floating) queries_.resize(levels_.size());
 }
 
 void Clusterer::assign(uint32_t vertex_id, std::span<const double, 3> position, std::span<uint32_t> cells) {
   if (cells.size() != levels_.size()) fail(Status::internal, "Clusterer::assign: cells.size() != levels()");
   const double p[3] = {position[0], position[1], position[2]};
   if (options_.clustering == Clustering::floating) {
-    for (size_t l = 0; l < levels_.size(); ++l) cells[l] = assign_floating(levels_[l], vertex_id, p);
+    // Three passes over the levels, each issuing independent memory accesses for all of them: the table
+    // slots, then the list heads, then the lists. Levels do not interact, so the order changes nothing.
+    for (size_t l = 0; l < levels_.size(); ++l) query_floating(levels_[l], p, queries_[l]);
+    for (size_t l = 0; l < levels_.size(); ++l) find_runs(levels_[l], queries_[l]);
+    for (size_t l = 0; l < levels_.size(); ++l) cells[l] = assign_floating(levels_[l], vertex_id, p, queries_[l]);
   } else {
     for (size_t l = 0; l < levels_.size(); ++l) cells[l] = assign_uniform(levels_[l], vertex_id, p);
   }
 }
 
-uint32_t Clusterer::assign_floating(Level& level, uint32_t vertex_id, const double* p) {
+void Clusterer::query_floating(const Level& level, const double* p, Query& q) const {
   const double h = level.half;
-  int64_t own[3], other[3];
+  int64_t other[3];
   for (int a = 0; a < 3; ++a) {
     const int64_t k = half_index(p[a], h, level.size);
-    own[a] = k >> 1;  // arithmetic shift: floor division by 2 at negative indices too
+    q.own[a] = k >> 1;  // arithmetic shift: floor division by 2 at negative indices too
     // A center within c/2 of p lies in p's square or in the neighbour on the side of p's half.
-    other[a] = own[a] + ((k & 1) ? 1 : -1);
+    other[a] = q.own[a] + ((k & 1) ? 1 : -1);
   }
-
-  const Cell* cells = level.cells.data();
   const Slot* table = level.table.data();
   const uint64_t mask = level.table.size() - 1;
+  for (int i = 0; i < 8; ++i) {
+    int64_t* sq = q.square[i];
+    sq[0] = (i & 1) ? other[0] : q.own[0];
+    sq[1] = (i & 2) ? other[1] : q.own[1];
+    sq[2] = (i & 4) ? other[2] : q.own[2];
+    q.slot[i] = hash_square(sq[0], sq[1], sq[2]) & mask;
+    // The probe for an absent square (most of them in the fine levels) runs on to the next empty slot,
+    // often on the next cache line: fetch that too.
+    __builtin_prefetch(&table[q.slot[i]]);
+    __builtin_prefetch(&table[(q.slot[i] + 2) & mask]);
+  }
+}
+
+void Clusterer::find_runs(const Level& level, Query& q) const {
+  const Slot* table = level.table.data();
+  const uint64_t mask = level.table.size() - 1;
+  const Cell* pool = level.pool.data();
+  for (int i = 0; i < 8; ++i) {
+    const Slot* s = find(table, mask, q.slot[i], q.square[i]);
+    q.run[i] = s ? s->run : 0;
+    q.count[i] = s ? s->count : 0;
+    if (s) {
+      __builtin_prefetch(&pool[s->run]);
+      if (s->count > 2) __builtin_prefetch(&pool[s->run + 2]);
+    }
+  }
+}
+
+uint32_t Clusterer::assign_floating(Level& level, uint32_t vertex_id, const double* p, const Query& q) {
+  const double h = level.half;
+  const Cell* pool = level.pool.data();
   const bool sphere = options_.shape == CellShape::sphere;
   const bool nearest = options_.choice == CellChoice::nearest;
   uint32_t best = kNoCell;
   double best_d2 = 0;
   for (int i = 0; i < 8; ++i) {
-    const Slot* s = find(table, mask, (i & 1) ? other[0] : own[0], (i & 2) ? other[1] : own[1],
-                         (i & 4) ? other[2] : own[2]);
-    if (s == nullptr) continue;
-    for (uint32_t c = s->head; c != kNoCell; c = cells[c].next) {
-      const double* q = cells[c].position;
-      const double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
+    const Cell* run = pool + q.run[i];
+    for (uint32_t j = 0; j < q.count[i]; ++j) {
+      const double* cp = run[j].position;
+      const uint32_t c = run[j].id;
+      const double dx = p[0] - cp[0], dy = p[1] - cp[1], dz = p[2] - cp[2];
       // One well-predicted branch for the common cases; the exact test only when an axis rounds onto h.
       const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
       if (m > h) continue;
-      if (m == h && !(within(p[0], q[0], dx, h) && within(p[1], q[1], dy, h) && within(p[2], q[2], dz, h)))
+      if (m == h && !(within(p[0], cp[0], dx, h) && within(p[1], cp[1], dy, h) && within(p[2], cp[2], dz, h)))
         continue;
       const double d2 = dx * dx + dy * dy + dz * dz;
       if (sphere && d2 > level.half_sq) continue;
@@ -193,10 +259,8 @@ uint32_t Clusterer::assign_floating(Level& level, uint32_t vertex_id, const doub
 
   // Inside no cell: p starts one, attached to its own square.
   bool inserted = false;
-  Slot& slot = find_or_insert(level.table, level.used, own, inserted);
-  const uint32_t id = new_cell(level.cells, vertex_id, p, slot.head);
-  slot.head = id;
-  ++slot.count;
+  Slot& slot = find_or_insert(level.table, level.used, q.own, inserted);
+  const uint32_t id = add_cell(level, slot, vertex_id, p);
   // invariant: slot.count <= kMaxCubeCellsPerSquare (cubes) or kMaxSphereCellsPerSquare (spheres); see the
   // header for the proof. It rests on the exact square and inside tests above, so a violation is a bug.
   const uint32_t bound = sphere ? kMaxSphereCellsPerSquare : kMaxCubeCellsPerSquare;
@@ -214,18 +278,60 @@ uint32_t Clusterer::assign_uniform(Level& level, uint32_t vertex_id, const doubl
   Slot& slot = find_or_insert(level.table, level.used, square, inserted);
   if (inserted) {
     // The first vertex to reach a square is its heaviest: it names the cell and numbers it.
-    slot.head = new_cell(level.cells, vertex_id, p, kNoCell);
-    slot.count = 1;
+    add_cell(level, slot, vertex_id, p);
     level.max_per_square = 1;
   }
-  return slot.head;
+  // Every uniform square holds one cell, in a run of one appended when the square appeared and never
+  // moved: the run's index in the pool is the cell's id, and returning it saves a random read.
+  return slot.run;
+}
+
+// Appends a new cell centred on p to `slot`'s run (count += 1), moving the run to one twice as large first
+// if it is full, and returns the cell's id.
+uint32_t Clusterer::add_cell(Level& level, Slot& slot, uint32_t vertex_id, const double* p) {
+  // Cell ids share uint32 with vertex ids and kNoCell is reserved; a pass creates at most one cell per
+  // vertex, so reaching it means the caller fed more than 2^32 − 1 vertices.
+  if (level.where.size() >= kNoCell) fail(Status::internal, "clustering: more than 2^32 - 1 cells in one level");
+  const uint32_t n = slot.count;
+  // A run's capacity is the power of two >= its count (1 for a new square), so it is full exactly when the
+  // count is 0 or a power of two.
+  if ((n & (n - 1)) == 0) {
+    const uint32_t capacity = n == 0 ? 1 : 2 * n;
+    const int k = std::countr_zero(capacity);
+    if (k >= kRunClasses) fail(Status::internal, "clustering: too many cells attached to one grid square");
+    uint32_t run = level.free_run[k];
+    if (run != kNoCell) {
+      level.free_run[k] = level.pool[run].id;
+    } else {
+      if (level.pool.size() + capacity > kNoCell) fail(Status::internal, "clustering: cell pool too large");
+      run = static_cast<uint32_t>(level.pool.size());
+      level.pool.resize(level.pool.size() + capacity);
+    }
+    if (n > 0) {
+      for (uint32_t j = 0; j < n; ++j) {
+        level.pool[run + j] = level.pool[slot.run + j];
+        level.where[level.pool[run + j].id] = run + j;
+      }
+      const int old_k = std::countr_zero(n);
+      level.pool[slot.run].id = level.free_run[old_k];
+      level.free_run[old_k] = slot.run;
+    }
+    slot.run = run;
+  }
+  const uint32_t id = static_cast<uint32_t>(level.where.size());
+  const uint32_t at = slot.run + n;
+  level.pool[at] = Cell{{p[0], p[1], p[2]}, vertex_id, id};
+  level.where.push_back(at);
+  slot.count = n + 1;
+  return id;
 }
 
 uint64_t Clusterer::memory_bytes() const {
   uint64_t bytes = sizeof(*this) + levels_.capacity() * sizeof(Level);
   for (const Level& level : levels_)
-    bytes += level.cells.capacity() * sizeof(Cell) + level.table.capacity() * sizeof(Slot);
-  return bytes;
+    bytes += level.pool.capacity() * sizeof(Cell) + level.where.capacity() * sizeof(uint32_t) +
+             level.table.capacity() * sizeof(Slot);
+  return bytes + queries_.capacity() * sizeof(Query);
 }
 
 }  // namespace lodstream::core

@@ -37,10 +37,13 @@
 //   sub-cubes of side c/2: two centers in one would be within c/2 on every axis). For spheres the bound is
 //   larger: at least 14 fit (8 near the corners and 6 near the face centers; the tests build it) and at
 //   most kMaxSphereCellsPerSquare = 48 (split the square into 3×4×4 boxes of c/3 × c/4 × c/4, whose
-//   diagonal √(1/9 + 1/16 + 1/16)·c ≈ 0.486·c is below c/2). A square stores its cells as a list threaded
-//   through the cell records, so no per-square capacity is reserved; assign checks the bound and throws
+//   diagonal √(1/9 + 1/16 + 1/16)·c ≈ 0.486·c is below c/2). A square stores its cells together, as one run
+//   of records in a per-level pool whose capacity is the power of two at or above its count (a full run
+//   moves to one twice as large; freed runs are reused by size), so no fixed per-square capacity is
+//   reserved; assign checks the bound and throws
 //   Failure(Status::internal) if it is ever exceeded (a bug, never bad input).
-// - Memory grows with the number of cells, not of vertices: per level one 32-byte record per cell and an
+// - Memory grows with the number of cells, not of vertices: per level one 32-byte pool record per cell
+//   (runs are at least half full, and freed runs are reused), a 4-byte id-to-record index per cell, and an
 //   open-addressing hash table of 32-byte slots, one per occupied square, at most half full. Nothing per
 //   vertex is kept: the caller receives the cell ids and writes them out.
 //
@@ -96,6 +99,21 @@ int64_t grid_square(double x, double size);
 // One clustering pass, all levels at once. Not thread-safe (one pass is inherently sequential: each
 // vertex's cell depends on every heavier vertex). Levels are independent, though: a Clusterer per level
 // (one cell size each), run on separate threads over the same vertex order, gives the same ids.
+// Allocator for the per-level arrays, which are read at random: large blocks are 2 MiB aligned and marked
+// for transparent huge pages (where the OS offers them: madvise), so that a random probe into a table of
+// tens of MiB costs a cache miss but not also a page walk. Small blocks come from operator new as usual.
+template <class T>
+struct HugePageAllocator {
+  using value_type = T;
+  HugePageAllocator() = default;
+  template <class U>
+  HugePageAllocator(const HugePageAllocator<U>&) {}
+  T* allocate(size_t n);
+  void deallocate(T* p, size_t n);
+  template <class U>
+  bool operator==(const HugePageAllocator<U>&) const { return true; }
+};
+
 class Clusterer {
  public:
   // cell_sizes: c_0 < c_1 < ..., one level each, at least one. Copied.
@@ -106,19 +124,23 @@ class Clusterer {
   // level l to cells[l]. cells.size() must equal levels() (else Failure(Status::internal)). A vertex that
   // starts a cell becomes its center vertex. Cost per level: O(1) hash probes (8 for floating cells, 1 for
   // uniform) and the cells attached to the probed squares (at most 64 cubes; about 10 in a dense random cloud).
-  // Allocates only when a level's cell array or hash table grows (doubling).
+  // Allocates only when a level's pool, index or hash table grows (doubling).
   void assign(uint32_t vertex_id, std::span<const double, 3> position, std::span<uint32_t> cells);
 
   size_t levels() const { return levels_.size(); }
   double cell_size(size_t level) const { return levels_[level].size; }
   const ClusterOptions& options() const { return options_; }
-  uint32_t cell_count(size_t level) const { return static_cast<uint32_t>(levels_[level].cells.size()); }
+  uint32_t cell_count(size_t level) const { return static_cast<uint32_t>(levels_[level].where.size()); }
   // The vertex that created the cell (floating: its center; uniform: the first, i.e. heaviest, vertex that
   // fell in the square) and that vertex's position. cell < cell_count(level); the span stays valid until
   // the next assign.
-  uint32_t center_vertex(size_t level, uint32_t cell) const { return levels_[level].cells[cell].vertex; }
+  uint32_t center_vertex(size_t level, uint32_t cell) const {
+    const Level& l = levels_[level];
+    return l.pool[l.where[cell]].vertex;
+  }
   std::span<const double, 3> center_position(size_t level, uint32_t cell) const {
-    return std::span<const double, 3>(levels_[level].cells[cell].position, 3);
+    const Level& l = levels_[level];
+    return std::span<const double, 3>(l.pool[l.where[cell]].position, 3);
   }
   // Most cells attached to one grid square so far in a level (uniform: 1 once a vertex was assigned).
   uint32_t max_cells_per_square(size_t level) const { return levels_[level].max_per_square; }
@@ -126,34 +148,56 @@ class Clusterer {
   // step briefly holds the old and the new array of one level: up to 1.5× a level's table or cell array.
   uint64_t memory_bytes() const;
 
-  // Exposed for tests and the documentation above: 32 bytes each.
+  // Exposed for tests and the documentation above: 32 bytes each. A square's cells are stored together, as
+  // one run of Cell records in a per-level pool, so that the candidate test reads them from one or two
+  // cache lines instead of following a list through records in creation order.
   struct Cell {
     double position[3];
     uint32_t vertex;
-    uint32_t next;  // floating: the next cell attached to the same square (kNoCell ends the list)
+    uint32_t id;  // the cell's id; in the first record of a free run: the next free run of its size
   };
   struct Slot {
     int64_t square[3];
-    uint32_t head;   // floating: the newest cell attached to the square; uniform: the square's cell
-    uint32_t count;  // cells attached; 0 marks an empty slot
+    uint32_t run;    // index in the pool of the square's first cell
+    uint32_t count;  // cells attached (the first `count` records of the run); 0 marks an empty slot
   };
 
  private:
+  // Runs have power-of-two capacities 2^k, k < kRunClasses (64 >= kMaxSphereCellsPerSquare); a run that
+  // fills moves to one twice as large and its old place joins the free list of its size.
+  static constexpr int kRunClasses = 7;
   struct Level {
     double size = 0;
     double half = 0;     // c/2, exact
     double half_sq = 0;  // fl((c/2)²)
-    std::vector<Cell> cells;
-    std::vector<Slot> table;  // power-of-two size, linear probing, at most half full
-    uint64_t used = 0;        // occupied slots
+    std::vector<Cell, HugePageAllocator<Cell>> pool;  // runs, one per occupied square, and free runs
+    std::vector<uint32_t, HugePageAllocator<uint32_t>> where;  // cell id → its record in pool
+    std::vector<Slot, HugePageAllocator<Slot>> table;  // power-of-two size, linear probing, at most half full
+    uint64_t used = 0;                                 // occupied slots
     uint32_t max_per_square = 0;
+    uint32_t free_run[kRunClasses] = {kNoCell, kNoCell, kNoCell, kNoCell, kNoCell, kNoCell, kNoCell};
   };
 
-  uint32_t assign_floating(Level& level, uint32_t vertex_id, const double* p);
+  // One level's 2×2×2 query block for the current vertex (floating only): computed for every level first so
+  // that the hash slots and runs of all levels are prefetched before any is read, and their cache
+  // misses overlap instead of following one another.
+  struct Query {
+    int64_t own[3];       // p's square
+    int64_t square[8][3]; // the block: bit a of the index selects the neighbour along axis a
+    uint64_t slot[8];     // hash & mask of each square, for the table as it is now
+    uint32_t run[8];      // each square's run in the pool
+    uint32_t count[8];    // and its cell count (0: square absent)
+  };
+
+  void query_floating(const Level& level, const double* p, Query& q) const;
+  void find_runs(const Level& level, Query& q) const;
+  uint32_t assign_floating(Level& level, uint32_t vertex_id, const double* p, const Query& q);
   uint32_t assign_uniform(Level& level, uint32_t vertex_id, const double* p);
+  static uint32_t add_cell(Level& level, Slot& slot, uint32_t vertex_id, const double* p);
 
   ClusterOptions options_;
   std::vector<Level> levels_;
+  std::vector<Query> queries_;  // one per level; scratch for assign, sized once
 };
 
 }  // namespace lodstream::core

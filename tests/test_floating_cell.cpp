@@ -458,5 +458,30 @@ TEST(FloatingCell, RejectsBadInput) {
   }
 }
 
+TEST(FloatingCell, CentersSurviveRunMoves) {
+  // A square's cells move to a larger run as it fills (and freed runs are reused): each cell's center must
+  // still be the vertex that created it, i.e. the first vertex assigned to it, at that vertex's position.
+  const std::vector<P> points = random_cloud(20000, 8);
+  const std::vector<double> sizes = {0.05, 0.2};
+  for (const ClusterOptions& o : {kCubeNearest, kSphereHeaviest, kUniform}) {
+    Clusterer clusterer(sizes, o);
+    const auto cells = run(clusterer, points);
+    for (size_t l = 0; l < sizes.size(); ++l) {
+      std::vector<bool> seen(clusterer.cell_count(l), false);
+      for (uint32_t v = 0; v < points.size(); ++v) {
+        const uint32_t c = cells[l][v];
+        if (seen[c]) continue;
+        seen[c] = true;
+        ASSERT_EQ(clusterer.center_vertex(l, c), v) << "level " << l;
+        const auto q = clusterer.center_position(l, c);
+        ASSERT_EQ(q[0], points[v][0]);
+        ASSERT_EQ(q[1], points[v][1]);
+        ASSERT_EQ(q[2], points[v][2]);
+      }
+      EXPECT_TRUE(std::all_of(seen.begin(), seen.end(), [](bool b) { return b; }));
+    }
+  }
+}
+
 }  // namespace
 }  // namespace lodstream
