@@ -28,7 +28,6 @@ void FileWriter::open(const std::string& path, size_t buffer_bytes) {
   if (fd_ < 0) io_fail(partial, "create", errno);
   buffer_.resize(buffer_bytes < 4096 ? 4096 : buffer_bytes);
   used_ = 0;
-  written_ = 0;
 }
 
 void FileWriter::write_through(const char* p, size_t bytes) {
@@ -51,7 +50,6 @@ void FileWriter::flush() {
 
 void FileWriter::write(const void* data, size_t bytes) {
   const char* p = static_cast<const char*>(data);
-  written_ += bytes;
   if (bytes >= buffer_.size()) {
     // Large spans go straight to the kernel: copying them through the buffer first costs a memcpy.
     flush();

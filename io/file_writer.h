@@ -27,7 +27,6 @@ class FileWriter {
   void write_array(std::span<const T> values) {
     write(values.data(), values.size_bytes());
   }
-  uint64_t bytes_written() const { return written_; }
   const std::string& path() const { return path_; }
   void commit();
   void discard();
@@ -39,7 +38,6 @@ class FileWriter {
   int fd_ = -1;
   std::vector<char> buffer_;
   size_t used_ = 0;
-  uint64_t written_ = 0;
 };
 
 // Writes a whole small file atomically (temporary + rename).

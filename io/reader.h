@@ -98,7 +98,6 @@ class Reader {
 
   // Global object names, index = object id. Readers without objects report one unnamed object.
   const std::vector<std::string>& object_names() const { return object_names_; }
-  const MappedFile& file() const { return file_; }
 
  protected:
   const MappedFile& file_;

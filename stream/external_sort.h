@@ -49,12 +49,10 @@ class ExternalSorter {
     // Reserving does not make pages resident; growing by doubling would briefly hold 1.5x the buffer.
     if (buffer_.capacity() == 0) buffer_.reserve(static_cast<size_t>(capacity_));
     buffer_.push_back(r);
-    ++size_;
   }
   void push(std::span<const Rec> records) {
     for (const Rec& r : records) push(r);
   }
-  uint64_t size() const { return size_; }
   size_t runs() const { return runs_.size(); }
 
   // Calls visit(const Rec&) for every record in sorted order. Can be called once.
@@ -175,7 +173,6 @@ class ExternalSorter {
   std::string name_;
   Less less_;
   uint64_t capacity_ = 0;
-  uint64_t size_ = 0;
   std::vector<Rec> buffer_;
   std::vector<Run> runs_;
 };

@@ -39,7 +39,6 @@ uint64_t physical_memory_bytes() {
   return pages > 0 && page > 0 ? static_cast<uint64_t>(pages) * static_cast<uint64_t>(page) : (4ull << 30);
 }
 
-uint64_t current_rss_bytes() { return status_field_kib("VmRSS") << 10; }
 uint64_t peak_rss_bytes() { return status_field_kib("VmHWM") << 10; }
 
 bool reset_peak_rss() {

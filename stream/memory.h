@@ -8,7 +8,6 @@
 namespace lodstream::stream {
 
 uint64_t physical_memory_bytes();
-uint64_t current_rss_bytes();  // VmRSS
 uint64_t peak_rss_bytes();     // VmHWM
 // Resets VmHWM to the current RSS (Linux: "5" into /proc/self/clear_refs), so that a stage's peak can be
 // measured on its own. Returns false where the kernel does not allow it.

@@ -23,7 +23,6 @@ class WorkDir {
   std::string subdir(std::string_view name) const;
   // A fresh name for a scratch file inside the directory (not created).
   std::string scratch(std::string_view stem) const;
-  bool temporary() const { return temporary_; }
 
  private:
   std::string path_;
