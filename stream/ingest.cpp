@@ -371,10 +371,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   meta.vertex_records = vertex_records;
   meta.object_names = reader->object_names();
   feeder.finish(&meta);
-  store.commit(std::move(meta));
-  StoreMeta written;
-  if (!read_store_meta(store_dir, &written)) fail(Status::io_error, store_dir + "/store.json: cannot read back");
-  return written;
+  return store.commit(std::move(meta));
 }
 
 

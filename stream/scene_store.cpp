@@ -104,7 +104,7 @@ void StoreWriter::add_triangles(std::span<const uint32_t> ids, std::span<const L
 void StoreWriter::add_lines(std::span<const uint32_t> ids, std::span<const LocalRun> runs) { lines_.add(ids, 2, runs); }
 void StoreWriter::add_points(std::span<const uint32_t> ids, std::span<const LocalRun> runs) { points_.add(ids, 1, runs); }
 
-void StoreWriter::commit(StoreMeta meta) {
+StoreMeta StoreWriter::commit(StoreMeta meta) {
   for (io::FileWriter* w : {&positions_, &triangles_.ids, &triangles_.runs, &lines_.ids, &lines_.runs, &points_.ids,
                             &points_.runs})
     w->commit();
@@ -116,6 +116,7 @@ void StoreWriter::commit(StoreMeta meta) {
   meta.bbox = bbox_;
   meta.vertex_chunk_bbox = vertex_chunk_bbox_;
   io::write_file_atomic(dir_ + "/store.json", store_meta_json(meta));
+  return meta;
 }
 
 namespace {

@@ -102,8 +102,8 @@ class StoreWriter {
   void add_lines(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
   void add_points(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
   // Renames every column into place, then writes store.json. `meta`'s counts, bbox and chunk table are
-  // filled in from what was written.
-  void commit(StoreMeta meta);
+  // filled in from what was written; returns the completed metadata (what store.json now holds).
+  StoreMeta commit(StoreMeta meta);
   uint64_t vertices() const { return vertices_; }
   const Bbox& bbox() const { return bbox_; }
 
