@@ -10,53 +10,15 @@
 #include "io/file_writer.h"
 #include "lodstream/lodstream.h"
 #include "stream/ingest.h"
+#include "stream/job.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
 
 namespace lodstream {
 
-namespace {
-
-// Runs `body` as the named stage and appends its time and peak memory to `stages`.
-template <class Body>
-auto run_stage(std::vector<StageStats>* stages, const char* name, Body&& body) {
-  stream::reset_peak_rss();
-  const auto t0 = std::chrono::steady_clock::now();
-  StageStats st;
-  st.name = name;
-  auto finish = [&] {
-    st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    st.peak_rss_bytes = stream::peak_rss_bytes();
-    stages->push_back(st);
-  };
-  if constexpr (std::is_void_v<decltype(body(st))>) {
-    body(st);
-    finish();
-  } else {
-    auto r = body(st);
-    finish();
-    return r;
-  }
-}
-
-template <class Job>
-Result guarded(Job&& job) {
-  try {
-    job();
-    return {};
-  } catch (const Failure& f) {
-    return {f.status(), f.what()};
-  } catch (const std::bad_alloc&) {
-    return {Status::internal, "out of memory (raise --memory or free memory)"};
-  } catch (const std::exception& e) {
-    return {Status::internal, std::string("internal error: ") + e.what()};
-  } catch (...) {
-    return {Status::internal, "internal error"};
-  }
-}
-
-}  // namespace
+using stream::guarded;
+using stream::run_stage;
 
 uint64_t peak_rss_bytes() { return stream::peak_rss_bytes(); }
 

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
 
 #include "stream/progress.h"
@@ -18,5 +19,11 @@ namespace lodstream::stream {
 // `path` holds `count` positions as 3 floats (single_precision) or 3 doubles each.
 uint64_t count_distinct_positions(const std::string& path, uint64_t count, bool single_precision,
                                   uint64_t memory_bytes, Progress& progress);
+
+// The same pass, welding: writes canonical[v] = the smallest vertex id whose position equals v's (so
+// canonical[v] <= v, and canonical[v] == v for the first vertex at each position). `canonical` has `count`
+// entries and is held in memory by the caller (4 bytes per vertex). Returns the distinct count.
+uint64_t weld_positions(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes,
+                        Progress& progress, std::span<uint32_t> canonical);
 
 }  // namespace lodstream::stream

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <fstream>
 #include <mutex>
 #include <string>
 
@@ -146,6 +147,56 @@ void print_info(const lodstream::SceneInfo& in) {
   std::printf("total        %.3f s, peak %s\n", in.seconds, human_bytes(in.peak_rss_bytes).c_str());
 }
 
+void print_simplify(const lodstream::SimplifyReport& r, const std::string& out_dir) {
+  std::printf("input        %s (%s): %s triangles, %s lines, %s points; %s positions graded\n", r.input.c_str(),
+              r.scene.format.c_str(), grouped(r.scene.triangles).c_str(), grouped(r.scene.lines).c_str(),
+              grouped(r.scene.points).c_str(), grouped(r.vertices_graded).c_str());
+  std::printf("%-6s %12s %12s %12s %10s %10s %14s  %s\n", "level", "cell size", "triangles", "vertices", "edges", "points",
+              "switch dist", "files");
+  for (size_t l = 0; l < r.levels.size(); ++l) {
+    const auto& lv = r.levels[l];
+    std::string files;
+    for (const auto& f : lv.files) files += (files.empty() ? "" : " ") + f;
+    std::printf("%-6zu %12.6g %12s %12s %10s %10s %14.6g  %s\n", l, lv.cell_size, grouped(lv.triangles).c_str(),
+                grouped(lv.vertices).c_str(), grouped(lv.edges).c_str(), grouped(lv.points).c_str(), lv.switch_distance,
+                files.c_str());
+  }
+  if (r.search_iterations)
+    std::printf("search       %u clustering passes, %.3f s\n", r.search_iterations, r.search_seconds);
+  for (const auto& s : r.stages)
+    std::printf("stage        %-10s %8.3f s  peak %s%s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str(),
+                s.reused ? "  (reused from work directory)" : "");
+  std::printf("total        %.3f s, peak %s; wrote %s/manifest.json\n", r.seconds, human_bytes(r.peak_rss_bytes).c_str(),
+              out_dir.c_str());
+}
+
+// "a,b,c" -> values; false on any unreadable item.
+template <class T>
+bool parse_list(const std::string& text, std::vector<T>* out) {
+  out->clear();
+  size_t at = 0;
+  while (at <= text.size()) {
+    const size_t comma = std::min(text.find(',', at), text.size());
+    const std::string item = text.substr(at, comma - at);
+    try {
+      size_t used = 0;
+      if constexpr (std::is_floating_point_v<T>) {
+        const double v = std::stod(item, &used);
+        out->push_back(v);
+      } else {
+        if (!item.empty() && item[0] == '-') return false;
+        const unsigned long long v = std::stoull(item, &used);
+        out->push_back(static_cast<T>(v));
+      }
+      if (used != item.size()) return false;
+    } catch (const std::exception&) {
+      return false;
+    }
+    at = comma + 1;
+  }
+  return !out->empty();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -170,6 +221,35 @@ int main(int argc, char** argv) {
   info_cmd->add_option("FILE", input, "Input scene (.obj, .ply, .stl)")->required();
   info_cmd->add_flag("--json", json, "Print one JSON object instead of text");
   add_common(info_cmd);
+
+  CLI::App* simplify_cmd = app.add_subcommand("simplify", "Build a chain of levels of detail (Low & Tan vertex clustering)");
+  lodstream::SimplifyOptions so;
+  std::string grading = "lowtan", clustering = "floating", cell = "cube", variant = "nearest", rep = "center";
+  std::string sizes_text, targets_text;
+  bool obj = false, no_glb = false, no_ply = false;
+  simplify_cmd->add_option("INPUT", input, "Input scene (.obj, .ply, .stl)")->required();
+  simplify_cmd->add_option("-o,--output", so.output_dir, "Output directory (created if missing)")->required();
+  simplify_cmd->add_option("--grading", grading, "Vertex grade: lowtan (cos(θ/2)·Lmax) or rossignac (Lmax/θ)")
+      ->check(CLI::IsMember({"lowtan", "rossignac"}));
+  simplify_cmd->add_option("--clustering", clustering, "floating (Low & Tan) or uniform (Rossignac & Borrel grid at the origin)")
+      ->check(CLI::IsMember({"floating", "uniform"}));
+  simplify_cmd->add_option("--cell", cell, "Floating cell shape: cube or sphere")->check(CLI::IsMember({"cube", "sphere"}));
+  simplify_cmd->add_option("--variant", variant, "Cell a vertex joins when several contain it: nearest or heaviest")
+      ->check(CLI::IsMember({"nearest", "heaviest"}));
+  simplify_cmd->add_option("--representative", rep, "Cell representative: center, mean (grade-weighted) or quadric")
+      ->check(CLI::IsMember({"center", "mean", "quadric"}));
+  simplify_cmd->add_option("--levels", so.levels, "Number of levels when no sizes or targets are given (default 5)");
+  simplify_cmd->add_option("--cell-sizes", sizes_text, "Cell sizes a,b,... in scene units, finest first");
+  simplify_cmd->add_option("--target-triangles", targets_text, "Triangle counts t1,t2,... to aim at (searched, ±15%)");
+  simplify_cmd->add_option("--crease", so.crease_degrees, "Crease angle for normals, degrees (default 30)");
+  simplify_cmd->add_option("--fov", so.fov_degrees, "Vertical field of view for switching distances, degrees (default 60)");
+  simplify_cmd->add_option("--resolution", so.resolution, "Image height in pixels for switching distances (default 1080)");
+  simplify_cmd->add_option("--pixels-per-cell", so.pixels_per_cell, "X of Low & Tan §4: cell width in pixels at the switch (default 5)");
+  simplify_cmd->add_flag("--obj", obj, "Also write lodN.obj");
+  simplify_cmd->add_flag("--no-ply", no_ply, "Do not write lodN.ply");
+  simplify_cmd->add_flag("--no-glb", no_glb, "Do not write lods.glb");
+  simplify_cmd->add_flag("--json", json, "Print the manifest's summary as one JSON object");
+  add_common(simplify_cmd);
 
   try {
     app.parse(argc, argv);
@@ -200,6 +280,41 @@ int main(int argc, char** argv) {
   options.progress_user = &progress;
   std::signal(SIGINT, on_sigint);
   std::signal(SIGTERM, on_sigint);
+
+  if (simplify_cmd->parsed()) {
+    if (!sizes_text.empty() && !parse_list(sizes_text, &so.cell_sizes)) {
+      std::fprintf(stderr, "lodstream: --cell-sizes: cannot read '%s' as a list of numbers\n", sizes_text.c_str());
+      return static_cast<int>(lodstream::Status::usage);
+    }
+    if (!targets_text.empty() && !parse_list(targets_text, &so.target_triangles)) {
+      std::fprintf(stderr, "lodstream: --target-triangles: cannot read '%s' as a list of counts\n", targets_text.c_str());
+      return static_cast<int>(lodstream::Status::usage);
+    }
+    so.grading = grading == "lowtan" ? lodstream::Grading::lowtan : lodstream::Grading::rossignac;
+    so.clustering = clustering == "floating" ? lodstream::Clustering::floating : lodstream::Clustering::uniform;
+    so.cell = cell == "cube" ? lodstream::CellShape::cube : lodstream::CellShape::sphere;
+    so.variant = variant == "nearest" ? lodstream::CellVariant::nearest : lodstream::CellVariant::heaviest;
+    so.representative = rep == "center" ? lodstream::Representative::center
+                        : rep == "mean" ? lodstream::Representative::mean
+                                        : lodstream::Representative::quadric;
+    so.write_obj = obj;
+    so.write_ply = !no_ply;
+    so.write_glb = !no_glb;
+    lodstream::SimplifyReport report;
+    const lodstream::Result r = lodstream::simplify(input, so, options, &report);
+    if (progress.bar_open) std::fputc('\n', stderr);
+    if (!r.ok()) {
+      std::fprintf(stderr, "lodstream: %s\n", r.message.c_str());
+      return static_cast<int>(r.status);
+    }
+    if (json) {
+      std::ifstream manifest(so.output_dir + "/manifest.json");
+      std::printf("%s\n", nlohmann::ordered_json::parse(manifest).dump().c_str());
+    } else {
+      print_simplify(report, so.output_dir);
+    }
+    return 0;
+  }
 
   lodstream::SceneInfo info;
   const lodstream::Result r = lodstream::info(input, options, &info);

@@ -92,6 +92,70 @@ struct SceneInfo {
 // (Linux /proc/self/clear_refs); read peak_rss_bytes() before calling if you need the earlier peak.
 Result info(const std::string& path, const Options& options, SceneInfo* out);
 
+// ---- simplify: the LOD pipeline (grade -> sort -> cluster -> emit -> write) ----
+
+enum class Grading { lowtan, rossignac };           // cos(θ/2)·Lmax (Low & Tan) or Lmax/θ (Rossignac & Borrel)
+enum class Clustering { floating, uniform };        // floating cells, or the origin-anchored uniform grid
+enum class CellShape { cube, sphere };
+enum class CellVariant { nearest, heaviest };       // which containing cell a vertex joins (floating only)
+enum class Representative { center, mean, quadric };
+
+struct SimplifyOptions {
+  std::string output_dir;  // created if missing; lodN.ply, lodN.obj, lods.glb and manifest.json go here
+  Grading grading = Grading::lowtan;
+  Clustering clustering = Clustering::floating;
+  CellShape cell = CellShape::cube;
+  CellVariant variant = CellVariant::nearest;
+  Representative representative = Representative::center;
+  // Levels: explicit cell sizes (strictly increasing), or target triangle counts (searched for), or
+  // neither: `levels` levels whose counts fall roughly geometrically from the input to a few thousand.
+  std::vector<double> cell_sizes;
+  std::vector<uint64_t> target_triangles;
+  unsigned levels = 5;
+  double crease_degrees = 30;    // normals: faces meeting at a sharper angle keep separate normals
+  // LOD selection (Low & Tan §4): a level of cell size c is used from the distance where c spans
+  // pixels_per_cell pixels of a `resolution`-pixel-high image with vertical field of view fov_degrees.
+  double fov_degrees = 60;
+  unsigned resolution = 1080;
+  double pixels_per_cell = 5;
+  bool write_ply = true;
+  bool write_obj = false;
+  bool write_glb = true;
+  // Testing: cap the vertices graded at once (0 = from the memory budget), to force seams.
+  uint64_t grade_range_vertices = 0;
+};
+
+struct LevelStats {
+  double cell_size = 0;
+  uint64_t cells = 0;
+  uint64_t vertices = 0, triangles = 0, edges = 0, points = 0;
+  uint64_t edges_on_triangles = 0, points_covered = 0;  // eliminated
+  uint64_t target_triangles = 0;  // 0 when no target was given
+  double switch_distance = 0;     // use this level from this camera distance on (scene units)
+  double screen_coverage = 0;     // the scene's bounding-box diagonal over the image height at that distance
+  std::vector<std::string> files; // written, relative to the output directory
+};
+
+struct SimplifyReport {
+  std::string input;
+  SceneInfo scene;                 // ingest statistics (census fields left 0)
+  uint64_t vertices_graded = 0;    // distinct used positions: the weight index's records
+  uint64_t distinct_positions = 0;
+  double surface_area = 0;
+  uint64_t grade_ranges = 0;
+  std::vector<LevelStats> levels;
+  unsigned search_iterations = 0;  // target search: clustering passes made
+  double search_seconds = 0;
+  std::vector<StageStats> stages;
+  double seconds = 0;
+  uint64_t peak_rss_bytes = 0;
+};
+
+// Simplifies `input` into the levels described by `simplify`, writing them and manifest.json into
+// simplify.output_dir. Output bytes depend only on the input and `simplify`, never on `options`.
+Result simplify(const std::string& input, const SimplifyOptions& simplify, const Options& options,
+                SimplifyReport* out);
+
 // Peak resident memory of this process so far (VmHWM), in bytes; 0 if unknown.
 uint64_t peak_rss_bytes();
 

@@ -1,0 +1,32 @@
+// One level of detail as the writers see it: plain arrays, nothing about how it was made.
+//
+// Conventions (the emit stage guarantees them; the writers may rely on them):
+// - positions: xyz per vertex, finite.
+// - normals: empty, or xyz per vertex. Vertices used by triangles have unit normals; vertices used only by
+//   edges or points have (0, 0, 0) (their normal is dynamic: it depends on the camera, Low & Tan §3.3.2).
+// - triangles: 3 vertex ids each, counter-clockwise seen from the front; no id repeated within a triangle.
+// - edges: 2 vertex ids each (distinct), with thickness[i] >= 0 in scene units (D_A + D_B, §3.3.1).
+// - points: 1 vertex id each.
+// - Every id is < vertex_count().
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace lodstream::core {
+
+struct LodMesh {
+  std::vector<float> positions;
+  std::vector<float> normals;
+  std::vector<uint32_t> triangles;
+  std::vector<uint32_t> edges;
+  std::vector<float> thickness;
+  std::vector<uint32_t> points;
+
+  uint64_t vertex_count() const { return positions.size() / 3; }
+  uint64_t triangle_count() const { return triangles.size() / 3; }
+  uint64_t edge_count() const { return edges.size() / 2; }
+  uint64_t point_count() const { return points.size(); }
+};
+
+}  // namespace lodstream::core

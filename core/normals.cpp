@@ -1,0 +1,340 @@
+// Vertex normals with a crease angle (pipeline stage 5). This work is based on:
+// Kok-Lim Low and Tiow-Seng Tan. Model Simplification Using Vertex-Clustering. I3D 1997, §2 step 6
+//
+// The pass is vertex-major, then triangle-major. Per vertex, the incident triangles (a CSR list, already in
+// increasing triangle order because the fill pass scans triangles in order) are grouped by their unit normal,
+// the crease test runs on pairs of groups, and each group's corner normal is written to every corner of v in
+// the group's triangles. Then one scan over the corners in triangle order gives output ids: a corner reuses an
+// output vertex of the same input vertex with the same normal bits (a short list per input vertex), else it
+// creates one. Only the grouping makes the O(k²) crease test cheap on flat CAD fans; the result is a function
+// of the input arrays alone: no hashing, no thread, no dependence on anything but the fixed orders stated in
+// normals.h.
+#include "core/normals.h"
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <numbers>
+#include <string>
+
+#include "core/status.h"
+
+namespace lodstream::core {
+namespace {
+
+constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
+
+// A dot product of two unit vectors (each component computed with a few roundings) is within a few times
+// 2^-53 of the truth, and cos(crease) within one ulp: outside a band of 1e-14 the dot decides the test for
+// sure, inside it the angle is evaluated directly.
+constexpr double kDotBand = 1e-14;
+
+// Cube-map fallback (normals.h): 16 × 16 bins per face, about 5.6° each.
+constexpr int kCubeBins = 16;
+constexpr size_t kCubeBinCount = 6 * kCubeBins * kCubeBins;
+
+inline double plus_zero(double x) { return x + 0.0; }  // −0 → +0, anything else unchanged
+inline float plus_zero(float x) { return x + 0.0f; }
+
+// u = c / |c| with scaling (no overflow or underflow for any finite c), components canonicalised to +0.
+// False when c is zero or not finite: the vector has no direction.
+bool unit(const double* c, double* u) {
+  if (!std::isfinite(c[0]) || !std::isfinite(c[1]) || !std::isfinite(c[2])) return false;
+  const double m = std::max(std::max(std::fabs(c[0]), std::fabs(c[1])), std::fabs(c[2]));
+  if (m == 0) return false;
+  const double a = c[0] / m, b = c[1] / m, d = c[2] / m;
+  const double r = std::sqrt(a * a + b * b + d * d);  // in [1, √3]
+  u[0] = plus_zero(a / r), u[1] = plus_zero(b / r), u[2] = plus_zero(d / r);
+  return true;
+}
+
+// The float32 output of a unit direction. False when n has no direction.
+bool unit_float(const double* n, float* out) {
+  double u[3];
+  if (!unit(n, u)) return false;
+  for (int i = 0; i < 3; ++i) out[i] = plus_zero(static_cast<float>(u[i]));
+  return true;
+}
+
+void unit_float_from_unit(const double* u, float* out) {
+  for (int i = 0; i < 3; ++i) out[i] = plus_zero(static_cast<float>(u[i]));
+}
+
+// The crease test of normals.h for crease in (0°, 180°) (or 0°, where it admits exactly parallel normals).
+struct Crease {
+  double radians = 0;
+  double dot_in = 0;   // dot above this: inside
+  double dot_out = 0;  // dot below this: outside
+  bool smooth = false;  // crease >= 180°: everything inside
+
+  explicit Crease(double degrees) {
+    if (std::isnan(degrees)) fail(Status::usage, "crease_normals: crease angle is NaN");
+    if (degrees >= 180) {
+      smooth = true;
+      return;
+    }
+    radians = std::max(degrees, 0.0) * (std::numbers::pi / 180);
+    const double c = std::cos(radians);
+    dot_in = c + kDotBand;
+    dot_out = c - kDotBand;
+  }
+
+  bool within(const double* a, const double* b) const {
+    const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    if (dot > dot_in) return true;
+    if (dot < dot_out) return false;
+    const double cx = a[1] * b[2] - a[2] * b[1];
+    const double cy = a[2] * b[0] - a[0] * b[2];
+    const double cz = a[0] * b[1] - a[1] * b[0];
+    return std::atan2(std::sqrt(cx * cx + cy * cy + cz * cz), dot) <= radians;
+  }
+};
+
+// One distinct unit normal among a vertex's incident triangles.
+struct Group {
+  uint32_t first = 0;     // lowest triangle index in the group
+  double sum[3] = {};     // Σ c_t over the group, in increasing t
+  double u[3] = {};       // the common unit normal
+  uint32_t bin = 0;       // fallback only: index into the vertex's bins
+  float normal[3] = {};   // the corner normal of the group's triangles
+};
+
+struct Bin {
+  double sum[3] = {};  // Σ of its groups' sums, in group order
+  double u[3] = {};    // rep direction: unit(sum), or the first group's u
+  float normal[3] = {};
+};
+
+// The cube-map bin of a unit vector: major axis (ties to the lower axis), its sign, and two coordinates.
+uint32_t cube_bin(const double* u) {
+  int a = 0;
+  if (std::fabs(u[1]) > std::fabs(u[a])) a = 1;
+  if (std::fabs(u[2]) > std::fabs(u[a])) a = 2;
+  const int face = 2 * a + (u[a] < 0 ? 1 : 0);
+  const double m = std::fabs(u[a]);
+  auto cell = [m](double x) {
+    const int i = static_cast<int>(std::floor((x / m + 1) * (kCubeBins / 2.0)));
+    return std::clamp(i, 0, kCubeBins - 1);
+  };
+  const int i = cell(u[(a + 1) % 3]), j = cell(u[(a + 2) % 3]);
+  return static_cast<uint32_t>((face * kCubeBins + i) * kCubeBins + j);
+}
+
+void add3(double* s, const double* x) {
+  s[0] += x[0], s[1] += x[1], s[2] += x[2];
+}
+
+// Per-call working memory; the per-vertex vectors grow to the largest valence.
+struct Work {
+  std::vector<double> cross;  // c_t, 3 per triangle
+  std::vector<double> unitn;  // u_t, 3 per triangle (valid where ok[t])
+  std::vector<uint8_t> ok;    // triangle has a direction
+  std::vector<uint32_t> offsets;    // CSR: vertex_count + 1
+  std::vector<uint32_t> incident;   // CSR: triangle ids, increasing per vertex
+  std::vector<uint32_t> per_vertex; // fill cursor, then the head of each vertex's output list
+  std::vector<float> corner;        // 3 per corner
+  std::vector<uint32_t> next;       // per output vertex: next output vertex of the same input vertex
+  // per vertex
+  std::vector<uint32_t> order;      // non-degenerate incident triangles, sorted by (u bits, t)
+  std::vector<uint32_t> group_of;   // parallel to order
+  std::vector<Group> groups;
+  std::vector<uint32_t> by_first;   // group ids in order of their lowest triangle
+  std::vector<Bin> bins;
+  std::vector<uint32_t> bin_slot;   // kCubeBinCount entries, kNone when unused at this vertex
+};
+
+// Groups the incident triangles of one vertex (inc[0..k), increasing) by unit normal and sets every group's
+// corner normal; returns the normal of the vertex's degenerate corners in `degenerate`.
+void vertex_normals(const uint32_t* inc, size_t k, const Crease& crease, Work& w, float* degenerate) {
+  const double* un = w.unitn.data();
+  w.order.clear();
+  for (size_t i = 0; i < k; ++i)
+    if (w.ok[inc[i]]) w.order.push_back(inc[i]);
+  // Group by unit normal bits. Canonical +0 makes bitwise equality value equality (no NaN reaches here).
+  auto key = [un](uint32_t t) {
+    const double* u = un + 3 * size_t{t};
+    return std::array<uint64_t, 3>{std::bit_cast<uint64_t>(u[0]), std::bit_cast<uint64_t>(u[1]),
+                                   std::bit_cast<uint64_t>(u[2])};
+  };
+  std::sort(w.order.begin(), w.order.end(), [&](uint32_t a, uint32_t b) {
+    const auto ka = key(a), kb = key(b);
+    return ka != kb ? ka < kb : a < b;
+  });
+  w.groups.clear();
+  w.group_of.resize(w.order.size());
+  for (size_t i = 0; i < w.order.size(); ++i) {
+    const uint32_t t = w.order[i];
+    if (i == 0 || key(t) != key(w.order[i - 1])) {
+      Group g;
+      g.first = t;  // the lowest index of the group: ties sort by t
+      std::copy(un + 3 * size_t{t}, un + 3 * size_t{t} + 3, g.u);
+      w.groups.push_back(g);
+    }
+    w.group_of[i] = static_cast<uint32_t>(w.groups.size() - 1);
+    add3(w.groups.back().sum, &w.cross[3 * size_t{t}]);  // increasing t within the group
+  }
+  const size_t d = w.groups.size();
+  // The summation order of normals.h: groups by their lowest triangle.
+  w.by_first.resize(d);
+  for (size_t g = 0; g < d; ++g) w.by_first[g] = static_cast<uint32_t>(g);
+  std::sort(w.by_first.begin(), w.by_first.end(),
+            [&](uint32_t a, uint32_t b) { return w.groups[a].first < w.groups[b].first; });
+
+  // Degenerate corners: normalize(Σ c_s) over all faces, else the lowest-index face's u, else +z.
+  double all[3] = {0, 0, 0};
+  for (uint32_t g : w.by_first) add3(all, w.groups[g].sum);
+  if (!unit_float(all, degenerate)) {
+    if (d > 0) {
+      unit_float_from_unit(w.groups[w.by_first[0]].u, degenerate);
+    } else {
+      degenerate[0] = 0, degenerate[1] = 0, degenerate[2] = 1;
+    }
+  }
+  if (d == 0) return;
+
+  if (crease.smooth) {
+    float n[3];
+    const bool ok = unit_float(all, n);
+    for (Group& g : w.groups) {
+      if (ok) std::copy(n, n + 3, g.normal);
+      else unit_float_from_unit(g.u, g.normal);
+    }
+    return;
+  }
+
+  if (d <= kMaxPairwiseDirections) {
+    for (Group& g : w.groups) {
+      double sum[3] = {0, 0, 0};
+      for (uint32_t h : w.by_first) {
+        const Group& other = w.groups[h];
+        if (&other == &g || crease.within(g.u, other.u)) add3(sum, other.sum);
+      }
+      if (!unit_float(sum, g.normal)) unit_float_from_unit(g.u, g.normal);
+    }
+    return;
+  }
+
+  // Cube-map fallback: bins in order of first appearance in group order, each the sum of its groups.
+  if (w.bin_slot.empty()) w.bin_slot.assign(kCubeBinCount, kNone);
+  w.bins.clear();
+  for (uint32_t g : w.by_first) {
+    Group& group = w.groups[g];
+    const uint32_t key_bin = cube_bin(group.u);
+    if (w.bin_slot[key_bin] == kNone) {
+      w.bin_slot[key_bin] = static_cast<uint32_t>(w.bins.size());
+      Bin b;
+      std::copy(group.u, group.u + 3, b.u);  // rep direction until the sum is known
+      w.bins.push_back(b);
+    }
+    group.bin = w.bin_slot[key_bin];
+    add3(w.bins[group.bin].sum, group.sum);
+  }
+  for (Bin& b : w.bins) unit(b.sum, b.u);  // keeps the first group's u when the sum has no direction
+  for (Bin& b : w.bins) {
+    double sum[3] = {0, 0, 0};
+    for (const Bin& other : w.bins)
+      if (&other == &b || crease.within(b.u, other.u)) add3(sum, other.sum);
+    if (!unit_float(sum, b.normal)) unit_float_from_unit(b.u, b.normal);
+  }
+  for (Group& g : w.groups) std::copy(w.bins[g.bin].normal, w.bins[g.bin].normal + 3, g.normal);
+  for (const Group& g : w.groups) w.bin_slot[cube_bin(g.u)] = kNone;
+}
+
+[[noreturn]] void bad_input(const std::string& what) {
+  fail(Status::internal, "crease_normals: " + what);
+}
+
+}  // namespace
+
+void crease_normals(std::span<const double> positions, std::span<const uint32_t> triangles,
+                    double crease_degrees, CreaseNormals& out) {
+  const Crease crease(crease_degrees);
+  if (positions.size() % 3 != 0) bad_input("positions.size() is not a multiple of 3");
+  if (triangles.size() % 3 != 0) bad_input("triangles.size() is not a multiple of 3");
+  if (triangles.size() > kNone) bad_input("more than 2^32 - 1 corners");
+  const size_t vertex_count = positions.size() / 3;
+  const size_t triangle_count = triangles.size() / 3;
+  const uint32_t* tri = triangles.data();
+  const double* pos = positions.data();
+
+  Work w;
+  // Face normals, and the incidence counts (a triangle counts once per distinct vertex).
+  w.cross.resize(3 * triangle_count);
+  w.unitn.resize(3 * triangle_count);
+  w.ok.resize(triangle_count);
+  w.offsets.assign(vertex_count + 1, 0);
+  for (size_t t = 0; t < triangle_count; ++t) {
+    const uint32_t a = tri[3 * t], b = tri[3 * t + 1], c = tri[3 * t + 2];
+    if (a >= vertex_count || b >= vertex_count || c >= vertex_count)
+      bad_input("triangle " + std::to_string(t) + " has a vertex id out of range");
+    const double* p0 = pos + 3 * size_t{a};
+    const double* p1 = pos + 3 * size_t{b};
+    const double* p2 = pos + 3 * size_t{c};
+    const double e1[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+    const double e2[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
+    double* n = &w.cross[3 * t];
+    n[0] = e1[1] * e2[2] - e1[2] * e2[1];
+    n[1] = e1[2] * e2[0] - e1[0] * e2[2];
+    n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    w.ok[t] = unit(n, &w.unitn[3 * t]);
+    if (!w.ok[t]) n[0] = n[1] = n[2] = 0;  // contributes nothing, even if it overflowed
+    ++w.offsets[size_t{a} + 1];
+    if (b != a) ++w.offsets[size_t{b} + 1];
+    if (c != a && c != b) ++w.offsets[size_t{c} + 1];
+  }
+  for (size_t v = 0; v < vertex_count; ++v) w.offsets[v + 1] += w.offsets[v];
+  w.incident.resize(w.offsets[vertex_count]);
+  w.per_vertex.assign(w.offsets.begin(), w.offsets.end() - 1);
+  for (size_t t = 0; t < triangle_count; ++t) {
+    const uint32_t a = tri[3 * t], b = tri[3 * t + 1], c = tri[3 * t + 2];
+    w.incident[w.per_vertex[a]++] = static_cast<uint32_t>(t);
+    if (b != a) w.incident[w.per_vertex[b]++] = static_cast<uint32_t>(t);
+    if (c != a && c != b) w.incident[w.per_vertex[c]++] = static_cast<uint32_t>(t);
+  }
+
+  // Corner normals, vertex by vertex.
+  w.corner.resize(3 * triangles.size());
+  for (size_t v = 0; v < vertex_count; ++v) {
+    const uint32_t begin = w.offsets[v], end = w.offsets[v + 1];
+    if (begin == end) continue;
+    const uint32_t* inc = w.incident.data() + begin;
+    float degenerate[3];
+    vertex_normals(inc, end - begin, crease, w, degenerate);
+    auto write = [&](uint32_t t, const float* n) {
+      for (size_t j = 3 * size_t{t}; j < 3 * size_t{t} + 3; ++j)
+        if (tri[j] == v) std::copy(n, n + 3, &w.corner[3 * j]);
+    };
+    for (size_t i = 0; i < w.order.size(); ++i) write(w.order[i], w.groups[w.group_of[i]].normal);
+    for (uint32_t i = 0; i < end - begin; ++i)
+      if (!w.ok[inc[i]]) write(inc[i], degenerate);
+  }
+
+  // Output vertices in order of first appearance; per input vertex a list of its output vertices.
+  out.vertex.clear();
+  out.normals.clear();
+  out.triangles.resize(triangles.size());
+  out.vertex.reserve(vertex_count);
+  out.normals.reserve(3 * vertex_count);
+  w.per_vertex.assign(vertex_count, kNone);
+  w.next.clear();
+  w.next.reserve(vertex_count);
+  for (size_t j = 0; j < triangles.size(); ++j) {
+    const uint32_t v = tri[j];
+    const float* n = &w.corner[3 * j];
+    uint32_t o = w.per_vertex[v];
+    while (o != kNone && std::memcmp(&out.normals[3 * size_t{o}], n, 3 * sizeof(float)) != 0) o = w.next[o];
+    if (o == kNone) {
+      o = static_cast<uint32_t>(out.vertex.size());
+      out.vertex.push_back(v);
+      out.normals.insert(out.normals.end(), n, n + 3);
+      w.next.push_back(w.per_vertex[v]);
+      w.per_vertex[v] = o;
+    }
+    out.triangles[j] = o;
+  }
+}
+
+}  // namespace lodstream::core

@@ -1,0 +1,302 @@
+// Binary glTF 2.0 (GLB) writer for a chain of levels of detail (see io/glb_writer.h for the layout).
+// Follows the glTF 2.0 specification (Khronos; GLB container: 12-byte header, JSON chunk padded with spaces,
+// BIN chunk padded with zeros, every chunk 4-byte aligned) and the MSFT_lod vendor extension
+// (KhronosGroup/glTF extensions/2.0/Vendor/MSFT_lod: `ids` on the highest level, lower levels in order;
+// extras.MSFT_screencoverage with one value per level, highest level first).
+//
+// Two passes over the levels, so the binary data is never held whole in memory: the first plans every
+// accessor and buffer view (counts, byte lengths, POSITION min/max) and builds the JSON; the second streams
+// the same blocks, in the same order, into the BIN chunk.
+#include "io/glb_writer.h"
+
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/status.h"
+#include "io/file_writer.h"
+
+namespace lodstream::io {
+
+static_assert(std::endian::native == std::endian::little, "the GLB writer copies little-endian memory as is");
+
+namespace {
+
+using Json = nlohmann::ordered_json;
+
+constexpr uint32_t kMagic = 0x46546C67;      // "glTF"
+constexpr uint32_t kChunkJson = 0x4E4F534A;  // "JSON"
+constexpr uint32_t kChunkBin = 0x004E4942;   // "BIN\0"
+constexpr int kFloat = 5126, kUnsignedInt = 5125;
+constexpr int kArrayBuffer = 34962, kElementArrayBuffer = 34963;
+constexpr int kPoints = 0, kLines = 1, kTriangles = 4;
+
+// The conventions of core/mesh.h that the file layout depends on.
+void check_mesh(const core::LodMesh& mesh, const std::string& path) {
+  auto bad = [&](const std::string& what) { fail(Status::internal, path + ": cannot write level: " + what); };
+  const uint64_t n = mesh.vertex_count();
+  if (mesh.positions.size() % 3 != 0) bad("positions are not xyz triples");
+  if (!mesh.normals.empty() && mesh.normals.size() != mesh.positions.size()) bad("normals do not match positions");
+  if (mesh.triangles.size() % 3 != 0) bad("triangles are not index triples");
+  if (mesh.edges.size() % 2 != 0) bad("edges are not index pairs");
+  if (mesh.thickness.size() != mesh.edge_count()) bad("one thickness per edge expected");
+  if (n > UINT32_MAX) bad("more vertices than 32-bit indices can address");
+  for (const auto* ids : {&mesh.triangles, &mesh.edges, &mesh.points})
+    for (uint32_t id : *ids)
+      if (id >= n) bad("vertex index " + std::to_string(id) + " out of range");
+}
+
+uint64_t align4(uint64_t n) { return (n + 3) & ~uint64_t{3}; }
+
+// The triangles' own vertex array: the vertex ids they use in order of first use, and the triangles
+// renumbered into that array.
+struct CompactTriangles {
+  std::vector<uint32_t> vertices;
+  std::vector<uint32_t> indices;
+};
+
+CompactTriangles compact_triangles(const core::LodMesh& mesh) {
+  CompactTriangles c;
+  if (mesh.triangles.empty()) return c;
+  constexpr uint32_t kUnset = std::numeric_limits<uint32_t>::max();
+  std::vector<uint32_t> slot(mesh.vertex_count(), kUnset);
+  c.indices.reserve(mesh.triangles.size());
+  for (uint32_t id : mesh.triangles) {
+    if (slot[id] == kUnset) {
+      slot[id] = static_cast<uint32_t>(c.vertices.size());
+      c.vertices.push_back(id);
+    }
+    c.indices.push_back(slot[id]);
+  }
+  return c;
+}
+
+// Bounding box of the positions of `ids` (each id a vertex of `mesh`), as JSON min and max arrays.
+void bounds(const core::LodMesh& mesh, const std::vector<uint32_t>& ids, Json* min, Json* max) {
+  float lo[3], hi[3];
+  for (int c = 0; c < 3; ++c) {
+    lo[c] = std::numeric_limits<float>::infinity();
+    hi[c] = -std::numeric_limits<float>::infinity();
+  }
+  for (uint32_t id : ids)
+    for (int c = 0; c < 3; ++c) {
+      const float x = mesh.positions[3 * uint64_t{id} + c];
+      if (x < lo[c]) lo[c] = x;
+      if (x > hi[c]) hi[c] = x;
+    }
+  *min = Json::array();
+  *max = Json::array();
+  for (int c = 0; c < 3; ++c) {
+    min->push_back(static_cast<double>(lo[c]));  // exact: every float is a double
+    max->push_back(static_cast<double>(hi[c]));
+  }
+}
+
+// Accessors and buffer views as the first pass plans them; the second pass checks that it writes exactly
+// the planned byte lengths, in the same order.
+class Plan {
+ public:
+  // A buffer view of `count` elements of `components` 4-byte values, and its accessor; returns the accessor.
+  int add(uint64_t count, int components, int component_type, const char* type, int target) {
+    const uint64_t bytes = count * components * 4;
+    const int view = static_cast<int>(views_.size());
+    Json v;
+    v["buffer"] = 0;
+    v["byteOffset"] = bin_bytes_;
+    v["byteLength"] = bytes;
+    v["target"] = target;
+    views_.push_back(std::move(v));
+    view_bytes_.push_back(bytes);
+    bin_bytes_ += align4(bytes);
+    Json a;
+    a["bufferView"] = view;
+    a["componentType"] = component_type;
+    a["count"] = count;
+    a["type"] = type;
+    accessors_.push_back(std::move(a));
+    return static_cast<int>(accessors_.size()) - 1;
+  }
+  int add_positions(const core::LodMesh& mesh, const std::vector<uint32_t>& ids) {
+    const int a = add(ids.size(), 3, kFloat, "VEC3", kArrayBuffer);
+    Json& accessor = accessors_[static_cast<size_t>(a)];
+    bounds(mesh, ids, &accessor["min"], &accessor["max"]);
+    return a;
+  }
+  Json& accessors() { return accessors_; }
+  Json& views() { return views_; }
+  const std::vector<uint64_t>& view_bytes() const { return view_bytes_; }
+  uint64_t bin_bytes() const { return bin_bytes_; }
+
+ private:
+  Json accessors_ = Json::array();
+  Json views_ = Json::array();
+  std::vector<uint64_t> view_bytes_;
+  uint64_t bin_bytes_ = 0;
+};
+
+// Second pass: the BIN chunk's contents, block by block, checked against the plan.
+class BinWriter {
+ public:
+  BinWriter(FileWriter& out, const std::vector<uint64_t>& view_bytes) : out_(out), view_bytes_(view_bytes) {}
+  // Positions (or normals, `from`) of the vertices `ids`.
+  void vec3(const std::vector<float>& from, const std::vector<uint32_t>& ids) {
+    for (uint32_t id : ids) out_.write(&from[3 * uint64_t{id}], 12);
+    end_block(ids.size() * 12);
+  }
+  void u32(const std::vector<uint32_t>& values) {
+    out_.write(values.data(), values.size() * 4);
+    end_block(values.size() * 4);
+  }
+  // Each value twice (a thickness for both ends of its edge).
+  void f32_twice(const std::vector<float>& values) {
+    for (float t : values) {
+      const float pair[2] = {t, t};
+      out_.write(pair, sizeof pair);
+    }
+    end_block(values.size() * 8);
+  }
+  size_t blocks() const { return block_; }
+
+ private:
+  void end_block(uint64_t bytes) {
+    if (block_ >= view_bytes_.size() || view_bytes_[block_] != bytes)
+      fail(Status::internal, out_.path() + ": GLB data does not match its plan");
+    static constexpr char zeros[4] = {0, 0, 0, 0};
+    out_.write(zeros, align4(bytes) - bytes);
+    ++block_;
+  }
+  FileWriter& out_;
+  const std::vector<uint64_t>& view_bytes_;
+  size_t block_ = 0;
+};
+
+void write_u32(FileWriter& out, uint64_t value) {
+  const uint32_t v = static_cast<uint32_t>(value);
+  out.write(&v, 4);
+}
+
+}  // namespace
+
+void write_glb(const std::string& path, std::span<const GlbLevel> levels, const std::string& generator) {
+  if (levels.empty()) fail(Status::internal, path + ": no level to write");
+  for (const GlbLevel& level : levels) {
+    if (level.mesh == nullptr) fail(Status::internal, path + ": level '" + level.name + "' has no mesh");
+    if (!std::isfinite(level.screen_coverage))
+      fail(Status::internal, path + ": level '" + level.name + "' has a non-finite screen coverage");
+    check_mesh(*level.mesh, path);
+  }
+
+  // ---- First pass: plan the accessors and build the JSON.
+  Plan plan;
+  Json nodes = Json::array();
+  Json meshes = Json::array();
+  for (const GlbLevel& level : levels) {
+    const core::LodMesh& mesh = *level.mesh;
+    Json primitives = Json::array();
+    if (!mesh.triangles.empty()) {
+      const CompactTriangles c = compact_triangles(mesh);
+      Json p;
+      p["attributes"]["POSITION"] = plan.add_positions(mesh, c.vertices);
+      if (!mesh.normals.empty()) p["attributes"]["NORMAL"] = plan.add(c.vertices.size(), 3, kFloat, "VEC3", kArrayBuffer);
+      p["indices"] = plan.add(c.indices.size(), 1, kUnsignedInt, "SCALAR", kElementArrayBuffer);
+      p["material"] = 0;
+      p["mode"] = kTriangles;
+      primitives.push_back(std::move(p));
+    }
+    if (!mesh.edges.empty()) {
+      Json p;
+      p["attributes"]["POSITION"] = plan.add_positions(mesh, mesh.edges);  // both ends of every edge
+      p["attributes"]["_THICKNESS"] = plan.add(mesh.edges.size(), 1, kFloat, "SCALAR", kArrayBuffer);
+      p["material"] = 0;
+      p["mode"] = kLines;
+      primitives.push_back(std::move(p));
+    }
+    if (!mesh.points.empty()) {
+      Json p;
+      p["attributes"]["POSITION"] = plan.add_positions(mesh, mesh.points);
+      p["material"] = 0;
+      p["mode"] = kPoints;
+      primitives.push_back(std::move(p));
+    }
+    Json node;
+    node["name"] = level.name;
+    if (!primitives.empty()) {
+      node["mesh"] = meshes.size();
+      Json m;
+      m["name"] = level.name;
+      m["primitives"] = std::move(primitives);
+      meshes.push_back(std::move(m));
+    }
+    nodes.push_back(std::move(node));
+  }
+  if (levels.size() > 1) {
+    Json ids = Json::array();
+    Json coverage = Json::array();
+    for (size_t i = 0; i < levels.size(); ++i) {
+      if (i > 0) ids.push_back(i);
+      coverage.push_back(levels[i].screen_coverage);
+    }
+    nodes[0]["extensions"]["MSFT_lod"]["ids"] = std::move(ids);
+    nodes[0]["extras"]["MSFT_screencoverage"] = std::move(coverage);
+  }
+
+  Json gltf;
+  gltf["asset"]["generator"] = generator;
+  gltf["asset"]["version"] = "2.0";
+  if (levels.size() > 1) gltf["extensionsUsed"] = Json::array({"MSFT_lod"});
+  gltf["scene"] = 0;
+  gltf["scenes"] = Json::array({Json{{"nodes", Json::array({0})}}});
+  gltf["nodes"] = std::move(nodes);
+  if (!meshes.empty()) {
+    gltf["meshes"] = std::move(meshes);
+    Json material;
+    material["pbrMetallicRoughness"]["metallicFactor"] = 0.0;  // a plain diffuse surface, not a metal
+    material["doubleSided"] = true;
+    gltf["materials"] = Json::array({std::move(material)});
+    gltf["accessors"] = std::move(plan.accessors());
+    gltf["bufferViews"] = std::move(plan.views());
+    gltf["buffers"] = Json::array({Json{{"byteLength", plan.bin_bytes()}}});
+  }
+
+  std::string json = gltf.dump();
+  json.resize(align4(json.size()), ' ');
+  const uint64_t bin_bytes = plan.bin_bytes();  // already a multiple of 4
+  const uint64_t total = 12 + 8 + json.size() + (bin_bytes > 0 ? 8 + bin_bytes : 0);
+  if (total > UINT32_MAX) fail(Status::io_error, path + ": the levels do not fit in one GLB file (4 GiB at most)");
+
+  // ---- Second pass: header, JSON chunk, BIN chunk.
+  FileWriter out(path);
+  write_u32(out, kMagic);
+  write_u32(out, 2);
+  write_u32(out, total);
+  write_u32(out, json.size());
+  write_u32(out, kChunkJson);
+  out.write(json);
+  if (bin_bytes > 0) {
+    write_u32(out, bin_bytes);
+    write_u32(out, kChunkBin);
+    BinWriter bin(out, plan.view_bytes());
+    for (const GlbLevel& level : levels) {
+      const core::LodMesh& mesh = *level.mesh;
+      if (!mesh.triangles.empty()) {
+        const CompactTriangles c = compact_triangles(mesh);
+        bin.vec3(mesh.positions, c.vertices);
+        if (!mesh.normals.empty()) bin.vec3(mesh.normals, c.vertices);
+        bin.u32(c.indices);
+      }
+      if (!mesh.edges.empty()) {
+        bin.vec3(mesh.positions, mesh.edges);
+        bin.f32_twice(mesh.thickness);
+      }
+      if (!mesh.points.empty()) bin.vec3(mesh.positions, mesh.points);
+    }
+    if (bin.blocks() != plan.view_bytes().size()) fail(Status::internal, path + ": GLB data does not match its plan");
+  }
+  out.commit();
+}
+
+}  // namespace lodstream::io

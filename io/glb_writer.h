@@ -1,0 +1,42 @@
+// Binary glTF 2.0 (GLB) writer holding every level of detail of a scene in one file, following the glTF 2.0
+// specification (Khronos, "glTF 2.0 Specification", sections 3 and 4.4 GLB File Format) and the vendor
+// extension MSFT_lod (KhronosGroup/glTF, extensions/2.0/Vendor/MSFT_lod) with its MSFT_screencoverage extras.
+//
+// Layout of the file:
+// - one node per level, in the order given (node i = levels[i]); a level with something to draw also has
+//   a mesh, a level with nothing gets a node without mesh;
+// - with two levels or more, node 0 (the finest level) carries extensions.MSFT_lod.ids = [1, 2, ..., n-1]
+//   (each id a lower level than the previous one) and extras.MSFT_screencoverage = one value per level,
+//   node 0 first: level i is shown while the screen coverage is at least its value, and nothing is drawn
+//   below the last value; extensionsUsed lists MSFT_lod. One level alone has neither;
+// - one scene whose nodes are [0] (the lower levels are reached through MSFT_lod only);
+// - per mesh up to three primitives, each with its own compacted vertex arrays (only the vertices it uses):
+//   TRIANGLES (mode 4) with POSITION, NORMAL (when the mesh has normals) and uint32 indices;
+//   LINES (mode 1) with POSITION and _THICKNESS (SCALAR float), two vertices per edge, both carrying the
+//   edge's thickness (a vertex shared by edges of different thickness is thus repeated), no indices;
+//   POINTS (mode 0) with POSITION, one vertex per point, no indices. An empty kind is left out;
+// - one material, {doubleSided: true}, used by every primitive;
+// - one buffer (the BIN chunk); one bufferView per accessor, 4-byte aligned, with its target.
+// The bytes depend only on the arguments (no time stamps, fixed JSON key order).
+#pragma once
+
+#include <span>
+#include <string>
+
+#include "core/mesh.h"
+
+namespace lodstream::io {
+
+struct GlbLevel {
+  const core::LodMesh* mesh;
+  std::string name;        // node and mesh name
+  double screen_coverage;  // lower bound of the screen coverage at which this level is shown (MSFT_lod)
+};
+
+// Writes `levels` (finest first, at least one) to `path` (through `<path>.partial`, renamed when complete);
+// `generator` goes to asset.generator. Throws Failure(io_error) when the file cannot be written,
+// Failure(internal) for no levels, a non-finite screen coverage, or a mesh that breaks the conventions of
+// core/mesh.h (array sizes, indices out of range).
+void write_glb(const std::string& path, std::span<const GlbLevel> levels, const std::string& generator);
+
+}  // namespace lodstream::io

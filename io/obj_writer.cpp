@@ -1,0 +1,104 @@
+// Wavefront OBJ writer for one level of detail (see io/obj_writer.h for the statements written).
+// Follows the OBJ format (Wavefront Advanced Visualizer manual, Appendix B1); numbers are written with
+// std::to_chars in the shortest form that reads back as the same float.
+#include "io/obj_writer.h"
+
+#include <charconv>
+#include <cstdint>
+
+#include "core/status.h"
+#include "io/file_writer.h"
+
+namespace lodstream::io {
+
+namespace {
+
+// The conventions of core/mesh.h that the file depends on.
+void check_mesh(const core::LodMesh& mesh, const std::string& path) {
+  auto bad = [&](const std::string& what) { fail(Status::internal, path + ": cannot write level: " + what); };
+  const uint64_t n = mesh.vertex_count();
+  if (mesh.positions.size() % 3 != 0) bad("positions are not xyz triples");
+  if (!mesh.normals.empty() && mesh.normals.size() != mesh.positions.size()) bad("normals do not match positions");
+  if (mesh.triangles.size() % 3 != 0) bad("triangles are not index triples");
+  if (mesh.edges.size() % 2 != 0) bad("edges are not index pairs");
+  for (const auto* ids : {&mesh.triangles, &mesh.edges, &mesh.points})
+    for (uint32_t id : *ids)
+      if (id >= n) bad("vertex index " + std::to_string(id) + " out of range");
+}
+
+// One output line at a time, built in a fixed buffer (the longest line, `f` with normals, is well under
+// 128 bytes: 6 indices of at most 10 digits).
+class Line {
+ public:
+  void text(std::string_view s) {
+    for (char c : s) *end_++ = c;
+  }
+  void number(float x) { end_ = std::to_chars(end_, buf_ + sizeof buf_, x).ptr; }
+  void number(uint64_t x) { end_ = std::to_chars(end_, buf_ + sizeof buf_, x).ptr; }
+  void finish(FileWriter& out) {
+    *end_++ = '\n';
+    out.write(buf_, static_cast<size_t>(end_ - buf_));
+    end_ = buf_;
+  }
+
+ private:
+  char buf_[160];
+  char* end_ = buf_;
+};
+
+}  // namespace
+
+void write_obj(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments) {
+  check_mesh(mesh, path);
+  const bool normals = !mesh.normals.empty();
+
+  FileWriter out(path);
+  for (const std::string& c : comments) {
+    std::string line = "# ";
+    for (char ch : c) line += static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f ? ' ' : ch;
+    line += '\n';
+    out.write(line);
+  }
+
+  Line line;
+  auto xyz = [&](const char* tag, const std::vector<float>& a, uint64_t v) {
+    line.text(tag);
+    for (int c = 0; c < 3; ++c) {
+      line.text(" ");
+      line.number(a[3 * v + c]);
+    }
+    line.finish(out);
+  };
+  for (uint64_t v = 0; v < mesh.vertex_count(); ++v) xyz("v", mesh.positions, v);
+  if (normals)
+    for (uint64_t v = 0; v < mesh.vertex_count(); ++v) xyz("vn", mesh.normals, v);
+
+  for (uint64_t t = 0; t < mesh.triangle_count(); ++t) {
+    line.text("f");
+    for (int c = 0; c < 3; ++c) {
+      const uint64_t id = uint64_t{mesh.triangles[3 * t + c]} + 1;
+      line.text(" ");
+      line.number(id);
+      if (normals) {
+        line.text("//");
+        line.number(id);
+      }
+    }
+    line.finish(out);
+  }
+  for (uint64_t e = 0; e < mesh.edge_count(); ++e) {
+    line.text("l ");
+    line.number(uint64_t{mesh.edges[2 * e]} + 1);
+    line.text(" ");
+    line.number(uint64_t{mesh.edges[2 * e + 1]} + 1);
+    line.finish(out);
+  }
+  for (uint32_t p : mesh.points) {
+    line.text("p ");
+    line.number(uint64_t{p} + 1);
+    line.finish(out);
+  }
+  out.commit();
+}
+
+}  // namespace lodstream::io

@@ -1,0 +1,90 @@
+// Binary little-endian PLY writer for one level of detail (see io/ply_writer.h for the elements written).
+// Follows the PLY format (Greg Turk, "The PLY Polygon File Format"); `element point` is this project's own.
+#include "io/ply_writer.h"
+
+#include <bit>
+#include <cstdint>
+#include <cstring>
+
+#include "core/status.h"
+#include "io/file_writer.h"
+
+namespace lodstream::io {
+
+static_assert(std::endian::native == std::endian::little, "the PLY writer copies little-endian memory as is");
+
+namespace {
+
+// The conventions of core/mesh.h that the file layout depends on.
+void check_mesh(const core::LodMesh& mesh, const std::string& path) {
+  auto bad = [&](const std::string& what) { fail(Status::internal, path + ": cannot write level: " + what); };
+  const uint64_t n = mesh.vertex_count();
+  if (mesh.positions.size() % 3 != 0) bad("positions are not xyz triples");
+  if (!mesh.normals.empty() && mesh.normals.size() != mesh.positions.size()) bad("normals do not match positions");
+  if (mesh.triangles.size() % 3 != 0) bad("triangles are not index triples");
+  if (mesh.edges.size() % 2 != 0) bad("edges are not index pairs");
+  if (mesh.thickness.size() != mesh.edge_count()) bad("one thickness per edge expected");
+  if (n > UINT32_MAX) bad("more vertices than 32-bit indices can address");
+  for (const auto* ids : {&mesh.triangles, &mesh.edges, &mesh.points})
+    for (uint32_t id : *ids)
+      if (id >= n) bad("vertex index " + std::to_string(id) + " out of range");
+}
+
+// A comment as one header line: control characters (line breaks included) become spaces.
+std::string comment_line(const std::string& text) {
+  std::string line = "comment ";
+  for (char c : text) line += static_cast<unsigned char>(c) < 0x20 || c == 0x7f ? ' ' : c;
+  line += '\n';
+  return line;
+}
+
+}  // namespace
+
+void write_ply(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments) {
+  check_mesh(mesh, path);
+  const bool normals = !mesh.normals.empty();
+
+  std::string header = "ply\nformat binary_little_endian 1.0\n";
+  for (const std::string& c : comments) header += comment_line(c);
+  header += "comment element point: one vertex index per point primitive\n";
+  header += "element vertex " + std::to_string(mesh.vertex_count()) + "\n";
+  header += "property float x\nproperty float y\nproperty float z\n";
+  if (normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
+  header += "element face " + std::to_string(mesh.triangle_count()) + "\n";
+  header += "property list uchar uint vertex_indices\n";
+  header += "element edge " + std::to_string(mesh.edge_count()) + "\n";
+  header += "property uint vertex1\nproperty uint vertex2\nproperty float thickness\n";
+  header += "element point " + std::to_string(mesh.point_count()) + "\n";
+  header += "property uint vertex\n";
+  header += "end_header\n";
+
+  FileWriter out(path);
+  out.write(header);
+
+  // vertex: x y z [nx ny nz], 12 or 24 bytes
+  for (uint64_t v = 0; v < mesh.vertex_count(); ++v) {
+    float record[6];
+    std::memcpy(record, &mesh.positions[3 * v], 12);
+    if (normals) std::memcpy(record + 3, &mesh.normals[3 * v], 12);
+    out.write(record, normals ? 24 : 12);
+  }
+  // face: count 3 (uchar), then 3 uint indices: 13 bytes
+  for (uint64_t t = 0; t < mesh.triangle_count(); ++t) {
+    char record[13];
+    record[0] = 3;
+    std::memcpy(record + 1, &mesh.triangles[3 * t], 12);
+    out.write(record, sizeof record);
+  }
+  // edge: vertex1 vertex2 (uint) thickness (float): 12 bytes
+  for (uint64_t e = 0; e < mesh.edge_count(); ++e) {
+    char record[12];
+    std::memcpy(record, &mesh.edges[2 * e], 8);
+    std::memcpy(record + 8, &mesh.thickness[e], 4);
+    out.write(record, sizeof record);
+  }
+  // point: vertex (uint): 4 bytes
+  out.write(mesh.points.data(), mesh.points.size() * sizeof(uint32_t));
+  out.commit();
+}
+
+}  // namespace lodstream::io

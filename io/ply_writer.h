@@ -1,0 +1,27 @@
+// Binary PLY writer for one level of detail (core::LodMesh), following the PLY format as described by
+// Greg Turk ("The PLY Polygon File Format", 1994) and written by most tools today.
+//
+// The file is `format binary_little_endian 1.0` with these elements, always in this order and always
+// present (count 0 when empty), so that the schema does not depend on the contents:
+//   element vertex N   property float x, y, z (and float nx, ny, nz when the mesh has normals)
+//   element face F     property list uchar uint vertex_indices          (triangles, 3 indices each)
+//   element edge E     property uint vertex1, uint vertex2, float thickness
+//   element point P    property uint vertex
+// PLY has no standard element for points: `point` is this project's own element, one vertex index per point
+// primitive (readers that do not know it skip it; the file also says so in a comment line).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/mesh.h"
+
+namespace lodstream::io {
+
+// Writes `mesh` to `path` (through `<path>.partial`, renamed when complete). Each comment becomes a
+// `comment ...` header line; line breaks and other control characters in it are replaced by spaces.
+// Throws Failure(io_error) when the file cannot be written, Failure(internal) when the mesh breaks the
+// conventions of core/mesh.h (array sizes, indices out of range).
+void write_ply(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments);
+
+}  // namespace lodstream::io

@@ -1,0 +1,46 @@
+// Stage 4 of the pipeline: one ordered pass over the weight index assigns every vertex to a cell in every
+// level (core/floating_cell.h). Levels are independent given the order, so each level runs as its own task
+// over the same blocks of records; the result does not depend on how the levels are spread over threads.
+//
+// Output, in the work directory:
+//   order.u32            the canonical vertex id of each weight-index record, in weight order
+//   cells-L.u32          per level L: the cell id of each record, in weight order
+//   cells-L.info         per level L: one CellInfo per cell, in cell-id order
+// Memory: the clusterers' tables and one CellInfo per cell (it grows with the cells, not the vertices).
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/floating_cell.h"
+#include "stream/progress.h"
+#include "stream/work_dir.h"
+
+namespace lodstream::stream {
+
+struct CellInfo {
+  double center[3];     // the center vertex's position (uniform: the first vertex that fell in the square)
+  double weighted[3];   // Σ grade · position over the cell's vertices
+  double sum[3];        // Σ position
+  double weight;        // Σ grade
+  uint32_t center_vertex;
+  uint32_t vertices;    // canonical vertices in the cell
+};
+static_assert(sizeof(CellInfo) == 88);
+
+struct ClusterSummary {
+  std::vector<uint64_t> cells;  // per level
+  uint64_t memory_bytes = 0;    // largest clusterer footprint seen
+};
+
+ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, std::span<const double> cell_sizes,
+                              const core::ClusterOptions& options, const WorkDir& work, Progress& progress,
+                              const std::string& prefix);
+
+std::string cells_path(const std::string& prefix, size_t level);
+std::string cell_info_path(const std::string& prefix, size_t level);
+std::string order_path(const std::string& prefix);
+
+}  // namespace lodstream::stream

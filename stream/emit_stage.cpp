@@ -1,0 +1,393 @@
+// Stage 5: emit one level. See emit_stage.h for the rules.
+#include "stream/emit_stage.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include "core/normals.h"
+#include "core/quadric.h"
+#include "core/status.h"
+#include "io/mapped_file.h"
+#include "stream/cluster_stage.h"
+#include "stream/flat_map.h"
+#include "stream/store_access.h"
+
+namespace lodstream::stream {
+
+namespace {
+
+// Fixed block size: sums are formed per block and merged in block order, so it must not depend on the
+// memory plan or the thread count.
+constexpr uint64_t kEmitBlock = 1 << 16;
+
+struct EdgeSums {
+  double a[3] = {0, 0, 0}, b[3] = {0, 0, 0};  // corner positions in the edge's lower cell (a), higher (b)
+  uint64_t na = 0, nb = 0;
+};
+struct Distances {
+  double a = 0, b = 0;
+};
+
+struct Block {
+  int kind = 0;  // 0 triangles, 1 segments, 2 points
+  uint64_t first = 0, count = 0;
+};
+
+struct BlockOut {
+  std::vector<std::array<uint32_t, 3>> triangles;  // input winding
+  std::vector<std::array<uint32_t, 2>> edges;      // lower cell first
+  std::vector<EdgeSums> sums;
+  std::vector<uint32_t> points;
+  std::vector<uint32_t> quadric_cells;
+  std::vector<core::Quadric> quadrics;
+  std::vector<uint32_t> distance_edges;  // pass B: global edge ids
+  std::vector<Distances> distances;
+  void clear() {
+    triangles.clear(), edges.clear(), sums.clear(), points.clear();
+    quadric_cells.clear(), quadrics.clear(), distance_edges.clear(), distances.clear();
+  }
+};
+
+struct Scratch {
+  FlatMap<3> triangles;
+  FlatMap<2> edges;
+  FlatMap<1> points;
+  FlatMap<1> cells;
+  void clear() { triangles.clear(), edges.clear(), points.clear(), cells.clear(); }
+};
+
+void add(double* sum, const double* p) {
+  sum[0] += p[0], sum[1] += p[1], sum[2] += p[2];
+}
+
+double distance_to_line(const double* x, const double* a, const double* b) {
+  const double d[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+  const double v[3] = {x[0] - a[0], x[1] - a[1], x[2] - a[2]};
+  const double len2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+  if (!(len2 > 0)) return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  const double c[3] = {v[1] * d[2] - v[2] * d[1], v[2] * d[0] - v[0] * d[2], v[0] * d[1] - v[1] * d[0]};
+  return std::sqrt((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) / len2);
+}
+
+}  // namespace
+
+EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
+                      const std::string& prefix, size_t level, uint64_t records, uint64_t cells, double cell_size,
+                      const core::ClusterOptions& cluster, const EmitOptions& options, Progress& progress,
+                      core::LodMesh* out) {
+  // The level's cluster map: stored vertex id -> cell.
+  std::vector<uint32_t> map(meta.vertices, core::kNoCell);
+  {
+    io::MappedFile order(order_path(prefix)), cell_file(cells_path(prefix, level));
+    if (order.size() != records * 4 || cell_file.size() != records * 4)
+      fail(Status::io_error, cell_file.path() + ": size does not match the weight index");
+    for (uint64_t first = 0; first < records; first += 1 << 20) {
+      const uint64_t n = std::min<uint64_t>(1 << 20, records - first);
+      const io::Window a = order.map(first * 4, (first + n) * 4), b = cell_file.map(first * 4, (first + n) * 4);
+      const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
+      const uint32_t* cs = reinterpret_cast<const uint32_t*>(b.data());
+      for (uint64_t i = 0; i < n; ++i) map[ids[i]] = cs[i];
+    }
+    if (!canonical_path.empty())
+      for_column_blocks(canonical_path, meta.vertices, 1, 1 << 20, [&](uint64_t first, std::span<const uint32_t> canon) {
+        for (uint64_t i = 0; i < canon.size(); ++i)
+          if (canon[i] != first + i) map[first + i] = map[canon[i]];
+      });
+  }
+
+  StorePositions positions(store_dir, meta);
+  positions.acquire();
+  const std::string column_path[3] = {store_dir + "/triangles.u32", store_dir + "/lines.u32", store_dir + "/points.u32"};
+  const uint64_t column_count[3] = {meta.triangles, meta.lines, meta.points};
+  std::unique_ptr<io::MappedFile> columns[3];
+  std::vector<Block> blocks;
+  for (int kind = 0; kind < 3; ++kind) {
+    if (column_count[kind] == 0) continue;
+    columns[kind] = std::make_unique<io::MappedFile>(column_path[kind]);
+    if (columns[kind]->size() != column_count[kind] * 4 * static_cast<uint64_t>(3 - kind))
+      fail(Status::io_error, column_path[kind] + ": size does not match store.json");
+    for (uint64_t first = 0; first < column_count[kind]; first += kEmitBlock)
+      blocks.push_back({kind, first, std::min(kEmitBlock, column_count[kind] - first)});
+  }
+  const bool quadric = options.representative == Representative::quadric && !options.count_only;
+
+  auto cell_of = [&](uint32_t v) {
+    const uint32_t c = map[v];
+    if (c == core::kNoCell) fail(Status::internal, "emit: vertex " + std::to_string(v) + " has no cell");
+    return c;
+  };
+
+  // Runs `work(block, out, scratch)` over the blocks in parallel groups, then `merge(out)` in block order.
+  tbb::enumerable_thread_specific<Scratch> scratch;
+  const size_t group = 4 * static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  std::vector<BlockOut> outs(group);
+  auto run_blocks = [&](const char* stage, bool segments_and_triangles_only, auto&& work, auto&& merge) {
+    for (size_t g = 0; g < blocks.size(); g += group) {
+      progress.check();
+      const size_t n = std::min(group, blocks.size() - g);
+      tbb::parallel_for(size_t{0}, n, [&](size_t i) {
+        const Block& b = blocks[g + i];
+        BlockOut& o = outs[i];
+        o.clear();
+        if (segments_and_triangles_only && b.kind == 2) return;
+        const uint64_t arity = static_cast<uint64_t>(3 - b.kind);
+        const io::Window w = columns[b.kind]->map(b.first * arity * 4, (b.first + b.count) * arity * 4);
+        Scratch& s = scratch.local();
+        s.clear();
+        work(b, std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), b.count * arity), o, s);
+      });
+      for (size_t i = 0; i < n; ++i) merge(outs[i]);
+      progress.report(stage, static_cast<double>(g + n) / static_cast<double>(blocks.size()));
+    }
+  };
+
+  // Pass A: classify, dedupe per block, sum edge corners and quadrics.
+  FlatMap<3> g_triangles;
+  FlatMap<2> g_edges;
+  FlatMap<1> g_points;
+  std::vector<std::array<uint32_t, 3>> triangles;
+  std::vector<std::array<uint32_t, 2>> edges;
+  std::vector<EdgeSums> sums;
+  std::vector<uint32_t> points;
+  std::vector<core::Quadric> quadrics(quadric ? cells : 0);
+
+  auto classify = [&](const Block& b, std::span<const uint32_t> ids, BlockOut& o, Scratch& s) {
+    auto edge = [&](uint32_t c0, uint32_t c1) -> EdgeSums& {
+      const std::array<uint32_t, 2> key{std::min(c0, c1), std::max(c0, c1)};
+      const auto [slot, fresh] = s.edges.insert(key, static_cast<uint32_t>(o.edges.size()));
+      if (fresh) o.edges.push_back(key), o.sums.emplace_back();
+      return o.sums[slot];
+    };
+    auto point = [&](uint32_t c) {
+      if (s.points.insert({c}, 0).second) o.points.push_back(c);
+    };
+    auto corner = [&](EdgeSums& e, uint32_t lower, uint32_t c, uint32_t v) {
+      if (options.count_only) return;
+      double p[3];
+      positions.get(v, p);
+      if (c == lower) add(e.a, p), ++e.na;
+      else add(e.b, p), ++e.nb;
+    };
+    const size_t arity = static_cast<size_t>(3 - b.kind);
+    for (size_t i = 0; i < ids.size(); i += arity) {
+      if (arity == 3) {
+        const uint32_t v[3] = {ids[i], ids[i + 1], ids[i + 2]};
+        const uint32_t c[3] = {cell_of(v[0]), cell_of(v[1]), cell_of(v[2])};
+        if (quadric) {
+          double p[3][3];
+          for (int k = 0; k < 3; ++k) positions.get(v[k], p[k]);
+          core::Quadric q;
+          q.add_triangle(p[0], p[1], p[2]);
+          for (int k = 0; k < 3; ++k) {
+            if ((k > 0 && c[k] == c[0]) || (k > 1 && c[k] == c[1])) continue;
+            const auto [slot, fresh] = s.cells.insert({c[k]}, static_cast<uint32_t>(o.quadrics.size()));
+            if (fresh) o.quadric_cells.push_back(c[k]), o.quadrics.push_back(q);
+            else o.quadrics[slot].add(q);
+          }
+        }
+        if (c[0] != c[1] && c[1] != c[2] && c[0] != c[2]) {
+          std::array<uint32_t, 3> key{c[0], c[1], c[2]};
+          std::sort(key.begin(), key.end());
+          if (s.triangles.insert(key, 0).second) o.triangles.push_back({c[0], c[1], c[2]});
+        } else if (c[0] == c[1] && c[1] == c[2]) {
+          point(c[0]);
+        } else {
+          const uint32_t other = c[0] != c[1] ? c[1] : c[2];
+          EdgeSums& e = edge(c[0], other);
+          const uint32_t lower = std::min(c[0], other);
+          for (int k = 0; k < 3; ++k) corner(e, lower, c[k], v[k]);
+        }
+      } else if (arity == 2) {
+        const uint32_t c0 = cell_of(ids[i]), c1 = cell_of(ids[i + 1]);
+        if (c0 == c1) {
+          point(c0);
+        } else {
+          EdgeSums& e = edge(c0, c1);
+          corner(e, std::min(c0, c1), c0, ids[i]);
+          corner(e, std::min(c0, c1), c1, ids[i + 1]);
+        }
+      } else {
+        point(cell_of(ids[i]));
+      }
+    }
+  };
+  run_blocks("emit", false, classify, [&](BlockOut& o) {
+    for (const auto& t : o.triangles) {
+      std::array<uint32_t, 3> key = t;
+      std::sort(key.begin(), key.end());
+      if (g_triangles.insert(key, 0).second) triangles.push_back(t);
+    }
+    for (size_t i = 0; i < o.edges.size(); ++i) {
+      const auto [slot, fresh] = g_edges.insert(o.edges[i], static_cast<uint32_t>(edges.size()));
+      if (fresh) edges.push_back(o.edges[i]), sums.emplace_back();
+      EdgeSums& e = sums[slot];
+      add(e.a, o.sums[i].a), add(e.b, o.sums[i].b);
+      e.na += o.sums[i].na, e.nb += o.sums[i].nb;
+    }
+    for (uint32_t c : o.points)
+      if (g_points.insert({c}, 0).second) points.push_back(c);
+    for (size_t i = 0; i < o.quadric_cells.size(); ++i) quadrics[o.quadric_cells[i]].add(o.quadrics[i]);
+  });
+
+  EmitCounts counts;
+  if (options.count_only) {
+    counts.triangles = triangles.size();
+    counts.edges = edges.size();
+    counts.points = points.size();
+    return counts;
+  }
+
+  // Pass B: mean distances of the collapsed corners to the line through the mean positions.
+  std::vector<std::array<double, 3>> pa(edges.size()), pb(edges.size());
+  for (size_t i = 0; i < edges.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      pa[i][k] = sums[i].na ? sums[i].a[k] / static_cast<double>(sums[i].na) : 0;
+      pb[i][k] = sums[i].nb ? sums[i].b[k] / static_cast<double>(sums[i].nb) : 0;
+    }
+  std::vector<Distances> distances(edges.size());
+  if (!edges.empty()) {
+    auto measure = [&](const Block& b, std::span<const uint32_t> ids, BlockOut& o, Scratch& s) {
+      const size_t arity = static_cast<size_t>(3 - b.kind);
+      for (size_t i = 0; i < ids.size(); i += arity) {
+        uint32_t c[3], lo = UINT32_MAX, hi = 0;
+        for (size_t k = 0; k < arity; ++k) c[k] = cell_of(ids[i + k]), lo = std::min(lo, c[k]), hi = std::max(hi, c[k]);
+        if (lo == hi) continue;
+        if (arity == 3 && c[0] != c[1] && c[1] != c[2] && c[0] != c[2]) continue;
+        const uint32_t e = g_edges.find({lo, hi});
+        const auto [slot, fresh] = s.edges.insert({e, 0}, static_cast<uint32_t>(o.distance_edges.size()));
+        if (fresh) o.distance_edges.push_back(e), o.distances.emplace_back();
+        for (size_t k = 0; k < arity; ++k) {
+          double p[3];
+          positions.get(ids[i + k], p);
+          const double d = distance_to_line(p, pa[e].data(), pb[e].data());
+          if (c[k] == lo) o.distances[slot].a += d;
+          else o.distances[slot].b += d;
+        }
+      }
+    };
+    run_blocks("emit", true, measure, [&](BlockOut& o) {
+      for (size_t i = 0; i < o.distance_edges.size(); ++i) {
+        distances[o.distance_edges[i]].a += o.distances[i].a;
+        distances[o.distance_edges[i]].b += o.distances[i].b;
+      }
+    });
+  }
+  positions.release();
+  std::vector<uint32_t>().swap(map);
+
+  // Elimination.
+  FlatMap<2> sides;
+  std::vector<uint8_t> used(cells, 0);
+  for (const auto& t : triangles)
+    for (int k = 0; k < 3; ++k) {
+      sides.insert({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])}, 0);
+      used[t[k]] = 1;
+    }
+  std::vector<uint32_t> kept_edges;
+  std::vector<float> thickness;
+  for (size_t i = 0; i < edges.size(); ++i) {
+    if (sides.find(edges[i]) != FlatMap<2>::empty) {
+      ++counts.edges_on_triangles;
+      continue;
+    }
+    kept_edges.push_back(static_cast<uint32_t>(i));
+    used[edges[i][0]] = used[edges[i][1]] = 1;
+    const double da = sums[i].na ? distances[i].a / static_cast<double>(sums[i].na) : 0;
+    const double db = sums[i].nb ? distances[i].b / static_cast<double>(sums[i].nb) : 0;
+    thickness.push_back(static_cast<float>(da + db));
+  }
+  std::vector<uint32_t> kept_points;
+  for (uint32_t c : points) {
+    if (used[c]) {
+      ++counts.points_covered;
+      continue;
+    }
+    kept_points.push_back(c);
+  }
+
+  // Representatives of the cells in use.
+  std::vector<CellInfo> info(cells);
+  {
+    io::MappedFile f(cell_info_path(prefix, level));
+    if (f.size() != cells * sizeof(CellInfo)) fail(Status::io_error, f.path() + ": size does not match");
+    const io::Window w = f.map(0, f.size());
+    if (cells) std::memcpy(info.data(), w.data(), f.size());
+  }
+  auto representative = [&](uint32_t c, double* p) {
+    const CellInfo& ci = info[c];
+    double mean[3];
+    for (int k = 0; k < 3; ++k) mean[k] = ci.sum[k] / static_cast<double>(ci.vertices);
+    if (options.representative == Representative::center) {
+      std::copy(ci.center, ci.center + 3, p);
+    } else if (options.representative == Representative::mean) {
+      for (int k = 0; k < 3; ++k) p[k] = ci.weight > 0 ? ci.weighted[k] / ci.weight : mean[k];
+    } else {
+      double lo[3], hi[3];
+      for (int k = 0; k < 3; ++k) {
+        if (cluster.clustering == core::Clustering::uniform) {
+          const double sq = static_cast<double>(core::grid_square(ci.center[k], cell_size));
+          lo[k] = sq * cell_size, hi[k] = (sq + 1) * cell_size;
+        } else {
+          lo[k] = ci.center[k] - cell_size / 2, hi[k] = ci.center[k] + cell_size / 2;
+        }
+      }
+      const std::array<double, 3> x = core::quadric_minimizer(quadrics[c], mean, lo, hi);
+      std::copy(x.begin(), x.end(), p);
+    }
+  };
+
+  // Output vertices in order of first use: triangle corners (split by normal), then edge and point ends.
+  core::LodMesh mesh;
+  std::vector<uint32_t> vertex_of(cells, UINT32_MAX);
+  std::vector<uint32_t> tri_cells;  // compact ids for the normals kernel
+  std::vector<uint32_t> compact_cell;
+  for (const auto& t : triangles)
+    for (uint32_t c : t) {
+      if (vertex_of[c] == UINT32_MAX) vertex_of[c] = static_cast<uint32_t>(compact_cell.size()), compact_cell.push_back(c);
+      tri_cells.push_back(vertex_of[c]);
+    }
+  std::vector<double> rep(3 * compact_cell.size());
+  for (size_t i = 0; i < compact_cell.size(); ++i) representative(compact_cell[i], &rep[3 * i]);
+  core::CreaseNormals normals;
+  core::crease_normals(rep, tri_cells, options.normals ? options.crease_degrees : 180.0, normals);
+  for (uint32_t v : normals.vertex)
+    for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(rep[3 * v + k]));
+  mesh.normals = normals.normals;
+  mesh.triangles = normals.triangles;
+  // Edge and point ends reuse a triangle vertex of their cell when there is one.
+  std::vector<uint32_t> out_vertex(cells, UINT32_MAX);
+  for (size_t i = 0; i < normals.vertex.size(); ++i) {
+    const uint32_t c = compact_cell[normals.vertex[i]];
+    if (out_vertex[c] == UINT32_MAX) out_vertex[c] = static_cast<uint32_t>(i);
+  }
+  auto end_vertex = [&](uint32_t c) {
+    if (out_vertex[c] == UINT32_MAX) {
+      out_vertex[c] = static_cast<uint32_t>(mesh.positions.size() / 3);
+      double p[3];
+      representative(c, p);
+      for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(p[k])), mesh.normals.push_back(0.0f);
+    }
+    return out_vertex[c];
+  };
+  for (uint32_t i : kept_edges) {
+    mesh.edges.push_back(end_vertex(edges[i][0]));
+    mesh.edges.push_back(end_vertex(edges[i][1]));
+  }
+  mesh.thickness = std::move(thickness);
+  for (uint32_t c : kept_points) mesh.points.push_back(end_vertex(c));
+
+  counts.triangles = mesh.triangle_count();
+  counts.edges = mesh.edge_count();
+  counts.points = mesh.point_count();
+  *out = std::move(mesh);
+  return counts;
+}
+
+}  // namespace lodstream::stream

@@ -1,0 +1,301 @@
+// Stages 2 and 3: weld by position, grade per id range (bucket files carry the seams), sort into the
+// weight index. See grade_stage.h for the contract.
+#include "stream/grade_stage.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <vector>
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include "core/status.h"
+#include "io/file_writer.h"
+#include "io/mapped_file.h"
+#include "stream/distinct_count.h"
+#include "stream/external_sort.h"
+#include "stream/store_access.h"
+
+namespace lodstream::stream {
+
+namespace {
+
+constexpr uint64_t kBlock = 1 << 18;  // primitives per mapped block
+constexpr uint64_t kMaxRanges = 256;
+
+// Stored vertex id -> canonical id: the identity, or the weld map file.
+class Canonical {
+ public:
+  Canonical(const std::string& path, uint64_t vertices) {
+    if (path.empty()) return;
+    file_ = std::make_unique<io::MappedFile>(path);
+    if (file_->size() != vertices * 4) fail(Status::io_error, path + ": size does not match the store");
+  }
+  void acquire() {
+    if (file_ && !window_.data()) window_ = file_->map(0, file_->size());
+  }
+  void release() { window_.reset(); }
+  uint32_t operator()(uint32_t v) const {
+    return window_.data() ? reinterpret_cast<const uint32_t*>(window_.data())[v] : v;
+  }
+
+ private:
+  std::unique_ptr<io::MappedFile> file_;
+  io::Window window_;
+};
+
+struct Columns {
+  std::string path[3];
+  uint64_t count[3];
+  static constexpr int arity[3] = {3, 2, 1};
+};
+
+// Visits the store's primitives of each kind (0 triangles, 1 segments, 2 points) in blocks, with ids
+// mapped to canonical ids: visit(kind, first primitive, ids).
+template <class Visit>
+void visit_store(const Columns& c, const Canonical& canonical, Visit&& visit) {
+  std::vector<uint32_t> mapped;
+  for (int kind = 0; kind < 3; ++kind) {
+    for_column_blocks(c.path[kind], c.count[kind], Columns::arity[kind], kBlock,
+                      [&](uint64_t first, std::span<const uint32_t> ids) {
+                        mapped.resize(ids.size());
+                        tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size(), 1 << 14),
+                                          [&](const tbb::blocked_range<size_t>& r) {
+                                            for (size_t i = r.begin(); i < r.end(); ++i) mapped[i] = canonical(ids[i]);
+                                          });
+                        visit(kind, first, std::span<const uint32_t>(mapped));
+                      });
+  }
+}
+
+double triangle_area(const double* a, const double* b, const double* c) {
+  const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+  const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+  const double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+  return 0.5 * std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+}
+
+// Sum of the areas of a block of triangles, in triangle order (a fixed order: the same bits every run).
+double block_area(std::span<const uint32_t> tris, const StorePositions& pos) {
+  double sum = 0;
+  for (size_t i = 0; i < tris.size(); i += 3) {
+    double a[3], b[3], c[3];
+    pos.get(tris[i], a), pos.get(tris[i + 1], b), pos.get(tris[i + 2], c);
+    sum += triangle_area(a, b, c);
+  }
+  return sum;
+}
+
+}  // namespace
+
+GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta, core::Grading mode,
+                            const MemoryPlan& plan, const WorkDir& work, Progress& progress,
+                            const std::string& canonical_path, const std::string& index_path,
+                            uint64_t max_range_vertices) {
+  GradeSummary summary;
+  const uint64_t n_vertices = meta.vertices;
+  Columns columns{{store_dir + "/triangles.u32", store_dir + "/lines.u32", store_dir + "/points.u32"},
+                  {meta.triangles, meta.lines, meta.points}};
+
+  // Weld. STL stores are welded at ingest already.
+  bool welded = false;
+  if (meta.format.rfind("stl", 0) == 0 || n_vertices == 0) {
+    summary.distinct_positions = n_vertices;
+  } else {
+    std::vector<uint32_t> canonical(n_vertices);
+    const uint64_t held = n_vertices * 4;
+    summary.distinct_positions = weld_positions(
+        store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), n_vertices, meta.single_precision,
+        plan.stage_bytes > held + (16 << 20) ? plan.stage_bytes - held : (16 << 20), progress, canonical);
+    if (summary.distinct_positions < n_vertices) {
+      io::FileWriter w(canonical_path, 4 << 20);
+      w.write_array(std::span<const uint32_t>(canonical));
+      w.commit();
+      welded = true;
+    }
+  }
+  Canonical canonical(welded ? canonical_path : std::string(), n_vertices);
+  StorePositions positions(store_dir, meta);
+
+  // Range size from the budget: per vertex its offsets, counters, a record, and its share of incidence
+  // entries (two per triangle corner, one per segment end).
+  const double incidences = n_vertices ? static_cast<double>(6 * meta.triangles + 2 * meta.lines) / static_cast<double>(n_vertices) : 0;
+  const uint64_t per_vertex = 8 + 4 + 8 + sizeof(WeightRecord) + static_cast<uint64_t>(std::ceil(4 * incidences));
+  const uint64_t range_budget = std::max<uint64_t>(plan.stage_bytes / 3, 16 << 20);
+  uint64_t range = std::max<uint64_t>(range_budget / per_vertex, 4096);
+  if (max_range_vertices) range = std::min(range, max_range_vertices);
+  range = std::max<uint64_t>({range, (n_vertices + kMaxRanges - 1) / kMaxRanges, 1});
+  const uint64_t n_ranges = std::max<uint64_t>((n_vertices + range - 1) / range, 1);
+  summary.ranges = n_ranges;
+
+  // Scatter into bucket files when there is more than one range; sum the area on the way.
+  std::vector<double> area_parts;
+  std::vector<std::string> bucket_paths[3];
+  canonical.acquire();
+  positions.acquire();
+  if (n_ranges > 1) {
+    const size_t buffer = static_cast<size_t>(std::clamp<uint64_t>(range_budget / (3 * n_ranges), 64 << 10, 1 << 20));
+    std::vector<std::unique_ptr<io::FileWriter>> writers[3];
+    for (int kind = 0; kind < 3; ++kind)
+      for (uint64_t r = 0; r < n_ranges; ++r) {
+        bucket_paths[kind].push_back(work.scratch("grade-bucket"));
+        writers[kind].push_back(std::make_unique<io::FileWriter>(bucket_paths[kind].back(), buffer));
+      }
+    std::vector<std::vector<uint32_t>> out(n_ranges);
+    uint64_t done = 0;
+    const uint64_t total = meta.triangles + meta.lines + meta.points;
+    visit_store(columns, canonical, [&](int kind, uint64_t, std::span<const uint32_t> ids) {
+      const int arity = Columns::arity[kind];
+      if (kind == 0) area_parts.push_back(block_area(ids, positions));
+      for (auto& o : out) o.clear();
+      for (size_t i = 0; i < ids.size(); i += static_cast<size_t>(arity)) {
+        uint64_t seen[3];
+        int n_seen = 0;
+        for (int k = 0; k < arity; ++k) {
+          const uint64_t r = ids[i + k] / range;
+          bool dup = false;
+          for (int j = 0; j < n_seen; ++j) dup |= seen[j] == r;
+          if (dup) continue;
+          seen[n_seen++] = r;
+          out[r].insert(out[r].end(), ids.begin() + i, ids.begin() + i + arity);
+        }
+      }
+      for (uint64_t r = 0; r < n_ranges; ++r) writers[kind][r]->write_array(std::span<const uint32_t>(out[r]));
+      done += ids.size() / arity;
+      progress.report("grade", 0.3 * static_cast<double>(done) / static_cast<double>(std::max<uint64_t>(total, 1)));
+    });
+    for (auto& ws : writers)
+      for (auto& w : ws) w->commit();
+  }
+  for (double a : area_parts) summary.surface_area += a;
+
+  ExternalSorter<WeightRecord, WeightLess> sorter(work, "weights", std::max<uint64_t>(plan.stage_bytes / 3, 4 << 20));
+  std::vector<uint32_t> count;
+  std::vector<uint64_t> offset;
+  std::vector<uint32_t> neighbours;
+  std::vector<uint8_t> used;
+  std::vector<double> grades;
+  struct Local {
+    core::GradeScratch scratch;
+    std::vector<double> nbr;
+  };
+  tbb::enumerable_thread_specific<Local> locals;
+
+  for (uint64_t r = 0; r < n_ranges; ++r) {
+    progress.check();
+    const uint64_t lo = r * range, hi = std::min(n_vertices, lo + range), n = hi - lo;
+    // The range's primitives: its bucket files, or the whole store.
+    auto visit = [&](auto&& fn) {
+      if (n_ranges == 1) {
+        visit_store(columns, canonical, [&](int kind, uint64_t, std::span<const uint32_t> ids) { fn(kind, ids); });
+      } else {
+        for (int kind = 0; kind < 3; ++kind) {
+          const uint64_t bytes = std::filesystem::file_size(bucket_paths[kind][r]);
+          for_column_blocks(bucket_paths[kind][r], bytes / (4 * Columns::arity[kind]), Columns::arity[kind], kBlock,
+                            [&](uint64_t, std::span<const uint32_t> ids) { fn(kind, ids); });
+        }
+      }
+    };
+    // Pass 1: incidence counts (and, with one range, the area).
+    count.assign(n, 0);
+    used.assign(n, 0);
+    visit([&](int kind, std::span<const uint32_t> ids) {
+      const size_t arity = static_cast<size_t>(Columns::arity[kind]);
+      if (kind == 0 && n_ranges == 1) area_parts.push_back(block_area(ids, positions));
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size() / arity, 1 << 12), [&](const tbb::blocked_range<size_t>& b) {
+        for (size_t i = b.begin(); i < b.end(); ++i) {
+          const uint32_t* p = &ids[i * arity];
+          for (size_t k = 0; k < arity; ++k) {
+            if (p[k] < lo || p[k] >= hi) continue;
+            const uint64_t l = p[k] - lo;
+            std::atomic_ref<uint8_t>(used[l]).store(1, std::memory_order_relaxed);
+            uint32_t others = 0;
+            for (size_t j = 0; j < arity; ++j) others += j != k && p[j] != p[k];
+            if (others) std::atomic_ref<uint32_t>(count[l]).fetch_add(others, std::memory_order_relaxed);
+          }
+        }
+      });
+    });
+    if (n_ranges == 1)
+      for (double a : area_parts) summary.surface_area += a;
+    offset.assign(n + 1, 0);
+    for (uint64_t i = 0; i < n; ++i) offset[i + 1] = offset[i] + count[i];
+    neighbours.resize(offset[n]);
+    for (uint64_t i = 0; i < n; ++i) count[i] = 0;
+    // Pass 2: fill (in any order: each list is sorted below).
+    visit([&](int kind, std::span<const uint32_t> ids) {
+      const size_t arity = static_cast<size_t>(Columns::arity[kind]);
+      if (arity == 1) return;
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size() / arity, 1 << 12), [&](const tbb::blocked_range<size_t>& b) {
+        for (size_t i = b.begin(); i < b.end(); ++i) {
+          const uint32_t* p = &ids[i * arity];
+          for (size_t k = 0; k < arity; ++k) {
+            if (p[k] < lo || p[k] >= hi) continue;
+            const uint64_t l = p[k] - lo;
+            for (size_t j = 0; j < arity; ++j) {
+              if (j == k || p[j] == p[k]) continue;
+              const uint32_t at = std::atomic_ref<uint32_t>(count[l]).fetch_add(1, std::memory_order_relaxed);
+              neighbours[offset[l] + at] = p[j];
+            }
+          }
+        }
+      });
+    });
+    // Grade.
+    grades.assign(n, 0);
+    tbb::parallel_for(tbb::blocked_range<uint64_t>(0, n, 1 << 10), [&](const tbb::blocked_range<uint64_t>& b) {
+      Local& loc = locals.local();
+      for (uint64_t l = b.begin(); l < b.end(); ++l) {
+        if (!used[l]) continue;
+        uint32_t* first = neighbours.data() + offset[l];
+        uint32_t* last = neighbours.data() + offset[l + 1];
+        std::sort(first, last);
+        last = std::unique(first, last);
+        loc.nbr.resize(3 * static_cast<size_t>(last - first));
+        for (uint32_t* it = first; it != last; ++it) positions.get(*it, &loc.nbr[3 * (it - first)]);
+        double p[3];
+        positions.get(lo + l, p);
+        grades[l] = core::grade_vertex(std::span<const double, 3>(p, 3), loc.nbr, mode, loc.scratch).grade;
+      }
+    });
+    for (uint64_t l = 0; l < n; ++l) {
+      if (!used[l]) continue;
+      WeightRecord rec{grades[l], static_cast<uint32_t>(lo + l), 0, {0, 0, 0}};
+      positions.get(lo + l, rec.position);
+      sorter.push(rec);
+      ++summary.records;
+    }
+    // Drop the mapped pages this range touched from the resident set.
+    positions.release();
+    canonical.release();
+    positions.acquire();
+    canonical.acquire();
+    if (n_ranges > 1)
+      for (int kind = 0; kind < 3; ++kind) std::filesystem::remove(bucket_paths[kind][r]);
+    progress.report("grade", 0.3 + 0.5 * static_cast<double>(r + 1) / static_cast<double>(n_ranges));
+  }
+  positions.release();
+  canonical.release();
+  std::vector<uint32_t>().swap(count);
+  std::vector<uint64_t>().swap(offset);
+  std::vector<uint32_t>().swap(neighbours);
+  std::vector<uint8_t>().swap(used);
+  std::vector<double>().swap(grades);
+
+  io::FileWriter out(index_path, 4 << 20);
+  uint64_t written = 0;
+  sorter.merge([&](const WeightRecord& rec) {
+    out.write(&rec, sizeof rec);
+    if ((++written & 0xFFFFF) == 0)
+      progress.report("sort", static_cast<double>(written) / static_cast<double>(summary.records));
+  });
+  out.commit();
+  progress.report("sort", 1);
+  return summary;
+}
+
+}  // namespace lodstream::stream

@@ -1,0 +1,55 @@
+// What every public entry point shares: stages timed and measured one by one, exceptions turned into a
+// Result at the API boundary.
+#pragma once
+
+#include <chrono>
+#include <new>
+#include <type_traits>
+#include <vector>
+
+#include "core/status.h"
+#include "lodstream/lodstream.h"
+#include "stream/memory.h"
+
+namespace lodstream::stream {
+
+// Runs `body(StageStats&)` as the named stage and appends its time and peak memory to `stages`. The
+// process's VmHWM is reset first, so each stage's peak is its own.
+template <class Body>
+auto run_stage(std::vector<StageStats>* stages, const char* name, Body&& body) {
+  reset_peak_rss();
+  const auto t0 = std::chrono::steady_clock::now();
+  StageStats st;
+  st.name = name;
+  auto finish = [&] {
+    st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    st.peak_rss_bytes = peak_rss_bytes();
+    stages->push_back(st);
+  };
+  if constexpr (std::is_void_v<decltype(body(st))>) {
+    body(st);
+    finish();
+  } else {
+    auto r = body(st);
+    finish();
+    return r;
+  }
+}
+
+template <class Job>
+Result guarded(Job&& job) {
+  try {
+    job();
+    return {};
+  } catch (const Failure& f) {
+    return {f.status(), f.what()};
+  } catch (const std::bad_alloc&) {
+    return {Status::internal, "out of memory (raise --memory or free memory)"};
+  } catch (const std::exception& e) {
+    return {Status::internal, std::string("internal error: ") + e.what()};
+  } catch (...) {
+    return {Status::internal, "internal error"};
+  }
+}
+
+}  // namespace lodstream::stream

@@ -1,0 +1,424 @@
+// `simplify`: the LOD pipeline of ../shared/DESIGN.md, stage by stage: ingest -> grade (weld, grade, sort
+// into the weight index) -> cluster (every level in one ordered pass) -> emit and write each level ->
+// manifest.json. Each stage leaves its result in the work directory with a stamp of what it was made from,
+// and a later run with the same inputs and options reuses it.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <tbb/task_arena.h>
+
+#include "core/floating_cell.h"
+#include "core/grade.h"
+#include "core/mesh.h"
+#include "core/status.h"
+#include "io/file_writer.h"
+#include "io/glb_writer.h"
+#include "io/obj_writer.h"
+#include "io/ply_writer.h"
+#include "lodstream/lodstream.h"
+#include "stream/cluster_stage.h"
+#include "stream/emit_stage.h"
+#include "stream/grade_stage.h"
+#include "stream/ingest.h"
+#include "stream/job.h"
+#include "stream/memory.h"
+#include "stream/progress.h"
+#include "stream/work_dir.h"
+
+namespace lodstream {
+
+namespace {
+
+using nlohmann::ordered_json;
+using stream::guarded;
+using stream::run_stage;
+
+constexpr int kStampVersion = 1;
+constexpr uint64_t kCoarsestTarget = 4000;  // "a few thousand" triangles at the coarsest default level
+constexpr unsigned kMaxLevels = 32;
+constexpr unsigned kMaxSearchPasses = 12;
+constexpr double kTargetTolerance = 0.15;
+
+const char* name(Grading g) { return g == Grading::lowtan ? "lowtan" : "rossignac"; }
+const char* name(Clustering c) { return c == Clustering::floating ? "floating" : "uniform"; }
+const char* name(CellShape c) { return c == CellShape::cube ? "cube" : "sphere"; }
+const char* name(CellVariant v) { return v == CellVariant::nearest ? "nearest" : "heaviest"; }
+const char* name(Representative r) {
+  return r == Representative::center ? "center" : r == Representative::mean ? "mean" : "quadric";
+}
+
+// Exact text for a double (hex float), for stamps.
+std::string exact(double v) { return fmt::format("{:a}", v); }
+
+void check_options(const SimplifyOptions& s) {
+  auto usage = [](const std::string& m) { fail(Status::usage, m); };
+  if (s.output_dir.empty()) usage("an output directory is required (-o DIR)");
+  if (!s.cell_sizes.empty() && !s.target_triangles.empty()) usage("give --cell-sizes or --target-triangles, not both");
+  for (size_t i = 0; i < s.cell_sizes.size(); ++i) {
+    const double c = s.cell_sizes[i];
+    if (!(c >= core::kMinCellSize && c <= core::kMaxCellSize)) usage(fmt::format("--cell-sizes: {} is not a usable cell size", c));
+    if (i > 0 && !(c > s.cell_sizes[i - 1])) usage("--cell-sizes must be strictly increasing");
+  }
+  for (size_t i = 0; i < s.target_triangles.size(); ++i) {
+    if (s.target_triangles[i] == 0) usage("--target-triangles: targets must be positive");
+    if (i > 0 && !(s.target_triangles[i] < s.target_triangles[i - 1]))
+      usage("--target-triangles must be strictly decreasing (finest level first)");
+  }
+  const size_t levels = !s.cell_sizes.empty() ? s.cell_sizes.size() : !s.target_triangles.empty() ? s.target_triangles.size() : s.levels;
+  if (levels < 1 || levels > kMaxLevels) usage(fmt::format("--levels must be between 1 and {}", kMaxLevels));
+  if (!(s.fov_degrees > 0 && s.fov_degrees < 180)) usage("--fov must be between 0 and 180 degrees");
+  if (s.resolution == 0) usage("--resolution must be positive");
+  if (!(s.pixels_per_cell > 0 && std::isfinite(s.pixels_per_cell))) usage("--pixels-per-cell must be positive");
+  if (!(s.crease_degrees >= 0 && s.crease_degrees <= 180)) usage("--crease must be between 0 and 180 degrees");
+  if (!s.write_ply && !s.write_obj && !s.write_glb) usage("nothing to write: enable at least one of PLY, OBJ, GLB");
+}
+
+core::ClusterOptions cluster_options(const SimplifyOptions& s) {
+  core::ClusterOptions o;
+  o.clustering = s.clustering == Clustering::floating ? core::Clustering::floating : core::Clustering::uniform;
+  o.shape = s.cell == CellShape::cube ? core::CellShape::cube : core::CellShape::sphere;
+  o.choice = s.variant == CellVariant::nearest ? core::CellChoice::nearest : core::CellChoice::heaviest;
+  return o;
+}
+
+stream::Representative representative(const SimplifyOptions& s) {
+  return s.representative == Representative::center ? stream::Representative::center
+         : s.representative == Representative::mean ? stream::Representative::mean
+                                                      : stream::Representative::quadric;
+}
+
+double diagonal(const stream::Bbox& b) {
+  if (b.empty) return 0;
+  double d2 = 0;
+  for (int k = 0; k < 3; ++k) d2 += (b.max[k] - b.min[k]) * (b.max[k] - b.min[k]);
+  return std::sqrt(d2);
+}
+
+// Every coordinate must be within the clusterer's range for the finest level (core/floating_cell.h).
+void check_cell_sizes(std::span<const double> sizes, const stream::Bbox& box) {
+  for (double c : sizes) {
+    if (!(c >= core::kMinCellSize && c <= core::kMaxCellSize)) fail(Status::usage, fmt::format("cell size {} is out of range", c));
+    for (int k = 0; k < 3; ++k) {
+      const double extent = std::max(std::abs(box.min[k]), std::abs(box.max[k]));
+      if (!(extent < core::kMaxSquaresPerAxis * (c / 2)))
+        fail(Status::usage, fmt::format("cell size {} is too small for coordinates as large as {}", c, extent));
+    }
+  }
+}
+
+// Default cell sizes: targets falling geometrically from the input's triangle count to a few thousand, and
+// for each the size at which a surface of the scene's area is covered by about that many triangles
+// (a surface cut into cells of side c gives about 1.5·A/c² cells and twice as many triangles).
+std::vector<double> default_cell_sizes(unsigned levels, uint64_t triangles, double area, double diag) {
+  std::vector<double> sizes;
+  const double t0 = static_cast<double>(std::max<uint64_t>(triangles, 1));
+  const double ratio = std::pow(std::min(1.0, static_cast<double>(kCoarsestTarget) / t0), 1.0 / levels);
+  for (unsigned l = 0; l < levels; ++l) {
+    const double target = std::max(1.0, t0 * std::pow(ratio, l + 1));
+    double c = area > 0 ? std::sqrt(3 * area / target) : (diag > 0 ? diag / std::sqrt(target) : 1.0);
+    if (!sizes.empty() && !(c > sizes.back())) c = sizes.back() * 2;
+    sizes.push_back(c);
+  }
+  return sizes;
+}
+
+ordered_json source_json(const stream::StoreMeta& m) {
+  return {{"path", m.source.path}, {"bytes", m.source.bytes}, {"mtime_ns", m.source.mtime_ns}, {"format", m.format}};
+}
+
+// A stage's stamp: reused when it exists, holds `key`, and every listed file exists.
+bool stamp_matches(const std::string& path, const ordered_json& key, ordered_json* value) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) return false;
+  try {
+    ordered_json j = ordered_json::parse(io::read_small_file(path));
+    if (j.at("key") != key) return false;
+    for (const auto& f : j.at("files"))
+      if (!std::filesystem::exists(f.get<std::string>(), ec)) return false;
+    *value = j.at("value");
+    return true;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+void write_stamp(const std::string& path, const ordered_json& key, const std::vector<std::string>& files,
+                 const ordered_json& value) {
+  io::write_file_atomic(path, ordered_json{{"key", key}, {"files", files}, {"value", value}}.dump(1) + "\n");
+}
+
+}  // namespace
+
+Result simplify(const std::string& input, const SimplifyOptions& so, const Options& options, SimplifyReport* out) {
+  return guarded([&] {
+    const auto t0 = std::chrono::steady_clock::now();
+    check_options(so);
+    const stream::MemoryPlan plan = stream::plan_memory(options);
+    stream::Progress progress(options);
+    stream::WorkDir work(options.work_dir);
+    const std::string store_dir = work.subdir("store");
+    const core::ClusterOptions copts = cluster_options(so);
+    SimplifyReport report;
+    report.input = input;
+
+    tbb::task_arena arena(static_cast<int>(plan.threads));
+    arena.execute([&] {
+      bool reused = false;
+      const stream::StoreMeta meta = run_stage(&report.stages, "ingest", [&](StageStats& st) {
+        auto m = stream::ingest(input, store_dir, plan, work, progress, &reused);
+        st.reused = reused;
+        return m;
+      });
+      report.scene.path = input;
+      report.scene.format = meta.format;
+      report.scene.file_bytes = meta.source.bytes;
+      report.scene.vertex_records = meta.vertex_records;
+      report.scene.vertices = meta.vertices;
+      report.scene.polygons = meta.polygons;
+      report.scene.triangles = meta.triangles;
+      report.scene.degenerate = meta.degenerate;
+      report.scene.degenerate_segments = meta.degenerate_segments;
+      report.scene.lines = meta.lines;
+      report.scene.points = meta.points;
+      report.scene.objects = meta.objects_used;
+      report.scene.skipped_statements = meta.skipped;
+      for (int k = 0; k < 3; ++k) report.scene.bbox_min[k] = meta.bbox.min[k], report.scene.bbox_max[k] = meta.bbox.max[k];
+      if (meta.triangles + meta.lines + meta.points == 0)
+        fail(Status::bad_data, input + ": nothing to simplify (no triangles, lines or points)");
+
+      // Grade and sort.
+      const std::string canonical_path = work.file("weld.u32");
+      const std::string index_path = work.file("weights.idx");
+      const ordered_json grade_key{{"version", kStampVersion}, {"source", source_json(meta)}, {"grading", name(so.grading)}};
+      const stream::GradeSummary grade = run_stage(&report.stages, "grade", [&](StageStats& st) {
+        ordered_json v;
+        if (stamp_matches(work.file("grade.json"), grade_key, &v)) {
+          st.reused = true;
+          stream::GradeSummary g;
+          g.records = v.at("records");
+          g.distinct_positions = v.at("distinct_positions");
+          g.surface_area = v.at("surface_area");
+          g.ranges = v.at("ranges");
+          return g;
+        }
+        std::filesystem::remove(work.file("grade.json"));
+        std::filesystem::remove(canonical_path);
+        const stream::GradeSummary g = stream::grade_and_sort(
+            store_dir, meta, so.grading == Grading::lowtan ? core::Grading::lowtan : core::Grading::rossignac, plan,
+            work, progress, canonical_path, index_path, so.grade_range_vertices);
+        std::vector<std::string> files{index_path};
+        if (g.distinct_positions < meta.vertices) files.push_back(canonical_path);
+        write_stamp(work.file("grade.json"), grade_key, files,
+                    {{"records", g.records}, {"distinct_positions", g.distinct_positions},
+                     {"surface_area", g.surface_area}, {"ranges", g.ranges}});
+        return g;
+      });
+      report.vertices_graded = grade.records;
+      report.distinct_positions = grade.distinct_positions;
+      report.surface_area = grade.surface_area;
+      report.grade_ranges = grade.ranges;
+      const std::string canonical = grade.distinct_positions < meta.vertices ? canonical_path : std::string();
+
+      const stream::EmitOptions count_only{representative(so), so.crease_degrees, true, true};
+      const std::string prefix = work.file("");
+      const ordered_json cluster_base{{"grade", grade_key},
+                                      {"clustering", name(so.clustering)},
+                                      {"cell", name(so.cell)},
+                                      {"variant", name(so.variant)}};
+      // Clusters at `sizes` unless the stamp says it is done; returns cells per level.
+      auto cluster = [&](const std::vector<double>& sizes, StageStats* st) {
+        ordered_json key = cluster_base;
+        std::vector<std::string> hex;
+        for (double c : sizes) hex.push_back(exact(c));
+        key["cell_sizes"] = hex;
+        ordered_json v;
+        if (stamp_matches(work.file("cluster.json"), key, &v)) {
+          if (st) st->reused = true;
+          return v.at("cells").get<std::vector<uint64_t>>();
+        }
+        std::filesystem::remove(work.file("cluster.json"));
+        check_cell_sizes(sizes, meta.bbox);
+        const stream::ClusterSummary cs = stream::cluster_levels(index_path, grade.records, sizes, copts, work, progress, prefix);
+        std::vector<std::string> files{stream::order_path(prefix)};
+        for (size_t l = 0; l < sizes.size(); ++l) {
+          files.push_back(stream::cells_path(prefix, l));
+          files.push_back(stream::cell_info_path(prefix, l));
+        }
+        write_stamp(work.file("cluster.json"), key, files, {{"cells", cs.cells}});
+        return cs.cells;
+      };
+
+      // Cell sizes: given, searched for, or the default estimate.
+      std::vector<double> sizes = so.cell_sizes;
+      if (sizes.empty()) {
+        const unsigned levels = so.target_triangles.empty() ? so.levels : static_cast<unsigned>(so.target_triangles.size());
+        sizes = default_cell_sizes(levels, meta.triangles, grade.surface_area, diagonal(meta.bbox));
+      }
+      if (!so.target_triangles.empty()) {
+        run_stage(&report.stages, "search", [&](StageStats&) {
+          const auto ts = std::chrono::steady_clock::now();
+          const size_t n = sizes.size();
+          std::vector<double> lo(n, 0), hi(n, 0), best(sizes);
+          std::vector<double> best_err(n, INFINITY);
+          for (unsigned pass = 0; pass < kMaxSearchPasses; ++pass) {
+            const std::vector<uint64_t> cells = cluster(sizes, nullptr);
+            ++report.search_iterations;
+            bool all_ok = true;
+            std::vector<double> next(sizes);
+            for (size_t l = 0; l < n; ++l) {
+              core::LodMesh none;
+              const stream::EmitCounts c = stream::emit_level(store_dir, meta, canonical, prefix, l, grade.records, cells[l],
+                                                              sizes[l], copts, count_only, progress, &none);
+              const double t = static_cast<double>(so.target_triangles[l]);
+              const double got = std::max(static_cast<double>(c.triangles), 0.5);
+              const double err = std::abs(std::log(got / t));
+              if (err < best_err[l]) best_err[l] = err, best[l] = sizes[l];
+              if (std::abs(got - t) <= kTargetTolerance * t) continue;
+              all_ok = false;
+              if (got > t) lo[l] = std::max(lo[l], sizes[l]);  // cells too small
+              else hi[l] = hi[l] > 0 ? std::min(hi[l], sizes[l]) : sizes[l];
+              // Triangle counts fall about as c^-2; bisect (geometrically) when that step leaves the bracket.
+              double step = sizes[l] * std::sqrt(got / t);
+              if ((lo[l] > 0 && !(step > lo[l])) || (hi[l] > 0 && !(step < hi[l])))
+                step = lo[l] > 0 && hi[l] > 0 ? std::sqrt(lo[l] * hi[l]) : (lo[l] > 0 ? lo[l] * 2 : hi[l] / 2);
+              next[l] = step;
+            }
+            if (all_ok) break;
+            for (size_t l = 1; l < n; ++l)
+              if (!(next[l] > next[l - 1])) next[l] = next[l - 1] * (1 + 1e-6);
+            if (next == sizes) break;
+            sizes = next;
+          }
+          sizes = best;
+          for (size_t l = 1; l < n; ++l)
+            if (!(sizes[l] > sizes[l - 1])) sizes[l] = sizes[l - 1] * (1 + 1e-9);
+          report.search_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+        });
+      }
+
+      const std::vector<uint64_t> cells = run_stage(&report.stages, "cluster", [&](StageStats& st) { return cluster(sizes, &st); });
+
+      // Emit and write.
+      std::error_code ec;
+      std::filesystem::create_directories(so.output_dir, ec);
+      if (ec || !std::filesystem::is_directory(so.output_dir))
+        fail(Status::io_error, so.output_dir + ": cannot create the output directory" + (ec ? ": " + ec.message() : ""));
+      const double tan_half = std::tan(so.fov_degrees * M_PI / 360);
+      const double diag = diagonal(meta.bbox);
+      std::vector<core::LodMesh> meshes(sizes.size());
+      const stream::EmitOptions emit_options{representative(so), so.crease_degrees, true, false};
+      run_stage(&report.stages, "emit", [&](StageStats&) {
+        for (size_t l = 0; l < sizes.size(); ++l) {
+          LevelStats ls;
+          ls.cell_size = sizes[l];
+          ls.cells = cells[l];
+          const stream::EmitCounts c = stream::emit_level(store_dir, meta, canonical, prefix, l, grade.records, cells[l],
+                                                          sizes[l], copts, emit_options, progress, &meshes[l]);
+          ls.vertices = meshes[l].vertex_count();
+          ls.triangles = c.triangles;
+          ls.edges = c.edges;
+          ls.points = c.points;
+          ls.edges_on_triangles = c.edges_on_triangles;
+          ls.points_covered = c.points_covered;
+          ls.target_triangles = so.target_triangles.empty() ? 0 : so.target_triangles[l];
+          ls.switch_distance = sizes[l] * so.resolution / (2 * so.pixels_per_cell * tan_half);
+          ls.screen_coverage = diag > 0 ? diag / (2 * ls.switch_distance * tan_half) : 0;
+          report.levels.push_back(ls);
+        }
+      });
+      run_stage(&report.stages, "write", [&](StageStats&) {
+        const std::string generator = std::string("lodstream ") + LODSTREAM_VERSION;
+        for (size_t l = 0; l < sizes.size(); ++l) {
+          const std::vector<std::string> comments{
+              generator, fmt::format("level {} of {}, cell size {}", l, sizes.size(), sizes[l]),
+              fmt::format("clustering {} {} {}, representative {}, grading {}", name(so.clustering), name(so.cell),
+                          name(so.variant), name(so.representative), name(so.grading))};
+          const std::string stem = fmt::format("lod{}", l);
+          if (so.write_ply) {
+            io::write_ply(so.output_dir + "/" + stem + ".ply", meshes[l], comments);
+            report.levels[l].files.push_back(stem + ".ply");
+          }
+          if (so.write_obj) {
+            io::write_obj(so.output_dir + "/" + stem + ".obj", meshes[l], comments);
+            report.levels[l].files.push_back(stem + ".obj");
+          }
+          progress.report("write", static_cast<double>(l + 1) / static_cast<double>(sizes.size() + 1));
+        }
+        if (so.write_glb) {
+          // MSFT_screencoverage: level l is shown while the coverage is at least the coverage at which the
+          // next level takes over; the last level down to one pixel.
+          std::vector<io::GlbLevel> glb;
+          for (size_t l = 0; l < sizes.size(); ++l) {
+            const double lower = l + 1 < sizes.size() ? report.levels[l + 1].screen_coverage : 1.0 / so.resolution;
+            glb.push_back({&meshes[l], fmt::format("lod{}", l), lower});
+          }
+          io::write_glb(so.output_dir + "/lods.glb", glb, generator);
+        }
+        progress.report("write", 1);
+      });
+    });
+    report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    for (const StageStats& s : report.stages) report.peak_rss_bytes = std::max(report.peak_rss_bytes, s.peak_rss_bytes);
+
+    // manifest.json, last: its presence means the output directory is complete.
+    ordered_json m;
+    m["generator"] = std::string("lodstream ") + LODSTREAM_VERSION;
+    m["input"] = {{"path", input},
+                  {"format", report.scene.format},
+                  {"bytes", report.scene.file_bytes},
+                  {"vertices", report.scene.vertices},
+                  {"triangles", report.scene.triangles},
+                  {"lines", report.scene.lines},
+                  {"points", report.scene.points},
+                  {"bbox", {{"min", report.scene.bbox_min}, {"max", report.scene.bbox_max}}},
+                  {"distinct_positions", report.distinct_positions},
+                  {"vertices_graded", report.vertices_graded},
+                  {"surface_area", report.surface_area}};
+    m["options"] = {{"grading", name(so.grading)},
+                    {"clustering", name(so.clustering)},
+                    {"cell", name(so.cell)},
+                    {"variant", name(so.variant)},
+                    {"representative", name(so.representative)},
+                    {"crease_degrees", so.crease_degrees},
+                    {"fov_degrees", so.fov_degrees},
+                    {"resolution", so.resolution},
+                    {"pixels_per_cell", so.pixels_per_cell}};
+    ordered_json levels = ordered_json::array();
+    for (size_t l = 0; l < report.levels.size(); ++l) {
+      const LevelStats& ls = report.levels[l];
+      ordered_json j{{"level", l},
+                     {"cell_size", ls.cell_size},
+                     {"cells", ls.cells},
+                     {"vertices", ls.vertices},
+                     {"triangles", ls.triangles},
+                     {"edges", ls.edges},
+                     {"points", ls.points},
+                     {"eliminated", {{"edges_on_triangles", ls.edges_on_triangles}, {"points_covered", ls.points_covered}}},
+                     {"switch_distance", ls.switch_distance},
+                     {"screen_coverage", ls.screen_coverage},
+                     {"files", ls.files}};
+      if (ls.target_triangles) j["target_triangles"] = ls.target_triangles;
+      levels.push_back(j);
+    }
+    m["levels"] = levels;
+    if (so.write_glb) m["glb"] = "lods.glb";
+    if (!so.target_triangles.empty())
+      m["search"] = {{"passes", report.search_iterations}, {"seconds", report.search_seconds}};
+    ordered_json stages = ordered_json::array();
+    for (const StageStats& s : report.stages)
+      stages.push_back({{"name", s.name}, {"seconds", s.seconds}, {"peak_rss_bytes", s.peak_rss_bytes}, {"reused", s.reused}});
+    m["stages"] = stages;
+    m["seconds"] = report.seconds;
+    m["peak_rss_bytes"] = report.peak_rss_bytes;
+    io::write_file_atomic(so.output_dir + "/manifest.json", m.dump(2) + "\n");
+    *out = std::move(report);
+  });
+}
+
+}  // namespace lodstream

@@ -1,0 +1,58 @@
+#!/usr/bin/env node
+// Validates a .glb (or .gltf) file with the Khronos glTF-Validator (npm package `gltf-validator`,
+// installed by `tools/install-deps.sh --test` under $HOME/.cache/lodstream-npm), as tests/test_writers.cpp
+// does for the GLB writer (io/glb_writer.cpp).
+//
+// Usage: node tools/validate_gltf.js FILE.glb
+// Prints the report's issues (numErrors, numWarnings, numInfos, numHints, messages, truncated) as JSON.
+// Exit status: 0 no errors, 1 errors, 2 bad usage or the file could not be read or validated,
+// 77 the validator is not installed (the output then starts with "skipped:").
+// The package is looked up in $LODSTREAM_NPM_PREFIX/node_modules (an npm --prefix), then in
+// $HOME/.cache/lodstream-npm/node_modules.
+'use strict';
+
+const fs = require('fs');
+const path = require('path');
+
+function loadValidator() {
+  const dirs = [];
+  if (process.env.LODSTREAM_NPM_PREFIX) dirs.push(path.join(process.env.LODSTREAM_NPM_PREFIX, 'node_modules'));
+  if (process.env.HOME) dirs.push(path.join(process.env.HOME, '.cache', 'lodstream-npm', 'node_modules'));
+  for (const dir of dirs) {
+    const module = path.join(dir, 'gltf-validator');
+    if (fs.existsSync(path.join(module, 'package.json'))) return require(module);
+  }
+  return null;
+}
+
+async function main() {
+  if (process.argv.length !== 3) {
+    console.error('usage: node tools/validate_gltf.js FILE.glb');
+    return 2;
+  }
+  const validator = loadValidator();
+  if (!validator) {
+    console.log('skipped: npm package gltf-validator not found (run tools/install-deps.sh --test, ' +
+                'or set LODSTREAM_NPM_PREFIX)');
+    return 77;
+  }
+  const file = process.argv[2];
+  let bytes;
+  try {
+    bytes = new Uint8Array(fs.readFileSync(file));
+  } catch (e) {
+    console.error(`${file}: cannot read: ${e.message}`);
+    return 2;
+  }
+  let report;
+  try {
+    report = await validator.validateBytes(bytes, {uri: path.basename(file), maxIssues: 1000});
+  } catch (e) {
+    console.error(`${file}: cannot validate: ${e}`);
+    return 2;
+  }
+  console.log(JSON.stringify(report.issues, null, 2));
+  return report.issues.numErrors === 0 ? 0 : 1;
+}
+
+main().then((code) => { process.exitCode = code; });
