@@ -4,11 +4,11 @@
 // The pass is vertex-major, then triangle-major. Per vertex, the incident triangles (a CSR list, already in
 // increasing triangle order because the fill pass scans triangles in order) are grouped by their unit normal,
 // the crease test runs on pairs of groups, and each group's corner normal is written to every corner of v in
-// the group's triangles. Then one scan over the corners in triangle order gives output ids: a corner reuses an
-// output vertex of the same input vertex with the same normal bits (a short list per input vertex), else it
-// creates one. Only the grouping makes the O(k²) crease test cheap on flat CAD fans; the result is a function
-// of the input arrays alone: no hashing, no thread, no dependence on anything but the fixed orders stated in
-// normals.h.
+// the group's triangles. Then one scan over the corners in triangle order gives output ids: a corner reuses
+// an output vertex of the same input vertex with the same normal bits (a short list per input vertex), else
+// it creates one. Only the grouping makes the O(k²) crease test cheap on flat CAD fans; the result is a
+// function of the input arrays alone: no hashing, no thread, no dependence on anything but the fixed orders
+// stated in normals.h.
 #include "core/normals.h"
 
 #include <algorithm>
@@ -36,8 +36,13 @@ constexpr double kDotBand = 1e-14;
 constexpr int kCubeBins = 16;
 constexpr size_t kCubeBinCount = 6 * kCubeBins * kCubeBins;
 
-inline double plus_zero(double x) { return x + 0.0; }  // −0 → +0, anything else unchanged
-inline float plus_zero(float x) { return x + 0.0f; }
+// −0 → +0, anything else unchanged (x + 0 is not folded away without -ffast-math, for this very reason).
+inline double plus_zero(double x) {
+  return x + 0.0;
+}
+inline float plus_zero(float x) {
+  return x + 0.0f;
+}
 
 // u = c / |c| with scaling (no overflow or underflow for any finite c), components canonicalised to +0.
 // False when c is zero or not finite: the vector has no direction.
@@ -66,8 +71,8 @@ void unit_float_from_unit(const double* u, float* out) {
 // The crease test of normals.h for crease in (0°, 180°) (or 0°, where it admits exactly parallel normals).
 struct Crease {
   double radians = 0;
-  double dot_in = 0;   // dot above this: inside
-  double dot_out = 0;  // dot below this: outside
+  double dot_in = 0;    // dot above this: inside
+  double dot_out = 0;   // dot below this: outside
   bool smooth = false;  // crease >= 180°: everything inside
 
   explicit Crease(double degrees) {
@@ -95,11 +100,11 @@ struct Crease {
 
 // One distinct unit normal among a vertex's incident triangles.
 struct Group {
-  uint32_t first = 0;     // lowest triangle index in the group
-  double sum[3] = {};     // Σ c_t over the group, in increasing t
-  double u[3] = {};       // the common unit normal
-  uint32_t bin = 0;       // fallback only: index into the vertex's bins
-  float normal[3] = {};   // the corner normal of the group's triangles
+  uint32_t first = 0;    // lowest triangle index in the group
+  double sum[3] = {};    // Σ c_t over the group, in increasing t
+  double u[3] = {};      // the common unit normal
+  uint32_t bin = 0;      // fallback only: index into the vertex's bins
+  float normal[3] = {};  // the corner normal of the group's triangles
 };
 
 struct Bin {
@@ -129,21 +134,21 @@ void add3(double* s, const double* x) {
 
 // Per-call working memory; the per-vertex vectors grow to the largest valence.
 struct Work {
-  std::vector<double> cross;  // c_t, 3 per triangle
-  std::vector<double> unitn;  // u_t, 3 per triangle (valid where ok[t])
-  std::vector<uint8_t> ok;    // triangle has a direction
-  std::vector<uint32_t> offsets;    // CSR: vertex_count + 1
-  std::vector<uint32_t> incident;   // CSR: triangle ids, increasing per vertex
-  std::vector<uint32_t> per_vertex; // fill cursor, then the head of each vertex's output list
-  std::vector<float> corner;        // 3 per corner
-  std::vector<uint32_t> next;       // per output vertex: next output vertex of the same input vertex
+  std::vector<double> cross;         // c_t, 3 per triangle
+  std::vector<double> unitn;         // u_t, 3 per triangle (valid where ok[t])
+  std::vector<uint8_t> ok;           // triangle has a direction
+  std::vector<uint32_t> offsets;     // CSR: vertex_count + 1
+  std::vector<uint32_t> incident;    // CSR: triangle ids, increasing per vertex
+  std::vector<uint32_t> per_vertex;  // fill cursor, then the head of each vertex's output list
+  std::vector<float> corner;         // 3 per corner
+  std::vector<uint32_t> next;        // per output vertex: next output vertex of the same input vertex
   // per vertex
-  std::vector<uint32_t> order;      // non-degenerate incident triangles, sorted by (u bits, t)
-  std::vector<uint32_t> group_of;   // parallel to order
+  std::vector<uint32_t> order;     // non-degenerate incident triangles, sorted by (u bits, t)
+  std::vector<uint32_t> group_of;  // parallel to order
   std::vector<Group> groups;
-  std::vector<uint32_t> by_first;   // group ids in order of their lowest triangle
+  std::vector<uint32_t> by_first;  // group ids in order of their lowest triangle
   std::vector<Bin> bins;
-  std::vector<uint32_t> bin_slot;   // kCubeBinCount entries, kNone when unused at this vertex
+  std::vector<uint32_t> bin_slot;  // kCubeBinCount entries, kNone when unused at this vertex
 };
 
 // Groups the incident triangles of one vertex (inc[0..k), increasing) by unit normal and sets every group's
@@ -199,8 +204,10 @@ void vertex_normals(const uint32_t* inc, size_t k, const Crease& crease, Work& w
     float n[3];
     const bool ok = unit_float(all, n);
     for (Group& g : w.groups) {
-      if (ok) std::copy(n, n + 3, g.normal);
-      else unit_float_from_unit(g.u, g.normal);
+      if (ok)
+        std::copy(n, n + 3, g.normal);
+      else
+        unit_float_from_unit(g.u, g.normal);
     }
     return;
   }

@@ -18,7 +18,8 @@
 // Units: positions in scene units (double); crease in degrees; normals unit length in float32 (the double
 // result rounded once, so |n| = 1 within float rounding; axis-aligned normals are exact).
 //
-// Definitions, so that the result is the same bits on every run, thread count and compiler setting:
+// Definitions, so that a build gives the same bits on every run (the kernel is single-threaded; callers may
+// run it on chunks in parallel):
 // - Zero normals are +0: every component of every output normal is canonicalised (−0 → +0) before the
 //   bitwise comparison and the output.
 // - Angle test: t always includes itself. Otherwise the angle is decided on the dot product of the unit
@@ -39,20 +40,20 @@
 // - A corner whose included sum cancels to zero or overflows (opposite faces under crease >= 180, say)
 //   takes its own triangle's unit normal u_t. Hence no output normal is ever NaN or zero.
 //
-// Cost: two passes over the triangles build the vertex → triangle incidence (CSR, 8 bytes per vertex + 4 per
+// Cost: two passes over the triangles build the vertex → triangle incidence (CSR, 4 bytes per vertex + 4 per
 // corner); then per vertex of valence k with d distinct face directions, O(k log k) to group and O(d²)
 // angle tests and additions. Flat CAD fans (a fan-triangulated cap has valence in the thousands but d = 1)
 // stay cheap. Pathological vertices with d > kMaxPairwiseDirections fall back to binning the directions on
 // a cube map of 6 × 16 × 16 bins (a bin is about 5.6° wide): the groups of a bin share one included set,
 // decided on the bins' area-weighted mean directions, so the cost is O(d + 1536²) and the crease is only
 // approximate (within about a bin width) at such vertices. Temporary memory, allocated once per call:
-// 48 bytes per triangle (face and unit normals), 16 per corner (incidence, corner normals), 4 per input
+// 48 bytes per triangle (face and unit normals), 16 per corner (incidence, corner normals), 8 per input
 // vertex and 4 per output vertex, i.e. about 100 bytes per triangle; per-vertex scratch grows to the
 // largest valence.
 //
 // Preconditions: positions.size() and triangles.size() are multiples of 3, every id is < positions.size()/3,
-// and there are at most 2^32 − 1 corners (so output ids fit in 32 bits); otherwise Failure(Status::internal) (a caller bug:
-// the store checks indices). Coordinates finite.
+// and there are at most 2^32 − 1 corners (so output ids fit in 32 bits); otherwise Failure(Status::internal)
+// (a caller bug: the store checks indices). Coordinates finite.
 #pragma once
 
 #include <cstddef>

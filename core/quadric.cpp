@@ -103,8 +103,8 @@ void Quadric::add_triangle(const double* p0, const double* p1, const double* p2)
   const double n[3] = {sx / r, sy / r, sz / r};
   const double area = 0.5 * (m * r);
   // The centroid, not a vertex: the plane then does not depend on which corner comes first.
-  const double d = (n[0] * (p0[0] + p1[0] + p2[0]) + n[1] * (p0[1] + p1[1] + p2[1]) +
-                    n[2] * (p0[2] + p1[2] + p2[2])) / 3;
+  const double d =
+      (n[0] * (p0[0] + p1[0] + p2[0]) + n[1] * (p0[1] + p1[1] + p2[1]) + n[2] * (p0[2] + p1[2] + p2[2])) / 3;
   add_plane(n, d, area);
 }
 

@@ -23,8 +23,8 @@
 // "Kept inside the cell" means clamped: each coordinate of the minimizer is clamped to [box_min, box_max]
 // (the caller passes the cell's axis-aligned box: for a floating cube cell center ± c/2, for a sphere cell
 // the same box, which contains the ball, for a uniform cell its grid square). This is not the minimizer of
-// E over the box (Lindstrom & Silva, Visualization 2001, constrain it properly); it is cheap, keeps the
-// representative within the cell's box, and is exact whenever the unconstrained minimizer is inside.
+// E over the box (Lindstrom & Silva, Visualization 2001, solve that constrained problem); it is cheap, keeps
+// the representative within the cell's box, and is exact whenever the unconstrained minimizer is inside.
 //
 // Units: positions in scene units; A in scene units² (area), b in units³, c in units⁴; the error E in
 // units⁴ (area × distance²). All double precision.
@@ -50,7 +50,7 @@ inline constexpr double kQuadricRelativeThreshold = 1e-3;
 
 struct Quadric {
   double a00 = 0, a01 = 0, a02 = 0, a11 = 0, a12 = 0, a22 = 0;  // A, upper triangle
-  double b0 = 0, b1 = 0, b2 = 0;                                 // b
+  double b0 = 0, b1 = 0, b2 = 0;                                // b
   double c = 0;
 
   // Adds weight · (plane n·x = d): n must be unit length, weight >= 0.

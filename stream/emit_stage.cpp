@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <vector>
 
@@ -144,6 +145,9 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
         work(b, std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), b.count * arity), o, s);
       });
       for (size_t i = 0; i < n; ++i) merge(outs[i]);
+      // Drop the position pages this group touched from the resident set (they stay in the page cache).
+      positions.release();
+      positions.acquire();
       progress.report(stage, static_cast<double>(g + n) / static_cast<double>(blocks.size()));
     }
   };
@@ -282,18 +286,23 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
   positions.release();
   std::vector<uint32_t>().swap(map);
 
-  // Elimination.
-  FlatMap<2> sides;
+  // Elimination. Edges are few next to triangle sides: look each side up among the edges.
+  g_triangles = FlatMap<3>();
+  g_points = FlatMap<1>();
+  std::vector<uint8_t> on_triangle(edges.size(), 0);
   std::vector<uint8_t> used(cells, 0);
   for (const auto& t : triangles)
     for (int k = 0; k < 3; ++k) {
-      sides.insert({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])}, 0);
       used[t[k]] = 1;
+      if (edges.empty()) continue;
+      const uint32_t e = g_edges.find({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});
+      if (e != FlatMap<2>::empty) on_triangle[e] = 1;
     }
+  g_edges = FlatMap<2>();
   std::vector<uint32_t> kept_edges;
   std::vector<float> thickness;
   for (size_t i = 0; i < edges.size(); ++i) {
-    if (sides.find(edges[i]) != FlatMap<2>::empty) {
+    if (on_triangle[i]) {
       ++counts.edges_on_triangles;
       continue;
     }
@@ -312,69 +321,87 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
     kept_points.push_back(c);
   }
 
-  // Representatives of the cells in use.
-  std::vector<CellInfo> info(cells);
+  // The cells in use, numbered in order of first use: triangle corners, then edge and point ends.
+  std::vector<uint32_t> slot_of(cells, UINT32_MAX);
+  std::vector<uint32_t> slot_cell;
+  auto use = [&](uint32_t c) {
+    if (slot_of[c] == UINT32_MAX) slot_of[c] = static_cast<uint32_t>(slot_cell.size()), slot_cell.push_back(c);
+    return slot_of[c];
+  };
+  std::vector<uint32_t> tri_slots;
+  tri_slots.reserve(3 * triangles.size());
+  for (const auto& t : triangles)
+    for (uint32_t c : t) tri_slots.push_back(use(c));
+  std::vector<std::array<uint32_t, 3>>().swap(triangles);
+  const size_t triangle_slots = slot_cell.size();
+  for (uint32_t i : kept_edges) use(edges[i][0]), use(edges[i][1]);
+  for (uint32_t c : kept_points) use(c);
+
+  // Their representatives, reading the cell table in cell order through windows (only the cells in use).
+  std::vector<double> rep(3 * slot_cell.size());
   {
+    std::vector<std::pair<uint32_t, uint32_t>> need(slot_cell.size());
+    for (size_t i = 0; i < slot_cell.size(); ++i) need[i] = {slot_cell[i], static_cast<uint32_t>(i)};
+    std::sort(need.begin(), need.end());
     io::MappedFile f(cell_info_path(prefix, level));
     if (f.size() != cells * sizeof(CellInfo)) fail(Status::io_error, f.path() + ": size does not match");
-    const io::Window w = f.map(0, f.size());
-    if (cells) std::memcpy(info.data(), w.data(), f.size());
-  }
-  auto representative = [&](uint32_t c, double* p) {
-    const CellInfo& ci = info[c];
-    double mean[3];
-    for (int k = 0; k < 3; ++k) mean[k] = ci.sum[k] / static_cast<double>(ci.vertices);
-    if (options.representative == Representative::center) {
-      std::copy(ci.center, ci.center + 3, p);
-    } else if (options.representative == Representative::mean) {
-      for (int k = 0; k < 3; ++k) p[k] = ci.weight > 0 ? ci.weighted[k] / ci.weight : mean[k];
-    } else {
-      double lo[3], hi[3];
-      for (int k = 0; k < 3; ++k) {
-        if (cluster.clustering == core::Clustering::uniform) {
-          const double sq = static_cast<double>(core::grid_square(ci.center[k], cell_size));
-          lo[k] = sq * cell_size, hi[k] = (sq + 1) * cell_size;
-        } else {
-          lo[k] = ci.center[k] - cell_size / 2, hi[k] = ci.center[k] + cell_size / 2;
-        }
+    constexpr uint64_t window_cells = 1 << 16;
+    io::Window w;
+    uint64_t window_first = 0;
+    for (const auto& [c, slot] : need) {
+      if (!w.data() || c >= window_first + window_cells) {
+        window_first = c - c % window_cells;
+        w = f.map(window_first * sizeof(CellInfo), (window_first + window_cells) * sizeof(CellInfo));
       }
-      const std::array<double, 3> x = core::quadric_minimizer(quadrics[c], mean, lo, hi);
-      std::copy(x.begin(), x.end(), p);
+      CellInfo ci;
+      std::memcpy(&ci, w.data() + (c - window_first) * sizeof(CellInfo), sizeof ci);
+      double* p = &rep[3 * slot];
+      double mean[3];
+      for (int k = 0; k < 3; ++k) mean[k] = ci.sum[k] / static_cast<double>(ci.vertices);
+      if (options.representative == Representative::center) {
+        std::copy(ci.center, ci.center + 3, p);
+      } else if (options.representative == Representative::mean) {
+        for (int k = 0; k < 3; ++k) p[k] = ci.weight > 0 ? ci.weighted[k] / ci.weight : mean[k];
+      } else {
+        double lo[3], hi[3];
+        for (int k = 0; k < 3; ++k) {
+          if (cluster.clustering == core::Clustering::uniform) {
+            const double sq = static_cast<double>(core::grid_square(ci.center[k], cell_size));
+            lo[k] = sq * cell_size, hi[k] = (sq + 1) * cell_size;
+          } else {
+            lo[k] = ci.center[k] - cell_size / 2, hi[k] = ci.center[k] + cell_size / 2;
+          }
+        }
+        const std::array<double, 3> x = core::quadric_minimizer(quadrics[c], mean, lo, hi);
+        std::copy(x.begin(), x.end(), p);
+      }
     }
-  };
+  }
+  std::vector<core::Quadric>().swap(quadrics);
 
-  // Output vertices in order of first use: triangle corners (split by normal), then edge and point ends.
+  // Output vertices: triangle corners split by normal (core/normals.h), then edge and point ends, which
+  // reuse a triangle vertex of their cell when there is one.
   core::LodMesh mesh;
-  std::vector<uint32_t> vertex_of(cells, UINT32_MAX);
-  std::vector<uint32_t> tri_cells;  // compact ids for the normals kernel
-  std::vector<uint32_t> compact_cell;
-  for (const auto& t : triangles)
-    for (uint32_t c : t) {
-      if (vertex_of[c] == UINT32_MAX) vertex_of[c] = static_cast<uint32_t>(compact_cell.size()), compact_cell.push_back(c);
-      tri_cells.push_back(vertex_of[c]);
-    }
-  std::vector<double> rep(3 * compact_cell.size());
-  for (size_t i = 0; i < compact_cell.size(); ++i) representative(compact_cell[i], &rep[3 * i]);
   core::CreaseNormals normals;
-  core::crease_normals(rep, tri_cells, options.normals ? options.crease_degrees : 180.0, normals);
+  core::crease_normals(std::span<const double>(rep.data(), 3 * triangle_slots), tri_slots,
+                       options.normals ? options.crease_degrees : 180.0, normals);
+  std::vector<uint32_t>().swap(tri_slots);
+  mesh.positions.reserve(3 * (normals.vertex.size() + slot_cell.size() - triangle_slots));
   for (uint32_t v : normals.vertex)
     for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(rep[3 * v + k]));
-  mesh.normals = normals.normals;
-  mesh.triangles = normals.triangles;
-  // Edge and point ends reuse a triangle vertex of their cell when there is one.
-  std::vector<uint32_t> out_vertex(cells, UINT32_MAX);
-  for (size_t i = 0; i < normals.vertex.size(); ++i) {
-    const uint32_t c = compact_cell[normals.vertex[i]];
-    if (out_vertex[c] == UINT32_MAX) out_vertex[c] = static_cast<uint32_t>(i);
-  }
+  mesh.normals = std::move(normals.normals);
+  mesh.triangles = std::move(normals.triangles);
+  std::vector<uint32_t> out_vertex(slot_cell.size(), UINT32_MAX);
+  for (size_t i = 0; i < normals.vertex.size(); ++i)
+    if (out_vertex[normals.vertex[i]] == UINT32_MAX) out_vertex[normals.vertex[i]] = static_cast<uint32_t>(i);
+  std::vector<uint32_t>().swap(normals.vertex);
   auto end_vertex = [&](uint32_t c) {
-    if (out_vertex[c] == UINT32_MAX) {
-      out_vertex[c] = static_cast<uint32_t>(mesh.positions.size() / 3);
-      double p[3];
-      representative(c, p);
-      for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(p[k])), mesh.normals.push_back(0.0f);
+    const uint32_t slot = slot_of[c];
+    if (out_vertex[slot] == UINT32_MAX) {
+      out_vertex[slot] = static_cast<uint32_t>(mesh.positions.size() / 3);
+      for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(rep[3 * slot + k])), mesh.normals.push_back(0.0f);
     }
-    return out_vertex[c];
+    return out_vertex[slot];
   };
   for (uint32_t i : kept_edges) {
     mesh.edges.push_back(end_vertex(edges[i][0]));

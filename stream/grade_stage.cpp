@@ -79,15 +79,18 @@ double triangle_area(const double* a, const double* b, const double* c) {
   return 0.5 * std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
 }
 
-// Sum of the areas of a block of triangles, in triangle order (a fixed order: the same bits every run).
-double block_area(std::span<const uint32_t> tris, const StorePositions& pos) {
-  double sum = 0;
+// Adds a block of triangles to the area histogram, in triangle order (a fixed order: the same bits every
+// run, since blocks are fixed and come in store order).
+void block_area(std::span<const uint32_t> tris, const StorePositions& pos, AreaHistogram& h) {
   for (size_t i = 0; i < tris.size(); i += 3) {
     double a[3], b[3], c[3];
     pos.get(tris[i], a), pos.get(tris[i + 1], b), pos.get(tris[i + 2], c);
-    sum += triangle_area(a, b, c);
+    const double area = triangle_area(a, b, c);
+    int bin = 0;
+    if (area > 0) bin = std::clamp(static_cast<int>(std::floor(4 * std::log2(area))) + kAreaBias, 0, kAreaBins - 1);
+    ++h.count[bin];
+    h.area[bin] += area;
   }
-  return sum;
 }
 
 }  // namespace
@@ -133,7 +136,6 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
   summary.ranges = n_ranges;
 
   // Scatter into bucket files when there is more than one range; sum the area on the way.
-  std::vector<double> area_parts;
   std::vector<std::string> bucket_paths[3];
   canonical.acquire();
   positions.acquire();
@@ -150,7 +152,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     const uint64_t total = meta.triangles + meta.lines + meta.points;
     visit_store(columns, canonical, [&](int kind, uint64_t, std::span<const uint32_t> ids) {
       const int arity = Columns::arity[kind];
-      if (kind == 0) area_parts.push_back(block_area(ids, positions));
+      if (kind == 0) block_area(ids, positions, summary.areas);
       for (auto& o : out) o.clear();
       for (size_t i = 0; i < ids.size(); i += static_cast<size_t>(arity)) {
         uint64_t seen[3];
@@ -171,7 +173,6 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     for (auto& ws : writers)
       for (auto& w : ws) w->commit();
   }
-  for (double a : area_parts) summary.surface_area += a;
 
   ExternalSorter<WeightRecord, WeightLess> sorter(work, "weights", std::max<uint64_t>(plan.stage_bytes / 3, 4 << 20));
   std::vector<uint32_t> count;
@@ -205,7 +206,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     used.assign(n, 0);
     visit([&](int kind, std::span<const uint32_t> ids) {
       const size_t arity = static_cast<size_t>(Columns::arity[kind]);
-      if (kind == 0 && n_ranges == 1) area_parts.push_back(block_area(ids, positions));
+      if (kind == 0 && n_ranges == 1) block_area(ids, positions, summary.areas);
       tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size() / arity, 1 << 12), [&](const tbb::blocked_range<size_t>& b) {
         for (size_t i = b.begin(); i < b.end(); ++i) {
           const uint32_t* p = &ids[i * arity];
@@ -220,8 +221,6 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
         }
       });
     });
-    if (n_ranges == 1)
-      for (double a : area_parts) summary.surface_area += a;
     offset.assign(n + 1, 0);
     for (uint64_t i = 0; i < n; ++i) offset[i + 1] = offset[i] + count[i];
     neighbours.resize(offset[n]);
@@ -278,6 +277,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
       for (int kind = 0; kind < 3; ++kind) std::filesystem::remove(bucket_paths[kind][r]);
     progress.report("grade", 0.3 + 0.5 * static_cast<double>(r + 1) / static_cast<double>(n_ranges));
   }
+  for (double a : summary.areas.area) summary.surface_area += a;
   positions.release();
   canonical.release();
   std::vector<uint32_t>().swap(count);

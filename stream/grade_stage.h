@@ -43,11 +43,21 @@ struct WeightLess {
   }
 };
 
+// Triangle areas in bins of a quarter power of two: bin b holds areas in [2^((b - kAreaBias)/4), ...).
+// Default cell sizes are estimated from it (simplify.cpp).
+inline constexpr int kAreaBins = 2048;
+inline constexpr int kAreaBias = 1024;
+struct AreaHistogram {
+  std::vector<uint64_t> count = std::vector<uint64_t>(kAreaBins, 0);
+  std::vector<double> area = std::vector<double>(kAreaBins, 0.0);
+};
+
 struct GradeSummary {
   uint64_t records = 0;             // vertices in the weight index
   uint64_t distinct_positions = 0;  // among all stored vertices
   double surface_area = 0;          // sum of triangle areas, scene units²
   uint64_t ranges = 0;              // id ranges graded one after another (1 = everything at once)
+  AreaHistogram areas;
 };
 
 // Writes `canonical_path` (uint32 per stored vertex: its canonical id) unless every position is distinct

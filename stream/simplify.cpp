@@ -112,16 +112,38 @@ void check_cell_sizes(std::span<const double> sizes, const stream::Bbox& box) {
   }
 }
 
+// Estimated output triangles at cell size c: a triangle of area a much smaller than a cell is merged with
+// others into about kCellsPerArea·a/c² triangles (a surface cut into cells of side c gives about 1.5·A/c²
+// cells and twice as many triangles); one larger than that stays about one triangle.
+constexpr double kCellsPerArea = 3.0;
+double estimated_triangles(const stream::AreaHistogram& h, double c) {
+  double t = 0;
+  for (int b = 0; b < stream::kAreaBins; ++b)
+    if (h.count[b]) t += std::min(static_cast<double>(h.count[b]), kCellsPerArea * h.area[b] / (c * c));
+  return t;
+}
+
 // Default cell sizes: targets falling geometrically from the input's triangle count to a few thousand, and
-// for each the size at which a surface of the scene's area is covered by about that many triangles
-// (a surface cut into cells of side c gives about 1.5·A/c² cells and twice as many triangles).
-std::vector<double> default_cell_sizes(unsigned levels, uint64_t triangles, double area, double diag) {
+// for each the size whose estimated triangle count (above) meets it, by bisection on log c.
+std::vector<double> default_cell_sizes(unsigned levels, uint64_t triangles, const stream::AreaHistogram& h, double diag) {
   std::vector<double> sizes;
   const double t0 = static_cast<double>(std::max<uint64_t>(triangles, 1));
   const double ratio = std::pow(std::min(1.0, static_cast<double>(kCoarsestTarget) / t0), 1.0 / levels);
+  double area = 0;
+  for (double a : h.area) area += a;
   for (unsigned l = 0; l < levels; ++l) {
     const double target = std::max(1.0, t0 * std::pow(ratio, l + 1));
-    double c = area > 0 ? std::sqrt(3 * area / target) : (diag > 0 ? diag / std::sqrt(target) : 1.0);
+    double c;
+    if (area > 0) {
+      double lo = std::log(std::sqrt(area / t0)) - 40, hi = std::log(std::sqrt(area)) + 10;
+      for (int i = 0; i < 100; ++i) {
+        const double mid = (lo + hi) / 2;
+        (estimated_triangles(h, std::exp(mid)) > target ? lo : hi) = mid;
+      }
+      c = std::exp(hi);
+    } else {
+      c = diag > 0 ? diag / std::sqrt(target) : 1.0;
+    }
     if (!sizes.empty() && !(c > sizes.back())) c = sizes.back() * 2;
     sizes.push_back(c);
   }
@@ -205,6 +227,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           g.distinct_positions = v.at("distinct_positions");
           g.surface_area = v.at("surface_area");
           g.ranges = v.at("ranges");
+          g.areas.count = v.at("area_counts").get<std::vector<uint64_t>>();
+          g.areas.area = v.at("area_sums").get<std::vector<double>>();
           return g;
         }
         std::filesystem::remove(work.file("grade.json"));
@@ -216,7 +240,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         if (g.distinct_positions < meta.vertices) files.push_back(canonical_path);
         write_stamp(work.file("grade.json"), grade_key, files,
                     {{"records", g.records}, {"distinct_positions", g.distinct_positions},
-                     {"surface_area", g.surface_area}, {"ranges", g.ranges}});
+                     {"surface_area", g.surface_area}, {"ranges", g.ranges},
+                     {"area_counts", g.areas.count}, {"area_sums", g.areas.area}});
         return g;
       });
       report.vertices_graded = grade.records;
@@ -258,7 +283,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       std::vector<double> sizes = so.cell_sizes;
       if (sizes.empty()) {
         const unsigned levels = so.target_triangles.empty() ? so.levels : static_cast<unsigned>(so.target_triangles.size());
-        sizes = default_cell_sizes(levels, meta.triangles, grade.surface_area, diagonal(meta.bbox));
+        sizes = default_cell_sizes(levels, meta.triangles, grade.areas, diagonal(meta.bbox));
       }
       if (!so.target_triangles.empty()) {
         run_stage(&report.stages, "search", [&](StageStats&) {
