@@ -5,6 +5,7 @@
 #include <memory>
 
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include "core/status.h"
 #include "io/file_writer.h"
@@ -24,16 +25,28 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, s
   io::MappedFile index(index_path);
   if (index.size() != records * sizeof(WeightRecord)) fail(Status::io_error, index_path + ": size does not match");
 
+  // Levels are split into one group per thread, each group one multi-level Clusterer (whose staged
+  // prefetch overlaps the levels' cache misses): the finest levels, with the most cells, get a group each
+  // and the coarser ones share the last. Levels are independent, so the split changes no result.
   struct Level {
-    std::unique_ptr<core::Clusterer> clusterer;
     std::vector<CellInfo> info;
     io::FileWriter cells;
     std::vector<uint32_t> block;
   };
+  struct Group {
+    size_t first = 0, count = 0;
+    std::unique_ptr<core::Clusterer> clusterer;
+    std::vector<uint32_t> cells;
+  };
   std::vector<Level> state(levels);
-  for (size_t l = 0; l < levels; ++l) {
-    state[l].clusterer = std::make_unique<core::Clusterer>(std::span<const double>(&cell_sizes[l], 1), options);
-    state[l].cells.open(cells_path(prefix, l), 1 << 20);
+  for (size_t l = 0; l < levels; ++l) state[l].cells.open(cells_path(prefix, l), 1 << 20);
+  const size_t n_groups = std::clamp<size_t>(static_cast<size_t>(tbb::this_task_arena::max_concurrency()), 1, levels);
+  std::vector<Group> groups(n_groups);
+  for (size_t g = 0; g < n_groups; ++g) {
+    groups[g].first = g;
+    groups[g].count = g + 1 < n_groups ? 1 : levels - g;
+    groups[g].clusterer = std::make_unique<core::Clusterer>(cell_sizes.subspan(g, groups[g].count), options);
+    groups[g].cells.resize(groups[g].count);
   }
   io::FileWriter order(order_path(prefix), 1 << 20);
   std::vector<uint32_t> ids;
@@ -47,32 +60,36 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, s
     ids.resize(n);
     for (uint64_t i = 0; i < n; ++i) ids[i] = rec[i].id;
     order.write_array(std::span<const uint32_t>(ids));
-    tbb::parallel_for(size_t{0}, levels, [&](size_t l) {
-      Level& s = state[l];
-      s.block.resize(n);
+    tbb::parallel_for(size_t{0}, n_groups, [&](size_t g) {
+      Group& grp = groups[g];
+      for (size_t j = 0; j < grp.count; ++j) state[grp.first + j].block.resize(n);
       for (uint64_t i = 0; i < n; ++i) {
         const WeightRecord& r = rec[i];
-        uint32_t cell;
-        s.clusterer->assign(r.id, std::span<const double, 3>(r.position, 3), std::span<uint32_t>(&cell, 1));
-        s.block[i] = cell;
-        if (cell == s.info.size()) {
-          CellInfo c{};
-          std::copy(r.position, r.position + 3, c.center);
-          c.center_vertex = r.id;
-          s.info.push_back(c);
+        grp.clusterer->assign(r.id, std::span<const double, 3>(r.position, 3), grp.cells);
+        for (size_t j = 0; j < grp.count; ++j) {
+          Level& s = state[grp.first + j];
+          const uint32_t cell = grp.cells[j];
+          s.block[i] = cell;
+          if (cell == s.info.size()) {
+            CellInfo c{};
+            std::copy(r.position, r.position + 3, c.center);
+            c.center_vertex = r.id;
+            s.info.push_back(c);
+          }
+          CellInfo& c = s.info[cell];
+          for (int k = 0; k < 3; ++k) {
+            c.weighted[k] += r.grade * r.position[k];
+            c.sum[k] += r.position[k];
+          }
+          c.weight += r.grade;
+          ++c.vertices;
         }
-        CellInfo& c = s.info[cell];
-        for (int k = 0; k < 3; ++k) {
-          c.weighted[k] += r.grade * r.position[k];
-          c.sum[k] += r.position[k];
-        }
-        c.weight += r.grade;
-        ++c.vertices;
       }
-      s.cells.write_array(std::span<const uint32_t>(s.block));
+      for (size_t j = 0; j < grp.count; ++j) state[grp.first + j].cells.write_array(std::span<const uint32_t>(state[grp.first + j].block));
     });
     uint64_t bytes = 0;
-    for (const Level& s : state) bytes += s.clusterer->memory_bytes() + s.info.capacity() * sizeof(CellInfo);
+    for (const Group& g : groups) bytes += g.clusterer->memory_bytes();
+    for (const Level& s : state) bytes += s.info.capacity() * sizeof(CellInfo);
     summary.memory_bytes = std::max(summary.memory_bytes, bytes);
     progress.report("cluster", static_cast<double>(first + n) / static_cast<double>(records));
   }
@@ -84,7 +101,6 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, s
     io::FileWriter info(cell_info_path(prefix, l), 1 << 20);
     info.write_array(std::span<const CellInfo>(s.info));
     info.commit();
-    s.clusterer.reset();
     std::vector<CellInfo>().swap(s.info);
   }
   return summary;
