@@ -71,11 +71,17 @@ void FileWriter::commit() {
   flush();
   const std::string partial = path_ + ".partial";
   if (::close(fd_) != 0) {
+    const int e = errno;
     fd_ = -1;
-    io_fail(partial, "close", errno);
+    ::unlink(partial.c_str());
+    io_fail(partial, "close", e);
   }
   fd_ = -1;
-  if (std::rename(partial.c_str(), path_.c_str()) != 0) io_fail(path_, "rename into place", errno);
+  if (std::rename(partial.c_str(), path_.c_str()) != 0) {
+    const int e = errno;
+    ::unlink(partial.c_str());
+    io_fail(path_, "rename into place", e);
+  }
 }
 
 void FileWriter::discard() {

@@ -128,7 +128,9 @@ double estimated_triangles(const stream::AreaHistogram& h, double c) {
 std::vector<double> default_cell_sizes(unsigned levels, uint64_t triangles, const stream::AreaHistogram& h, double diag) {
   std::vector<double> sizes;
   const double t0 = static_cast<double>(std::max<uint64_t>(triangles, 1));
-  const double ratio = std::pow(std::min(1.0, static_cast<double>(kCoarsestTarget) / t0), 1.0 / levels);
+  // Small inputs halve at least once per level, so that every target is below the input's count.
+  const double coarsest = std::min(static_cast<double>(kCoarsestTarget), t0 / std::pow(2.0, levels));
+  const double ratio = std::pow(coarsest / t0, 1.0 / levels);
   double area = 0;
   for (double a : h.area) area += a;
   for (unsigned l = 0; l < levels; ++l) {

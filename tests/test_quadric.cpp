@@ -28,13 +28,21 @@ V minimize(const Quadric& q, const V& ref, const V& lo = kBigMin, const V& hi = 
   return core::quadric_minimizer(q, ref.data(), lo.data(), hi.data());
 }
 
-V add(const V& a, const V& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
-V scale(const V& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
-double dot(const V& a, const V& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+V add(const V& a, const V& b) {
+  return {a[0] + b[0], a[1] + b[1], a[2] + b[2]};
+}
+V scale(const V& a, double s) {
+  return {a[0] * s, a[1] * s, a[2] * s};
+}
+double dot(const V& a, const V& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
 V cross(const V& a, const V& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
-V normalized(const V& a) { return scale(a, 1 / std::sqrt(dot(a, a))); }
+V normalized(const V& a) {
+  return scale(a, 1 / std::sqrt(dot(a, a)));
+}
 
 void expect_near(const V& a, const V& b, double tol) {
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(a[i], b[i], tol) << "coordinate " << i;
@@ -211,7 +219,8 @@ TEST(Quadric, ScaleFreeAndAddIsFieldwise) {
     sum.add(b);
     EXPECT_EQ(sum.a00, a.a00 + b.a00);
     EXPECT_EQ(sum.c, a.c + b.c);
-    expect_near(minimize(sum, {0, 0, 0}), corner, 1e-9 * s);
+    const V lo{-1e12, -1e12, -1e12}, hi{1e12, 1e12, 1e12};
+    expect_near(minimize(sum, {0, 0, 0}, lo, hi), corner, 1e-9 * s);
   }
 }
 

@@ -7,7 +7,8 @@
 #     cell size) via meshlabserver under xvfb-run (Debian packages meshlab, xvfb, xauth).
 # Every command runs under /usr/bin/time -v (wall time, max RSS); the table shows medians over the runs
 # and the ratio peer time / lodstream time. The scene is read once first so every run finds it in the
-# page cache.
+# page cache. Each run also reports the CPU seconds other processes used meanwhile ("others"): on a
+# shared machine, runs with a large value are disturbed and should be repeated.
 #
 # usage: tools/bench_simplify.sh [--runs N] [--memory 1G] [--scene /work/scenes/city.ply] [--build build]
 #                                [--target-triangles N --cell-size C] [--work DIR] [--keep]
@@ -92,7 +93,10 @@ fi
 stdbuf_cmd=()
 command -v stdbuf >/dev/null && stdbuf_cmd=(stdbuf -oL -eL)
 
-# time_field FILE: prints "WALL_S MAXRSS_BYTES EXIT" from a /usr/bin/time -v report.
+# cpu_busy: CPU seconds the whole machine has been busy (all cores, /proc/stat, USER_HZ = 100).
+cpu_busy() { awk '/^cpu /{printf "%.2f\n", ($2 + $3 + $4 + $7 + $8 + $9) / 100}' /proc/stat; }
+
+# time_fields FILE: prints "WALL_S MAXRSS_BYTES CPU_S" (CPU_S = user + system) from a /usr/bin/time -v report.
 time_fields() {
   python3 - "$1" <<'EOF'
 import re, sys
@@ -103,23 +107,30 @@ if m:
     for part in m.group(1).split(":"):
         wall = wall * 60 + float(part)
 r = re.search(r"Maximum resident set size \(kbytes\): (\d+)", t)
-e = re.search(r"Exit status: (\d+)", t)
-print(f"{wall:.3f} {int(r.group(1)) * 1024 if r else 0} {e.group(1) if e else 1}")
+u = re.search(r"User time \(seconds\): ([\d.]+)", t)
+s = re.search(r"System time \(seconds\): ([\d.]+)", t)
+cpu = (float(u.group(1)) if u else 0.0) + (float(s.group(1)) if s else 0.0)
+print(f"{wall:.3f} {int(r.group(1)) * 1024 if r else 0} {cpu:.2f}")
 EOF
 }
 
-# record TOOL RUN WALL RSS TRIS [EXTRA_JSON]
+# record TOOL RUN WALL RSS TRIS CPU BUSY [EXTRA_JSON]
+# CPU: the tool's user + system seconds; BUSY: the whole machine's busy CPU seconds meanwhile; their
+# difference, other_cpu_s, is what other processes used: well above 0 means the run was disturbed.
 record() {
   python3 - "$@" >> "$results" <<'EOF'
 import json, sys
-tool, run, wall, rss, tris = sys.argv[1:6]
+tool, run, wall, rss, tris, cpu, busy = sys.argv[1:8]
 d = {"tool": tool, "run": int(run), "wall_s": float(wall), "peak_rss_bytes": int(rss),
-     "triangles_out": int(tris) if tris not in ("", "None") else None}
-if len(sys.argv) > 6 and sys.argv[6]:
-    d.update(json.loads(sys.argv[6]))
+     "triangles_out": int(tris) if tris not in ("", "None") else None,
+     "cpu_s": float(cpu), "other_cpu_s": round(max(0.0, float(busy) - float(cpu)), 2)}
+if len(sys.argv) > 8 and sys.argv[8]:
+    d.update(json.loads(sys.argv[8]))
 print(json.dumps(d))
 EOF
 }
+other_of() { python3 -c 'import sys; print(f"{max(0.0, float(sys.argv[1]) - float(sys.argv[2])):.1f}")' "$1" "$2"; }
+busy_since() { python3 -c 'import sys; print(f"{float(sys.argv[2]) - float(sys.argv[1]):.2f}")' "$1" "$(cpu_busy)"; }
 
 echo "scene   $scene ($(du -h "$scene" | cut -f1))"
 echo "work    $work"
@@ -137,13 +148,15 @@ for run in $(seq 1 "$runs"); do
   if [[ $skip_lod -eq 0 ]]; then
     out="$work/lodstream_out"
     rm -rf "$out"
+    b0=$(cpu_busy)
     set +e
     /usr/bin/time -v -o "$work/lodstream.time" "$build/lodstream" simplify "$scene" -o "$out" \
       --memory "$memory" --progress none > "$work/lodstream.log" 2>&1
     rc=$?
     set -e
+    busy=$(busy_since "$b0")
     if [[ $rc -eq 0 && -f "$out/manifest.json" ]]; then
-      read -r wall rss _ < <(time_fields "$work/lodstream.time")
+      read -r wall rss cpu < <(time_fields "$work/lodstream.time")
       # level 0 = the finest level; its triangle count and cell size are the peers' targets
       lod_json=$(python3 - "$out/manifest.json" <<'EOF'
 import json, sys
@@ -160,8 +173,8 @@ EOF
 )
       target_tris=$(python3 -c 'import json,sys; print(json.loads(sys.argv[1])["level0_triangles"])' "$lod_json")
       cell=$(python3 -c 'import json,sys; print(repr(json.loads(sys.argv[1])["level0_cell_size"]))' "$lod_json")
-      record lodstream "$run" "$wall" "$rss" "$target_tris" "$lod_json"
-      echo "lodstream simplify: ${wall} s, $((rss / 1048576)) MiB, level 0: $target_tris triangles, cell $cell"
+      record lodstream "$run" "$wall" "$rss" "$target_tris" "$cpu" "$busy" "$lod_json"
+      echo "lodstream simplify: ${wall} s (cpu ${cpu} s, others $(other_of "$busy" "$cpu") s), $((rss / 1048576)) MiB, level 0: $target_tris triangles, cell $cell"
     else
       if [[ $lod_note_printed -eq 0 ]]; then
         echo "lodstream simplify: not available (exit $rc; see $work/lodstream.log)"
@@ -176,18 +189,20 @@ EOF
 
   # meshopt_simplifySloppy, in core, one level
   if [[ $have_sloppy -eq 1 ]]; then
+    b0=$(cpu_busy)
     set +e
     /usr/bin/time -v -o "$work/sloppy.time" "$build/peer_sloppy" "$scene" "$target_tris" \
       --out "$work/sloppy.ply" > "$work/sloppy.json" 2> "$work/sloppy.log"
     rc=$?
     set -e
+    busy=$(busy_since "$b0")
     if [[ $rc -eq 0 ]]; then
-      read -r wall rss _ < <(time_fields "$work/sloppy.time")
+      read -r wall rss cpu < <(time_fields "$work/sloppy.time")
       line=$(tail -n 1 "$work/sloppy.json")
       tris=$(python3 -c 'import json,sys; print(json.loads(sys.argv[1])["triangles_out"])' "$line")
-      record meshopt_simplifySloppy "$run" "$wall" "$rss" "$tris" \
+      record meshopt_simplifySloppy "$run" "$wall" "$rss" "$tris" "$cpu" "$busy" \
         "$(python3 -c 'import json,sys; d=json.loads(sys.argv[1]); print(json.dumps({k: d[k] for k in ("load_s","simplify_s","write_s","total_s","target_triangles")}))' "$line")"
-      echo "meshopt_simplifySloppy: ${wall} s, $((rss / 1048576)) MiB, $tris triangles (target $target_tris) $line"
+      echo "meshopt_simplifySloppy: ${wall} s (cpu ${cpu} s, others $(other_of "$busy" "$cpu") s), $((rss / 1048576)) MiB, $tris triangles (target $target_tris) $line"
     else
       echo "meshopt_simplifySloppy: failed (exit $rc; see $work/sloppy.log)"
     fi
@@ -207,6 +222,7 @@ EOF
 </FilterScript>
 EOF
     rm -f "$work/meshlab.ply"
+    b0=$(cpu_busy)
     t0=$(date +%s.%N)
     set +e
     # Each output line gets the seconds since t0, to separate the loading from the filter + save.
@@ -219,7 +235,8 @@ for l in sys.stdin:
     print(f"{time.time() - t0:9.3f} {l}", end="", flush=True)' "$t0" > "$work/meshlab.log"
     rc=${PIPESTATUS[0]}
     set -e
-    read -r wall rss _ < <(time_fields "$work/meshlab.time")
+    busy=$(busy_since "$b0")
+    read -r wall rss cpu < <(time_fields "$work/meshlab.time")
     parsed=$(python3 - "$work/meshlab.log" <<'EOF'
 import json, re, sys
 load = None; tris = None; vin = None
@@ -234,8 +251,8 @@ EOF
     tris=$(python3 -c 'import json,sys; print(json.loads(sys.argv[1])["triangles_out"])' "$parsed")
     load=$(python3 -c 'import json,sys; print(json.loads(sys.argv[1])["load_s"])' "$parsed")
     if [[ $rc -eq 0 && "$tris" != "None" ]]; then
-      record meshlab_clustering "$run" "$wall" "$rss" "$tris" "{\"load_s\": ${load/None/null}, \"cell_size\": $cell}"
-      echo "meshlab clustering: ${wall} s (loaded after ${load} s), $((rss / 1048576)) MiB, $tris triangles (cell $cell)"
+      record meshlab_clustering "$run" "$wall" "$rss" "$tris" "$cpu" "$busy" "{\"load_s\": ${load/None/null}, \"cell_size\": $cell}"
+      echo "meshlab clustering: ${wall} s (loaded after ${load} s; cpu ${cpu} s, others $(other_of "$busy" "$cpu") s), $((rss / 1048576)) MiB, $tris triangles (cell $cell)"
     else
       echo "meshlab clustering: failed (exit $rc; see $work/meshlab.log)"
     fi
@@ -260,7 +277,8 @@ for t in tools:
                   "peak_rss_mb": med([r["peak_rss_bytes"] / 1048576 for r in rs]),
                   "triangles_out": med([r["triangles_out"] for r in rs]),
                   "all_wall_s": [r["wall_s"] for r in rs],
-                  "all_peak_rss_mb": [round(r["peak_rss_bytes"] / 1048576, 1) for r in rs]}
+                  "all_peak_rss_mb": [round(r["peak_rss_bytes"] / 1048576, 1) for r in rs],
+                  "all_other_cpu_s": [r.get("other_cpu_s") for r in rs]}
     if any("load_s" in r for r in rs):
         summary[t]["load_s"] = med([r.get("load_s") for r in rs])
 lod = summary.get("lodstream", {}).get("wall_s")
@@ -276,7 +294,8 @@ print()
 for t in tools:
     s = summary[t]
     extra = f"  (load: median {s['load_s']:.2f} s)" if s.get("load_s") is not None else ""
-    print(f"{t}: wall {s['all_wall_s']} s, peak RSS {s['all_peak_rss_mb']} MB{extra}")
+    print(f"{t}: wall {s['all_wall_s']} s, peak RSS {s['all_peak_rss_mb']} MB, "
+          f"other processes' CPU {s['all_other_cpu_s']} s{extra}")
 if "lodstream" in summary:
     lv = [r for r in rows if r["tool"] == "lodstream"][-1].get("levels", [])
     print("lodstream levels (last run): " + ", ".join(f"L{l['level']}: {l['triangles']:,} tris @ {l['cell_size']}" for l in lv))

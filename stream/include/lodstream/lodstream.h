@@ -121,7 +121,8 @@ struct SimplifyOptions {
   bool write_ply = true;
   bool write_obj = false;
   bool write_glb = true;
-  // Testing: cap the vertices graded at once (0 = from the memory budget), to force seams.
+  // Testing: cap the vertices graded at once (0 = from the memory budget), to force seams. Ranges are
+  // at most 256, so the cap is raised to vertices / 256 when it is smaller.
   uint64_t grade_range_vertices = 0;
 };
 
