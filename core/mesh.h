@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace lodstream::core {
@@ -28,5 +29,21 @@ struct LodMesh {
   uint64_t edge_count() const { return edges.size() / 2; }
   uint64_t point_count() const { return points.size(); }
 };
+
+// What breaks the conventions above that a file layout depends on (array shapes, 32-bit addressable
+// vertices, indices in range), or "" when nothing does. Writers check it before writing a byte.
+inline std::string convention_violation(const LodMesh& mesh) {
+  const uint64_t n = mesh.vertex_count();
+  if (mesh.positions.size() % 3 != 0) return "positions are not xyz triples";
+  if (!mesh.normals.empty() && mesh.normals.size() != mesh.positions.size()) return "normals do not match positions";
+  if (mesh.triangles.size() % 3 != 0) return "triangles are not index triples";
+  if (mesh.edges.size() % 2 != 0) return "edges are not index pairs";
+  if (mesh.thickness.size() != mesh.edge_count()) return "one thickness per edge expected";
+  if (n > UINT32_MAX) return "more vertices than 32-bit indices can address";
+  for (const auto* ids : {&mesh.triangles, &mesh.edges, &mesh.points})
+    for (uint32_t id : *ids)
+      if (id >= n) return "vertex index " + std::to_string(id) + " out of range";
+  return {};
+}
 
 }  // namespace lodstream::core

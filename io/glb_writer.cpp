@@ -35,21 +35,6 @@ constexpr int kFloat = 5126, kUnsignedInt = 5125;
 constexpr int kArrayBuffer = 34962, kElementArrayBuffer = 34963;
 constexpr int kPoints = 0, kLines = 1, kTriangles = 4;
 
-// The conventions of core/mesh.h that the file layout depends on.
-void check_mesh(const core::LodMesh& mesh, const std::string& path) {
-  auto bad = [&](const std::string& what) { fail(Status::internal, path + ": cannot write level: " + what); };
-  const uint64_t n = mesh.vertex_count();
-  if (mesh.positions.size() % 3 != 0) bad("positions are not xyz triples");
-  if (!mesh.normals.empty() && mesh.normals.size() != mesh.positions.size()) bad("normals do not match positions");
-  if (mesh.triangles.size() % 3 != 0) bad("triangles are not index triples");
-  if (mesh.edges.size() % 2 != 0) bad("edges are not index pairs");
-  if (mesh.thickness.size() != mesh.edge_count()) bad("one thickness per edge expected");
-  if (n > UINT32_MAX) bad("more vertices than 32-bit indices can address");
-  for (const auto* ids : {&mesh.triangles, &mesh.edges, &mesh.points})
-    for (uint32_t id : *ids)
-      if (id >= n) bad("vertex index " + std::to_string(id) + " out of range");
-}
-
 uint64_t align4(uint64_t n) { return (n + 3) & ~uint64_t{3}; }
 
 // The triangles' own vertex array: the vertex ids they use in order of first use, and the triangles
@@ -187,7 +172,8 @@ void write_glb(const std::string& path, std::span<const GlbLevel> levels, const 
     if (level.mesh == nullptr) fail(Status::internal, path + ": level '" + level.name + "' has no mesh");
     if (!std::isfinite(level.screen_coverage))
       fail(Status::internal, path + ": level '" + level.name + "' has a non-finite screen coverage");
-    check_mesh(*level.mesh, path);
+    if (const std::string v = core::convention_violation(*level.mesh); !v.empty())
+      fail(Status::internal, path + ": cannot write level: " + v);
   }
 
   // ---- First pass: plan the accessors and build the JSON.

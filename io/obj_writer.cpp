@@ -13,19 +13,6 @@ namespace lodstream::io {
 
 namespace {
 
-// The conventions of core/mesh.h that the file depends on.
-void check_mesh(const core::LodMesh& mesh, const std::string& path) {
-  auto bad = [&](const std::string& what) { fail(Status::internal, path + ": cannot write level: " + what); };
-  const uint64_t n = mesh.vertex_count();
-  if (mesh.positions.size() % 3 != 0) bad("positions are not xyz triples");
-  if (!mesh.normals.empty() && mesh.normals.size() != mesh.positions.size()) bad("normals do not match positions");
-  if (mesh.triangles.size() % 3 != 0) bad("triangles are not index triples");
-  if (mesh.edges.size() % 2 != 0) bad("edges are not index pairs");
-  for (const auto* ids : {&mesh.triangles, &mesh.edges, &mesh.points})
-    for (uint32_t id : *ids)
-      if (id >= n) bad("vertex index " + std::to_string(id) + " out of range");
-}
-
 // One output line at a time, built in a fixed buffer (the longest line, `f` with normals, is well under
 // 128 bytes: 6 indices of at most 10 digits).
 class Line {
@@ -49,7 +36,8 @@ class Line {
 }  // namespace
 
 void write_obj(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments) {
-  check_mesh(mesh, path);
+  if (const std::string v = core::convention_violation(mesh); !v.empty())
+    fail(Status::internal, path + ": cannot write level: " + v);
   const bool normals = !mesh.normals.empty();
 
   FileWriter out(path);

@@ -15,21 +15,6 @@ static_assert(std::endian::native == std::endian::little, "the PLY writer copies
 
 namespace {
 
-// The conventions of core/mesh.h that the file layout depends on.
-void check_mesh(const core::LodMesh& mesh, const std::string& path) {
-  auto bad = [&](const std::string& what) { fail(Status::internal, path + ": cannot write level: " + what); };
-  const uint64_t n = mesh.vertex_count();
-  if (mesh.positions.size() % 3 != 0) bad("positions are not xyz triples");
-  if (!mesh.normals.empty() && mesh.normals.size() != mesh.positions.size()) bad("normals do not match positions");
-  if (mesh.triangles.size() % 3 != 0) bad("triangles are not index triples");
-  if (mesh.edges.size() % 2 != 0) bad("edges are not index pairs");
-  if (mesh.thickness.size() != mesh.edge_count()) bad("one thickness per edge expected");
-  if (n > UINT32_MAX) bad("more vertices than 32-bit indices can address");
-  for (const auto* ids : {&mesh.triangles, &mesh.edges, &mesh.points})
-    for (uint32_t id : *ids)
-      if (id >= n) bad("vertex index " + std::to_string(id) + " out of range");
-}
-
 // A comment as one header line: control characters (line breaks included) become spaces.
 std::string comment_line(const std::string& text) {
   std::string line = "comment ";
@@ -41,7 +26,8 @@ std::string comment_line(const std::string& text) {
 }  // namespace
 
 void write_ply(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments) {
-  check_mesh(mesh, path);
+  if (const std::string v = core::convention_violation(mesh); !v.empty())
+    fail(Status::internal, path + ": cannot write level: " + v);
   const bool normals = !mesh.normals.empty();
 
   std::string header = "ply\nformat binary_little_endian 1.0\n";

@@ -30,15 +30,11 @@ Result info(const std::string& path, const Options& options, SceneInfo* out) {
     stream::WorkDir work(options.work_dir);
     const std::string store_dir = work.subdir("store");
     SceneInfo info;
-    info.path = path;
     tbb::task_arena arena(static_cast<int>(plan.threads));
     arena.execute([&] {
       bool reused = false;
-      const stream::StoreMeta meta = run_stage(&info.stages, "ingest", [&](StageStats& st) {
-        auto m = stream::ingest(path, store_dir, plan, work, progress, &reused);
-        st.reused = reused;
-        return m;
-      });
+      const stream::StoreMeta meta =
+          stream::run_ingest_stage(path, store_dir, plan, work, progress, &info.stages, &info, &reused);
       const stream::Census census = run_stage(&info.stages, "census", [&](StageStats& st) {
         const std::string cache = store_dir + "/census.json";
         if (reused) {
@@ -56,22 +52,6 @@ Result info(const std::string& path, const Options& options, SceneInfo* out) {
       });
       info.vertices_welded = census.vertices_welded;
       info.unused_vertices = census.unused_vertices;
-      info.format = meta.format;
-      info.file_bytes = meta.source.bytes;
-      info.vertex_records = meta.vertex_records;
-      info.vertices = meta.vertices;
-      info.degenerate_segments = meta.degenerate_segments;
-      info.polygons = meta.polygons;
-      info.triangles = meta.triangles;
-      info.degenerate = meta.degenerate;
-      info.lines = meta.lines;
-      info.points = meta.points;
-      info.objects = meta.objects_used;
-      info.skipped_statements = meta.skipped;
-      for (int k = 0; k < 3; ++k) {
-        info.bbox_min[k] = meta.bbox.min[k];
-        info.bbox_max[k] = meta.bbox.max[k];
-      }
     });
     info.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     info.peak_rss_bytes = 0;

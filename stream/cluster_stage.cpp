@@ -87,10 +87,6 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, s
       }
       for (size_t j = 0; j < grp.count; ++j) state[grp.first + j].cells.write_array(std::span<const uint32_t>(state[grp.first + j].block));
     });
-    uint64_t bytes = 0;
-    for (const Group& g : groups) bytes += g.clusterer->memory_bytes();
-    for (const Level& s : state) bytes += s.info.capacity() * sizeof(CellInfo);
-    summary.memory_bytes = std::max(summary.memory_bytes, bytes);
     progress.report("cluster", static_cast<double>(first + n) / static_cast<double>(records));
   }
   order.commit();

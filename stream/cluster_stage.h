@@ -32,7 +32,6 @@ static_assert(sizeof(CellInfo) == 88);
 
 struct ClusterSummary {
   std::vector<uint64_t> cells;  // per level
-  uint64_t memory_bytes = 0;    // largest clusterer footprint seen
 };
 
 ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, std::span<const double> cell_sizes,

@@ -60,7 +60,7 @@ struct Scratch {
   FlatMap<3> triangles;
   FlatMap<2> edges;
   FlatMap<1> points;
-  FlatMap<1> cells;
+  FlatMap<1> cells;  // pass A: a cell's quadric slot; pass B: an edge's distance slot
   void clear() { triangles.clear(), edges.clear(), points.clear(), cells.clear(); }
 };
 
@@ -265,7 +265,7 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
         if (lo == hi) continue;
         if (arity == 3 && c[0] != c[1] && c[1] != c[2] && c[0] != c[2]) continue;
         const uint32_t e = g_edges.find({lo, hi});
-        const auto [slot, fresh] = s.edges.insert({e, 0}, static_cast<uint32_t>(o.distance_edges.size()));
+        const auto [slot, fresh] = s.cells.insert({e}, static_cast<uint32_t>(o.distance_edges.size()));
         if (fresh) o.distance_edges.push_back(e), o.distances.emplace_back();
         for (size_t k = 0; k < arity; ++k) {
           double p[3];

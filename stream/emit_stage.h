@@ -27,13 +27,12 @@
 
 #include "core/floating_cell.h"
 #include "core/mesh.h"
+#include "lodstream/lodstream.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/scene_store.h"
 
 namespace lodstream::stream {
-
-enum class Representative { center, mean, quadric };
 
 struct EmitOptions {
   Representative representative = Representative::center;

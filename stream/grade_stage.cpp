@@ -201,24 +201,26 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
         }
       }
     };
+    // Calls corner(local id, primitive ids, arity, k) in parallel for every corner k in the range.
+    auto for_range_corners = [&](std::span<const uint32_t> ids, size_t arity, auto&& corner) {
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size() / arity, 1 << 12), [&](const tbb::blocked_range<size_t>& b) {
+        for (size_t i = b.begin(); i < b.end(); ++i) {
+          const uint32_t* p = &ids[i * arity];
+          for (size_t k = 0; k < arity; ++k)
+            if (p[k] >= lo && p[k] < hi) corner(p[k] - lo, p, arity, k);
+        }
+      });
+    };
     // Pass 1: incidence counts (and, with one range, the area).
     count.assign(n, 0);
     used.assign(n, 0);
     visit([&](int kind, std::span<const uint32_t> ids) {
-      const size_t arity = static_cast<size_t>(Columns::arity[kind]);
       if (kind == 0 && n_ranges == 1) block_area(ids, positions, summary.areas);
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size() / arity, 1 << 12), [&](const tbb::blocked_range<size_t>& b) {
-        for (size_t i = b.begin(); i < b.end(); ++i) {
-          const uint32_t* p = &ids[i * arity];
-          for (size_t k = 0; k < arity; ++k) {
-            if (p[k] < lo || p[k] >= hi) continue;
-            const uint64_t l = p[k] - lo;
-            std::atomic_ref<uint8_t>(used[l]).store(1, std::memory_order_relaxed);
-            uint32_t others = 0;
-            for (size_t j = 0; j < arity; ++j) others += j != k && p[j] != p[k];
-            if (others) std::atomic_ref<uint32_t>(count[l]).fetch_add(others, std::memory_order_relaxed);
-          }
-        }
+      for_range_corners(ids, static_cast<size_t>(Columns::arity[kind]), [&](uint64_t l, const uint32_t* p, size_t arity, size_t k) {
+        std::atomic_ref<uint8_t>(used[l]).store(1, std::memory_order_relaxed);
+        uint32_t others = 0;
+        for (size_t j = 0; j < arity; ++j) others += j != k && p[j] != p[k];
+        if (others) std::atomic_ref<uint32_t>(count[l]).fetch_add(others, std::memory_order_relaxed);
       });
     });
     offset.assign(n + 1, 0);
@@ -227,20 +229,12 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     for (uint64_t i = 0; i < n; ++i) count[i] = 0;
     // Pass 2: fill (in any order: each list is sorted below).
     visit([&](int kind, std::span<const uint32_t> ids) {
-      const size_t arity = static_cast<size_t>(Columns::arity[kind]);
-      if (arity == 1) return;
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size() / arity, 1 << 12), [&](const tbb::blocked_range<size_t>& b) {
-        for (size_t i = b.begin(); i < b.end(); ++i) {
-          const uint32_t* p = &ids[i * arity];
-          for (size_t k = 0; k < arity; ++k) {
-            if (p[k] < lo || p[k] >= hi) continue;
-            const uint64_t l = p[k] - lo;
-            for (size_t j = 0; j < arity; ++j) {
-              if (j == k || p[j] == p[k]) continue;
-              const uint32_t at = std::atomic_ref<uint32_t>(count[l]).fetch_add(1, std::memory_order_relaxed);
-              neighbours[offset[l] + at] = p[j];
-            }
-          }
+      if (Columns::arity[kind] == 1) return;
+      for_range_corners(ids, static_cast<size_t>(Columns::arity[kind]), [&](uint64_t l, const uint32_t* p, size_t arity, size_t k) {
+        for (size_t j = 0; j < arity; ++j) {
+          if (j == k || p[j] == p[k]) continue;
+          const uint32_t at = std::atomic_ref<uint32_t>(count[l]).fetch_add(1, std::memory_order_relaxed);
+          neighbours[offset[l] + at] = p[j];
         }
       });
     });

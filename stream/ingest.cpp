@@ -25,6 +25,7 @@
 #include "io/mapped_file.h"
 #include "io/reader.h"
 #include "stream/distinct_count.h"
+#include "stream/job.h"
 #include "stream/external_sort.h"
 
 namespace lodstream::stream {
@@ -409,6 +410,31 @@ Census census(const std::string& store_dir, const StoreMeta& meta, const MemoryP
       plan.stage_bytes, progress);
   progress.report("census", 1);
   return c;
+}
+
+StoreMeta run_ingest_stage(const std::string& input, const std::string& store_dir, const MemoryPlan& plan,
+                           const WorkDir& work, Progress& progress, std::vector<StageStats>* stages,
+                           SceneInfo* scene, bool* reused) {
+  const StoreMeta meta = run_stage(stages, "ingest", [&](StageStats& st) {
+    StoreMeta m = ingest(input, store_dir, plan, work, progress, reused);
+    st.reused = *reused;
+    return m;
+  });
+  scene->path = input;
+  scene->format = meta.format;
+  scene->file_bytes = meta.source.bytes;
+  scene->vertex_records = meta.vertex_records;
+  scene->vertices = meta.vertices;
+  scene->polygons = meta.polygons;
+  scene->triangles = meta.triangles;
+  scene->degenerate = meta.degenerate;
+  scene->degenerate_segments = meta.degenerate_segments;
+  scene->lines = meta.lines;
+  scene->points = meta.points;
+  scene->objects = meta.objects_used;
+  scene->skipped_statements = meta.skipped;
+  for (int k = 0; k < 3; ++k) scene->bbox_min[k] = meta.bbox.min[k], scene->bbox_max[k] = meta.bbox.max[k];
+  return meta;
 }
 
 }  // namespace lodstream::stream

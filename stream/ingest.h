@@ -2,6 +2,9 @@
 #pragma once
 
 #include <string>
+#include <vector>
+
+#include "lodstream/lodstream.h"
 
 #include "stream/memory.h"
 #include "stream/progress.h"
@@ -14,6 +17,13 @@ namespace lodstream::stream {
 // `store_dir`. Sets *reused accordingly. Throws Failure.
 StoreMeta ingest(const std::string& input, const std::string& store_dir, const MemoryPlan& plan,
                  const WorkDir& work, Progress& progress, bool* reused);
+
+// The ingest stage as every entry point runs it: ingest() timed as the stage "ingest" into `stages`, and
+// the ingest fields of *scene filled from the store (path, format, counts, bbox; the census fields are
+// left alone). Sets *reused.
+StoreMeta run_ingest_stage(const std::string& input, const std::string& store_dir, const MemoryPlan& plan,
+                           const WorkDir& work, Progress& progress, std::vector<StageStats>* stages,
+                           SceneInfo* scene, bool* reused);
 
 // Statistics of a store that only `info` needs: distinct positions among the vertices (exact comparison,
 // -0 equals +0; see distinct_count.h) and vertices no primitive uses.

@@ -6,8 +6,6 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -85,12 +83,6 @@ core::ClusterOptions cluster_options(const SimplifyOptions& s) {
   o.shape = s.cell == CellShape::cube ? core::CellShape::cube : core::CellShape::sphere;
   o.choice = s.variant == CellVariant::nearest ? core::CellChoice::nearest : core::CellChoice::heaviest;
   return o;
-}
-
-stream::Representative representative(const SimplifyOptions& s) {
-  return s.representative == Representative::center ? stream::Representative::center
-         : s.representative == Representative::mean ? stream::Representative::mean
-                                                      : stream::Representative::quadric;
 }
 
 double diagonal(const stream::Bbox& b) {
@@ -194,25 +186,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     tbb::task_arena arena(static_cast<int>(plan.threads));
     arena.execute([&] {
       bool reused = false;
-      const stream::StoreMeta meta = run_stage(&report.stages, "ingest", [&](StageStats& st) {
-        auto m = stream::ingest(input, store_dir, plan, work, progress, &reused);
-        st.reused = reused;
-        return m;
-      });
-      report.scene.path = input;
-      report.scene.format = meta.format;
-      report.scene.file_bytes = meta.source.bytes;
-      report.scene.vertex_records = meta.vertex_records;
-      report.scene.vertices = meta.vertices;
-      report.scene.polygons = meta.polygons;
-      report.scene.triangles = meta.triangles;
-      report.scene.degenerate = meta.degenerate;
-      report.scene.degenerate_segments = meta.degenerate_segments;
-      report.scene.lines = meta.lines;
-      report.scene.points = meta.points;
-      report.scene.objects = meta.objects_used;
-      report.scene.skipped_statements = meta.skipped;
-      for (int k = 0; k < 3; ++k) report.scene.bbox_min[k] = meta.bbox.min[k], report.scene.bbox_max[k] = meta.bbox.max[k];
+      const stream::StoreMeta meta =
+          stream::run_ingest_stage(input, store_dir, plan, work, progress, &report.stages, &report.scene, &reused);
       if (meta.triangles + meta.lines + meta.points == 0)
         fail(Status::bad_data, input + ": nothing to simplify (no triangles, lines or points)");
 
@@ -252,7 +227,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       report.grade_ranges = grade.ranges;
       const std::string canonical = grade.distinct_positions < meta.vertices ? canonical_path : std::string();
 
-      const stream::EmitOptions count_only{representative(so), so.crease_degrees, true, true};
+      const stream::EmitOptions count_only{so.representative, so.crease_degrees, true, true};
       const std::string prefix = work.file("");
       const ordered_json cluster_base{{"grade", grade_key},
                                       {"clustering", name(so.clustering)},
@@ -339,7 +314,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       const double tan_half = std::tan(so.fov_degrees * M_PI / 360);
       const double diag = diagonal(meta.bbox);
       std::vector<core::LodMesh> meshes(sizes.size());
-      const stream::EmitOptions emit_options{representative(so), so.crease_degrees, true, false};
+      const stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
       run_stage(&report.stages, "emit", [&](StageStats&) {
         for (size_t l = 0; l < sizes.size(); ++l) {
           LevelStats ls;

@@ -28,9 +28,6 @@ class StorePositions {
     if (!window_.data() && count_ > 0) window_ = file_.map(0, file_.size());
   }
   void release() { window_.reset(); }
-  uint64_t count() const { return count_; }
-  bool single_precision() const { return single_; }
-  uint64_t bytes() const { return file_.size(); }
   void get(uint64_t v, double* out) const {
     if (single_) {
       const float* p = reinterpret_cast<const float*>(window_.data()) + 3 * v;

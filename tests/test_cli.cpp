@@ -16,51 +16,16 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_harness.h"
 #include "test_util.h"
-
-extern char** environ;
 
 namespace lodstream {
 namespace {
 
 namespace fs = std::filesystem;
 
-struct CliRun {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-CliRun run_cli(std::vector<std::string> args, const test::TempDir& tmp, int sigint_after_ms = -1) {
-  args.insert(args.begin(), LODSTREAM_CLI);
-  std::vector<char*> argv;
-  for (auto& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  const std::string out = tmp.file("stdout"), err = tmp.file("stderr");
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_addopen(&fa, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  pid_t pid;
-  EXPECT_EQ(posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ), 0);
-  posix_spawn_file_actions_destroy(&fa);
-  if (sigint_after_ms >= 0) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(sigint_after_ms));
-    kill(pid, SIGINT);
-  }
-  int status = 0;
-  waitpid(pid, &status, 0);
-  CliRun r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  auto slurp = [](const std::string& p) {
-    std::ifstream f(p);
-    std::stringstream ss;
-    ss << f.rdbuf();
-    return ss.str();
-  };
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
-}
+using test::CliRun;
+using test::run_cli;
 
 // An OBJ grid of n x n quads, about 60 bytes per quad.
 std::string grid_obj(const test::TempDir& tmp, int n) {

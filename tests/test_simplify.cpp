@@ -39,10 +39,9 @@
 
 #include "core/grade.h"
 #include "lodstream/lodstream.h"
+#include "cli_harness.h"
 #include "reader_harness.h"
 #include "test_util.h"
-
-extern char** environ;
 
 namespace lodstream {
 namespace {
@@ -52,12 +51,7 @@ using Json = nlohmann::json;
 using P3 = std::array<double, 3>;
 using F3 = std::array<float, 3>;
 
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+std::string slurp(const fs::path& p) { return test::read_file(p.string()); }
 
 std::string sample_room() { return test::source_dir() + "/tests/data/sample-room.ply"; }
 
@@ -766,32 +760,8 @@ TEST(SimplifyPlate5, DistantObjectChangesNothingTranslationOnlyUnderFloatingCell
 
 // ---- 7: errors through the CLI ----
 
-struct CliRun {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-CliRun run_cli(std::vector<std::string> args, const test::TempDir& tmp) {
-  args.insert(args.begin(), LODSTREAM_CLI);
-  std::vector<char*> argv;
-  for (auto& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  const std::string out = tmp.file("stdout"), err = tmp.file("stderr");
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_addopen(&fa, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  pid_t pid;
-  EXPECT_EQ(posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ), 0);
-  posix_spawn_file_actions_destroy(&fa);
-  int status = 0;
-  waitpid(pid, &status, 0);
-  CliRun r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
-}
+using test::CliRun;
+using test::run_cli;
 
 // Regular files under `dir`, recursively, relative names.
 std::vector<std::string> files_under(const fs::path& dir) {
