@@ -272,6 +272,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     progress.report("grade", 0.3 + 0.5 * static_cast<double>(r + 1) / static_cast<double>(n_ranges));
   }
   for (double a : summary.areas.area) summary.surface_area += a;
+  progress.report("grade", 1);
   positions.release();
   canonical.release();
   std::vector<uint32_t>().swap(count);

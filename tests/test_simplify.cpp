@@ -813,6 +813,73 @@ TEST(SimplifyCli, ExitCodes) {
   EXPECT_EQ(files_under(out), (std::vector<std::string>{"lod0.ply", "lod1.ply", "lods.glb", "manifest.json"}));
 }
 
+// ---- progress and cancellation (item 7) ----
+
+TEST(SimplifyCli, ProgressJsonHasOneLinePerStepAndEveryStageFinishes) {
+  test::TempDir tmp;
+  const std::string out = tmp.file("out");
+  const CliRun r = run_cli({"simplify", sample_room(), "-o", out, "--progress", "json"}, tmp);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::map<std::string, double> last;
+  std::vector<std::string> order;
+  std::istringstream lines(r.err);
+  for (std::string line; std::getline(lines, line);) {
+    const Json j = Json::parse(line);  // every stderr line is one JSON object
+    const std::string stage = j.at("stage");
+    const double f = j.at("fraction");
+    EXPECT_GE(f, 0.0) << line;
+    EXPECT_LE(f, 1.0) << line;
+    if (last.count(stage)) {
+      EXPECT_GE(f, last[stage]) << line;  // never goes back within a stage
+    } else {
+      order.push_back(stage);
+    }
+    last[stage] = f;
+  }
+  for (const char* stage : {"ingest", "grade", "sort", "cluster", "emit", "write"}) {
+    ASSERT_TRUE(last.count(stage)) << stage << " never reported";
+    EXPECT_EQ(last[stage], 1.0) << stage << " did not finish";
+  }
+  EXPECT_EQ(order.front(), "ingest");
+  EXPECT_EQ(order.back(), "write");
+}
+
+TEST(SimplifyCli, QuietWhenNotATerminal) {
+  test::TempDir tmp;
+  const CliRun r = run_cli({"simplify", tmp.write("t.obj", kTwoTriangles), "-o", tmp.file("out"), "--cell-sizes", "0.5"}, tmp);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");  // --progress auto and stderr is a file
+}
+
+TEST(SimplifyApi, CancellingFromTheCallbackReturnsCancelledAndWritesNoManifest) {
+  // Cancels at the n-th progress call for several n, so that every stage gets cancelled somewhere.
+  for (int cancel_at : {1, 5, 20, 60, 200}) {
+    test::TempDir tmp;
+    struct Counter {
+      int calls = 0, limit = 0;
+    } counter{0, cancel_at};
+    Options options;
+    options.progress = [](void* user, const char*, double) {
+      auto* c = static_cast<Counter*>(user);
+      return ++c->calls < c->limit;
+    };
+    options.progress_user = &counter;
+    SimplifyOptions so;
+    so.output_dir = tmp.file("out");
+    SimplifyReport report;
+    const Result r = simplify(sample_room(), so, options, &report);
+    if (r.ok()) {
+      EXPECT_LT(counter.calls, cancel_at) << "ran to the end although the callback said stop";
+      continue;
+    }
+    EXPECT_EQ(r.status, Status::cancelled) << cancel_at << ": " << r.message;
+    for (const std::string& f : files_under(tmp.file("out"))) {
+      EXPECT_NE(f, "manifest.json") << cancel_at;
+      EXPECT_EQ(f.find(".partial"), std::string::npos) << cancel_at << ": left " << f;
+    }
+  }
+}
+
 TEST(SimplifyCli, OutputDirectoryThatCannotBeCreatedExits74AndLeavesNothing) {
   test::TempDir tmp;
   const std::string obj = tmp.write("t.obj", kTwoTriangles);
