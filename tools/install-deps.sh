@@ -4,7 +4,10 @@
 set -euo pipefail
 pkgs=(build-essential cmake libembree-dev libtbb-dev libopenmesh-dev libcli11-dev nlohmann-json3-dev libfmt-dev
       libpng-dev)
-if [ "${1:-}" = "--test" ]; then pkgs+=(googletest libgtest-dev python3); fi
+# --test also: MeshLab for the Hausdorff agreement test (tools/meshlab_hausdorff.py runs meshlabserver under
+# xvfb-run, which needs xauth; meshlab's only Recommends, chemical-mime-data, is not needed) and Chromium for
+# the report.html render check (tools/check_html.py).
+if [ "${1:-}" = "--test" ]; then pkgs+=(googletest libgtest-dev python3 meshlab xvfb xauth chromium); fi
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

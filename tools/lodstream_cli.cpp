@@ -170,6 +170,30 @@ void print_simplify(const lodstream::SimplifyReport& r, const std::string& out_d
               out_dir.c_str());
 }
 
+void print_report(const lodstream::Report& r, const std::string& out_dir) {
+  for (const auto& run : r.runs) {
+    std::printf("run          %s: original %s, %s triangles\n", run.name.c_str(), run.original.c_str(),
+                grouped(run.original_triangles).c_str());
+    std::printf("%-6s %12s %12s %26s %10s %12s %24s\n", "level", "triangles", "switch dist", "silhouette max/p95/mean px",
+                "mismatch", "normal p95", "Hausdorff max/mean %diag");
+    for (size_t l = 0; l < run.levels.size(); ++l) {
+      const auto& v = run.levels[l];
+      const std::string sil = fmt::format("{:.3g} / {:.3g} / {:.3g}", v.silhouette.max, v.silhouette.p95, v.silhouette.mean);
+      const std::string hd = fmt::format("{:.3g} / {:.3g}", v.hausdorff_max_percent, v.hausdorff_mean_percent);
+      std::printf("%-6zu %12s %12.6g %26s %9.3f%% %11.3g° %24s\n", l, grouped(v.triangles).c_str(), v.switch_distance,
+                  sil.c_str(), 100 * v.mismatch_fraction, v.normal.p95, hd.c_str());
+    }
+  }
+  std::printf("rays         %s in %.3f s (%.3g M/s); %s point queries in %.3f s (%.3g M/s)\n", grouped(r.rays).c_str(),
+              r.ray_seconds, r.ray_seconds > 0 ? r.rays / r.ray_seconds / 1e6 : 0.0, grouped(r.point_queries).c_str(),
+              r.query_seconds, r.query_seconds > 0 ? r.point_queries / r.query_seconds / 1e6 : 0.0);
+  for (const auto& s : r.stages)
+    std::printf("stage        %-10s %8.3f s  peak %s%s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str(),
+                s.reused ? "  (reused from work directory)" : "");
+  std::printf("total        %.3f s, peak %s; wrote %s/report.json and report.html\n", r.seconds,
+              human_bytes(r.peak_rss_bytes).c_str(), out_dir.c_str());
+}
+
 // "a,b,c" -> values; false on any unreadable item.
 template <class T>
 bool parse_list(const std::string& text, std::vector<T>* out) {
@@ -251,6 +275,26 @@ int main(int argc, char** argv) {
   simplify_cmd->add_flag("--json", json, "Print the manifest's summary as one JSON object");
   add_common(simplify_cmd);
 
+  CLI::App* report_cmd = app.add_subcommand(
+      "report", "Measure each level's error in pixels at its switching distance (Embree ray casts, Hausdorff)");
+  lodstream::ReportOptions ro;
+  std::string distances_text;
+  report_cmd->add_option("OUTDIR", ro.runs, "simplify output directories (several: side by side)");
+  report_cmd->add_option("-o,--output", ro.output_dir, "Report directory (default: the one simplify directory given)");
+  report_cmd->add_option("--original", ro.original, "The original scene (default: the manifest's input)");
+  report_cmd->add_option("--lod", ro.lods, "A LOD file (.ply, .obj) of --original, finest first; repeat for each");
+  report_cmd->add_option("--switch-distances", distances_text, "With --lod: camera distance d1,d2,... per LOD");
+  report_cmd->add_option("--views", ro.views, "View directions per level (default 32)");
+  report_cmd->add_option("--resolution", ro.resolution, "Image width and height in pixels (default 512)");
+  report_cmd->add_option("--seed", ro.seed, "Seed of view targets and surface samples (default 1)");
+  report_cmd->add_option("--samples", ro.samples, "Hausdorff samples of each kind (vertex, edge, face) per direction (default 250000)");
+  report_cmd->add_option("--fov", ro.fov_degrees, "With --lod: field of view, degrees (default 60)");
+  report_cmd->add_option("--pixels-per-cell", ro.pixels_per_cell,
+                         "With --lod and no distances: the Hausdorff max spans this many pixels at the switch (default 5)");
+  report_cmd->add_option("--html-views", ro.html_views, "Views per level rendered into report.html (default 3)");
+  report_cmd->add_flag("--json", json, "Print report.json instead of the table");
+  add_common(report_cmd);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -312,6 +356,34 @@ int main(int argc, char** argv) {
       std::printf("%s\n", nlohmann::ordered_json::parse(manifest).dump().c_str());
     } else {
       print_simplify(report, so.output_dir);
+    }
+    return 0;
+  }
+
+  if (report_cmd->parsed()) {
+    if (!distances_text.empty() && !parse_list(distances_text, &ro.switch_distances)) {
+      std::fprintf(stderr, "lodstream: --switch-distances: cannot read '%s' as a list of numbers\n", distances_text.c_str());
+      return static_cast<int>(lodstream::Status::usage);
+    }
+    if (ro.output_dir.empty()) {
+      if (ro.runs.size() != 1) {
+        std::fprintf(stderr, "lodstream: report: give the report directory with -o (see lodstream report --help)\n");
+        return static_cast<int>(lodstream::Status::usage);
+      }
+      ro.output_dir = ro.runs[0];
+    }
+    lodstream::Report report;
+    const lodstream::Result r = lodstream::report(ro, options, &report);
+    if (progress.bar_open) std::fputc('\n', stderr);
+    if (!r.ok()) {
+      std::fprintf(stderr, "lodstream: %s\n", r.message.c_str());
+      return static_cast<int>(r.status);
+    }
+    if (json) {
+      std::ifstream in(ro.output_dir + "/report.json");
+      std::printf("%s\n", nlohmann::ordered_json::parse(in).dump().c_str());
+    } else {
+      print_report(report, ro.output_dir);
     }
     return 0;
   }

@@ -157,6 +157,76 @@ struct SimplifyReport {
 Result simplify(const std::string& input, const SimplifyOptions& simplify, const Options& options,
                 SimplifyReport* out);
 
+// ---- report: the LOD error report (../shared/DESIGN.md "Error report") ----
+
+struct ReportOptions {
+  std::string output_dir;  // created if missing; report.json, report.html and one CSV per level go here
+  // What to measure: simplify output directories (each read through its manifest.json; the original is the
+  // manifest's input, unless `original` is given), or else `original` with `lods`, finest first.
+  std::vector<std::string> runs;
+  std::string original;
+  std::vector<std::string> lods;            // PLY (as simplify writes them, or any PLY) or OBJ
+  std::vector<double> switch_distances;     // for `lods`: one per LOD; empty = from each LOD's Hausdorff max
+  unsigned views = 32;                      // view directions on a Fibonacci sphere
+  unsigned resolution = 512;                // square images, resolution × resolution pixels
+  uint64_t seed = 1;                        // view targets and surface samples
+  uint64_t samples = 250000;                // Hausdorff samples of each kind (vertex, edge, face) per direction
+  double fov_degrees = 60;                  // for `lods` (runs use their manifest's)
+  double pixels_per_cell = 5;               // for `lods` without distances: Hausdorff max spans this many pixels
+  unsigned html_views = 3;                  // views rendered into report.html per level
+};
+
+// Distribution of an error over pixels or samples. Units depend on the field.
+struct ErrorStats {
+  double max = 0, p95 = 0, mean = 0, rms = 0;
+  uint64_t count = 0;  // pixels or samples measured
+};
+
+struct ReportLevel {
+  std::string file;               // the LOD file measured
+  double cell_size = 0;           // 0 when unknown (LOD files given directly)
+  uint64_t vertices = 0, triangles = 0, edges = 0, points = 0;
+  double switch_distance = 0;     // camera distance of every view (scene units)
+  double pixel_size = 0;          // object size of one pixel at that distance (scene units)
+  // Silhouette: over pixels covered by exactly one of original and LOD, the distance (pixels) from such a
+  // pixel to the original's outline, from exact Euclidean distance transforms of the original's coverage.
+  ErrorStats silhouette;
+  uint64_t mismatched_pixels = 0, covered_pixels = 0;  // covered: by either image
+  double mismatch_fraction = 0;   // mismatched / covered
+  ErrorStats depth;               // pixels covered by both: |depth difference| in pixels at that depth
+  ErrorStats normal;              // pixels covered by both: angle between camera-facing normals, degrees
+  // Two-sided Hausdorff distance (scene units) by Metro-style sampling; closest points by Embree.
+  ErrorStats lod_to_original, original_to_lod;
+  double hausdorff_max = 0, hausdorff_mean = 0, hausdorff_rms = 0;  // the larger of the two directions
+  double hausdorff_max_percent = 0, hausdorff_mean_percent = 0;    // of the original's bbox diagonal
+  double hausdorff_max_pixels = 0, hausdorff_mean_pixels = 0;      // at the switching distance
+  std::string csv;                // per-view figures, relative to the output directory
+  double seconds = 0;
+};
+
+struct ReportRun {
+  std::string name;               // the simplify directory, or the original's file name
+  std::string original;
+  uint64_t original_triangles = 0, original_vertices = 0;
+  double bbox_diagonal = 0;
+  double fov_degrees = 60;
+  std::vector<ReportLevel> levels;
+};
+
+struct Report {
+  std::vector<ReportRun> runs;
+  uint64_t rays = 0;              // primary rays cast
+  double ray_seconds = 0;         // wall time spent casting them
+  uint64_t point_queries = 0;
+  double query_seconds = 0;
+  std::vector<StageStats> stages;
+  double seconds = 0;
+  uint64_t peak_rss_bytes = 0;
+};
+
+// Measures every level of every run, writing report.json (written last), report.html and the CSVs.
+Result report(const ReportOptions& report, const Options& options, Report* out);
+
 // Peak resident memory of this process so far (VmHWM), in bytes; 0 if unknown.
 uint64_t peak_rss_bytes();
 

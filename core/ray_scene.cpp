@@ -1,0 +1,306 @@
+// Embree 3 scenes for the error report; see ray_scene.h.
+//
+// Closest point on a triangle: Ericson, "Real-Time Collision Detection" (2005), §5.1.5, evaluated in
+// double so that large scene coordinates keep their precision.
+#include "core/ray_scene.h"
+
+#include <embree3/rtcore.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "core/status.h"
+
+namespace lodstream::core {
+namespace {
+
+struct Vec {
+  double x, y, z;
+};
+inline Vec sub(Vec a, Vec b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+inline Vec add(Vec a, Vec b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+inline Vec mul(Vec a, double s) { return {a.x * s, a.y * s, a.z * s}; }
+inline double dot(Vec a, Vec b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline Vec load(const float* p) { return {p[0], p[1], p[2]}; }
+
+// Ericson §5.1.5: the Voronoi region of p among the triangle's vertices, edges and face.
+Vec closest_on_triangle(Vec p, Vec a, Vec b, Vec c) {
+  const Vec ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+  const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+  if (d1 <= 0 && d2 <= 0) return a;
+  const Vec bp = sub(p, b);
+  const double d3 = dot(ab, bp), d4 = dot(ac, bp);
+  if (d3 >= 0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return add(a, mul(ab, d1 / (d1 - d3)));
+  const Vec cp = sub(p, c);
+  const double d5 = dot(ab, cp), d6 = dot(ac, cp);
+  if (d6 >= 0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return add(a, mul(ac, d2 / (d2 - d6)));
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+    return add(b, mul(sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6))));
+  const double denom = va + vb + vc;
+  if (!(denom > 0)) {  // degenerate (zero-area) triangle: the nearest of its three sides
+    Vec best = a;
+    double best_d = std::numeric_limits<double>::infinity();
+    const Vec ends[3][2] = {{a, b}, {b, c}, {c, a}};
+    for (const auto& e : ends) {
+      const Vec d = sub(e[1], e[0]);
+      const double len2 = dot(d, d);
+      const double t = len2 > 0 ? std::clamp(dot(sub(p, e[0]), d) / len2, 0.0, 1.0) : 0.0;
+      const Vec q = add(e[0], mul(d, t));
+      const double dq = dot(sub(p, q), sub(p, q));
+      if (dq < best_d) best_d = dq, best = q;
+    }
+    return best;
+  }
+  const double v = vb / denom, w = vc / denom;
+  return add(a, add(mul(ab, v), mul(ac, w)));
+}
+
+Vec closest_on_segment(Vec p, Vec a, Vec b) {
+  const Vec d = sub(b, a);
+  const double len2 = dot(d, d);
+  const double t = len2 > 0 ? std::clamp(dot(sub(p, a), d) / len2, 0.0, 1.0) : 0.0;
+  return add(a, mul(d, t));
+}
+
+struct Geom {
+  PrimitiveKind kind = PrimitiveKind::none;
+  const float* vertices = nullptr;    // triangles: xyz stride 3; segments and points: xyzr stride 4
+  const uint32_t* indices = nullptr;  // triangles: 3 per primitive; segments: first vertex per primitive
+};
+
+}  // namespace
+
+struct RayScene::Impl {
+
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  uint64_t limit = 0;
+  std::atomic<int64_t> bytes{0};
+  std::atomic<int64_t> peak{0};
+  std::atomic<bool> over{false};
+  std::mutex error_mutex;
+  std::string error;
+  std::vector<Geom> geoms;  // by geometry id
+  bool committed = false;
+  bool has_primitives = false;
+
+  static bool monitor(void* user, ssize_t delta, bool post) {
+    auto* self = static_cast<Impl*>(user);
+    const int64_t now = self->bytes.fetch_add(delta) + delta;
+    int64_t seen = self->peak.load();
+    while (now > seen && !self->peak.compare_exchange_weak(seen, now)) {
+    }
+    if (delta > 0 && !post && self->limit > 0 && now > static_cast<int64_t>(self->limit)) {
+      self->bytes.fetch_sub(delta);  // the allocation is refused, so it never happens
+      self->over = true;
+      return false;
+    }
+    return true;
+  }
+  static void on_error(void* user, RTCError code, const char* message) {
+    auto* self = static_cast<Impl*>(user);
+    std::lock_guard<std::mutex> lock(self->error_mutex);
+    if (self->error.empty()) self->error = std::string("Embree error ") + std::to_string(static_cast<int>(code)) + ": " + (message ? message : "");
+  }
+
+  void check(const char* what) {
+    const RTCError code = rtcGetDeviceError(device);
+    if (over) {
+      fail(Status::usage, std::string("the ray-casting scene needs more memory than --memory allows (") +
+                              std::to_string(limit >> 20) + " MiB for Embree; " + what + ")");
+    }
+    if (code != RTC_ERROR_NONE) {
+      std::lock_guard<std::mutex> lock(error_mutex);
+      fail(code == RTC_ERROR_OUT_OF_MEMORY ? Status::internal : Status::internal,
+           error.empty() ? std::string("Embree failed: ") + what : error + " (" + what + ")");
+    }
+  }
+
+  RTCGeometry attach(RTCGeometryType type, PrimitiveKind kind) {
+    RTCGeometry g = rtcNewGeometry(device, type);
+    check("new geometry");
+    const unsigned id = static_cast<unsigned>(geoms.size());
+    geoms.push_back({kind, nullptr, nullptr});
+    (void)id;
+    return g;
+  }
+  void finish(RTCGeometry g) {
+    rtcCommitGeometry(g);
+    const unsigned id = rtcAttachGeometry(scene, g);
+    rtcReleaseGeometry(g);
+    check("attach geometry");
+    if (id != geoms.size() - 1) fail(Status::internal, "Embree geometry ids out of order");
+    has_primitives = true;
+  }
+};
+
+RayScene::RayScene(uint64_t memory_limit) : impl_(std::make_unique<Impl>()) {
+  impl_->limit = memory_limit;
+  impl_->device = rtcNewDevice("verbose=0");
+  if (!impl_->device) fail(Status::internal, "cannot create an Embree device");
+  rtcSetDeviceErrorFunction(impl_->device, &Impl::on_error, impl_.get());
+  rtcSetDeviceMemoryMonitorFunction(impl_->device, &Impl::monitor, impl_.get());
+  impl_->scene = rtcNewScene(impl_->device);
+  rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_COMPACT);
+  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_MEDIUM);
+  impl_->check("new scene");
+}
+
+RayScene::~RayScene() {
+  if (impl_->scene) rtcReleaseScene(impl_->scene);
+  if (impl_->device) rtcReleaseDevice(impl_->device);
+}
+
+RayScene::TriangleBuffers RayScene::add_triangles(uint64_t vertex_count, uint64_t triangle_count) {
+  if (vertex_count > UINT32_MAX || triangle_count > UINT32_MAX)
+    fail(Status::usage, "more than 2^32 vertices or triangles in one ray-casting scene");
+  if (triangle_count == 0) return {};
+  Impl& s = *impl_;
+  RTCGeometry g = s.attach(RTC_GEOMETRY_TYPE_TRIANGLE, PrimitiveKind::triangle);
+  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                        3 * sizeof(float), vertex_count));
+  s.check("triangle vertices");
+  auto* i = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                           3 * sizeof(uint32_t), triangle_count));
+  s.check("triangle indices");
+  s.geoms.back().vertices = v;
+  s.geoms.back().indices = i;
+  s.finish(g);
+  return {std::span<float>(v, 3 * vertex_count), std::span<uint32_t>(i, 3 * triangle_count)};
+}
+
+void RayScene::add_triangles(std::span<const float> xyz, std::span<const uint32_t> triangles) {
+  const TriangleBuffers b = add_triangles(xyz.size() / 3, triangles.size() / 3);
+  if (b.indices.empty()) return;
+  std::memcpy(b.xyz.data(), xyz.data(), xyz.size_bytes());
+  std::memcpy(b.indices.data(), triangles.data(), triangles.size_bytes());
+}
+
+void RayScene::add_segments(std::span<const float> xyz, std::span<const uint32_t> edges,
+                            std::span<const float> radius) {
+  const uint64_t n = edges.size() / 2;
+  if (n == 0) return;
+  if (2 * n > UINT32_MAX) fail(Status::usage, "more than 2^31 edges in one ray-casting scene");
+  Impl& s = *impl_;
+  RTCGeometry g = s.attach(RTC_GEOMETRY_TYPE_FLAT_LINEAR_CURVE, PrimitiveKind::edge);
+  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
+                                                        4 * sizeof(float), 2 * n));
+  s.check("edge vertices");
+  auto* i = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT,
+                                                           sizeof(uint32_t), n));
+  s.check("edge indices");
+  for (uint64_t e = 0; e < n; ++e) {
+    for (int end = 0; end < 2; ++end) {
+      const float* p = xyz.data() + 3 * static_cast<uint64_t>(edges[2 * e + end]);
+      float* o = v + 4 * (2 * e + end);
+      o[0] = p[0], o[1] = p[1], o[2] = p[2], o[3] = radius[e];
+    }
+    i[e] = static_cast<uint32_t>(2 * e);
+  }
+  s.geoms.back().vertices = v;
+  s.geoms.back().indices = i;
+  s.finish(g);
+}
+
+void RayScene::add_points(std::span<const float> xyz, std::span<const uint32_t> ids, float radius) {
+  const uint64_t n = ids.size();
+  if (n == 0) return;
+  if (n > UINT32_MAX) fail(Status::usage, "more than 2^32 points in one ray-casting scene");
+  Impl& s = *impl_;
+  RTCGeometry g = s.attach(RTC_GEOMETRY_TYPE_DISC_POINT, PrimitiveKind::point);
+  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
+                                                        4 * sizeof(float), n));
+  s.check("point vertices");
+  for (uint64_t k = 0; k < n; ++k) {
+    const float* p = xyz.data() + 3 * static_cast<uint64_t>(ids[k]);
+    float* o = v + 4 * k;
+    o[0] = p[0], o[1] = p[1], o[2] = p[2], o[3] = radius;
+  }
+  s.geoms.back().vertices = v;
+  s.finish(g);
+}
+
+void RayScene::commit() {
+  rtcCommitScene(impl_->scene);
+  impl_->check("scene build");
+  impl_->committed = true;
+}
+
+namespace {
+struct QueryState {
+  const std::vector<Geom>* geoms;
+  Vec p;
+  double best_d2;
+  Vec best;
+};
+}  // namespace
+
+static bool closest_callback(RTCPointQueryFunctionArguments* args) {
+  auto* q = static_cast<QueryState*>(args->userPtr);
+  const auto& g = (*q->geoms)[args->geomID];
+  const uint64_t prim = args->primID;
+  Vec c;
+  switch (g.kind) {
+    case PrimitiveKind::triangle: {
+      const uint32_t* t = g.indices + 3 * prim;
+      c = closest_on_triangle(q->p, load(g.vertices + 3ull * t[0]), load(g.vertices + 3ull * t[1]),
+                              load(g.vertices + 3ull * t[2]));
+      break;
+    }
+    case PrimitiveKind::edge: {
+      const uint64_t first = g.indices[prim];
+      c = closest_on_segment(q->p, load(g.vertices + 4 * first), load(g.vertices + 4 * (first + 1)));
+      break;
+    }
+    case PrimitiveKind::point:
+      c = load(g.vertices + 4 * prim);
+      break;
+    default:
+      return false;
+  }
+  const Vec d = sub(q->p, c);
+  const double d2 = dot(d, d);
+  if (d2 < q->best_d2) {
+    q->best_d2 = d2;
+    q->best = c;
+    args->query->radius = static_cast<float>(std::sqrt(d2));
+    return true;
+  }
+  return false;
+}
+
+float RayScene::closest_distance(const float p[3], float* closest) const {
+  QueryState state{&impl_->geoms, load(p), std::numeric_limits<double>::infinity(), {0, 0, 0}};
+  if (impl_->has_primitives) {
+    RTCPointQuery query;
+    query.x = p[0], query.y = p[1], query.z = p[2];
+    query.radius = std::numeric_limits<float>::infinity();
+    query.time = 0;
+    RTCPointQueryContext context;
+    rtcInitPointQueryContext(&context);
+    rtcPointQuery(impl_->scene, &query, &context, closest_callback, &state);
+  }
+  if (closest) closest[0] = float(state.best.x), closest[1] = float(state.best.y), closest[2] = float(state.best.z);
+  return static_cast<float>(std::sqrt(state.best_d2));
+}
+
+PrimitiveKind RayScene::kind_of(unsigned geom_id) const {
+  return geom_id < impl_->geoms.size() ? impl_->geoms[geom_id].kind : PrimitiveKind::none;
+}
+uint64_t RayScene::embree_bytes() const { return static_cast<uint64_t>(std::max<int64_t>(0, impl_->bytes.load())); }
+uint64_t RayScene::peak_embree_bytes() const { return static_cast<uint64_t>(std::max<int64_t>(0, impl_->peak.load())); }
+void* RayScene::handle() const { return impl_->scene; }
+bool RayScene::empty() const { return !impl_->has_primitives; }
+
+}  // namespace lodstream::core

@@ -1,0 +1,73 @@
+// Embree 3 scenes for the error report (../shared/DESIGN.md "Error report"): what a renderer would draw
+// of an original or a level of detail, for ray casting and closest-point queries.
+//
+// Primitives:
+// - triangles: an Embree triangle mesh;
+// - thick edges: Embree flat linear curves (RTC_GEOMETRY_TYPE_FLAT_LINEAR_CURVE), one segment of constant
+//   radius per edge. A flat curve is a ribbon that always faces the ray, which is exactly how Low & Tan
+//   (§3.3.2) draw a thick edge: a line T/R pixels wide whose normal lies in the plane of edge and camera;
+// - points: ray-facing discs (RTC_GEOMETRY_TYPE_DISC_POINT).
+// Geometry is copied into Embree-owned buffers (Embree needs 16 readable bytes at every vertex, which a
+// mapped column does not promise at its end). Scenes are built with RTC_SCENE_FLAG_ROBUST, so that a ray
+// through a shared edge never slips between two triangles (that would count as a silhouette mismatch), and
+// RTC_SCENE_FLAG_COMPACT, to keep the original's BVH small.
+//
+// Closest points (Metro-style Hausdorff sampling) use rtcPointQuery with one callback for every geometry:
+// the distance to a triangle, to an edge's axis (its thickness is a rendering width, not geometry), or to
+// a point.
+//
+// Memory: every byte Embree allocates passes through a device memory monitor; when the scene would take
+// more than the limit given at construction, the build fails with Status::usage and a message saying
+// how much it needed.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+
+namespace lodstream::core {
+
+// Geometry kinds, as stored per pixel by the ray caster.
+enum class PrimitiveKind : uint8_t { none = 0, triangle = 1, edge = 2, point = 3 };
+
+class RayScene {
+ public:
+  // memory_limit: bytes Embree may hold for this scene (0 = no limit). threads: 0 = all.
+  explicit RayScene(uint64_t memory_limit = 0);
+  ~RayScene();
+  RayScene(const RayScene&) = delete;
+  RayScene& operator=(const RayScene&) = delete;
+
+  // A triangle mesh whose buffers the caller fills before commit(): `vertices` xyz triples, `triangles`
+  // index triples (every index < vertex_count). Returns the buffers.
+  struct TriangleBuffers {
+    std::span<float> xyz;
+    std::span<uint32_t> indices;
+  };
+  TriangleBuffers add_triangles(uint64_t vertex_count, uint64_t triangle_count);
+  void add_triangles(std::span<const float> xyz, std::span<const uint32_t> triangles);
+  // Segments between xyz[edges[2i]] and xyz[edges[2i+1]], of radius radius[i] (> 0).
+  void add_segments(std::span<const float> xyz, std::span<const uint32_t> edges, std::span<const float> radius);
+  // Discs at xyz[ids[i]], of the given radius (> 0).
+  void add_points(std::span<const float> xyz, std::span<const uint32_t> ids, float radius);
+  // Builds the BVH. Throws Failure(usage) when the memory limit is exceeded, Failure(internal) on any
+  // other Embree error.
+  void commit();
+
+  // Distance from p to the nearest primitive, or +infinity when the scene is empty. Thread-safe after
+  // commit(). `closest` (optional) receives the nearest point.
+  float closest_distance(const float p[3], float* closest = nullptr) const;
+
+  PrimitiveKind kind_of(unsigned geom_id) const;
+  uint64_t embree_bytes() const;  // bytes Embree holds now
+  uint64_t peak_embree_bytes() const;
+  void* handle() const;           // the RTCScene, for the ray caster
+  bool empty() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace lodstream::core

@@ -1,0 +1,983 @@
+// Whole-file reader for one level of detail (see io/lod_reader.h): PLY (Greg Turk, "The PLY Polygon File
+// Format") and Wavefront OBJ, into core::LodMesh.
+//
+// The file is mapped once and parsed in one pass. Memory is the result's arrays: they are reserved from
+// PLY header counts only after the counts are checked against the bytes the file holds (a record takes at
+// least its fixed-size properties and list counts in binary, one character and a separator per property in
+// ascii), and otherwise grow with the data. Indices are checked as they are read (PLY declares the vertex
+// count up front); OBJ may refer to vertices defined later, so the few references that reach past the
+// vertices read so far are remembered and checked at the end, reported at the first such line in file order.
+//
+// Coordinates and thicknesses are parsed straight to float where the file declares float (and in OBJ,
+// whose writer prints the shortest decimal of a float), so they read back bit for bit; other types are
+// converted once, and a value a float cannot hold is an error, not an infinity.
+#include "io/lod_reader.h"
+
+#include <bit>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <string_view>
+#include <system_error>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include "core/status.h"
+#include "io/mapped_file.h"
+#include "io/reader.h"
+#include "io/text.h"
+
+namespace lodstream::io {
+namespace {
+
+constexpr uint64_t kMaxVertices = uint64_t{UINT32_MAX} + 1;  // ids must fit uint32
+
+// Parses a number at p (no blanks skipped; a leading '+' accepted) as float, correctly rounded from the
+// decimal, with no detour through double. Returns the end of the number, or nullptr if none starts there.
+// Overflow gives infinity and underflow its rounded value (as text::parse_double).
+const char* float_at(const char* p, const char* end, float* out) {
+  if (p < end && *p == '+') ++p;
+  const auto [q, ec] = std::from_chars(p, end, *out, std::chars_format::general);
+  if (ec == std::errc::result_out_of_range) {
+    *out = static_cast<float>(text::out_of_range_value(p, q));
+    return q;
+  }
+  return ec == std::errc() ? q : nullptr;
+}
+
+// A token for an error message: at most 40 bytes, unprintable bytes as '?'.
+std::string quoted(std::string_view s) {
+  std::string r = "'";
+  for (size_t i = 0; i < s.size() && i < 40; ++i) {
+    const unsigned char c = static_cast<unsigned char>(s[i]);
+    r += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
+  }
+  if (s.size() > 40) r += "...";
+  return r + "'";
+}
+
+std::string vertices_text(uint64_t n) { return std::to_string(n) + (n == 1 ? " vertex" : " vertices"); }
+
+bool is_control(unsigned char c) { return c < 0x20 && c != '\t' && c != '\n' && c != '\r' && c != '\f' && c != '\v'; }
+
+std::string control_message(unsigned char c) {
+  char hex[8];
+  std::snprintf(hex, sizeof hex, "0x%02x", c);
+  return std::string("binary data in a text file (byte ") + hex + ")";
+}
+
+// ================================================================================================ PLY
+
+enum class Type : uint8_t { none, i8, u8, i16, u16, i32, u32, f32, f64 };
+
+Type type_from_name(std::string_view s) {
+  if (s == "char" || s == "int8") return Type::i8;
+  if (s == "uchar" || s == "uint8") return Type::u8;
+  if (s == "short" || s == "int16") return Type::i16;
+  if (s == "ushort" || s == "uint16") return Type::u16;
+  if (s == "int" || s == "int32") return Type::i32;
+  if (s == "uint" || s == "uint32") return Type::u32;
+  if (s == "float" || s == "float32") return Type::f32;
+  if (s == "double" || s == "float64") return Type::f64;
+  return Type::none;
+}
+
+const char* type_name(Type t) {
+  switch (t) {
+    case Type::i8: return "char";
+    case Type::u8: return "uchar";
+    case Type::i16: return "short";
+    case Type::u16: return "ushort";
+    case Type::i32: return "int";
+    case Type::u32: return "uint";
+    case Type::f32: return "float";
+    case Type::f64: return "double";
+    default: return "?";
+  }
+}
+
+unsigned type_size(Type t) {
+  switch (t) {
+    case Type::i8:
+    case Type::u8: return 1;
+    case Type::i16:
+    case Type::u16: return 2;
+    case Type::i32:
+    case Type::u32:
+    case Type::f32: return 4;
+    case Type::f64: return 8;
+    default: return 0;
+  }
+}
+
+bool is_integer(Type t) { return t != Type::none && t != Type::f32 && t != Type::f64; }
+
+int64_t type_min(Type t) {
+  switch (t) {
+    case Type::i8: return std::numeric_limits<int8_t>::min();
+    case Type::i16: return std::numeric_limits<int16_t>::min();
+    case Type::i32: return std::numeric_limits<int32_t>::min();
+    default: return 0;
+  }
+}
+
+int64_t type_max(Type t) {
+  switch (t) {
+    case Type::i8: return std::numeric_limits<int8_t>::max();
+    case Type::u8: return std::numeric_limits<uint8_t>::max();
+    case Type::i16: return std::numeric_limits<int16_t>::max();
+    case Type::u16: return std::numeric_limits<uint16_t>::max();
+    case Type::i32: return std::numeric_limits<int32_t>::max();
+    case Type::u32: return std::numeric_limits<uint32_t>::max();
+    default: return 0;
+  }
+}
+
+template <typename T, bool Swap>
+inline T load(const char* p) {
+  using U = std::conditional_t<sizeof(T) == 1, uint8_t,
+                               std::conditional_t<sizeof(T) == 2, uint16_t,
+                                                  std::conditional_t<sizeof(T) == 4, uint32_t, uint64_t>>>;
+  U u;
+  std::memcpy(&u, p, sizeof u);
+  if constexpr (Swap && sizeof(T) == 2) u = __builtin_bswap16(u);
+  if constexpr (Swap && sizeof(T) == 4) u = __builtin_bswap32(u);
+  if constexpr (Swap && sizeof(T) == 8) u = __builtin_bswap64(u);
+  return std::bit_cast<T>(u);
+}
+
+template <bool Swap>
+inline int64_t load_int(const char* p, Type t) {
+  switch (t) {
+    case Type::i8: return load<int8_t, Swap>(p);
+    case Type::u8: return load<uint8_t, Swap>(p);
+    case Type::i16: return load<int16_t, Swap>(p);
+    case Type::u16: return load<uint16_t, Swap>(p);
+    case Type::i32: return load<int32_t, Swap>(p);
+    case Type::u32: return load<uint32_t, Swap>(p);
+    default: return 0;  // the header allows only integer types where integers are loaded
+  }
+}
+
+// Every PLY type converts to double exactly.
+template <bool Swap>
+inline double load_double(const char* p, Type t) {
+  switch (t) {
+    case Type::f32: return load<float, Swap>(p);
+    case Type::f64: return load<double, Swap>(p);
+    default: return static_cast<double>(load_int<Swap>(p, t));
+  }
+}
+
+enum class Kind : uint8_t { vertex, face, edge, point, other };
+enum class Role : uint8_t { none, x, y, z, indices, v1, v2, thickness, vertex };
+
+struct Property {
+  std::string name;
+  bool list = false;
+  Type count_type = Type::none;  // lists only
+  Type type = Type::none;        // scalar type, or the list's item type
+  Role role = Role::none;
+};
+
+struct Element {
+  std::string name;
+  uint64_t count = 0;
+  uint64_t header_line = 0;
+  std::vector<Property> props;
+  Kind kind = Kind::other;
+  bool fixed = true;      // binary records of one size (no list)
+  uint64_t min_size = 0;  // binary: bytes of a record whose lists are all empty
+  unsigned index_size = 0;  // face: bytes of one index
+};
+
+// A polygon being fan-triangulated as its indices arrive: (first, previous, current) per index after the
+// second.
+struct Fan {
+  uint32_t first = 0, prev = 0;
+  uint64_t n = 0;
+};
+
+class PlyParser {
+ public:
+  PlyParser(const MappedFile& file, std::string_view bytes, core::LodMesh* mesh, LodFileStats* stats)
+      : file_(file), data_(bytes.data()), size_(bytes.size()), mesh_(*mesh), stats_(*stats) {}
+
+  void run() {
+    parse_header();
+    check_header();
+    stats_.format = fmt_ == Fmt::ascii ? "ply-ascii" : fmt_ == Fmt::le ? "ply-binary-le" : "ply-binary-be";
+    reserve();
+    constexpr bool little = std::endian::native == std::endian::little;
+    if (fmt_ == Fmt::ascii) parse_ascii();
+    else if ((fmt_ == Fmt::le) == little) parse_binary<false>();
+    else parse_binary<true>();
+  }
+
+ private:
+  enum class Fmt : uint8_t { ascii, le, be };
+
+  void parse_header();
+  void check_header();
+  void reserve();
+  template <bool Swap>
+  void parse_binary();
+  void parse_ascii();
+
+  [[noreturn]] void header_error(uint64_t line, const std::string& message) const {
+    fail_at_line(file_, line, message);
+  }
+  // An error in the current record: at its line (ascii) or its first byte (binary).
+  [[noreturn]] void data_error(const std::string& message) const {
+    if (fmt_ == Fmt::ascii) fail_at_line(file_, line_, message);
+    fail_at_offset(file_, offset_, message);
+  }
+  std::string record_text() const {
+    return "record " + std::to_string(record_ + 1) + " of " + std::to_string(element_->count) + " of element '" +
+           element_->name + "'";
+  }
+  [[noreturn]] void truncated() const {
+    data_error(std::string("truncated: the file ends ") + (offset_ >= size_ ? "before " : "inside ") + record_text());
+  }
+
+  uint32_t index(int64_t i) const {
+    if (static_cast<uint64_t>(i) >= vertex_count_)
+      data_error("vertex index " + std::to_string(i) + " out of range in " + record_text() + ": the file has " +
+                 vertices_text(vertex_count_));
+    return static_cast<uint32_t>(i);
+  }
+  void fan_add(Fan& f, int64_t i) {
+    const uint32_t v = index(i);
+    if (f.n >= 2) {
+      if (f.first == f.prev || f.prev == v || f.first == v) {
+        ++stats_.degenerate_triangles;
+      } else {
+        const uint32_t t[3] = {f.first, f.prev, v};
+        mesh_.triangles.insert(mesh_.triangles.end(), t, t + 3);
+      }
+    } else if (f.n == 0) {
+      f.first = v;
+    }
+    f.prev = v;
+    ++f.n;
+  }
+  void add_edge(uint32_t a, uint32_t b, double thickness) {
+    const float t = static_cast<float>(thickness);
+    if (!(t >= 0) || !std::isfinite(t)) {
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%g", thickness);
+      data_error(std::string("edge thickness ") + buf + " is negative or not finite in " + record_text());
+    }
+    if (a == b) {
+      ++stats_.degenerate_edges;
+      return;
+    }
+    mesh_.edges.push_back(a);
+    mesh_.edges.push_back(b);
+    mesh_.thickness.push_back(t);
+  }
+  // What a record's roles collected, once the whole record is read.
+  void finish_record(const double* xyz, const int64_t* v, double thickness, const Fan& fan) {
+    switch (element_->kind) {
+      case Kind::vertex: {
+        const float f[3] = {static_cast<float>(xyz[0]), static_cast<float>(xyz[1]), static_cast<float>(xyz[2])};
+        if (!std::isfinite(f[0]) || !std::isfinite(f[1]) || !std::isfinite(f[2])) {
+          char buf[160];
+          std::snprintf(buf, sizeof buf, "vertex coordinate is not finite%s (%g, %g, %g) in ",
+                        text::finite3(xyz) ? " as a float" : "", xyz[0], xyz[1], xyz[2]);
+          data_error(buf + record_text());
+        }
+        mesh_.positions.insert(mesh_.positions.end(), f, f + 3);
+        break;
+      }
+      case Kind::face:
+        ++stats_.faces;
+        if (fan.n < 2)
+          data_error("face with " + vertices_text(fan.n) + " (a face needs at least 2) in " + record_text());
+        if (fan.n == 2) add_edge(fan.first, fan.prev, 0);  // a loose edge, as the ingest readers keep it
+        break;
+      case Kind::edge: add_edge(index(v[0]), index(v[1]), thickness); break;
+      case Kind::point: mesh_.points.push_back(index(v[0])); break;
+      case Kind::other: ++stats_.skipped; break;
+    }
+  }
+
+  const MappedFile& file_;
+  const char* const data_;
+  const uint64_t size_;
+  core::LodMesh& mesh_;
+  LodFileStats& stats_;
+
+  Fmt fmt_ = Fmt::ascii;
+  std::vector<Element> elements_;
+  uint64_t data_start_ = 0;
+  uint64_t data_line_ = 0;
+  uint64_t header_lines_ = 0;
+  uint64_t vertex_count_ = 0;
+
+  // The record being read, for error messages.
+  const Element* element_ = nullptr;
+  uint64_t record_ = 0;
+  uint64_t offset_ = 0;
+  uint64_t line_ = 0;
+};
+
+void PlyParser::parse_header() {
+  const char* p = data_;
+  const char* const end = data_ + size_;
+  bool saw_format = false;
+  uint64_t line = 0;
+  for (;;) {
+    if (p >= end) header_error(line + 1, "the PLY header has no end_header line");
+    const char* const le = text::line_end(p, end);
+    ++line;
+    const char* lp = p;
+    p = le < end ? le + 1 : end;
+    const std::string_view whole(lp, static_cast<size_t>(le - lp));
+    for (const char c : whole)
+      if (!text::is_text_byte(static_cast<unsigned char>(c)))
+        header_error(line, "binary data in the PLY header (is end_header missing?): " + quoted(whole));
+    const std::string_view keyword = text::next_token(lp, le);
+    auto expect_end = [&](const char* what) {
+      const std::string_view extra = text::next_token(lp, le);
+      if (!extra.empty()) header_error(line, std::string("unexpected ") + quoted(extra) + " after " + what);
+    };
+    if (line == 1) {  // the caller checked the magic
+      expect_end("'ply'");
+      continue;
+    }
+    if (keyword.empty() || keyword == "comment" || keyword == "obj_info") continue;
+    if (keyword == "format") {
+      if (saw_format) header_error(line, "second format line");
+      const std::string_view f = text::next_token(lp, le);
+      const std::string_view version = text::next_token(lp, le);
+      if (f == "ascii") fmt_ = Fmt::ascii;
+      else if (f == "binary_little_endian") fmt_ = Fmt::le;
+      else if (f == "binary_big_endian") fmt_ = Fmt::be;
+      else
+        header_error(line, "unknown PLY format " + quoted(f) +
+                               " (expected ascii, binary_little_endian or binary_big_endian)");
+      if (version != "1.0") header_error(line, "unsupported PLY version " + quoted(version) + " (expected 1.0)");
+      expect_end("the format line");
+      saw_format = true;
+      continue;
+    }
+    if (keyword == "element") {
+      if (!saw_format) header_error(line, "element before the format line");
+      const std::string_view name = text::next_token(lp, le);
+      const std::string_view count = text::next_token(lp, le);
+      if (name.empty() || count.empty()) header_error(line, "bad element line: expected 'element NAME COUNT'");
+      uint64_t n = 0;
+      const auto [q, ec] = std::from_chars(count.data(), count.data() + count.size(), n);
+      if (ec != std::errc() || q != count.data() + count.size())
+        header_error(line, "bad element count " + quoted(count) + " for element " + quoted(name));
+      expect_end("the element line");
+      for (const Element& e : elements_)
+        if (e.name == name) header_error(line, "second element named " + quoted(name));
+      Element e;
+      e.name = std::string(name);
+      e.count = n;
+      e.header_line = line;
+      elements_.push_back(std::move(e));
+      continue;
+    }
+    if (keyword == "property") {
+      if (elements_.empty()) header_error(line, "property before any element");
+      Property pr;
+      std::string_view t = text::next_token(lp, le);
+      if (t == "list") {
+        pr.list = true;
+        const std::string_view ct = text::next_token(lp, le);
+        if (ct.empty()) header_error(line, "bad list property: expected 'property list COUNTTYPE ITEMTYPE NAME'");
+        pr.count_type = type_from_name(ct);
+        if (pr.count_type == Type::none) header_error(line, "unknown property type " + quoted(ct));
+        if (!is_integer(pr.count_type))
+          header_error(line, "list count type must be an integer type, not " + quoted(ct));
+        t = text::next_token(lp, le);
+      }
+      if (t.empty()) header_error(line, "bad property line: expected 'property TYPE NAME'");
+      pr.type = type_from_name(t);
+      if (pr.type == Type::none) header_error(line, "unknown property type " + quoted(t));
+      const std::string_view name = text::next_token(lp, le);
+      if (name.empty()) header_error(line, "property without a name");
+      expect_end("the property line");
+      Element& e = elements_.back();
+      for (const Property& other : e.props)
+        if (other.name == name)
+          header_error(line, "second property named " + quoted(name) + " in element " + quoted(e.name));
+      pr.name = std::string(name);
+      e.props.push_back(std::move(pr));
+      continue;
+    }
+    if (keyword == "end_header") {
+      expect_end("end_header");
+      if (!saw_format) header_error(line, "no format line before end_header");
+      data_start_ = static_cast<uint64_t>(p - data_);
+      header_lines_ = line;
+      data_line_ = line + 1;
+      return;
+    }
+    header_error(line, "unknown PLY header line " + quoted(whole));
+  }
+}
+
+void PlyParser::check_header() {
+  const bool binary = fmt_ != Fmt::ascii;
+  bool have_vertex = false;
+  for (Element& e : elements_) {
+    auto find = [&](std::string_view name) -> Property* {
+      for (Property& pr : e.props)
+        if (pr.name == name) return &pr;
+      return nullptr;
+    };
+    auto scalar = [&](Property* pr, bool integer) {
+      if (pr->list || (integer && !is_integer(pr->type)))
+        header_error(e.header_line, "property " + quoted(pr->name) + " of element " + quoted(e.name) +
+                                        (integer ? " must be a scalar integer" : " must be a scalar"));
+    };
+    if (e.count > 0 && e.props.empty())
+      header_error(e.header_line, "element " + quoted(e.name) + " has records but no properties");
+    if (e.name == "vertex") {
+      e.kind = Kind::vertex;
+      have_vertex = true;
+      vertex_count_ = e.count;
+      if (e.count > kMaxVertices)
+        header_error(e.header_line, "element 'vertex' declares " + std::to_string(e.count) +
+                                        " records: more than 32-bit indices can address");
+      const std::pair<const char*, Role> coords[3] = {{"x", Role::x}, {"y", Role::y}, {"z", Role::z}};
+      for (const auto& [name, role] : coords) {
+        Property* pr = find(name);
+        if (!pr) header_error(e.header_line, std::string("element 'vertex' has no property '") + name + "'");
+        scalar(pr, false);
+        pr->role = role;
+      }
+    } else if (e.name == "face") {
+      e.kind = Kind::face;
+      Property* pr = find("vertex_indices");
+      if (!pr) pr = find("vertex_index");
+      if (!pr) header_error(e.header_line, "element 'face' has no list property 'vertex_indices'");
+      if (!pr->list) header_error(e.header_line, "property " + quoted(pr->name) + " of element 'face' is not a list");
+      if (!is_integer(pr->type))
+        header_error(e.header_line, "face indices must have an integer type, not " + std::string(type_name(pr->type)));
+      pr->role = Role::indices;
+      e.index_size = type_size(pr->type);
+    } else if (e.name == "edge") {
+      Property* a = find("vertex1");
+      Property* b = find("vertex2");
+      if (a && b) {
+        e.kind = Kind::edge;
+        scalar(a, true);
+        scalar(b, true);
+        a->role = Role::v1;
+        b->role = Role::v2;
+        if (Property* t = find("thickness")) {
+          scalar(t, false);
+          t->role = Role::thickness;
+        }
+      }
+    } else if (e.name == "point") {
+      if (Property* v = find("vertex")) {
+        e.kind = Kind::point;
+        scalar(v, true);
+        v->role = Role::v1;
+      }
+    }
+    for (const Property& pr : e.props) {
+      e.min_size += type_size(pr.list ? pr.count_type : pr.type);
+      if (pr.list) e.fixed = false;
+    }
+  }
+  if (!have_vertex) header_error(header_lines_, "the PLY header declares no element 'vertex'");
+
+  // Counts the data cannot hold, rejected before anything is allocated. A binary record takes at least
+  // min_size bytes; an ascii record of k properties at least 2k (k one-character tokens, k-1 separators and
+  // a line end that the very last record may lack).
+  const uint64_t avail = size_ - data_start_;
+  uint64_t used = 0;
+  for (const Element& e : elements_) {
+    if (e.count == 0) continue;
+    const uint64_t per = binary ? e.min_size : 2 * e.props.size();
+    const uint64_t room = avail - used + (binary ? 0 : 1);
+    if (e.count > room / per)
+      header_error(e.header_line, "element " + quoted(e.name) + " declares " + std::to_string(e.count) +
+                                      " records of at least " + std::to_string(per) + " bytes each, but only " +
+                                      std::to_string(avail - std::min(avail, used)) +
+                                      " bytes of data remain for it (from byte " +
+                                      std::to_string(data_start_ + std::min(avail, used)) +
+                                      "): the file is truncated or the count is wrong");
+    used += e.count * per;
+  }
+}
+
+void PlyParser::reserve() {
+  const uint64_t avail = size_ - data_start_;
+  for (const Element& e : elements_) {
+    switch (e.kind) {
+      case Kind::vertex: mesh_.positions.reserve(3 * e.count); break;
+      case Kind::face: {
+        // As many triangles as records the bytes could hold if every record were a triangle.
+        const uint64_t per = fmt_ == Fmt::ascii ? 2 * (e.props.size() + 3) : e.min_size + 3 * e.index_size;
+        mesh_.triangles.reserve(3 * std::min(e.count, avail / per));
+        break;
+      }
+      case Kind::edge:
+        mesh_.edges.reserve(2 * e.count);
+        mesh_.thickness.reserve(e.count);
+        break;
+      case Kind::point: mesh_.points.reserve(e.count); break;
+      case Kind::other: break;
+    }
+  }
+}
+
+template <bool Swap>
+void PlyParser::parse_binary() {
+  const char* p = data_ + data_start_;
+  const char* const end = data_ + size_;
+  for (const Element& e : elements_) {
+    element_ = &e;
+    if (e.kind == Kind::other && e.fixed) {
+      // Nothing to read: step over the records at once.
+      const uint64_t left = static_cast<uint64_t>(end - p);
+      if (left / e.min_size < e.count) {
+        record_ = left / e.min_size;
+        offset_ = static_cast<uint64_t>(p - data_) + record_ * e.min_size;
+        truncated();
+      }
+      p += e.count * e.min_size;
+      stats_.skipped += e.count;
+      continue;
+    }
+    for (uint64_t k = 0; k < e.count; ++k) {
+      record_ = k;
+      offset_ = static_cast<uint64_t>(p - data_);
+      double xyz[3] = {0, 0, 0};
+      int64_t v[2] = {0, 0};
+      double thickness = 0;
+      Fan fan;
+      for (const Property& pr : e.props) {
+        if (pr.list) {
+          const unsigned cs = type_size(pr.count_type);
+          if (static_cast<uint64_t>(end - p) < cs) truncated();
+          const int64_t n = load_int<Swap>(p, pr.count_type);
+          p += cs;
+          if (n < 0)
+            data_error("negative list count " + std::to_string(n) + " for list '" + pr.name + "' in " + record_text());
+          const unsigned is = type_size(pr.type);
+          if (static_cast<uint64_t>(end - p) / is < static_cast<uint64_t>(n)) truncated();
+          if (pr.role == Role::indices)
+            for (int64_t i = 0; i < n; ++i) fan_add(fan, load_int<Swap>(p + i * is, pr.type));
+          p += static_cast<uint64_t>(n) * is;
+        } else {
+          const unsigned s = type_size(pr.type);
+          if (static_cast<uint64_t>(end - p) < s) truncated();
+          switch (pr.role) {
+            case Role::x: xyz[0] = load_double<Swap>(p, pr.type); break;
+            case Role::y: xyz[1] = load_double<Swap>(p, pr.type); break;
+            case Role::z: xyz[2] = load_double<Swap>(p, pr.type); break;
+            case Role::v1: v[0] = load_int<Swap>(p, pr.type); break;
+            case Role::v2: v[1] = load_int<Swap>(p, pr.type); break;
+            case Role::thickness: thickness = load_double<Swap>(p, pr.type); break;
+            default: break;
+          }
+          p += s;
+        }
+      }
+      finish_record(xyz, v, thickness, fan);
+    }
+  }
+  if (p < end)
+    fail_at_offset(file_, static_cast<uint64_t>(p - data_),
+                   std::to_string(end - p) + " bytes after the last element the header declares");
+}
+
+enum class Val : uint8_t { ok, missing, bad, range };
+
+// One ascii value of type t at p, within a line ending at e: an integer in range for integer types, a
+// number rounded once to the declared type for float types.
+Val ascii_value(const char*& p, const char* e, Type t, double* d, int64_t* i) {
+  p = text::skip_blanks(p, e);
+  if (p == e) return Val::missing;
+  const char* q = p;
+  if (is_integer(t)) {
+    int64_t v = 0;
+    if (!text::parse_int64(q, e, &v) || (q < e && !text::is_blank(*q))) return Val::bad;
+    if (v < type_min(t) || v > type_max(t)) return Val::range;
+    *i = v;
+    *d = static_cast<double>(v);
+  } else if (t == Type::f32) {
+    float f = 0;
+    q = float_at(q, e, &f);
+    if (!q || (q < e && !text::is_blank(*q))) return Val::bad;
+    *d = f;
+  } else {
+    if (!text::parse_double(q, e, d)) return Val::bad;
+  }
+  p = q;
+  return Val::ok;
+}
+
+void PlyParser::parse_ascii() {
+  const char* p = data_ + data_start_;
+  const char* const end = data_ + size_;
+  uint64_t line = data_line_;
+  for (const Element& e : elements_) {
+    element_ = &e;
+    for (uint64_t k = 0; k < e.count; ++k) {
+      record_ = k;
+      const char* le;
+      const char* q;
+      for (;;) {  // the next line that is not blank
+        offset_ = static_cast<uint64_t>(p - data_);
+        line_ = line;
+        if (p >= end) data_error("truncated: the file ends before " + record_text());
+        le = text::line_end(p, end);
+        q = text::skip_blanks(p, le);
+        if (q != le) break;
+        p = le < end ? le + 1 : end;
+        ++line;
+      }
+      double xyz[3] = {0, 0, 0};
+      int64_t v[2] = {0, 0};
+      double thickness = 0;
+      Fan fan;
+      for (const Property& pr : e.props) {
+        double d = 0;
+        int64_t iv = 0;
+        auto value = [&](Type t, const std::string& what) {
+          const char* tok = text::skip_blanks(q, le);
+          const Val r = ascii_value(q, le, t, &d, &iv);
+          if (r == Val::ok) return;
+          if (r == Val::missing) data_error("too few values in " + record_text() + ": no value for " + what);
+          const char* te = tok;
+          while (te < le && !text::is_blank(*te)) ++te;
+          data_error(std::string(r == Val::range ? "value out of range for " : "bad value for ") + what + " (" +
+                     type_name(t) + ") in " + record_text() + ": " +
+                     quoted(std::string_view(tok, static_cast<size_t>(te - tok))));
+        };
+        if (pr.list) {
+          value(pr.count_type, "the count of list '" + pr.name + "'");
+          if (iv < 0)
+            data_error("negative list count " + std::to_string(iv) + " for list '" + pr.name + "' in " + record_text());
+          const int64_t n = iv;
+          for (int64_t j = 0; j < n; ++j) {
+            value(pr.type, "item " + std::to_string(j + 1) + " of list '" + pr.name + "'");
+            if (pr.role == Role::indices) fan_add(fan, iv);
+          }
+        } else {
+          value(pr.type, "property '" + pr.name + "'");
+          switch (pr.role) {
+            case Role::x: xyz[0] = d; break;
+            case Role::y: xyz[1] = d; break;
+            case Role::z: xyz[2] = d; break;
+            case Role::v1: v[0] = iv; break;
+            case Role::v2: v[1] = iv; break;
+            case Role::thickness: thickness = d; break;
+            default: break;
+          }
+        }
+      }
+      q = text::skip_blanks(q, le);
+      if (q != le)
+        data_error("extra values after the last property in " + record_text() + ": " +
+                   quoted(std::string_view(q, static_cast<size_t>(le - q))));
+      finish_record(xyz, v, thickness, fan);
+      p = le < end ? le + 1 : end;
+      ++line;
+    }
+  }
+  // Whitespace may follow the last record, nothing else.
+  for (; p < end; ++p) {
+    if (*p == '\n') {
+      ++line;
+    } else if (!text::is_blank(*p)) {
+      fail_at_line(file_, line, "data after the last element the header declares");
+    }
+  }
+}
+
+// ================================================================================================ OBJ
+
+// If p (at a backslash) continues the statement on the next line, the position after the line break (or
+// end, for a backslash ending the file); else nullptr.
+const char* continuation(const char* p, const char* end) {
+  const char* q = p + 1;
+  if (q < end && *q == '\r') ++q;
+  if (q == end) return end;
+  return *q == '\n' ? q + 1 : nullptr;
+}
+
+class ObjParser {
+ public:
+  ObjParser(const MappedFile& file, std::string_view bytes, core::LodMesh* mesh, LodFileStats* stats)
+      : file_(file), p_(bytes.data()), end_(bytes.data() + bytes.size()), mesh_(*mesh), stats_(*stats) {}
+
+  void run();
+
+ private:
+  [[noreturn]] void error(const std::string& message) const { fail_at_line(file_, stmt_line_, message); }
+
+  // What may end a token: a blank, the end of the statement, a comment, a continuation.
+  bool is_sep(const char* p) const {
+    if (p >= end_) return true;
+    const char c = *p;
+    return text::is_blank(c) || c == '\n' || c == '#' || (c == '\\' && continuation(p, end_));
+  }
+  bool at_statement_end() const { return p_ >= end_ || *p_ == '\n' || *p_ == '#'; }
+  void skip_ws() {
+    for (;;) {
+      while (p_ < end_ && text::is_blank(*p_)) ++p_;
+      if (p_ < end_ && *p_ == '\\') {
+        if (const char* q = continuation(p_, end_)) {
+          if (q[-1] == '\n') ++line_;
+          p_ = q;
+          continue;
+        }
+      }
+      return;
+    }
+  }
+  std::string token_at(const char* p) const {
+    const char* e = p;
+    while (!is_sep(e)) ++e;
+    return quoted(std::string_view(p, static_cast<size_t>(e - p)));
+  }
+  // A token that does not parse: binary bytes in it are the better explanation.
+  [[noreturn]] void bad_token(const char* p, const std::string& message) const {
+    for (const char* e = p; !is_sep(e); ++e)
+      if (is_control(static_cast<unsigned char>(*e))) error(control_message(static_cast<unsigned char>(*e)));
+    error(message);
+  }
+  void skip_statement();
+  void vertex();
+  uint32_t reference(const char* what);
+  void face();
+  void polyline();
+  void point();
+
+  const MappedFile& file_;
+  const char* p_;
+  const char* const end_;
+  core::LodMesh& mesh_;
+  LodFileStats& stats_;
+  uint64_t line_ = 1;
+  uint64_t stmt_line_ = 1;
+  uint64_t vertices_ = 0;
+  // References past the vertices read so far, each larger than the one before, with their lines: the first
+  // whose index is past the last vertex of the file is the first such reference in file order.
+  std::vector<std::pair<uint32_t, uint64_t>> forward_;
+};
+
+// Moves p_ to the '\n' ending the statement (or the end), across continuations; any comment ends at its
+// physical line. Checks the bytes on the way.
+void ObjParser::skip_statement() {
+  for (;;) {
+    const char* const le = text::line_end(p_, end_);
+    const char* comment = nullptr;
+    for (const char* c = p_; c < le; ++c) {
+      if (*c == '#' && !comment) comment = c;
+      if (is_control(static_cast<unsigned char>(*c))) error(control_message(static_cast<unsigned char>(*c)));
+    }
+    const char* last = le;
+    if (last > p_ && last[-1] == '\r') --last;
+    if (!comment && le < end_ && last > p_ && last[-1] == '\\') {
+      p_ = le + 1;
+      ++line_;
+      continue;
+    }
+    p_ = le;
+    return;
+  }
+}
+
+void ObjParser::vertex() {
+  float xyz[3];
+  for (int c = 0; c < 3; ++c) {
+    skip_ws();
+    if (at_statement_end())
+      error("vertex has " + std::to_string(c) + " coordinate" + (c == 1 ? "" : "s") + ", needs 3");
+    const char* q = float_at(p_, end_, &xyz[c]);
+    if (!q || !is_sep(q)) bad_token(p_, "bad vertex coordinate " + token_at(p_));
+    p_ = q;
+  }
+  if (!std::isfinite(xyz[0]) || !std::isfinite(xyz[1]) || !std::isfinite(xyz[2]))
+    error("vertex coordinate is not finite (or out of float range)");
+  if (vertices_ == kMaxVertices) error("more vertices than 32-bit indices can address");
+  mesh_.positions.insert(mesh_.positions.end(), xyz, xyz + 3);
+  ++vertices_;
+  skip_statement();
+}
+
+// One corner: v, v/vt, v//vn or v/vt/vn, 1-based or negative (relative to the vertices read so far).
+uint32_t ObjParser::reference(const char* what) {
+  const char* const b = p_;
+  int64_t v = 0;
+  const auto [q, ec] = std::from_chars(p_, end_, v);
+  bool ok = ec == std::errc();
+  p_ = ok ? q : p_;
+  if (ok && p_ < end_ && *p_ == '/') {
+    // Texture and normal indices: digits and signs between the slashes, not used.
+    while (p_ < end_ && (*p_ == '/' || *p_ == '-' || *p_ == '+' || (*p_ >= '0' && *p_ <= '9'))) ++p_;
+  }
+  if (!ok || !is_sep(p_))
+    bad_token(b, std::string("bad vertex reference ") + token_at(b) + " in '" + what + "' statement");
+  if (v == 0) error(std::string("vertex index 0 in '") + what + "' statement (OBJ indices start at 1)");
+  if (v < 0) {
+    if (static_cast<uint64_t>(-(v + 1)) >= vertices_)
+      error("relative vertex index " + std::to_string(v) + " reaches before the first vertex");
+    return static_cast<uint32_t>(vertices_ - static_cast<uint64_t>(-(v + 1)) - 1);
+  }
+  const uint64_t id = static_cast<uint64_t>(v) - 1;
+  if (id >= kMaxVertices) error("vertex index " + std::to_string(v) + " is past what 32-bit indices can address");
+  if (id >= vertices_ && (forward_.empty() || id > forward_.back().first))
+    forward_.emplace_back(static_cast<uint32_t>(id), stmt_line_);
+  return static_cast<uint32_t>(id);
+}
+
+void ObjParser::face() {
+  Fan f;
+  for (;;) {
+    skip_ws();
+    if (at_statement_end()) break;
+    const uint32_t v = reference("f");
+    if (f.n >= 2) {
+      if (f.first == f.prev || f.prev == v || f.first == v) {
+        ++stats_.degenerate_triangles;
+      } else {
+        const uint32_t t[3] = {f.first, f.prev, v};
+        mesh_.triangles.insert(mesh_.triangles.end(), t, t + 3);
+      }
+    } else if (f.n == 0) {
+      f.first = v;
+    }
+    f.prev = v;
+    ++f.n;
+  }
+  ++stats_.faces;
+  if (f.n < 2) error("face with " + std::to_string(f.n) + " corner" + (f.n == 1 ? "" : "s") + " (needs at least 2)");
+  if (f.n == 2) {  // an exporter's loose edge
+    if (f.first == f.prev) {
+      ++stats_.degenerate_edges;
+    } else {
+      mesh_.edges.push_back(f.first);
+      mesh_.edges.push_back(f.prev);
+      mesh_.thickness.push_back(0);
+    }
+  }
+  skip_statement();
+}
+
+void ObjParser::polyline() {
+  uint64_t n = 0;
+  uint32_t prev = 0;
+  for (;;) {
+    skip_ws();
+    if (at_statement_end()) break;
+    const uint32_t v = reference("l");
+    if (n > 0) {
+      if (v == prev) {
+        ++stats_.degenerate_edges;
+      } else {
+        mesh_.edges.push_back(prev);
+        mesh_.edges.push_back(v);
+        mesh_.thickness.push_back(0);
+      }
+    }
+    prev = v;
+    ++n;
+  }
+  if (n < 2) error("line with " + vertices_text(n) + " (needs at least 2)");
+  skip_statement();
+}
+
+void ObjParser::point() {
+  uint64_t n = 0;
+  for (;;) {
+    skip_ws();
+    if (at_statement_end()) break;
+    mesh_.points.push_back(reference("p"));
+    ++n;
+  }
+  if (n == 0) error("point statement without vertices");
+  skip_statement();
+}
+
+void ObjParser::run() {
+  stats_.format = "obj";
+  while (p_ < end_) {
+    skip_ws();
+    stmt_line_ = line_;
+    if (p_ >= end_) break;
+    if (*p_ == '#') {
+      skip_statement();  // a comment is text too: its bytes are checked
+    } else if (*p_ != '\n') {
+      const char* k = p_;
+      while (!is_sep(p_)) ++p_;
+      const std::string_view keyword(k, static_cast<size_t>(p_ - k));
+      if (keyword == "v") vertex();
+      else if (keyword == "f") face();
+      else if (keyword == "l") polyline();
+      else if (keyword == "p") point();
+      else {
+        for (const char c : keyword)
+          if (is_control(static_cast<unsigned char>(c))) error(control_message(static_cast<unsigned char>(c)));
+        ++stats_.skipped;
+        skip_statement();
+      }
+    }
+    if (p_ < end_) {  // at the '\n' ending the statement
+      ++p_;
+      ++line_;
+    }
+  }
+  for (const auto& [id, line] : forward_) {
+    if (id >= vertices_) {
+      stmt_line_ = line;
+      error("vertex index " + std::to_string(uint64_t{id} + 1) + " is past the last vertex (the file has " +
+            vertices_text(vertices_) + ")");
+    }
+  }
+}
+
+// `ext` is ".obj" or ".ply": the file name ends with it in any case, after a name of its own.
+bool has_extension(const std::string& path, std::string_view ext) {
+  const size_t slash = path.find_last_of('/');
+  const std::string_view name = std::string_view(path).substr(slash == std::string::npos ? 0 : slash + 1);
+  if (name.size() <= ext.size()) return false;
+  for (size_t i = 0; i < ext.size(); ++i) {
+    const char c = name[name.size() - ext.size() + i];
+    if ((c >= 'A' && c <= 'Z' ? c - 'A' + 'a' : c) != ext[i]) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+core::LodMesh read_lod_mesh(const std::string& path) { return read_lod_mesh(path, nullptr); }
+
+core::LodMesh read_lod_mesh(const std::string& path, LodFileStats* stats) {
+  LodFileStats local;
+  LodFileStats& st = stats ? *stats : local;
+  st = LodFileStats{};
+  const MappedFile file(path);
+  const Window all = file.map(0, file.size());
+  const std::string_view bytes = all.view();
+  core::LodMesh mesh;
+  if (bytes.starts_with("ply\n") || bytes.starts_with("ply\r\n")) {
+    PlyParser(file, bytes, &mesh, &st).run();
+  } else if (has_extension(path, ".obj")) {
+    ObjParser(file, bytes, &mesh, &st).run();
+  } else if (has_extension(path, ".ply")) {
+    // Named PLY but not one: malformed rather than a usage mistake, as the ingest readers say.
+    fail_at_offset(file, 0, bytes.empty() ? "empty file" : "not a PLY file: it does not start with the line 'ply'");
+  } else {
+    fail(Status::usage, path + ": unsupported LOD format (expected PLY, or OBJ named *.obj)");
+  }
+  return mesh;
+}
+
+}  // namespace lodstream::io
