@@ -10,6 +10,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
+#include <deque>
 #include <limits>
 #include <mutex>
 #include <string>
@@ -85,26 +86,31 @@ struct RayScene::Impl {
 
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
+  // Embree's point queries visit triangles but not curves or points, so segments and points are also
+  // user geometries (bounds only) of a second scene that serves closest-point queries.
+  RTCScene query_scene = nullptr;
   uint64_t limit = 0;
   std::atomic<int64_t> bytes{0};
   std::atomic<int64_t> peak{0};
   std::atomic<bool> over{false};
   std::mutex error_mutex;
   std::string error;
-  std::vector<Geom> geoms;  // by geometry id
+  std::vector<Geom> geoms;        // by geometry id of `scene`
+  std::deque<Geom> query_geoms;   // by geometry id of `query_scene` (a deque: user data points into it)
+  bool has_query_primitives = false;
   bool committed = false;
   bool has_primitives = false;
 
   static bool monitor(void* user, ssize_t delta, bool post) {
     auto* self = static_cast<Impl*>(user);
     const int64_t now = self->bytes.fetch_add(delta) + delta;
-    int64_t seen = self->peak.load();
-    while (now > seen && !self->peak.compare_exchange_weak(seen, now)) {
-    }
     if (delta > 0 && !post && self->limit > 0 && now > static_cast<int64_t>(self->limit)) {
-      self->bytes.fetch_sub(delta);  // the allocation is refused, so it never happens
+      self->bytes.fetch_sub(delta);  // the allocation is refused, so it never happens (nor counts to peak)
       self->over = true;
       return false;
+    }
+    int64_t seen = self->peak.load();
+    while (now > seen && !self->peak.compare_exchange_weak(seen, now)) {
     }
     return true;
   }
@@ -143,6 +149,41 @@ struct RayScene::Impl {
     if (id != geoms.size() - 1) fail(Status::internal, "Embree geometry ids out of order");
     has_primitives = true;
   }
+
+  static void bounds(const RTCBoundsFunctionArguments* args) {
+    const auto* g = static_cast<const Geom*>(args->geometryUserPtr);
+    const float* a;
+    const float* b;
+    if (g->kind == PrimitiveKind::edge) {
+      a = g->vertices + 4ull * g->indices[args->primID];
+      b = a + 4;
+    } else {
+      a = b = g->vertices + 4ull * args->primID;
+    }
+    args->bounds_o->lower_x = std::min(a[0], b[0]), args->bounds_o->upper_x = std::max(a[0], b[0]);
+    args->bounds_o->lower_y = std::min(a[1], b[1]), args->bounds_o->upper_y = std::max(a[1], b[1]);
+    args->bounds_o->lower_z = std::min(a[2], b[2]), args->bounds_o->upper_z = std::max(a[2], b[2]);
+  }
+
+  // The query twin of the last geometry added (a segment or point set of `primitives` primitives).
+  void add_query_twin(uint64_t primitives) {
+    if (!query_scene) {
+      query_scene = rtcNewScene(device);
+      rtcSetSceneFlags(query_scene, RTC_SCENE_FLAG_COMPACT);
+      check("new query scene");
+    }
+    query_geoms.push_back(geoms.back());
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
+    rtcSetGeometryUserPrimitiveCount(g, static_cast<unsigned>(primitives));
+    rtcSetGeometryUserData(g, &query_geoms.back());
+    rtcSetGeometryBoundsFunction(g, &Impl::bounds, nullptr);
+    rtcCommitGeometry(g);
+    const unsigned id = rtcAttachGeometry(query_scene, g);
+    rtcReleaseGeometry(g);
+    check("attach query geometry");
+    if (id != query_geoms.size() - 1) fail(Status::internal, "Embree query geometry ids out of order");
+    has_query_primitives = true;
+  }
 };
 
 RayScene::RayScene(uint64_t memory_limit) : impl_(std::make_unique<Impl>()) {
@@ -158,6 +199,7 @@ RayScene::RayScene(uint64_t memory_limit) : impl_(std::make_unique<Impl>()) {
 }
 
 RayScene::~RayScene() {
+  if (impl_->query_scene) rtcReleaseScene(impl_->query_scene);
   if (impl_->scene) rtcReleaseScene(impl_->scene);
   if (impl_->device) rtcReleaseDevice(impl_->device);
 }
@@ -211,6 +253,7 @@ void RayScene::add_segments(std::span<const float> xyz, std::span<const uint32_t
   s.geoms.back().vertices = v;
   s.geoms.back().indices = i;
   s.finish(g);
+  s.add_query_twin(n);
 }
 
 void RayScene::add_points(std::span<const float> xyz, std::span<const uint32_t> ids, float radius) {
@@ -229,17 +272,23 @@ void RayScene::add_points(std::span<const float> xyz, std::span<const uint32_t> 
   }
   s.geoms.back().vertices = v;
   s.finish(g);
+  s.add_query_twin(n);
 }
 
 void RayScene::commit() {
   rtcCommitScene(impl_->scene);
   impl_->check("scene build");
+  if (impl_->query_scene) {
+    rtcCommitScene(impl_->query_scene);
+    impl_->check("query scene build");
+  }
   impl_->committed = true;
 }
 
 namespace {
 struct QueryState {
-  const std::vector<Geom>* geoms;
+  const std::vector<Geom>* geoms;        // the triangle scene's geometries, or
+  const std::deque<Geom>* query_geoms;   // the query scene's
   Vec p;
   double best_d2;
   Vec best;
@@ -248,7 +297,7 @@ struct QueryState {
 
 static bool closest_callback(RTCPointQueryFunctionArguments* args) {
   auto* q = static_cast<QueryState*>(args->userPtr);
-  const auto& g = (*q->geoms)[args->geomID];
+  const Geom& g = q->geoms ? (*q->geoms)[args->geomID] : (*q->query_geoms)[args->geomID];
   const uint64_t prim = args->primID;
   Vec c;
   switch (g.kind) {
@@ -281,15 +330,23 @@ static bool closest_callback(RTCPointQueryFunctionArguments* args) {
 }
 
 float RayScene::closest_distance(const float p[3], float* closest) const {
-  QueryState state{&impl_->geoms, load(p), std::numeric_limits<double>::infinity(), {0, 0, 0}};
+  QueryState state{&impl_->geoms, nullptr, load(p), std::numeric_limits<double>::infinity(), {0, 0, 0}};
+  RTCPointQuery query;
+  query.x = p[0], query.y = p[1], query.z = p[2];
+  query.radius = std::numeric_limits<float>::infinity();
+  query.time = 0;
+  RTCPointQueryContext context;
   if (impl_->has_primitives) {
-    RTCPointQuery query;
-    query.x = p[0], query.y = p[1], query.z = p[2];
-    query.radius = std::numeric_limits<float>::infinity();
-    query.time = 0;
-    RTCPointQueryContext context;
     rtcInitPointQueryContext(&context);
     rtcPointQuery(impl_->scene, &query, &context, closest_callback, &state);
+  }
+  if (impl_->has_query_primitives) {
+    state.geoms = nullptr;
+    state.query_geoms = &impl_->query_geoms;
+    query.radius = std::isfinite(state.best_d2) ? static_cast<float>(std::sqrt(state.best_d2)) * 1.0001f + 1e-30f
+                                                : std::numeric_limits<float>::infinity();
+    rtcInitPointQueryContext(&context);
+    rtcPointQuery(impl_->query_scene, &query, &context, closest_callback, &state);
   }
   if (closest) closest[0] = float(state.best.x), closest[1] = float(state.best.y), closest[2] = float(state.best.z);
   return static_cast<float>(std::sqrt(state.best_d2));

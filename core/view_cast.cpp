@@ -107,10 +107,21 @@ uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera
           const unsigned x = tx * kTile + i % kTile, y = ty * kTile + i / kTile;
           const uint64_t p = uint64_t{y} * h + x;
           out->depth[p] = packet.ray.tfar[i];
-          out->kind[p] = static_cast<uint8_t>(scenes[which[i]]->kind_of(packet.hit.geomID[i]));
+          const PrimitiveKind kind = scenes[which[i]]->kind_of(packet.hit.geomID[i]);
+          out->kind[p] = static_cast<uint8_t>(kind);
           double n[3] = {packet.hit.Ng_x[i], packet.hit.Ng_y[i], packet.hit.Ng_z[i]};
           const double dir[3] = {packet.ray.dir_x[i], packet.ray.dir_y[i], packet.ray.dir_z[i]};
           normalize(n);
+          if (kind == PrimitiveKind::edge) {
+            // Embree reports a flat curve's tangent as Ng. The ribbon's normal (Low & Tan's dynamic normal)
+            // is perpendicular to the edge in the plane of edge and ray: -dir without its part along the
+            // tangent. Left at 0 (so -dir below) for a ray along the edge.
+            const double along = n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2];
+            for (int k = 0; k < 3; ++k) n[k] = along * n[k] - dir[k];
+            const double len2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+            if (len2 > 1e-12) normalize(n);
+            else n[0] = n[1] = n[2] = 0;
+          }
           const double facing = n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2];
           if (n[0] == 0 && n[1] == 0 && n[2] == 0) {
             for (int k = 0; k < 3; ++k) n[k] = -dir[k];

@@ -45,7 +45,7 @@ std::string plot(const Report& report, const std::string& title, const std::stri
     for (const ReportLevel& l : r.levels) {
       const double x = std::max<double>(1, double(l.triangles)), v = y(l);
       x0 = std::min(x0, x), x1 = std::max(x1, x);
-      if (v > 0) y0 = std::min(y0, v), y1 = std::max(y1, v);
+      if (v > 0 && std::isfinite(v)) y0 = std::min(y0, v), y1 = std::max(y1, v);
     }
   if (x1 == 0) return "";
   if (y1 == 0) y0 = 0.1, y1 = 1;
@@ -54,7 +54,7 @@ std::string plot(const Report& report, const std::string& title, const std::stri
   const int W = 520, H = 300, L = 60, R = 20, T = 30, B = 45;
   auto px = [&](double x) { return L + (std::log10(std::max(x, 1.0)) - lx0) / (lx1 - lx0) * (W - L - R); };
   auto py = [&](double v) {
-    const double lv = v > 0 ? std::log10(v) : ly0;
+    const double lv = v > 0 && std::isfinite(v) ? std::log10(v) : v > 0 ? ly1 : ly0;
     return T + (1 - (std::clamp(lv, ly0, ly1) - ly0) / (ly1 - ly0)) * (H - T - B);
   };
   std::string s = fmt::format("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" height=\"{}\" class=\"plot\">", W, H);

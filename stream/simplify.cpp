@@ -372,6 +372,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     ordered_json m;
     m["generator"] = std::string("lodstream ") + LODSTREAM_VERSION;
     m["input"] = {{"path", input},
+                  {"absolute_path", std::filesystem::absolute(input).lexically_normal().string()},
                   {"format", report.scene.format},
                   {"bytes", report.scene.file_bytes},
                   {"vertices", report.scene.vertices},

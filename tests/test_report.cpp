@@ -1,0 +1,224 @@
+// `lodstream report` end to end, through the CLI as a user runs it: exact figures where geometry makes
+// them exact (a LOD identical to its original, a LOD moved by a known offset), the same figures for any
+// thread count or memory budget, every file written, runs side by side, the documented exit codes, and
+// report.html rendered by headless Chromium (tools/check_html.py).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "cli_harness.h"
+#include "test_util.h"
+
+namespace lodstream::test {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+const std::string kRoom = std::string(LODSTREAM_SOURCE_DIR) + "/tests/data/sample-room.ply";
+// Small settings keep each report well under a second on the sample room.
+const std::vector<std::string> kQuick = {"--views", "4", "--resolution", "64", "--samples", "5000", "--progress", "none"};
+
+std::vector<std::string> cat(std::vector<std::string> a, const std::vector<std::string>& b) {
+  a.insert(a.end(), b.begin(), b.end());
+  return a;
+}
+
+// A flat n×n grid of squares in the plane z = `z`, side 1, as OBJ.
+std::string grid_obj(int n, double z) {
+  std::string s;
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) s += "v " + std::to_string(double(i) / n) + " " + std::to_string(double(j) / n) + " " + std::to_string(z) + "\n";
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const int a = j * (n + 1) + i + 1, b = a + 1, c = a + n + 2, d = a + n + 1;
+      s += "f " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(c) + " " + std::to_string(d) + "\n";
+    }
+  return s;
+}
+
+// report.json without what may differ between runs (times, memory, the directory of the files).
+json figures(const std::string& path) {
+  json j = json::parse(read_file(path));
+  j.erase("stages"), j.erase("seconds"), j.erase("peak_rss_bytes"), j.erase("performance");
+  for (auto& run : j["runs"]) {
+    run.erase("name");
+    for (auto& level : run["levels"]) level.erase("seconds"), level.erase("file");
+  }
+  return j;
+}
+
+class ReportRoom : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    tmp_ = new TempDir();
+    const CliRun s = run_cli({"simplify", kRoom, "-o", tmp_->file("room"), "--progress", "none"}, *tmp_);
+    ASSERT_EQ(s.exit_code, 0) << s.err;
+    const CliRun r = run_cli(cat({"report", tmp_->file("room"), "-o", tmp_->file("base")}, kQuick), *tmp_);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+  }
+  static void TearDownTestSuite() { delete tmp_; }
+  static TempDir* tmp_;
+};
+TempDir* ReportRoom::tmp_ = nullptr;
+
+TEST_F(ReportRoom, WritesEveryFileWithTheManifestsLevels) {
+  const json manifest = json::parse(read_file(tmp_->file("room/manifest.json")));
+  const json report = json::parse(read_file(tmp_->file("base/report.json")));
+  ASSERT_EQ(report["runs"].size(), 1u);
+  const json& levels = report["runs"][0]["levels"];
+  ASSERT_EQ(levels.size(), manifest["levels"].size());
+  EXPECT_EQ(report["runs"][0]["original"]["triangles"], manifest["input"]["triangles"]);
+  for (size_t l = 0; l < levels.size(); ++l) {
+    const json& v = levels[l];
+    EXPECT_EQ(v["triangles"], manifest["levels"][l]["triangles"]);
+    EXPECT_EQ(v["edges"], manifest["levels"][l]["edges"]);
+    EXPECT_EQ(v["points"], manifest["levels"][l]["points"]);
+    EXPECT_DOUBLE_EQ(v["switch_distance"].get<double>(), manifest["levels"][l]["switch_distance"].get<double>());
+    // 4 views of 64×64 pixels; 5000 face samples per direction (the figures' denominators).
+    EXPECT_LE(v["silhouette"]["covered_pixels"].get<uint64_t>(), 4u * 64 * 64);
+    EXPECT_GT(v["silhouette"]["covered_pixels"].get<uint64_t>(), 0u);
+    EXPECT_GE(v["hausdorff"]["lod_to_original"]["count"].get<uint64_t>(), 10000u);
+    for (const char* k : {"max", "mean", "rms"}) EXPECT_GE(v["hausdorff"][k].get<double>(), 0) << k;
+    EXPECT_LE(v["hausdorff"]["mean"].get<double>(), v["hausdorff"]["max"].get<double>());
+    EXPECT_LE(v["silhouette"]["p95_px"].get<double>(), v["silhouette"]["max_px"].get<double>());
+    EXPECT_LE(v["normal_degrees"]["max"].get<double>(), 180.0);
+    EXPECT_TRUE(fs::exists(tmp_->file("base/lod" + std::to_string(l) + ".csv")));
+    // One CSV row per view, plus the header.
+    const std::string csv = read_file(tmp_->file("base/lod" + std::to_string(l) + ".csv"));
+    EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 5);
+  }
+  // Coarser levels are further off.
+  EXPECT_GT(levels[4]["hausdorff"]["mean"].get<double>(), levels[0]["hausdorff"]["mean"].get<double>());
+  EXPECT_TRUE(fs::exists(tmp_->file("base/report.html")));
+  for (const auto& e : fs::directory_iterator(tmp_->file("base")))
+    EXPECT_NE(e.path().extension(), ".partial") << e.path();
+}
+
+TEST_F(ReportRoom, SameFiguresForOneAndTwoThreadsAndAnyMemory) {
+  const CliRun a = run_cli(cat({"report", tmp_->file("room"), "-o", tmp_->file("t1"), "--threads", "1", "--memory", "256M"}, kQuick), *tmp_);
+  ASSERT_EQ(a.exit_code, 0) << a.err;
+  const CliRun b = run_cli(cat({"report", tmp_->file("room"), "-o", tmp_->file("t2"), "--threads", "2", "--memory", "4G"}, kQuick), *tmp_);
+  ASSERT_EQ(b.exit_code, 0) << b.err;
+  EXPECT_EQ(figures(tmp_->file("t1/report.json")), figures(tmp_->file("base/report.json")));
+  EXPECT_EQ(figures(tmp_->file("t2/report.json")), figures(tmp_->file("base/report.json")));
+  for (int l = 0; l < 5; ++l) {
+    const std::string name = "/lod" + std::to_string(l) + ".csv";
+    EXPECT_EQ(read_file(tmp_->file("t1") + name), read_file(tmp_->file("base") + name));
+    EXPECT_EQ(read_file(tmp_->file("t2") + name), read_file(tmp_->file("base") + name));
+  }
+  EXPECT_EQ(read_file(tmp_->file("t1/report.html")), read_file(tmp_->file("base/report.html")));
+}
+
+TEST_F(ReportRoom, AnotherSeedMovesTheViews) {
+  const CliRun r = run_cli(cat({"report", tmp_->file("room"), "-o", tmp_->file("seed2"), "--seed", "2"}, kQuick), *tmp_);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(read_file(tmp_->file("seed2/lod0.csv")), read_file(tmp_->file("base/lod0.csv")));
+}
+
+TEST_F(ReportRoom, RunsGivenTogetherSitSideBySide) {
+  const CliRun s = run_cli({"simplify", kRoom, "-o", tmp_->file("uniform"), "--clustering", "uniform", "--progress", "none"}, *tmp_);
+  ASSERT_EQ(s.exit_code, 0) << s.err;
+  const CliRun r = run_cli(cat({"report", tmp_->file("room"), tmp_->file("uniform"), "-o", tmp_->file("both")}, kQuick), *tmp_);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json j = json::parse(read_file(tmp_->file("both/report.json")));
+  ASSERT_EQ(j["runs"].size(), 2u);
+  EXPECT_EQ(j["runs"][0]["levels"][0]["csv"], "run0-lod0.csv");
+  EXPECT_EQ(j["runs"][1]["levels"][0]["csv"], "run1-lod0.csv");
+  EXPECT_TRUE(fs::exists(tmp_->file("both/run1-lod4.csv")));
+  // The first run's figures are those of the report made for it alone.
+  json alone = figures(tmp_->file("base/report.json"))["runs"][0];
+  json together = figures(tmp_->file("both/report.json"))["runs"][0];
+  for (auto& l : together["levels"]) l.erase("csv");
+  for (auto& l : alone["levels"]) l.erase("csv");
+  EXPECT_EQ(together, alone);
+  const std::string html = read_file(tmp_->file("both/report.html"));
+  EXPECT_NE(html.find(tmp_->file("uniform")), std::string::npos);
+  // One plot polyline per run in each of the two plots.
+  size_t lines = 0;
+  for (size_t at = html.find("<polyline"); at != std::string::npos; at = html.find("<polyline", at + 1)) ++lines;
+  EXPECT_EQ(lines, 4u);
+}
+
+TEST_F(ReportRoom, HtmlRendersInHeadlessChromium) {
+  const std::string script = std::string(LODSTREAM_SOURCE_DIR) + "/tools/check_html.py";
+  const std::string cmd = "python3 " + script + " " + tmp_->file("base/report.html") + " > " + tmp_->file("check.json") + " 2> " + tmp_->file("check.err");
+  const int rc = std::system(cmd.c_str());
+  const int code = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+  if (code == 77) GTEST_SKIP() << "skipped: " << read_file(tmp_->file("check.err"));
+  ASSERT_EQ(code, 0) << read_file(tmp_->file("check.json")) << read_file(tmp_->file("check.err"));
+  const json j = json::parse(read_file(tmp_->file("check.json")));
+  // 5 levels × 3 views × (original, level, heat map).
+  EXPECT_EQ(j["status"], "ok 45/45");
+  EXPECT_FALSE(j["screenshot"]["flat"].get<bool>());
+}
+
+TEST(ReportExact, ALevelIdenticalToItsOriginalIsOffByNothing) {
+  TempDir tmp;
+  const std::string obj = tmp.write("grid.obj", grid_obj(8, 0));
+  const CliRun r = run_cli(cat({"report", "--original", obj, "--lod", obj, "--switch-distances", "2", "-o", tmp.file("r")}, kQuick), tmp);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json v = json::parse(read_file(tmp.file("r/report.json")))["runs"][0]["levels"][0];
+  EXPECT_EQ(v["silhouette"]["mismatched_pixels"], 0);
+  EXPECT_GT(v["silhouette"]["covered_pixels"].get<uint64_t>(), 0u);
+  EXPECT_EQ(v["depth_px"]["max"], 0.0);
+  EXPECT_EQ(v["normal_degrees"]["max"], 0.0);
+  EXPECT_LT(v["hausdorff"]["max"].get<double>(), 1e-6);
+  EXPECT_DOUBLE_EQ(v["switch_distance"].get<double>(), 2.0);
+}
+
+TEST(ReportExact, ALevelMovedByAnOffsetIsThatFarOff) {
+  // The LOD is the grid lifted by 0.01 along its normal: every sample of either is exactly 0.01 from the
+  // other (to float precision), so max = mean = rms = 0.01 both ways.
+  TempDir tmp;
+  const std::string original = tmp.write("grid.obj", grid_obj(8, 0));
+  const std::string lifted = tmp.write("lifted.obj", grid_obj(8, 0.01));
+  const CliRun r = run_cli(cat({"report", "--original", original, "--lod", lifted, "-o", tmp.file("r")}, kQuick), tmp);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json v = json::parse(read_file(tmp.file("r/report.json")))["runs"][0]["levels"][0];
+  for (const char* dir : {"lod_to_original", "original_to_lod"})
+    for (const char* k : {"max", "mean", "rms", "p95"}) EXPECT_NEAR(v["hausdorff"][dir][k].get<double>(), 0.01, 1e-6) << dir << " " << k;
+  // No distance given: the level is shown from where its Hausdorff max spans 5 pixels of 64.
+  const double pixel = v["pixel_size"].get<double>();
+  EXPECT_NEAR(v["hausdorff"]["max_px"].get<double>(), 5.0, 1e-4);
+  EXPECT_NEAR(pixel, 0.01 / 5, 1e-8);
+  EXPECT_NEAR(v["hausdorff"]["max_percent_diagonal"].get<double>(), 100 * 0.01 / std::sqrt(2.0), 1e-4);
+}
+
+TEST(ReportErrors, DocumentedExitCodesAndNoReportLeftBehind) {
+  TempDir tmp;
+  const std::string obj = tmp.write("grid.obj", grid_obj(2, 0));
+  const std::string bad = tmp.write("bad.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\nnot-a-number\n");
+  fs::create_directories(tmp.file("empty"));
+  struct Case {
+    std::vector<std::string> args;
+    int code;
+  };
+  const std::vector<Case> cases = {
+      {{"report", tmp.file("missing"), "-o", tmp.file("o1")}, 66},
+      {{"report", tmp.file("empty"), "-o", tmp.file("o2")}, 66},
+      {{"report", "--lod", obj, "-o", tmp.file("o3")}, 64},
+      {{"report", tmp.file("empty"), tmp.file("empty")}, 64},
+      {{"report", "--original", obj, "--lod", obj, "--views", "0", "-o", tmp.file("o5")}, 64},
+      {{"report", "--original", obj, "--lod", obj, "--switch-distances", "1,2", "-o", tmp.file("o6")}, 64},
+      {{"report", "--original", obj, "--lod", tmp.file("nope.ply"), "-o", tmp.file("o7")}, 66},
+      {{"report", "--original", obj, "--lod", bad, "-o", tmp.file("o8")}, 65},
+      {{"report", "--original", tmp.file("nope.obj"), "--lod", obj, "-o", tmp.file("o9")}, 66},
+  };
+  for (size_t i = 0; i < cases.size(); ++i) {
+    const CliRun r = run_cli(cases[i].args, tmp);
+    EXPECT_EQ(r.exit_code, cases[i].code) << "case " << i << ": " << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "case " << i << ": one line expected: " << r.err;
+    EXPECT_FALSE(fs::exists(tmp.file("o" + std::to_string(i + 1) + "/report.json"))) << "case " << i;
+  }
+}
+
+}  // namespace
+}  // namespace lodstream::test
