@@ -128,7 +128,7 @@ struct RayScene::Impl {
     }
     if (code != RTC_ERROR_NONE) {
       std::lock_guard<std::mutex> lock(error_mutex);
-      fail(code == RTC_ERROR_OUT_OF_MEMORY ? Status::internal : Status::internal,
+      fail(Status::internal,
            error.empty() ? std::string("Embree failed: ") + what : error + " (" + what + ")");
     }
   }
