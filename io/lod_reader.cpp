@@ -28,6 +28,8 @@
 
 #include "core/status.h"
 #include "io/mapped_file.h"
+#include "io/ply_header.h"
+#include "io/ply_types.h"
 #include "io/reader.h"
 #include "io/text.h"
 
@@ -49,16 +51,7 @@ const char* float_at(const char* p, const char* end, float* out) {
   return ec == std::errc() ? q : nullptr;
 }
 
-// A token for an error message: at most 40 bytes, unprintable bytes as '?'.
-std::string quoted(std::string_view s) {
-  std::string r = "'";
-  for (size_t i = 0; i < s.size() && i < 40; ++i) {
-    const unsigned char c = static_cast<unsigned char>(s[i]);
-    r += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
-  }
-  if (s.size() > 40) r += "...";
-  return r + "'";
-}
+using ply::quoted;  // a token for an error message (io/ply_header.h), in PLY and OBJ alike
 
 std::string vertices_text(uint64_t n) { return std::to_string(n) + (n == 1 ? " vertex" : " vertices"); }
 
@@ -72,70 +65,7 @@ std::string control_message(unsigned char c) {
 
 // ================================================================================================ PLY
 
-enum class Type : uint8_t { none, i8, u8, i16, u16, i32, u32, f32, f64 };
-
-Type type_from_name(std::string_view s) {
-  if (s == "char" || s == "int8") return Type::i8;
-  if (s == "uchar" || s == "uint8") return Type::u8;
-  if (s == "short" || s == "int16") return Type::i16;
-  if (s == "ushort" || s == "uint16") return Type::u16;
-  if (s == "int" || s == "int32") return Type::i32;
-  if (s == "uint" || s == "uint32") return Type::u32;
-  if (s == "float" || s == "float32") return Type::f32;
-  if (s == "double" || s == "float64") return Type::f64;
-  return Type::none;
-}
-
-const char* type_name(Type t) {
-  switch (t) {
-    case Type::i8: return "char";
-    case Type::u8: return "uchar";
-    case Type::i16: return "short";
-    case Type::u16: return "ushort";
-    case Type::i32: return "int";
-    case Type::u32: return "uint";
-    case Type::f32: return "float";
-    case Type::f64: return "double";
-    default: return "?";
-  }
-}
-
-unsigned type_size(Type t) {
-  switch (t) {
-    case Type::i8:
-    case Type::u8: return 1;
-    case Type::i16:
-    case Type::u16: return 2;
-    case Type::i32:
-    case Type::u32:
-    case Type::f32: return 4;
-    case Type::f64: return 8;
-    default: return 0;
-  }
-}
-
-bool is_integer(Type t) { return t != Type::none && t != Type::f32 && t != Type::f64; }
-
-int64_t type_min(Type t) {
-  switch (t) {
-    case Type::i8: return std::numeric_limits<int8_t>::min();
-    case Type::i16: return std::numeric_limits<int16_t>::min();
-    case Type::i32: return std::numeric_limits<int32_t>::min();
-    default: return 0;
-  }
-}
-
-int64_t type_max(Type t) {
-  switch (t) {
-    case Type::i8: return std::numeric_limits<int8_t>::max();
-    case Type::u8: return std::numeric_limits<uint8_t>::max();
-    case Type::i16: return std::numeric_limits<int16_t>::max();
-    case Type::u16: return std::numeric_limits<uint16_t>::max();
-    case Type::i32: return std::numeric_limits<int32_t>::max();
-    case Type::u32: return std::numeric_limits<uint32_t>::max();
-    default: return 0;
-  }
-}
+using namespace ply;  // Type, type_size, ... (io/ply_types.h); Property, Role, ... (io/ply_header.h)
 
 template <typename T, bool Swap>
 inline T load(const char* p) {
@@ -174,24 +104,10 @@ inline double load_double(const char* p, Type t) {
 }
 
 enum class Kind : uint8_t { vertex, face, edge, point, other };
-enum class Role : uint8_t { none, x, y, z, indices, v1, v2, thickness, vertex };
 
-struct Property {
-  std::string name;
-  bool list = false;
-  Type count_type = Type::none;  // lists only
-  Type type = Type::none;        // scalar type, or the list's item type
-  Role role = Role::none;
-};
-
-struct Element {
-  std::string name;
-  uint64_t count = 0;
-  uint64_t header_line = 0;
-  std::vector<Property> props;
+// A header element (name, count, properties with their roles, min_size) and how it is read.
+struct Element : ply::Element {
   Kind kind = Kind::other;
-  bool fixed = true;      // binary records of one size (no list)
-  uint64_t min_size = 0;  // binary: bytes of a record whose lists are all empty
   unsigned index_size = 0;  // face: bytes of one index
 };
 
@@ -200,6 +116,23 @@ struct Element {
 struct Fan {
   uint32_t first = 0, prev = 0;
   uint64_t n = 0;
+
+  // The next index (in range): from the third on, the triangle (first, prev, v) goes to the mesh, or is
+  // counted as degenerate if it repeats a vertex.
+  void add(uint32_t v, core::LodMesh& mesh, LodFileStats& stats) {
+    if (n >= 2) {
+      if (first == prev || prev == v || first == v) {
+        ++stats.degenerate_triangles;
+      } else {
+        const uint32_t t[3] = {first, prev, v};
+        mesh.triangles.insert(mesh.triangles.end(), t, t + 3);
+      }
+    } else if (n == 0) {
+      first = v;
+    }
+    prev = v;
+    ++n;
+  }
 };
 
 class PlyParser {
@@ -208,9 +141,10 @@ class PlyParser {
       : file_(file), data_(bytes.data()), size_(bytes.size()), mesh_(*mesh), stats_(*stats) {}
 
   void run() {
-    parse_header();
-    check_header();
-    stats_.format = fmt_ == Fmt::ascii ? "ply-ascii" : fmt_ == Fmt::le ? "ply-binary-le" : "ply-binary-be";
+    ply::Header header;
+    ply::parse_header(file_, std::string_view(data_, size_), true, &header, ply::MissingEndLine::after_last);
+    check_header(std::move(header));
+    stats_.format = format_name(fmt_);
     reserve();
     constexpr bool little = std::endian::native == std::endian::little;
     if (fmt_ == Fmt::ascii) parse_ascii();
@@ -219,10 +153,9 @@ class PlyParser {
   }
 
  private:
-  enum class Fmt : uint8_t { ascii, le, be };
+  using Fmt = ply::Format;
 
-  void parse_header();
-  void check_header();
+  void check_header(ply::Header&& header);
   void reserve();
   template <bool Swap>
   void parse_binary();
@@ -250,21 +183,7 @@ class PlyParser {
                  vertices_text(vertex_count_));
     return static_cast<uint32_t>(i);
   }
-  void fan_add(Fan& f, int64_t i) {
-    const uint32_t v = index(i);
-    if (f.n >= 2) {
-      if (f.first == f.prev || f.prev == v || f.first == v) {
-        ++stats_.degenerate_triangles;
-      } else {
-        const uint32_t t[3] = {f.first, f.prev, v};
-        mesh_.triangles.insert(mesh_.triangles.end(), t, t + 3);
-      }
-    } else if (f.n == 0) {
-      f.first = v;
-    }
-    f.prev = v;
-    ++f.n;
-  }
+  void fan_add(Fan& f, int64_t i) { f.add(index(i), mesh_, stats_); }
   void add_edge(uint32_t a, uint32_t b, double thickness) {
     const float t = static_cast<float>(thickness);
     if (!(t >= 0) || !std::isfinite(t)) {
@@ -326,107 +245,13 @@ class PlyParser {
   uint64_t line_ = 0;
 };
 
-void PlyParser::parse_header() {
-  const char* p = data_;
-  const char* const end = data_ + size_;
-  bool saw_format = false;
-  uint64_t line = 0;
-  for (;;) {
-    if (p >= end) header_error(line + 1, "the PLY header has no end_header line");
-    const char* const le = text::line_end(p, end);
-    ++line;
-    const char* lp = p;
-    p = le < end ? le + 1 : end;
-    const std::string_view whole(lp, static_cast<size_t>(le - lp));
-    for (const char c : whole)
-      if (!text::is_text_byte(static_cast<unsigned char>(c)))
-        header_error(line, "binary data in the PLY header (is end_header missing?): " + quoted(whole));
-    const std::string_view keyword = text::next_token(lp, le);
-    auto expect_end = [&](const char* what) {
-      const std::string_view extra = text::next_token(lp, le);
-      if (!extra.empty()) header_error(line, std::string("unexpected ") + quoted(extra) + " after " + what);
-    };
-    if (line == 1) {  // the caller checked the magic
-      expect_end("'ply'");
-      continue;
-    }
-    if (keyword.empty() || keyword == "comment" || keyword == "obj_info") continue;
-    if (keyword == "format") {
-      if (saw_format) header_error(line, "second format line");
-      const std::string_view f = text::next_token(lp, le);
-      const std::string_view version = text::next_token(lp, le);
-      if (f == "ascii") fmt_ = Fmt::ascii;
-      else if (f == "binary_little_endian") fmt_ = Fmt::le;
-      else if (f == "binary_big_endian") fmt_ = Fmt::be;
-      else
-        header_error(line, "unknown PLY format " + quoted(f) +
-                               " (expected ascii, binary_little_endian or binary_big_endian)");
-      if (version != "1.0") header_error(line, "unsupported PLY version " + quoted(version) + " (expected 1.0)");
-      expect_end("the format line");
-      saw_format = true;
-      continue;
-    }
-    if (keyword == "element") {
-      if (!saw_format) header_error(line, "element before the format line");
-      const std::string_view name = text::next_token(lp, le);
-      const std::string_view count = text::next_token(lp, le);
-      if (name.empty() || count.empty()) header_error(line, "bad element line: expected 'element NAME COUNT'");
-      uint64_t n = 0;
-      const auto [q, ec] = std::from_chars(count.data(), count.data() + count.size(), n);
-      if (ec != std::errc() || q != count.data() + count.size())
-        header_error(line, "bad element count " + quoted(count) + " for element " + quoted(name));
-      expect_end("the element line");
-      for (const Element& e : elements_)
-        if (e.name == name) header_error(line, "second element named " + quoted(name));
-      Element e;
-      e.name = std::string(name);
-      e.count = n;
-      e.header_line = line;
-      elements_.push_back(std::move(e));
-      continue;
-    }
-    if (keyword == "property") {
-      if (elements_.empty()) header_error(line, "property before any element");
-      Property pr;
-      std::string_view t = text::next_token(lp, le);
-      if (t == "list") {
-        pr.list = true;
-        const std::string_view ct = text::next_token(lp, le);
-        if (ct.empty()) header_error(line, "bad list property: expected 'property list COUNTTYPE ITEMTYPE NAME'");
-        pr.count_type = type_from_name(ct);
-        if (pr.count_type == Type::none) header_error(line, "unknown property type " + quoted(ct));
-        if (!is_integer(pr.count_type))
-          header_error(line, "list count type must be an integer type, not " + quoted(ct));
-        t = text::next_token(lp, le);
-      }
-      if (t.empty()) header_error(line, "bad property line: expected 'property TYPE NAME'");
-      pr.type = type_from_name(t);
-      if (pr.type == Type::none) header_error(line, "unknown property type " + quoted(t));
-      const std::string_view name = text::next_token(lp, le);
-      if (name.empty()) header_error(line, "property without a name");
-      expect_end("the property line");
-      Element& e = elements_.back();
-      for (const Property& other : e.props)
-        if (other.name == name)
-          header_error(line, "second property named " + quoted(name) + " in element " + quoted(e.name));
-      pr.name = std::string(name);
-      e.props.push_back(std::move(pr));
-      continue;
-    }
-    if (keyword == "end_header") {
-      expect_end("end_header");
-      if (!saw_format) header_error(line, "no format line before end_header");
-      data_start_ = static_cast<uint64_t>(p - data_);
-      header_lines_ = line;
-      data_line_ = line + 1;
-      return;
-    }
-    header_error(line, "unknown PLY header line " + quoted(whole));
-  }
-}
-
-void PlyParser::check_header() {
-  const bool binary = fmt_ != Fmt::ascii;
+// Takes the parsed header: gives the properties this reader knows their roles and checks them.
+void PlyParser::check_header(ply::Header&& header) {
+  fmt_ = header.format;
+  data_start_ = header.data_start;
+  header_lines_ = header.lines;
+  data_line_ = header.lines + 1;
+  for (ply::Element& d : header.elements) elements_.push_back(Element{std::move(d)});
   bool have_vertex = false;
   for (Element& e : elements_) {
     auto find = [&](std::string_view name) -> Property* {
@@ -486,31 +311,10 @@ void PlyParser::check_header() {
         v->role = Role::v1;
       }
     }
-    for (const Property& pr : e.props) {
-      e.min_size += type_size(pr.list ? pr.count_type : pr.type);
-      if (pr.list) e.fixed = false;
-    }
   }
   if (!have_vertex) header_error(header_lines_, "the PLY header declares no element 'vertex'");
-
-  // Counts the data cannot hold, rejected before anything is allocated. A binary record takes at least
-  // min_size bytes; an ascii record of k properties at least 2k (k one-character tokens, k-1 separators and
-  // a line end that the very last record may lack).
-  const uint64_t avail = size_ - data_start_;
-  uint64_t used = 0;
-  for (const Element& e : elements_) {
-    if (e.count == 0) continue;
-    const uint64_t per = binary ? e.min_size : 2 * e.props.size();
-    const uint64_t room = avail - used + (binary ? 0 : 1);
-    if (e.count > room / per)
-      header_error(e.header_line, "element " + quoted(e.name) + " declares " + std::to_string(e.count) +
-                                      " records of at least " + std::to_string(per) + " bytes each, but only " +
-                                      std::to_string(avail - std::min(avail, used)) +
-                                      " bytes of data remain for it (from byte " +
-                                      std::to_string(data_start_ + std::min(avail, used)) +
-                                      "): the file is truncated or the count is wrong");
-    used += e.count * per;
-  }
+  // Counts the data cannot hold, rejected before anything is allocated.
+  ply::check_counts(file_, header, elements_);
 }
 
 void PlyParser::reserve() {
@@ -543,7 +347,7 @@ void PlyParser::parse_binary() {
     if (e.kind == Kind::other && e.fixed) {
       // Nothing to read: step over the records at once.
       const uint64_t left = static_cast<uint64_t>(end - p);
-      if (left / e.min_size < e.count) {
+      if (e.min_size > 0 && left / e.min_size < e.count) {  // an element without properties takes no bytes
         record_ = left / e.min_size;
         offset_ = static_cast<uint64_t>(p - data_) + record_ * e.min_size;
         truncated();
@@ -843,19 +647,7 @@ void ObjParser::face() {
   for (;;) {
     skip_ws();
     if (at_statement_end()) break;
-    const uint32_t v = reference("f");
-    if (f.n >= 2) {
-      if (f.first == f.prev || f.prev == v || f.first == v) {
-        ++stats_.degenerate_triangles;
-      } else {
-        const uint32_t t[3] = {f.first, f.prev, v};
-        mesh_.triangles.insert(mesh_.triangles.end(), t, t + 3);
-      }
-    } else if (f.n == 0) {
-      f.first = v;
-    }
-    f.prev = v;
-    ++f.n;
+    f.add(reference("f"), mesh_, stats_);
   }
   ++stats_.faces;
   if (f.n < 2) error("face with " + std::to_string(f.n) + " corner" + (f.n == 1 ? "" : "s") + " (needs at least 2)");

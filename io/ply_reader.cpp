@@ -1,8 +1,8 @@
 // PLY reader: ascii, binary_little_endian and binary_big_endian, any elements in any order.
 //
-// open() parses the header into element layouts and rejects counts the file cannot hold. next_chunk()
-// cuts whole records of one element at a time: by arithmetic for fixed-size binary records, by walking
-// the list counts for variable-size binary records, and by lines for ascii. parse() turns vertex records
+// open() parses the header (io/ply_header.h) into element layouts and rejects counts the file cannot hold.
+// next_chunk() cuts whole records of one element at a time: by arithmetic for fixed-size binary records, by
+// walking the list counts for variable-size binary records, and by lines for ascii. parse() turns vertex records
 // into positions, face records into fan-triangulated triangles (PLY indices are absolute, so they are
 // final after parse), edge records into lines, and only counts the records of any other element.
 //
@@ -10,7 +10,6 @@
 // one record more than the bytes hold, so the error is raised by resolve() in file order, after any earlier
 // error, whatever the chunk size.
 #include <algorithm>
-#include <charconv>
 #include <cstdio>
 #include <cstring>
 #include <limits>
@@ -20,6 +19,8 @@
 #include <vector>
 
 #include "core/status.h"
+#include "io/ply_header.h"
+#include "io/ply_types.h"
 #include "io/reader.h"
 #include "io/text.h"
 
@@ -37,70 +38,7 @@ constexpr uint64_t kMinScanBytes = 4096, kMaxScanBytes = 64ull << 20, kHeaderByt
 
 // ---------------------------------------------------------------------------------------------- types
 
-enum class Type : uint8_t { none, i8, u8, i16, u16, i32, u32, f32, f64 };
-
-Type type_from_name(std::string_view s) {
-  if (s == "char" || s == "int8") return Type::i8;
-  if (s == "uchar" || s == "uint8") return Type::u8;
-  if (s == "short" || s == "int16") return Type::i16;
-  if (s == "ushort" || s == "uint16") return Type::u16;
-  if (s == "int" || s == "int32") return Type::i32;
-  if (s == "uint" || s == "uint32") return Type::u32;
-  if (s == "float" || s == "float32") return Type::f32;
-  if (s == "double" || s == "float64") return Type::f64;
-  return Type::none;
-}
-
-const char* type_name(Type t) {
-  switch (t) {
-    case Type::i8: return "char";
-    case Type::u8: return "uchar";
-    case Type::i16: return "short";
-    case Type::u16: return "ushort";
-    case Type::i32: return "int";
-    case Type::u32: return "uint";
-    case Type::f32: return "float";
-    case Type::f64: return "double";
-    default: return "?";
-  }
-}
-
-unsigned type_size(Type t) {
-  switch (t) {
-    case Type::i8:
-    case Type::u8: return 1;
-    case Type::i16:
-    case Type::u16: return 2;
-    case Type::i32:
-    case Type::u32:
-    case Type::f32: return 4;
-    case Type::f64: return 8;
-    default: return 0;
-  }
-}
-
-bool is_integer(Type t) { return t != Type::none && t != Type::f32 && t != Type::f64; }
-
-int64_t type_min(Type t) {
-  switch (t) {
-    case Type::i8: return std::numeric_limits<int8_t>::min();
-    case Type::i16: return std::numeric_limits<int16_t>::min();
-    case Type::i32: return std::numeric_limits<int32_t>::min();
-    default: return 0;
-  }
-}
-
-int64_t type_max(Type t) {
-  switch (t) {
-    case Type::i8: return std::numeric_limits<int8_t>::max();
-    case Type::u8: return std::numeric_limits<uint8_t>::max();
-    case Type::i16: return std::numeric_limits<int16_t>::max();
-    case Type::u16: return std::numeric_limits<uint16_t>::max();
-    case Type::i32: return std::numeric_limits<int32_t>::max();
-    case Type::u32: return std::numeric_limits<uint32_t>::max();
-    default: return 0;
-  }
-}
+using namespace ply;  // Type, type_size, ... (io/ply_types.h); Property, Role, quoted, ... (io/ply_header.h)
 
 template <typename T, bool Swap>
 inline T load(const char* p) {
@@ -151,43 +89,17 @@ inline double load_double(const char* p, Type t) {
 // ------------------------------------------------------------------------------------------- layout
 
 enum class Kind : uint8_t { vertex, face, edge, other };
-enum class Role : uint8_t { none, x, y, z, indices, v1, v2 };
 
-struct Property {
-  std::string name;
-  bool list = false;
-  Type count_type = Type::none;  // lists only
-  Type type = Type::none;        // scalar type, or the list's item type
-  Role role = Role::none;
-  uint32_t offset = 0;  // byte offset within a fixed-size binary record
-};
-
-struct Element {
-  std::string name;
-  uint64_t count = 0;
-  uint64_t header_line = 0;
-  std::vector<Property> props;
+// A header element (name, count, properties with their roles and offsets, min_size) and how it is read.
+struct Element : ply::Element {
   Kind kind = Kind::other;
-  bool fixed = true;         // binary records of one size (no list property)
   uint64_t record_size = 0;  // binary, fixed only
-  uint64_t min_size = 0;     // binary: the smallest possible record (every list empty)
   int px = -1, py = -1, pz = -1, pv1 = -1, pv2 = -1;
   // Fast paths: vertex with x, y, z all float (1) or all double (2) in fixed records; face whose only
   // property is `list (u)char (u)int` (1 = int items, 2 = uint items).
   uint8_t fast_vertex = 0;
   uint8_t fast_face = 0;
 };
-
-// A header token or line for an error message: at most 40 bytes, unprintable bytes as '?'.
-std::string quoted(std::string_view s) {
-  std::string r = "'";
-  for (size_t i = 0; i < s.size() && i < 40; ++i) {
-    const unsigned char c = static_cast<unsigned char>(s[i]);
-    r += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
-  }
-  if (s.size() > 40) r += "...";
-  return r + "'";
-}
 
 bool has_binary_bytes(const char* p, const char* end) {
   for (; p < end; ++p)
@@ -296,14 +208,7 @@ class PlyReader final : public Reader {
  public:
   explicit PlyReader(const MappedFile& file) : Reader(file) { peek_format(); }
 
-  std::string format() const override {
-    switch (fmt_) {
-      case Fmt::ascii: return "ply-ascii";
-      case Fmt::le: return "ply-binary-le";
-      case Fmt::be: return "ply-binary-be";
-    }
-    return "ply";
-  }
+  std::string format() const override { return format_name(fmt_); }
 
   void open() override;
   bool single_precision() const override { return single_; }
@@ -313,11 +218,10 @@ class PlyReader final : public Reader {
   void finish(uint64_t vertex_records) override;
 
  private:
-  enum class Fmt : uint8_t { ascii, le, be };
+  using Fmt = ply::Format;
 
   void peek_format();
-  bool parse_header(std::string_view head, bool at_eof);
-  void finalize_header();
+  void finalize_header(ply::Header&& header);
   [[noreturn]] void header_error(uint64_t line, const std::string& message) const {
     fail_at_line(file_, line, message);
   }
@@ -344,7 +248,6 @@ class PlyReader final : public Reader {
 
   Fmt fmt_ = Fmt::ascii;
   bool opened_ = false;
-  bool saw_format_ = false;
   std::vector<Element> elements_;
   uint64_t data_start_ = 0;
   uint64_t data_line_ = 1;  // 1-based line of the first data byte (ascii)
@@ -376,122 +279,15 @@ void PlyReader::peek_format() {
   else if (rest.substr(0, 17) == "binary_big_endian") fmt_ = Fmt::be;
 }
 
-// Parses the header in `head` (the first bytes of the file). Returns false when the header runs past the
-// end of `head` and more of the file exists; throws for a malformed header.
-bool PlyReader::parse_header(std::string_view head, bool at_eof) {
+// Takes the parsed header: gives the properties this reader knows their roles, checks them, and plans the
+// fast paths.
+void PlyReader::finalize_header(ply::Header&& header) {
+  fmt_ = header.format;
+  data_start_ = header.data_start;
+  header_lines_ = header.lines;
+  data_line_ = header.lines + 1;
   elements_.clear();
-  saw_format_ = false;
-  const char* const base = head.data();
-  const char* const end = base + head.size();
-  const char* p = base;
-  uint64_t line = 0;
-  bool last_unterminated = false;
-  while (p < end) {
-    const char* nl = static_cast<const char*>(std::memchr(p, '\n', static_cast<size_t>(end - p)));
-    if (!nl && !at_eof) {
-      // Read more of the file for this line, unless it is already binary (a missing end_header).
-      if (has_binary_bytes(p, end))
-        header_error(line + 1, "binary data in the PLY header (is end_header missing?)");
-      return false;
-    }
-    const char* le = nl ? nl : end;
-    last_unterminated = !nl;
-    ++line;
-    const char* lp = p;
-    p = nl ? nl + 1 : end;
-    const std::string_view whole(lp, static_cast<size_t>(le - lp));
-    if (has_binary_bytes(lp, le))
-      header_error(line, "binary data in the PLY header (is end_header missing?): " + quoted(whole));
-    const std::string_view keyword = text::next_token(lp, le);
-    auto expect_end = [&](const char* what) {
-      const std::string_view extra = text::next_token(lp, le);
-      if (!extra.empty()) header_error(line, std::string("unexpected ") + quoted(extra) + " after " + what);
-    };
-    if (line == 1) {
-      if (keyword != "ply") header_error(line, "not a PLY file: the first line must be 'ply'");
-      expect_end("'ply'");
-      continue;
-    }
-    if (keyword.empty()) continue;  // tolerate blank header lines
-    if (keyword == "comment" || keyword == "obj_info") continue;
-    if (keyword == "format") {
-      if (saw_format_) header_error(line, "second format line");
-      const std::string_view f = text::next_token(lp, le);
-      const std::string_view version = text::next_token(lp, le);
-      if (f == "ascii") fmt_ = Fmt::ascii;
-      else if (f == "binary_little_endian") fmt_ = Fmt::le;
-      else if (f == "binary_big_endian") fmt_ = Fmt::be;
-      else
-        header_error(line, "unknown PLY format " + quoted(f) +
-                               " (expected ascii, binary_little_endian or binary_big_endian)");
-      if (version != "1.0") header_error(line, "unsupported PLY version " + quoted(version) + " (expected 1.0)");
-      expect_end("the format line");
-      saw_format_ = true;
-      continue;
-    }
-    if (keyword == "element") {
-      if (!saw_format_) header_error(line, "element before the format line");
-      const std::string_view name = text::next_token(lp, le);
-      const std::string_view count = text::next_token(lp, le);
-      if (name.empty() || count.empty()) header_error(line, "bad element line: expected 'element NAME COUNT'");
-      uint64_t n = 0;
-      const auto [q, ec] = std::from_chars(count.data(), count.data() + count.size(), n);
-      if (ec != std::errc() || q != count.data() + count.size())
-        header_error(line, "bad element count " + quoted(count) + " for element " + quoted(name));
-      expect_end("the element line");
-      for (const Element& e : elements_)
-        if (e.name == name) header_error(line, "second element named " + quoted(name));
-      Element e;
-      e.name = std::string(name);
-      e.count = n;
-      e.header_line = line;
-      elements_.push_back(std::move(e));
-      continue;
-    }
-    if (keyword == "property") {
-      if (elements_.empty()) header_error(line, "property before any element");
-      Property pr;
-      std::string_view t = text::next_token(lp, le);
-      if (t == "list") {
-        pr.list = true;
-        const std::string_view ct = text::next_token(lp, le);
-        pr.count_type = type_from_name(ct);
-        if (ct.empty()) header_error(line, "bad list property: expected 'property list COUNTTYPE ITEMTYPE NAME'");
-        if (pr.count_type == Type::none) header_error(line, "unknown property type " + quoted(ct));
-        if (!is_integer(pr.count_type))
-          header_error(line, "list count type must be an integer type, not " + quoted(ct));
-        t = text::next_token(lp, le);
-      }
-      if (t.empty()) header_error(line, "bad property line: expected 'property TYPE NAME'");
-      pr.type = type_from_name(t);
-      if (pr.type == Type::none) header_error(line, "unknown property type " + quoted(t));
-      const std::string_view name = text::next_token(lp, le);
-      if (name.empty()) header_error(line, "property without a name");
-      expect_end("the property line");
-      Element& e = elements_.back();
-      for (const Property& other : e.props)
-        if (other.name == name)
-          header_error(line, "second property named " + quoted(name) + " in element " + quoted(e.name));
-      pr.name = std::string(name);
-      e.props.push_back(std::move(pr));
-      continue;
-    }
-    if (keyword == "end_header") {
-      expect_end("end_header");
-      if (!saw_format_) header_error(line, "no format line before end_header");
-      data_start_ = static_cast<uint64_t>(p - base);
-      header_lines_ = line;
-      data_line_ = line + 1;
-      return true;
-    }
-    header_error(line, "unknown PLY header line " + quoted(whole));
-  }
-  if (!at_eof) return false;
-  header_error(line + (last_unterminated ? 0 : 1), "the PLY header has no end_header line");
-}
-
-void PlyReader::finalize_header() {
-  const bool binary = fmt_ != Fmt::ascii;
+  for (ply::Element& d : header.elements) elements_.push_back(Element{std::move(d)});
   for (size_t k = 0; k < elements_.size(); ++k) {
     Element& e = elements_[k];
     auto find = [&](std::string_view name) -> int {
@@ -545,20 +341,8 @@ void PlyReader::finalize_header() {
         e.props[b].role = Role::v2;
       }
     }
-    // Binary layout.
-    uint64_t offset = 0, min_size = 0;
-    for (Property& pr : e.props) {
-      pr.offset = static_cast<uint32_t>(offset);
-      if (pr.list) {
-        e.fixed = false;
-        min_size += type_size(pr.count_type);
-      } else {
-        min_size += type_size(pr.type);
-        offset += type_size(pr.type);
-      }
-    }
-    e.min_size = min_size;
-    e.record_size = e.fixed ? min_size : 0;
+    // Binary layout (offsets and min_size: io/ply_header.cpp).
+    e.record_size = e.fixed ? e.min_size : 0;
     if (e.kind == Kind::vertex && e.fixed) {
       const Type t = e.props[e.px].type;
       if (e.props[e.py].type == t && e.props[e.pz].type == t)
@@ -573,27 +357,12 @@ void PlyReader::finalize_header() {
   if (vertex_count_ > (uint64_t{1} << 32))
     for (Element& e : elements_) e.fast_face = 0;
 
-  // Counts the remaining bytes cannot hold: checked before any data is read, so a lying count costs
-  // nothing. A binary record takes at least min_size bytes; an ascii record of k properties at least 2k
-  // (k one-character tokens, k-1 separators, a line end that the very last record may lack).
-  const uint64_t avail = file_.size() - data_start_;
-  uint64_t used = 0;
-  for (const Element& e : elements_) {
-    if (e.count == 0) continue;
-    const uint64_t per = binary ? e.min_size : 2 * e.props.size();
-    const uint64_t room = avail - used + (binary ? 0 : 1);
-    if (e.count > room / per) {
-      header_error(e.header_line,
-                   "element " + quoted(e.name) + " declares " + std::to_string(e.count) + " records of at least " +
-                       std::to_string(per) + " bytes each, but only " + std::to_string(avail - std::min(avail, used)) +
-                       " bytes of data remain for it (from byte " + std::to_string(data_start_ + std::min(avail, used)) +
-                       "): the file is truncated or the count is wrong");
-    }
-    used += e.count * per;
-  }
+  // Counts the remaining bytes cannot hold: checked before any data is read, so a lying count costs nothing.
+  ply::check_counts(file_, header, elements_);
 
   // An ascii header over binary data: say so instead of reporting garbage numbers.
-  if (!binary && avail > 0) {
+  const uint64_t avail = file_.size() - data_start_;
+  if (fmt_ == Fmt::ascii && avail > 0) {
     const Window w = file_.map(data_start_, data_start_ + std::min<uint64_t>(avail, 4096));
     const char* d = w.data();
     for (uint64_t i = 0; i < w.size(); ++i) {
@@ -610,13 +379,12 @@ void PlyReader::finalize_header() {
 
 void PlyReader::open() {
   if (opened_) return;
-  uint64_t want = kHeaderBytes;
-  for (;;) {
+  ply::Header header;
+  for (uint64_t want = kHeaderBytes;; want *= 2) {
     const Window w = file_.map(0, want);
-    if (parse_header(w.view(), w.end() >= file_.size())) break;
-    want *= 2;
+    if (ply::parse_header(file_, w.view(), w.end() >= file_.size(), &header)) break;
   }
-  finalize_header();
+  finalize_header(std::move(header));
   cursor_ = data_start_;
   line_ = data_line_;
   elem_ = 0;

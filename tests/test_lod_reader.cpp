@@ -277,6 +277,16 @@ TEST(LodReaderErrors, MissingUnreadableOrUnknown) {
   expect_failure(dir.write("empty.ply", ""), Status::bad_data, {"byte 0", "empty file"});
 }
 
+TEST(LodReader, BinaryElementWithoutPropertiesTakesNoBytes) {
+  // Found by review: an empty element without properties once divided by its zero record size.
+  TempDir dir;
+  const std::string ply = std::string("ply\nformat binary_little_endian 1.0\nelement empty 0\nelement vertex 1\n") +
+                          "property float x\nproperty float y\nproperty float z\nend_header\n" + std::string(12, '\0');
+  const core::LodMesh m = io::read_lod_mesh(dir.write("e.ply", ply));
+  EXPECT_EQ(m.vertex_count(), 1u);
+  EXPECT_EQ(m.positions, std::vector<float>(3, 0.0f));
+}
+
 TEST(LodReaderErrors, TruncatedBinaryBody) {
   TempDir dir;
   const std::string full = [&] {
