@@ -45,8 +45,6 @@ void compare_silhouettes(std::span<const uint8_t> original, std::span<const uint
   if (!distance_image.empty()) std::fill(distance_image.begin(), distance_image.end(), 0.0f);
   if (out.mismatched == 0) return;
 
-  const uint32_t no_target = static_cast<uint32_t>(width) * static_cast<uint32_t>(width) +
-                             static_cast<uint32_t>(height) * static_cast<uint32_t>(height);
   scratch.squared.resize(n);
   scratch.mismatched.clear();
   auto collect = [&](EdtTarget target, bool lod_side) {
@@ -55,7 +53,10 @@ void compare_silhouettes(std::span<const uint8_t> original, std::span<const uint
       const bool o = original[i] != 0;
       const bool l = lod[i] != 0;
       if (o == l || l != lod_side) continue;
-      const uint32_t d2 = scratch.squared[i] == kEdtNoTarget ? no_target : scratch.squared[i];
+      // The nearest pixel center outside the image bounds every distance (see the header).
+      const uint32_t x = static_cast<uint32_t>(i % static_cast<size_t>(width)), y = static_cast<uint32_t>(i / static_cast<size_t>(width));
+      const uint32_t border = std::min(std::min(x + 1, y + 1), std::min(static_cast<uint32_t>(width) - x, static_cast<uint32_t>(height) - y));
+      const uint32_t d2 = std::min(scratch.squared[i], border * border);
       scratch.mismatched.push_back(d2);
       if (!distance_image.empty()) distance_image[i] = static_cast<float>(std::sqrt(static_cast<double>(d2)));
     }

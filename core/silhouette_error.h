@@ -10,9 +10,11 @@
 //   pixel in O, not in L   distance to the nearest pixel not in O   (the LOD leaves a gap or a hole)
 //   coverage agrees        no distance (0 in the heat map)
 //
-// Distances are between pixel centers, in pixels, within the image: nothing is assumed beyond its border.
-// When the nearest such pixel does not exist (O empty, or O covering the whole image), the squared distance
-// is width² + height², farther than any two pixels of the image.
+// Distances are between pixel centers, in pixels. What the original covers beyond the image's border is
+// unknown (the outline may run just outside it), so a distance is at most the distance to the nearest
+// pixel center outside the image, min(x + 1, y + 1, width − x, height − y): a lower bound wherever the
+// border is nearer than anything in view. (Without that bound, a pinhole in a view the original fills
+// would count as the image diagonal.)
 //
 // Exactness: every distance is kept as its squared value, an integer dx² + dy² (< 2^31), in a histogram keyed
 // by that value; counts are exact integers. So max and p95 are exact (the square root of an exact integer),

@@ -1,5 +1,5 @@
 // Silhouette error (core/silhouette_error.h): hand-made masks with exact expectations (a shifted square, an
-// isolated extra pixel, identical masks, holes where the original has no outline in view), nearest-rank
+// isolated extra pixel, identical masks, the image border bounding every distance), nearest-rank
 // percentiles on known distributions, summing views in any order, and a brute-force reference of the
 // per-pixel definition on random masks.
 #include <gtest/gtest.h>
@@ -140,21 +140,28 @@ TEST(SilhouetteError, HoleMeasuredToOriginalOutline) {
   EXPECT_EQ(r.counts.covered_both, 80u);
 }
 
-// When the original has no outline in view (it covers every pixel, or none), a mismatch is farther than
-// anything in the image: width² + height².
-TEST(SilhouetteError, NoOutlineInView) {
+// The original's coverage beyond the border is unknown, so the border bounds every distance: a pinhole in a
+// view the original fills is as far as its nearest outside pixel, not the image diagonal.
+TEST(SilhouetteError, BorderBoundsTheDistance) {
   Image full(6, 4);
   full.fill(0, 0, 6, 4);
   Image holed = full;
-  holed.pixels[0] = 0;
-  EXPECT_EQ(compare(full, holed).counts.histogram, histogram({{36 + 16, 1}}));
+  holed.pixels[0] = 0;              // corner: 1 from outside
+  holed.pixels[1 * 6 + 2] = 0;      // (2, 1): 2 from the top edge
+  EXPECT_EQ(compare(full, holed).counts.histogram, histogram({{1, 1}, {4, 1}}));
   const Image empty(6, 4);
   Image speck(6, 4);
-  speck.set(2, 2);
-  speck.set(3, 2);
+  speck.set(2, 2);                  // min(3, 3, 4, 2) = 2
+  speck.set(3, 2);                  // min(4, 3, 3, 2) = 2
   const Result r = compare(empty, speck);
-  EXPECT_EQ(r.counts.histogram, histogram({{52, 2}}));
-  EXPECT_EQ(r.distances[2 * 6 + 2], static_cast<float>(std::sqrt(52.0)));
+  EXPECT_EQ(r.counts.histogram, histogram({{4, 2}}));
+  EXPECT_EQ(r.distances[2 * 6 + 2], 2.0f);
+  // Inside a large image, the outline in view is nearer than the border and wins.
+  Image o(40, 40), l(40, 40);
+  o.fill(10, 10, 30, 30);
+  l = o;
+  l.set(33, 20);                    // 4 from O, 7 from the border
+  EXPECT_EQ(compare(o, l).counts.histogram, histogram({{16, 1}}));
 }
 
 TEST(SilhouetteError, BadArguments) {
@@ -243,7 +250,6 @@ TEST(SilhouetteError, SumOfViewsInAnyOrder) {
 
 // The definition, pixel by pixel, with a full scan for the nearest pixel.
 std::vector<uint32_t> brute_force(const Image& o, const Image& l) {
-  const uint32_t none = static_cast<uint32_t>(o.w * o.w + o.h * o.h);
   std::vector<uint32_t> out(o.pixels.size(), 0);
   for (int y = 0; y < o.h; ++y) {
     for (int x = 0; x < o.w; ++x) {
@@ -258,7 +264,8 @@ std::vector<uint32_t> brute_force(const Image& o, const Image& l) {
           best = std::min(best, static_cast<uint32_t>((x - u) * (x - u) + (y - v) * (y - v)));
         }
       }
-      out[static_cast<size_t>(y) * o.w + x] = best == std::numeric_limits<uint32_t>::max() ? none : best;
+      const uint32_t border = static_cast<uint32_t>(std::min(std::min(x + 1, y + 1), std::min(o.w - x, o.h - y)));
+      out[static_cast<size_t>(y) * o.w + x] = std::min(best, border * border);
     }
   }
   return out;

@@ -248,7 +248,7 @@ int main(int argc, char** argv) {
 
   CLI::App* simplify_cmd = app.add_subcommand("simplify", "Build a chain of levels of detail (Low & Tan vertex clustering)");
   lodstream::SimplifyOptions so;
-  std::string grading = "lowtan", clustering = "floating", cell = "cube", variant = "nearest", rep = "center";
+  std::string grading = "lowtan", clustering = "floating", cell = "cube", variant = "nearest", rep = "quadric";
   std::string sizes_text, targets_text;
   bool obj = false, no_glb = false, no_ply = false;
   simplify_cmd->add_option("INPUT", input, "Input scene (.obj, .ply, .stl)")->required();
