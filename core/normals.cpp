@@ -1,14 +1,16 @@
 // Vertex normals with a crease angle (pipeline stage 5). This work is based on:
 // Kok-Lim Low and Tiow-Seng Tan. Model Simplification Using Vertex-Clustering. I3D 1997, §2 step 6
 //
-// The pass is vertex-major, then triangle-major. Per vertex, the incident triangles (a CSR list, already in
-// increasing triangle order because the fill pass scans triangles in order) are grouped by their unit normal,
-// the crease test runs on pairs of groups, and each group's corner normal is written to every corner of v in
-// the group's triangles. Then one scan over the corners in triangle order gives output ids: a corner reuses
-// an output vertex of the same input vertex with the same normal bits (a short list per input vertex), else
-// it creates one. Only the grouping makes the O(k²) crease test cheap on flat CAD fans; the result is a
-// function of the input arrays alone: no hashing, no thread, no dependence on anything but the fixed orders
-// stated in normals.h.
+// The pass is vertex-major, then triangle-major. Per vertex, the incident triangles (a CSR list in increasing
+// triangle order: the fill runs over the triangles backwards into end offsets) get their face normals
+// computed afresh (a pure function of the positions, so each of a triangle's vertices sees the same bits,
+// and no per-triangle array is kept), are grouped by their unit normal, the crease test runs on pairs of
+// groups, and the vertex's distinct corner normals become numbered (vertex, normal) pairs whose ids are
+// written into its corners. Then one scan over the corners in triangle order numbers the pairs in order of
+// first appearance: those are the output vertices, exactly as "a corner reuses an output vertex of the same
+// input vertex with the same normal bits, else creates one". Only the grouping makes the O(k²) crease test
+// cheap on flat CAD fans; the result is a function of the input arrays alone: no hashing, no thread, no
+// dependence on anything but the fixed orders stated in normals.h.
 #include "core/normals.h"
 
 #include <algorithm>
@@ -100,7 +102,7 @@ struct Crease {
 
 // One distinct unit normal among a vertex's incident triangles.
 struct Group {
-  uint32_t first = 0;    // lowest triangle index in the group
+  uint32_t first = 0;    // lowest triangle in the group (its position in the vertex's incidence list)
   double sum[3] = {};    // Σ c_t over the group, in increasing t
   double u[3] = {};      // the common unit normal
   uint32_t bin = 0;      // fallback only: index into the vertex's bins
@@ -128,58 +130,82 @@ uint32_t cube_bin(const double* u) {
   return static_cast<uint32_t>((face * kCubeBins + i) * kCubeBins + j);
 }
 
+// Bitwise equality of two float32 normals (no NaN reaches here, and zeros are +0).
+bool same_bits(const float* a, const float* b) {
+  return std::bit_cast<uint32_t>(a[0]) == std::bit_cast<uint32_t>(b[0]) &&
+         std::bit_cast<uint32_t>(a[1]) == std::bit_cast<uint32_t>(b[1]) &&
+         std::bit_cast<uint32_t>(a[2]) == std::bit_cast<uint32_t>(b[2]);
+}
+
 void add3(double* s, const double* x) {
   s[0] += x[0], s[1] += x[1], s[2] += x[2];
 }
 
+// Face normal of triangle t: c_t into `cross`, u_t into `u`; false (and c_t = 0, so that it contributes
+// nothing even if it overflowed) when the triangle has no direction. A pure function of the positions: the
+// per-vertex pass calls it once for every vertex of t and gets the same bits each time.
+bool face(const double* pos, const uint32_t* tri, size_t t, double* cross, double* u) {
+  const double* p0 = pos + 3 * size_t{tri[3 * t]};
+  const double* p1 = pos + 3 * size_t{tri[3 * t + 1]};
+  const double* p2 = pos + 3 * size_t{tri[3 * t + 2]};
+  const double e1[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+  const double e2[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
+  cross[0] = e1[1] * e2[2] - e1[2] * e2[1];
+  cross[1] = e1[2] * e2[0] - e1[0] * e2[2];
+  cross[2] = e1[0] * e2[1] - e1[1] * e2[0];
+  if (unit(cross, u)) return true;
+  cross[0] = cross[1] = cross[2] = 0;
+  return false;
+}
+
 // Per-call working memory; the per-vertex vectors grow to the largest valence.
 struct Work {
-  std::vector<double> cross;         // c_t, 3 per triangle
-  std::vector<double> unitn;         // u_t, 3 per triangle (valid where ok[t])
-  std::vector<uint8_t> ok;           // triangle has a direction
-  std::vector<uint32_t> offsets;     // CSR: vertex_count + 1
-  std::vector<uint32_t> incident;    // CSR: triangle ids, increasing per vertex
-  std::vector<uint32_t> per_vertex;  // fill cursor, then the head of each vertex's output list
-  std::vector<float> corner;         // 3 per corner
-  std::vector<uint32_t> next;        // per output vertex: next output vertex of the same input vertex
-  // per vertex
-  std::vector<uint32_t> order;     // non-degenerate incident triangles, sorted by (u bits, t)
+  std::vector<uint32_t> offsets;   // CSR: vertex_count + 1
+  std::vector<uint32_t> incident;  // CSR: triangle ids, increasing per vertex
+  // per vertex, indexed by the position i of a triangle in the vertex's incidence list
+  std::vector<double> cross;       // c_t, 3 per incident triangle
+  std::vector<double> unitn;       // u_t, 3 per incident triangle (valid where ok[i])
+  std::vector<uint8_t> ok;         // the triangle has a direction
+  std::vector<uint32_t> order;     // positions of the non-degenerate incident triangles, sorted by (u bits, i)
   std::vector<uint32_t> group_of;  // parallel to order
   std::vector<Group> groups;
   std::vector<uint32_t> by_first;  // group ids in order of their lowest triangle
+  std::vector<uint32_t> normal_of;  // per group: its pair id (below)
   std::vector<Bin> bins;
   std::vector<uint32_t> bin_slot;  // kCubeBinCount entries, kNone when unused at this vertex
 };
 
-// Groups the incident triangles of one vertex (inc[0..k), increasing) by unit normal and sets every group's
-// corner normal; returns the normal of the vertex's degenerate corners in `degenerate`.
-void vertex_normals(const uint32_t* inc, size_t k, const Crease& crease, Work& w, float* degenerate) {
+// Groups the incident triangles of one vertex (inc[0..k), increasing; their face normals in w.cross,
+// w.unitn, w.ok) by unit normal and sets every group's corner normal; returns the normal of the vertex's
+// degenerate corners in `degenerate`.
+void vertex_normals(size_t k, const Crease& crease, Work& w, float* degenerate) {
   const double* un = w.unitn.data();
   w.order.clear();
   for (size_t i = 0; i < k; ++i)
-    if (w.ok[inc[i]]) w.order.push_back(inc[i]);
+    if (w.ok[i]) w.order.push_back(static_cast<uint32_t>(i));
   // Group by unit normal bits. Canonical +0 makes bitwise equality value equality (no NaN reaches here).
-  auto key = [un](uint32_t t) {
-    const double* u = un + 3 * size_t{t};
+  auto key = [un](uint32_t i) {
+    const double* u = un + 3 * size_t{i};
     return std::array<uint64_t, 3>{std::bit_cast<uint64_t>(u[0]), std::bit_cast<uint64_t>(u[1]),
                                    std::bit_cast<uint64_t>(u[2])};
   };
+  // Positions increase with triangle ids, so ties by position are ties by triangle.
   std::sort(w.order.begin(), w.order.end(), [&](uint32_t a, uint32_t b) {
     const auto ka = key(a), kb = key(b);
     return ka != kb ? ka < kb : a < b;
   });
   w.groups.clear();
   w.group_of.resize(w.order.size());
-  for (size_t i = 0; i < w.order.size(); ++i) {
-    const uint32_t t = w.order[i];
-    if (i == 0 || key(t) != key(w.order[i - 1])) {
+  for (size_t n = 0; n < w.order.size(); ++n) {
+    const uint32_t i = w.order[n];
+    if (n == 0 || key(i) != key(w.order[n - 1])) {
       Group g;
-      g.first = t;  // the lowest index of the group: ties sort by t
-      std::copy(un + 3 * size_t{t}, un + 3 * size_t{t} + 3, g.u);
+      g.first = i;  // the lowest triangle of the group: ties sort by position
+      std::copy(un + 3 * size_t{i}, un + 3 * size_t{i} + 3, g.u);
       w.groups.push_back(g);
     }
-    w.group_of[i] = static_cast<uint32_t>(w.groups.size() - 1);
-    add3(w.groups.back().sum, &w.cross[3 * size_t{t}]);  // increasing t within the group
+    w.group_of[n] = static_cast<uint32_t>(w.groups.size() - 1);
+    add3(w.groups.back().sum, &w.cross[3 * size_t{i}]);  // increasing t within the group
   }
   const size_t d = w.groups.size();
   // The summation order of normals.h: groups by their lowest triangle.
@@ -268,79 +294,84 @@ void crease_normals(std::span<const double> positions, std::span<const uint32_t>
   const double* pos = positions.data();
 
   Work w;
-  // Face normals, and the incidence counts (a triangle counts once per distinct vertex).
-  w.cross.resize(3 * triangle_count);
-  w.unitn.resize(3 * triangle_count);
-  w.ok.resize(triangle_count);
+  // The incidence (a triangle counts once per distinct vertex): counts, end offsets, then a backward fill
+  // that leaves offsets[v] at the start of v's list and each list in increasing triangle order.
   w.offsets.assign(vertex_count + 1, 0);
   for (size_t t = 0; t < triangle_count; ++t) {
     const uint32_t a = tri[3 * t], b = tri[3 * t + 1], c = tri[3 * t + 2];
     if (a >= vertex_count || b >= vertex_count || c >= vertex_count)
       bad_input("triangle " + std::to_string(t) + " has a vertex id out of range");
-    const double* p0 = pos + 3 * size_t{a};
-    const double* p1 = pos + 3 * size_t{b};
-    const double* p2 = pos + 3 * size_t{c};
-    const double e1[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
-    const double e2[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
-    double* n = &w.cross[3 * t];
-    n[0] = e1[1] * e2[2] - e1[2] * e2[1];
-    n[1] = e1[2] * e2[0] - e1[0] * e2[2];
-    n[2] = e1[0] * e2[1] - e1[1] * e2[0];
-    w.ok[t] = unit(n, &w.unitn[3 * t]);
-    if (!w.ok[t]) n[0] = n[1] = n[2] = 0;  // contributes nothing, even if it overflowed
-    ++w.offsets[size_t{a} + 1];
-    if (b != a) ++w.offsets[size_t{b} + 1];
-    if (c != a && c != b) ++w.offsets[size_t{c} + 1];
+    ++w.offsets[a];
+    if (b != a) ++w.offsets[b];
+    if (c != a && c != b) ++w.offsets[c];
   }
-  for (size_t v = 0; v < vertex_count; ++v) w.offsets[v + 1] += w.offsets[v];
-  w.incident.resize(w.offsets[vertex_count]);
-  w.per_vertex.assign(w.offsets.begin(), w.offsets.end() - 1);
-  for (size_t t = 0; t < triangle_count; ++t) {
+  for (size_t v = 1; v <= vertex_count; ++v) w.offsets[v] += w.offsets[v - 1];
+  w.incident.resize(vertex_count ? w.offsets[vertex_count - 1] : 0);
+  for (size_t t = triangle_count; t-- > 0;) {
     const uint32_t a = tri[3 * t], b = tri[3 * t + 1], c = tri[3 * t + 2];
-    w.incident[w.per_vertex[a]++] = static_cast<uint32_t>(t);
-    if (b != a) w.incident[w.per_vertex[b]++] = static_cast<uint32_t>(t);
-    if (c != a && c != b) w.incident[w.per_vertex[c]++] = static_cast<uint32_t>(t);
+    w.incident[--w.offsets[a]] = static_cast<uint32_t>(t);
+    if (b != a) w.incident[--w.offsets[b]] = static_cast<uint32_t>(t);
+    if (c != a && c != b) w.incident[--w.offsets[c]] = static_cast<uint32_t>(t);
   }
+  w.offsets[vertex_count] = static_cast<uint32_t>(w.incident.size());
 
-  // Corner normals, vertex by vertex.
-  w.corner.resize(3 * triangles.size());
+  // Corner normals, vertex by vertex. A vertex's distinct corner normals (bitwise) become "pairs" (vertex,
+  // normal), numbered in vertex order, their normals in `pair_normals`; each corner holds its pair id in
+  // out.triangles until the last pass renumbers them. Reserving one pair per corner costs address space
+  // only: pages are touched as pairs are written.
+  out.triangles.assign(triangles.size(), 0);
+  std::vector<float> pair_normals;
+  pair_normals.reserve(3 * triangles.size());
+  auto pair_of = [&](size_t first_pair, const float* n) {
+    const size_t pairs = pair_normals.size() / 3;
+    for (size_t p = first_pair; p < pairs; ++p)
+      if (same_bits(&pair_normals[3 * p], n)) return static_cast<uint32_t>(p);
+    pair_normals.insert(pair_normals.end(), n, n + 3);
+    return static_cast<uint32_t>(pairs);
+  };
   for (size_t v = 0; v < vertex_count; ++v) {
     const uint32_t begin = w.offsets[v], end = w.offsets[v + 1];
     if (begin == end) continue;
     const uint32_t* inc = w.incident.data() + begin;
+    const size_t k = end - begin;
+    w.cross.resize(3 * k);
+    w.unitn.resize(3 * k);
+    w.ok.resize(k);
+    for (size_t i = 0; i < k; ++i) w.ok[i] = face(pos, tri, inc[i], &w.cross[3 * i], &w.unitn[3 * i]);
     float degenerate[3];
-    vertex_normals(inc, end - begin, crease, w, degenerate);
-    auto write = [&](uint32_t t, const float* n) {
+    vertex_normals(k, crease, w, degenerate);
+    const size_t first_pair = pair_normals.size() / 3;
+    w.normal_of.resize(w.groups.size());
+    for (size_t g = 0; g < w.groups.size(); ++g) w.normal_of[g] = pair_of(first_pair, w.groups[g].normal);
+    auto write = [&](uint32_t t, uint32_t pair) {
       for (size_t j = 3 * size_t{t}; j < 3 * size_t{t} + 3; ++j)
-        if (tri[j] == v) std::copy(n, n + 3, &w.corner[3 * j]);
+        if (tri[j] == v) out.triangles[j] = pair;
     };
-    for (size_t i = 0; i < w.order.size(); ++i) write(w.order[i], w.groups[w.group_of[i]].normal);
-    for (uint32_t i = 0; i < end - begin; ++i)
-      if (!w.ok[inc[i]]) write(inc[i], degenerate);
+    for (size_t n = 0; n < w.order.size(); ++n) write(inc[w.order[n]], w.normal_of[w.group_of[n]]);
+    if (w.order.size() < k) {
+      const uint32_t pair = pair_of(first_pair, degenerate);
+      for (size_t i = 0; i < k; ++i)
+        if (!w.ok[i]) write(inc[i], pair);
+    }
   }
+  std::vector<uint32_t>().swap(w.incident);
+  std::vector<uint32_t>().swap(w.offsets);
 
-  // Output vertices in order of first appearance; per input vertex a list of its output vertices.
+  // Output vertices: the pairs in order of first appearance over the corners. Every pair has a corner.
+  const size_t pairs = pair_normals.size() / 3;
+  std::vector<uint32_t> output_of(pairs, kNone);
   out.vertex.clear();
   out.normals.clear();
-  out.triangles.resize(triangles.size());
-  out.vertex.reserve(vertex_count);
-  out.normals.reserve(3 * vertex_count);
-  w.per_vertex.assign(vertex_count, kNone);
-  w.next.clear();
-  w.next.reserve(vertex_count);
+  out.vertex.reserve(pairs);
+  out.normals.reserve(3 * pairs);
   for (size_t j = 0; j < triangles.size(); ++j) {
-    const uint32_t v = tri[j];
-    const float* n = &w.corner[3 * j];
-    uint32_t o = w.per_vertex[v];
-    while (o != kNone && std::memcmp(&out.normals[3 * size_t{o}], n, 3 * sizeof(float)) != 0) o = w.next[o];
-    if (o == kNone) {
-      o = static_cast<uint32_t>(out.vertex.size());
-      out.vertex.push_back(v);
-      out.normals.insert(out.normals.end(), n, n + 3);
-      w.next.push_back(w.per_vertex[v]);
-      w.per_vertex[v] = o;
+    const uint32_t p = out.triangles[j];
+    if (output_of[p] == kNone) {
+      output_of[p] = static_cast<uint32_t>(out.vertex.size());
+      out.vertex.push_back(tri[j]);
+      out.normals.insert(out.normals.end(), &pair_normals[3 * size_t{p}], &pair_normals[3 * size_t{p}] + 3);
     }
-    out.triangles[j] = o;
+    out.triangles[j] = output_of[p];
   }
 }
 

@@ -41,15 +41,16 @@
 //   takes its own triangle's unit normal u_t. Hence no output normal is ever NaN or zero.
 //
 // Cost: two passes over the triangles build the vertex → triangle incidence (CSR, 4 bytes per vertex + 4 per
-// corner); then per vertex of valence k with d distinct face directions, O(k log k) to group and O(d²)
-// angle tests and additions. Flat CAD fans (a fan-triangulated cap has valence in the thousands but d = 1)
+// corner); then per vertex of valence k with d distinct face directions, k face normals (each triangle's is
+// computed once per vertex, three times in all, rather than stored), O(k log k) to group and O(d²) angle
+// tests and additions. Flat CAD fans (a fan-triangulated cap has valence in the thousands but d = 1)
 // stay cheap. Pathological vertices with d > kMaxPairwiseDirections fall back to binning the directions on
 // a cube map of 6 × 16 × 16 bins (a bin is about 5.6° wide): the groups of a bin share one included set,
 // decided on the bins' area-weighted mean directions, so the cost is O(d + 1536²) and the crease is only
-// approximate (within about a bin width) at such vertices. Temporary memory, allocated once per call:
-// 48 bytes per triangle (face and unit normals), 16 per corner (incidence, corner normals), 8 per input
-// vertex and 4 per output vertex, i.e. about 100 bytes per triangle; per-vertex scratch grows to the
-// largest valence.
+// approximate (within about a bin width) at such vertices. Temporary memory, allocated once per call besides
+// the output: 4 bytes per input vertex and per corner (the incidence, freed before the last pass), and 16
+// bytes per output vertex (its normal in vertex order and its renumbering), i.e. about 12 bytes per corner
+// plus 16 per output vertex; per-vertex scratch grows to the largest valence.
 //
 // Preconditions: positions.size() and triangles.size() are multiples of 3, every id is < positions.size()/3,
 // and there are at most 2^32 − 1 corners (so output ids fit in 32 bits); otherwise Failure(Status::internal)

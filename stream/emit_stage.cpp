@@ -10,6 +10,7 @@
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
 #include <tbb/task_arena.h>
 
 #include "core/normals.h"
@@ -44,23 +45,23 @@ struct Block {
 struct BlockOut {
   std::vector<std::array<uint32_t, 3>> triangles;  // input winding
   std::vector<std::array<uint32_t, 2>> edges;      // lower cell first
-  std::vector<EdgeSums> sums;
   std::vector<uint32_t> points;
   std::vector<uint32_t> quadric_cells;
   std::vector<core::Quadric> quadrics;
-  std::vector<uint32_t> distance_edges;  // pass B: global edge ids
+  std::vector<uint32_t> kept_edges;  // passes B and C: kept edge ids, and per id its sums (B) or distances (C)
+  std::vector<EdgeSums> sums;
   std::vector<Distances> distances;
   void clear() {
     triangles.clear(), edges.clear(), sums.clear(), points.clear();
-    quadric_cells.clear(), quadrics.clear(), distance_edges.clear(), distances.clear();
+    quadric_cells.clear(), quadrics.clear(), kept_edges.clear(), distances.clear();
   }
 };
 
 struct Scratch {
-  FlatMap<3> triangles;
+  FlatMap<3, false> triangles;
   FlatMap<2> edges;
-  FlatMap<1> points;
-  FlatMap<1> cells;  // pass A: a cell's quadric slot; pass B: an edge's distance slot
+  FlatMap<1, false> points;
+  FlatMap<1> cells;  // pass A: a cell's quadric slot; passes B and C: a kept edge's slot
   void clear() { triangles.clear(), edges.clear(), points.clear(), cells.clear(); }
 };
 
@@ -82,9 +83,10 @@ double distance_to_line(const double* x, const double* a, const double* b) {
 EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
                       const std::string& prefix, size_t level, uint64_t records, uint64_t cells, double cell_size,
                       const core::ClusterOptions& cluster, const EmitOptions& options, Progress& progress,
-                      core::LodMesh* out) {
+                      EmitScratch& level_scratch, core::LodMesh* out) {
   // The level's cluster map: stored vertex id -> cell.
-  std::vector<uint32_t> map(meta.vertices, core::kNoCell);
+  std::vector<uint32_t>& map = level_scratch.map;
+  map.assign(meta.vertices, core::kNoCell);
   {
     io::MappedFile order(order_path(prefix)), cell_file(cells_path(prefix, level));
     if (order.size() != records * 4 || cell_file.size() != records * 4)
@@ -125,17 +127,27 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
     return c;
   };
 
-  // Runs `work(block, out, scratch)` over the blocks in parallel groups, then `merge(out)` in block order.
+  // Runs `work(block, out, scratch)` over the blocks in parallel groups, and `merge(out)` in block order:
+  // group g's outputs are merged (one thread) while group g + 1 runs (the others), so the two sets of
+  // outputs alternate. Merges stay serial and in block order, so this changes no sum.
   tbb::enumerable_thread_specific<Scratch> scratch;
   const size_t group = 4 * static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
-  std::vector<BlockOut> outs(group);
+  std::vector<BlockOut> outs[2] = {std::vector<BlockOut>(group), std::vector<BlockOut>(group)};
   auto run_blocks = [&](const char* stage, bool segments_and_triangles_only, auto&& work, auto&& merge) {
-    for (size_t g = 0; g < blocks.size(); g += group) {
+    size_t merged = 0;  // blocks merged so far
+    for (size_t g = 0, k = 0; g < blocks.size() || merged < blocks.size(); g += group, ++k) {
       progress.check();
-      const size_t n = std::min(group, blocks.size() - g);
+      const size_t n = g < blocks.size() ? std::min(group, blocks.size() - g) : 0;
+      std::vector<BlockOut>& current = outs[k % 2];
+      std::vector<BlockOut>& previous = outs[(k + 1) % 2];
+      const size_t before = std::min(g, blocks.size());  // the blocks of the groups before g
+      tbb::task_group merging;
+      if (merged < before) merging.run([&] {
+        for (size_t i = 0; merged + i < before; ++i) merge(previous[i]);
+      });
       tbb::parallel_for(size_t{0}, n, [&](size_t i) {
         const Block& b = blocks[g + i];
-        BlockOut& o = outs[i];
+        BlockOut& o = current[i];
         o.clear();
         if (segments_and_triangles_only && b.kind == 2) return;
         const uint64_t arity = static_cast<uint64_t>(3 - b.kind);
@@ -144,40 +156,42 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
         s.clear();
         work(b, std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), b.count * arity), o, s);
       });
-      for (size_t i = 0; i < n; ++i) merge(outs[i]);
+      merging.wait();
+      merged = before;
       // Drop the position pages this group touched from the resident set (they stay in the page cache).
       positions.release();
       positions.acquire();
-      progress.report(stage, static_cast<double>(g + n) / static_cast<double>(blocks.size()));
+      if (merged > 0) progress.report(stage, static_cast<double>(merged) / static_cast<double>(blocks.size()));
     }
   };
 
-  // Pass A: classify, dedupe per block, sum edge corners and quadrics.
-  FlatMap<3> g_triangles;
+  // Pass A: classify, dedupe per block, sum quadrics.
+  FlatMap<3, false> g_triangles;
   FlatMap<2> g_edges;
-  FlatMap<1> g_points;
+  FlatMap<1, false> g_points;
   std::vector<std::array<uint32_t, 3>> triangles;
   std::vector<std::array<uint32_t, 2>> edges;
-  std::vector<EdgeSums> sums;
   std::vector<uint32_t> points;
   std::vector<core::Quadric> quadrics(quadric ? cells : 0);
+  // One bit per input triangle and segment that collapsed to an edge, so that pass B visits only those.
+  // Blocks start at multiples of 64 primitives: each word is written by one block, hence one thread.
+  static_assert(kEmitBlock % 64 == 0);
+  std::vector<uint64_t> collapsed[2];
+  for (int kind = 0; kind < 2; ++kind)
+    if (!options.count_only) collapsed[kind].assign((column_count[kind] + 63) / 64, 0);
+  auto mark = [&](const Block& b, size_t i) {
+    if (options.count_only) return;
+    const uint64_t p = b.first + i;
+    collapsed[b.kind][p / 64] |= uint64_t{1} << (p % 64);
+  };
 
   auto classify = [&](const Block& b, std::span<const uint32_t> ids, BlockOut& o, Scratch& s) {
-    auto edge = [&](uint32_t c0, uint32_t c1) -> EdgeSums& {
+    auto edge = [&](uint32_t c0, uint32_t c1) {
       const std::array<uint32_t, 2> key{std::min(c0, c1), std::max(c0, c1)};
-      const auto [slot, fresh] = s.edges.insert(key, static_cast<uint32_t>(o.edges.size()));
-      if (fresh) o.edges.push_back(key), o.sums.emplace_back();
-      return o.sums[slot];
+      if (s.edges.insert(key, 0).second) o.edges.push_back(key);
     };
     auto point = [&](uint32_t c) {
       if (s.points.insert({c}, 0).second) o.points.push_back(c);
-    };
-    auto corner = [&](EdgeSums& e, uint32_t lower, uint32_t c, uint32_t v) {
-      if (options.count_only) return;
-      double p[3];
-      positions.get(v, p);
-      if (c == lower) add(e.a, p), ++e.na;
-      else add(e.b, p), ++e.nb;
     };
     const size_t arity = static_cast<size_t>(3 - b.kind);
     for (size_t i = 0; i < ids.size(); i += arity) {
@@ -203,19 +217,16 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
         } else if (c[0] == c[1] && c[1] == c[2]) {
           point(c[0]);
         } else {
-          const uint32_t other = c[0] != c[1] ? c[1] : c[2];
-          EdgeSums& e = edge(c[0], other);
-          const uint32_t lower = std::min(c[0], other);
-          for (int k = 0; k < 3; ++k) corner(e, lower, c[k], v[k]);
+          edge(c[0], c[0] != c[1] ? c[1] : c[2]);
+          mark(b, i / 3);
         }
       } else if (arity == 2) {
         const uint32_t c0 = cell_of(ids[i]), c1 = cell_of(ids[i + 1]);
         if (c0 == c1) {
           point(c0);
         } else {
-          EdgeSums& e = edge(c0, c1);
-          corner(e, std::min(c0, c1), c0, ids[i]);
-          corner(e, std::min(c0, c1), c1, ids[i + 1]);
+          edge(c0, c1);
+          mark(b, i / 2);
         }
       } else {
         point(cell_of(ids[i]));
@@ -228,13 +239,8 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
       std::sort(key.begin(), key.end());
       if (g_triangles.insert(key, 0).second) triangles.push_back(t);
     }
-    for (size_t i = 0; i < o.edges.size(); ++i) {
-      const auto [slot, fresh] = g_edges.insert(o.edges[i], static_cast<uint32_t>(edges.size()));
-      if (fresh) edges.push_back(o.edges[i]), sums.emplace_back();
-      EdgeSums& e = sums[slot];
-      add(e.a, o.sums[i].a), add(e.b, o.sums[i].b);
-      e.na += o.sums[i].na, e.nb += o.sums[i].nb;
-    }
+    for (const auto& e : o.edges)
+      if (g_edges.insert(e, static_cast<uint32_t>(edges.size())).second) edges.push_back(e);
     for (uint32_t c : o.points)
       if (g_points.insert({c}, 0).second) points.push_back(c);
     for (size_t i = 0; i < o.quadric_cells.size(); ++i) quadrics[o.quadric_cells[i]].add(o.quadrics[i]);
@@ -248,47 +254,10 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
     return counts;
   }
 
-  // Pass B: mean distances of the collapsed corners to the line through the mean positions.
-  std::vector<std::array<double, 3>> pa(edges.size()), pb(edges.size());
-  for (size_t i = 0; i < edges.size(); ++i)
-    for (int k = 0; k < 3; ++k) {
-      pa[i][k] = sums[i].na ? sums[i].a[k] / static_cast<double>(sums[i].na) : 0;
-      pb[i][k] = sums[i].nb ? sums[i].b[k] / static_cast<double>(sums[i].nb) : 0;
-    }
-  std::vector<Distances> distances(edges.size());
-  if (!edges.empty()) {
-    auto measure = [&](const Block& b, std::span<const uint32_t> ids, BlockOut& o, Scratch& s) {
-      const size_t arity = static_cast<size_t>(3 - b.kind);
-      for (size_t i = 0; i < ids.size(); i += arity) {
-        uint32_t c[3], lo = UINT32_MAX, hi = 0;
-        for (size_t k = 0; k < arity; ++k) c[k] = cell_of(ids[i + k]), lo = std::min(lo, c[k]), hi = std::max(hi, c[k]);
-        if (lo == hi) continue;
-        if (arity == 3 && c[0] != c[1] && c[1] != c[2] && c[0] != c[2]) continue;
-        const uint32_t e = g_edges.find({lo, hi});
-        const auto [slot, fresh] = s.cells.insert({e}, static_cast<uint32_t>(o.distance_edges.size()));
-        if (fresh) o.distance_edges.push_back(e), o.distances.emplace_back();
-        for (size_t k = 0; k < arity; ++k) {
-          double p[3];
-          positions.get(ids[i + k], p);
-          const double d = distance_to_line(p, pa[e].data(), pb[e].data());
-          if (c[k] == lo) o.distances[slot].a += d;
-          else o.distances[slot].b += d;
-        }
-      }
-    };
-    run_blocks("emit", true, measure, [&](BlockOut& o) {
-      for (size_t i = 0; i < o.distance_edges.size(); ++i) {
-        distances[o.distance_edges[i]].a += o.distances[i].a;
-        distances[o.distance_edges[i]].b += o.distances[i].b;
-      }
-    });
-  }
-  positions.release();
-  std::vector<uint32_t>().swap(map);
-
-  // Elimination. Edges are few next to triangle sides: look each side up among the edges.
-  g_triangles = FlatMap<3>();
-  g_points = FlatMap<1>();
+  // Elimination, before the thickness pass, which then measures the kept edges only. Edges are few next to
+  // triangle sides: look each side up among the edges.
+  g_triangles = FlatMap<3, false>();
+  g_points = FlatMap<1, false>();
   std::vector<uint8_t> on_triangle(edges.size(), 0);
   std::vector<uint8_t> used(cells, 0);
   for (const auto& t : triangles)
@@ -299,19 +268,20 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
       if (e != FlatMap<2>::empty) on_triangle[e] = 1;
     }
   g_edges = FlatMap<2>();
-  std::vector<uint32_t> kept_edges;
-  std::vector<float> thickness;
+  // The kept edges, in edge order; k_edges finds them by cells.
+  std::vector<std::array<uint32_t, 2>> kept_edges;
+  FlatMap<2> k_edges;
   for (size_t i = 0; i < edges.size(); ++i) {
     if (on_triangle[i]) {
       ++counts.edges_on_triangles;
       continue;
     }
-    kept_edges.push_back(static_cast<uint32_t>(i));
+    k_edges.insert(edges[i], static_cast<uint32_t>(kept_edges.size()));
+    kept_edges.push_back(edges[i]);
     used[edges[i][0]] = used[edges[i][1]] = 1;
-    const double da = sums[i].na ? distances[i].a / static_cast<double>(sums[i].na) : 0;
-    const double db = sums[i].nb ? distances[i].b / static_cast<double>(sums[i].nb) : 0;
-    thickness.push_back(static_cast<float>(da + db));
   }
+  std::vector<std::array<uint32_t, 2>>().swap(edges);
+  std::vector<uint8_t>().swap(on_triangle);
   std::vector<uint32_t> kept_points;
   for (uint32_t c : points) {
     if (used[c]) {
@@ -319,6 +289,89 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
       continue;
     }
     kept_points.push_back(c);
+  }
+  std::vector<uint8_t>().swap(used);
+
+  // Passes B and C visit the input triangles and segments that collapsed to a kept edge (an eliminated
+  // edge's thickness would go unused). For each, `visit(corner ids, their cells, arity, lower cell, kept
+  // edge, slot)` gets the edge's slot in the block's output (o.kept_edges, o.distances, in order of first
+  // appearance), so that sums are formed per block in primitive order and merged in block order.
+  auto for_kept_edges = [&](auto&& visit) {
+    return [&, visit](const Block& b, std::span<const uint32_t> ids, BlockOut& o, Scratch& s) {
+      const size_t arity = static_cast<size_t>(3 - b.kind);
+      const uint64_t* bits = collapsed[b.kind].data();
+      for (size_t i = 0; i < ids.size(); i += arity) {
+        const uint64_t prim = b.first + i / arity;
+        if (!(bits[prim / 64] >> (prim % 64) & 1)) continue;
+        uint32_t c[3], lo = UINT32_MAX, hi = 0;
+        for (size_t k = 0; k < arity; ++k) c[k] = cell_of(ids[i + k]), lo = std::min(lo, c[k]), hi = std::max(hi, c[k]);
+        const uint32_t e = k_edges.find({lo, hi});
+        if (e == FlatMap<2>::empty) continue;
+        const auto [slot, fresh] = s.cells.insert({e}, static_cast<uint32_t>(o.kept_edges.size()));
+        if (fresh) o.kept_edges.push_back(e), o.sums.emplace_back(), o.distances.emplace_back();
+        visit(&ids[i], c, arity, lo, e, slot, o);
+      }
+    };
+  };
+
+  // Pass B: the corner sums of the kept edges, for P_A and P_B (a corner in the lower cell goes to A).
+  std::vector<EdgeSums> kept_sums(kept_edges.size());
+  if (!kept_edges.empty()) {
+    run_blocks("emit", true,
+               for_kept_edges([&](const uint32_t* v, const uint32_t* c, size_t arity, uint32_t lo, uint32_t, uint32_t slot,
+                                  BlockOut& o) {
+                 EdgeSums& e = o.sums[slot];
+                 for (size_t k = 0; k < arity; ++k) {
+                   double p[3];
+                   positions.get(v[k], p);
+                   if (c[k] == lo) add(e.a, p), ++e.na;
+                   else add(e.b, p), ++e.nb;
+                 }
+               }),
+               [&](BlockOut& o) {
+                 for (size_t i = 0; i < o.kept_edges.size(); ++i) {
+                   EdgeSums& e = kept_sums[o.kept_edges[i]];
+                   add(e.a, o.sums[i].a), add(e.b, o.sums[i].b);
+                   e.na += o.sums[i].na, e.nb += o.sums[i].nb;
+                 }
+               });
+  }
+
+  // Pass C: mean distances of the collapsed corners to the line through the mean positions.
+  std::vector<std::array<double, 3>> pa(kept_edges.size()), pb(kept_edges.size());
+  for (size_t i = 0; i < kept_edges.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      pa[i][k] = kept_sums[i].na ? kept_sums[i].a[k] / static_cast<double>(kept_sums[i].na) : 0;
+      pb[i][k] = kept_sums[i].nb ? kept_sums[i].b[k] / static_cast<double>(kept_sums[i].nb) : 0;
+    }
+  std::vector<Distances> distances(kept_edges.size());
+  if (!kept_edges.empty()) {
+    run_blocks("emit", true,
+               for_kept_edges([&](const uint32_t* v, const uint32_t* c, size_t arity, uint32_t lo, uint32_t e, uint32_t slot,
+                                  BlockOut& o) {
+                 for (size_t k = 0; k < arity; ++k) {
+                   double p[3];
+                   positions.get(v[k], p);
+                   const double d = distance_to_line(p, pa[e].data(), pb[e].data());
+                   if (c[k] == lo) o.distances[slot].a += d;
+                   else o.distances[slot].b += d;
+                 }
+               }),
+               [&](BlockOut& o) {
+                 for (size_t i = 0; i < o.kept_edges.size(); ++i) {
+                   distances[o.kept_edges[i]].a += o.distances[i].a;
+                   distances[o.kept_edges[i]].b += o.distances[i].b;
+                 }
+               });
+  }
+  positions.release();
+  for (auto& bits : collapsed) std::vector<uint64_t>().swap(bits);
+  k_edges = FlatMap<2>();
+  std::vector<float> thickness(kept_edges.size());
+  for (size_t i = 0; i < kept_edges.size(); ++i) {
+    const double da = kept_sums[i].na ? distances[i].a / static_cast<double>(kept_sums[i].na) : 0;
+    const double db = kept_sums[i].nb ? distances[i].b / static_cast<double>(kept_sums[i].nb) : 0;
+    thickness[i] = static_cast<float>(da + db);
   }
 
   // The cells in use, numbered in order of first use: triangle corners, then edge and point ends.
@@ -334,7 +387,7 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
     for (uint32_t c : t) tri_slots.push_back(use(c));
   std::vector<std::array<uint32_t, 3>>().swap(triangles);
   const size_t triangle_slots = slot_cell.size();
-  for (uint32_t i : kept_edges) use(edges[i][0]), use(edges[i][1]);
+  for (const auto& e : kept_edges) use(e[0]), use(e[1]);
   for (uint32_t c : kept_points) use(c);
 
   // Their representatives, reading the cell table in cell order through windows (only the cells in use).
@@ -403,9 +456,9 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
     }
     return out_vertex[slot];
   };
-  for (uint32_t i : kept_edges) {
-    mesh.edges.push_back(end_vertex(edges[i][0]));
-    mesh.edges.push_back(end_vertex(edges[i][1]));
+  for (const auto& e : kept_edges) {
+    mesh.edges.push_back(end_vertex(e[0]));
+    mesh.edges.push_back(end_vertex(e[1]));
   }
   mesh.thickness = std::move(thickness);
   for (uint32_t c : kept_points) mesh.points.push_back(end_vertex(c));

@@ -2,8 +2,10 @@
 //
 // Records are pushed into one in-memory buffer; a full buffer is sorted (tbb::parallel_sort) and written
 // to a run file. merge() visits every record in order: straight from the buffer when nothing spilled,
-// otherwise by a k-way heap merge of the runs with one read buffer per run; each run file is deleted as
-// soon as it is exhausted (DuckDB's "free merged runs behind the readers").
+// otherwise by a k-way heap merge of the runs with one read buffer per run, the last run being the
+// records still in the buffer (sorted, never written: writes into the page cache cost more than the
+// sort); each run file is deleted as soon as it is exhausted (DuckDB's "free merged runs behind the
+// readers"). Memory: the buffer, then the buffer's records and the run readers within the same budget.
 //
 // Determinism: `Less` must be a total order on everything that distinguishes two records (break ties by
 // an id), so the output is the same whatever the buffer size, i.e. whatever the memory budget.
@@ -64,12 +66,15 @@ class ExternalSorter {
       release(buffer_);
       return;
     }
-    if (!buffer_.empty()) spill();
-    release(buffer_);
-    const size_t k = runs_.size();
-    const uint64_t per_run = std::max<uint64_t>(capacity_ / (k + 1), 256);
+    // The records still buffered are not spilled: sorted in place, they are merged from memory as the
+    // last run (where a spill would have put them), and the file runs share what is left of the budget.
+    tbb::parallel_sort(buffer_.begin(), buffer_.end(), less_);
+    const size_t files = runs_.size();
+    const size_t k = files + (buffer_.empty() ? 0 : 1);
+    const uint64_t per_run = std::max<uint64_t>((capacity_ - buffer_.size()) / files, 256);
     std::vector<Reader> readers(k);
-    for (size_t i = 0; i < k; ++i) readers[i].open(runs_[i], per_run);
+    for (size_t i = 0; i < files; ++i) readers[i].open(runs_[i], per_run);
+    if (k > files) readers[files].open_memory(buffer_.data(), buffer_.size());
     // Min-heap of run indices on their current record; ties go to the lower run so equal records
     // keep a fixed order.
     std::vector<size_t> heap;
@@ -95,6 +100,7 @@ class ExternalSorter {
       }
     }
     runs_.clear();
+    release(buffer_);
   }
 
  private:
@@ -115,8 +121,14 @@ class ExternalSorter {
       buf_.resize(static_cast<size_t>(std::min<uint64_t>(records, std::max<uint64_t>(left_, 1))));
       refill();
     }
+    // Reads n records at `data` (which must outlive the reader) instead of a file.
+    void open_memory(const Rec* data, size_t n) {
+      data_ = data;
+      pos_ = 0;
+      len_ = n;
+    }
     bool valid() const { return pos_ < len_; }
-    const Rec& current() const { return buf_[pos_]; }
+    const Rec& current() const { return data_[pos_]; }
     bool advance() {
       if (++pos_ < len_) return true;
       refill();
@@ -144,6 +156,7 @@ class ExternalSorter {
         if (r <= 0) fail(Status::io_error, path_ + ": cannot read sort run: " + std::strerror(r < 0 ? errno : EIO));
         got += static_cast<size_t>(r);
       }
+      data_ = buf_.data();
       len_ = n;
       left_ -= n;
     }
@@ -151,6 +164,7 @@ class ExternalSorter {
     int fd_ = -1;
     uint64_t left_ = 0;
     std::vector<Rec> buf_;
+    const Rec* data_ = nullptr;  // buf_, or the records given to open_memory
     size_t pos_ = 0, len_ = 0;
   };
 

@@ -1,7 +1,8 @@
 // Open-addressing hash map from N uint32 words to a uint32 value, for the emit stage's dedupe tables.
 // Linear probing, at most half full, grows by doubling; a key whose word 0 is UINT32_MAX is reserved as the
 // empty marker (cell ids never reach it). clear() keeps the capacity, so a per-thread map reused block
-// after block allocates only while it grows.
+// after block allocates only while it grows. Values = false makes it a set (no value array; insert returns
+// value 0 and find returns 0 for a present key), a quarter less memory for the triangle table.
 #pragma once
 
 #include <array>
@@ -13,7 +14,7 @@
 
 namespace lodstream::stream {
 
-template <int N>
+template <int N, bool Values = true>
 class FlatMap {
  public:
   using Key = std::array<uint32_t, N>;
@@ -25,11 +26,11 @@ class FlatMap {
     for (uint64_t i = hash(k) & mask_;; i = (i + 1) & mask_) {
       if (keys_[i][0] == empty) {
         keys_[i] = k;
-        values_[i] = value;
+        if constexpr (Values) values_[i] = value;
         ++size_;
         return {value, true};
       }
-      if (keys_[i] == k) return {values_[i], false};
+      if (same(keys_[i], k)) return {value_at(i), false};
     }
   }
   // The value of k, or `empty` if absent.
@@ -37,7 +38,7 @@ class FlatMap {
     if (keys_.empty()) return empty;
     for (uint64_t i = hash(k) & mask_;; i = (i + 1) & mask_) {
       if (keys_[i][0] == empty) return empty;
-      if (keys_[i] == k) return values_[i];
+      if (same(keys_[i], k)) return value_at(i);
     }
   }
   uint64_t size() const { return size_; }
@@ -49,6 +50,16 @@ class FlatMap {
   uint64_t memory_bytes() const { return keys_.capacity() * sizeof(Key) + values_.capacity() * 4; }
 
  private:
+  uint32_t value_at(uint64_t i) const {
+    if constexpr (Values) return values_[i];
+    return 0;
+  }
+  // Word by word: std::array's == becomes a call to memcmp, a tenth of the emit stage's time.
+  static bool same(const Key& a, const Key& b) {
+    bool equal = true;
+    for (int i = 0; i < N; ++i) equal &= a[i] == b[i];
+    return equal;
+  }
   static uint64_t hash(const Key& k) {
     uint64_t h = 0;
     for (int i = 0; i < N; ++i) h = core::fmix64(h ^ (k[i] + 0x9E3779B97F4A7C15ull * static_cast<uint64_t>(i + 1)));
@@ -60,11 +71,11 @@ class FlatMap {
     const uint64_t slots = std::max<uint64_t>(64, 2 * old_keys.size());
     keys_.assign(slots, Key{});
     for (Key& k : keys_) k[0] = empty;
-    values_.assign(slots, 0);
+    if constexpr (Values) values_.assign(slots, 0);
     mask_ = slots - 1;
     size_ = 0;
     for (uint64_t i = 0; i < old_keys.size(); ++i)
-      if (old_keys[i][0] != empty) insert(old_keys[i], old_values[i]);
+      if (old_keys[i][0] != empty) insert(old_keys[i], Values ? old_values[i] : 0);
   }
 
   std::vector<Key> keys_;

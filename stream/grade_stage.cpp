@@ -80,16 +80,28 @@ double triangle_area(const double* a, const double* b, const double* c) {
 }
 
 // Adds a block of triangles to the area histogram, in triangle order (a fixed order: the same bits every
-// run, since blocks are fixed and come in store order).
-void block_area(std::span<const uint32_t> tris, const StorePositions& pos, AreaHistogram& h) {
-  for (size_t i = 0; i < tris.size(); i += 3) {
-    double a[3], b[3], c[3];
-    pos.get(tris[i], a), pos.get(tris[i + 1], b), pos.get(tris[i + 2], c);
-    const double area = triangle_area(a, b, c);
-    int bin = 0;
-    if (area > 0) bin = std::clamp(static_cast<int>(std::floor(4 * std::log2(area))) + kAreaBias, 0, kAreaBins - 1);
-    ++h.count[bin];
-    h.area[bin] += area;
+// run, since blocks are fixed and come in store order). The areas and their bins are computed in parallel
+// into `scratch`; only the sums run serially, in triangle order.
+struct BinnedArea {
+  double area;
+  int bin;
+};
+void block_area(std::span<const uint32_t> tris, const StorePositions& pos, AreaHistogram& h,
+                std::vector<BinnedArea>& scratch) {
+  scratch.resize(tris.size() / 3);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, scratch.size(), 1 << 12), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t t = r.begin(); t < r.end(); ++t) {
+      double a[3], b[3], c[3];
+      pos.get(tris[3 * t], a), pos.get(tris[3 * t + 1], b), pos.get(tris[3 * t + 2], c);
+      const double area = triangle_area(a, b, c);
+      int bin = 0;
+      if (area > 0) bin = std::clamp(static_cast<int>(std::floor(4 * std::log2(area))) + kAreaBias, 0, kAreaBins - 1);
+      scratch[t] = {area, bin};
+    }
+  });
+  for (const BinnedArea& x : scratch) {
+    ++h.count[x.bin];
+    h.area[x.bin] += x.area;
   }
 }
 
@@ -137,6 +149,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
 
   // Scatter into bucket files when there is more than one range; sum the area on the way.
   std::vector<std::string> bucket_paths[3];
+  std::vector<BinnedArea> area_scratch;
   canonical.acquire();
   positions.acquire();
   if (n_ranges > 1) {
@@ -152,7 +165,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     const uint64_t total = meta.triangles + meta.lines + meta.points;
     visit_store(columns, canonical, [&](int kind, uint64_t, std::span<const uint32_t> ids) {
       const int arity = Columns::arity[kind];
-      if (kind == 0) block_area(ids, positions, summary.areas);
+      if (kind == 0) block_area(ids, positions, summary.areas, area_scratch);
       for (auto& o : out) o.clear();
       for (size_t i = 0; i < ids.size(); i += static_cast<size_t>(arity)) {
         uint64_t seen[3];
@@ -215,7 +228,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     count.assign(n, 0);
     used.assign(n, 0);
     visit([&](int kind, std::span<const uint32_t> ids) {
-      if (kind == 0 && n_ranges == 1) block_area(ids, positions, summary.areas);
+      if (kind == 0 && n_ranges == 1) block_area(ids, positions, summary.areas, area_scratch);
       for_range_corners(ids, static_cast<size_t>(Columns::arity[kind]), [&](uint64_t l, const uint32_t* p, size_t arity, size_t k) {
         std::atomic_ref<uint8_t>(used[l]).store(1, std::memory_order_relaxed);
         uint32_t others = 0;

@@ -228,6 +228,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       const std::string canonical = grade.distinct_positions < meta.vertices ? canonical_path : std::string();
 
       const stream::EmitOptions count_only{so.representative, so.crease_degrees, true, true};
+      stream::EmitScratch scratch;
       const std::string prefix = work.file("");
       const ordered_json cluster_base{{"grade", grade_key},
                                       {"clustering", name(so.clustering)},
@@ -276,7 +277,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
             for (size_t l = 0; l < n; ++l) {
               core::LodMesh none;
               const stream::EmitCounts c = stream::emit_level(store_dir, meta, canonical, prefix, l, grade.records, cells[l],
-                                                              sizes[l], copts, count_only, progress, &none);
+                                                              sizes[l], copts, count_only, progress, scratch, &none);
               const double t = static_cast<double>(so.target_triangles[l]);
               const double got = std::max(static_cast<double>(c.triangles), 0.5);
               const double err = std::abs(std::log(got / t));
@@ -321,7 +322,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           ls.cell_size = sizes[l];
           ls.cells = cells[l];
           const stream::EmitCounts c = stream::emit_level(store_dir, meta, canonical, prefix, l, grade.records, cells[l],
-                                                          sizes[l], copts, emit_options, progress, &meshes[l]);
+                                                          sizes[l], copts, emit_options, progress, scratch, &meshes[l]);
           ls.vertices = meshes[l].vertex_count();
           ls.triangles = c.triangles;
           ls.edges = c.edges;
@@ -333,6 +334,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           ls.screen_coverage = diag > 0 ? diag / (2 * ls.switch_distance * tan_half) : 0;
           report.levels.push_back(ls);
         }
+        scratch = stream::EmitScratch();
       });
       run_stage(&report.stages, "write", [&](StageStats&) {
         const std::string generator = std::string("lodstream ") + LODSTREAM_VERSION;
