@@ -2,7 +2,7 @@
 # Quality benchmark (issue 4, item 6): at matched triangle counts, how far off is each simplification,
 # measured by `lodstream report` (silhouette p95 in pixels at the switching distance, Hausdorff mean in % of
 # the bounding-box diagonal), for
-#   nearest   floating cells, variant nearest, representative center (simplify's defaults): the reference
+#   nearest   floating cells, variant nearest, simplify's default representative (quadric): the reference
 #             run; its levels' triangle counts and switching distances are the targets of every other method;
 #   heaviest  floating cells, --variant heaviest, --target-triangles = nearest's counts;
 #   uniform   --clustering uniform (Rossignac & Borrel grid), --target-triangles = nearest's counts;

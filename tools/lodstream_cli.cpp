@@ -170,6 +170,23 @@ void print_simplify(const lodstream::SimplifyReport& r, const std::string& out_d
               out_dir.c_str());
 }
 
+void print_grid(const lodstream::GridReport& r, const std::string& out_dir) {
+  std::printf("input        %s (%s): %u x %u samples, %s valid, spacing %g\n", r.input.c_str(), r.format.c_str(), r.width,
+              r.height, grouped(r.valid_samples).c_str(), r.spacing);
+  std::printf("polygons     %s (%s fill polygons, %s fill vertex references); %s hole cells\n", grouped(r.polygons).c_str(),
+              grouped(r.fill_polygons).c_str(), grouped(r.fill_vertices).c_str(), grouped(r.hole_cells).c_str());
+  std::printf("vertices     %s retained, %s sent; %s triangles drawn; %s bytes\n", grouped(r.vertices).c_str(),
+              grouped(r.draw_vertices).c_str(), grouped(r.triangles).c_str(), grouped(r.bytes).c_str());
+  std::printf("error        max %.6g, RMS %.6g over %s samples (%s uncovered)\n", r.max_error, r.rms_error,
+              grouped(r.measured_samples).c_str(), grouped(r.uncovered_samples).c_str());
+  std::printf("junctions    %s T-junctions, %s with a gap (max %.6g), %s open cracks\n", grouped(r.t_junctions).c_str(),
+              grouped(r.gaps).c_str(), r.max_gap, grouped(r.cracks).c_str());
+  for (const auto& s : r.stages)
+    std::printf("stage        %-10s %8.3f s  peak %s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str());
+  std::printf("total        %.3f s, peak %s; wrote %s/summary.json\n", r.seconds, human_bytes(r.peak_rss_bytes).c_str(),
+              out_dir.c_str());
+}
+
 void print_report(const lodstream::Report& r, const std::string& out_dir) {
   for (const auto& run : r.runs) {
     std::printf("run          %s: original %s, %s triangles\n", run.name.c_str(), run.original.c_str(),
@@ -295,6 +312,30 @@ int main(int argc, char** argv) {
   report_cmd->add_flag("--json", json, "Print report.json instead of the table");
   add_common(report_cmd);
 
+  CLI::App* grid_cmd = app.add_subcommand("grid", "Fit polygons to a height grid by adaptive subdivision (DeHaemer 1989)");
+  lodstream::GridOptions go;
+  std::string split = "greatest", gaps = "extra-vertices", method = "subdivision";
+  bool no_obj = false;
+  grid_cmd->add_option("INPUT", input, "Height grid (Terrain-RGB PNG, PGM, ESRI ASCII .asc)")->required();
+  grid_cmd->add_option("-o,--output", go.output_dir, "Output directory (created if missing)")->required();
+  grid_cmd->add_option("--tolerance", go.tolerance, "Largest vertical distance of a sample from the drawn surface (z units)");
+  grid_cmd->add_option("--split", split, "Where a failing polygon splits: center, first, greatest, curvature, random")
+      ->check(CLI::IsMember({"center", "first", "greatest", "curvature", "random"}));
+  grid_cmd->add_option("--divide", go.divide, "Split into 4, or 2 across the longer side (default 4)")->check(CLI::IsMember({2u, 4u}));
+  grid_cmd->add_option("--gaps", gaps, "Edge gaps: none (cracks remain), extra-vertices, fill (fill polygons)")
+      ->check(CLI::IsMember({"none", "extra-vertices", "fill"}));
+  grid_cmd->add_option("--target-polygons", go.target_polygons, "Refine greatest error first until N polygons");
+  grid_cmd->add_option("--method", method, "subdivision or growth (polygon growth, slow)")
+      ->check(CLI::IsMember({"subdivision", "growth"}));
+  grid_cmd->add_option("--seed", go.seed, "Seed of --split random (default 1)");
+  grid_cmd->add_option("--z-scale", go.z_scale, "PGM: height = sample value x this (default 1)");
+  grid_cmd->add_option("--spacing", go.spacing, "Sample distance, overriding the file's (default: file, or 1)");
+  grid_cmd->add_flag("--no-obj", no_obj, "Do not write grid.obj");
+  grid_cmd->add_flag("--no-ply", no_ply, "Do not write grid.ply");
+  grid_cmd->add_flag("--no-glb", no_glb, "Do not write grid.glb");
+  grid_cmd->add_flag("--json", json, "Print summary.json instead of the table");
+  add_common(grid_cmd);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -356,6 +397,35 @@ int main(int argc, char** argv) {
       std::printf("%s\n", nlohmann::ordered_json::parse(manifest).dump().c_str());
     } else {
       print_simplify(report, so.output_dir);
+    }
+    return 0;
+  }
+
+  if (grid_cmd->parsed()) {
+    go.split = split == "center"     ? lodstream::GridSplit::center
+               : split == "first"    ? lodstream::GridSplit::first
+               : split == "greatest" ? lodstream::GridSplit::greatest
+               : split == "curvature" ? lodstream::GridSplit::curvature
+                                      : lodstream::GridSplit::random;
+    go.gaps = gaps == "none" ? lodstream::GridGaps::none
+              : gaps == "fill" ? lodstream::GridGaps::fill
+                               : lodstream::GridGaps::extra_vertices;
+    go.method = method == "growth" ? lodstream::GridMethod::growth : lodstream::GridMethod::subdivision;
+    go.write_obj = !no_obj;
+    go.write_ply = !no_ply;
+    go.write_glb = !no_glb;
+    lodstream::GridReport report;
+    const lodstream::Result r = lodstream::grid(input, go, options, &report);
+    if (progress.bar_open) std::fputc('\n', stderr);
+    if (!r.ok()) {
+      std::fprintf(stderr, "lodstream: %s\n", r.message.c_str());
+      return static_cast<int>(r.status);
+    }
+    if (json) {
+      std::ifstream summary(go.output_dir + "/summary.json");
+      std::printf("%s\n", nlohmann::ordered_json::parse(summary).dump().c_str());
+    } else {
+      print_grid(report, go.output_dir);
     }
     return 0;
   }

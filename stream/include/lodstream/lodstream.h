@@ -227,6 +227,59 @@ struct Report {
 // Measures every level of every run, writing report.json (written last), report.html and the CSVs.
 Result report(const ReportOptions& report, const Options& options, Report* out);
 
+// ---- grid: adaptive subdivision of height fields and range grids (DeHaemer 1989) ----
+
+enum class GridSplit { center, first, greatest, curvature, random };  // where a failing polygon splits
+enum class GridGaps { none, extra_vertices, fill };  // corners only (cracks), extra vertices, fill polygons
+enum class GridMethod { subdivision, growth };
+
+struct GridOptions {
+  std::string output_dir;  // created if missing; grid.obj, grid.ply, grid.glb and summary.json go here
+  // Vertical tolerance in z units (metres for Terrain-RGB): every valid sample under a polygon lies within
+  // it of the triangles drawn for that polygon. < 0 = not given (then target_polygons is required).
+  double tolerance = -1;
+  GridSplit split = GridSplit::greatest;
+  unsigned divide = 4;     // 4, or 2 (across the longer side)
+  GridGaps gaps = GridGaps::extra_vertices;
+  // > 0: refine the polygon of greatest error first until this many polygons (fill polygons not
+  // counted) or until the tolerance holds everywhere. Extra vertices may then split a few more.
+  uint64_t target_polygons = 0;
+  GridMethod method = GridMethod::subdivision;  // growth: needs a tolerance, no target
+  uint64_t seed = 1;       // GridSplit::random
+  double z_scale = 1;      // PGM samples only (io/grid_reader.h)
+  double spacing = 0;      // > 0 overrides the file's sample distance
+  bool write_obj = true;   // n-gons
+  bool write_ply = true;   // n-gons
+  bool write_glb = true;   // the drawn triangles, one level
+};
+
+struct GridReport {
+  std::string input, format;
+  uint32_t width = 0, height = 0;
+  double spacing = 0;
+  uint64_t valid_samples = 0, hole_cells = 0;  // hole cells: cells touching NODATA, left out
+  // The thesis' table columns: polygons (fill polygons included), vertices retained, vertices sent
+  // (draw_vertices: the sum of polygon sizes), bytes of the thesis' data structure (24 per vertex for
+  // position and normal, 12 per polygon node, 4 per vertex reference), fill polygons and their references.
+  uint64_t polygons = 0, fill_polygons = 0, fill_vertices = 0, vertices = 0, draw_vertices = 0, bytes = 0;
+  uint64_t triangles = 0;               // the drawn triangulation (GLB), fill triangles included
+  // Vertical error of every valid sample against the drawn triangles over it (z units).
+  double max_error = 0, rms_error = 0;
+  uint64_t measured_samples = 0, uncovered_samples = 0;
+  uint64_t t_junctions = 0, gaps = 0, cracks = 0;  // cracks: gaps left open (GridGaps::none)
+  double max_gap = 0;
+  uint64_t trials = 0, verify_splits = 0;
+  std::vector<std::string> files;       // written, relative to the output directory
+  std::vector<StageStats> stages;
+  double seconds = 0;
+  uint64_t peak_rss_bytes = 0;
+};
+
+// Reads the height grid `input` (io/grid_reader.h formats), subdivides it and writes the polygons and
+// summary.json (last) into grid.output_dir. Errors: usage (options, unknown format), no_input, bad_data
+// (malformed grid, fewer than 2 x 2 samples), io_error, cancelled.
+Result grid(const std::string& input, const GridOptions& grid, const Options& options, GridReport* out);
+
 // Peak resident memory of this process so far (VmHWM), in bytes; 0 if unknown.
 uint64_t peak_rss_bytes();
 

@@ -1,0 +1,574 @@
+// This work is based on:
+// Michael A. DeHaemer Jr. Simplification of objects rendered by polygonal approximation. M.S. thesis,
+//   Naval Postgraduate School, 1989: adaptive subdivision (ch. II: trial polygons, edge gaps, extra
+//   vertices, fill polygons, divide by two, split at center / first / greatest error / curvature /
+//   random), polygon growth (ch. III).
+// Francis J. M. Schmitt, Brian A. Barsky, Wen-hui Du. An adaptive subdivision method for surface-fitting
+//   from sampled data. SIGGRAPH 1986 (the basic method the thesis starts from).
+//
+// Differences from the thesis, on purpose:
+// - The accuracy test measures each sample against the triangles that are drawn (draw_triangles), not a
+//   bilinear patch, and a trial rectangle takes whichever of its two diagonals fits better. After the
+//   subdivision, every polygon is verified again with its final vertices (extra vertices change its
+//   triangles); one that fails is split at its sample of greatest error and refined, until none fails.
+//   invariant (after subdivide): every valid sample under a drawn polygon lies within tolerance of that
+//   polygon's drawn triangles, for every gap mode.
+// - Polygon growth grows rectangles (east, south, west, north in turn, one row or column of cells at a
+//   time), so that its polygons go through the same gap treatment and error check as the subdivision's.
+#include "core/adaptive_subdivision.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <queue>
+#include <stdexcept>
+
+namespace lodstream::core {
+
+namespace {
+
+uint64_t mix64(uint64_t x) {  // splitmix64 finalizer
+  x += 0x9e3779b97f4a7c15ull;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+
+struct Point {
+  uint32_t i, j;
+};
+
+// Visits every sample inside or on triangle (a, b, c) with the height of the triangle's plane there.
+// Exact integer inside test in sample coordinates; the triangle is oriented counter-clockwise from above
+// (x = i, y = -j) or skipped when vertical.
+template <class F>
+void for_each_sample(const GridSamples& g, uint32_t a, uint32_t b, uint32_t c, F&& f) {
+  const int64_t ax = a % g.width, ay = -int64_t(a / g.width);
+  const int64_t bx = b % g.width, by = -int64_t(b / g.width);
+  const int64_t cx = c % g.width, cy = -int64_t(c / g.width);
+  int64_t area2 = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
+  if (area2 == 0) return;
+  double za = g.z[a], zb = g.z[b], zc = g.z[c];
+  int64_t Bx = bx, By = by, Cx = cx, Cy = cy;
+  if (area2 < 0) {
+    std::swap(Bx, Cx);
+    std::swap(By, Cy);
+    std::swap(zb, zc);
+    area2 = -area2;
+  }
+  const int64_t xmin = std::min({ax, Bx, Cx}), xmax = std::max({ax, Bx, Cx});
+  const int64_t ymin = std::min({ay, By, Cy}), ymax = std::max({ay, By, Cy});
+  const double inv = 1.0 / static_cast<double>(area2);
+  for (int64_t y = ymin; y <= ymax; ++y) {
+    for (int64_t x = xmin; x <= xmax; ++x) {
+      const int64_t wa = (Bx - x) * (Cy - y) - (By - y) * (Cx - x);
+      const int64_t wb = (Cx - x) * (ay - y) - (Cy - y) * (ax - x);
+      const int64_t wc = area2 - wa - wb;
+      if (wa < 0 || wb < 0 || wc < 0) continue;
+      // At a vertex the height is exactly the vertex's: corners and extra vertices fit with error 0.
+      const double h = wa == area2 ? za
+                       : wb == area2 ? zb
+                       : wc == area2 ? zc
+                                     : (static_cast<double>(wa) * za + static_cast<double>(wb) * zb +
+                                        static_cast<double>(wc) * zc) * inv;
+      f(static_cast<uint32_t>(-y) * g.width + static_cast<uint32_t>(x), h);
+    }
+  }
+}
+
+class Subdivider {
+ public:
+  Subdivider(const GridSamples& g, const SubdivisionOptions& o, const SubdivisionProgress& p)
+      : g_(g), o_(o), progress_(p), tol_(o.tolerance) {
+    const uint64_t n = uint64_t(g.width) * g.height;
+    valid_.assign(n, 1);
+    for (uint64_t s = 0; s < n; ++s)
+      if ((!g.valid.empty() && !g.valid[s]) || !std::isfinite(g.z[s])) valid_[s] = 0;
+    if (o.split == SplitRule::curvature) compute_curvature();
+    total_cells_ = double(g.width - 1) * double(g.height - 1);
+  }
+
+  Subdivision run() {
+    const Rect root{0, 0, g_.width - 1, g_.height - 1, 0};
+    if (o_.method == Method::growth) grow();
+    else if (o_.target_polygons > 0) refine_to_target(root);
+    else refine(root);
+    verify_and_draw();
+    return std::move(out_);
+  }
+
+ private:
+  bool valid(uint32_t i, uint32_t j) const { return valid_[id(i, j)] != 0; }
+  uint32_t id(uint32_t i, uint32_t j) const { return j * g_.width + i; }
+  double z(uint32_t i, uint32_t j) const { return g_.z[id(i, j)]; }
+
+  // Thesis Figure 10: per sample, the length of the difference of the unit normals of its east and west
+  // neighbours plus that of its north and south neighbours (one-sided at the border and next to NODATA).
+  void compute_curvature() {
+    const uint32_t w = g_.width, h = g_.height;
+    std::vector<float> n(3 * uint64_t(w) * h);
+    auto zs = [&](int64_t i, int64_t j, uint32_t i0, uint32_t j0) {
+      i = std::clamp<int64_t>(i, 0, w - 1);
+      j = std::clamp<int64_t>(j, 0, h - 1);
+      return valid(uint32_t(i), uint32_t(j)) ? z(uint32_t(i), uint32_t(j)) : z(i0, j0);
+    };
+    for (uint32_t j = 0; j < h; ++j)
+      for (uint32_t i = 0; i < w; ++i) {
+        const double dx = (zs(int64_t(i) + 1, j, i, j) - zs(int64_t(i) - 1, j, i, j)) / (2 * g_.spacing);
+        const double dy = (zs(i, int64_t(j) - 1, i, j) - zs(i, int64_t(j) + 1, i, j)) / (2 * g_.spacing);  // y is north
+        const double len = std::sqrt(dx * dx + dy * dy + 1);
+        float* v = &n[3 * uint64_t(id(i, j))];
+        v[0] = float(-dx / len);
+        v[1] = float(-dy / len);
+        v[2] = float(1 / len);
+      }
+    curvature_.assign(uint64_t(w) * h, 0);
+    auto diff = [&](uint32_t a, uint32_t b) {
+      const float* p = &n[3 * uint64_t(a)];
+      const float* q = &n[3 * uint64_t(b)];
+      return std::sqrt(double(p[0] - q[0]) * (p[0] - q[0]) + double(p[1] - q[1]) * (p[1] - q[1]) +
+                       double(p[2] - q[2]) * (p[2] - q[2]));
+    };
+    for (uint32_t j = 0; j < h; ++j)
+      for (uint32_t i = 0; i < w; ++i)
+        curvature_[id(i, j)] = float(diff(id(std::min(i + 1, w - 1), j), id(i > 0 ? i - 1 : 0, j)) +
+                                     diff(id(i, j > 0 ? j - 1 : 0), id(i, std::min(j + 1, h - 1))));
+  }
+
+  struct Eval {
+    bool nodata = false;
+    double error = 0;   // of the better diagonal, the one kept
+    uint8_t diagonal = 0;
+    Point split{0, 0};  // where to split when error > tolerance (or nodata)
+  };
+
+  // The trial polygon's accuracy test with corners only (both diagonals at once), and its split point.
+  Eval evaluate(const Rect& r) {
+    ++out_.trials;
+    Eval e;
+    const uint32_t w = r.i1 - r.i0, h = r.j1 - r.j0;
+    const Point center{r.i0 + w / 2, r.j0 + h / 2};
+    for (uint32_t j = r.j0; j <= r.j1 && !e.nodata; ++j)
+      for (uint32_t i = r.i0; i <= r.i1; ++i)
+        if (!valid(i, j)) {
+          e.nodata = true;
+          break;
+        }
+    if (e.nodata) {
+      e.error = std::numeric_limits<double>::infinity();
+      e.split = center;
+      return e;
+    }
+    const double znw = z(r.i0, r.j0), zne = z(r.i1, r.j0), zsw = z(r.i0, r.j1), zse = z(r.i1, r.j1);
+    const double fw = 1.0 / w, fh = 1.0 / h;
+    const int64_t W = w, H = h;
+    double max_err[2] = {0, 0};
+    Point arg[2] = {{r.i0, r.j0}, {r.i0, r.j0}}, first[2] = {{0, 0}, {0, 0}};
+    bool over[2] = {false, false};
+    double best_curv = -1;
+    uint64_t best_dist = 0;
+    Point curv{center};
+    auto visit = [&](uint32_t i, uint32_t j) {
+      const int64_t di = i - r.i0, dj = j - r.j0;
+      const double u = di * fw, v = dj * fh, zs = z(i, j);
+      // Diagonal 0 (SW-NE): triangles (SW, SE, NE) where u + v >= 1 and (SW, NE, NW) elsewhere.
+      const double p0 = di * H + dj * W >= W * H ? zse + (1 - u) * (zsw - zse) + (1 - v) * (zne - zse)
+                                                 : znw + u * (zne - znw) + v * (zsw - znw);
+      // Diagonal 1 (NW-SE): triangles (NW, NE, SE) where u >= v and (NW, SE, SW) elsewhere.
+      const double p1 = di * H >= dj * W ? znw + u * (zne - znw) + v * (zse - zne) : znw + v * (zsw - znw) + u * (zse - zsw);
+      const double e0 = std::abs(zs - p0), e1 = std::abs(zs - p1);
+      if (e0 > max_err[0]) max_err[0] = e0, arg[0] = {i, j};
+      if (e1 > max_err[1]) max_err[1] = e1, arg[1] = {i, j};
+      if (!over[0] && e0 > tol_) over[0] = true, first[0] = {i, j};
+      if (!over[1] && e1 > tol_) over[1] = true, first[1] = {i, j};
+      if (!curvature_.empty() && !((i == r.i0 || i == r.i1) && (j == r.j0 || j == r.j1))) {
+        const double c = curvature_[id(i, j)];
+        const uint64_t d = uint64_t(std::abs(int64_t(i) - center.i)) * std::abs(int64_t(i) - center.i) +
+                           uint64_t(std::abs(int64_t(j) - center.j)) * std::abs(int64_t(j) - center.j);
+        if (c > best_curv || (c == best_curv && d < best_dist)) best_curv = c, best_dist = d, curv = {i, j};
+      }
+    };
+    // Scan order of "first error": north to south when at least as wide as tall, else west to east.
+    if (w >= h) {
+      for (uint32_t j = r.j0; j <= r.j1; ++j)
+        for (uint32_t i = r.i0; i <= r.i1; ++i) visit(i, j);
+    } else {
+      for (uint32_t i = r.i0; i <= r.i1; ++i)
+        for (uint32_t j = r.j0; j <= r.j1; ++j) visit(i, j);
+    }
+    const int d = max_err[1] < max_err[0] ? 1 : 0;
+    e.diagonal = uint8_t(d);
+    e.error = max_err[d];
+    switch (o_.split) {
+      case SplitRule::center: e.split = center; break;
+      case SplitRule::first: e.split = over[d] ? first[d] : arg[d]; break;
+      case SplitRule::greatest: e.split = arg[d]; break;
+      case SplitRule::curvature: e.split = curv; break;
+      case SplitRule::random: {
+        const uint64_t key = mix64(o_.seed ^ mix64((uint64_t(r.i0) << 32 | r.j0) ^ mix64(uint64_t(r.i1) << 32 | r.j1)));
+        e.split.i = w >= 2 ? r.i0 + 1 + uint32_t(key % (w - 1)) : r.i0;
+        e.split.j = h >= 2 ? r.j0 + 1 + uint32_t(mix64(key) % (h - 1)) : r.j0;
+        break;
+      }
+    }
+    return e;
+  }
+
+  // Children of `r` split through point p: four (or two when p lies on a side) with divide 4; two with
+  // divide 2, across the longer side when p's coordinate there is inside, else across the other.
+  std::vector<Rect> split(const Rect& r, Point p) const {
+    const uint32_t w = r.i1 - r.i0, h = r.j1 - r.j0;
+    bool in_i = p.i > r.i0 && p.i < r.i1, in_j = p.j > r.j0 && p.j < r.j1;
+    if (!in_i && !in_j) {  // a corner: cannot happen for errors (corners fit exactly); fall back to the center
+      p = {r.i0 + w / 2, r.j0 + h / 2};
+      in_i = w >= 2;
+      in_j = h >= 2;
+    }
+    if (o_.divide == 2) {
+      const bool across_i = w >= h ? in_i : !in_j;
+      in_i = across_i;
+      in_j = !across_i;
+    }
+    std::vector<Rect> c;
+    const uint32_t xs[3] = {r.i0, in_i ? p.i : r.i1, r.i1};
+    const uint32_t ys[3] = {r.j0, in_j ? p.j : r.j1, r.j1};
+    for (int b = 0; b < (in_j ? 2 : 1); ++b)
+      for (int a = 0; a < (in_i ? 2 : 1); ++a) c.push_back({xs[a], ys[b], in_i ? xs[a + 1] : r.i1, in_j ? ys[b + 1] : r.j1, 0});
+    return c;
+  }
+
+  void add_hole(const Rect& r) { out_.hole_cells += uint64_t(r.i1 - r.i0) * (r.j1 - r.j0); }
+  void add_done(const Rect& r) {
+    done_cells_ += double(r.i1 - r.i0) * double(r.j1 - r.j0);
+    if (progress_ && ++ticks_ % 1024 == 0) progress_(std::min(0.9, 0.9 * done_cells_ / total_cells_));
+  }
+
+  // Recursive subdivision to tolerance.
+  void refine(const Rect& root) {
+    std::vector<Rect> stack{root};
+    while (!stack.empty()) {
+      Rect r = stack.back();
+      stack.pop_back();
+      const bool unit = r.i1 - r.i0 == 1 && r.j1 - r.j0 == 1;
+      const Eval e = evaluate(r);
+      if (unit && !e.nodata) {  // a single cell is drawn through its four samples: nothing under it to miss
+        r.diagonal = e.diagonal;
+        leaves_.push_back(r);
+        add_done(r);
+      } else if (e.nodata && unit) {
+        add_hole(r);
+        add_done(r);
+      } else if (!e.nodata && e.error <= tol_) {
+        r.diagonal = e.diagonal;
+        leaves_.push_back(r);
+        add_done(r);
+      } else {
+        const std::vector<Rect> c = split(r, e.split);
+        stack.insert(stack.end(), c.rbegin(), c.rend());
+      }
+    }
+  }
+
+  // The thesis' search direction: always refine the polygon of greatest error next.
+  void refine_to_target(const Rect& root) {
+    struct Item {
+      double error;
+      Rect r;
+      Point split;
+    };
+    auto less = [](const Item& a, const Item& b) {
+      if (a.error != b.error) return a.error < b.error;
+      if (a.r.j0 != b.r.j0) return a.r.j0 > b.r.j0;
+      return a.r.i0 > b.r.i0;
+    };
+    std::priority_queue<Item, std::vector<Item>, decltype(less)> queue(less);
+    const double stop = std::isinf(tol_) ? 0 : tol_;
+    auto push = [&](const Rect& r) {
+      const Eval e = evaluate(r);
+      const bool unit = r.i1 - r.i0 == 1 && r.j1 - r.j0 == 1;
+      if (e.nodata && unit) return add_hole(r);
+      Rect k = r;
+      k.diagonal = e.diagonal;
+      queue.push({unit ? 0.0 : e.error, k, e.split});
+    };
+    push(root);
+    while (!queue.empty()) {
+      const Item top = queue.top();
+      const bool nodata = std::isinf(top.error);
+      if (!nodata && queue.size() >= o_.target_polygons) {
+        // Stopped by the count: the tolerance is not a promise any more, the extra vertices are drawn as
+        // they come (the verification splits nothing).
+        tol_ = std::numeric_limits<double>::infinity();
+        break;
+      }
+      if (!nodata && top.error <= stop) break;
+      queue.pop();
+      for (const Rect& c : split(top.r, top.split)) push(c);
+      if (progress_ && ++ticks_ % 256 == 0) progress_(0.9 * std::min(1.0, double(queue.size()) / double(o_.target_polygons)));
+    }
+    for (; !queue.empty(); queue.pop()) leaves_.push_back(queue.top().r);
+  }
+
+  // Polygon growth (thesis ch. III) with sequential seeds: each unclaimed cell in row order seeds a
+  // rectangle that grows by a row or column of unclaimed, NODATA-free cells while the trial passes.
+  void grow() {
+    const uint32_t cw = g_.width - 1, ch = g_.height - 1;
+    std::vector<uint8_t> claimed(uint64_t(cw) * ch, 0);
+    auto cell_ok = [&](uint32_t i, uint32_t j) {
+      return !claimed[uint64_t(j) * cw + i] && valid(i, j) && valid(i + 1, j) && valid(i, j + 1) && valid(i + 1, j + 1);
+    };
+    for (uint32_t j = 0; j < ch; ++j) {
+      for (uint32_t i = 0; i < cw; ++i) {
+        if (claimed[uint64_t(j) * cw + i]) continue;
+        Rect r{i, j, i + 1, j + 1, 0};
+        if (!cell_ok(i, j)) {
+          claimed[uint64_t(j) * cw + i] = 1;
+          add_hole(r);
+          continue;
+        }
+        r.diagonal = evaluate(r).diagonal;
+        for (bool grew = true; grew;) {
+          grew = false;
+          for (int dir = 0; dir < 4; ++dir) {
+            Rect t = r;
+            bool ok = true;
+            if (dir == 0 && r.i1 < cw) {  // east: cells (r.i1, r.j0 .. r.j1-1)
+              for (uint32_t y = r.j0; y < r.j1 && ok; ++y) ok = cell_ok(r.i1, y);
+              t.i1 = r.i1 + 1;
+            } else if (dir == 1 && r.j1 < ch) {  // south
+              for (uint32_t x = r.i0; x < r.i1 && ok; ++x) ok = cell_ok(x, r.j1);
+              t.j1 = r.j1 + 1;
+            } else if (dir == 2 && r.i0 > 0) {  // west
+              for (uint32_t y = r.j0; y < r.j1 && ok; ++y) ok = cell_ok(r.i0 - 1, y);
+              t.i0 = r.i0 - 1;
+            } else if (dir == 3 && r.j0 > 0) {  // north
+              for (uint32_t x = r.i0; x < r.i1 && ok; ++x) ok = cell_ok(x, r.j0 - 1);
+              t.j0 = r.j0 - 1;
+            } else {
+              ok = false;
+            }
+            if (!ok) continue;
+            const Eval e = evaluate(t);
+            if (e.nodata || e.error > tol_) continue;
+            t.diagonal = e.diagonal;
+            r = t;
+            grew = true;
+          }
+        }
+        for (uint32_t y = r.j0; y < r.j1; ++y)
+          for (uint32_t x = r.i0; x < r.i1; ++x) claimed[uint64_t(y) * cw + x] = 1;
+        leaves_.push_back(r);
+        add_done(r);
+      }
+    }
+  }
+
+  // The points strictly inside the four sides of r that are corners of other polygons, in ring order.
+  void side_points(const Rect& r, std::vector<uint32_t> (&sides)[4]) const {
+    for (auto& s : sides) s.clear();
+    for (uint32_t i = r.i0 + 1; i < r.i1; ++i)
+      if (corner_[id(i, r.j1)]) sides[0].push_back(id(i, r.j1));
+    for (uint32_t j = r.j1 - 1; j > r.j0; --j)
+      if (corner_[id(r.i1, j)]) sides[1].push_back(id(r.i1, j));
+    for (uint32_t i = r.i1 - 1; i > r.i0; --i)
+      if (corner_[id(i, r.j0)]) sides[2].push_back(id(i, r.j0));
+    for (uint32_t j = r.j0 + 1; j < r.j1; ++j)
+      if (corner_[id(r.i0, j)]) sides[3].push_back(id(r.i0, j));
+  }
+
+  void mark_corners() {
+    corner_.assign(uint64_t(g_.width) * g_.height, 0);
+    for (const Rect& r : leaves_)
+      corner_[id(r.i0, r.j0)] = corner_[id(r.i1, r.j0)] = corner_[id(r.i0, r.j1)] = corner_[id(r.i1, r.j1)] = 1;
+  }
+
+  // Largest error over the samples under `tris`, and where (ties: the smallest sample id).
+  std::pair<double, uint32_t> surface_error(const std::vector<uint32_t>& tris) const {
+    double worst = -1;
+    uint32_t at = 0;
+    for (size_t t = 0; t < tris.size(); t += 3)
+      for_each_sample(g_, tris[t], tris[t + 1], tris[t + 2], [&](uint32_t s, double h) {
+        const double e = std::abs(double(g_.z[s]) - h);
+        if (e > worst || (e == worst && s < at)) worst = e, at = s;
+      });
+    return {worst, at};
+  }
+
+  // Verifies every polygon against its final drawn triangles, splitting and refining the ones that fail,
+  // until none does; then writes rings, triangles, fill polygons and the T-junction census.
+  void verify_and_draw() {
+    const bool extra = o_.gaps == GapMode::extra_vertices;
+    std::vector<uint32_t> sides[4];
+    const std::vector<uint32_t> none[4];
+    std::vector<uint32_t> tris;
+    for (;;) {
+      mark_corners();
+      std::vector<Rect> kept, failed;
+      std::vector<Point> where;
+      for (Rect r : leaves_) {
+        if (extra) side_points(r, sides);
+        bool ok = false;
+        std::pair<double, uint32_t> worst{0, 0};
+        for (int attempt = 0; attempt < 2 && !ok; ++attempt) {
+          if (attempt == 1) r.diagonal ^= 1;
+          tris.clear();
+          draw_triangles(g_, r, extra ? sides : none, &tris);
+          const auto e = surface_error(tris);
+          if (attempt == 0) worst = e;
+          ok = e.first <= tol_;
+        }
+        if (ok || (r.i1 - r.i0 == 1 && r.j1 - r.j0 == 1)) {
+          kept.push_back(r);
+        } else {
+          r.diagonal ^= 1;
+          failed.push_back(r);
+          where.push_back({worst.second % g_.width, worst.second / g_.width});
+        }
+      }
+      leaves_ = std::move(kept);  // with the diagonals that passed
+      if (failed.empty()) break;
+      out_.verify_splits += failed.size();
+      for (size_t f = 0; f < failed.size(); ++f)
+        for (const Rect& c : split(failed[f], where[f])) refine(c);
+    }
+    if (progress_) progress_(0.95);
+
+    std::sort(leaves_.begin(), leaves_.end(), [](const Rect& a, const Rect& b) {
+      return a.j0 != b.j0 ? a.j0 < b.j0 : a.i0 < b.i0;
+    });
+    mark_corners();
+    out_.ring_offsets.push_back(0);
+    std::vector<uint32_t> fill_rings;  // (size, ids...) per fill polygon
+    for (const Rect& r : leaves_) {
+      side_points(r, sides);
+      const uint32_t corners[4] = {id(r.i0, r.j1), id(r.i1, r.j1), id(r.i1, r.j0), id(r.i0, r.j0)};  // SW SE NE NW
+      for (int s = 0; s < 4; ++s) {
+        out_.rings.push_back(corners[s]);
+        if (extra) out_.rings.insert(out_.rings.end(), sides[s].begin(), sides[s].end());
+        // T-junction census: heights against this side's straight line, exactly (integer weights).
+        const uint32_t a = corners[s], b = corners[(s + 1) % 4];
+        const auto ai = int64_t(a % g_.width), aj = int64_t(a / g_.width), bi = int64_t(b % g_.width), bj = int64_t(b / g_.width);
+        const int64_t len = std::abs(bi - ai) + std::abs(bj - aj);
+        bool gap_here = false;
+        for (uint32_t t : sides[s]) {
+          const int64_t at = std::abs(int64_t(t % g_.width) - ai) + std::abs(int64_t(t / g_.width) - aj);
+          const double d = std::abs(double(g_.z[t]) * len - (double(g_.z[a]) * (len - at) + double(g_.z[b]) * at)) / len;
+          ++out_.t_junctions;
+          if (d > 0) {
+            ++out_.gaps;
+            gap_here = true;
+            out_.max_gap = std::max(out_.max_gap, d);
+          }
+        }
+        if (o_.gaps == GapMode::fill && gap_here) {
+          fill_rings.push_back(uint32_t(sides[s].size() + 2));
+          fill_rings.push_back(a);
+          fill_rings.insert(fill_rings.end(), sides[s].begin(), sides[s].end());
+          fill_rings.push_back(b);
+        }
+      }
+      out_.ring_offsets.push_back(out_.rings.size());
+      draw_triangles(g_, r, extra ? sides : none, &out_.triangles);
+    }
+    // Fill polygons: (A, t1 .. tk, B) over side AB, drawn as a fan from A. Seen in the vertical plane of
+    // the side, every point between AB and the polyline A t1 .. tk B is on a segment from A to the polyline,
+    // so the fan covers the gap.
+    for (size_t at = 0; at < fill_rings.size();) {
+      const uint32_t n = fill_rings[at];
+      const uint32_t* ring = &fill_rings[at + 1];
+      out_.rings.insert(out_.rings.end(), ring, ring + n);
+      out_.ring_offsets.push_back(out_.rings.size());
+      for (uint32_t k = 1; k + 1 < n; ++k) {
+        out_.triangles.insert(out_.triangles.end(), {ring[0], ring[k], ring[k + 1]});
+        ++out_.fill_triangles;
+      }
+      ++out_.fill_polygons;
+      at += n + 1;
+    }
+    out_.cracks = o_.gaps == GapMode::none ? out_.gaps : 0;
+    out_.polygons = std::move(leaves_);
+    if (progress_) progress_(1);
+  }
+
+  const GridSamples& g_;
+  const SubdivisionOptions& o_;
+  const SubdivisionProgress& progress_;
+  double tol_;  // infinite once a polygon target stopped the refinement
+  std::vector<uint8_t> valid_, corner_;
+  std::vector<float> curvature_;
+  std::vector<Rect> leaves_;
+  Subdivision out_;
+  double total_cells_ = 1, done_cells_ = 0;
+  uint64_t ticks_ = 0;
+};
+
+}  // namespace
+
+void draw_triangles(const GridSamples& g, const Rect& r, const std::vector<uint32_t> (&sides)[4], std::vector<uint32_t>* out) {
+  const uint32_t w = g.width;
+  const uint32_t c[4] = {r.j1 * w + r.i0, r.j1 * w + r.i1, r.j0 * w + r.i1, r.j0 * w + r.i0};  // SW SE NE NW
+  auto dist2 = [w](uint32_t a, uint32_t b) {
+    const int64_t di = int64_t(a % w) - int64_t(b % w), dj = int64_t(a / w) - int64_t(b / w);
+    return di * di + dj * dj;
+  };
+  // Half k: diagonal c[k] - c[k+2], apex c[k+1]; its legs are sides[k] (c[k] to apex) and sides[k+1].
+  auto half = [&](int k) {
+    const uint32_t p = c[k], apex = c[(k + 1) % 4], q = c[(k + 2) % 4];
+    const std::vector<uint32_t>& in = sides[k];
+    const std::vector<uint32_t>& outl = sides[(k + 1) % 4];
+    // chain 1: p, in[0], in[1], ... toward the apex; chain 2: q, outl[last], ... toward the apex.
+    auto c1 = [&](size_t x) { return x == 0 ? p : in[x - 1]; };
+    auto c2 = [&](size_t y) { return y == 0 ? q : outl[outl.size() - y]; };
+    size_t x = 0, y = 0;
+    const size_t n1 = in.size(), n2 = outl.size();
+    while (x < n1 || y < n2) {
+      const bool advance1 = y == n2 || (x < n1 && dist2(c1(x + 1), c2(y)) <= dist2(c1(x), c2(y + 1)));
+      if (advance1) {
+        out->insert(out->end(), {c1(x), c1(x + 1), c2(y)});
+        ++x;
+      } else {
+        out->insert(out->end(), {c1(x), c2(y + 1), c2(y)});
+        ++y;
+      }
+    }
+    out->insert(out->end(), {c1(x), apex, c2(y)});
+  };
+  half(r.diagonal == 0 ? 0 : 1);
+  half(r.diagonal == 0 ? 2 : 3);
+}
+
+Subdivision subdivide(const GridSamples& grid, const SubdivisionOptions& options, const SubdivisionProgress& progress) {
+  if (grid.width < 2 || grid.height < 2) throw std::invalid_argument("subdivide: the grid needs at least 2 x 2 samples");
+  if (uint64_t(grid.width) * grid.height > UINT32_MAX) throw std::invalid_argument("subdivide: more than 2^32 samples");
+  if (grid.z.size() != uint64_t(grid.width) * grid.height) throw std::invalid_argument("subdivide: z size");
+  if (!grid.valid.empty() && grid.valid.size() != grid.z.size()) throw std::invalid_argument("subdivide: valid size");
+  if (!(options.tolerance >= 0)) throw std::invalid_argument("subdivide: tolerance must be >= 0");
+  if (options.divide != 2 && options.divide != 4) throw std::invalid_argument("subdivide: divide must be 2 or 4");
+  return Subdivider(grid, options, progress).run();
+}
+
+VerticalError vertical_error(const GridSamples& g, std::span<const uint32_t> triangles) {
+  std::vector<double> err(uint64_t(g.width) * g.height, -1);
+  VerticalError r;
+  for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+    const uint32_t a = triangles[t], b = triangles[t + 1], c = triangles[t + 2];
+    const int64_t ax = a % g.width, ay = a / g.width, bx = b % g.width, by = b / g.width, cx = c % g.width, cy = c / g.width;
+    r.covered_area += 0.5 * double(std::abs((bx - ax) * (cy - ay) - (by - ay) * (cx - ax)));
+    for_each_sample(g, a, b, c, [&](uint32_t s, double h) { err[s] = std::max(err[s], std::abs(double(g.z[s]) - h)); });
+  }
+  double sum2 = 0;
+  for (uint64_t s = 0; s < err.size(); ++s) {
+    if ((!g.valid.empty() && !g.valid[s]) || !std::isfinite(g.z[s])) continue;
+    if (err[s] < 0) {
+      ++r.uncovered;
+      continue;
+    }
+    ++r.samples;
+    r.max = std::max(r.max, err[s]);
+    sum2 += err[s] * err[s];
+  }
+  r.rms = r.samples ? std::sqrt(sum2 / double(r.samples)) : 0;
+  return r;
+}
+
+}  // namespace lodstream::core
