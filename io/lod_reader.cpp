@@ -67,41 +67,6 @@ std::string control_message(unsigned char c) {
 
 using namespace ply;  // Type, type_size, ... (io/ply_types.h); Property, Role, ... (io/ply_header.h)
 
-template <typename T, bool Swap>
-inline T load(const char* p) {
-  using U = std::conditional_t<sizeof(T) == 1, uint8_t,
-                               std::conditional_t<sizeof(T) == 2, uint16_t,
-                                                  std::conditional_t<sizeof(T) == 4, uint32_t, uint64_t>>>;
-  U u;
-  std::memcpy(&u, p, sizeof u);
-  if constexpr (Swap && sizeof(T) == 2) u = __builtin_bswap16(u);
-  if constexpr (Swap && sizeof(T) == 4) u = __builtin_bswap32(u);
-  if constexpr (Swap && sizeof(T) == 8) u = __builtin_bswap64(u);
-  return std::bit_cast<T>(u);
-}
-
-template <bool Swap>
-inline int64_t load_int(const char* p, Type t) {
-  switch (t) {
-    case Type::i8: return load<int8_t, Swap>(p);
-    case Type::u8: return load<uint8_t, Swap>(p);
-    case Type::i16: return load<int16_t, Swap>(p);
-    case Type::u16: return load<uint16_t, Swap>(p);
-    case Type::i32: return load<int32_t, Swap>(p);
-    case Type::u32: return load<uint32_t, Swap>(p);
-    default: return 0;  // the header allows only integer types where integers are loaded
-  }
-}
-
-// Every PLY type converts to double exactly.
-template <bool Swap>
-inline double load_double(const char* p, Type t) {
-  switch (t) {
-    case Type::f32: return load<float, Swap>(p);
-    case Type::f64: return load<double, Swap>(p);
-    default: return static_cast<double>(load_int<Swap>(p, t));
-  }
-}
 
 enum class Kind : uint8_t { vertex, face, edge, point, other };
 

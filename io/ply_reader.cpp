@@ -40,51 +40,6 @@ constexpr uint64_t kMinScanBytes = 4096, kMaxScanBytes = 64ull << 20, kHeaderByt
 
 using namespace ply;  // Type, type_size, ... (io/ply_types.h); Property, Role, quoted, ... (io/ply_header.h)
 
-template <typename T, bool Swap>
-inline T load(const char* p) {
-  T v;
-  if constexpr (!Swap || sizeof(T) == 1) {
-    std::memcpy(&v, p, sizeof v);
-  } else if constexpr (sizeof(T) == 2) {
-    uint16_t u;
-    std::memcpy(&u, p, 2);
-    u = __builtin_bswap16(u);
-    std::memcpy(&v, &u, 2);
-  } else if constexpr (sizeof(T) == 4) {
-    uint32_t u;
-    std::memcpy(&u, p, 4);
-    u = __builtin_bswap32(u);
-    std::memcpy(&v, &u, 4);
-  } else {
-    uint64_t u;
-    std::memcpy(&u, p, 8);
-    u = __builtin_bswap64(u);
-    std::memcpy(&v, &u, 8);
-  }
-  return v;
-}
-
-template <bool Swap>
-inline int64_t load_int(const char* p, Type t) {
-  switch (t) {
-    case Type::i8: return load<int8_t, Swap>(p);
-    case Type::u8: return load<uint8_t, Swap>(p);
-    case Type::i16: return load<int16_t, Swap>(p);
-    case Type::u16: return load<uint16_t, Swap>(p);
-    case Type::i32: return load<int32_t, Swap>(p);
-    case Type::u32: return load<uint32_t, Swap>(p);
-    default: return 0;  // float types never reach here: the header rejects them where integers are needed
-  }
-}
-
-template <bool Swap>
-inline double load_double(const char* p, Type t) {
-  switch (t) {
-    case Type::f32: return load<float, Swap>(p);
-    case Type::f64: return load<double, Swap>(p);
-    default: return static_cast<double>(load_int<Swap>(p, t));
-  }
-}
 
 // ------------------------------------------------------------------------------------------- layout
 
