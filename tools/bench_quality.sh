@@ -2,7 +2,7 @@
 # Quality benchmark (issue 4, item 6): at matched triangle counts, how far off is each simplification,
 # measured by `lodstream report` (silhouette p95 in pixels at the switching distance, Hausdorff mean in % of
 # the bounding-box diagonal), for
-#   nearest   floating cells, variant nearest, simplify's default representative (quadric): the reference
+#   nearest   floating cells, variant nearest, representative center (the paper's): the reference
 #             run; its levels' triangle counts and switching distances are the targets of every other method;
 #   heaviest  floating cells, --variant heaviest, --target-triangles = nearest's counts;
 #   uniform   --clustering uniform (Rossignac & Borrel grid), --target-triangles = nearest's counts;
@@ -104,7 +104,7 @@ for model in "${models[@]}"; do
   d="$work/$name"
   rm -rf "$d"; mkdir -p "$d"
   t0=$(date +%s)
-  "$lodstream" simplify "$model" -o "$d/nearest" --resolution "$resolution" --no-glb "${common[@]}" > "$d/nearest.log"
+  "$lodstream" simplify "$model" -o "$d/nearest" --representative center --resolution "$resolution" --no-glb "${common[@]}" > "$d/nearest.log"
   tris=$(manifest_list "$d/nearest/manifest.json" triangles)
   cells=$(manifest_list "$d/nearest/manifest.json" cell_size)
   dists=$(manifest_list "$d/nearest/manifest.json" switch_distance)
@@ -115,7 +115,7 @@ for model in "${models[@]}"; do
   for m in heaviest uniform; do
     if [[ $m == heaviest ]]; then how=(--variant heaviest); else how=(--clustering uniform); fi
     if [[ $decreasing == 1 ]]; then
-      "$lodstream" simplify "$model" -o "$d/$m" "${how[@]}" --target-triangles "$tris" \
+      "$lodstream" simplify "$model" -o "$d/$m" "${how[@]}" --representative center --target-triangles "$tris" \
         --resolution "$resolution" --no-glb "${common[@]}" > "$d/$m.log"
     else
       echo "bench_quality: $name: reference counts $tris not decreasing, $m matched one level per run" >&2
@@ -123,7 +123,7 @@ for model in "${models[@]}"; do
       : > "$d/$m.log"
       IFS=, read -r -a targets <<< "$tris"
       for i in "${!targets[@]}"; do
-        "$lodstream" simplify "$model" -o "$d/$m.level$i" "${how[@]}" --target-triangles "${targets[$i]}" \
+        "$lodstream" simplify "$model" -o "$d/$m.level$i" "${how[@]}" --representative center --target-triangles "${targets[$i]}" \
           --resolution "$resolution" --no-glb "${common[@]}" >> "$d/$m.log"
         mv "$d/$m.level$i/lod0.ply" "$d/$m/lod$i.ply"
       done
