@@ -13,5 +13,9 @@ echo
 # Five levels of detail, every format, reusing the scene store ingested above.
 "$root/build/lodstream" simplify "$root/tests/data/sample-room.ply" -o "$out/lods" --obj --work "$out/work"
 echo
+# The error of each level, in pixels where a renderer would switch to it (Embree ray casts, Hausdorff).
+"$root/build/lodstream" report "$out/lods"
+echo
 echo "quickstart: ingest statistics in $out/info.json; levels of detail in $out/lods"
-echo "  (lodN.ply, lodN.obj, lods.glb with every level chained by MSFT_lod, manifest.json)"
+echo "  (lodN.ply, lodN.obj, lods.glb with every level chained by MSFT_lod, manifest.json);"
+echo "  their error report in $out/lods/report.html (open it in any browser), report.json and lodN.csv"
