@@ -11,6 +11,23 @@
 
 namespace lodstream::io {
 
+std::string ply_vertex_header(uint64_t count, bool normals) {
+  std::string h = "element vertex " + std::to_string(count) + "\n";
+  h += "property float x\nproperty float y\nproperty float z\n";
+  if (normals) h += "property float nx\nproperty float ny\nproperty float nz\n";
+  return h;
+}
+
+void write_ply_vertices(FileWriter& out, std::span<const float> positions, std::span<const float> normals) {
+  const bool with_normals = !normals.empty();
+  for (uint64_t v = 0; v < positions.size() / 3; ++v) {
+    float record[6];
+    std::memcpy(record, &positions[3 * v], 12);
+    if (with_normals) std::memcpy(record + 3, &normals[3 * v], 12);
+    out.write(record, with_normals ? 24 : 12);
+  }
+}
+
 static_assert(std::endian::native == std::endian::little, "the PLY writer copies little-endian memory as is");
 
 namespace {
@@ -33,9 +50,7 @@ void write_ply(const std::string& path, const core::LodMesh& mesh, const std::ve
   std::string header = "ply\nformat binary_little_endian 1.0\n";
   for (const std::string& c : comments) header += comment_line(c);
   header += "comment element point: one vertex index per point primitive\n";
-  header += "element vertex " + std::to_string(mesh.vertex_count()) + "\n";
-  header += "property float x\nproperty float y\nproperty float z\n";
-  if (normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
+  header += ply_vertex_header(mesh.vertex_count(), normals);
   header += "element face " + std::to_string(mesh.triangle_count()) + "\n";
   header += "property list uchar uint vertex_indices\n";
   header += "element edge " + std::to_string(mesh.edge_count()) + "\n";
@@ -48,12 +63,7 @@ void write_ply(const std::string& path, const core::LodMesh& mesh, const std::ve
   out.write(header);
 
   // vertex: x y z [nx ny nz], 12 or 24 bytes
-  for (uint64_t v = 0; v < mesh.vertex_count(); ++v) {
-    float record[6];
-    std::memcpy(record, &mesh.positions[3 * v], 12);
-    if (normals) std::memcpy(record + 3, &mesh.normals[3 * v], 12);
-    out.write(record, normals ? 24 : 12);
-  }
+  write_ply_vertices(out, mesh.positions, mesh.normals);
   // face: count 3 (uchar), then 3 uint indices: 13 bytes
   for (uint64_t t = 0; t < mesh.triangle_count(); ++t) {
     char record[13];

@@ -11,12 +11,21 @@
 // primitive (readers that do not know it skip it; the file also says so in a comment line).
 #pragma once
 
+#include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "core/mesh.h"
 
 namespace lodstream::io {
+
+class FileWriter;
+
+// What this writer and io/polygon_writer.cpp share: the `element vertex` header lines (float x, y, z, and
+// nx, ny, nz with normals) and the little-endian vertex records (`normals` empty or one xyz per vertex).
+std::string ply_vertex_header(uint64_t count, bool normals);
+void write_ply_vertices(FileWriter& out, std::span<const float> positions, std::span<const float> normals);
 
 // Writes `mesh` to `path` (through `<path>.partial`, renamed when complete). Each comment becomes a
 // `comment ...` header line; line breaks and other control characters in it are replaced by spaces.

@@ -7,6 +7,7 @@
 
 #include "core/status.h"
 #include "io/file_writer.h"
+#include "io/ply_writer.h"
 
 namespace lodstream::io {
 
@@ -87,20 +88,13 @@ void write_polygon_ply(const std::string& path, const PolygonMesh& mesh, const s
   const bool wide = largest > 255;
   std::string header = "ply\nformat binary_little_endian 1.0\n";
   for (const std::string& c : comments) header += "comment " + clean(c) + "\n";
-  header += "element vertex " + std::to_string(mesh.vertex_count()) + "\n";
-  header += "property float x\nproperty float y\nproperty float z\n";
-  if (normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
+  header += ply_vertex_header(mesh.vertex_count(), normals);
   header += "element face " + std::to_string(mesh.polygon_count()) + "\n";
   header += wide ? "property list uint uint vertex_indices\n" : "property list uchar uint vertex_indices\n";
   header += "end_header\n";
   FileWriter out(path);
   out.write(header);
-  for (uint64_t v = 0; v < mesh.vertex_count(); ++v) {
-    float record[6];
-    std::memcpy(record, &mesh.positions[3 * v], 12);
-    if (normals) std::memcpy(record + 3, &mesh.normals[3 * v], 12);
-    out.write(record, normals ? 24 : 12);
-  }
+  write_ply_vertices(out, mesh.positions, mesh.normals);
   for (uint64_t p = 0; p < mesh.polygon_count(); ++p) {
     const uint32_t n = static_cast<uint32_t>(mesh.offsets[p + 1] - mesh.offsets[p]);
     if (wide) {

@@ -11,6 +11,8 @@
 // pixels, normal = -ray), two scenes together (the nearer hit and its kind), and the
 // same bytes with 1 and 2 threads. look_at and fibonacci_direction: bases and directions.
 #include <gtest/gtest.h>
+
+#include "ref_geometry.h"
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -37,14 +39,7 @@ using core::ViewImage;
 // ---------------------------------------------------------------------------------------------------------
 // An independent closest-point reference, in double.
 
-using V3 = std::array<double, 3>;
-V3 v3(const float* p) { return {p[0], p[1], p[2]}; }
-V3 operator-(V3 a, V3 b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-V3 operator+(V3 a, V3 b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
-V3 operator*(V3 a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
-double dot(V3 a, V3 b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-V3 cross(V3 a, V3 b) { return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]}; }
-double norm(V3 a) { return std::sqrt(dot(a, a)); }
+using namespace lodstream::test;  // V3 and its operations (ref_geometry.h)
 
 V3 ref_closest_on_segment(V3 p, V3 a, V3 b) {
   const V3 d = b - a;

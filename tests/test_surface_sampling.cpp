@@ -5,6 +5,8 @@
 // vertices in visiting order, and the generator underneath (mix64, uniform01, sorted_uniform_positions).
 #include <gtest/gtest.h>
 
+#include "ref_geometry.h"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -68,14 +70,7 @@ Samples sample(const Mesh& m, uint64_t n, uint64_t seed, uint64_t stream = 0) {
 // ---------------------------------------------------------------------------------------------------------
 // An independent closest-point reference, in double.
 
-using V3 = std::array<double, 3>;
-V3 v3(const float* p) { return {p[0], p[1], p[2]}; }
-V3 operator-(V3 a, V3 b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-V3 operator+(V3 a, V3 b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
-V3 operator*(V3 a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
-double dot(V3 a, V3 b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-V3 cross(V3 a, V3 b) { return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]}; }
-double norm(V3 a) { return std::sqrt(dot(a, a)); }
+using namespace lodstream::test;  // V3 and its operations (ref_geometry.h)
 
 double segment_distance(V3 p, V3 a, V3 b) {
   const V3 d = b - a;
