@@ -23,20 +23,22 @@
 #include <queue>
 #include <stdexcept>
 
+#include "core/surface_sampling.h"  // mix64
+
 namespace lodstream::core {
 
 namespace {
 
-uint64_t mix64(uint64_t x) {  // splitmix64 finalizer
-  x += 0x9e3779b97f4a7c15ull;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-  return x ^ (x >> 31);
-}
-
 struct Point {
   uint32_t i, j;
 };
+
+// NODATA: flagged invalid, or a non-finite height.
+bool sample_valid(const GridSamples& g, uint64_t s) {
+  return (g.valid.empty() || g.valid[s]) && std::isfinite(g.z[s]);
+}
+
+bool is_cell(const Rect& r) { return r.i1 - r.i0 == 1 && r.j1 - r.j0 == 1; }
 
 // Visits every sample inside or on triangle (a, b, c) with the height of the triangle's plane there.
 // Exact integer inside test in sample coordinates; the triangle is oriented counter-clockwise from above
@@ -81,9 +83,9 @@ class Subdivider {
   Subdivider(const GridSamples& g, const SubdivisionOptions& o, const SubdivisionProgress& p)
       : g_(g), o_(o), progress_(p), tol_(o.tolerance) {
     const uint64_t n = uint64_t(g.width) * g.height;
-    valid_.assign(n, 1);
-    for (uint64_t s = 0; s < n; ++s)
-      if ((!g.valid.empty() && !g.valid[s]) || !std::isfinite(g.z[s])) valid_[s] = 0;
+    valid_.resize(n);
+    for (uint64_t s = 0; s < n; ++s) valid_[s] = sample_valid(g, s);
+    any_nodata_ = std::find(valid_.begin(), valid_.end(), uint8_t{0}) != valid_.end();
     if (o.split == SplitRule::curvature) compute_curvature();
     total_cells_ = double(g.width - 1) * double(g.height - 1);
   }
@@ -148,7 +150,7 @@ class Subdivider {
     Eval e;
     const uint32_t w = r.i1 - r.i0, h = r.j1 - r.j0;
     const Point center{r.i0 + w / 2, r.j0 + h / 2};
-    for (uint32_t j = r.j0; j <= r.j1 && !e.nodata; ++j)
+    for (uint32_t j = r.j0; any_nodata_ && j <= r.j1 && !e.nodata; ++j)
       for (uint32_t i = r.i0; i <= r.i1; ++i)
         if (!valid(i, j)) {
           e.nodata = true;
@@ -249,16 +251,12 @@ class Subdivider {
     while (!stack.empty()) {
       Rect r = stack.back();
       stack.pop_back();
-      const bool unit = r.i1 - r.i0 == 1 && r.j1 - r.j0 == 1;
+      const bool unit = is_cell(r);
       const Eval e = evaluate(r);
-      if (unit && !e.nodata) {  // a single cell is drawn through its four samples: nothing under it to miss
-        r.diagonal = e.diagonal;
-        leaves_.push_back(r);
-        add_done(r);
-      } else if (e.nodata && unit) {
+      if (e.nodata && unit) {
         add_hole(r);
         add_done(r);
-      } else if (!e.nodata && e.error <= tol_) {
+      } else if (!e.nodata && (unit || e.error <= tol_)) {  // a single cell has nothing under it to miss
         r.diagonal = e.diagonal;
         leaves_.push_back(r);
         add_done(r);
@@ -285,7 +283,7 @@ class Subdivider {
     const double stop = std::isinf(tol_) ? 0 : tol_;
     auto push = [&](const Rect& r) {
       const Eval e = evaluate(r);
-      const bool unit = r.i1 - r.i0 == 1 && r.j1 - r.j0 == 1;
+      const bool unit = is_cell(r);
       if (e.nodata && unit) return add_hole(r);
       Rect k = r;
       k.diagonal = e.diagonal;
@@ -417,7 +415,7 @@ class Subdivider {
           if (attempt == 0) worst = e;
           ok = e.first <= tol_;
         }
-        if (ok || (r.i1 - r.i0 == 1 && r.j1 - r.j0 == 1)) {
+        if (ok || is_cell(r)) {
           kept.push_back(r);
         } else {
           r.diagonal ^= 1;
@@ -436,7 +434,7 @@ class Subdivider {
     std::sort(leaves_.begin(), leaves_.end(), [](const Rect& a, const Rect& b) {
       return a.j0 != b.j0 ? a.j0 < b.j0 : a.i0 < b.i0;
     });
-    mark_corners();
+    // corner_ still holds these polygons' corners: the last pass split nothing.
     out_.ring_offsets.push_back(0);
     std::vector<uint32_t> fill_rings;  // (size, ids...) per fill polygon
     for (const Rect& r : leaves_) {
@@ -495,6 +493,7 @@ class Subdivider {
   const SubdivisionProgress& progress_;
   double tol_;  // infinite once a polygon target stopped the refinement
   std::vector<uint8_t> valid_, corner_;
+  bool any_nodata_ = false;
   std::vector<float> curvature_;
   std::vector<Rect> leaves_;
   Subdivision out_;
@@ -558,7 +557,7 @@ VerticalError vertical_error(const GridSamples& g, std::span<const uint32_t> tri
   }
   double sum2 = 0;
   for (uint64_t s = 0; s < err.size(); ++s) {
-    if ((!g.valid.empty() && !g.valid[s]) || !std::isfinite(g.z[s])) continue;
+    if (!sample_valid(g, s)) continue;
     if (err[s] < 0) {
       ++r.uncovered;
       continue;

@@ -17,7 +17,6 @@
 #include <array>
 #include <bit>
 #include <cmath>
-#include <cstring>
 #include <limits>
 #include <numbers>
 #include <string>
@@ -175,7 +174,7 @@ struct Work {
   std::vector<uint32_t> bin_slot;  // kCubeBinCount entries, kNone when unused at this vertex
 };
 
-// Groups the incident triangles of one vertex (inc[0..k), increasing; their face normals in w.cross,
+// Groups the k incident triangles of one vertex (in increasing order; their face normals in w.cross,
 // w.unitn, w.ok) by unit normal and sets every group's corner normal; returns the normal of the vertex's
 // degenerate corners in `degenerate`.
 void vertex_normals(size_t k, const Crease& crease, Work& w, float* degenerate) {
@@ -305,15 +304,14 @@ void crease_normals(std::span<const double> positions, std::span<const uint32_t>
     if (b != a) ++w.offsets[b];
     if (c != a && c != b) ++w.offsets[c];
   }
-  for (size_t v = 1; v <= vertex_count; ++v) w.offsets[v] += w.offsets[v - 1];
-  w.incident.resize(vertex_count ? w.offsets[vertex_count - 1] : 0);
+  for (size_t v = 1; v <= vertex_count; ++v) w.offsets[v] += w.offsets[v - 1];  // [vertex_count]: the total
+  w.incident.resize(w.offsets[vertex_count]);
   for (size_t t = triangle_count; t-- > 0;) {
     const uint32_t a = tri[3 * t], b = tri[3 * t + 1], c = tri[3 * t + 2];
     w.incident[--w.offsets[a]] = static_cast<uint32_t>(t);
     if (b != a) w.incident[--w.offsets[b]] = static_cast<uint32_t>(t);
     if (c != a && c != b) w.incident[--w.offsets[c]] = static_cast<uint32_t>(t);
   }
-  w.offsets[vertex_count] = static_cast<uint32_t>(w.incident.size());
 
   // Corner normals, vertex by vertex. A vertex's distinct corner normals (bitwise) become "pairs" (vertex,
   // normal), numbered in vertex order, their normals in `pair_normals`; each corner holds its pair id in

@@ -49,8 +49,8 @@
 // decided on the bins' area-weighted mean directions, so the cost is O(d + 1536²) and the crease is only
 // approximate (within about a bin width) at such vertices. Temporary memory, allocated once per call besides
 // the output: 4 bytes per input vertex and per corner (the incidence, freed before the last pass), and 16
-// bytes per output vertex (its normal in vertex order and its renumbering), i.e. about 12 bytes per corner
-// plus 16 per output vertex; per-vertex scratch grows to the largest valence.
+// bytes per output vertex (its normal in vertex order and its renumbering), i.e. about 12 bytes per triangle,
+// 4 per input vertex and 16 per output vertex; per-vertex scratch grows to the largest valence.
 //
 // Preconditions: positions.size() and triangles.size() are multiples of 3, every id is < positions.size()/3,
 // and there are at most 2^32 − 1 corners (so output ids fit in 32 bits); otherwise Failure(Status::internal)

@@ -136,9 +136,7 @@ struct RayScene::Impl {
   RTCGeometry attach(RTCGeometryType type, PrimitiveKind kind) {
     RTCGeometry g = rtcNewGeometry(device, type);
     check("new geometry");
-    const unsigned id = static_cast<unsigned>(geoms.size());
     geoms.push_back({kind, nullptr, nullptr});
-    (void)id;
     return g;
   }
   void finish(RTCGeometry g) {

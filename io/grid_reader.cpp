@@ -16,13 +16,13 @@
 #include <algorithm>
 #include <cmath>
 #include <csetjmp>
-#include <cstdio>
 #include <cstring>
 #include <new>
 #include <string_view>
 
 #include "core/status.h"
 #include "io/mapped_file.h"
+#include "io/png_common.h"
 #include "io/reader.h"
 #include "io/text.h"
 
@@ -45,22 +45,14 @@ struct PngDecode {
   const uint8_t* data = nullptr;
   size_t size = 0;
   size_t pos = 0;  // bytes handed to libpng so far: the offset reported with its errors
-  char message[256] = {};
+  PngErrorText error;
   enum class Outcome { ok, png_error, not_rgb8, bad_size, too_large, out_of_memory } outcome = Outcome::ok;
   png_uint_32 width = 0, height = 0;
   int bit_depth = 0, color_type = 0, interlace = 0;
   std::vector<uint8_t>* pixels = nullptr;  // row buffer, or the whole image when interlaced
   std::vector<float>* z = nullptr;
-  std::vector<uint8_t>* valid = nullptr;  // one flag per sample (alpha != 0); dropped if all are 1
+  std::vector<uint8_t>* valid = nullptr;  // RGBA only: one flag per sample (alpha != 0)
 };
-
-void png_on_error(png_structp png, png_const_charp message) {
-  PngDecode* d = static_cast<PngDecode*>(png_get_error_ptr(png));
-  std::snprintf(d->message, sizeof d->message, "%s", message);
-  png_longjmp(png, 1);
-}
-
-void png_on_warning(png_structp, png_const_charp) {}
 
 void png_on_read(png_structp png, png_bytep out, size_t length) {
   PngDecode* d = static_cast<PngDecode*>(png_get_io_ptr(png));
@@ -80,7 +72,7 @@ bool append_terrain_row(const uint8_t* row, png_uint_32 width, int channels, Png
       const uint32_t code = uint32_t(px[0]) << 16 | uint32_t(px[1]) << 8 | px[2];
       const bool present = channels == 3 || px[3] != 0;
       d->z->push_back(present ? float(-10000.0 + code / 10.0) : 0.0f);
-      d->valid->push_back(present ? 1 : 0);
+      if (channels == 4) d->valid->push_back(present ? 1 : 0);
     }
   } catch (const std::bad_alloc&) {
     return false;
@@ -99,7 +91,7 @@ bool resize_buffer(std::vector<uint8_t>* buffer, size_t bytes) {
 
 // Decodes into d->z / d->valid. Returns with d->outcome set; never throws, never leaks libpng's state.
 void decode_png(PngDecode* d) {
-  png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, d, png_on_error, png_on_warning);
+  png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &d->error, png_on_error, png_on_warning);
   if (png == nullptr) {
     d->outcome = PngDecode::Outcome::out_of_memory;
     return;
@@ -178,7 +170,7 @@ HeightGrid read_terrain_png(const MappedFile& file, const Window& bytes, const G
     case PngDecode::Outcome::ok:
       break;
     case PngDecode::Outcome::png_error:
-      fail_at_offset(file, d.pos, std::string("PNG: ") + d.message);
+      fail_at_offset(file, d.pos, std::string("PNG: ") + d.error.message);
     case PngDecode::Outcome::not_rgb8: {
       const char* type = d.color_type == PNG_COLOR_TYPE_GRAY         ? "gray"
                          : d.color_type == PNG_COLOR_TYPE_GRAY_ALPHA ? "gray+alpha"
@@ -205,17 +197,14 @@ HeightGrid read_terrain_png(const MappedFile& file, const Window& bytes, const G
   grid.height = d.height;
   grid.spacing = sample_spacing(options, 1);
   grid.format = "terrain-rgb-png";
-  bool all_valid = true;
-  for (uint8_t v : grid.valid) all_valid = all_valid && v;
-  if (all_valid) std::vector<uint8_t>().swap(grid.valid);
+  if (std::find(grid.valid.begin(), grid.valid.end(), uint8_t{0}) == grid.valid.end())
+    std::vector<uint8_t>().swap(grid.valid);
   return grid;
 }
 
 // ---- Text scanning shared by PGM headers, P2 and ASC
 
-inline bool is_space(char c) {
-  return c == ' ' || c == '\t' || c == '\n' || c == '\r' || c == '\v' || c == '\f';
-}
+inline bool is_space(char c) { return c == '\n' || text::is_blank(c); }
 
 // A cursor over [p, end) that counts lines as it passes '\n'.
 struct TextCursor {
@@ -409,13 +398,13 @@ HeightGrid read_esri_ascii(const MappedFile& file, const Window& bytes, const Gr
                    "header key " + std::string(keys[k]) + " repeated (first on line " +
                        std::to_string(seen_line[k]) + ")");
     }
-    while (c.p < c.end && *c.p != '\n' && is_space(*c.p)) ++c.p;
+    c.p = text::skip_blanks(c.p, c.end);
     const std::string_view token = c.token();
     if (!parse_number(token, &value[k]) || !std::isfinite(value[k])) {
       fail_at_line(file, line, "bad value " + quoted(token) + " for " + std::string(keys[k]));
     }
     seen_line[k] = line;
-    while (c.p < c.end && *c.p != '\n' && is_space(*c.p)) ++c.p;
+    c.p = text::skip_blanks(c.p, c.end);
     if (c.p < c.end && *c.p != '\n')
       fail_at_line(file, line, "unexpected text after the value of " + std::string(keys[k]));
   }

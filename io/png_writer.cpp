@@ -13,22 +13,15 @@
 #include <string>
 
 #include "core/status.h"
+#include "io/png_common.h"
 
 namespace lodstream::io {
 namespace {
 
 struct Sink {
   std::vector<uint8_t>* bytes = nullptr;
-  char message[256] = {};
+  PngErrorText error;
 };
-
-void on_error(png_structp png, png_const_charp message) {
-  Sink* sink = static_cast<Sink*>(png_get_error_ptr(png));
-  std::snprintf(sink->message, sizeof sink->message, "%s", message);
-  png_longjmp(png, 1);
-}
-
-void on_warning(png_structp, png_const_charp) {}
 
 void on_write(png_structp png, png_bytep data, size_t length) {
   Sink* sink = static_cast<Sink*>(png_get_io_ptr(png));
@@ -43,18 +36,18 @@ void on_write(png_structp png, png_bytep data, size_t length) {
 
 void on_flush(png_structp) {}
 
-// Returns false with sink.message set when libpng fails.
+// Returns false with sink.error.message set when libpng fails.
 bool write_png(const uint8_t* pixels, png_uint_32 width, png_uint_32 height, int color_type, size_t stride,
                Sink& sink) {
-  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &sink, on_error, on_warning);
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &sink.error, png_on_error, png_on_warning);
   if (png == nullptr) {
-    std::snprintf(sink.message, sizeof sink.message, "cannot create the encoder");
+    std::snprintf(sink.error.message, sizeof sink.error.message, "cannot create the encoder");
     return false;
   }
   png_infop info = png_create_info_struct(png);
   if (info == nullptr) {
     png_destroy_write_struct(&png, nullptr);
-    std::snprintf(sink.message, sizeof sink.message, "cannot create the encoder");
+    std::snprintf(sink.error.message, sizeof sink.error.message, "cannot create the encoder");
     return false;
   }
   if (setjmp(png_jmpbuf(png))) {
@@ -95,7 +88,7 @@ std::vector<uint8_t> encode_png(std::span<const uint8_t> pixels, int width, int 
   sink.bytes = &bytes;
   if (!write_png(pixels.data(), static_cast<png_uint_32>(width), static_cast<png_uint_32>(height), color_type,
                  stride, sink)) {
-    fail(Status::internal, std::string("encode_png: libpng: ") + sink.message);
+    fail(Status::internal, std::string("encode_png: libpng: ") + sink.error.message);
   }
   return bytes;
 }

@@ -1,9 +1,9 @@
 // OBJ and binary PLY writers for meshes of n-gons (see io/polygon_writer.h).
 #include "io/polygon_writer.h"
 
+#include <algorithm>
 #include <bit>
 #include <charconv>
-#include <cstring>
 
 #include "core/status.h"
 #include "io/file_writer.h"

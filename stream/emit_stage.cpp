@@ -173,8 +173,8 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
   std::vector<std::array<uint32_t, 2>> edges;
   std::vector<uint32_t> points;
   std::vector<core::Quadric> quadrics(quadric ? cells : 0);
-  // One bit per input triangle and segment that collapsed to an edge, so that pass B visits only those.
-  // Blocks start at multiples of 64 primitives: each word is written by one block, hence one thread.
+  // One bit per input triangle and segment that collapsed to an edge, so that passes B and C visit only
+  // those. Blocks start at multiples of 64 primitives: each word is written by one block, hence one thread.
   static_assert(kEmitBlock % 64 == 0);
   std::vector<uint64_t> collapsed[2];
   for (int kind = 0; kind < 2; ++kind)
@@ -254,7 +254,7 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
     return counts;
   }
 
-  // Elimination, before the thickness pass, which then measures the kept edges only. Edges are few next to
+  // Elimination, before the thickness passes, which then measure the kept edges only. Edges are few next to
   // triangle sides: look each side up among the edges.
   g_triangles = FlatMap<3, false>();
   g_points = FlatMap<1, false>();
@@ -294,8 +294,9 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
 
   // Passes B and C visit the input triangles and segments that collapsed to a kept edge (an eliminated
   // edge's thickness would go unused). For each, `visit(corner ids, their cells, arity, lower cell, kept
-  // edge, slot)` gets the edge's slot in the block's output (o.kept_edges, o.distances, in order of first
-  // appearance), so that sums are formed per block in primitive order and merged in block order.
+  // edge, slot, o)` gets the edge's slot in the block's output (o.kept_edges with o.sums or o.distances, in
+  // order of first appearance), so that sums are formed per block in primitive order and merged in block
+  // order.
   auto for_kept_edges = [&](auto&& visit) {
     return [&, visit](const Block& b, std::span<const uint32_t> ids, BlockOut& o, Scratch& s) {
       const size_t arity = static_cast<size_t>(3 - b.kind);

@@ -60,15 +60,14 @@ class ExternalSorter {
   // Calls visit(const Rec&) for every record in sorted order. Can be called once.
   template <class Visit>
   void merge(Visit&& visit) {
+    tbb::parallel_sort(buffer_.begin(), buffer_.end(), less_);
     if (runs_.empty()) {
-      tbb::parallel_sort(buffer_.begin(), buffer_.end(), less_);
       for (const Rec& r : buffer_) visit(r);
       release(buffer_);
       return;
     }
     // The records still buffered are not spilled: sorted in place, they are merged from memory as the
     // last run (where a spill would have put them), and the file runs share what is left of the budget.
-    tbb::parallel_sort(buffer_.begin(), buffer_.end(), less_);
     const size_t files = runs_.size();
     const size_t k = files + (buffer_.empty() ? 0 : 1);
     const uint64_t per_run = std::max<uint64_t>((capacity_ - buffer_.size()) / files, 256);

@@ -47,7 +47,6 @@ class FlatMap {
     for (Key& k : keys_) k[0] = empty;
     size_ = 0;
   }
-  uint64_t memory_bytes() const { return keys_.capacity() * sizeof(Key) + values_.capacity() * 4; }
 
  private:
   uint32_t value_at(uint64_t i) const {

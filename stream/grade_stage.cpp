@@ -79,13 +79,14 @@ double triangle_area(const double* a, const double* b, const double* c) {
   return 0.5 * std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
 }
 
-// Adds a block of triangles to the area histogram, in triangle order (a fixed order: the same bits every
-// run, since blocks are fixed and come in store order). The areas and their bins are computed in parallel
-// into `scratch`; only the sums run serially, in triangle order.
 struct BinnedArea {
   double area;
   int bin;
 };
+
+// Adds a block of triangles to the area histogram, in triangle order (a fixed order: the same bits every
+// run, since blocks are fixed and come in store order). The areas and their bins are computed in parallel
+// into `scratch`; only the sums run serially, in triangle order.
 void block_area(std::span<const uint32_t> tris, const StorePositions& pos, AreaHistogram& h,
                 std::vector<BinnedArea>& scratch) {
   scratch.resize(tris.size() / 3);

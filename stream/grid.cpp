@@ -19,6 +19,7 @@
 #include "lodstream/lodstream.h"
 #include "stream/job.h"
 #include "stream/progress.h"
+#include "stream/work_dir.h"
 
 namespace lodstream {
 
@@ -142,8 +143,7 @@ Result grid(const std::string& input, const GridOptions& go, const Options& opti
     report.hole_cells = sub.hole_cells;
     report.polygons = poly.polygon_count();
     report.fill_polygons = sub.fill_polygons;
-    for (uint64_t p = sub.polygons.size(); p < poly.polygon_count(); ++p)
-      report.fill_vertices += poly.offsets[p + 1] - poly.offsets[p];
+    report.fill_vertices = poly.offsets.back() - poly.offsets[sub.polygons.size()];  // fill rings come last
     report.vertices = used.size();
     report.draw_vertices = poly.indices.size();
     report.bytes = 24 * report.vertices + 12 * report.polygons + 4 * report.draw_vertices;
@@ -159,10 +159,7 @@ Result grid(const std::string& input, const GridOptions& go, const Options& opti
     report.trials = sub.trials;
     report.verify_splits = sub.verify_splits;
 
-    std::error_code ec;
-    std::filesystem::create_directories(go.output_dir, ec);
-    if (ec || !std::filesystem::is_directory(go.output_dir))
-      fail(Status::io_error, go.output_dir + ": cannot create the output directory" + (ec ? ": " + ec.message() : ""));
+    stream::make_output_dir(go.output_dir);
     const std::string generator = std::string("lodstream ") + LODSTREAM_VERSION;
     const std::string tol_text = go.tolerance >= 0 ? fmt::format("{}", go.tolerance) : std::string("none");
     const std::vector<std::string> comments{

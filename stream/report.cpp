@@ -155,14 +155,9 @@ std::vector<RunSpec> resolve_runs(const ReportOptions& ro) {
   return runs;
 }
 
-// One direction of the Hausdorff distance (Metro): the max over every sample (faces, edges, vertices);
-// mean, RMS and p95 over the face samples, which estimate the surface integral and do not depend on the
-// sample count (vertex samples sit where a simplification is worst, so pooling them would bias the mean
-// by N). Without face samples (a mesh of edges or points only), over every sample.
-ErrorStats hausdorff_stats(std::vector<float>& d, size_t faces);
-
-// Nearest-rank statistics of a set of values (any order); the sum runs in the given order.
-ErrorStats stats_of(std::vector<float>& values) {
+// Nearest-rank statistics of a set of values (any order; reordered for the p95); the sum runs in the given
+// order.
+ErrorStats stats_of(std::span<float> values) {
   ErrorStats s;
   s.count = values.size();
   if (values.empty()) return s;
@@ -180,11 +175,14 @@ ErrorStats stats_of(std::vector<float>& values) {
   return s;
 }
 
+// One direction of the Hausdorff distance (Metro): the max over every sample (faces, edges, vertices);
+// mean, RMS and p95 over the face samples, which estimate the surface integral and do not depend on the
+// sample count (vertex samples sit where a simplification is worst, so pooling them would bias the mean
+// by N). Without face samples (a mesh of edges or points only), over every sample.
 ErrorStats hausdorff_stats(std::vector<float>& d, size_t faces) {
   float mx = 0;
   for (float v : d) mx = std::max(mx, v);
-  std::vector<float> area(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(faces > 0 ? faces : d.size()));
-  ErrorStats s = stats_of(area);
+  ErrorStats s = stats_of(std::span<float>(d.data(), faces > 0 ? faces : d.size()));
   s.max = mx;
   s.count = d.size();
   return s;
@@ -199,63 +197,56 @@ struct Samples {
   size_t faces = 0;  // the first `faces` samples are uniform by area
 };
 
+// With `targets`, also K view targets in the same two passes (the original is streamed once for both): points
+// uniform by area on the triangles; with no triangles, uniform by length on the segments; with neither,
+// the points themselves in turn.
 Samples sample_mesh(std::span<const float> xyz, std::span<const uint32_t> triangles,
-                               std::span<const uint32_t> segments, std::span<const uint32_t> points, uint64_t n,
-                               uint64_t seed, uint64_t stream) {
-  core::SurfaceSampler sampler(n, seed, stream);
+                    std::span<const uint32_t> segments, std::span<const uint32_t> points, uint64_t n, uint64_t seed,
+                    uint64_t stream, unsigned k = 0, std::vector<float>* targets = nullptr) {
+  core::SurfaceSampler sampler(n, seed, stream), aim(k, seed, kStreamTargets);
   const uint64_t vertex_count = xyz.size() / 3;
   std::vector<uint8_t> used(vertex_count, 0);
   for (auto ids : {triangles, segments, points})
     for (uint32_t v : ids) used[v] = 1;
   const float* p = xyz.data();
-  for (size_t t = 0; t + 2 < triangles.size(); t += 3)
-    sampler.measure_triangle(p + 3ull * triangles[t], p + 3ull * triangles[t + 1], p + 3ull * triangles[t + 2]);
-  for (size_t e = 0; e + 1 < segments.size(); e += 2)
-    sampler.measure_segment(p + 3ull * segments[e], p + 3ull * segments[e + 1]);
+  auto corner = [&](std::span<const uint32_t> ids, size_t i) { return p + 3ull * ids[i]; };
+  for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+    sampler.measure_triangle(corner(triangles, t), corner(triangles, t + 1), corner(triangles, t + 2));
+    if (targets) aim.measure_triangle(corner(triangles, t), corner(triangles, t + 1), corner(triangles, t + 2));
+  }
+  for (size_t e = 0; e + 1 < segments.size(); e += 2) {
+    sampler.measure_segment(corner(segments, e), corner(segments, e + 1));
+    if (targets && triangles.empty()) aim.measure_segment(corner(segments, e), corner(segments, e + 1));
+  }
   for (uint64_t v = 0; v < vertex_count; ++v)
     if (used[v]) sampler.measure_vertex();
   sampler.begin_sampling();
-  std::vector<float> faces, edges, vertices;
+  aim.begin_sampling();
+  std::vector<float> faces, edges, vertices, aim_faces, aim_edges, aim_unused;
   faces.reserve(3 * n), edges.reserve(3 * n), vertices.reserve(3 * std::min(n, vertex_count));
-  for (size_t t = 0; t + 2 < triangles.size(); t += 3)
-    sampler.sample_triangle(p + 3ull * triangles[t], p + 3ull * triangles[t + 1], p + 3ull * triangles[t + 2], faces, edges);
-  for (size_t e = 0; e + 1 < segments.size(); e += 2)
-    sampler.sample_segment(p + 3ull * segments[e], p + 3ull * segments[e + 1], edges);
+  for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+    sampler.sample_triangle(corner(triangles, t), corner(triangles, t + 1), corner(triangles, t + 2), faces, edges);
+    if (targets)
+      aim.sample_triangle(corner(triangles, t), corner(triangles, t + 1), corner(triangles, t + 2), aim_faces, aim_unused);
+  }
+  const bool aim_at_segments = targets && aim_faces.empty();
+  for (size_t e = 0; e + 1 < segments.size(); e += 2) {
+    sampler.sample_segment(corner(segments, e), corner(segments, e + 1), edges);
+    if (aim_at_segments) aim.sample_segment(corner(segments, e), corner(segments, e + 1), aim_edges);
+  }
   for (uint64_t v = 0; v < vertex_count; ++v)
     if (used[v]) sampler.sample_vertex(p + 3 * v, vertices);
+  if (targets) {
+    *targets = !aim_faces.empty() ? std::move(aim_faces) : std::move(aim_edges);
+    if (targets->empty() && !points.empty())
+      for (unsigned i = 0; i < k; ++i) targets->insert(targets->end(), corner(points, i % points.size()), corner(points, i % points.size()) + 3);
+  }
   Samples out;
   out.faces = faces.size() / 3;
   faces.insert(faces.end(), edges.begin(), edges.end());
   faces.insert(faces.end(), vertices.begin(), vertices.end());
   out.xyz = std::move(faces);
   return out;
-}
-
-// K view targets: points uniform by area on the triangles; with no triangles, uniform by length on the
-// segments; with neither, the points themselves in turn.
-std::vector<float> view_targets(std::span<const float> xyz, std::span<const uint32_t> triangles,
-                                std::span<const uint32_t> segments, std::span<const uint32_t> points, unsigned k,
-                                uint64_t seed) {
-  core::SurfaceSampler sampler(k, seed, kStreamTargets);
-  const float* p = xyz.data();
-  for (size_t t = 0; t + 2 < triangles.size(); t += 3)
-    sampler.measure_triangle(p + 3ull * triangles[t], p + 3ull * triangles[t + 1], p + 3ull * triangles[t + 2]);
-  if (triangles.empty())
-    for (size_t e = 0; e + 1 < segments.size(); e += 2)
-      sampler.measure_segment(p + 3ull * segments[e], p + 3ull * segments[e + 1]);
-  sampler.begin_sampling();
-  std::vector<float> faces, edges, unused;
-  for (size_t t = 0; t + 2 < triangles.size(); t += 3)
-    sampler.sample_triangle(p + 3ull * triangles[t], p + 3ull * triangles[t + 1], p + 3ull * triangles[t + 2], faces, unused);
-  if (!faces.empty()) return faces;
-  for (size_t e = 0; e + 1 < segments.size(); e += 2)
-    sampler.sample_segment(p + 3ull * segments[e], p + 3ull * segments[e + 1], edges);
-  if (!edges.empty()) return edges;
-  for (unsigned i = 0; i < k && !points.empty(); ++i) {
-    const float* q = p + 3ull * points[i % points.size()];
-    edges.insert(edges.end(), q, q + 3);
-  }
-  return edges;
 }
 
 // An original, loaded once for all the levels measured against it.
@@ -306,8 +297,8 @@ void load_original(const std::string& store_dir, const stream::StoreMeta& meta, 
   o->tris = buffers.indices;
   o->triangles->commit();
   progress.report("load", 0.8);
-  o->samples = sample_mesh(o->xyz, o->tris, o->lines, o->points, ro.samples, ro.seed, kStreamOriginalSamples);
-  o->targets = view_targets(o->xyz, o->tris, o->lines, o->points, ro.views, ro.seed);
+  o->samples = sample_mesh(o->xyz, o->tris, o->lines, o->points, ro.samples, ro.seed, kStreamOriginalSamples,
+                           ro.views, &o->targets);
   const double d[3] = {meta.bbox.max[0] - meta.bbox.min[0], meta.bbox.max[1] - meta.bbox.min[1],
                        meta.bbox.max[2] - meta.bbox.min[2]};
   o->diagonal = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
@@ -369,9 +360,7 @@ const char* kCsvHeader =
     "silhouette_max_px,silhouette_mean_px,both_pixels,depth_mean_px,normal_mean_deg\n";
 
 std::string fmt_csv_row(unsigned k, const double* dir, const double* target, const double* eye,
-                        const core::SilhouetteCounts& view, const core::SilhouetteStats& s, uint64_t both,
-                        double depth_mean, double normal_mean) {
-  (void)view;
+                        const core::SilhouetteStats& s, uint64_t both, double depth_mean, double normal_mean) {
   return fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", k, dir[0], dir[1], dir[2], target[0],
                      target[1], target[2], eye[0], eye[1], eye[2], s.covered_either, s.mismatched, s.max, s.mean,
                      both, depth_mean, normal_mean);
@@ -501,7 +490,7 @@ LevelResult measure_level(const Original& o, const RunSpec& run, size_t index, c
       depth_err.push_back(de), normal_err.push_back(ne);
       depth_sum += de, normal_sum += ne, ++both;
     }
-    out.csv_rows.push_back(fmt_csv_row(k, dir, target, eye, view, vs, both, both ? depth_sum / both : 0,
+    out.csv_rows.push_back(fmt_csv_row(k, dir, target, eye, vs, both, both ? depth_sum / both : 0,
                                        both ? normal_sum / both : 0));
     if (k < ro.html_views) {
       io::HtmlView hv;
@@ -605,11 +594,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     const std::vector<RunSpec> runs = resolve_runs(ro);
     stream::Progress progress(options);
     stream::WorkDir work(options.work_dir);
-    {
-      std::error_code ec;
-      fs::create_directories(ro.output_dir, ec);
-      if (ec || !fs::is_directory(ro.output_dir)) fail(Status::io_error, ro.output_dir + ": cannot create the output directory");
-    }
+    stream::make_output_dir(ro.output_dir);
     Report rep;
     rep.runs.resize(runs.size());
     std::vector<std::vector<std::vector<io::HtmlView>>> views(runs.size());
@@ -620,10 +605,12 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     tbb::task_arena arena(static_cast<int>(plan.threads));
     arena.execute([&] {
       // One original at a time, each loaded once for every run that measures against it.
-      std::vector<std::string> originals;
-      for (const RunSpec& r : runs)
-        if (std::find(originals.begin(), originals.end(), absolute(r.original)) == originals.end())
-          originals.push_back(absolute(r.original));
+      std::vector<std::string> originals, run_original;  // distinct originals; each run's, as absolute paths
+      for (const RunSpec& r : runs) {
+        run_original.push_back(absolute(r.original));
+        if (std::find(originals.begin(), originals.end(), run_original.back()) == originals.end())
+          originals.push_back(run_original.back());
+      }
       for (size_t g = 0; g < originals.size(); ++g) {
         const std::string store_dir = work.subdir(g == 0 ? std::string("store") : "store-" + std::to_string(g));
         SceneInfo scene;
@@ -636,7 +623,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         const uint64_t lod_limit = std::max<uint64_t>(64ull << 20, original_limit - std::min(original_limit, o.triangles->embree_bytes()));
         run_stage(&rep.stages, "measure", [&](StageStats&) {
           for (size_t r = 0; r < runs.size(); ++r) {
-            if (absolute(runs[r].original) != o.path) continue;
+            if (run_original[r] != o.path) continue;
             ReportRun& rr = rep.runs[r];
             rr.name = runs[r].name;
             rr.original = runs[r].original;

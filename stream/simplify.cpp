@@ -308,10 +308,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       const std::vector<uint64_t> cells = run_stage(&report.stages, "cluster", [&](StageStats& st) { return cluster(sizes, &st); });
 
       // Emit and write.
-      std::error_code ec;
-      std::filesystem::create_directories(so.output_dir, ec);
-      if (ec || !std::filesystem::is_directory(so.output_dir))
-        fail(Status::io_error, so.output_dir + ": cannot create the output directory" + (ec ? ": " + ec.message() : ""));
+      stream::make_output_dir(so.output_dir);
       const double tan_half = std::tan(so.fov_degrees * M_PI / 360);
       const double diag = diagonal(meta.bbox);
       std::vector<core::LodMesh> meshes(sizes.size());

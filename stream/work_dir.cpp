@@ -57,4 +57,11 @@ std::string WorkDir::scratch(std::string_view stem) const {
               std::to_string(scratch_counter_++));
 }
 
+void make_output_dir(const std::string& path) {
+  std::error_code ec;
+  std::filesystem::create_directories(path, ec);
+  if (ec || !std::filesystem::is_directory(path))
+    fail(Status::io_error, path + ": cannot create the output directory" + (ec ? ": " + ec.message() : ""));
+}
+
 }  // namespace lodstream::stream

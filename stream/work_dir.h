@@ -30,4 +30,8 @@ class WorkDir {
   mutable std::atomic<uint64_t> scratch_counter_{0};
 };
 
+// Creates a job's output directory (and its parents) if missing. Throws Failure(io_error) naming it when
+// it cannot be created or is not a directory.
+void make_output_dir(const std::string& path);
+
 }  // namespace lodstream::stream

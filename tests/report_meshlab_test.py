@@ -24,6 +24,9 @@ import subprocess
 import sys
 import tempfile
 
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "tools"))
+from shared_data import shared_data_dir  # noqa: E402
+
 # (model path under ../shared/data, levels whose triangle-only copies are compared). Both under 100k triangles.
 MODELS = [
     ("buildings/AC20-FZK-Haus.obj", [1, 2, 3]),  # IFC building, 21,650 triangles
@@ -106,9 +109,8 @@ def close(ours, ref, diag):
 
 def main():
     binary, source = sys.argv[1], sys.argv[2]
-    data = os.environ.get("LODSTREAM_SHARED_DATA") or os.path.join(source, "..", "shared", "data")
-    if not os.path.isdir(data):
-        print("skipped: ../shared/data is absent (set LODSTREAM_SHARED_DATA to run this test)")
+    data = shared_data_dir(source)
+    if data is None:
         return 0
     missing = [t for t in ("meshlabserver", "xvfb-run") if shutil.which(t) is None]
     if missing:

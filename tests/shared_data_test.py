@@ -12,15 +12,15 @@ import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "tools"))
 import count_mesh  # noqa: E402
+from shared_data import shared_data_dir  # noqa: E402
 
 KEYS = ["vertices", "vertices_welded", "polygons", "triangles", "degenerate", "lines", "points", "objects"]
 
 
 def main():
     binary, source = sys.argv[1], sys.argv[2]
-    data = os.environ.get("LODSTREAM_SHARED_DATA") or os.path.join(source, "..", "shared", "data")
-    if not os.path.isdir(data):
-        print("skipped: ../shared/data is absent (set LODSTREAM_SHARED_DATA to run this test)")
+    data = shared_data_dir(source)
+    if data is None:
         return 0
     files = []
     for root, _, names in os.walk(data):

@@ -279,7 +279,9 @@ TEST(GridFuji, ExtraVerticesLeaveNoBoundaryEdgeInsideTheGrid) {
         ++tri_edges[{std::min(a, b), std::max(a, b)}];
       }
     for (const auto& [edge, count] : tri_edges)
-      if (!on_border(edge.first, edge.second, w, h)) ASSERT_EQ(count, 2);
+      if (!on_border(edge.first, edge.second, w, h)) {
+        ASSERT_EQ(count, 2);
+      }
   }
   // With corners only the T-junctions leave edges used once inside the grid: the cracks.
   const core::Subdivision none = core::subdivide(f->view(), opts(5, SplitRule::greatest, GapMode::none));

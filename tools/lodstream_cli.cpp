@@ -211,6 +211,24 @@ void print_report(const lodstream::Report& r, const std::string& out_dir) {
               human_bytes(r.peak_rss_bytes).c_str(), out_dir.c_str());
 }
 
+// How every subcommand ends: the progress bar's line closed; on failure the one-line error and its exit
+// status; else the JSON file the job wrote (when `json_file` is given: --json) or the text summary.
+template <class Print>
+int finish(const lodstream::Result& r, const ProgressState& progress, const std::string& json_file, Print&& print) {
+  if (progress.bar_open) std::fputc('\n', stderr);
+  if (!r.ok()) {
+    std::fprintf(stderr, "lodstream: %s\n", r.message.c_str());
+    return static_cast<int>(r.status);
+  }
+  if (!json_file.empty()) {
+    std::ifstream in(json_file);
+    std::printf("%s\n", nlohmann::ordered_json::parse(in).dump().c_str());
+  } else {
+    print();
+  }
+  return 0;
+}
+
 // "a,b,c" -> values; false on any unreadable item.
 template <class T>
 bool parse_list(const std::string& text, std::vector<T>* out) {
@@ -387,18 +405,7 @@ int main(int argc, char** argv) {
     so.write_glb = !no_glb;
     lodstream::SimplifyReport report;
     const lodstream::Result r = lodstream::simplify(input, so, options, &report);
-    if (progress.bar_open) std::fputc('\n', stderr);
-    if (!r.ok()) {
-      std::fprintf(stderr, "lodstream: %s\n", r.message.c_str());
-      return static_cast<int>(r.status);
-    }
-    if (json) {
-      std::ifstream manifest(so.output_dir + "/manifest.json");
-      std::printf("%s\n", nlohmann::ordered_json::parse(manifest).dump().c_str());
-    } else {
-      print_simplify(report, so.output_dir);
-    }
-    return 0;
+    return finish(r, progress, json ? so.output_dir + "/manifest.json" : std::string(), [&] { print_simplify(report, so.output_dir); });
   }
 
   if (grid_cmd->parsed()) {
@@ -416,18 +423,7 @@ int main(int argc, char** argv) {
     go.write_glb = !no_glb;
     lodstream::GridReport report;
     const lodstream::Result r = lodstream::grid(input, go, options, &report);
-    if (progress.bar_open) std::fputc('\n', stderr);
-    if (!r.ok()) {
-      std::fprintf(stderr, "lodstream: %s\n", r.message.c_str());
-      return static_cast<int>(r.status);
-    }
-    if (json) {
-      std::ifstream summary(go.output_dir + "/summary.json");
-      std::printf("%s\n", nlohmann::ordered_json::parse(summary).dump().c_str());
-    } else {
-      print_grid(report, go.output_dir);
-    }
-    return 0;
+    return finish(r, progress, json ? go.output_dir + "/summary.json" : std::string(), [&] { print_grid(report, go.output_dir); });
   }
 
   if (report_cmd->parsed()) {
@@ -444,28 +440,13 @@ int main(int argc, char** argv) {
     }
     lodstream::Report report;
     const lodstream::Result r = lodstream::report(ro, options, &report);
-    if (progress.bar_open) std::fputc('\n', stderr);
-    if (!r.ok()) {
-      std::fprintf(stderr, "lodstream: %s\n", r.message.c_str());
-      return static_cast<int>(r.status);
-    }
-    if (json) {
-      std::ifstream in(ro.output_dir + "/report.json");
-      std::printf("%s\n", nlohmann::ordered_json::parse(in).dump().c_str());
-    } else {
-      print_report(report, ro.output_dir);
-    }
-    return 0;
+    return finish(r, progress, json ? ro.output_dir + "/report.json" : std::string(), [&] { print_report(report, ro.output_dir); });
   }
 
   lodstream::SceneInfo info;
   const lodstream::Result r = lodstream::info(input, options, &info);
-  if (progress.bar_open) std::fputc('\n', stderr);
-  if (!r.ok()) {
-    std::fprintf(stderr, "lodstream: %s\n", r.message.c_str());
-    return static_cast<int>(r.status);
-  }
-  if (json) std::printf("%s\n", info_json(info).dump().c_str());
-  else print_info(info);
-  return 0;
+  return finish(r, progress, std::string(), [&] {
+    if (json) std::printf("%s\n", info_json(info).dump().c_str());
+    else print_info(info);
+  });
 }
