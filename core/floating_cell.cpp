@@ -23,6 +23,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <new>
 #if __has_include(<sys/mman.h>)
 #include <sys/mman.h>
@@ -72,11 +73,15 @@ inline bool within(double x, double cx, double d, double h) {
   return d > 0 ? err <= 0 : err >= 0;
 }
 
+// The hash of square xyz is fmix64 of a linear mix of the coordinates; the mix is a sum of per-axis
+// terms, so that a query's 8 squares share the 6 products of their 2 coordinates per axis.
+constexpr uint64_t kAxisMul[3] = {0x9E3779B97F4A7C15ull, 0xC2B2AE3D27D4EB4Full, 0x165667B19E3779F9ull};
+
+inline uint64_t axis_term(int64_t x, int axis) { return static_cast<uint64_t>(x) * kAxisMul[axis]; }
+
 inline uint64_t hash_square(int64_t x, int64_t y, int64_t z) {
-  uint64_t k = static_cast<uint64_t>(x) * 0x9E3779B97F4A7C15ull + static_cast<uint64_t>(y) * 0xC2B2AE3D27D4EB4Full +
-               static_cast<uint64_t>(z) * 0x165667B19E3779F9ull;
-  // The linear mix above leaves neighbouring squares in neighbouring low bits: finish with fmix64.
-  return fmix64(k);
+  // The linear mix leaves neighbouring squares in neighbouring low bits: finish with fmix64.
+  return fmix64(axis_term(x, 0) + axis_term(y, 1) + axis_term(z, 2));
 }
 
 // The slot of square xyz, or nullptr if absent; `i` is its hash & mask.
@@ -121,6 +126,63 @@ Slot& find_or_insert(std::vector<Slot, HugePageAllocator<Slot>>& table, uint64_t
   s.run = kNoCell;
   inserted = true;
   return s;
+}
+
+// The candidate test of assign_floating, over the runs of the query block. Squares and runs come in no
+// particular id order: distances and ids alone decide (nearest: smallest fl(d²), ties by lowest id;
+// heaviest: lowest id).
+//
+// scan_fast is branch-free: in a coarse level a query meets dozens of candidates, accepted or rejected
+// about at random, which branches would mispredict half the time. It decides |d| <= h per axis on the
+// rounded difference, which is exact except where that difference rounds onto h itself; it then sets
+// `boundary` and the caller redoes the scan with scan_exact, whose `within` decides those cases exactly.
+template <bool kNearest, bool kSphere>
+uint32_t scan_fast(const Cell* pool, const Clusterer::Query& q, const double* p, double h, double half_sq,
+                   bool& boundary) {
+  uint32_t best = kNoCell;
+  double best_key = std::numeric_limits<double>::infinity();
+  bool on_h = false;
+  for (int i = 0; i < 8; ++i) {
+    const Cell* run = pool + q.run[i];
+    for (uint32_t j = 0; j < q.count[i]; ++j) {
+      const double dx = p[0] - run[j].position[0], dy = p[1] - run[j].position[1], dz = p[2] - run[j].position[2];
+      const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
+      const double d2 = dx * dx + dy * dy + dz * dz;
+      on_h |= m == h;
+      bool inside = m < h;
+      if constexpr (kSphere) inside &= d2 <= half_sq;
+      const double key = kNearest ? d2 : 0.0;
+      const uint32_t c = run[j].id;
+      const bool better = inside & ((key < best_key) | ((key == best_key) & (c < best)));
+      best = better ? c : best;
+      best_key = better ? key : best_key;
+    }
+  }
+  boundary = on_h;
+  return best;
+}
+
+uint32_t scan_exact(const Cell* pool, const Clusterer::Query& q, const double* p, double h, double half_sq,
+                    bool sphere, bool nearest) {
+  uint32_t best = kNoCell;
+  double best_d2 = 0;
+  for (int i = 0; i < 8; ++i) {
+    const Cell* run = pool + q.run[i];
+    for (uint32_t j = 0; j < q.count[i]; ++j) {
+      const double* cp = run[j].position;
+      const uint32_t c = run[j].id;
+      const double dx = p[0] - cp[0], dy = p[1] - cp[1], dz = p[2] - cp[2];
+      const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
+      if (m > h) continue;
+      if (m == h && !(within(p[0], cp[0], dx, h) && within(p[1], cp[1], dy, h) && within(p[2], cp[2], dz, h)))
+        continue;
+      const double d2 = dx * dx + dy * dy + dz * dz;
+      if (sphere && d2 > half_sq) continue;
+      const bool better = best == kNoCell || (nearest ? (d2 < best_d2 || (d2 == best_d2 && c < best)) : c < best);
+      if (better) best = c, best_d2 = d2;
+    }
+  }
+  return best;
 }
 
 constexpr size_t kHugePage = size_t{2} << 20;
@@ -174,7 +236,10 @@ Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options)
     level.half_sq = level.half * level.half;
     level.table.assign(kInitialSlots, Slot{{0, 0, 0}, kNoCell, 0});
   }
-  if (options_.clustering == Clustering::floating) queries_.resize(levels_.size());
+  if (options_.clustering == Clustering::floating) {
+    queries_.resize(levels_.size());
+    ring_.resize(kQueryRing * levels_.size());
+  }
 }
 
 void Clusterer::assign(uint32_t vertex_id, std::span<const double, 3> position, std::span<uint32_t> cells) {
@@ -191,23 +256,87 @@ void Clusterer::assign(uint32_t vertex_id, std::span<const double, 3> position, 
   }
 }
 
+void Clusterer::assign_block(std::span<const uint32_t> ids, std::span<const double> positions,
+                             std::span<uint32_t> cells) {
+  const size_t n = ids.size(), nl = levels_.size();
+  if (positions.size() != 3 * n || cells.size() != nl * n)
+    fail(Status::internal, "Clusterer::assign_block: positions or cells do not match the ids");
+  const double* xyz = positions.data();
+  if (options_.clustering == Clustering::uniform) {
+    constexpr size_t kAhead = 8;
+    for (size_t i = 0; i < n; ++i) {
+      if (i + kAhead < n)
+        for (size_t l = 0; l < nl; ++l) prefetch_uniform(levels_[l], xyz + 3 * (i + kAhead));
+      for (size_t l = 0; l < nl; ++l) cells[l * n + i] = assign_uniform(levels_[l], ids[i], xyz + 3 * i);
+    }
+    return;
+  }
+  // A software pipeline over the vertices. Vertex i + kSlotsAhead gets its query (squares, slot indices)
+  // and its table slots fetched; vertex i + kRunsAhead has its slots read and its cell runs fetched; vertex
+  // i is assigned, as assign does, from slots and runs that are by then mostly in cache. The queries are
+  // exact (they depend on the position alone); what the later stages read ahead may be stale by the time
+  // the vertex is assigned, so the assignment itself re-reads everything.
+  constexpr size_t kSlotsAhead = 16, kRunsAhead = 8;
+  static_assert(kRunsAhead < kSlotsAhead && kSlotsAhead < kQueryRing);
+  auto ring = [&](size_t i) { return &ring_[(i % kQueryRing) * nl]; };
+  auto query = [&](size_t i) {
+    Query* q = ring(i);
+    for (size_t l = 0; l < nl; ++l) query_floating(levels_[l], xyz + 3 * i, q[l]);
+  };
+  for (size_t i = 0; i < std::min(n, kSlotsAhead); ++i) query(i);
+  for (size_t i = 0; i < n; ++i) {
+    if (i + kSlotsAhead < n) query(i + kSlotsAhead);
+    if (i + kRunsAhead < n) {
+      const Query* q = ring(i + kRunsAhead);
+      for (size_t l = 0; l < nl; ++l) prefetch_runs(levels_[l], q[l]);
+    }
+    Query* q = ring(i);
+    for (size_t l = 0; l < nl; ++l) find_runs(levels_[l], q[l]);
+    for (size_t l = 0; l < nl; ++l) cells[l * n + i] = assign_floating(levels_[l], ids[i], xyz + 3 * i, q[l]);
+  }
+}
+
+void Clusterer::prefetch_runs(const Level& level, const Query& q) const {
+  const Slot* table = level.table.data();
+  const uint64_t mask = level.table.size() - 1;
+  if (q.mask != mask) return;  // the table grew since: the slots moved, and this is only a hint
+  const Cell* pool = level.pool.data();
+  for (int i = 0; i < 8; ++i)
+    if (const Slot* s = find(table, mask, q.slot[i], q.square[i])) {
+      __builtin_prefetch(&pool[s->run]);
+      if (s->count > 2) __builtin_prefetch(&pool[s->run + 2]);
+    }
+}
+
+void Clusterer::prefetch_uniform(const Level& level, const double* p) const {
+  int64_t square[3];
+  for (int a = 0; a < 3; ++a) square[a] = half_index(p[a], level.half, level.size) >> 1;
+  const uint64_t mask = level.table.size() - 1;
+  __builtin_prefetch(&level.table[hash_square(square[0], square[1], square[2]) & mask]);
+}
+
 void Clusterer::query_floating(const Level& level, const double* p, Query& q) const {
   const double h = level.half;
   int64_t other[3];
+  uint64_t term[3][2];  // axis_term of own (0) and other (1)
   for (int a = 0; a < 3; ++a) {
     const int64_t k = half_index(p[a], h, level.size);
     q.own[a] = k >> 1;  // arithmetic shift: floor division by 2 at negative indices too
     // A center within c/2 of p lies in p's square or in the neighbour on the side of p's half.
     other[a] = q.own[a] + ((k & 1) ? 1 : -1);
+    term[a][0] = axis_term(q.own[a], a);
+    term[a][1] = axis_term(other[a], a);
   }
   const Slot* table = level.table.data();
   const uint64_t mask = level.table.size() - 1;
+  q.mask = mask;
   for (int i = 0; i < 8; ++i) {
+    const int bx = i & 1, by = (i >> 1) & 1, bz = (i >> 2) & 1;
     int64_t* sq = q.square[i];
-    sq[0] = (i & 1) ? other[0] : q.own[0];
-    sq[1] = (i & 2) ? other[1] : q.own[1];
-    sq[2] = (i & 4) ? other[2] : q.own[2];
-    q.slot[i] = hash_square(sq[0], sq[1], sq[2]) & mask;
+    sq[0] = bx ? other[0] : q.own[0];
+    sq[1] = by ? other[1] : q.own[1];
+    sq[2] = bz ? other[2] : q.own[2];
+    q.slot[i] = fmix64(term[0][bx] + term[1][by] + term[2][bz]) & mask;
     // The probe for an absent square (most of them in the fine levels) runs on to the next empty slot,
     // often on the next cache line: fetch that too.
     __builtin_prefetch(&table[q.slot[i]]);
@@ -218,6 +347,10 @@ void Clusterer::query_floating(const Level& level, const double* p, Query& q) co
 void Clusterer::find_runs(const Level& level, Query& q) const {
   const Slot* table = level.table.data();
   const uint64_t mask = level.table.size() - 1;
+  if (q.mask != mask) {  // made ahead of time (assign_block), before the table last grew
+    for (int i = 0; i < 8; ++i) q.slot[i] = hash_square(q.square[i][0], q.square[i][1], q.square[i][2]) & mask;
+    q.mask = mask;
+  }
   const Cell* pool = level.pool.data();
   for (int i = 0; i < 8; ++i) {
     const Slot* s = find(table, mask, q.slot[i], q.square[i]);
@@ -231,30 +364,15 @@ void Clusterer::find_runs(const Level& level, Query& q) const {
 }
 
 uint32_t Clusterer::assign_floating(Level& level, uint32_t vertex_id, const double* p, const Query& q) {
-  const double h = level.half;
-  const Cell* pool = level.pool.data();
   const bool sphere = options_.shape == CellShape::sphere;
   const bool nearest = options_.choice == CellChoice::nearest;
-  uint32_t best = kNoCell;
-  double best_d2 = 0;
-  for (int i = 0; i < 8; ++i) {
-    const Cell* run = pool + q.run[i];
-    for (uint32_t j = 0; j < q.count[i]; ++j) {
-      const double* cp = run[j].position;
-      const uint32_t c = run[j].id;
-      const double dx = p[0] - cp[0], dy = p[1] - cp[1], dz = p[2] - cp[2];
-      // One well-predicted branch for the common cases; the exact test only when an axis rounds onto h.
-      const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
-      if (m > h) continue;
-      if (m == h && !(within(p[0], cp[0], dx, h) && within(p[1], cp[1], dy, h) && within(p[2], cp[2], dz, h)))
-        continue;
-      const double d2 = dx * dx + dy * dy + dz * dz;
-      if (sphere && d2 > level.half_sq) continue;
-      // Squares and lists come in no particular id order: distances and ids alone decide.
-      const bool better = best == kNoCell || (nearest ? (d2 < best_d2 || (d2 == best_d2 && c < best)) : c < best);
-      if (better) best = c, best_d2 = d2;
-    }
-  }
+  const Cell* pool = level.pool.data();
+  bool boundary = false;
+  uint32_t best = nearest ? (sphere ? scan_fast<true, true>(pool, q, p, level.half, level.half_sq, boundary)
+                                    : scan_fast<true, false>(pool, q, p, level.half, level.half_sq, boundary))
+                          : (sphere ? scan_fast<false, true>(pool, q, p, level.half, level.half_sq, boundary)
+                                    : scan_fast<false, false>(pool, q, p, level.half, level.half_sq, boundary));
+  if (boundary) best = scan_exact(pool, q, p, level.half, level.half_sq, sphere, nearest);
   if (best != kNoCell) return best;
 
   // Inside no cell: p starts one, attached to its own square.

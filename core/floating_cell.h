@@ -127,6 +127,14 @@ class Clusterer {
   // Allocates only when a level's pool, index or hash table grows (doubling).
   void assign(uint32_t vertex_id, std::span<const double, 3> position, std::span<uint32_t> cells);
 
+  // The same for n = ids.size() consecutive vertices in weight order: vertex i has id ids[i] and position
+  // positions[3i .. 3i + 3), and its cell in level l is written to cells[l · n + i] (level-major, so that
+  // cells.size() must be levels() · n; else Failure(Status::internal)). Exactly the ids that n calls of
+  // assign would give; faster, because the table slots and cell runs of the vertices a few places ahead
+  // are fetched while the current one is assigned (a later vertex's squares do not depend on earlier
+  // vertices, and a fetch is only a hint, so a stale one costs time, never a wrong answer).
+  void assign_block(std::span<const uint32_t> ids, std::span<const double> positions, std::span<uint32_t> cells);
+
   size_t levels() const { return levels_.size(); }
   double cell_size(size_t level) const { return levels_[level].size; }
   const ClusterOptions& options() const { return options_; }
@@ -161,6 +169,17 @@ class Clusterer {
     uint32_t run;    // index in the pool of the square's first cell
     uint32_t count;  // cells attached (the first `count` records of the run); 0 marks an empty slot
   };
+  // One level's 2×2×2 query block for a vertex (floating only): computed ahead of the assignment (for
+  // every level, and in assign_block for vertices a few places ahead) so that the hash slots and runs are
+  // fetched before any is read, and their cache misses overlap instead of following one another.
+  struct Query {
+    int64_t own[3];       // p's square
+    int64_t square[8][3]; // the block: bit a of the index selects the neighbour along axis a
+    uint64_t mask;        // the table's size − 1 when slot[] was computed (a table that grew since needs new slots)
+    uint64_t slot[8];     // hash & mask of each square
+    uint32_t run[8];      // each square's run in the pool
+    uint32_t count[8];    // and its cell count (0: square absent)
+  };
 
  private:
   // Runs have power-of-two capacities 2^k, k < kRunClasses (64 >= kMaxSphereCellsPerSquare); a run that
@@ -178,26 +197,20 @@ class Clusterer {
     uint32_t free_run[kRunClasses] = {kNoCell, kNoCell, kNoCell, kNoCell, kNoCell, kNoCell, kNoCell};
   };
 
-  // One level's 2×2×2 query block for the current vertex (floating only): computed for every level first so
-  // that the hash slots and runs of all levels are prefetched before any is read, and their cache
-  // misses overlap instead of following one another.
-  struct Query {
-    int64_t own[3];       // p's square
-    int64_t square[8][3]; // the block: bit a of the index selects the neighbour along axis a
-    uint64_t slot[8];     // hash & mask of each square, for the table as it is now
-    uint32_t run[8];      // each square's run in the pool
-    uint32_t count[8];    // and its cell count (0: square absent)
-  };
-
   void query_floating(const Level& level, const double* p, Query& q) const;
   void find_runs(const Level& level, Query& q) const;
+  void prefetch_runs(const Level& level, const Query& q) const;
+  void prefetch_uniform(const Level& level, const double* p) const;
   uint32_t assign_floating(Level& level, uint32_t vertex_id, const double* p, const Query& q);
   uint32_t assign_uniform(Level& level, uint32_t vertex_id, const double* p);
   static uint32_t add_cell(Level& level, Slot& slot, uint32_t vertex_id, const double* p);
 
   ClusterOptions options_;
   std::vector<Level> levels_;
-  std::vector<Query> queries_;  // one per level; scratch for assign, sized once
+  // Scratch for assign (one per level) and assign_block (kQueryRing per level, level-major), sized once.
+  static constexpr size_t kQueryRing = 32;
+  std::vector<Query> queries_;
+  std::vector<Query> ring_;
 };
 
 }  // namespace lodstream::core

@@ -18,12 +18,13 @@ std::string cells_path(const std::string& prefix, size_t level) { return prefix 
 std::string cell_info_path(const std::string& prefix, size_t level) { return prefix + "cells-" + std::to_string(level) + ".info"; }
 std::string order_path(const std::string& prefix) { return prefix + "order.u32"; }
 
-ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, std::span<const double> cell_sizes,
-                              const core::ClusterOptions& options, const WorkDir& work, Progress& progress,
-                              const std::string& prefix) {
+ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, bool single_precision,
+                              std::span<const double> cell_sizes, const core::ClusterOptions& options,
+                              const WorkDir& work, Progress& progress, const std::string& prefix) {
   const size_t levels = cell_sizes.size();
+  const uint64_t record_bytes = weight_record_bytes(single_precision);
   io::MappedFile index(index_path);
-  if (index.size() != records * sizeof(WeightRecord)) fail(Status::io_error, index_path + ": size does not match");
+  if (index.size() != records * record_bytes) fail(Status::io_error, index_path + ": size does not match");
 
   // Levels are split into one group per thread, each group one multi-level Clusterer (whose staged
   // prefetch overlaps the levels' cache misses). Measured on a 48M-triangle scene, the finest level costs
@@ -39,7 +40,7 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, s
   struct Group {
     std::vector<size_t> levels;  // increasing
     std::unique_ptr<core::Clusterer> clusterer;
-    std::vector<uint32_t> cells;
+    std::vector<uint32_t> cells;  // the block's cells, level-major (Clusterer::assign_block)
   };
   std::vector<Level> state(levels);
   for (size_t l = 0; l < levels; ++l) state[l].cells.open(cells_path(prefix, l), 1 << 20);
@@ -57,29 +58,37 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, s
     std::vector<double> sizes;
     for (size_t l : grp.levels) sizes.push_back(cell_sizes[l]);
     grp.clusterer = std::make_unique<core::Clusterer>(sizes, options);
-    grp.cells.resize(grp.levels.size());
   }
   io::FileWriter order(order_path(prefix), 1 << 20);
   std::vector<uint32_t> ids;
+  std::vector<double> grades, xyz;
 
   constexpr uint64_t block = 1 << 16;
   constexpr uint64_t kAhead = 8;
   ClusterSummary summary;
   for (uint64_t first = 0; first < records; first += block) {
     const uint64_t n = std::min(block, records - first);
-    const io::Window w = index.map(first * sizeof(WeightRecord), (first + n) * sizeof(WeightRecord));
-    const WeightRecord* rec = reinterpret_cast<const WeightRecord*>(w.data());
+    const io::Window w = index.map(first * record_bytes, (first + n) * record_bytes);
+    // The block's records as plain arrays, positions widened to double (exact for float).
     ids.resize(n);
-    for (uint64_t i = 0; i < n; ++i) ids[i] = rec[i].id;
+    grades.resize(n);
+    xyz.resize(3 * n);
+    auto unpack = [&](const auto* rec) {
+      for (uint64_t i = 0; i < n; ++i) {
+        ids[i] = rec[i].id;
+        grades[i] = rec[i].grade;
+        for (int k = 0; k < 3; ++k) xyz[3 * i + k] = rec[i].position[k];
+      }
+    };
+    if (single_precision) unpack(reinterpret_cast<const WeightRecord32*>(w.data()));
+    else unpack(reinterpret_cast<const WeightRecord64*>(w.data()));
     order.write_array(std::span<const uint32_t>(ids));
     tbb::parallel_for(size_t{0}, n_groups, [&](size_t g) {
       Group& grp = groups[g];
-      for (size_t l : grp.levels) state[l].block.resize(n);
-      for (uint64_t i = 0; i < n; ++i) {
-        const WeightRecord& r = rec[i];
-        grp.clusterer->assign(r.id, std::span<const double, 3>(r.position, 3), grp.cells);
-        for (size_t j = 0; j < grp.levels.size(); ++j) state[grp.levels[j]].block[i] = grp.cells[j];
-      }
+      grp.cells.resize(grp.levels.size() * n);
+      grp.clusterer->assign_block(ids, xyz, grp.cells);
+      for (size_t j = 0; j < grp.levels.size(); ++j)
+        state[grp.levels[j]].block.assign(grp.cells.begin() + j * n, grp.cells.begin() + (j + 1) * n);
       // The cells' sums, level by level once the block's cells are known, so that the cell records can be
       // fetched kAhead vertices ahead; each cell still adds its vertices in weight order.
       for (size_t j = 0; j < grp.levels.size(); ++j) {
@@ -90,20 +99,21 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, s
             __builtin_prefetch(ahead);
             __builtin_prefetch(ahead + sizeof(CellInfo) - 1);
           }
-          const WeightRecord& r = rec[i];
+          const double* p = &xyz[3 * i];
+          const double grade = grades[i];
           const uint32_t cell = s.block[i];
           if (cell == s.info.size()) {
             CellInfo c{};
-            std::copy(r.position, r.position + 3, c.center);
-            c.center_vertex = r.id;
+            std::copy(p, p + 3, c.center);
+            c.center_vertex = ids[i];
             s.info.push_back(c);
           }
           CellInfo& c = s.info[cell];
           for (int k = 0; k < 3; ++k) {
-            c.weighted[k] += r.grade * r.position[k];
-            c.sum[k] += r.position[k];
+            c.weighted[k] += grade * p[k];
+            c.sum[k] += p[k];
           }
-          c.weight += r.grade;
+          c.weight += grade;
           ++c.vertices;
         }
         s.cells.write_array(std::span<const uint32_t>(s.block));

@@ -34,9 +34,11 @@ struct ClusterSummary {
   std::vector<uint64_t> cells;  // per level
 };
 
-ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, std::span<const double> cell_sizes,
-                              const core::ClusterOptions& options, const WorkDir& work, Progress& progress,
-                              const std::string& prefix);
+// index_path: the weight index of `records` records (WeightRecord32 if single_precision, else
+// WeightRecord64; stream/grade_stage.h).
+ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, bool single_precision,
+                              std::span<const double> cell_sizes, const core::ClusterOptions& options,
+                              const WorkDir& work, Progress& progress, const std::string& prefix);
 
 std::string cells_path(const std::string& prefix, size_t level);
 std::string cell_info_path(const std::string& prefix, size_t level);

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <memory>
+#include <type_traits>
 #include <vector>
 
 #include <tbb/enumerable_thread_specific.h>
@@ -140,7 +141,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
   // Range size from the budget: per vertex its offsets, counters, a record, and its share of incidence
   // entries (two per triangle corner, one per segment end).
   const double incidences = n_vertices ? static_cast<double>(6 * meta.triangles + 2 * meta.lines) / static_cast<double>(n_vertices) : 0;
-  const uint64_t per_vertex = 8 + 4 + 8 + sizeof(WeightRecord) + static_cast<uint64_t>(std::ceil(4 * incidences));
+  const uint64_t per_vertex = 8 + 4 + 8 + weight_record_bytes(meta.single_precision) + static_cast<uint64_t>(std::ceil(4 * incidences));
   const uint64_t range_budget = std::max<uint64_t>(plan.stage_bytes / 3, 16 << 20);
   uint64_t range = std::max<uint64_t>(range_budget / per_vertex, 4096);
   if (max_range_vertices) range = std::min(range, max_range_vertices);
@@ -188,122 +189,133 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
       for (auto& w : ws) w->commit();
   }
 
-  ExternalSorter<WeightRecord, WeightLess> sorter(work, "weights", std::max<uint64_t>(plan.stage_bytes / 3, 4 << 20));
-  std::vector<uint32_t> count;
-  std::vector<uint64_t> offset;
-  std::vector<uint32_t> neighbours;
-  std::vector<uint8_t> used;
-  std::vector<double> grades;
-  struct Local {
-    core::GradeScratch scratch;
-    std::vector<double> nbr;
-  };
-  tbb::enumerable_thread_specific<Local> locals;
+  // The rest (grading by range, the sort) once per record type: the index keeps the store's precision.
+  auto grade_ranges = [&](auto record_type) {
+    using Record = decltype(record_type);
+    using Real = std::remove_extent_t<decltype(Record::position)>;
+    ExternalSorter<Record, WeightLess> sorter(work, "weights", std::max<uint64_t>(plan.stage_bytes / 3, 4 << 20));
+    std::vector<uint32_t> count;
+    std::vector<uint64_t> offset;
+    std::vector<uint32_t> neighbours;
+    std::vector<uint8_t> used;
+    std::vector<double> grades;
+    struct Local {
+      core::GradeScratch scratch;
+      std::vector<double> nbr;
+    };
+    tbb::enumerable_thread_specific<Local> locals;
 
-  for (uint64_t r = 0; r < n_ranges; ++r) {
-    progress.check();
-    const uint64_t lo = r * range, hi = std::min(n_vertices, lo + range), n = hi - lo;
-    // The range's primitives: its bucket files, or the whole store.
-    auto visit = [&](auto&& fn) {
-      if (n_ranges == 1) {
-        visit_store(columns, canonical, [&](int kind, uint64_t, std::span<const uint32_t> ids) { fn(kind, ids); });
-      } else {
-        for (int kind = 0; kind < 3; ++kind) {
-          const uint64_t bytes = std::filesystem::file_size(bucket_paths[kind][r]);
-          for_column_blocks(bucket_paths[kind][r], bytes / (4 * Columns::arity[kind]), Columns::arity[kind], kBlock,
-                            [&](uint64_t, std::span<const uint32_t> ids) { fn(kind, ids); });
+    for (uint64_t r = 0; r < n_ranges; ++r) {
+      progress.check();
+      const uint64_t lo = r * range, hi = std::min(n_vertices, lo + range), n = hi - lo;
+      // The range's primitives: its bucket files, or the whole store.
+      auto visit = [&](auto&& fn) {
+        if (n_ranges == 1) {
+          visit_store(columns, canonical, [&](int kind, uint64_t, std::span<const uint32_t> ids) { fn(kind, ids); });
+        } else {
+          for (int kind = 0; kind < 3; ++kind) {
+            const uint64_t bytes = std::filesystem::file_size(bucket_paths[kind][r]);
+            for_column_blocks(bucket_paths[kind][r], bytes / (4 * Columns::arity[kind]), Columns::arity[kind], kBlock,
+                              [&](uint64_t, std::span<const uint32_t> ids) { fn(kind, ids); });
+          }
         }
-      }
-    };
-    // Calls corner(local id, primitive ids, arity, k) in parallel for every corner k in the range.
-    auto for_range_corners = [&](std::span<const uint32_t> ids, size_t arity, auto&& corner) {
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size() / arity, 1 << 12), [&](const tbb::blocked_range<size_t>& b) {
-        for (size_t i = b.begin(); i < b.end(); ++i) {
-          const uint32_t* p = &ids[i * arity];
-          for (size_t k = 0; k < arity; ++k)
-            if (p[k] >= lo && p[k] < hi) corner(p[k] - lo, p, arity, k);
+      };
+      // Calls corner(local id, primitive ids, arity, k) in parallel for every corner k in the range.
+      auto for_range_corners = [&](std::span<const uint32_t> ids, size_t arity, auto&& corner) {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size() / arity, 1 << 12), [&](const tbb::blocked_range<size_t>& b) {
+          for (size_t i = b.begin(); i < b.end(); ++i) {
+            const uint32_t* p = &ids[i * arity];
+            for (size_t k = 0; k < arity; ++k)
+              if (p[k] >= lo && p[k] < hi) corner(p[k] - lo, p, arity, k);
+          }
+        });
+      };
+      // Pass 1: incidence counts (and, with one range, the area).
+      count.assign(n, 0);
+      used.assign(n, 0);
+      visit([&](int kind, std::span<const uint32_t> ids) {
+        if (kind == 0 && n_ranges == 1) block_area(ids, positions, summary.areas, area_scratch);
+        for_range_corners(ids, static_cast<size_t>(Columns::arity[kind]), [&](uint64_t l, const uint32_t* p, size_t arity, size_t k) {
+          std::atomic_ref<uint8_t>(used[l]).store(1, std::memory_order_relaxed);
+          uint32_t others = 0;
+          for (size_t j = 0; j < arity; ++j) others += j != k && p[j] != p[k];
+          if (others) std::atomic_ref<uint32_t>(count[l]).fetch_add(others, std::memory_order_relaxed);
+        });
+      });
+      offset.assign(n + 1, 0);
+      for (uint64_t i = 0; i < n; ++i) offset[i + 1] = offset[i] + count[i];
+      neighbours.resize(offset[n]);
+      for (uint64_t i = 0; i < n; ++i) count[i] = 0;
+      // Pass 2: fill (in any order: each list is sorted below).
+      visit([&](int kind, std::span<const uint32_t> ids) {
+        if (Columns::arity[kind] == 1) return;
+        for_range_corners(ids, static_cast<size_t>(Columns::arity[kind]), [&](uint64_t l, const uint32_t* p, size_t arity, size_t k) {
+          for (size_t j = 0; j < arity; ++j) {
+            if (j == k || p[j] == p[k]) continue;
+            const uint32_t at = std::atomic_ref<uint32_t>(count[l]).fetch_add(1, std::memory_order_relaxed);
+            neighbours[offset[l] + at] = p[j];
+          }
+        });
+      });
+      // Grade.
+      grades.assign(n, 0);
+      tbb::parallel_for(tbb::blocked_range<uint64_t>(0, n, 1 << 10), [&](const tbb::blocked_range<uint64_t>& b) {
+        Local& loc = locals.local();
+        for (uint64_t l = b.begin(); l < b.end(); ++l) {
+          if (!used[l]) continue;
+          uint32_t* first = neighbours.data() + offset[l];
+          uint32_t* last = neighbours.data() + offset[l + 1];
+          std::sort(first, last);
+          last = std::unique(first, last);
+          loc.nbr.resize(3 * static_cast<size_t>(last - first));
+          for (uint32_t* it = first; it != last; ++it) positions.get(*it, &loc.nbr[3 * (it - first)]);
+          double p[3];
+          positions.get(lo + l, p);
+          grades[l] = core::grade_vertex(std::span<const double, 3>(p, 3), loc.nbr, mode, loc.scratch).grade;
         }
       });
-    };
-    // Pass 1: incidence counts (and, with one range, the area).
-    count.assign(n, 0);
-    used.assign(n, 0);
-    visit([&](int kind, std::span<const uint32_t> ids) {
-      if (kind == 0 && n_ranges == 1) block_area(ids, positions, summary.areas, area_scratch);
-      for_range_corners(ids, static_cast<size_t>(Columns::arity[kind]), [&](uint64_t l, const uint32_t* p, size_t arity, size_t k) {
-        std::atomic_ref<uint8_t>(used[l]).store(1, std::memory_order_relaxed);
-        uint32_t others = 0;
-        for (size_t j = 0; j < arity; ++j) others += j != k && p[j] != p[k];
-        if (others) std::atomic_ref<uint32_t>(count[l]).fetch_add(others, std::memory_order_relaxed);
-      });
-    });
-    offset.assign(n + 1, 0);
-    for (uint64_t i = 0; i < n; ++i) offset[i + 1] = offset[i] + count[i];
-    neighbours.resize(offset[n]);
-    for (uint64_t i = 0; i < n; ++i) count[i] = 0;
-    // Pass 2: fill (in any order: each list is sorted below).
-    visit([&](int kind, std::span<const uint32_t> ids) {
-      if (Columns::arity[kind] == 1) return;
-      for_range_corners(ids, static_cast<size_t>(Columns::arity[kind]), [&](uint64_t l, const uint32_t* p, size_t arity, size_t k) {
-        for (size_t j = 0; j < arity; ++j) {
-          if (j == k || p[j] == p[k]) continue;
-          const uint32_t at = std::atomic_ref<uint32_t>(count[l]).fetch_add(1, std::memory_order_relaxed);
-          neighbours[offset[l] + at] = p[j];
-        }
-      });
-    });
-    // Grade.
-    grades.assign(n, 0);
-    tbb::parallel_for(tbb::blocked_range<uint64_t>(0, n, 1 << 10), [&](const tbb::blocked_range<uint64_t>& b) {
-      Local& loc = locals.local();
-      for (uint64_t l = b.begin(); l < b.end(); ++l) {
+      for (uint64_t l = 0; l < n; ++l) {
         if (!used[l]) continue;
-        uint32_t* first = neighbours.data() + offset[l];
-        uint32_t* last = neighbours.data() + offset[l + 1];
-        std::sort(first, last);
-        last = std::unique(first, last);
-        loc.nbr.resize(3 * static_cast<size_t>(last - first));
-        for (uint32_t* it = first; it != last; ++it) positions.get(*it, &loc.nbr[3 * (it - first)]);
+        Record rec{};
+        rec.grade = grades[l];
+        rec.id = static_cast<uint32_t>(lo + l);
         double p[3];
         positions.get(lo + l, p);
-        grades[l] = core::grade_vertex(std::span<const double, 3>(p, 3), loc.nbr, mode, loc.scratch).grade;
+        for (int k = 0; k < 3; ++k) rec.position[k] = static_cast<Real>(p[k]);  // the stored value: exact
+        sorter.push(rec);
+        ++summary.records;
       }
-    });
-    for (uint64_t l = 0; l < n; ++l) {
-      if (!used[l]) continue;
-      WeightRecord rec{grades[l], static_cast<uint32_t>(lo + l), 0, {0, 0, 0}};
-      positions.get(lo + l, rec.position);
-      sorter.push(rec);
-      ++summary.records;
+      // Drop the mapped pages this range touched from the resident set.
+      positions.release();
+      canonical.release();
+      positions.acquire();
+      canonical.acquire();
+      if (n_ranges > 1)
+        for (int kind = 0; kind < 3; ++kind) std::filesystem::remove(bucket_paths[kind][r]);
+      progress.report("grade", 0.3 + 0.5 * static_cast<double>(r + 1) / static_cast<double>(n_ranges));
     }
-    // Drop the mapped pages this range touched from the resident set.
+    for (double a : summary.areas.area) summary.surface_area += a;
+    progress.report("grade", 1);
     positions.release();
     canonical.release();
-    positions.acquire();
-    canonical.acquire();
-    if (n_ranges > 1)
-      for (int kind = 0; kind < 3; ++kind) std::filesystem::remove(bucket_paths[kind][r]);
-    progress.report("grade", 0.3 + 0.5 * static_cast<double>(r + 1) / static_cast<double>(n_ranges));
-  }
-  for (double a : summary.areas.area) summary.surface_area += a;
-  progress.report("grade", 1);
-  positions.release();
-  canonical.release();
-  std::vector<uint32_t>().swap(count);
-  std::vector<uint64_t>().swap(offset);
-  std::vector<uint32_t>().swap(neighbours);
-  std::vector<uint8_t>().swap(used);
-  std::vector<double>().swap(grades);
+    std::vector<uint32_t>().swap(count);
+    std::vector<uint64_t>().swap(offset);
+    std::vector<uint32_t>().swap(neighbours);
+    std::vector<uint8_t>().swap(used);
+    std::vector<double>().swap(grades);
 
-  io::FileWriter out(index_path, 4 << 20);
-  uint64_t written = 0;
-  sorter.merge([&](const WeightRecord& rec) {
-    out.write(&rec, sizeof rec);
-    if ((++written & 0xFFFFF) == 0)
-      progress.report("sort", static_cast<double>(written) / static_cast<double>(summary.records));
-  });
-  out.commit();
-  progress.report("sort", 1);
+    io::FileWriter out(index_path, 4 << 20);
+    uint64_t written = 0;
+    sorter.merge([&](const Record& rec) {
+      out.write(&rec, sizeof rec);
+      if ((++written & 0xFFFFF) == 0)
+        progress.report("sort", static_cast<double>(written) / static_cast<double>(summary.records));
+    });
+    out.commit();
+    progress.report("sort", 1);
+  };
+  if (meta.single_precision) grade_ranges(WeightRecord32{});
+  else grade_ranges(WeightRecord64{});
   return summary;
 }
 

@@ -28,16 +28,30 @@
 
 namespace lodstream::stream {
 
-// One weight-index record: 40 bytes.
-struct WeightRecord {
+// One weight-index record. The position is kept at the scene store's precision: 24 bytes for a
+// single-precision store (most inputs: PLY/STL/OBJ floats), 40 for a double one. The index is written
+// and read back in full (about 1.4 GB for 35 M vertices at 40 bytes), so its record size is a large share
+// of the grade and cluster stages' I/O; widening float to double in the cluster pass is exact, so the
+// clustering sees the same values either way.
+struct WeightRecord32 {
   double grade;
   uint32_t id;  // canonical vertex id
-  uint32_t reserved;  // 0
+  float position[3];
+};
+struct WeightRecord64 {
+  double grade;
+  uint32_t id;        // canonical vertex id
+  uint32_t reserved;  // 0 (no indeterminate padding bytes in the file)
   double position[3];
 };
+static_assert(sizeof(WeightRecord32) == 24 && sizeof(WeightRecord64) == 40);
+inline uint64_t weight_record_bytes(bool single_precision) {
+  return single_precision ? sizeof(WeightRecord32) : sizeof(WeightRecord64);
+}
 // Non-increasing grade, ties by increasing id: a total order, since ids are unique.
 struct WeightLess {
-  bool operator()(const WeightRecord& a, const WeightRecord& b) const {
+  template <class Record>
+  bool operator()(const Record& a, const Record& b) const {
     if (a.grade != b.grade) return a.grade > b.grade;
     return a.id < b.id;
   }
@@ -62,7 +76,8 @@ struct GradeSummary {
 
 // Writes `canonical_path` (uint32 per stored vertex: its canonical id) unless every position is distinct
 // (then it writes nothing and returns distinct == vertices), and `index_path`, the weight index: one
-// WeightRecord per used canonical vertex in WeightLess order. `max_range_vertices` caps the range size
+// record (WeightRecord32 if meta.single_precision, else WeightRecord64) per used canonical vertex in
+// WeightLess order. `max_range_vertices` caps the range size
 // (0 = from the budget; tests force small ranges to exercise the seams). Throws Failure.
 GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta, core::Grading mode,
                             const MemoryPlan& plan, const WorkDir& work, Progress& progress,

@@ -37,7 +37,9 @@ using nlohmann::ordered_json;
 using stream::guarded;
 using stream::run_stage;
 
-constexpr int kStampVersion = 1;
+// Part of every stage stamp; bumped when a work file changes format (2: the weight index keeps the store's
+// precision), so that a work directory from an older build is redone rather than misread.
+constexpr int kStampVersion = 2;
 constexpr uint64_t kCoarsestTarget = 4000;  // "a few thousand" triangles at the coarsest default level
 constexpr unsigned kMaxLevels = 32;
 constexpr unsigned kMaxSearchPasses = 12;
@@ -247,7 +249,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         }
         std::filesystem::remove(work.file("cluster.json"));
         check_cell_sizes(sizes, meta.bbox);
-        const stream::ClusterSummary cs = stream::cluster_levels(index_path, grade.records, sizes, copts, work, progress, prefix);
+        const stream::ClusterSummary cs = stream::cluster_levels(index_path, grade.records, meta.single_precision, sizes, copts, work,
+                                                                    progress, prefix);
         std::vector<std::string> files{stream::order_path(prefix)};
         for (size_t l = 0; l < sizes.size(); ++l) {
           files.push_back(stream::cells_path(prefix, l));
