@@ -162,26 +162,36 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
         bucket_paths[kind].push_back(work.scratch("grade-bucket"));
         writers[kind].push_back(std::make_unique<io::FileWriter>(bucket_paths[kind].back(), buffer));
       }
-    std::vector<std::vector<uint32_t>> out(n_ranges);
+    // Routing runs in parallel over kParts fixed slices of each block, each slice into its own lists; the
+    // lists are written slice by slice, so a bucket file holds its primitives in store order as before.
+    constexpr size_t kParts = 8;
+    std::vector<std::vector<uint32_t>> out(kParts * n_ranges);
     uint64_t done = 0;
     const uint64_t total = meta.triangles + meta.lines + meta.points;
     visit_store(columns, canonical, [&](int kind, uint64_t, std::span<const uint32_t> ids) {
-      const int arity = Columns::arity[kind];
+      const size_t arity = static_cast<size_t>(Columns::arity[kind]);
       if (kind == 0) block_area(ids, positions, summary.areas, area_scratch);
-      for (auto& o : out) o.clear();
-      for (size_t i = 0; i < ids.size(); i += static_cast<size_t>(arity)) {
-        uint64_t seen[3];
-        int n_seen = 0;
-        for (int k = 0; k < arity; ++k) {
-          const uint64_t r = ids[i + k] / range;
-          bool dup = false;
-          for (int j = 0; j < n_seen; ++j) dup |= seen[j] == r;
-          if (dup) continue;
-          seen[n_seen++] = r;
-          out[r].insert(out[r].end(), ids.begin() + i, ids.begin() + i + arity);
+      const size_t prims = ids.size() / arity;
+      tbb::parallel_for(size_t{0}, kParts, [&](size_t part) {
+        std::vector<uint32_t>* o = &out[part * n_ranges];
+        for (uint64_t r = 0; r < n_ranges; ++r) o[r].clear();
+        for (size_t t = prims * part / kParts; t < prims * (part + 1) / kParts; ++t) {
+          const uint32_t* p = &ids[t * arity];
+          uint64_t seen[3];
+          int n_seen = 0;
+          for (size_t k = 0; k < arity; ++k) {
+            const uint64_t r = p[k] / range;
+            bool dup = false;
+            for (int j = 0; j < n_seen; ++j) dup |= seen[j] == r;
+            if (dup) continue;
+            seen[n_seen++] = r;
+            o[r].insert(o[r].end(), p, p + arity);
+          }
         }
-      }
-      for (uint64_t r = 0; r < n_ranges; ++r) writers[kind][r]->write_array(std::span<const uint32_t>(out[r]));
+      });
+      for (uint64_t r = 0; r < n_ranges; ++r)
+        for (size_t part = 0; part < kParts; ++part)
+          writers[kind][r]->write_array(std::span<const uint32_t>(out[part * n_ranges + r]));
       done += ids.size() / arity;
       progress.report("grade", 0.3 * static_cast<double>(done) / static_cast<double>(std::max<uint64_t>(total, 1)));
     });
