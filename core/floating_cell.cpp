@@ -214,6 +214,7 @@ void HugePageAllocator<T>::deallocate(T* p, size_t n) {
 template struct HugePageAllocator<Clusterer::Cell>;
 template struct HugePageAllocator<Clusterer::Slot>;
 template struct HugePageAllocator<uint32_t>;
+template struct HugePageAllocator<Clusterer::DenseSquare>;
 
 int64_t grid_square(double x, double size) {
   if (!(size >= kMinCellSize && size <= kMaxCellSize))
@@ -221,8 +222,10 @@ int64_t grid_square(double x, double size) {
   return half_index(x, size / 2, size) >> 1;
 }
 
-Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options) : options_(options) {
+Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options, std::span<const double> bounds)
+    : options_(options) {
   if (cell_sizes.empty()) fail(Status::usage, "clustering: no level (no cell size)");
+  if (!bounds.empty() && bounds.size() != 6) fail(Status::internal, "clustering: bounds need 6 values");
   levels_.resize(cell_sizes.size());
   for (size_t l = 0; l < cell_sizes.size(); ++l) {
     const double c = cell_sizes[l];
@@ -234,7 +237,19 @@ Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options)
     level.size = c;
     level.half = c / 2;  // exact: c is normal
     level.half_sq = level.half * level.half;
-    level.table.assign(kInitialSlots, Slot{{0, 0, 0}, kNoCell, 0});
+    uint64_t squares = bounds.empty() ? kMaxDenseSquares + 1 : 1;
+    for (int a = 0; a < 3 && !bounds.empty(); ++a) {
+      level.first[a] = grid_square(bounds[a], c) - 1;
+      level.dims[a] = grid_square(bounds[3 + a], c) + 2 - level.first[a];
+      squares = level.dims[a] > 0 && static_cast<uint64_t>(level.dims[a]) <= kMaxDenseSquares
+                    ? squares * static_cast<uint64_t>(level.dims[a])
+                    : kMaxDenseSquares + 1;
+      if (squares > kMaxDenseSquares) squares = kMaxDenseSquares + 1;
+    }
+    if (squares <= kMaxDenseSquares)
+      level.dense.assign(squares, DenseSquare{kNoCell, 0});
+    else
+      level.table.assign(kInitialSlots, Slot{{0, 0, 0}, kNoCell, 0});
   }
   if (options_.clustering == Clustering::floating) {
     queries_.resize(levels_.size());
@@ -297,6 +312,13 @@ void Clusterer::assign_block(std::span<const uint32_t> ids, std::span<const doub
 }
 
 void Clusterer::prefetch_runs(const Level& level, const Query& q) const {
+  if (!level.dense.empty()) {
+    for (int i = 0; i < 8; ++i) {
+      const DenseSquare& d = level.dense[q.slot[i]];
+      if (d.count) __builtin_prefetch(&level.pool[d.run]);
+    }
+    return;
+  }
   const Slot* table = level.table.data();
   const uint64_t mask = level.table.size() - 1;
   if (q.mask != mask) return;  // the table grew since: the slots moved, and this is only a hint
@@ -311,8 +333,27 @@ void Clusterer::prefetch_runs(const Level& level, const Query& q) const {
 void Clusterer::prefetch_uniform(const Level& level, const double* p) const {
   int64_t square[3];
   for (int a = 0; a < 3; ++a) square[a] = half_index(p[a], level.half, level.size) >> 1;
+  if (!level.dense.empty()) return;  // small enough to stay in cache
   const uint64_t mask = level.table.size() - 1;
   __builtin_prefetch(&level.table[hash_square(square[0], square[1], square[2]) & mask]);
+}
+
+// The index of `square` in a dense level's array. The vertex's own square must lie inside the bounds'
+// squares (then its query block lies in the array, which has one more square on each side).
+uint64_t Clusterer::dense_index(const Level& level, const int64_t square[3]) {
+  const uint64_t x = static_cast<uint64_t>(square[0] - level.first[0]);
+  const uint64_t y = static_cast<uint64_t>(square[1] - level.first[1]);
+  const uint64_t z = static_cast<uint64_t>(square[2] - level.first[2]);
+  return x + static_cast<uint64_t>(level.dims[0]) * (y + static_cast<uint64_t>(level.dims[1]) * z);
+}
+
+[[gnu::cold, gnu::noinline]] static void outside_bounds() {
+  fail(Status::internal, "clustering: a position lies outside the bounds given to the clusterer");
+}
+
+static inline void check_inside(const int64_t* first, const int64_t* dims, const int64_t own[3]) {
+  for (int a = 0; a < 3; ++a)
+    if (own[a] <= first[a] || own[a] >= first[a] + dims[a] - 1) outside_bounds();
 }
 
 void Clusterer::query_floating(const Level& level, const double* p, Query& q) const {
@@ -326,6 +367,18 @@ void Clusterer::query_floating(const Level& level, const double* p, Query& q) co
     other[a] = q.own[a] + ((k & 1) ? 1 : -1);
     term[a][0] = axis_term(q.own[a], a);
     term[a][1] = axis_term(other[a], a);
+  }
+  if (!level.dense.empty()) {
+    check_inside(level.first, level.dims, q.own);
+    q.mask = 0;
+    for (int i = 0; i < 8; ++i) {
+      int64_t* sq = q.square[i];
+      sq[0] = (i & 1) ? other[0] : q.own[0];
+      sq[1] = (i & 2) ? other[1] : q.own[1];
+      sq[2] = (i & 4) ? other[2] : q.own[2];
+      q.slot[i] = dense_index(level, sq);
+    }
+    return;
   }
   const Slot* table = level.table.data();
   const uint64_t mask = level.table.size() - 1;
@@ -345,6 +398,14 @@ void Clusterer::query_floating(const Level& level, const double* p, Query& q) co
 }
 
 void Clusterer::find_runs(const Level& level, Query& q) const {
+  if (!level.dense.empty()) {
+    for (int i = 0; i < 8; ++i) {
+      const DenseSquare& d = level.dense[q.slot[i]];
+      q.run[i] = d.run;
+      q.count[i] = d.count;
+    }
+    return;
+  }
   const Slot* table = level.table.data();
   const uint64_t mask = level.table.size() - 1;
   if (q.mask != mask) {  // made ahead of time (assign_block), before the table last grew
@@ -375,42 +436,64 @@ uint32_t Clusterer::assign_floating(Level& level, uint32_t vertex_id, const doub
   if (boundary) best = scan_exact(pool, q, p, level.half, level.half_sq, sphere, nearest);
   if (best != kNoCell) return best;
 
-  // Inside no cell: p starts one, attached to its own square.
-  bool inserted = false;
-  Slot& slot = find_or_insert(level.table, level.used, q.own, inserted);
-  const uint32_t id = add_cell(level, slot, vertex_id, p);
-  // invariant: slot.count <= kMaxCubeCellsPerSquare (cubes) or kMaxSphereCellsPerSquare (spheres); see the
+  return start_cell(level, vertex_id, p, q.own);
+}
+
+// p lies in no cell: it starts one, attached to its own square.
+uint32_t Clusterer::start_cell(Level& level, uint32_t vertex_id, const double* p, const int64_t square[3]) {
+  uint32_t* run;
+  uint32_t* count;
+  if (!level.dense.empty()) {
+    DenseSquare& d = level.dense[dense_index(level, square)];
+    run = &d.run, count = &d.count;
+  } else {
+    bool inserted = false;
+    Slot& slot = find_or_insert(level.table, level.used, square, inserted);
+    run = &slot.run, count = &slot.count;
+  }
+  const uint32_t id = add_cell(level, *run, *count, vertex_id, p);
+  // invariant: count <= kMaxCubeCellsPerSquare (cubes) or kMaxSphereCellsPerSquare (spheres); see the
   // header for the proof. It rests on the exact square and inside tests above, so a violation is a bug.
-  const uint32_t bound = sphere ? kMaxSphereCellsPerSquare : kMaxCubeCellsPerSquare;
-  if (slot.count > bound)
-    fail(Status::internal, "clustering: " + std::to_string(slot.count) + " cells attached to one grid square (bound " +
+  const uint32_t bound = options_.shape == CellShape::sphere ? kMaxSphereCellsPerSquare : kMaxCubeCellsPerSquare;
+  if (*count > bound)
+    fail(Status::internal, "clustering: " + std::to_string(*count) + " cells attached to one grid square (bound " +
                                std::to_string(bound) + ")");
-  if (slot.count > level.max_per_square) level.max_per_square = slot.count;
+  if (*count > level.max_per_square) level.max_per_square = *count;
   return id;
 }
 
 uint32_t Clusterer::assign_uniform(Level& level, uint32_t vertex_id, const double* p) {
   int64_t square[3];
   for (int a = 0; a < 3; ++a) square[a] = half_index(p[a], level.half, level.size) >> 1;
-  bool inserted = false;
-  Slot& slot = find_or_insert(level.table, level.used, square, inserted);
-  if (inserted) {
+  uint32_t* run;
+  uint32_t* count;
+  if (!level.dense.empty()) {
+    check_inside(level.first, level.dims, square);
+    DenseSquare& d = level.dense[dense_index(level, square)];
+    run = &d.run, count = &d.count;
+  } else {
+    bool inserted = false;
+    Slot& slot = find_or_insert(level.table, level.used, square, inserted);
+    run = &slot.run, count = &slot.count;
+  }
+  if (*count == 0) {
     // The first vertex to reach a square is its heaviest: it names the cell and numbers it.
-    add_cell(level, slot, vertex_id, p);
+    add_cell(level, *run, *count, vertex_id, p);
     level.max_per_square = 1;
   }
   // Every uniform square holds one cell, in a run of one appended when the square appeared and never
   // moved: the run's index in the pool is the cell's id, and returning it saves a random read.
-  return slot.run;
+  return *run;
 }
 
-// Appends a new cell centred on p to `slot`'s run (count += 1), moving the run to one twice as large first
-// if it is full, and returns the cell's id.
-uint32_t Clusterer::add_cell(Level& level, Slot& slot, uint32_t vertex_id, const double* p) {
+// Appends a new cell centred on p to a square's run (its `slot_run`, `slot_count` fields; count += 1),
+// moving the run to one twice as large first if it is full, and returns the cell's id.
+uint32_t Clusterer::add_cell(Level& level, uint32_t& slot_run, uint32_t& slot_count, uint32_t vertex_id,
+                             const double* p) {
   // Cell ids share uint32 with vertex ids and kNoCell is reserved; a pass creates at most one cell per
   // vertex, so reaching it means the caller fed more than 2^32 − 1 vertices.
   if (level.where.size() >= kNoCell) fail(Status::internal, "clustering: more than 2^32 - 1 cells in one level");
-  const uint32_t n = slot.count;
+  const uint32_t n = slot_count;
   // A run's capacity is the power of two >= its count (1 for a new square), so it is full exactly when the
   // count is 0 or a power of two.
   if ((n & (n - 1)) == 0) {
@@ -427,20 +510,20 @@ uint32_t Clusterer::add_cell(Level& level, Slot& slot, uint32_t vertex_id, const
     }
     if (n > 0) {
       for (uint32_t j = 0; j < n; ++j) {
-        level.pool[run + j] = level.pool[slot.run + j];
+        level.pool[run + j] = level.pool[slot_run + j];
         level.where[level.pool[run + j].id] = run + j;
       }
       const int old_k = std::countr_zero(n);
-      level.pool[slot.run].id = level.free_run[old_k];
-      level.free_run[old_k] = slot.run;
+      level.pool[slot_run].id = level.free_run[old_k];
+      level.free_run[old_k] = slot_run;
     }
-    slot.run = run;
+    slot_run = run;
   }
   const uint32_t id = static_cast<uint32_t>(level.where.size());
-  const uint32_t at = slot.run + n;
+  const uint32_t at = slot_run + n;
   level.pool[at] = Cell{{p[0], p[1], p[2]}, vertex_id, id};
   level.where.push_back(at);
-  slot.count = n + 1;
+  slot_count = n + 1;
   return id;
 }
 
@@ -448,7 +531,7 @@ uint64_t Clusterer::memory_bytes() const {
   uint64_t bytes = sizeof(*this) + levels_.capacity() * sizeof(Level);
   for (const Level& level : levels_)
     bytes += level.pool.capacity() * sizeof(Cell) + level.where.capacity() * sizeof(uint32_t) +
-             level.table.capacity() * sizeof(Slot);
+             level.table.capacity() * sizeof(Slot) + level.dense.capacity() * sizeof(DenseSquare);
   return bytes + queries_.capacity() * sizeof(Query);
 }
 

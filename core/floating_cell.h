@@ -44,8 +44,9 @@
 //   Failure(Status::internal) if it is ever exceeded (a bug, never bad input).
 // - Memory grows with the number of cells, not of vertices: per level one 32-byte pool record per cell
 //   (runs are at least half full, and freed runs are reused), a 4-byte id-to-record index per cell, and an
-//   open-addressing hash table of 32-byte slots, one per occupied square, at most half full. Nothing per
-//   vertex is kept: the caller receives the cell ids and writes them out.
+//   open-addressing hash table of 32-byte slots, one per occupied square, at most half full — or, for a
+//   coarse level given bounds, a dense array of 8 bytes per square of the bounds (at most
+//   kMaxDenseSquares). Nothing per vertex is kept: the caller receives the cell ids and writes them out.
 //
 // Limits (Failure(Status::usage) from the constructor or assign, as the stream stage should have checked
 // them against the scene's bounding box first): cell sizes finite, in [kMinCellSize, kMaxCellSize] and
@@ -117,7 +118,13 @@ struct HugePageAllocator {
 class Clusterer {
  public:
   // cell_sizes: c_0 < c_1 < ..., one level each, at least one. Copied.
-  Clusterer(std::span<const double> cell_sizes, ClusterOptions options = {});
+  // bounds: empty, or {min x, min y, min z, max x, max y, max z} of every position that will be assigned.
+  // With bounds, a level whose grid over them has at most kMaxDenseSquares squares indexes its squares
+  // directly (a dense array) instead of hashing them: the coarse levels, which meet every vertex but hold
+  // few cells, then skip the hash and the probes. The ids are the same either way; a position outside the
+  // bounds is then a caller bug: Failure(Status::internal).
+  Clusterer(std::span<const double> cell_sizes, ClusterOptions options = {}, std::span<const double> bounds = {});
+  static constexpr uint64_t kMaxDenseSquares = uint64_t{1} << 21;  // 16 MiB of squares at 8 bytes
 
   // Assigns the next vertex in weight order (non-increasing grade, ties by vertex id: the caller's
   // guarantee; the clusterer cannot check it) at `position` (xyz) in every level, and writes its cell id in
@@ -169,6 +176,10 @@ class Clusterer {
     uint32_t run;    // index in the pool of the square's first cell
     uint32_t count;  // cells attached (the first `count` records of the run); 0 marks an empty slot
   };
+  struct DenseSquare {  // a square of a dense level: the fields of Slot without the key
+    uint32_t run;
+    uint32_t count;
+  };
   // One level's 2×2×2 query block for a vertex (floating only): computed ahead of the assignment (for
   // every level, and in assign_block for vertices a few places ahead) so that the hash slots and runs are
   // fetched before any is read, and their cache misses overlap instead of following one another.
@@ -176,7 +187,7 @@ class Clusterer {
     int64_t own[3];       // p's square
     int64_t square[8][3]; // the block: bit a of the index selects the neighbour along axis a
     uint64_t mask;        // the table's size − 1 when slot[] was computed (a table that grew since needs new slots)
-    uint64_t slot[8];     // hash & mask of each square
+    uint64_t slot[8];     // hash & mask of each square; in a dense level, its index in the array
     uint32_t run[8];      // each square's run in the pool
     uint32_t count[8];    // and its cell count (0: square absent)
   };
@@ -195,6 +206,12 @@ class Clusterer {
     uint64_t used = 0;                                 // occupied slots
     uint32_t max_per_square = 0;
     uint32_t free_run[kRunClasses] = {kNoCell, kNoCell, kNoCell, kNoCell, kNoCell, kNoCell, kNoCell};
+    // Dense levels only (table unused): squares first[a] .. first[a] + dims[a] − 1 per axis, which is the
+    // bounds' squares with one more on each side (a query block reaches one square past the vertex's),
+    // x fastest.
+    std::vector<DenseSquare, HugePageAllocator<DenseSquare>> dense;
+    int64_t first[3] = {0, 0, 0};
+    int64_t dims[3] = {0, 0, 0};
   };
 
   void query_floating(const Level& level, const double* p, Query& q) const;
@@ -203,7 +220,9 @@ class Clusterer {
   void prefetch_uniform(const Level& level, const double* p) const;
   uint32_t assign_floating(Level& level, uint32_t vertex_id, const double* p, const Query& q);
   uint32_t assign_uniform(Level& level, uint32_t vertex_id, const double* p);
-  static uint32_t add_cell(Level& level, Slot& slot, uint32_t vertex_id, const double* p);
+  static uint32_t add_cell(Level& level, uint32_t& run, uint32_t& count, uint32_t vertex_id, const double* p);
+  static uint64_t dense_index(const Level& level, const int64_t square[3]);
+  uint32_t start_cell(Level& level, uint32_t vertex_id, const double* p, const int64_t square[3]);
 
   ClusterOptions options_;
   std::vector<Level> levels_;

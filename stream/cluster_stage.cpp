@@ -19,7 +19,8 @@ std::string cell_info_path(const std::string& prefix, size_t level) { return pre
 std::string order_path(const std::string& prefix) { return prefix + "order.u32"; }
 
 ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, bool single_precision,
-                              std::span<const double> cell_sizes, const core::ClusterOptions& options,
+                              std::span<const double> bounds, std::span<const double> cell_sizes,
+                              const core::ClusterOptions& options,
                               const WorkDir& work, Progress& progress, const std::string& prefix) {
   const size_t levels = cell_sizes.size();
   const uint64_t record_bytes = weight_record_bytes(single_precision);
@@ -57,7 +58,7 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
   for (Group& grp : groups) {
     std::vector<double> sizes;
     for (size_t l : grp.levels) sizes.push_back(cell_sizes[l]);
-    grp.clusterer = std::make_unique<core::Clusterer>(sizes, options);
+    grp.clusterer = std::make_unique<core::Clusterer>(sizes, options, bounds);
   }
   io::FileWriter order(order_path(prefix), 1 << 20);
   std::vector<uint32_t> ids;

@@ -35,9 +35,12 @@ struct ClusterSummary {
 };
 
 // index_path: the weight index of `records` records (WeightRecord32 if single_precision, else
-// WeightRecord64; stream/grade_stage.h).
+// WeightRecord64; stream/grade_stage.h). bounds: empty, or the min and max corners (6 values) of a box
+// holding every position in the index, which lets the coarse levels index their squares directly
+// (core::Clusterer); the result is the same either way.
 ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, bool single_precision,
-                              std::span<const double> cell_sizes, const core::ClusterOptions& options,
+                              std::span<const double> bounds, std::span<const double> cell_sizes,
+                              const core::ClusterOptions& options,
                               const WorkDir& work, Progress& progress, const std::string& prefix);
 
 std::string cells_path(const std::string& prefix, size_t level);

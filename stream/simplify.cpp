@@ -249,8 +249,13 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         }
         std::filesystem::remove(work.file("cluster.json"));
         check_cell_sizes(sizes, meta.bbox);
-        const stream::ClusterSummary cs = stream::cluster_levels(index_path, grade.records, meta.single_precision, sizes, copts, work,
-                                                                    progress, prefix);
+        std::vector<double> bounds;
+        if (!meta.bbox.empty) {
+          bounds.assign(meta.bbox.min.begin(), meta.bbox.min.end());
+          bounds.insert(bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
+        }
+        const stream::ClusterSummary cs = stream::cluster_levels(index_path, grade.records, meta.single_precision, bounds, sizes, copts,
+                                                                    work, progress, prefix);
         std::vector<std::string> files{stream::order_path(prefix)};
         for (size_t l = 0; l < sizes.size(); ++l) {
           files.push_back(stream::cells_path(prefix, l));

@@ -483,39 +483,57 @@ TEST(FloatingCell, CentersSurviveRunMoves) {
   }
 }
 
-// assign_block (the pipelined pass the stream stage uses) gives exactly the ids of one assign per vertex:
-// for every variant and uniform cells, over blocks of uneven sizes (the look-ahead ring wraps, reaches past
-// a block's end, and the tables grow in mid-block), on a random cloud and on a lattice of spacing c/4,
-// whose points lie exactly c/2 from many centers (the boundary cases the fast scan hands to the exact one).
+// assign_block (the pipelined pass the stream stage uses) gives exactly the ids of one assign per vertex,
+// with and without bounds (with them, the three coarser levels index their squares directly and the
+// finest, whose grid over the bounds is too large, keeps its hash table): for every variant and uniform
+// cells, over blocks of uneven sizes (the look-ahead ring wraps, reaches past a block's end, and the tables
+// grow in mid-block), on a random cloud and on a lattice of spacing c/4, whose points lie exactly c/2 from
+// many centers (the boundary cases the fast scan hands to the exact one).
 TEST(FloatingCell, AssignBlockMatchesAssign) {
   std::vector<P> points = random_cloud(20000, 7, -3, 3);
   for (int x = 0; x < 24; ++x)
     for (int y = 0; y < 24; ++y)
       for (int z = 0; z < 6; ++z) points.push_back({x * 0.125 - 1.5, y * 0.125 - 1.5, z * 0.125});
-  const double sizes[] = {0.5, 1.25, 4};
+  const double sizes[] = {0.002, 0.5, 1.25, 4};
+  constexpr size_t kLevels = 4;
+  const double bounds[] = {-3, -3, -3, 3, 3, 3};
   std::vector<ClusterOptions> variants(std::begin(kFloatingVariants), std::end(kFloatingVariants));
   variants.push_back(kUniform);
   for (const ClusterOptions& options : variants) {
-    Clusterer one(sizes, options), block(sizes, options);
+    Clusterer one(sizes, options);
     const std::vector<std::vector<uint32_t>> expected = run(one, points);
-    const size_t chunks[] = {1, 7, 16, 17, 100, 4096};
-    size_t first = 0, k = 0;
-    while (first < points.size()) {
-      const size_t n = std::min(chunks[k++ % 6], points.size() - first);
-      std::vector<uint32_t> ids(n), cells(3 * n);
-      std::vector<double> xyz(3 * n);
-      for (size_t i = 0; i < n; ++i) {
-        ids[i] = static_cast<uint32_t>(first + i);
-        std::copy(points[first + i].begin(), points[first + i].end(), &xyz[3 * i]);
+    for (bool bounded : {false, true}) {
+      Clusterer block = bounded ? Clusterer(sizes, options, bounds) : Clusterer(sizes, options);
+      const size_t chunks[] = {1, 7, 16, 17, 100, 4096};
+      size_t first = 0, k = 0;
+      while (first < points.size()) {
+        const size_t n = std::min(chunks[k++ % 6], points.size() - first);
+        std::vector<uint32_t> ids(n), cells(kLevels * n);
+        std::vector<double> xyz(3 * n);
+        for (size_t i = 0; i < n; ++i) {
+          ids[i] = static_cast<uint32_t>(first + i);
+          std::copy(points[first + i].begin(), points[first + i].end(), &xyz[3 * i]);
+        }
+        block.assign_block(ids, xyz, cells);
+        for (size_t l = 0; l < kLevels; ++l)
+          for (size_t i = 0; i < n; ++i)
+            ASSERT_EQ(cells[l * n + i], expected[l][first + i])
+                << "bounded " << bounded << " level " << l << " vertex " << first + i;
+        first += n;
       }
-      block.assign_block(ids, xyz, cells);
-      for (size_t l = 0; l < 3; ++l)
-        for (size_t i = 0; i < n; ++i)
-          ASSERT_EQ(cells[l * n + i], expected[l][first + i]) << "level " << l << " vertex " << first + i;
-      first += n;
+      for (size_t l = 0; l < kLevels; ++l) EXPECT_EQ(block.cell_count(l), one.cell_count(l));
     }
-    for (size_t l = 0; l < 3; ++l) EXPECT_EQ(block.cell_count(l), one.cell_count(l));
   }
+  // A position outside the bounds is a caller bug, reported, not an out-of-range write.
+  Clusterer bounded(sizes, kCubeNearest, bounds);
+  std::vector<uint32_t> cells(kLevels);
+  Status status = Status::ok;
+  try {
+    bounded.assign(0, P{0, 0, 3.5}, cells);
+  } catch (const Failure& e) {
+    status = e.status();
+  }
+  EXPECT_EQ(status, Status::internal);
 }
 
 }  // namespace
