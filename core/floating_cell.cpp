@@ -37,6 +37,7 @@ namespace {
 
 using Cell = Clusterer::Cell;
 using Slot = Clusterer::Slot;
+using PackedSlot = Clusterer::PackedSlot;
 
 static_assert(sizeof(Cell) == 32 && sizeof(Slot) == 32, "records sized for two per cache line");
 
@@ -84,47 +85,62 @@ inline uint64_t hash_square(int64_t x, int64_t y, int64_t z) {
   return fmix64(axis_term(x, 0) + axis_term(y, 1) + axis_term(z, 2));
 }
 
-// The slot of square xyz, or nullptr if absent; `i` is its hash & mask.
-inline const Slot* find(const Slot* table, uint64_t mask, uint64_t i, const int64_t xyz[3]) {
+// The two kinds of hash-table slot, with their keys: a Slot keys a square by its three coordinates; a
+// PackedSlot, used where the bounds allow, by one word (21 bits per axis, relative to the level's first
+// square), so it takes 16 bytes instead of 32 and a cache line holds four.
+struct WideKey {
+  int64_t xyz[3];
+};
+inline bool matches(const Slot& s, const WideKey& k) {
+  return s.square[0] == k.xyz[0] && s.square[1] == k.xyz[1] && s.square[2] == k.xyz[2];
+}
+inline bool matches(const PackedSlot& s, uint64_t k) { return s.key == k; }
+inline void set_key(Slot& s, const WideKey& k) { s.square[0] = k.xyz[0], s.square[1] = k.xyz[1], s.square[2] = k.xyz[2]; }
+inline void set_key(PackedSlot& s, uint64_t k) { s.key = k; }
+inline uint64_t key_hash(const WideKey& k) { return hash_square(k.xyz[0], k.xyz[1], k.xyz[2]); }
+inline uint64_t key_hash(uint64_t k) { return fmix64(k); }
+inline uint64_t slot_hash(const Slot& s) { return hash_square(s.square[0], s.square[1], s.square[2]); }
+inline uint64_t slot_hash(const PackedSlot& s) { return fmix64(s.key); }
+
+// The slot of `key`, or nullptr if absent; `i` is its hash & mask.
+template <class S, class K>
+inline const S* find(const S* table, uint64_t mask, uint64_t i, const K& key) {
   for (;; i = (i + 1) & mask) {
-    const Slot& s = table[i];
+    const S& s = table[i];
     if (s.count == 0) return nullptr;  // the table is never full, so every probe ends
-    if (s.square[0] == xyz[0] && s.square[1] == xyz[1] && s.square[2] == xyz[2]) return &s;
+    if (matches(s, key)) return &s;
   }
 }
 
-// The slot of square xyz in `table`, inserting an empty-listed one (count 0 → 1 is the caller's) if
-// absent; doubles the table first when an insert would make it more than half full.
-Slot& find_or_insert(std::vector<Slot, HugePageAllocator<Slot>>& table, uint64_t& used, const int64_t xyz[3], bool& inserted) {
+// The slot of `key` in `table`, inserting an empty-listed one (count 0 → 1 is the caller's) if absent;
+// doubles the table first when an insert would make it more than half full.
+template <class S, class K>
+S& find_or_insert(std::vector<S, HugePageAllocator<S>>& table, uint64_t& used, const K& key) {
   uint64_t mask = table.size() - 1;
-  uint64_t i = hash_square(xyz[0], xyz[1], xyz[2]) & mask;
+  uint64_t i = key_hash(key) & mask;
   for (;; i = (i + 1) & mask) {
-    Slot& s = table[i];
+    S& s = table[i];
     if (s.count == 0) break;
-    if (s.square[0] == xyz[0] && s.square[1] == xyz[1] && s.square[2] == xyz[2]) {
-      inserted = false;
-      return s;
-    }
+    if (matches(s, key)) return s;
   }
   if (2 * (used + 1) > table.size()) {
-    std::vector<Slot, HugePageAllocator<Slot>> grown(2 * table.size(), Slot{{0, 0, 0}, kNoCell, 0});
+    std::vector<S, HugePageAllocator<S>> grown(2 * table.size(), S{});
     const uint64_t grown_mask = grown.size() - 1;
-    for (const Slot& s : table) {
+    for (const S& s : table) {
       if (s.count == 0) continue;
-      uint64_t j = hash_square(s.square[0], s.square[1], s.square[2]) & grown_mask;
+      uint64_t j = slot_hash(s) & grown_mask;
       while (grown[j].count != 0) j = (j + 1) & grown_mask;
       grown[j] = s;
     }
     table.swap(grown);
     mask = grown_mask;
-    i = hash_square(xyz[0], xyz[1], xyz[2]) & mask;
+    i = key_hash(key) & mask;
     while (table[i].count != 0) i = (i + 1) & mask;
   }
   ++used;
-  Slot& s = table[i];
-  s.square[0] = xyz[0], s.square[1] = xyz[1], s.square[2] = xyz[2];
+  S& s = table[i];
+  set_key(s, key);
   s.run = kNoCell;
-  inserted = true;
   return s;
 }
 
@@ -185,6 +201,15 @@ uint32_t scan_exact(const Cell* pool, const Clusterer::Query& q, const double* p
   return best;
 }
 
+[[gnu::cold, gnu::noinline]] void outside_bounds() {
+  fail(Status::internal, "clustering: a position lies outside the bounds given to the clusterer");
+}
+
+inline void check_inside(const int64_t* first, const int64_t* dims, const int64_t own[3]) {
+  for (int a = 0; a < 3; ++a)
+    if (own[a] <= first[a] || own[a] >= first[a] + dims[a] - 1) outside_bounds();
+}
+
 constexpr size_t kHugePage = size_t{2} << 20;
 
 }  // namespace
@@ -215,6 +240,7 @@ template struct HugePageAllocator<Clusterer::Cell>;
 template struct HugePageAllocator<Clusterer::Slot>;
 template struct HugePageAllocator<uint32_t>;
 template struct HugePageAllocator<Clusterer::DenseSquare>;
+template struct HugePageAllocator<Clusterer::PackedSlot>;
 
 int64_t grid_square(double x, double size) {
   if (!(size >= kMinCellSize && size <= kMaxCellSize))
@@ -246,8 +272,12 @@ Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options,
                     : kMaxDenseSquares + 1;
       if (squares > kMaxDenseSquares) squares = kMaxDenseSquares + 1;
     }
+    bool packable = !bounds.empty();
+    for (int a = 0; a < 3; ++a) packable &= level.dims[a] > 0 && level.dims[a] < (int64_t{1} << 21);
     if (squares <= kMaxDenseSquares)
       level.dense.assign(squares, DenseSquare{kNoCell, 0});
+    else if (packable)
+      level.packed.assign(kInitialSlots, PackedSlot{0, kNoCell, 0});
     else
       level.table.assign(kInitialSlots, Slot{{0, 0, 0}, kNoCell, 0});
   }
@@ -319,23 +349,53 @@ void Clusterer::prefetch_runs(const Level& level, const Query& q) const {
     }
     return;
   }
-  const Slot* table = level.table.data();
-  const uint64_t mask = level.table.size() - 1;
-  if (q.mask != mask) return;  // the table grew since: the slots moved, and this is only a hint
   const Cell* pool = level.pool.data();
-  for (int i = 0; i < 8; ++i)
-    if (const Slot* s = find(table, mask, q.slot[i], q.square[i])) {
-      __builtin_prefetch(&pool[s->run]);
-      if (s->count > 2) __builtin_prefetch(&pool[s->run + 2]);
-    }
+  auto fetch = [&](const auto* table, uint64_t mask, auto key_of) {
+    if (q.mask != mask) return;  // the table grew since: the slots moved, and this is only a hint
+    for (int i = 0; i < 8; ++i)
+      if (const auto* s = find(table, mask, q.slot[i], key_of(i))) {
+        __builtin_prefetch(&pool[s->run]);
+        if (s->count > 2) __builtin_prefetch(&pool[s->run + 2]);
+      }
+  };
+  if (!level.packed.empty())
+    fetch(level.packed.data(), level.packed.size() - 1, [&](int i) { return q.key[i]; });
+  else
+    fetch(level.table.data(), level.table.size() - 1, [&](int i) { return WideKey{{q.square[i][0], q.square[i][1], q.square[i][2]}}; });
 }
 
 void Clusterer::prefetch_uniform(const Level& level, const double* p) const {
   int64_t square[3];
   for (int a = 0; a < 3; ++a) square[a] = half_index(p[a], level.half, level.size) >> 1;
   if (!level.dense.empty()) return;  // small enough to stay in cache
+  if (!level.packed.empty()) {
+    check_inside(level.first, level.dims, square);
+    __builtin_prefetch(&level.packed[fmix64(pack(level, square)) & (level.packed.size() - 1)]);
+    return;
+  }
   const uint64_t mask = level.table.size() - 1;
   __builtin_prefetch(&level.table[hash_square(square[0], square[1], square[2]) & mask]);
+}
+
+uint64_t Clusterer::pack(const Level& level, const int64_t square[3]) {
+  return static_cast<uint64_t>(square[0] - level.first[0]) | static_cast<uint64_t>(square[1] - level.first[1]) << 21 |
+         static_cast<uint64_t>(square[2] - level.first[2]) << 42;
+}
+
+// The run and count fields of `square`, which is inserted (count 0) if absent.
+void Clusterer::square_fields(Level& level, const int64_t square[3], uint32_t*& run, uint32_t*& count) {
+  if (!level.dense.empty()) {
+    check_inside(level.first, level.dims, square);
+    DenseSquare& d = level.dense[dense_index(level, square)];
+    run = &d.run, count = &d.count;
+  } else if (!level.packed.empty()) {
+    check_inside(level.first, level.dims, square);
+    PackedSlot& slot = find_or_insert(level.packed, level.used, pack(level, square));
+    run = &slot.run, count = &slot.count;
+  } else {
+    Slot& slot = find_or_insert(level.table, level.used, WideKey{{square[0], square[1], square[2]}});
+    run = &slot.run, count = &slot.count;
+  }
 }
 
 // The index of `square` in a dense level's array. The vertex's own square must lie inside the bounds'
@@ -345,15 +405,6 @@ uint64_t Clusterer::dense_index(const Level& level, const int64_t square[3]) {
   const uint64_t y = static_cast<uint64_t>(square[1] - level.first[1]);
   const uint64_t z = static_cast<uint64_t>(square[2] - level.first[2]);
   return x + static_cast<uint64_t>(level.dims[0]) * (y + static_cast<uint64_t>(level.dims[1]) * z);
-}
-
-[[gnu::cold, gnu::noinline]] static void outside_bounds() {
-  fail(Status::internal, "clustering: a position lies outside the bounds given to the clusterer");
-}
-
-static inline void check_inside(const int64_t* first, const int64_t* dims, const int64_t own[3]) {
-  for (int a = 0; a < 3; ++a)
-    if (own[a] <= first[a] || own[a] >= first[a] + dims[a] - 1) outside_bounds();
 }
 
 void Clusterer::query_floating(const Level& level, const double* p, Query& q) const {
@@ -377,6 +428,25 @@ void Clusterer::query_floating(const Level& level, const double* p, Query& q) co
       sq[1] = (i & 2) ? other[1] : q.own[1];
       sq[2] = (i & 4) ? other[2] : q.own[2];
       q.slot[i] = dense_index(level, sq);
+    }
+    return;
+  }
+  if (!level.packed.empty()) {
+    check_inside(level.first, level.dims, q.own);
+    const PackedSlot* table = level.packed.data();
+    const uint64_t mask = level.packed.size() - 1;
+    q.mask = mask;
+    for (int i = 0; i < 8; ++i) {
+      int64_t* sq = q.square[i];
+      sq[0] = (i & 1) ? other[0] : q.own[0];
+      sq[1] = (i & 2) ? other[1] : q.own[1];
+      sq[2] = (i & 4) ? other[2] : q.own[2];
+      q.key[i] = pack(level, sq);
+      q.slot[i] = fmix64(q.key[i]) & mask;
+      // Four slots share a cache line: the probe for an absent square runs on to the next empty slot,
+      // which may be in the next line (no branch: a mispredicted one costs more than a redundant fetch).
+      __builtin_prefetch(&table[q.slot[i]]);
+      __builtin_prefetch(&table[(q.slot[i] + 2) & mask]);
     }
     return;
   }
@@ -406,21 +476,30 @@ void Clusterer::find_runs(const Level& level, Query& q) const {
     }
     return;
   }
-  const Slot* table = level.table.data();
-  const uint64_t mask = level.table.size() - 1;
-  if (q.mask != mask) {  // made ahead of time (assign_block), before the table last grew
-    for (int i = 0; i < 8; ++i) q.slot[i] = hash_square(q.square[i][0], q.square[i][1], q.square[i][2]) & mask;
-    q.mask = mask;
-  }
   const Cell* pool = level.pool.data();
-  for (int i = 0; i < 8; ++i) {
-    const Slot* s = find(table, mask, q.slot[i], q.square[i]);
-    q.run[i] = s ? s->run : 0;
-    q.count[i] = s ? s->count : 0;
-    if (s) {
-      __builtin_prefetch(&pool[s->run]);
-      if (s->count > 2) __builtin_prefetch(&pool[s->run + 2]);
+  // Made ahead of time (assign_block), a query's slots are stale if the table grew since: redo them.
+  auto lookup = [&](const auto* table, uint64_t mask, auto key_of, auto hash_of) {
+    if (q.mask != mask) {
+      for (int i = 0; i < 8; ++i) q.slot[i] = hash_of(i) & mask;
+      q.mask = mask;
     }
+    for (int i = 0; i < 8; ++i) {
+      const auto* s = find(table, mask, q.slot[i], key_of(i));
+      q.run[i] = s ? s->run : 0;
+      q.count[i] = s ? s->count : 0;
+      if (s) {
+        __builtin_prefetch(&pool[s->run]);
+        if (s->count > 2) __builtin_prefetch(&pool[s->run + 2]);
+      }
+    }
+  };
+  if (!level.packed.empty()) {
+    lookup(level.packed.data(), level.packed.size() - 1, [&](int i) { return q.key[i]; },
+           [&](int i) { return fmix64(q.key[i]); });
+  } else {
+    lookup(level.table.data(), level.table.size() - 1,
+           [&](int i) { return WideKey{{q.square[i][0], q.square[i][1], q.square[i][2]}}; },
+           [&](int i) { return hash_square(q.square[i][0], q.square[i][1], q.square[i][2]); });
   }
 }
 
@@ -443,14 +522,7 @@ uint32_t Clusterer::assign_floating(Level& level, uint32_t vertex_id, const doub
 uint32_t Clusterer::start_cell(Level& level, uint32_t vertex_id, const double* p, const int64_t square[3]) {
   uint32_t* run;
   uint32_t* count;
-  if (!level.dense.empty()) {
-    DenseSquare& d = level.dense[dense_index(level, square)];
-    run = &d.run, count = &d.count;
-  } else {
-    bool inserted = false;
-    Slot& slot = find_or_insert(level.table, level.used, square, inserted);
-    run = &slot.run, count = &slot.count;
-  }
+  square_fields(level, square, run, count);
   const uint32_t id = add_cell(level, *run, *count, vertex_id, p);
   // invariant: count <= kMaxCubeCellsPerSquare (cubes) or kMaxSphereCellsPerSquare (spheres); see the
   // header for the proof. It rests on the exact square and inside tests above, so a violation is a bug.
@@ -467,15 +539,7 @@ uint32_t Clusterer::assign_uniform(Level& level, uint32_t vertex_id, const doubl
   for (int a = 0; a < 3; ++a) square[a] = half_index(p[a], level.half, level.size) >> 1;
   uint32_t* run;
   uint32_t* count;
-  if (!level.dense.empty()) {
-    check_inside(level.first, level.dims, square);
-    DenseSquare& d = level.dense[dense_index(level, square)];
-    run = &d.run, count = &d.count;
-  } else {
-    bool inserted = false;
-    Slot& slot = find_or_insert(level.table, level.used, square, inserted);
-    run = &slot.run, count = &slot.count;
-  }
+  square_fields(level, square, run, count);
   if (*count == 0) {
     // The first vertex to reach a square is its heaviest: it names the cell and numbers it.
     add_cell(level, *run, *count, vertex_id, p);
@@ -531,7 +595,8 @@ uint64_t Clusterer::memory_bytes() const {
   uint64_t bytes = sizeof(*this) + levels_.capacity() * sizeof(Level);
   for (const Level& level : levels_)
     bytes += level.pool.capacity() * sizeof(Cell) + level.where.capacity() * sizeof(uint32_t) +
-             level.table.capacity() * sizeof(Slot) + level.dense.capacity() * sizeof(DenseSquare);
+             level.table.capacity() * sizeof(Slot) + level.packed.capacity() * sizeof(PackedSlot) +
+             level.dense.capacity() * sizeof(DenseSquare);
   return bytes + queries_.capacity() * sizeof(Query);
 }
 

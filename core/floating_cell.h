@@ -176,6 +176,11 @@ class Clusterer {
     uint32_t run;    // index in the pool of the square's first cell
     uint32_t count;  // cells attached (the first `count` records of the run); 0 marks an empty slot
   };
+  struct PackedSlot {  // a Slot whose square is packed into one word (Clusterer::pack)
+    uint64_t key;
+    uint32_t run;
+    uint32_t count;
+  };
   struct DenseSquare {  // a square of a dense level: the fields of Slot without the key
     uint32_t run;
     uint32_t count;
@@ -188,6 +193,7 @@ class Clusterer {
     int64_t square[8][3]; // the block: bit a of the index selects the neighbour along axis a
     uint64_t mask;        // the table's size − 1 when slot[] was computed (a table that grew since needs new slots)
     uint64_t slot[8];     // hash & mask of each square; in a dense level, its index in the array
+    uint64_t key[8];      // packed levels: each square's packed key
     uint32_t run[8];      // each square's run in the pool
     uint32_t count[8];    // and its cell count (0: square absent)
   };
@@ -202,13 +208,18 @@ class Clusterer {
     double half_sq = 0;  // fl((c/2)²)
     std::vector<Cell, HugePageAllocator<Cell>> pool;  // runs, one per occupied square, and free runs
     std::vector<uint32_t, HugePageAllocator<uint32_t>> where;  // cell id → its record in pool
-    std::vector<Slot, HugePageAllocator<Slot>> table;  // power-of-two size, linear probing, at most half full
-    uint64_t used = 0;                                 // occupied slots
+    // The squares' index, one of three kinds: a dense array (dense non-empty), a hash table of packed
+    // slots (packed non-empty), or of wide slots (table); hash tables have a power-of-two size, linear
+    // probing, at most half full.
+    std::vector<Slot, HugePageAllocator<Slot>> table;
+    std::vector<PackedSlot, HugePageAllocator<PackedSlot>> packed;
+    uint64_t used = 0;  // occupied slots of the hash table
     uint32_t max_per_square = 0;
     uint32_t free_run[kRunClasses] = {kNoCell, kNoCell, kNoCell, kNoCell, kNoCell, kNoCell, kNoCell};
-    // Dense levels only (table unused): squares first[a] .. first[a] + dims[a] − 1 per axis, which is the
-    // bounds' squares with one more on each side (a query block reaches one square past the vertex's),
-    // x fastest.
+    // Levels with bounds: squares first[a] .. first[a] + dims[a] − 1 per axis, which is the bounds'
+    // squares with one more on each side (a query block reaches one square past the vertex's). A dense
+    // level stores them x fastest; a packed level keys them by (x − first) | (y − first) << 21 |
+    // (z − first) << 42, which needs dims below 2^21 per axis.
     std::vector<DenseSquare, HugePageAllocator<DenseSquare>> dense;
     int64_t first[3] = {0, 0, 0};
     int64_t dims[3] = {0, 0, 0};
@@ -222,6 +233,8 @@ class Clusterer {
   uint32_t assign_uniform(Level& level, uint32_t vertex_id, const double* p);
   static uint32_t add_cell(Level& level, uint32_t& run, uint32_t& count, uint32_t vertex_id, const double* p);
   static uint64_t dense_index(const Level& level, const int64_t square[3]);
+  static uint64_t pack(const Level& level, const int64_t square[3]);
+  static void square_fields(Level& level, const int64_t square[3], uint32_t*& run, uint32_t*& count);
   uint32_t start_cell(Level& level, uint32_t vertex_id, const double* p, const int64_t square[3]);
 
   ClusterOptions options_;
