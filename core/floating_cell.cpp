@@ -13,9 +13,12 @@
 //
 // Speed: a query reads 8 table slots and their runs per level, mostly cache misses in the fine levels.
 // assign therefore works in passes over all levels — prefetch every slot, then read the slots and prefetch
-// the runs, then test the candidates — so that the misses of all levels overlap; runs keep a square's
-// candidates in one or two cache lines; and the large arrays sit on huge pages (HugePageAllocator), so
-// the random reads do not also miss the TLB. None of this affects the result.
+// the runs, then test the candidates — so that the misses of all levels overlap, and assign_block runs
+// the same passes as a pipeline over vertices a few places apart, so that the misses of successive
+// vertices overlap too; runs keep a square's candidates in one or two cache lines; the large arrays sit on
+// huge pages (HugePageAllocator), so the random reads do not also miss the TLB; slots are packed to 16
+// bytes where the bounds allow, and coarse levels index a dense array instead of hashing; the candidate
+// test is branch-free. None of this affects the result.
 #include "core/floating_cell.h"
 #include "core/hash.h"
 

@@ -121,8 +121,9 @@ class Clusterer {
   // bounds: empty, or {min x, min y, min z, max x, max y, max z} of every position that will be assigned.
   // With bounds, a level whose grid over them has at most kMaxDenseSquares squares indexes its squares
   // directly (a dense array) instead of hashing them: the coarse levels, which meet every vertex but hold
-  // few cells, then skip the hash and the probes. The ids are the same either way; a position outside the
-  // bounds is then a caller bug: Failure(Status::internal).
+  // few cells, then skip the hash and the probes. A finer level within 2^21 squares per axis keys its hash
+  // table by one packed word (16-byte slots instead of 32). The ids are the same either way; a position
+  // outside the bounds is then a caller bug: Failure(Status::internal).
   Clusterer(std::span<const double> cell_sizes, ClusterOptions options = {}, std::span<const double> bounds = {});
   static constexpr uint64_t kMaxDenseSquares = uint64_t{1} << 21;  // 16 MiB of squares at 8 bytes
 
