@@ -3,7 +3,6 @@
 #include "stream/grade_stage.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <filesystem>
 #include <memory>
@@ -231,12 +230,18 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
         }
       };
       // Calls corner(local id, primitive ids, arity, k) in parallel for every corner k in the range.
+      // Calls corner(local id, primitive ids, arity, k) for every corner k in the range. Each task owns a
+      // slice of the range's vertices and scans the whole block for their corners: no two tasks touch one
+      // vertex, so the counts and fills below need no atomic operations (which cost more than reading the
+      // block once per task), and each list is filled in primitive order.
+      const size_t slices = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
       auto for_range_corners = [&](std::span<const uint32_t> ids, size_t arity, auto&& corner) {
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size() / arity, 1 << 12), [&](const tbb::blocked_range<size_t>& b) {
-          for (size_t i = b.begin(); i < b.end(); ++i) {
-            const uint32_t* p = &ids[i * arity];
+        tbb::parallel_for(size_t{0}, slices, [&](size_t slice) {
+          const uint64_t s_lo = lo + n * slice / slices, s_hi = lo + n * (slice + 1) / slices;
+          for (size_t i = 0; i < ids.size(); i += arity) {
+            const uint32_t* p = &ids[i];
             for (size_t k = 0; k < arity; ++k)
-              if (p[k] >= lo && p[k] < hi) corner(p[k] - lo, p, arity, k);
+              if (p[k] >= s_lo && p[k] < s_hi) corner(p[k] - lo, p, arity, k);
           }
         });
       };
@@ -246,24 +251,23 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
       visit([&](int kind, std::span<const uint32_t> ids) {
         if (kind == 0 && n_ranges == 1) block_area(ids, positions, summary.areas, area_scratch);
         for_range_corners(ids, static_cast<size_t>(Columns::arity[kind]), [&](uint64_t l, const uint32_t* p, size_t arity, size_t k) {
-          std::atomic_ref<uint8_t>(used[l]).store(1, std::memory_order_relaxed);
+          used[l] = 1;
           uint32_t others = 0;
           for (size_t j = 0; j < arity; ++j) others += j != k && p[j] != p[k];
-          if (others) std::atomic_ref<uint32_t>(count[l]).fetch_add(others, std::memory_order_relaxed);
+          count[l] += others;
         });
       });
       offset.assign(n + 1, 0);
       for (uint64_t i = 0; i < n; ++i) offset[i + 1] = offset[i] + count[i];
       neighbours.resize(offset[n]);
       for (uint64_t i = 0; i < n; ++i) count[i] = 0;
-      // Pass 2: fill (in any order: each list is sorted below).
+      // Pass 2: fill (each list is sorted below).
       visit([&](int kind, std::span<const uint32_t> ids) {
         if (Columns::arity[kind] == 1) return;
         for_range_corners(ids, static_cast<size_t>(Columns::arity[kind]), [&](uint64_t l, const uint32_t* p, size_t arity, size_t k) {
           for (size_t j = 0; j < arity; ++j) {
             if (j == k || p[j] == p[k]) continue;
-            const uint32_t at = std::atomic_ref<uint32_t>(count[l]).fetch_add(1, std::memory_order_relaxed);
-            neighbours[offset[l] + at] = p[j];
+            neighbours[offset[l] + count[l]++] = p[j];
           }
         });
       });
