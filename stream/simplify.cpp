@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 
 #include "core/floating_cell.h"
 #include "core/grade.h"
@@ -343,32 +344,46 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       });
       run_stage(&report.stages, "write", [&](StageStats&) {
         const std::string generator = std::string("lodstream ") + LODSTREAM_VERSION;
-        for (size_t l = 0; l < sizes.size(); ++l) {
-          const std::vector<std::string> comments{
-              generator, fmt::format("level {} of {}, cell size {}", l, sizes.size(), sizes[l]),
-              fmt::format("clustering {} {} {}, representative {}, grading {}", name(so.clustering), name(so.cell),
-                          name(so.variant), name(so.representative), name(so.grading))};
-          const std::string stem = fmt::format("lod{}", l);
-          if (so.write_ply) {
-            io::write_ply(so.output_dir + "/" + stem + ".ply", meshes[l], comments);
-            report.levels[l].files.push_back(stem + ".ply");
-          }
-          if (so.write_obj) {
-            io::write_obj(so.output_dir + "/" + stem + ".obj", meshes[l], comments);
-            report.levels[l].files.push_back(stem + ".obj");
-          }
-          progress.report("write", static_cast<double>(l + 1) / static_cast<double>(sizes.size() + 1));
-        }
+        // The GLB (every level) is written by a second task while this thread writes the per-level files:
+        // the two largest files of a run then go out side by side.
+        tbb::task_group glb_task;
         if (so.write_glb) {
-          // MSFT_screencoverage: level l is shown while the coverage is at least the coverage at which the
-          // next level takes over; the last level down to one pixel.
-          std::vector<io::GlbLevel> glb;
-          for (size_t l = 0; l < sizes.size(); ++l) {
-            const double lower = l + 1 < sizes.size() ? report.levels[l + 1].screen_coverage : 1.0 / so.resolution;
-            glb.push_back({&meshes[l], fmt::format("lod{}", l), lower});
-          }
-          io::write_glb(so.output_dir + "/lods.glb", glb, generator);
+          glb_task.run([&] {
+            // MSFT_screencoverage: level l is shown while the coverage is at least the coverage at which the
+            // next level takes over; the last level down to one pixel.
+            std::vector<io::GlbLevel> glb;
+            for (size_t l = 0; l < sizes.size(); ++l) {
+              const double lower = l + 1 < sizes.size() ? report.levels[l + 1].screen_coverage : 1.0 / so.resolution;
+              glb.push_back({&meshes[l], fmt::format("lod{}", l), lower});
+            }
+            io::write_glb(so.output_dir + "/lods.glb", glb, generator);
+          });
         }
+        try {
+          for (size_t l = 0; l < sizes.size(); ++l) {
+            const std::vector<std::string> comments{
+                generator, fmt::format("level {} of {}, cell size {}", l, sizes.size(), sizes[l]),
+                fmt::format("clustering {} {} {}, representative {}, grading {}", name(so.clustering), name(so.cell),
+                            name(so.variant), name(so.representative), name(so.grading))};
+            const std::string stem = fmt::format("lod{}", l);
+            if (so.write_ply) {
+              io::write_ply(so.output_dir + "/" + stem + ".ply", meshes[l], comments);
+              report.levels[l].files.push_back(stem + ".ply");
+            }
+            if (so.write_obj) {
+              io::write_obj(so.output_dir + "/" + stem + ".obj", meshes[l], comments);
+              report.levels[l].files.push_back(stem + ".obj");
+            }
+            progress.report("write", static_cast<double>(l + 1) / static_cast<double>(sizes.size() + 1));
+          }
+        } catch (...) {
+          try {
+            glb_task.wait();  // never leave the task running; its own failure is second to this one
+          } catch (...) {
+          }
+          throw;
+        }
+        glb_task.wait();
         progress.report("write", 1);
       });
     });
