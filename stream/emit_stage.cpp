@@ -63,7 +63,13 @@ struct Scratch {
   FlatMap<2> edges;
   FlatMap<1, false> points;
   FlatMap<1> cells;  // pass A: a cell's quadric slot; passes B and C: a kept edge's slot
-  void clear() { triangles.clear(), edges.clear(), points.clear(), cells.clear(); }
+  // Pass A: the last point and the last quadric cell of the block. Neighbouring triangles mostly fall in
+  // the same cell at coarse levels; these skip the hash table then (same result: the cell is in it).
+  uint32_t last_point = UINT32_MAX, last_cell = UINT32_MAX, last_slot = 0;
+  void clear() {
+    triangles.clear(), edges.clear(), points.clear(), cells.clear();
+    last_point = last_cell = UINT32_MAX;
+  }
 };
 
 void add(double* sum, const double* p) {
@@ -315,6 +321,8 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       if (s.edges.insert(key, 0).second) o.edges.push_back(key);
     };
     auto point = [&](BlockOut& o, Scratch& s, uint32_t c) {
+      if (c == s.last_point) return;
+      s.last_point = c;
       if (s.points.insert({c}, 0).second) o.points.push_back(c);
     };
     const size_t arity = static_cast<size_t>(3 - b.kind);
@@ -336,9 +344,14 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
           if (quadric) {
             for (int k = 0; k < 3; ++k) {
               if ((k > 0 && c[k] == c[0]) || (k > 1 && c[k] == c[1])) continue;
+              if (c[k] == s.last_cell) {
+                o.quadrics[s.last_slot].add(q);
+                continue;
+              }
               const auto [slot, fresh] = s.cells.insert({c[k]}, static_cast<uint32_t>(o.quadrics.size()));
               if (fresh) o.quadric_cells.push_back(c[k]), o.quadrics.push_back(q);
               else o.quadrics[slot].add(q);
+              s.last_cell = c[k], s.last_slot = slot;
             }
           }
           if (c[0] != c[1] && c[1] != c[2] && c[0] != c[2]) {
@@ -440,28 +453,41 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   // where one did, `visit(level, corner positions, their cells, arity, lower cell, kept edge, slot, o)` gets
   // the edge's slot in the block's output (o.kept_edges with o.sums or o.distances, in order of first
   // appearance), so that sums are formed per block in primitive order and merged in block order.
-  auto for_kept_edges = [&](auto&& visit) {
-    return [&, visit](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
+  // Pass B (`drop` true) also clears the bit of every primitive whose edge was eliminated, so that pass C
+  // visits the kept edges' primitives only (at the finest city level, 3% of those that collapsed).
+  auto for_kept_edges = [&](bool drop, auto&& visit) {
+    return [&, drop, visit](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
       const size_t arity = static_cast<size_t>(3 - b.kind);
-      for (size_t i = 0; i < ids.size(); i += arity) {
-        const uint64_t prim = b.first + i / arity;
-        bool any = false;
-        for (size_t l = 0; l < nl; ++l) any = any || (levels[l].collapsed[b.kind][prim / 64] >> (prim % 64) & 1);
-        if (!any) continue;
-        uint64_t r[3];
-        double p[3][3];
-        for (size_t k = 0; k < arity; ++k) r[k] = record_of(ids[i + k]), positions.get(ids[i + k], p[k]);
-        for (size_t l = 0; l < nl; ++l) {
-          LevelState& L = levels[l];
-          if (!(L.collapsed[b.kind][prim / 64] >> (prim % 64) & 1)) continue;
-          uint32_t c[3], lo = UINT32_MAX, hi = 0;
-          for (size_t k = 0; k < arity; ++k) c[k] = cell(L, r[k]), lo = std::min(lo, c[k]), hi = std::max(hi, c[k]);
-          const uint32_t e = L.k_edges.find({lo, hi});
-          if (e == FlatMap<2>::empty) continue;
-          BlockOut& o = outs_l[l];
-          const auto [slot, fresh] = scratch_l[l].cells.insert({e}, static_cast<uint32_t>(o.kept_edges.size()));
-          if (fresh) o.kept_edges.push_back(e), o.sums.emplace_back(), o.distances.emplace_back();
-          visit(L, p, c, arity, lo, e, slot, o);
+      const uint64_t first_word = b.first / 64, words = (b.count + 63) / 64;  // b.first is a multiple of 64
+      for (uint64_t w = first_word; w < first_word + words; ++w) {
+        uint64_t any = 0;  // the primitives of this word that collapsed in some level, visited in order
+        for (size_t l = 0; l < nl; ++l) any |= levels[l].collapsed[b.kind][w];
+        for (; any; any &= any - 1) {
+          const uint64_t bit = uint64_t{1} << std::countr_zero(any);
+          const uint32_t* v = &ids[(w * 64 + static_cast<uint64_t>(std::countr_zero(any)) - b.first) * arity];
+          uint64_t r[3];
+          for (size_t k = 0; k < arity; ++k) r[k] = record_of(v[k]);
+          double p[3][3];
+          bool fetched = false;
+          for (size_t l = 0; l < nl; ++l) {
+            LevelState& L = levels[l];
+            uint64_t& word = L.collapsed[b.kind][w];
+            if (!(word & bit)) continue;
+            uint32_t c[3], lo = UINT32_MAX, hi = 0;
+            for (size_t k = 0; k < arity; ++k) c[k] = cell(L, r[k]), lo = std::min(lo, c[k]), hi = std::max(hi, c[k]);
+            const uint32_t e = L.k_edges.find({lo, hi});
+            if (e == FlatMap<2>::empty) {
+              if (drop) word &= ~bit;
+              continue;
+            }
+            if (!fetched)
+              for (size_t k = 0; k < arity; ++k) positions.get(v[k], p[k]);
+            fetched = true;
+            BlockOut& o = outs_l[l];
+            const auto [slot, fresh] = scratch_l[l].cells.insert({e}, static_cast<uint32_t>(o.kept_edges.size()));
+            if (fresh) o.kept_edges.push_back(e), o.sums.emplace_back(), o.distances.emplace_back();
+            visit(L, p, c, arity, lo, e, slot, o);
+          }
         }
       }
     };
@@ -470,7 +496,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   // Pass B: the corner sums of the kept edges, for P_A and P_B (a corner in the lower cell goes to A).
   if (any_kept_edges) {
     run_blocks("emit", true,
-               for_kept_edges([&](LevelState&, const double (*p)[3], const uint32_t* c, size_t arity, uint32_t lo,
+               for_kept_edges(true, [&](LevelState&, const double (*p)[3], const uint32_t* c, size_t arity, uint32_t lo,
                                   uint32_t, uint32_t slot, BlockOut& o) {
                  EdgeSums& e = o.sums[slot];
                  for (size_t k = 0; k < arity; ++k) {
@@ -501,7 +527,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   }
   if (any_kept_edges) {
     run_blocks("emit", true,
-               for_kept_edges([&](LevelState& L, const double (*p)[3], const uint32_t* c, size_t arity, uint32_t lo,
+               for_kept_edges(false, [&](LevelState& L, const double (*p)[3], const uint32_t* c, size_t arity, uint32_t lo,
                                   uint32_t e, uint32_t slot, BlockOut& o) {
                  for (size_t k = 0; k < arity; ++k) {
                    const double d = distance_to_line(p[k], L.pa[e].data(), L.pb[e].data());
