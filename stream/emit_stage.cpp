@@ -582,45 +582,44 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     for (const auto& e : L.kept_edges) use(e[0]), use(e[1]);
     for (uint32_t c : L.kept_points) use(c);
 
-    // Their representatives, reading the cell table in cell order through windows (only the cells in use).
+    // Their representatives, reading the cell table through windows in cell order, the windows in parallel
+    // (each representative depends on its cell alone, so the bytes do not depend on the threads).
     std::vector<double> rep(3 * slot_cell.size());
     {
-      std::vector<std::pair<uint32_t, uint32_t>> need(slot_cell.size());
-      for (size_t i = 0; i < slot_cell.size(); ++i) need[i] = {slot_cell[i], static_cast<uint32_t>(i)};
-      std::sort(need.begin(), need.end());
       io::MappedFile f(cell_info_path(prefix, L.in.level));
       if (f.size() != cells * sizeof(CellInfo)) fail(Status::io_error, f.path() + ": size does not match");
       constexpr uint64_t window_cells = 1 << 16;
-      io::Window w;
-      uint64_t window_first = 0;
-      for (const auto& [c, slot] : need) {
-        if (!w.data() || c >= window_first + window_cells) {
-          window_first = c - c % window_cells;
-          w = f.map(window_first * sizeof(CellInfo), (window_first + window_cells) * sizeof(CellInfo));
-        }
-        CellInfo ci;
-        std::memcpy(&ci, w.data() + (c - window_first) * sizeof(CellInfo), sizeof ci);
-        double* p = &rep[3 * slot];
-        double mean[3];
-        for (int k = 0; k < 3; ++k) mean[k] = ci.sum[k] / static_cast<double>(ci.vertices);
-        if (options.representative == Representative::center) {
-          std::copy(ci.center, ci.center + 3, p);
-        } else if (options.representative == Representative::mean) {
-          for (int k = 0; k < 3; ++k) p[k] = ci.weight > 0 ? ci.weighted[k] / ci.weight : mean[k];
-        } else {
-          double lo[3], hi[3];
-          for (int k = 0; k < 3; ++k) {
-            if (cluster.clustering == core::Clustering::uniform) {
-              const double sq = static_cast<double>(core::grid_square(ci.center[k], cell_size));
-              lo[k] = sq * cell_size, hi[k] = (sq + 1) * cell_size;
-            } else {
-              lo[k] = ci.center[k] - cell_size / 2, hi[k] = ci.center[k] + cell_size / 2;
+      tbb::parallel_for(uint64_t{0}, (cells + window_cells - 1) / window_cells, [&](uint64_t window) {
+        const uint64_t first = window * window_cells, end = std::min(cells, first + window_cells);
+        io::Window w;
+        for (uint64_t c = first; c < end; ++c) {
+          const uint32_t slot = slot_of[c];
+          if (slot == UINT32_MAX) continue;
+          if (!w.data()) w = f.map(first * sizeof(CellInfo), end * sizeof(CellInfo));
+          CellInfo ci;
+          std::memcpy(&ci, w.data() + (c - first) * sizeof(CellInfo), sizeof ci);
+          double* p = &rep[3 * slot];
+          double mean[3];
+          for (int k = 0; k < 3; ++k) mean[k] = ci.sum[k] / static_cast<double>(ci.vertices);
+          if (options.representative == Representative::center) {
+            std::copy(ci.center, ci.center + 3, p);
+          } else if (options.representative == Representative::mean) {
+            for (int k = 0; k < 3; ++k) p[k] = ci.weight > 0 ? ci.weighted[k] / ci.weight : mean[k];
+          } else {
+            double lo[3], hi[3];
+            for (int k = 0; k < 3; ++k) {
+              if (cluster.clustering == core::Clustering::uniform) {
+                const double sq = static_cast<double>(core::grid_square(ci.center[k], cell_size));
+                lo[k] = sq * cell_size, hi[k] = (sq + 1) * cell_size;
+              } else {
+                lo[k] = ci.center[k] - cell_size / 2, hi[k] = ci.center[k] + cell_size / 2;
+              }
             }
+            const std::array<double, 3> x = core::quadric_minimizer(L.quadrics[c], mean, lo, hi);
+            std::copy(x.begin(), x.end(), p);
           }
-          const std::array<double, 3> x = core::quadric_minimizer(L.quadrics[c], mean, lo, hi);
-          std::copy(x.begin(), x.end(), p);
         }
-      }
+      });
     }
     std::vector<core::Quadric>().swap(L.quadrics);
 
