@@ -3,12 +3,14 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstring>
 #include <memory>
 #include <vector>
 
+#include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_group.h>
@@ -197,7 +199,9 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   if (bits > 64) fail(Status::internal, "emit: a group's cluster maps need more than 64 bits per vertex");
 
   // The group's cluster maps: stored vertex id -> one record holding every level's cell. Each record is
-  // composed from all the levels' cell files at once and written once.
+  // composed from all the levels' cell files at once and written once. The records are random writes (the
+  // weight index is in grade order); the threads split them by vertex range, each range a whole number of
+  // words so that no two threads write one word, and each thread reads every record (sequential, cheap).
   PackedMap map;
   map.reset(emit_scratch.map, meta.vertices, bits);
   {
@@ -208,27 +212,33 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       if (order.size() != records * 4 || cell_files.back()->size() != records * 4)
         fail(Status::io_error, cell_files.back()->path() + ": size does not match the weight index");
     }
-    std::vector<io::Window> windows(nl);
-    std::vector<const uint32_t*> cs(nl);
-    for (uint64_t first = 0; first < records; first += 1 << 20) {
-      const uint64_t n = std::min<uint64_t>(1 << 20, records - first);
-      const io::Window a = order.map(first * 4, (first + n) * 4);
-      for (size_t l = 0; l < nl; ++l) {
-        windows[l] = cell_files[l]->map(first * 4, (first + n) * 4);
-        cs[l] = reinterpret_cast<const uint32_t*>(windows[l].data());
-      }
-      const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
-      for (uint64_t i = 0; i < n; ++i) {
-        uint64_t record = 0;
+    const size_t parts = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+    const uint64_t per_part = ((meta.vertices + parts - 1) / parts + 63) / 64 * 64;  // 64 records: whole words
+    tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
+      const uint64_t lo = part * per_part, span = std::min(meta.vertices, lo + per_part) - std::min(meta.vertices, lo);
+      std::vector<io::Window> windows(nl);
+      std::vector<const uint32_t*> cs(nl);
+      for (uint64_t first = 0; first < records && span > 0; first += 1 << 20) {
+        const uint64_t n = std::min<uint64_t>(1 << 20, records - first);
+        const io::Window a = order.map(first * 4, (first + n) * 4);
         for (size_t l = 0; l < nl; ++l) {
-          const uint64_t c = cs[l][i] == core::kNoCell ? levels[l].mask : cs[l][i];
-          if (c >= levels[l].in.cells && c != levels[l].mask)
-            fail(Status::io_error, cell_files[l]->path() + ": cell id out of range");
-          record |= c << levels[l].shift;
+          windows[l] = cell_files[l]->map(first * 4, (first + n) * 4);
+          cs[l] = reinterpret_cast<const uint32_t*>(windows[l].data());
         }
-        map.set(ids[i], record);
+        const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
+        for (uint64_t i = 0; i < n; ++i) {
+          if (ids[i] - lo >= span) continue;  // another part's vertex (unsigned: below lo wraps around)
+          uint64_t record = 0;
+          for (size_t l = 0; l < nl; ++l) {
+            const uint64_t c = cs[l][i] == core::kNoCell ? levels[l].mask : cs[l][i];
+            if (c >= levels[l].in.cells && c != levels[l].mask)
+              fail(Status::io_error, cell_files[l]->path() + ": cell id out of range");
+            record |= c << levels[l].shift;
+          }
+          map.set(ids[i], record);
+        }
       }
-    }
+    });
     if (!canonical_path.empty())
       for_column_blocks(canonical_path, meta.vertices, 1, 1 << 20, [&](uint64_t first, std::span<const uint32_t> canon) {
         for (uint64_t i = 0; i < canon.size(); ++i)
@@ -417,13 +427,18 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     L.g_points = FlatMap<1, false>();
     std::vector<uint8_t> on_triangle(L.edges.size(), 0);
     std::vector<uint8_t> used(L.in.cells, 0);
-    for (const auto& t : L.triangles)
-      for (int k = 0; k < 3; ++k) {
-        used[t[k]] = 1;
-        if (L.edges.empty()) continue;
-        const uint32_t e = L.g_edges.find({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});
-        if (e != FlatMap<2>::empty) on_triangle[e] = 1;
+    // In parallel: the flags only ever go from 0 to 1, so the result does not depend on the threads.
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, L.triangles.size(), 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        const auto& t = L.triangles[i];
+        for (int k = 0; k < 3; ++k) {
+          std::atomic_ref<uint8_t>(used[t[k]]).store(1, std::memory_order_relaxed);
+          if (L.edges.empty()) continue;
+          const uint32_t e = L.g_edges.find({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});
+          if (e != FlatMap<2>::empty) std::atomic_ref<uint8_t>(on_triangle[e]).store(1, std::memory_order_relaxed);
+        }
       }
+    });
     L.g_edges = FlatMap<2>();
     for (size_t i = 0; i < L.edges.size(); ++i) {
       if (on_triangle[i]) {
