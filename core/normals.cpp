@@ -9,8 +9,10 @@
 // written into its corners. Then one scan over the corners in triangle order numbers the pairs in order of
 // first appearance: those are the output vertices, exactly as "a corner reuses an output vertex of the same
 // input vertex with the same normal bits, else creates one". Only the grouping makes the O(k²) crease test
-// cheap on flat CAD fans; the result is a function of the input arrays alone: no hashing, no thread, no
-// dependence on anything but the fixed orders stated in normals.h.
+// cheap on flat CAD fans; the result is a function of the input arrays alone: no hashing, no dependence on
+// anything but the fixed orders stated in normals.h (the per-vertex pass runs in fixed vertex chunks in the
+// caller's TBB arena; pair numbers are offset by the chunks' counts in chunk order, so threads change
+// nothing).
 #include "core/normals.h"
 
 #include <algorithm>
@@ -20,6 +22,9 @@
 #include <limits>
 #include <numbers>
 #include <string>
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
 
 #include "core/status.h"
 
@@ -314,60 +319,70 @@ void crease_normals(std::span<const double> positions, std::span<const uint32_t>
   }
 
   // Corner normals, vertex by vertex. A vertex's distinct corner normals (bitwise) become "pairs" (vertex,
-  // normal), numbered in vertex order, their normals in `pair_normals`; each corner holds its pair id in
-  // out.triangles until the last pass renumbers them. Reserving one pair per corner costs address space
-  // only: pages are touched as pairs are written.
+  // normal), numbered in vertex order; each corner holds its pair id in out.triangles until the last pass
+  // renumbers them. The vertices run in fixed chunks in parallel (each vertex reads only the positions and
+  // writes only its own corners): a chunk numbers its pairs from 0 with their normals in its own array, and
+  // the chunks' pair counts, summed in chunk order, give the same numbers as one pass in vertex order.
   out.triangles.assign(triangles.size(), 0);
-  std::vector<float> pair_normals;
-  pair_normals.reserve(3 * triangles.size());
-  auto pair_of = [&](size_t first_pair, const float* n) {
-    const size_t pairs = pair_normals.size() / 3;
-    for (size_t p = first_pair; p < pairs; ++p)
-      if (same_bits(&pair_normals[3 * p], n)) return static_cast<uint32_t>(p);
-    pair_normals.insert(pair_normals.end(), n, n + 3);
-    return static_cast<uint32_t>(pairs);
-  };
-  for (size_t v = 0; v < vertex_count; ++v) {
-    const uint32_t begin = w.offsets[v], end = w.offsets[v + 1];
-    if (begin == end) continue;
-    const uint32_t* inc = w.incident.data() + begin;
-    const size_t k = end - begin;
-    w.cross.resize(3 * k);
-    w.unitn.resize(3 * k);
-    w.ok.resize(k);
-    for (size_t i = 0; i < k; ++i) w.ok[i] = face(pos, tri, inc[i], &w.cross[3 * i], &w.unitn[3 * i]);
-    float degenerate[3];
-    vertex_normals(k, crease, w, degenerate);
-    const size_t first_pair = pair_normals.size() / 3;
-    w.normal_of.resize(w.groups.size());
-    for (size_t g = 0; g < w.groups.size(); ++g) w.normal_of[g] = pair_of(first_pair, w.groups[g].normal);
-    auto write = [&](uint32_t t, uint32_t pair) {
-      for (size_t j = 3 * size_t{t}; j < 3 * size_t{t} + 3; ++j)
-        if (tri[j] == v) out.triangles[j] = pair;
+  constexpr size_t kChunk = 1 << 14;  // vertices
+  const size_t chunks = (vertex_count + kChunk - 1) / kChunk;
+  std::vector<std::vector<float>> chunk_normals(chunks);
+  tbb::enumerable_thread_specific<Work> works;
+  tbb::parallel_for(size_t{0}, chunks, [&](size_t ch) {
+    Work& vw = works.local();  // per-vertex scratch (the CSR stays in w)
+    std::vector<float>& pair_normals = chunk_normals[ch];
+    auto pair_of = [&](size_t first_pair, const float* n) {
+      const size_t pairs = pair_normals.size() / 3;
+      for (size_t p = first_pair; p < pairs; ++p)
+        if (same_bits(&pair_normals[3 * p], n)) return static_cast<uint32_t>(p);
+      pair_normals.insert(pair_normals.end(), n, n + 3);
+      return static_cast<uint32_t>(pairs);
     };
-    for (size_t n = 0; n < w.order.size(); ++n) write(inc[w.order[n]], w.normal_of[w.group_of[n]]);
-    if (w.order.size() < k) {
-      const uint32_t pair = pair_of(first_pair, degenerate);
-      for (size_t i = 0; i < k; ++i)
-        if (!w.ok[i]) write(inc[i], pair);
+    for (size_t v = ch * kChunk; v < std::min(vertex_count, (ch + 1) * kChunk); ++v) {
+      const uint32_t begin = w.offsets[v], end = w.offsets[v + 1];
+      if (begin == end) continue;
+      const uint32_t* inc = w.incident.data() + begin;
+      const size_t k = end - begin;
+      vw.cross.resize(3 * k);
+      vw.unitn.resize(3 * k);
+      vw.ok.resize(k);
+      for (size_t i = 0; i < k; ++i) vw.ok[i] = face(pos, tri, inc[i], &vw.cross[3 * i], &vw.unitn[3 * i]);
+      float degenerate[3];
+      vertex_normals(k, crease, vw, degenerate);
+      const size_t first_pair = pair_normals.size() / 3;
+      vw.normal_of.resize(vw.groups.size());
+      for (size_t g = 0; g < vw.groups.size(); ++g) vw.normal_of[g] = pair_of(first_pair, vw.groups[g].normal);
+      auto write = [&](uint32_t t, uint32_t pair) {
+        for (size_t j = 3 * size_t{t}; j < 3 * size_t{t} + 3; ++j)
+          if (tri[j] == v) out.triangles[j] = pair;
+      };
+      for (size_t n = 0; n < vw.order.size(); ++n) write(inc[vw.order[n]], vw.normal_of[vw.group_of[n]]);
+      if (vw.order.size() < k) {
+        const uint32_t pair = pair_of(first_pair, degenerate);
+        for (size_t i = 0; i < k; ++i)
+          if (!vw.ok[i]) write(inc[i], pair);
+      }
     }
-  }
+  });
+  std::vector<size_t> chunk_first(chunks + 1, 0);  // the global id of each chunk's first pair
+  for (size_t ch = 0; ch < chunks; ++ch) chunk_first[ch + 1] = chunk_first[ch] + chunk_normals[ch].size() / 3;
   std::vector<uint32_t>().swap(w.incident);
   std::vector<uint32_t>().swap(w.offsets);
 
   // Output vertices: the pairs in order of first appearance over the corners. Every pair has a corner.
-  const size_t pairs = pair_normals.size() / 3;
+  const size_t pairs = chunk_first[chunks];
   std::vector<uint32_t> output_of(pairs, kNone);
   out.vertex.clear();
   out.normals.clear();
   out.vertex.reserve(pairs);
   out.normals.reserve(3 * pairs);
   for (size_t j = 0; j < triangles.size(); ++j) {
-    const uint32_t p = out.triangles[j];
+    const size_t ch = tri[j] / kChunk, local = out.triangles[j], p = chunk_first[ch] + local;
     if (output_of[p] == kNone) {
       output_of[p] = static_cast<uint32_t>(out.vertex.size());
       out.vertex.push_back(tri[j]);
-      out.normals.insert(out.normals.end(), &pair_normals[3 * size_t{p}], &pair_normals[3 * size_t{p}] + 3);
+      const float* n = &chunk_normals[ch][3 * local];
+      out.normals.insert(out.normals.end(), n, n + 3);
     }
     out.triangles[j] = output_of[p];
   }

@@ -18,8 +18,8 @@
 // Units: positions in scene units (double); crease in degrees; normals unit length in float32 (the double
 // result rounded once, so |n| = 1 within float rounding; axis-aligned normals are exact).
 //
-// Definitions, so that a build gives the same bits on every run (the kernel is single-threaded; callers may
-// run it on chunks in parallel):
+// Definitions, so that a build gives the same bits on every run, for any number of threads (the per-vertex
+// pass runs in fixed vertex chunks in parallel in the caller's TBB arena):
 // - Zero normals are +0: every component of every output normal is canonicalised (−0 → +0) before the
 //   bitwise comparison and the output.
 // - Angle test: t always includes itself. Otherwise the angle is decided on the dot product of the unit

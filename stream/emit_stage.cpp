@@ -3,11 +3,14 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <memory>
 #include <vector>
 
+#include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_group.h>
@@ -62,7 +65,13 @@ struct Scratch {
   FlatMap<2> edges;
   FlatMap<1, false> points;
   FlatMap<1> cells;  // pass A: a cell's quadric slot; passes B and C: a kept edge's slot
-  void clear() { triangles.clear(), edges.clear(), points.clear(), cells.clear(); }
+  // Pass A: the last point and the last quadric cell of the block. Neighbouring triangles mostly fall in
+  // the same cell at coarse levels; these skip the hash table then (same result: the cell is in it).
+  uint32_t last_point = UINT32_MAX, last_cell = UINT32_MAX, last_slot = 0;
+  void clear() {
+    triangles.clear(), edges.clear(), points.clear(), cells.clear();
+    last_point = last_cell = UINT32_MAX;
+  }
 };
 
 void add(double* sum, const double* p) {
@@ -78,30 +87,162 @@ double distance_to_line(const double* x, const double* a, const double* b) {
   return std::sqrt((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) / len2);
 }
 
+// The group's cluster maps, packed: per stored vertex one record of `bits` bits (at most 64), at bit
+// v * bits of a plain word array, holding each level's cell in its own field. A field of b bits holds the
+// cells 0 .. 2^b - 2 and all ones for "no cell", so a level of C cells needs bit_width(C) bits. Packing
+// several levels into one record lets one pass over the triangles serve them all (one record fetch per
+// corner instead of one map per level), and packing to the bit keeps a lone level at 22 bits per vertex
+// on a 2.5M-cell level instead of 32.
+class PackedMap {
+ public:
+  // Every record all ones: no vertex has a cell yet.
+  void reset(std::vector<uint64_t>& words, uint64_t vertices, unsigned bits) {
+    words_ = &words, bits_ = bits;
+    mask_ = bits == 64 ? ~uint64_t{0} : (uint64_t{1} << bits) - 1;
+    words.assign((vertices * bits + 63) / 64 + 1, ~uint64_t{0});  // + 1: get() may read one word past
+  }
+  uint64_t get(uint64_t v) const {
+    const uint64_t bit = v * bits_, s = bit % 64;
+    const uint64_t* w = words_->data() + bit / 64;
+    uint64_t x = w[0] >> s;
+    if (s + bits_ > 64) x |= w[1] << (64 - s);
+    return x & mask_;
+  }
+  void set(uint64_t v, uint64_t record) {
+    const uint64_t bit = v * bits_, s = bit % 64;
+    uint64_t* w = words_->data() + bit / 64;
+    w[0] = (w[0] & ~(mask_ << s)) | (record << s);
+    if (s + bits_ > 64) w[1] = (w[1] & ~(mask_ >> (64 - s))) | (record >> (64 - s));
+  }
+
+ private:
+  std::vector<uint64_t>* words_ = nullptr;
+  unsigned bits_ = 0;
+  uint64_t mask_ = 0;
+};
+
+// One level of a group: its field in the packed map and what it accumulates.
+struct LevelState {
+  EmitLevel in;
+  unsigned shift = 0;
+  uint64_t mask = 0;  // field mask after the shift; all ones is "no cell"
+  // Pass A.
+  FlatMap<3, false> g_triangles;
+  FlatMap<2> g_edges;
+  FlatMap<1, false> g_points;
+  std::vector<std::array<uint32_t, 3>> triangles;
+  std::vector<std::array<uint32_t, 2>> edges;
+  std::vector<uint32_t> points;
+  std::vector<core::Quadric> quadrics;
+  // One bit per input triangle and segment that collapsed to an edge, so that passes B and C visit only
+  // those.
+  std::vector<uint64_t> collapsed[2];
+  // Elimination, passes B and C.
+  std::vector<std::array<uint32_t, 2>> kept_edges;  // in edge order; k_edges finds them by cells
+  FlatMap<2> k_edges;
+  std::vector<uint32_t> kept_points;
+  std::vector<EdgeSums> kept_sums;
+  std::vector<std::array<double, 3>> pa, pb;
+  std::vector<Distances> distances;
+  EmitCounts counts;
+};
+
 }  // namespace
 
-EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
-                      const std::string& prefix, size_t level, uint64_t records, uint64_t cells, double cell_size,
-                      const core::ClusterOptions& cluster, const EmitOptions& options, Progress& progress,
-                      EmitScratch& level_scratch, core::LodMesh* out) {
-  // The level's cluster map: stored vertex id -> cell.
-  std::vector<uint32_t>& map = level_scratch.map;
-  map.assign(meta.vertices, core::kNoCell);
+unsigned emit_bits(uint64_t cells) { return std::max(1u, static_cast<unsigned>(std::bit_width(cells))); }
+
+uint64_t emit_level_bytes(uint64_t cells, const EmitOptions& options) {
+  // Measured on the 48M-triangle city scene at its finest level (2.56M cells, 5.4M output triangles): the
+  // dedupe tables (half-full open addressing, doubled while they grow), the output arrays and the
+  // per-thread block tables peak at about 240 bytes per cell during pass A; the quadrics add 80.
+  const bool quadric = options.representative == Representative::quadric && !options.count_only;
+  return cells * (240 + (quadric ? sizeof(core::Quadric) : 0));
+}
+
+uint64_t emit_map_bytes(uint64_t vertices, unsigned bits) { return (vertices * bits + 63) / 64 * 8 + 8; }
+
+uint64_t mesh_bytes(const core::LodMesh& m) {
+  return 4 * (m.positions.capacity() + m.normals.capacity() + m.triangles.capacity() + m.edges.capacity() +
+              m.thickness.capacity() + m.points.capacity());
+}
+
+size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t budget,
+                      uint64_t resident, const EmitOptions& options) {
+  unsigned bits = emit_bits(cells[first]);
+  uint64_t work = emit_level_bytes(cells[first], options);
+  size_t end = first + 1;
+  while (end < cells.size()) {
+    const unsigned b = bits + emit_bits(cells[end]);
+    const uint64_t w = work + emit_level_bytes(cells[end], options);
+    if (b > 64 || resident + emit_map_bytes(vertices, b) + w > budget) break;
+    bits = b, work = w, ++end;
+  }
+  return end;
+}
+
+std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
+                                    const std::string& canonical_path, const std::string& prefix,
+                                    std::span<const EmitLevel> group, uint64_t records,
+                                    const core::ClusterOptions& cluster, const EmitOptions& options,
+                                    Progress& progress, EmitScratch& emit_scratch, core::LodMesh* out) {
+  const size_t nl = group.size();
+  if (nl == 0) return {};
+  std::vector<LevelState> levels(nl);
+  unsigned bits = 0;
+  for (size_t l = 0; l < nl; ++l) {
+    LevelState& L = levels[l];
+    L.in = group[l];
+    const unsigned b = emit_bits(L.in.cells);
+    L.shift = bits, L.mask = b == 64 ? ~uint64_t{0} : (uint64_t{1} << b) - 1;
+    bits += b;
+  }
+  if (bits > 64) fail(Status::internal, "emit: a group's cluster maps need more than 64 bits per vertex");
+
+  // The group's cluster maps: stored vertex id -> one record holding every level's cell. Each record is
+  // composed from all the levels' cell files at once and written once. The records are random writes (the
+  // weight index is in grade order); the threads split them by vertex range, each range a whole number of
+  // words so that no two threads write one word, and each thread reads every record (sequential, cheap).
+  PackedMap map;
+  map.reset(emit_scratch.map, meta.vertices, bits);
   {
-    io::MappedFile order(order_path(prefix)), cell_file(cells_path(prefix, level));
-    if (order.size() != records * 4 || cell_file.size() != records * 4)
-      fail(Status::io_error, cell_file.path() + ": size does not match the weight index");
-    for (uint64_t first = 0; first < records; first += 1 << 20) {
-      const uint64_t n = std::min<uint64_t>(1 << 20, records - first);
-      const io::Window a = order.map(first * 4, (first + n) * 4), b = cell_file.map(first * 4, (first + n) * 4);
-      const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
-      const uint32_t* cs = reinterpret_cast<const uint32_t*>(b.data());
-      for (uint64_t i = 0; i < n; ++i) map[ids[i]] = cs[i];
+    io::MappedFile order(order_path(prefix));
+    std::vector<std::unique_ptr<io::MappedFile>> cell_files;
+    for (const LevelState& L : levels) {
+      cell_files.push_back(std::make_unique<io::MappedFile>(cells_path(prefix, L.in.level)));
+      if (order.size() != records * 4 || cell_files.back()->size() != records * 4)
+        fail(Status::io_error, cell_files.back()->path() + ": size does not match the weight index");
     }
+    const size_t parts = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+    const uint64_t per_part = ((meta.vertices + parts - 1) / parts + 63) / 64 * 64;  // 64 records: whole words
+    tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
+      const uint64_t lo = part * per_part, span = std::min(meta.vertices, lo + per_part) - std::min(meta.vertices, lo);
+      std::vector<io::Window> windows(nl);
+      std::vector<const uint32_t*> cs(nl);
+      for (uint64_t first = 0; first < records && span > 0; first += 1 << 20) {
+        const uint64_t n = std::min<uint64_t>(1 << 20, records - first);
+        const io::Window a = order.map(first * 4, (first + n) * 4);
+        for (size_t l = 0; l < nl; ++l) {
+          windows[l] = cell_files[l]->map(first * 4, (first + n) * 4);
+          cs[l] = reinterpret_cast<const uint32_t*>(windows[l].data());
+        }
+        const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
+        for (uint64_t i = 0; i < n; ++i) {
+          if (ids[i] - lo >= span) continue;  // another part's vertex (unsigned: below lo wraps around)
+          uint64_t record = 0;
+          for (size_t l = 0; l < nl; ++l) {
+            const uint64_t c = cs[l][i] == core::kNoCell ? levels[l].mask : cs[l][i];
+            if (c >= levels[l].in.cells && c != levels[l].mask)
+              fail(Status::io_error, cell_files[l]->path() + ": cell id out of range");
+            record |= c << levels[l].shift;
+          }
+          map.set(ids[i], record);
+        }
+      }
+    });
     if (!canonical_path.empty())
       for_column_blocks(canonical_path, meta.vertices, 1, 1 << 20, [&](uint64_t first, std::span<const uint32_t> canon) {
         for (uint64_t i = 0; i < canon.size(); ++i)
-          if (canon[i] != first + i) map[first + i] = map[canon[i]];
+          if (canon[i] != first + i) map.set(first + i, map.get(canon[i]));
       });
   }
 
@@ -121,40 +262,44 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
   }
   const bool quadric = options.representative == Representative::quadric && !options.count_only;
 
-  auto cell_of = [&](uint32_t v) {
-    const uint32_t c = map[v];
-    if (c == core::kNoCell) fail(Status::internal, "emit: vertex " + std::to_string(v) + " has no cell");
-    return c;
+  // A vertex's record; every level's field is all ones exactly when the vertex has no cell, so the first
+  // level's field tells.
+  auto record_of = [&](uint32_t v) {
+    const uint64_t r = map.get(v);
+    if ((r & levels[0].mask) == levels[0].mask) fail(Status::internal, "emit: vertex " + std::to_string(v) + " has no cell");
+    return r;
   };
+  auto cell = [&](const LevelState& L, uint64_t record) { return static_cast<uint32_t>((record >> L.shift) & L.mask); };
 
-  // Runs `work(block, out, scratch)` over the blocks in parallel groups, and `merge(out)` in block order:
-  // group g's outputs are merged (one thread) while group g + 1 runs (the others), so the two sets of
-  // outputs alternate. Merges stay serial and in block order, so this changes no sum.
-  tbb::enumerable_thread_specific<Scratch> scratch;
-  const size_t group = 4 * static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
-  std::vector<BlockOut> outs[2] = {std::vector<BlockOut>(group), std::vector<BlockOut>(group)};
+  // Runs `work(block, ids, outs, scratches)` (one BlockOut and one Scratch per level) over the blocks in
+  // parallel groups, and `merge(outs)` in block order: group g's outputs are merged (one thread) while group
+  // g + 1 runs (the others), so the two sets of outputs alternate. Merges stay serial and in block order, so
+  // this changes no sum.
+  tbb::enumerable_thread_specific<std::vector<Scratch>> scratch([nl] { return std::vector<Scratch>(nl); });
+  const size_t concurrent = 4 * static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  std::vector<BlockOut> outs[2] = {std::vector<BlockOut>(concurrent * nl), std::vector<BlockOut>(concurrent * nl)};
   auto run_blocks = [&](const char* stage, bool segments_and_triangles_only, auto&& work, auto&& merge) {
     size_t merged = 0;  // blocks merged so far
-    for (size_t g = 0, k = 0; g < blocks.size() || merged < blocks.size(); g += group, ++k) {
+    for (size_t g = 0, k = 0; g < blocks.size() || merged < blocks.size(); g += concurrent, ++k) {
       progress.check();
-      const size_t n = g < blocks.size() ? std::min(group, blocks.size() - g) : 0;
+      const size_t n = g < blocks.size() ? std::min(concurrent, blocks.size() - g) : 0;
       std::vector<BlockOut>& current = outs[k % 2];
       std::vector<BlockOut>& previous = outs[(k + 1) % 2];
       const size_t before = std::min(g, blocks.size());  // the blocks of the groups before g
       tbb::task_group merging;
       if (merged < before) merging.run([&] {
-        for (size_t i = 0; merged + i < before; ++i) merge(previous[i]);
+        for (size_t i = 0; merged + i < before; ++i) merge(&previous[i * nl]);
       });
       tbb::parallel_for(size_t{0}, n, [&](size_t i) {
         const Block& b = blocks[g + i];
-        BlockOut& o = current[i];
-        o.clear();
+        BlockOut* o = &current[i * nl];
+        for (size_t l = 0; l < nl; ++l) o[l].clear();
         if (segments_and_triangles_only && b.kind == 2) return;
         const uint64_t arity = static_cast<uint64_t>(3 - b.kind);
         const io::Window w = columns[b.kind]->map(b.first * arity * 4, (b.first + b.count) * arity * 4);
-        Scratch& s = scratch.local();
-        s.clear();
-        work(b, std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), b.count * arity), o, s);
+        std::vector<Scratch>& s = scratch.local();
+        for (Scratch& x : s) x.clear();
+        work(b, std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), b.count * arity), o, s.data());
       });
       merging.wait();
       merged = before;
@@ -165,309 +310,373 @@ EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const
     }
   };
 
-  // Pass A: classify, dedupe per block, sum quadrics.
-  FlatMap<3, false> g_triangles;
-  FlatMap<2> g_edges;
-  FlatMap<1, false> g_points;
-  std::vector<std::array<uint32_t, 3>> triangles;
-  std::vector<std::array<uint32_t, 2>> edges;
-  std::vector<uint32_t> points;
-  std::vector<core::Quadric> quadrics(quadric ? cells : 0);
-  // One bit per input triangle and segment that collapsed to an edge, so that passes B and C visit only
-  // those. Blocks start at multiples of 64 primitives: each word is written by one block, hence one thread.
+  // Pass A: classify, dedupe per block, sum quadrics; a triangle's positions and quadric are formed once for
+  // every level of the group.
+  // Blocks start at multiples of 64 primitives: each word of the collapsed bits is written by one block,
+  // hence one thread.
   static_assert(kEmitBlock % 64 == 0);
-  std::vector<uint64_t> collapsed[2];
-  for (int kind = 0; kind < 2; ++kind)
-    if (!options.count_only) collapsed[kind].assign((column_count[kind] + 63) / 64, 0);
-  auto mark = [&](const Block& b, size_t i) {
-    if (options.count_only) return;
-    const uint64_t p = b.first + i;
-    collapsed[b.kind][p / 64] |= uint64_t{1} << (p % 64);
-  };
-
-  auto classify = [&](const Block& b, std::span<const uint32_t> ids, BlockOut& o, Scratch& s) {
-    auto edge = [&](uint32_t c0, uint32_t c1) {
+  for (LevelState& L : levels) {
+    if (quadric) L.quadrics.resize(L.in.cells);
+    for (int kind = 0; kind < 2; ++kind)
+      if (!options.count_only) L.collapsed[kind].assign((column_count[kind] + 63) / 64, 0);
+  }
+  auto classify = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
+    auto mark = [&](LevelState& L, size_t i) {
+      if (options.count_only) return;
+      const uint64_t p = b.first + i;
+      L.collapsed[b.kind][p / 64] |= uint64_t{1} << (p % 64);
+    };
+    auto edge = [&](BlockOut& o, Scratch& s, uint32_t c0, uint32_t c1) {
       const std::array<uint32_t, 2> key{std::min(c0, c1), std::max(c0, c1)};
       if (s.edges.insert(key, 0).second) o.edges.push_back(key);
     };
-    auto point = [&](uint32_t c) {
+    auto point = [&](BlockOut& o, Scratch& s, uint32_t c) {
+      if (c == s.last_point) return;
+      s.last_point = c;
       if (s.points.insert({c}, 0).second) o.points.push_back(c);
     };
     const size_t arity = static_cast<size_t>(3 - b.kind);
     for (size_t i = 0; i < ids.size(); i += arity) {
       if (arity == 3) {
         const uint32_t v[3] = {ids[i], ids[i + 1], ids[i + 2]};
-        const uint32_t c[3] = {cell_of(v[0]), cell_of(v[1]), cell_of(v[2])};
+        const uint64_t r[3] = {record_of(v[0]), record_of(v[1]), record_of(v[2])};
+        core::Quadric q;
         if (quadric) {
           double p[3][3];
           for (int k = 0; k < 3; ++k) positions.get(v[k], p[k]);
-          core::Quadric q;
           q.add_triangle(p[0], p[1], p[2]);
-          for (int k = 0; k < 3; ++k) {
-            if ((k > 0 && c[k] == c[0]) || (k > 1 && c[k] == c[1])) continue;
-            const auto [slot, fresh] = s.cells.insert({c[k]}, static_cast<uint32_t>(o.quadrics.size()));
-            if (fresh) o.quadric_cells.push_back(c[k]), o.quadrics.push_back(q);
-            else o.quadrics[slot].add(q);
+        }
+        for (size_t l = 0; l < nl; ++l) {
+          LevelState& L = levels[l];
+          BlockOut& o = outs_l[l];
+          Scratch& s = scratch_l[l];
+          const uint32_t c[3] = {cell(L, r[0]), cell(L, r[1]), cell(L, r[2])};
+          if (quadric) {
+            for (int k = 0; k < 3; ++k) {
+              if ((k > 0 && c[k] == c[0]) || (k > 1 && c[k] == c[1])) continue;
+              if (c[k] == s.last_cell) {
+                o.quadrics[s.last_slot].add(q);
+                continue;
+              }
+              const auto [slot, fresh] = s.cells.insert({c[k]}, static_cast<uint32_t>(o.quadrics.size()));
+              if (fresh) o.quadric_cells.push_back(c[k]), o.quadrics.push_back(q);
+              else o.quadrics[slot].add(q);
+              s.last_cell = c[k], s.last_slot = slot;
+            }
+          }
+          if (c[0] != c[1] && c[1] != c[2] && c[0] != c[2]) {
+            std::array<uint32_t, 3> key{c[0], c[1], c[2]};
+            std::sort(key.begin(), key.end());
+            if (s.triangles.insert(key, 0).second) o.triangles.push_back({c[0], c[1], c[2]});
+          } else if (c[0] == c[1] && c[1] == c[2]) {
+            point(o, s, c[0]);
+          } else {
+            edge(o, s, c[0], c[0] != c[1] ? c[1] : c[2]);
+            mark(L, i / 3);
           }
         }
-        if (c[0] != c[1] && c[1] != c[2] && c[0] != c[2]) {
-          std::array<uint32_t, 3> key{c[0], c[1], c[2]};
-          std::sort(key.begin(), key.end());
-          if (s.triangles.insert(key, 0).second) o.triangles.push_back({c[0], c[1], c[2]});
-        } else if (c[0] == c[1] && c[1] == c[2]) {
-          point(c[0]);
-        } else {
-          edge(c[0], c[0] != c[1] ? c[1] : c[2]);
-          mark(b, i / 3);
-        }
       } else if (arity == 2) {
-        const uint32_t c0 = cell_of(ids[i]), c1 = cell_of(ids[i + 1]);
-        if (c0 == c1) {
-          point(c0);
-        } else {
-          edge(c0, c1);
-          mark(b, i / 2);
+        const uint64_t r0 = record_of(ids[i]), r1 = record_of(ids[i + 1]);
+        for (size_t l = 0; l < nl; ++l) {
+          const uint32_t c0 = cell(levels[l], r0), c1 = cell(levels[l], r1);
+          if (c0 == c1) {
+            point(outs_l[l], scratch_l[l], c0);
+          } else {
+            edge(outs_l[l], scratch_l[l], c0, c1);
+            mark(levels[l], i / 2);
+          }
         }
       } else {
-        point(cell_of(ids[i]));
+        const uint64_t r0 = record_of(ids[i]);
+        for (size_t l = 0; l < nl; ++l) point(outs_l[l], scratch_l[l], cell(levels[l], r0));
       }
     }
   };
-  run_blocks("emit", false, classify, [&](BlockOut& o) {
-    for (const auto& t : o.triangles) {
-      std::array<uint32_t, 3> key = t;
-      std::sort(key.begin(), key.end());
-      if (g_triangles.insert(key, 0).second) triangles.push_back(t);
+  run_blocks("emit", false, classify, [&](BlockOut* outs_l) {
+    for (size_t l = 0; l < nl; ++l) {
+      LevelState& L = levels[l];
+      const BlockOut& o = outs_l[l];
+      for (const auto& t : o.triangles) {
+        std::array<uint32_t, 3> key = t;
+        std::sort(key.begin(), key.end());
+        if (L.g_triangles.insert(key, 0).second) L.triangles.push_back(t);
+      }
+      for (const auto& e : o.edges)
+        if (L.g_edges.insert(e, static_cast<uint32_t>(L.edges.size())).second) L.edges.push_back(e);
+      for (uint32_t c : o.points)
+        if (L.g_points.insert({c}, 0).second) L.points.push_back(c);
+      for (size_t i = 0; i < o.quadric_cells.size(); ++i) L.quadrics[o.quadric_cells[i]].add(o.quadrics[i]);
     }
-    for (const auto& e : o.edges)
-      if (g_edges.insert(e, static_cast<uint32_t>(edges.size())).second) edges.push_back(e);
-    for (uint32_t c : o.points)
-      if (g_points.insert({c}, 0).second) points.push_back(c);
-    for (size_t i = 0; i < o.quadric_cells.size(); ++i) quadrics[o.quadric_cells[i]].add(o.quadrics[i]);
   });
 
-  EmitCounts counts;
+  std::vector<EmitCounts> counts(nl);
   if (options.count_only) {
-    counts.triangles = triangles.size();
-    counts.edges = edges.size();
-    counts.points = points.size();
+    for (size_t l = 0; l < nl; ++l) {
+      counts[l].triangles = levels[l].triangles.size();
+      counts[l].edges = levels[l].edges.size();
+      counts[l].points = levels[l].points.size();
+    }
     return counts;
   }
 
   // Elimination, before the thickness passes, which then measure the kept edges only. Edges are few next to
   // triangle sides: look each side up among the edges.
-  g_triangles = FlatMap<3, false>();
-  g_points = FlatMap<1, false>();
-  std::vector<uint8_t> on_triangle(edges.size(), 0);
-  std::vector<uint8_t> used(cells, 0);
-  for (const auto& t : triangles)
-    for (int k = 0; k < 3; ++k) {
-      used[t[k]] = 1;
-      if (edges.empty()) continue;
-      const uint32_t e = g_edges.find({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});
-      if (e != FlatMap<2>::empty) on_triangle[e] = 1;
+  bool any_kept_edges = false;
+  for (LevelState& L : levels) {
+    L.g_triangles = FlatMap<3, false>();
+    L.g_points = FlatMap<1, false>();
+    std::vector<uint8_t> on_triangle(L.edges.size(), 0);
+    std::vector<uint8_t> used(L.in.cells, 0);
+    // In parallel: the flags only ever go from 0 to 1, so the result does not depend on the threads.
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, L.triangles.size(), 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        const auto& t = L.triangles[i];
+        for (int k = 0; k < 3; ++k) {
+          std::atomic_ref<uint8_t>(used[t[k]]).store(1, std::memory_order_relaxed);
+          if (L.edges.empty()) continue;
+          const uint32_t e = L.g_edges.find({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});
+          if (e != FlatMap<2>::empty) std::atomic_ref<uint8_t>(on_triangle[e]).store(1, std::memory_order_relaxed);
+        }
+      }
+    });
+    L.g_edges = FlatMap<2>();
+    for (size_t i = 0; i < L.edges.size(); ++i) {
+      if (on_triangle[i]) {
+        ++L.counts.edges_on_triangles;
+        continue;
+      }
+      L.k_edges.insert(L.edges[i], static_cast<uint32_t>(L.kept_edges.size()));
+      L.kept_edges.push_back(L.edges[i]);
+      used[L.edges[i][0]] = used[L.edges[i][1]] = 1;
     }
-  g_edges = FlatMap<2>();
-  // The kept edges, in edge order; k_edges finds them by cells.
-  std::vector<std::array<uint32_t, 2>> kept_edges;
-  FlatMap<2> k_edges;
-  for (size_t i = 0; i < edges.size(); ++i) {
-    if (on_triangle[i]) {
-      ++counts.edges_on_triangles;
-      continue;
+    std::vector<std::array<uint32_t, 2>>().swap(L.edges);
+    for (uint32_t c : L.points) {
+      if (used[c]) {
+        ++L.counts.points_covered;
+        continue;
+      }
+      L.kept_points.push_back(c);
     }
-    k_edges.insert(edges[i], static_cast<uint32_t>(kept_edges.size()));
-    kept_edges.push_back(edges[i]);
-    used[edges[i][0]] = used[edges[i][1]] = 1;
+    std::vector<uint32_t>().swap(L.points);
+    L.kept_sums.resize(L.kept_edges.size());
+    L.distances.resize(L.kept_edges.size());
+    any_kept_edges = any_kept_edges || !L.kept_edges.empty();
   }
-  std::vector<std::array<uint32_t, 2>>().swap(edges);
-  std::vector<uint8_t>().swap(on_triangle);
-  std::vector<uint32_t> kept_points;
-  for (uint32_t c : points) {
-    if (used[c]) {
-      ++counts.points_covered;
-      continue;
-    }
-    kept_points.push_back(c);
-  }
-  std::vector<uint8_t>().swap(used);
 
-  // Passes B and C visit the input triangles and segments that collapsed to a kept edge (an eliminated
-  // edge's thickness would go unused). For each, `visit(corner ids, their cells, arity, lower cell, kept
-  // edge, slot, o)` gets the edge's slot in the block's output (o.kept_edges with o.sums or o.distances, in
-  // order of first appearance), so that sums are formed per block in primitive order and merged in block
-  // order.
-  auto for_kept_edges = [&](auto&& visit) {
-    return [&, visit](const Block& b, std::span<const uint32_t> ids, BlockOut& o, Scratch& s) {
+  // Passes B and C visit the input triangles and segments that collapsed to a kept edge in some level of
+  // the group (an eliminated edge's thickness would go unused), fetching their corners once. For each level
+  // where one did, `visit(level, corner positions, their cells, arity, lower cell, kept edge, slot, o)` gets
+  // the edge's slot in the block's output (o.kept_edges with o.sums or o.distances, in order of first
+  // appearance), so that sums are formed per block in primitive order and merged in block order.
+  // Pass B (`drop` true) also clears the bit of every primitive whose edge was eliminated, so that pass C
+  // visits the kept edges' primitives only (at the finest city level, 3% of those that collapsed).
+  auto for_kept_edges = [&](bool drop, auto&& visit) {
+    return [&, drop, visit](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
       const size_t arity = static_cast<size_t>(3 - b.kind);
-      const uint64_t* bits = collapsed[b.kind].data();
-      for (size_t i = 0; i < ids.size(); i += arity) {
-        const uint64_t prim = b.first + i / arity;
-        if (!(bits[prim / 64] >> (prim % 64) & 1)) continue;
-        uint32_t c[3], lo = UINT32_MAX, hi = 0;
-        for (size_t k = 0; k < arity; ++k) c[k] = cell_of(ids[i + k]), lo = std::min(lo, c[k]), hi = std::max(hi, c[k]);
-        const uint32_t e = k_edges.find({lo, hi});
-        if (e == FlatMap<2>::empty) continue;
-        const auto [slot, fresh] = s.cells.insert({e}, static_cast<uint32_t>(o.kept_edges.size()));
-        if (fresh) o.kept_edges.push_back(e), o.sums.emplace_back(), o.distances.emplace_back();
-        visit(&ids[i], c, arity, lo, e, slot, o);
+      const uint64_t first_word = b.first / 64, words = (b.count + 63) / 64;  // b.first is a multiple of 64
+      for (uint64_t w = first_word; w < first_word + words; ++w) {
+        uint64_t any = 0;  // the primitives of this word that collapsed in some level, visited in order
+        for (size_t l = 0; l < nl; ++l) any |= levels[l].collapsed[b.kind][w];
+        for (; any; any &= any - 1) {
+          const uint64_t bit = uint64_t{1} << std::countr_zero(any);
+          const uint32_t* v = &ids[(w * 64 + static_cast<uint64_t>(std::countr_zero(any)) - b.first) * arity];
+          uint64_t r[3];
+          for (size_t k = 0; k < arity; ++k) r[k] = record_of(v[k]);
+          double p[3][3];
+          bool fetched = false;
+          for (size_t l = 0; l < nl; ++l) {
+            LevelState& L = levels[l];
+            uint64_t& word = L.collapsed[b.kind][w];
+            if (!(word & bit)) continue;
+            uint32_t c[3], lo = UINT32_MAX, hi = 0;
+            for (size_t k = 0; k < arity; ++k) c[k] = cell(L, r[k]), lo = std::min(lo, c[k]), hi = std::max(hi, c[k]);
+            const uint32_t e = L.k_edges.find({lo, hi});
+            if (e == FlatMap<2>::empty) {
+              if (drop) word &= ~bit;
+              continue;
+            }
+            if (!fetched)
+              for (size_t k = 0; k < arity; ++k) positions.get(v[k], p[k]);
+            fetched = true;
+            BlockOut& o = outs_l[l];
+            const auto [slot, fresh] = scratch_l[l].cells.insert({e}, static_cast<uint32_t>(o.kept_edges.size()));
+            if (fresh) o.kept_edges.push_back(e), o.sums.emplace_back(), o.distances.emplace_back();
+            visit(L, p, c, arity, lo, e, slot, o);
+          }
+        }
       }
     };
   };
 
   // Pass B: the corner sums of the kept edges, for P_A and P_B (a corner in the lower cell goes to A).
-  std::vector<EdgeSums> kept_sums(kept_edges.size());
-  if (!kept_edges.empty()) {
+  if (any_kept_edges) {
     run_blocks("emit", true,
-               for_kept_edges([&](const uint32_t* v, const uint32_t* c, size_t arity, uint32_t lo, uint32_t, uint32_t slot,
-                                  BlockOut& o) {
+               for_kept_edges(true, [&](LevelState&, const double (*p)[3], const uint32_t* c, size_t arity, uint32_t lo,
+                                  uint32_t, uint32_t slot, BlockOut& o) {
                  EdgeSums& e = o.sums[slot];
                  for (size_t k = 0; k < arity; ++k) {
-                   double p[3];
-                   positions.get(v[k], p);
-                   if (c[k] == lo) add(e.a, p), ++e.na;
-                   else add(e.b, p), ++e.nb;
+                   if (c[k] == lo) add(e.a, p[k]), ++e.na;
+                   else add(e.b, p[k]), ++e.nb;
                  }
                }),
-               [&](BlockOut& o) {
-                 for (size_t i = 0; i < o.kept_edges.size(); ++i) {
-                   EdgeSums& e = kept_sums[o.kept_edges[i]];
-                   add(e.a, o.sums[i].a), add(e.b, o.sums[i].b);
-                   e.na += o.sums[i].na, e.nb += o.sums[i].nb;
+               [&](BlockOut* outs_l) {
+                 for (size_t l = 0; l < nl; ++l) {
+                   const BlockOut& o = outs_l[l];
+                   for (size_t i = 0; i < o.kept_edges.size(); ++i) {
+                     EdgeSums& e = levels[l].kept_sums[o.kept_edges[i]];
+                     add(e.a, o.sums[i].a), add(e.b, o.sums[i].b);
+                     e.na += o.sums[i].na, e.nb += o.sums[i].nb;
+                   }
                  }
                });
   }
 
   // Pass C: mean distances of the collapsed corners to the line through the mean positions.
-  std::vector<std::array<double, 3>> pa(kept_edges.size()), pb(kept_edges.size());
-  for (size_t i = 0; i < kept_edges.size(); ++i)
-    for (int k = 0; k < 3; ++k) {
-      pa[i][k] = kept_sums[i].na ? kept_sums[i].a[k] / static_cast<double>(kept_sums[i].na) : 0;
-      pb[i][k] = kept_sums[i].nb ? kept_sums[i].b[k] / static_cast<double>(kept_sums[i].nb) : 0;
-    }
-  std::vector<Distances> distances(kept_edges.size());
-  if (!kept_edges.empty()) {
+  for (LevelState& L : levels) {
+    L.pa.resize(L.kept_edges.size()), L.pb.resize(L.kept_edges.size());
+    for (size_t i = 0; i < L.kept_edges.size(); ++i)
+      for (int k = 0; k < 3; ++k) {
+        L.pa[i][k] = L.kept_sums[i].na ? L.kept_sums[i].a[k] / static_cast<double>(L.kept_sums[i].na) : 0;
+        L.pb[i][k] = L.kept_sums[i].nb ? L.kept_sums[i].b[k] / static_cast<double>(L.kept_sums[i].nb) : 0;
+      }
+  }
+  if (any_kept_edges) {
     run_blocks("emit", true,
-               for_kept_edges([&](const uint32_t* v, const uint32_t* c, size_t arity, uint32_t lo, uint32_t e, uint32_t slot,
-                                  BlockOut& o) {
+               for_kept_edges(false, [&](LevelState& L, const double (*p)[3], const uint32_t* c, size_t arity, uint32_t lo,
+                                  uint32_t e, uint32_t slot, BlockOut& o) {
                  for (size_t k = 0; k < arity; ++k) {
-                   double p[3];
-                   positions.get(v[k], p);
-                   const double d = distance_to_line(p, pa[e].data(), pb[e].data());
+                   const double d = distance_to_line(p[k], L.pa[e].data(), L.pb[e].data());
                    if (c[k] == lo) o.distances[slot].a += d;
                    else o.distances[slot].b += d;
                  }
                }),
-               [&](BlockOut& o) {
-                 for (size_t i = 0; i < o.kept_edges.size(); ++i) {
-                   distances[o.kept_edges[i]].a += o.distances[i].a;
-                   distances[o.kept_edges[i]].b += o.distances[i].b;
+               [&](BlockOut* outs_l) {
+                 for (size_t l = 0; l < nl; ++l) {
+                   const BlockOut& o = outs_l[l];
+                   for (size_t i = 0; i < o.kept_edges.size(); ++i) {
+                     levels[l].distances[o.kept_edges[i]].a += o.distances[i].a;
+                     levels[l].distances[o.kept_edges[i]].b += o.distances[i].b;
+                   }
                  }
                });
   }
   positions.release();
-  for (auto& bits : collapsed) std::vector<uint64_t>().swap(bits);
-  k_edges = FlatMap<2>();
-  std::vector<float> thickness(kept_edges.size());
-  for (size_t i = 0; i < kept_edges.size(); ++i) {
-    const double da = kept_sums[i].na ? distances[i].a / static_cast<double>(kept_sums[i].na) : 0;
-    const double db = kept_sums[i].nb ? distances[i].b / static_cast<double>(kept_sums[i].nb) : 0;
-    thickness[i] = static_cast<float>(da + db);
-  }
+  for (BlockOut& o : outs[0]) o = BlockOut();
+  for (BlockOut& o : outs[1]) o = BlockOut();
 
-  // The cells in use, numbered in order of first use: triangle corners, then edge and point ends.
-  std::vector<uint32_t> slot_of(cells, UINT32_MAX);
-  std::vector<uint32_t> slot_cell;
-  auto use = [&](uint32_t c) {
-    if (slot_of[c] == UINT32_MAX) slot_of[c] = static_cast<uint32_t>(slot_cell.size()), slot_cell.push_back(c);
-    return slot_of[c];
-  };
-  std::vector<uint32_t> tri_slots;
-  tri_slots.reserve(3 * triangles.size());
-  for (const auto& t : triangles)
-    for (uint32_t c : t) tri_slots.push_back(use(c));
-  std::vector<std::array<uint32_t, 3>>().swap(triangles);
-  const size_t triangle_slots = slot_cell.size();
-  for (const auto& e : kept_edges) use(e[0]), use(e[1]);
-  for (uint32_t c : kept_points) use(c);
+  for (size_t l = 0; l < nl; ++l) {
+    LevelState& L = levels[l];
+    const uint64_t cells = L.in.cells;
+    const double cell_size = L.in.cell_size;
+    for (auto& b : L.collapsed) std::vector<uint64_t>().swap(b);
+    L.k_edges = FlatMap<2>();
+    std::vector<float> thickness(L.kept_edges.size());
+    for (size_t i = 0; i < L.kept_edges.size(); ++i) {
+      const double da = L.kept_sums[i].na ? L.distances[i].a / static_cast<double>(L.kept_sums[i].na) : 0;
+      const double db = L.kept_sums[i].nb ? L.distances[i].b / static_cast<double>(L.kept_sums[i].nb) : 0;
+      thickness[i] = static_cast<float>(da + db);
+    }
+    std::vector<EdgeSums>().swap(L.kept_sums);
+    std::vector<Distances>().swap(L.distances);
+    std::vector<std::array<double, 3>>().swap(L.pa);
+    std::vector<std::array<double, 3>>().swap(L.pb);
 
-  // Their representatives, reading the cell table in cell order through windows (only the cells in use).
-  std::vector<double> rep(3 * slot_cell.size());
-  {
-    std::vector<std::pair<uint32_t, uint32_t>> need(slot_cell.size());
-    for (size_t i = 0; i < slot_cell.size(); ++i) need[i] = {slot_cell[i], static_cast<uint32_t>(i)};
-    std::sort(need.begin(), need.end());
-    io::MappedFile f(cell_info_path(prefix, level));
-    if (f.size() != cells * sizeof(CellInfo)) fail(Status::io_error, f.path() + ": size does not match");
-    constexpr uint64_t window_cells = 1 << 16;
-    io::Window w;
-    uint64_t window_first = 0;
-    for (const auto& [c, slot] : need) {
-      if (!w.data() || c >= window_first + window_cells) {
-        window_first = c - c % window_cells;
-        w = f.map(window_first * sizeof(CellInfo), (window_first + window_cells) * sizeof(CellInfo));
-      }
-      CellInfo ci;
-      std::memcpy(&ci, w.data() + (c - window_first) * sizeof(CellInfo), sizeof ci);
-      double* p = &rep[3 * slot];
-      double mean[3];
-      for (int k = 0; k < 3; ++k) mean[k] = ci.sum[k] / static_cast<double>(ci.vertices);
-      if (options.representative == Representative::center) {
-        std::copy(ci.center, ci.center + 3, p);
-      } else if (options.representative == Representative::mean) {
-        for (int k = 0; k < 3; ++k) p[k] = ci.weight > 0 ? ci.weighted[k] / ci.weight : mean[k];
-      } else {
-        double lo[3], hi[3];
-        for (int k = 0; k < 3; ++k) {
-          if (cluster.clustering == core::Clustering::uniform) {
-            const double sq = static_cast<double>(core::grid_square(ci.center[k], cell_size));
-            lo[k] = sq * cell_size, hi[k] = (sq + 1) * cell_size;
+    // The cells in use, numbered in order of first use: triangle corners, then edge and point ends.
+    std::vector<uint32_t> slot_of(cells, UINT32_MAX);
+    std::vector<uint32_t> slot_cell;
+    auto use = [&](uint32_t c) {
+      if (slot_of[c] == UINT32_MAX) slot_of[c] = static_cast<uint32_t>(slot_cell.size()), slot_cell.push_back(c);
+      return slot_of[c];
+    };
+    std::vector<uint32_t> tri_slots;
+    tri_slots.reserve(3 * L.triangles.size());
+    for (const auto& t : L.triangles)
+      for (uint32_t c : t) tri_slots.push_back(use(c));
+    std::vector<std::array<uint32_t, 3>>().swap(L.triangles);
+    const size_t triangle_slots = slot_cell.size();
+    for (const auto& e : L.kept_edges) use(e[0]), use(e[1]);
+    for (uint32_t c : L.kept_points) use(c);
+
+    // Their representatives, reading the cell table through windows in cell order, the windows in parallel
+    // (each representative depends on its cell alone, so the bytes do not depend on the threads).
+    std::vector<double> rep(3 * slot_cell.size());
+    {
+      io::MappedFile f(cell_info_path(prefix, L.in.level));
+      if (f.size() != cells * sizeof(CellInfo)) fail(Status::io_error, f.path() + ": size does not match");
+      constexpr uint64_t window_cells = 1 << 16;
+      tbb::parallel_for(uint64_t{0}, (cells + window_cells - 1) / window_cells, [&](uint64_t window) {
+        const uint64_t first = window * window_cells, end = std::min(cells, first + window_cells);
+        io::Window w;
+        for (uint64_t c = first; c < end; ++c) {
+          const uint32_t slot = slot_of[c];
+          if (slot == UINT32_MAX) continue;
+          if (!w.data()) w = f.map(first * sizeof(CellInfo), end * sizeof(CellInfo));
+          CellInfo ci;
+          std::memcpy(&ci, w.data() + (c - first) * sizeof(CellInfo), sizeof ci);
+          double* p = &rep[3 * slot];
+          double mean[3];
+          for (int k = 0; k < 3; ++k) mean[k] = ci.sum[k] / static_cast<double>(ci.vertices);
+          if (options.representative == Representative::center) {
+            std::copy(ci.center, ci.center + 3, p);
+          } else if (options.representative == Representative::mean) {
+            for (int k = 0; k < 3; ++k) p[k] = ci.weight > 0 ? ci.weighted[k] / ci.weight : mean[k];
           } else {
-            lo[k] = ci.center[k] - cell_size / 2, hi[k] = ci.center[k] + cell_size / 2;
+            double lo[3], hi[3];
+            for (int k = 0; k < 3; ++k) {
+              if (cluster.clustering == core::Clustering::uniform) {
+                const double sq = static_cast<double>(core::grid_square(ci.center[k], cell_size));
+                lo[k] = sq * cell_size, hi[k] = (sq + 1) * cell_size;
+              } else {
+                lo[k] = ci.center[k] - cell_size / 2, hi[k] = ci.center[k] + cell_size / 2;
+              }
+            }
+            const std::array<double, 3> x = core::quadric_minimizer(L.quadrics[c], mean, lo, hi);
+            std::copy(x.begin(), x.end(), p);
           }
         }
-        const std::array<double, 3> x = core::quadric_minimizer(quadrics[c], mean, lo, hi);
-        std::copy(x.begin(), x.end(), p);
+      });
+    }
+    std::vector<core::Quadric>().swap(L.quadrics);
+
+    // Output vertices: triangle corners split by normal (core/normals.h), then edge and point ends, which
+    // reuse a triangle vertex of their cell when there is one.
+    core::LodMesh mesh;
+    core::CreaseNormals normals;
+    core::crease_normals(std::span<const double>(rep.data(), 3 * triangle_slots), tri_slots,
+                         options.normals ? options.crease_degrees : 180.0, normals);
+    std::vector<uint32_t>().swap(tri_slots);
+    mesh.positions.reserve(3 * (normals.vertex.size() + slot_cell.size() - triangle_slots));
+    for (uint32_t v : normals.vertex)
+      for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(rep[3 * v + k]));
+    mesh.normals = std::move(normals.normals);
+    mesh.triangles = std::move(normals.triangles);
+    std::vector<uint32_t> out_vertex(slot_cell.size(), UINT32_MAX);
+    for (size_t i = 0; i < normals.vertex.size(); ++i)
+      if (out_vertex[normals.vertex[i]] == UINT32_MAX) out_vertex[normals.vertex[i]] = static_cast<uint32_t>(i);
+    std::vector<uint32_t>().swap(normals.vertex);
+    auto end_vertex = [&](uint32_t c) {
+      const uint32_t slot = slot_of[c];
+      if (out_vertex[slot] == UINT32_MAX) {
+        out_vertex[slot] = static_cast<uint32_t>(mesh.positions.size() / 3);
+        for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(rep[3 * slot + k])), mesh.normals.push_back(0.0f);
       }
+      return out_vertex[slot];
+    };
+    for (const auto& e : L.kept_edges) {
+      mesh.edges.push_back(end_vertex(e[0]));
+      mesh.edges.push_back(end_vertex(e[1]));
     }
-  }
-  std::vector<core::Quadric>().swap(quadrics);
+    mesh.thickness = std::move(thickness);
+    for (uint32_t c : L.kept_points) mesh.points.push_back(end_vertex(c));
+    std::vector<std::array<uint32_t, 2>>().swap(L.kept_edges);
+    std::vector<uint32_t>().swap(L.kept_points);
 
-  // Output vertices: triangle corners split by normal (core/normals.h), then edge and point ends, which
-  // reuse a triangle vertex of their cell when there is one.
-  core::LodMesh mesh;
-  core::CreaseNormals normals;
-  core::crease_normals(std::span<const double>(rep.data(), 3 * triangle_slots), tri_slots,
-                       options.normals ? options.crease_degrees : 180.0, normals);
-  std::vector<uint32_t>().swap(tri_slots);
-  mesh.positions.reserve(3 * (normals.vertex.size() + slot_cell.size() - triangle_slots));
-  for (uint32_t v : normals.vertex)
-    for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(rep[3 * v + k]));
-  mesh.normals = std::move(normals.normals);
-  mesh.triangles = std::move(normals.triangles);
-  std::vector<uint32_t> out_vertex(slot_cell.size(), UINT32_MAX);
-  for (size_t i = 0; i < normals.vertex.size(); ++i)
-    if (out_vertex[normals.vertex[i]] == UINT32_MAX) out_vertex[normals.vertex[i]] = static_cast<uint32_t>(i);
-  std::vector<uint32_t>().swap(normals.vertex);
-  auto end_vertex = [&](uint32_t c) {
-    const uint32_t slot = slot_of[c];
-    if (out_vertex[slot] == UINT32_MAX) {
-      out_vertex[slot] = static_cast<uint32_t>(mesh.positions.size() / 3);
-      for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(rep[3 * slot + k])), mesh.normals.push_back(0.0f);
-    }
-    return out_vertex[slot];
-  };
-  for (const auto& e : kept_edges) {
-    mesh.edges.push_back(end_vertex(e[0]));
-    mesh.edges.push_back(end_vertex(e[1]));
+    counts[l] = L.counts;
+    counts[l].triangles = mesh.triangle_count();
+    counts[l].edges = mesh.edge_count();
+    counts[l].points = mesh.point_count();
+    out[l] = std::move(mesh);
   }
-  mesh.thickness = std::move(thickness);
-  for (uint32_t c : kept_points) mesh.points.push_back(end_vertex(c));
-
-  counts.triangles = mesh.triangle_count();
-  counts.edges = mesh.edge_count();
-  counts.points = mesh.point_count();
-  *out = std::move(mesh);
   return counts;
 }
 

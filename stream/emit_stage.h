@@ -19,14 +19,17 @@
 // Determinism: primitives are processed in fixed blocks of the store (not of the parse or memory plan),
 // each block's sums are formed in store order and merged in block order; output primitives and vertices
 // are numbered in order of first appearance. So the bytes depend on the input and options only.
-// Memory: 4 bytes per stored vertex (the level's cluster map, kept in EmitScratch between levels) and one bit
-// per input triangle and segment (collapsed to an edge or not), plus what grows with the output: at the
-// peak (classification), the triangle and edge dedupe tables. Elimination runs before the thickness passes
+// Levels are emitted in groups that share one pass over the input (emit_levels, emit_group_end below).
+// Memory: the group's packed cluster maps (bit_width(cells) bits per stored vertex and level, kept in
+// EmitScratch between groups) and per level one bit per input triangle and segment (collapsed to an edge
+// or not), plus what grows with the output: at the peak (classification), the triangle and edge dedupe
+// tables and the quadrics. Elimination runs before the thickness passes
 // (corner sums, then distances), which visit only the primitives that collapsed to an edge and keep sums
 // for the kept edges only.
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -51,17 +54,44 @@ struct EmitCounts {
   uint64_t edges_on_triangles = 0, points_covered = 0;  // eliminated
 };
 
-// What one level leaves to the next: the buffer of the cluster map (4 bytes per stored vertex), so that
-// every level does not fault in and zero fresh pages for it (measured at a tenth of the stage's time on a
-// 48M-triangle scene). Holds no result: any scratch, fresh or used, gives the same output.
+// What one group of levels leaves to the next: the buffer of the packed cluster maps, so that every group
+// does not fault in and zero fresh pages for it (measured at a tenth of the stage's time on a 48M-triangle
+// scene). Holds no result: any scratch, fresh or used, gives the same output.
 struct EmitScratch {
-  std::vector<uint32_t> map;
+  std::vector<uint64_t> map;
 };
 
-// `canonical_path` empty: every stored vertex is canonical. `prefix`, `level`: the cluster stage's files.
-EmitCounts emit_level(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
-                      const std::string& prefix, size_t level, uint64_t records, uint64_t cells, double cell_size,
-                      const core::ClusterOptions& cluster, const EmitOptions& options, Progress& progress,
-                      EmitScratch& scratch, core::LodMesh* out);
+// One level to emit: its index in the cluster stage's files, its cell count and size.
+struct EmitLevel {
+  size_t level = 0;
+  uint64_t cells = 0;
+  double cell_size = 0;
+};
+
+// Emits the levels of `group` (cells of all of them together fit in 64 bits per vertex: the sum over the
+// levels of emit_bits(cells)) in one pass over the input: each triangle's corners, positions and quadric
+// are read and formed once and serve every level. Every level gets the same bytes as when emitted alone:
+// its sums are still formed per block and merged in block order. `out` receives one mesh per level.
+// `canonical_path` empty: every stored vertex is canonical. `prefix`: the cluster stage's files.
+std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
+                                    const std::string& canonical_path, const std::string& prefix,
+                                    std::span<const EmitLevel> group, uint64_t records,
+                                    const core::ClusterOptions& cluster, const EmitOptions& options,
+                                    Progress& progress, EmitScratch& scratch, core::LodMesh* out);
+
+// Memory model of the grouping. A level of C cells takes emit_bits(C) bits of each packed map record.
+unsigned emit_bits(uint64_t cells);
+// Working memory of one level in a group (its dedupe tables, outputs and quadrics at the peak, pass A).
+uint64_t emit_level_bytes(uint64_t cells, const EmitOptions& options);
+// The packed cluster maps of `vertices` stored vertices at `bits` bits each.
+uint64_t emit_map_bytes(uint64_t vertices, unsigned bits);
+// The memory a finished level's mesh holds until it is written.
+uint64_t mesh_bytes(const core::LodMesh& mesh);
+// The end of the group that starts at level `first` (levels of `cells` cells, finest first): the levels
+// after it join while their records fit in 64 bits and the map, their working memory and `resident` (the
+// finished meshes held for writing) fit in `budget`. The first level always runs, alone if need be. The
+// grouping changes no output byte, only how many passes the input gets.
+size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t budget,
+                      uint64_t resident, const EmitOptions& options);
 
 }  // namespace lodstream::stream

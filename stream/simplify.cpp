@@ -266,6 +266,25 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         return cs.cells;
       };
 
+      // Emits every level at `sizes` with `cells` cells into `meshes`, in groups that share a pass over the
+      // input as far as the memory plan allows (stream::emit_group_end); the grouping changes no byte.
+      auto emit_all = [&](const std::vector<double>& sizes, const std::vector<uint64_t>& cells,
+                          const stream::EmitOptions& eo, std::vector<core::LodMesh>& meshes) {
+        std::vector<stream::EmitCounts> counts;
+        uint64_t resident = 0;  // finished meshes, held until they are written
+        for (size_t first = 0; first < sizes.size();) {
+          const size_t end = stream::emit_group_end(cells, first, meta.vertices, plan.stage_bytes, resident, eo);
+          std::vector<stream::EmitLevel> group;
+          for (size_t l = first; l < end; ++l) group.push_back({l, cells[l], sizes[l]});
+          const std::vector<stream::EmitCounts> c = stream::emit_levels(store_dir, meta, canonical, prefix, group, grade.records,
+                                                                        copts, eo, progress, scratch, &meshes[first]);
+          counts.insert(counts.end(), c.begin(), c.end());
+          for (size_t l = first; l < end; ++l) resident += stream::mesh_bytes(meshes[l]);
+          first = end;
+        }
+        return counts;
+      };
+
       // Cell sizes: given, searched for, or the default estimate.
       std::vector<double> sizes = so.cell_sizes;
       if (sizes.empty()) {
@@ -283,10 +302,10 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
             ++report.search_iterations;
             bool all_ok = true;
             std::vector<double> next(sizes);
+            std::vector<core::LodMesh> none(n);
+            const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, count_only, none);
             for (size_t l = 0; l < n; ++l) {
-              core::LodMesh none;
-              const stream::EmitCounts c = stream::emit_level(store_dir, meta, canonical, prefix, l, grade.records, cells[l],
-                                                              sizes[l], copts, count_only, progress, scratch, &none);
+              const stream::EmitCounts& c = counts[l];
               const double t = static_cast<double>(so.target_triangles[l]);
               const double got = std::max(static_cast<double>(c.triangles), 0.5);
               const double err = std::abs(std::log(got / t));
@@ -323,12 +342,12 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       std::vector<core::LodMesh> meshes(sizes.size());
       const stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
       run_stage(&report.stages, "emit", [&](StageStats&) {
+        const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, emit_options, meshes);
         for (size_t l = 0; l < sizes.size(); ++l) {
           LevelStats ls;
           ls.cell_size = sizes[l];
           ls.cells = cells[l];
-          const stream::EmitCounts c = stream::emit_level(store_dir, meta, canonical, prefix, l, grade.records, cells[l],
-                                                          sizes[l], copts, emit_options, progress, scratch, &meshes[l]);
+          const stream::EmitCounts& c = counts[l];
           ls.vertices = meshes[l].vertex_count();
           ls.triangles = c.triangles;
           ls.edges = c.edges;

@@ -1,0 +1,103 @@
+// Emit groups (stream/emit_stage.h): a level gives the same mesh, to the bit, whether it is emitted alone or
+// in one pass with other levels (packed cluster maps, shared corner and quadric work), and groups follow the
+// memory model.
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/floating_cell.h"
+#include "core/mesh.h"
+#include "lodstream/lodstream.h"
+#include "stream/emit_stage.h"
+#include "stream/progress.h"
+#include "stream/scene_store.h"
+#include "cli_harness.h"
+#include "test_util.h"
+
+namespace lodstream {
+namespace {
+
+void expect_same_mesh(const core::LodMesh& a, const core::LodMesh& b, const std::string& what) {
+  EXPECT_EQ(a.positions, b.positions) << what;
+  EXPECT_EQ(a.normals, b.normals) << what;
+  EXPECT_EQ(a.triangles, b.triangles) << what;
+  EXPECT_EQ(a.edges, b.edges) << what;
+  EXPECT_EQ(a.thickness, b.thickness) << what;
+  EXPECT_EQ(a.points, b.points) << what;
+}
+
+TEST(EmitGroups, SameMeshesAloneAndGrouped) {
+  for (Representative rep : {Representative::center, Representative::quadric}) {
+    test::TempDir tmp;
+    Options o;
+    o.threads = 2;
+    o.work_dir = tmp.file("work");
+    SimplifyOptions so;
+    so.output_dir = tmp.file("out");
+    so.representative = rep;
+    SimplifyReport report;
+    const Result r = simplify(test::source_dir() + "/tests/data/sample-room.ply", so, o, &report);
+    ASSERT_TRUE(r.ok()) << r.message;
+
+    // The stages' files, as simplify left them in the work directory.
+    const std::string store_dir = o.work_dir + "/store";
+    stream::StoreMeta meta;
+    ASSERT_TRUE(stream::read_store_meta(store_dir, &meta));
+    const uint64_t records = nlohmann::json::parse(test::read_file(o.work_dir + "/grade.json"))["value"]["records"];
+    const std::string weld = o.work_dir + "/weld.u32";
+    const std::string canonical = std::filesystem::exists(weld) ? weld : std::string();
+    const std::string prefix = o.work_dir + "/";
+    std::vector<stream::EmitLevel> levels;
+    unsigned bits = 0;  // of levels 1 to 4
+    for (size_t l = 0; l < report.levels.size(); ++l) {
+      levels.push_back({l, report.levels[l].cells, report.levels[l].cell_size});
+      if (l > 0) bits += stream::emit_bits(report.levels[l].cells);
+    }
+    ASSERT_EQ(levels.size(), 5u);
+    ASSERT_LE(bits, 64u);  // the room's levels 1 to 4 fit in one group
+
+    stream::Progress progress(o);
+    stream::EmitScratch scratch;
+    const core::ClusterOptions copts;
+    const stream::EmitOptions eo{rep, so.crease_degrees, true, false};
+    std::vector<core::LodMesh> alone(levels.size()), four(4), pair(2);
+    for (size_t l = 0; l < levels.size(); ++l)
+      stream::emit_levels(store_dir, meta, canonical, prefix, std::span(&levels[l], 1), records, copts, eo, progress,
+                          scratch, &alone[l]);
+    stream::emit_levels(store_dir, meta, canonical, prefix, std::span(levels).subspan(1), records, copts, eo, progress,
+                        scratch, four.data());
+    const stream::EmitLevel skip[2] = {levels[3], levels[0]};  // any levels, in any order
+    stream::emit_levels(store_dir, meta, canonical, prefix, skip, records, copts, eo, progress, scratch, pair.data());
+    for (size_t l = 0; l < levels.size(); ++l) EXPECT_GT(alone[l].triangle_count(), 0u);
+    for (size_t l = 1; l < levels.size(); ++l)
+      expect_same_mesh(alone[l], four[l - 1], "level " + std::to_string(l) + " with levels 1 to 4");
+    expect_same_mesh(alone[3], pair[0], "level 3 with level 0");
+    expect_same_mesh(alone[0], pair[1], "level 0 with level 3");
+  }
+}
+
+TEST(EmitGroups, GroupsFollowTheMemoryModel) {
+  // The city scene's levels (34.8M stored vertices) under --memory 1G: the finest level alone, the
+  // others together beside the finest level's mesh.
+  const std::vector<uint64_t> cells{2557792, 310283, 40817, 5424, 1012};
+  const uint64_t vertices = 34781752, budget = (1ull << 30) - (40ull << 20);
+  const stream::EmitOptions quadric{Representative::quadric, 30, true, false};
+  EXPECT_EQ(stream::emit_bits(2557792), 22u);
+  EXPECT_EQ(stream::emit_bits(1), 1u);
+  EXPECT_EQ(stream::emit_bits(255), 8u);
+  EXPECT_EQ(stream::emit_bits(256), 9u);  // 256 cells and the all-ones "no cell"
+  EXPECT_EQ(stream::emit_group_end(cells, 0, vertices, budget, 0, quadric), 1u);
+  EXPECT_EQ(stream::emit_group_end(cells, 1, vertices, budget, 250ull << 20, quadric), 5u);
+  // Unlimited memory: levels join while their records fit in 64 bits (22 + 19 + 16 = 57, + 13 > 64).
+  EXPECT_EQ(stream::emit_group_end(cells, 0, vertices, UINT64_MAX / 2, 0, quadric), 3u);
+  // No memory to spare: one level per pass.
+  for (size_t l = 0; l < cells.size(); ++l) EXPECT_EQ(stream::emit_group_end(cells, l, vertices, 1, 0, quadric), l + 1);
+}
+
+}  // namespace
+}  // namespace lodstream
