@@ -5,7 +5,8 @@
 // otherwise by a k-way heap merge of the runs with one read buffer per run, the last run being the
 // records still in the buffer (sorted, never written: writes into the page cache cost more than the
 // sort); each run file is deleted as soon as it is exhausted (DuckDB's "free merged runs behind the
-// readers"). Memory: the buffer, then the buffer's records and the run readers within the same budget.
+// readers"). Memory: the buffer, then the buffer's records and the run readers within the same budget
+// (but at least 4096 records of read buffer per run file).
 //
 // Determinism: `Less` must be a total order on everything that distinguishes two records (break ties by
 // an id), so the output is the same whatever the buffer size, i.e. whatever the memory budget.
@@ -39,6 +40,7 @@ class ExternalSorter {
   ExternalSorter(const WorkDir& dir, std::string name, uint64_t memory_bytes, Less less = Less())
       : dir_(dir), name_(std::move(name)), less_(less) {
     capacity_ = std::max<uint64_t>(memory_bytes / sizeof(Rec), 1024);
+    limit_ = capacity_;
   }
   ExternalSorter(const ExternalSorter&) = delete;
   ExternalSorter& operator=(const ExternalSorter&) = delete;
@@ -46,8 +48,22 @@ class ExternalSorter {
     for (const Run& r : runs_) ::unlink(r.path.c_str());
   }
 
+  // Hint: about `total` records will be pushed (an upper bound is best). The first run is then cut short so
+  // that the last one, which is merged from memory and never written, is a full buffer: of N records
+  // with room for C, N − C are written instead of up to N − 1. Only the run boundaries change, never the
+  // merged order.
+  void expect(uint64_t total) {
+    if (runs_.empty() && buffer_.empty() && total > capacity_) {
+      const uint64_t rest = total % capacity_;
+      limit_ = rest ? rest : capacity_;
+    }
+  }
+
   void push(const Rec& r) {
-    if (buffer_.size() == capacity_) spill();
+    if (buffer_.size() == limit_) {
+      spill();
+      limit_ = capacity_;
+    }
     // Reserving does not make pages resident; growing by doubling would briefly hold 1.5x the buffer.
     if (buffer_.capacity() == 0) buffer_.reserve(static_cast<size_t>(capacity_));
     buffer_.push_back(r);
@@ -56,6 +72,11 @@ class ExternalSorter {
     for (const Rec& r : records) push(r);
   }
   size_t runs() const { return runs_.size(); }
+  uint64_t spilled_records() const {
+    uint64_t n = 0;
+    for (const Run& r : runs_) n += r.records;
+    return n;
+  }
 
   // Calls visit(const Rec&) for every record in sorted order. Can be called once.
   template <class Visit>
@@ -70,7 +91,7 @@ class ExternalSorter {
     // last run (where a spill would have put them), and the file runs share what is left of the budget.
     const size_t files = runs_.size();
     const size_t k = files + (buffer_.empty() ? 0 : 1);
-    const uint64_t per_run = std::max<uint64_t>((capacity_ - buffer_.size()) / files, 256);
+    const uint64_t per_run = std::max<uint64_t>((capacity_ - buffer_.size()) / files, 4096);
     std::vector<Reader> readers(k);
     for (size_t i = 0; i < files; ++i) readers[i].open(runs_[i], per_run);
     if (k > files) readers[files].open_memory(buffer_.data(), buffer_.size());
@@ -186,6 +207,7 @@ class ExternalSorter {
   std::string name_;
   Less less_;
   uint64_t capacity_ = 0;
+  uint64_t limit_ = 0;  // records in the buffer that trigger a spill: capacity_, or less for the first run
   std::vector<Rec> buffer_;
   std::vector<Run> runs_;
 };

@@ -203,6 +203,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     using Record = decltype(record_type);
     using Real = std::remove_extent_t<decltype(Record::position)>;
     ExternalSorter<Record, WeightLess> sorter(work, "weights", std::max<uint64_t>(plan.stage_bytes / 3, 4 << 20));
+    sorter.expect(summary.distinct_positions);  // at least the records: one per used canonical vertex
     std::vector<uint32_t> count;
     std::vector<uint64_t> offset;
     std::vector<uint32_t> neighbours;
