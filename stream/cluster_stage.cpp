@@ -6,6 +6,7 @@
 
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 
 #include "core/status.h"
 #include "io/file_writer.h"
@@ -60,32 +61,40 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
     for (size_t l : grp.levels) sizes.push_back(cell_sizes[l]);
     grp.clusterer = std::make_unique<core::Clusterer>(sizes, options, bounds);
   }
+  // Each group runs through the whole index on its own task, unpacking the records itself: no barrier per
+  // block, so a group held up (its core busy with page-cache writeback, say) does not stall the other.
+  // Group 0 also writes the order file and reports progress; every group checks for cancellation per
+  // block, and stops when another has failed.
   io::FileWriter order(order_path(prefix), 1 << 20);
-  std::vector<uint32_t> ids;
-  std::vector<double> grades, xyz;
-
   constexpr uint64_t block = 1 << 16;
   constexpr uint64_t kAhead = 8;
   ClusterSummary summary;
-  for (uint64_t first = 0; first < records; first += block) {
-    const uint64_t n = std::min(block, records - first);
-    const io::Window w = index.map(first * record_bytes, (first + n) * record_bytes);
-    // The block's records as plain arrays, positions widened to double (exact for float).
-    ids.resize(n);
-    grades.resize(n);
-    xyz.resize(3 * n);
-    auto unpack = [&](const auto* rec) {
-      for (uint64_t i = 0; i < n; ++i) {
-        ids[i] = rec[i].id;
-        grades[i] = rec[i].grade;
-        for (int k = 0; k < 3; ++k) xyz[3 * i + k] = rec[i].position[k];
+  summary.cells.resize(levels);
+  tbb::parallel_for(size_t{0}, n_groups, [&](size_t g) {
+    Group& grp = groups[g];
+    std::vector<uint32_t> ids;
+    std::vector<double> grades, xyz;
+    for (uint64_t first = 0; first < records; first += block) {
+      progress.check();
+      if (tbb::is_current_task_group_canceling()) return;
+      const uint64_t n = std::min(block, records - first);
+      {
+        const io::Window w = index.map(first * record_bytes, (first + n) * record_bytes);
+        // The block's records as plain arrays, positions widened to double (exact for float).
+        ids.resize(n);
+        grades.resize(n);
+        xyz.resize(3 * n);
+        auto unpack = [&](const auto* rec) {
+          for (uint64_t i = 0; i < n; ++i) {
+            ids[i] = rec[i].id;
+            grades[i] = rec[i].grade;
+            for (int k = 0; k < 3; ++k) xyz[3 * i + k] = rec[i].position[k];
+          }
+        };
+        if (single_precision) unpack(reinterpret_cast<const WeightRecord32*>(w.data()));
+        else unpack(reinterpret_cast<const WeightRecord64*>(w.data()));
       }
-    };
-    if (single_precision) unpack(reinterpret_cast<const WeightRecord32*>(w.data()));
-    else unpack(reinterpret_cast<const WeightRecord64*>(w.data()));
-    order.write_array(std::span<const uint32_t>(ids));
-    tbb::parallel_for(size_t{0}, n_groups, [&](size_t g) {
-      Group& grp = groups[g];
+      if (g == 0) order.write_array(std::span<const uint32_t>(ids));
       grp.cells.resize(grp.levels.size() * n);
       grp.clusterer->assign_block(ids, xyz, grp.cells);
       for (size_t j = 0; j < grp.levels.size(); ++j)
@@ -119,19 +128,21 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
         }
         s.cells.write_array(std::span<const uint32_t>(s.block));
       }
-    });
-    progress.report("cluster", static_cast<double>(first + n) / static_cast<double>(records));
-  }
+      if (g == 0) progress.report("cluster", static_cast<double>(first + n) / static_cast<double>(records));
+    }
+    // The group's levels' files, while the other groups may still be clustering.
+    for (size_t l : grp.levels) {
+      Level& s = state[l];
+      s.cells.commit();
+      summary.cells[l] = s.info.size();
+      io::FileWriter info(cell_info_path(prefix, l), 1 << 20);
+      info.write_array(std::span<const CellInfo>(s.info));
+      info.commit();
+      std::vector<CellInfo>().swap(s.info);
+    }
+  });
+  progress.check();  // a group that saw the cancellation returned early
   order.commit();
-  for (size_t l = 0; l < levels; ++l) {
-    Level& s = state[l];
-    s.cells.commit();
-    summary.cells.push_back(s.info.size());
-    io::FileWriter info(cell_info_path(prefix, l), 1 << 20);
-    info.write_array(std::span<const CellInfo>(s.info));
-    info.commit();
-    std::vector<CellInfo>().swap(s.info);
-  }
   return summary;
 }
 
