@@ -95,12 +95,17 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
   io::MappedFile file(path);
   const uint64_t stride = 3 * sizeof(T);
   if (file.size() != count * stride) fail(Status::io_error, path + ": size does not match store.json");
-  // Mapped pages count as resident: small windows.
+  // Mapped pages count as resident: small windows. The file is read in fixed slices of kSlice vertices
+  // (a constant, not the thread count), in parallel; within a bucket, keys are placed slice by slice, so
+  // they stay in file order, which the canonical ids rely on.
+  constexpr uint64_t kSlice = uint64_t{1} << 20;
   const uint64_t step = stride * 65536;
-  auto scan = [&](auto&& visit) {
-    for (uint64_t at = 0; at < file.size(); at += step) {
+  const uint64_t slices = (count + kSlice - 1) / kSlice;
+  auto scan_slice = [&](uint64_t slice, auto&& visit) {
+    const uint64_t end = std::min(count, (slice + 1) * kSlice) * stride;
+    for (uint64_t at = slice * kSlice * stride; at < end; at += step) {
       progress.check();
-      const io::Window w = file.map(at, at + step);
+      const io::Window w = file.map(at, std::min(at + step, end));
       const T* xyz = reinterpret_cast<const T*>(w.data());
       const uint64_t first = at / stride;
       for (uint64_t i = 0, n = w.size() / stride; i < n; ++i) {
@@ -110,9 +115,15 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
     }
   };
 
-  // Pass 1: the exact size of every bucket.
+  // Pass 1: the exact size of every bucket, per slice.
+  std::vector<uint64_t> slice_size(slices * buckets, 0);
+  tbb::parallel_for(uint64_t{0}, slices, [&](uint64_t sl) {
+    uint64_t* sz = &slice_size[sl * buckets];
+    scan_slice(sl, [&](const Key<W>&, uint64_t h, uint32_t) { ++sz[h >> (64 - bucket_bits)]; });
+  });
   std::vector<uint64_t> size(buckets, 0);
-  scan([&](const Key<W>&, uint64_t h, uint32_t) { ++size[h >> (64 - bucket_bits)]; });
+  for (uint64_t sl = 0; sl < slices; ++sl)
+    for (uint64_t b = 0; b < buckets; ++b) size[b] += slice_size[sl * buckets + b];
   progress.report(stage, 0.2);
 
   // Then, for as many consecutive buckets as the budget holds at a time (keys plus one table per
@@ -122,7 +133,7 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
   const uint64_t largest = *std::max_element(size.begin(), size.end());
   const uint64_t per_key = sizeof(Key<W>) + (canonical ? sizeof(uint32_t) : 0);
   const uint64_t tables = threads * 4 * largest * per_key;
-  const uint64_t key_budget = std::max<uint64_t>(memory_bytes > tables + step ? memory_bytes - tables - step : 0,
+  const uint64_t key_budget = std::max<uint64_t>(memory_bytes > tables + threads * step ? memory_bytes - tables - threads * step : 0,
                                                  largest * per_key);
   uint64_t distinct = 0;
   for (uint64_t first = 0; first < buckets;) {
@@ -131,16 +142,25 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
       bytes += size[last++] * per_key;
     std::vector<uint64_t> offset(buckets + 1, 0);
     for (uint64_t b = first; b < last; ++b) offset[b + 1] = offset[b] + size[b];
-    std::vector<uint64_t> fill(offset.begin(), offset.end() - 1);
+    // Where each slice's keys of each bucket start: after the earlier slices' keys of that bucket.
+    std::vector<uint64_t> fill(slices * buckets, 0);
+    for (uint64_t b = first; b < last; ++b)
+      for (uint64_t sl = 0, at = offset[b]; sl < slices; ++sl) {
+        fill[sl * buckets + b] = at;
+        at += slice_size[sl * buckets + b];
+      }
     auto keys = std::make_unique_for_overwrite<Key<W>[]>(std::max<uint64_t>(offset[last], 1));
     std::unique_ptr<uint32_t[]> ids;
     if (canonical) ids = std::make_unique_for_overwrite<uint32_t[]>(std::max<uint64_t>(offset[last], 1));
-    scan([&](const Key<W>& k, uint64_t h, uint32_t id) {
-      const uint64_t b = h >> (64 - bucket_bits);
-      if (b >= first && b < last) {
-        if (canonical) ids[fill[b]] = id;
-        keys[fill[b]++] = k;
-      }
+    tbb::parallel_for(uint64_t{0}, slices, [&](uint64_t sl) {
+      uint64_t* at = &fill[sl * buckets];
+      scan_slice(sl, [&](const Key<W>& k, uint64_t h, uint32_t id) {
+        const uint64_t b = h >> (64 - bucket_bits);
+        if (b >= first && b < last) {
+          if (canonical) ids[at[b]] = id;
+          keys[at[b]++] = k;
+        }
+      });
     });
     std::atomic<uint64_t> found{0};
     tbb::enumerable_thread_specific<Table<W>> table;
