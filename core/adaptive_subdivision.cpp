@@ -95,6 +95,7 @@ class Subdivider {
     if (o_.method == Method::growth) grow();
     else if (o_.target_polygons > 0) refine_to_target(root);
     else refine(root);
+    if (o_.merge && std::isfinite(tol_)) merge();
     verify_and_draw();
     return std::move(out_);
   }
@@ -145,7 +146,9 @@ class Subdivider {
   };
 
   // The trial polygon's accuracy test with corners only (both diagonals at once), and its split point.
-  Eval evaluate(const Rect& r) {
+  // decide_only: the caller needs only whether it passes and, if it does, the diagonal: the scan stops as
+  // soon as both diagonals are over tolerance (error is then only known to be > tolerance, split unset).
+  Eval evaluate(const Rect& r, bool decide_only = false) {
     ++out_.trials;
     Eval e;
     const uint32_t w = r.i1 - r.i0, h = r.j1 - r.j0;
@@ -191,11 +194,12 @@ class Subdivider {
       }
     };
     // Scan order of "first error": north to south when at least as wide as tall, else west to east.
+    // decide_only stops between rows (columns), which keeps the inner loop free of the test.
     if (w >= h) {
-      for (uint32_t j = r.j0; j <= r.j1; ++j)
+      for (uint32_t j = r.j0; j <= r.j1 && !(decide_only && over[0] && over[1]); ++j)
         for (uint32_t i = r.i0; i <= r.i1; ++i) visit(i, j);
     } else {
-      for (uint32_t i = r.i0; i <= r.i1; ++i)
+      for (uint32_t i = r.i0; i <= r.i1 && !(decide_only && over[0] && over[1]); ++i)
         for (uint32_t j = r.j0; j <= r.j1; ++j) visit(i, j);
     }
     const int d = max_err[1] < max_err[0] ? 1 : 0;
@@ -245,14 +249,16 @@ class Subdivider {
     if (progress_ && ++ticks_ % 1024 == 0) progress_(std::min(0.9, 0.9 * done_cells_ / total_cells_));
   }
 
-  // Recursive subdivision to tolerance.
+  // Recursive subdivision to tolerance. The center and random split points do not depend on the samples,
+  // so a failing trial can stop early there.
   void refine(const Rect& root) {
+    const bool split_needs_no_scan = o_.split == SplitRule::center || o_.split == SplitRule::random;
     std::vector<Rect> stack{root};
     while (!stack.empty()) {
       Rect r = stack.back();
       stack.pop_back();
       const bool unit = is_cell(r);
-      const Eval e = evaluate(r);
+      const Eval e = evaluate(r, split_needs_no_scan);
       if (e.nodata && unit) {
         add_hole(r);
         add_done(r);
@@ -346,7 +352,7 @@ class Subdivider {
               ok = false;
             }
             if (!ok) continue;
-            const Eval e = evaluate(t);
+            const Eval e = evaluate(t, true);
             if (e.nodata || e.error > tol_) continue;
             t.diagonal = e.diagonal;
             r = t;
@@ -359,6 +365,49 @@ class Subdivider {
         add_done(r);
       }
     }
+  }
+
+  // Merge pass (not in the thesis): two polygons that share a whole side become one when their union
+  // passes the trial polygon test. The subdivision cannot find these unions (it only ever tests a
+  // polygon's own children) nor can growth (the neighbour's cells were claimed, or the first row or column
+  // of them failed where the whole neighbour would pass), yet each one saves two triangles and up to two
+  // T-junctions. Rows of polygons in (j0, i0) order, east then south neighbour, repeated until nothing
+  // merges; deterministic.
+  void merge() {
+    constexpr uint32_t kNone = UINT32_MAX;
+    std::sort(leaves_.begin(), leaves_.end(), [](const Rect& a, const Rect& b) {
+      return a.j0 != b.j0 ? a.j0 < b.j0 : a.i0 < b.i0;
+    });
+    std::vector<uint32_t> at(uint64_t(g_.width) * g_.height, kNone);  // polygon by its NW corner
+    for (uint32_t k = 0; k < leaves_.size(); ++k) at[id(leaves_[k].i0, leaves_[k].j0)] = k;
+    std::vector<uint8_t> alive(leaves_.size(), 1);
+    for (bool changed = true; changed;) {
+      changed = false;
+      for (uint32_t k = 0; k < leaves_.size(); ++k) {
+        for (int dir = 0; dir < 2 && alive[k]; ++dir) {
+          Rect& p = leaves_[k];
+          const bool east = dir == 0;
+          if (east ? p.i1 == g_.width - 1 : p.j1 == g_.height - 1) continue;
+          const uint32_t q = east ? at[id(p.i1, p.j0)] : at[id(p.i0, p.j1)];
+          if (q == kNone || !alive[q]) continue;
+          const Rect& n = leaves_[q];
+          if (east ? n.j1 != p.j1 : n.i1 != p.i1) continue;  // not the whole side
+          Rect u{p.i0, p.j0, n.i1, n.j1, 0};
+          const Eval e = evaluate(u, true);
+          if (e.nodata || e.error > tol_) continue;
+          u.diagonal = e.diagonal;
+          at[id(n.i0, n.j0)] = kNone;
+          alive[q] = 0;
+          p = u;
+          changed = true;
+          ++out_.merges;
+        }
+      }
+    }
+    size_t kept = 0;
+    for (size_t k = 0; k < leaves_.size(); ++k)
+      if (alive[k]) leaves_[kept++] = leaves_[k];
+    leaves_.resize(kept);
   }
 
   // The points strictly inside the four sides of r that are corners of other polygons, in ring order.

@@ -10,8 +10,9 @@
 # tools/install-deps.sh uses ($LODSTREAM_NPM_PREFIX, default ~/.cache/lodstream-npm).
 # lodstream runs as `lodstream grid TILE -o OUT --tolerance E --split S --divide D --gaps G` (binary from
 # --build DIR; OUT is a directory); triangles, measured max error and seconds come from OUT/summary.json
-# (time: its "subdivide" stage; the total is kept in WORK/lodstream.jsonl).
-# Peers' times are medians over --peer-runs runs of the meshing alone; lodstream's the median of --runs.
+# (time: its "subdivide" + "index" stages, heights to indexed triangles; the total is kept in
+# WORK/lodstream.jsonl). Peers' times are medians over --peer-runs runs of the same (Martini's includes its
+# constructor: see tools/terrain_peers.js); lodstream's the median of --runs.
 #
 # usage: tools/bench_grid.sh [--tile PNG] [--build build] [--errors 1,5,20] [--runs 1] [--peer-runs 3]
 #                            [--splits center,first,greatest,curvature,random] [--divides 4,2]
@@ -32,7 +33,7 @@ work=""
 skip_peers=0
 skip_lod=0
 
-usage() { sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --tile) tile=$2; shift 2 ;;
@@ -174,10 +175,11 @@ if summary:
     row['measured_max_error'] = summary.get('max_error', summary.get('measured_max_error'))
     row['seconds'] = summary.get('seconds', row['wall_seconds'])
     row['cracks'] = summary.get('cracks', 0)
-    # The meshing alone, comparable with the peers' times: the "subdivide" stage when the summary has stages.
+    # The meshing alone, comparable with the peers' times: heights to indexed triangles, the "subdivide" and
+    # "index" stages (an older binary has no "index" stage: its subdivide alone).
     stages = {st.get('name'): st.get('seconds') for st in summary.get('stages', []) if isinstance(st, dict)}
     if stages.get('subdivide') is not None:
-        row['mesh_seconds'] = stages['subdivide']
+        row['mesh_seconds'] = stages['subdivide'] + (stages.get('index') or 0)
 else:
     row['error'] = (open(stderr).read().strip().splitlines() or ['no JSON summary found'])[-1][:300]
 print(json.dumps(row))
@@ -226,8 +228,8 @@ for (s, d, g, e), rs in groups.items():
         put(label, e, None, None, rs[0].get('error', f"exit {rs[0]['exit']}"))
 def fmt_e(e): return f'{e:g} m'
 print(f'Triangles needed for a max vertical error of {", ".join(fmt_e(e) for e in errors)} on {tile}; time in seconds '
-      '(the meshing alone: PNG decoding excluded for the peers, medians of their runs; lodstream\'s "subdivide" '
-      'stage, reading, measuring and writing excluded). † = measured max error above the target; '
+      '(heights to indexed triangles: PNG decoding excluded; Martini with its constructor, medians of the peers\' '
+      'runs; lodstream\'s "subdivide" + "index" stages, reading, measuring and writing excluded). † = measured max error above the target; '
       '‡ = open cracks (T-junction gaps) left in the surface.')
 print()
 head = '| tool / variant | ' + ' | '.join(f'{fmt_e(e)}: triangles | {fmt_e(e)}: s' for e in errors) + ' |'
