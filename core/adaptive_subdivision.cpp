@@ -370,9 +370,11 @@ class Subdivider {
   // Merge pass (not in the thesis): two polygons that share a whole side become one when their union
   // passes the trial polygon test. The subdivision cannot find these unions (it only ever tests a
   // polygon's own children) nor can growth (the neighbour's cells were claimed, or the first row or column
-  // of them failed where the whole neighbour would pass), yet each one saves two triangles and up to two
-  // T-junctions. Rows of polygons in (j0, i0) order, east then south neighbour, repeated until nothing
-  // merges; deterministic.
+  // of them failed where the whole neighbour passes), yet each one saves two triangles and often
+  // T-junctions. In rounds of growing union area (2, 4, 8, ... cells), so that small polygons pair up with
+  // each other before big ones absorb them one at a time (on the Fuji tile, center/2/fill: 0.2% and 0.8%
+  // fewer triangles at 5 and 20 m than one uncapped round, the same at 1 m). A round is one pass over the polygons in (j0, i0) order, each trying its east then
+  // its south neighbour; the last, uncapped round repeats until nothing merges. Deterministic.
   void merge() {
     constexpr uint32_t kNone = UINT32_MAX;
     std::sort(leaves_.begin(), leaves_.end(), [](const Rect& a, const Rect& b) {
@@ -381,28 +383,44 @@ class Subdivider {
     std::vector<uint32_t> at(uint64_t(g_.width) * g_.height, kNone);  // polygon by its NW corner
     for (uint32_t k = 0; k < leaves_.size(); ++k) at[id(leaves_[k].i0, leaves_[k].j0)] = k;
     std::vector<uint8_t> alive(leaves_.size(), 1);
-    for (bool changed = true; changed;) {
-      changed = false;
-      for (uint32_t k = 0; k < leaves_.size(); ++k) {
-        for (int dir = 0; dir < 2 && alive[k]; ++dir) {
-          Rect& p = leaves_[k];
-          const bool east = dir == 0;
-          if (east ? p.i1 == g_.width - 1 : p.j1 == g_.height - 1) continue;
-          const uint32_t q = east ? at[id(p.i1, p.j0)] : at[id(p.i0, p.j1)];
-          if (q == kNone || !alive[q]) continue;
-          const Rect& n = leaves_[q];
-          if (east ? n.j1 != p.j1 : n.i1 != p.i1) continue;  // not the whole side
-          Rect u{p.i0, p.j0, n.i1, n.j1, 0};
-          const Eval e = evaluate(u, true);
-          if (e.nodata || e.error > tol_) continue;
-          u.diagonal = e.diagonal;
-          at[id(n.i0, n.j0)] = kNone;
-          alive[q] = 0;
-          p = u;
-          changed = true;
-          ++out_.merges;
+    std::vector<uint32_t> live(leaves_.size());  // the alive polygons, in order, compacted between rounds
+    for (uint32_t k = 0; k < live.size(); ++k) live[k] = k;
+    // The last union that failed per polygon and direction: the same union fails again, so it is not
+    // tested again (a round repeats until nothing merges, and every round re-reads every pair).
+    std::vector<Rect> failed(2 * leaves_.size(), Rect{0, 0, 0, 0, 0});
+    auto same = [](const Rect& a, const Rect& b) { return a.i0 == b.i0 && a.j0 == b.j0 && a.i1 == b.i1 && a.j1 == b.j1; };
+    const double all_cells = double(g_.width - 1) * double(g_.height - 1);
+    for (double cap = 2;; cap *= 2) {
+      const bool last = cap >= all_cells;
+      for (bool changed = true; changed;) {
+        changed = false;
+        for (uint32_t k : live) {
+          for (int dir = 0; dir < 2 && alive[k]; ++dir) {
+            Rect& p = leaves_[k];
+            const bool east = dir == 0;
+            if (east ? p.i1 == g_.width - 1 : p.j1 == g_.height - 1) continue;
+            const uint32_t q = east ? at[id(p.i1, p.j0)] : at[id(p.i0, p.j1)];
+            if (q == kNone || !alive[q]) continue;
+            const Rect& n = leaves_[q];
+            if (east ? n.j1 != p.j1 : n.i1 != p.i1) continue;  // not the whole side
+            Rect u{p.i0, p.j0, n.i1, n.j1, 0};
+            if (double(u.i1 - u.i0) * double(u.j1 - u.j0) > cap || same(u, failed[2 * k + dir])) continue;
+            const Eval e = evaluate(u, true);
+            if (e.nodata || e.error > tol_) {
+              failed[2 * k + dir] = u;
+              continue;
+            }
+            u.diagonal = e.diagonal;
+            at[id(n.i0, n.j0)] = kNone;
+            alive[q] = 0;
+            p = u;
+            changed = last;
+            ++out_.merges;
+          }
         }
       }
+      if (last) break;
+      std::erase_if(live, [&](uint32_t k) { return !alive[k]; });
     }
     size_t kept = 0;
     for (size_t k = 0; k < leaves_.size(); ++k)
