@@ -39,6 +39,13 @@ bool sample_valid(const GridSamples& g, uint64_t s) {
   return (g.valid.empty() || g.valid[s]) && std::isfinite(g.z[s]);
 }
 
+// x rounded up to a float (an upper bound is what verify_and_draw needs).
+float float_up(double x) {
+  float f = static_cast<float>(x);
+  if (static_cast<double>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
+}
+
 bool is_cell(const Rect& r) { return r.i1 - r.i0 == 1 && r.j1 - r.j0 == 1; }
 
 // Visits every sample inside or on triangle (a, b, c) with the height of the triangle's plane there.
@@ -87,6 +94,15 @@ class Subdivider {
     valid_.resize(n);
     for (uint64_t s = 0; s < n; ++s) valid_[s] = sample_valid(g, s);
     any_nodata_ = std::find(valid_.begin(), valid_.end(), uint8_t{0}) != valid_.end();
+    // verify_and_draw() measures a polygon's corner triangles with integer barycentric weights, evaluate()
+    // with fractions of its sides: the same planes, each rounded a handful of times on values of at most
+    // twice the largest |z|, so the two differ by far less than 2^-30 of it (the margin below). A trial
+    // error at least that far within tolerance therefore passes the verification too.
+    double zmax = 0;
+    for (uint64_t s = 0; s < n; ++s)
+      if (valid_[s]) zmax = std::max(zmax, std::abs(double(g.z[s])));
+    proven_tol_ = tol_ - std::ldexp(zmax, -30);
+    known_.resize(n);
     if (o.split == SplitRule::curvature) compute_curvature();
     total_cells_ = double(g.width - 1) * double(g.height - 1);
   }
@@ -206,6 +222,9 @@ class Subdivider {
     const int d = max_err[1] < max_err[0] ? 1 : 0;
     e.diagonal = uint8_t(d);
     e.error = max_err[d];
+    // Within tolerance means the scan was complete (decide_only stops only when both diagonals are over),
+    // so this is the polygon's exact error with diagonal d: kept for verify_and_draw().
+    if (e.error <= tol_) known_[id(r.i0, r.j0)] = {r.i1, r.j1, float_up(e.error), e.diagonal};
     switch (o_.split) {
       case SplitRule::center: e.split = center; break;
       case SplitRule::first: e.split = over[d] ? first[d] : arg[d]; break;
@@ -533,6 +552,17 @@ class Subdivider {
     return {worst, at};
   }
 
+  // Whether the trial test already proves that r passes the verification: r is drawn with its corners
+  // only (no extra vertices on its sides), with the diagonal the trial measured, and the trial's error is
+  // within tolerance by more than the rounding margin (see the constructor). Skips re-measuring nearly
+  // every polygon; one that is not proven is measured as before, so the result is the same.
+  bool proven_by_trial(const Rect& r, const std::vector<uint32_t> (&sides)[4]) const {
+    for (const auto& s : sides)
+      if (!s.empty()) return false;
+    const KnownError& k = known_[id(r.i0, r.j0)];
+    return k.i1 == r.i1 && k.j1 == r.j1 && k.diagonal == r.diagonal && double(k.error) <= proven_tol_;
+  }
+
   // Verifies every polygon against its final drawn triangles, splitting and refining the ones that fail,
   // until none does; then writes rings, triangles, fill polygons and the T-junction census.
   void verify_and_draw() {
@@ -546,6 +576,10 @@ class Subdivider {
       std::vector<Point> where;
       for (Rect r : leaves_) {
         if (extra) side_points(r, sides);
+        if (proven_by_trial(r, extra ? sides : none)) {
+          kept.push_back(r);
+          continue;
+        }
         bool ok = false;
         std::pair<double, uint32_t> worst{0, 0};
         for (int attempt = 0; attempt < 2 && !ok; ++attempt) {
@@ -635,6 +669,15 @@ class Subdivider {
   bool any_nodata_ = false;
   std::vector<float> curvature_;
   std::vector<Rect> leaves_;
+  // The last trial error within tolerance measured per NW corner, with the rectangle and diagonal it is
+  // for (a cache of a function of those: an entry for another rectangle is simply not used).
+  struct KnownError {
+    uint32_t i1 = 0, j1 = 0;
+    float error = 0;       // rounded up
+    uint8_t diagonal = 2;  // 2: none
+  };
+  std::vector<KnownError> known_;
+  double proven_tol_ = 0;
   Subdivision out_;
   double total_cells_ = 1, done_cells_ = 0;
   uint64_t ticks_ = 0;
