@@ -22,6 +22,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <queue>
+#include <ctime>
 #include <stdexcept>
 
 #include "core/surface_sampling.h"  // mix64
@@ -103,6 +104,7 @@ class Subdivider {
       if (valid_[s]) zmax = std::max(zmax, std::abs(double(g.z[s])));
     proven_tol_ = tol_ - std::ldexp(zmax, -30);
     known_.resize(n);
+    if (o.merge) failed_se_.assign(n, UINT32_MAX);
     if (o.split == SplitRule::curvature) compute_curvature();
     total_cells_ = double(g.width - 1) * double(g.height - 1);
   }
@@ -163,8 +165,9 @@ class Subdivider {
   };
 
   // The trial polygon's accuracy test with corners only (both diagonals at once), and its split point.
-  // decide_only: the caller needs only whether it passes and, if it does, the diagonal: the scan stops as
-  // soon as both diagonals are over tolerance (error is then only known to be > tolerance, split unset).
+  // decide_only: the caller needs only whether it passes and, if it does, the diagonal, or a split point
+  // that depends on no sample (center, random): the scan stops as soon as both diagonals are over
+  // tolerance (error is then only known to be > tolerance), and the other rules' split points are unset.
   Eval evaluate(const Rect& r, bool decide_only = false) {
     ++out_.trials;
     Eval e;
@@ -190,15 +193,20 @@ class Subdivider {
     double best_curv = -1;
     uint64_t best_dist = 0;
     Point curv{center};
-    auto visit = [&](uint32_t i, uint32_t j) {
-      const int64_t di = i - r.i0, dj = j - r.j0;
-      const double u = di * fw, v = dj * fh, zs = z(i, j);
+    // The errors of sample (i0 + di, j0 + dj) against both diagonals' triangles.
+    auto errors = [&](int64_t di, int64_t dj, double zs, double& e0, double& e1) {
+      const double u = di * fw, v = dj * fh;
       // Diagonal 0 (SW-NE): triangles (SW, SE, NE) where u + v >= 1 and (SW, NE, NW) elsewhere.
       const double p0 = di * H + dj * W >= W * H ? zse + (1 - u) * (zsw - zse) + (1 - v) * (zne - zse)
                                                  : znw + u * (zne - znw) + v * (zsw - znw);
       // Diagonal 1 (NW-SE): triangles (NW, NE, SE) where u >= v and (NW, SE, SW) elsewhere.
       const double p1 = di * H >= dj * W ? znw + u * (zne - znw) + v * (zse - zne) : znw + v * (zsw - znw) + u * (zse - zsw);
-      const double e0 = std::abs(zs - p0), e1 = std::abs(zs - p1);
+      e0 = std::abs(zs - p0);
+      e1 = std::abs(zs - p1);
+    };
+    auto visit = [&](uint32_t i, uint32_t j) {
+      double e0, e1;
+      errors(int64_t(i) - r.i0, int64_t(j) - r.j0, z(i, j), e0, e1);
       if (e0 > max_err[0]) max_err[0] = e0, arg[0] = {i, j};
       if (e1 > max_err[1]) max_err[1] = e1, arg[1] = {i, j};
       if (!over[0] && e0 > tol_) over[0] = true, first[0] = {i, j};
@@ -210,13 +218,25 @@ class Subdivider {
         if (c > best_curv || (c == best_curv && d < best_dist)) best_curv = c, best_dist = d, curv = {i, j};
       }
     };
-    // Scan order of "first error": north to south when at least as wide as tall, else west to east.
-    // decide_only stops between rows (columns), which keeps the inner loop free of the test.
-    if (w >= h) {
-      for (uint32_t j = r.j0; j <= r.j1 && !(decide_only && over[0] && over[1]); ++j)
+    if (decide_only) {
+      // Most trials (growth, merge, center and random splits): no sample to track, so a lean row-major
+      // scan of the two maxima. Any scan order gives the same maxima, and the scan stops only when both
+      // are over tolerance.
+      for (uint32_t j = r.j0; j <= r.j1 && !(max_err[0] > tol_ && max_err[1] > tol_); ++j) {
+        const float* row = &g_.z[id(0, j)];
+        const int64_t dj = j - r.j0;
+        for (uint32_t i = r.i0; i <= r.i1; ++i) {
+          double e0, e1;
+          errors(i - r.i0, dj, row[i], e0, e1);
+          max_err[0] = std::max(max_err[0], e0);
+          max_err[1] = std::max(max_err[1], e1);
+        }
+      }
+    } else if (w >= h) {  // the scan order of "first error": north to south when at least as wide as tall
+      for (uint32_t j = r.j0; j <= r.j1; ++j)
         for (uint32_t i = r.i0; i <= r.i1; ++i) visit(i, j);
-    } else {
-      for (uint32_t i = r.i0; i <= r.i1 && !(decide_only && over[0] && over[1]); ++i)
+    } else {  // else west to east
+      for (uint32_t i = r.i0; i <= r.i1; ++i)
         for (uint32_t j = r.j0; j <= r.j1; ++j) visit(i, j);
     }
     const int d = max_err[1] < max_err[0] ? 1 : 0;
@@ -295,6 +315,7 @@ class Subdivider {
         leaves_.push_back(r);
         add_done(r);
       } else {
+        if (!failed_se_.empty()) failed_se_[id(r.i0, r.j0)] = id(r.i1, r.j1);
         const Children c = split(r, e.split);
         for (int k = c.n - 1; k >= 0; --k) stack.push_back(c.r[k]);  // first child on top
       }
@@ -430,10 +451,9 @@ class Subdivider {
       at[id(r.i0, r.j0)] = ne_at[id(r.i1, r.j0)] = sw_at[id(r.i0, r.j1)] = k;
     }
     std::vector<uint8_t> alive(n, 1);
-    // The last union that failed per polygon and direction: the same union fails again, so it is not
-    // tested again.
-    std::vector<Rect> failed(2 * uint64_t(n), Rect{0, 0, 0, 0, 0});
-    auto same = [](const Rect& a, const Rect& b) { return a.i0 == b.i0 && a.j0 == b.j0 && a.i1 == b.i1 && a.j1 == b.j1; };
+    // The last union that failed per polygon and direction, by its SE corner (its NW corner is the
+    // polygon's, which never moves): the same union fails again, so it is not tested again.
+    std::vector<uint32_t> failed(2 * uint64_t(n), kNone);
     // Round r caps the union area at 2^(r+1) cells; the last round's cap covers the whole grid.
     const double all_cells = double(g_.width - 1) * double(g_.height - 1);
     int rounds = 1;
@@ -468,10 +488,14 @@ class Subdivider {
           due[size_t(round_of(area))].push_back(k);
           continue;
         }
-        if (same(u, failed[2 * k + dir])) continue;
-        const Eval e = evaluate(u, true);
-        if (e.nodata || e.error > tol_) {
-          failed[2 * k + dir] = u;
+        if (failed[2 * k + dir] == id(u.i1, u.j1)) continue;
+        // A union that refine() already saw fail (two children of one parent, often) fails again: it
+        // counts as a trial, as it did when it was measured, but is not measured again.
+        const bool refined_away = !failed_se_.empty() && failed_se_[id(u.i0, u.j0)] == id(u.i1, u.j1);
+        if (refined_away) ++out_.trials;
+        const Eval e = refined_away ? Eval{} : evaluate(u, true);
+        if (refined_away || e.nodata || e.error > tol_) {
+          failed[2 * k + dir] = id(u.i1, u.j1);
           continue;
         }
         u.diagonal = e.diagonal;
@@ -512,6 +536,8 @@ class Subdivider {
   // times faster than sorting a few hundred thousand rectangles).
   void sort_leaves() {
     constexpr uint32_t kNone = UINT32_MAX;
+    auto before = [](const Rect& a, const Rect& b) { return a.j0 != b.j0 ? a.j0 < b.j0 : a.i0 < b.i0; };
+    if (std::is_sorted(leaves_.begin(), leaves_.end(), before)) return;  // e.g. merge() left them sorted
     std::vector<uint32_t> by_corner(uint64_t(g_.width) * g_.height, kNone);
     for (uint32_t k = 0; k < leaves_.size(); ++k) by_corner[id(leaves_[k].i0, leaves_[k].j0)] = k;
     std::vector<Rect> sorted;
@@ -572,12 +598,14 @@ class Subdivider {
     std::vector<uint32_t> tris;
     for (;;) {
       mark_corners();
-      std::vector<Rect> kept, failed;
+      // The polygons that pass are compacted in place (kept <= the polygon being verified).
+      size_t kept = 0;
+      std::vector<Rect> failed;
       std::vector<Point> where;
       for (Rect r : leaves_) {
         if (extra) side_points(r, sides);
         if (proven_by_trial(r, extra ? sides : none)) {
-          kept.push_back(r);
+          leaves_[kept++] = r;
           continue;
         }
         bool ok = false;
@@ -591,14 +619,14 @@ class Subdivider {
           ok = e.first <= tol_;
         }
         if (ok || is_cell(r)) {
-          kept.push_back(r);
+          leaves_[kept++] = r;
         } else {
           r.diagonal ^= 1;
           failed.push_back(r);
           where.push_back({worst.second % g_.width, worst.second / g_.width});
         }
       }
-      leaves_ = std::move(kept);  // with the diagonals that passed
+      leaves_.resize(kept);  // with the diagonals that passed
       if (failed.empty()) break;
       out_.verify_splits += failed.size();
       for (size_t f = 0; f < failed.size(); ++f)
@@ -677,6 +705,8 @@ class Subdivider {
     uint8_t diagonal = 2;  // 2: none
   };
   std::vector<KnownError> known_;
+  // With merge: the SE corner of the last rectangle refine() split, by its NW corner (UINT32_MAX: none).
+  std::vector<uint32_t> failed_se_;
   double proven_tol_ = 0;
   Subdivision out_;
   double total_cells_ = 1, done_cells_ = 0;
