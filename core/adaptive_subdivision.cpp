@@ -196,11 +196,14 @@ class Subdivider {
     // The errors of sample (i0 + di, j0 + dj) against both diagonals' triangles.
     auto errors = [&](int64_t di, int64_t dj, double zs, double& e0, double& e1) {
       const double u = di * fw, v = dj * fh;
+      // Both triangles' planes are computed and one is selected, without a branch: which triangle a
+      // sample falls in changes from sample to sample, a branch there is mispredicted often.
       // Diagonal 0 (SW-NE): triangles (SW, SE, NE) where u + v >= 1 and (SW, NE, NW) elsewhere.
-      const double p0 = di * H + dj * W >= W * H ? zse + (1 - u) * (zsw - zse) + (1 - v) * (zne - zse)
-                                                 : znw + u * (zne - znw) + v * (zsw - znw);
+      const double se0 = zse + (1 - u) * (zsw - zse) + (1 - v) * (zne - zse), nw0 = znw + u * (zne - znw) + v * (zsw - znw);
+      const double p0 = di * H + dj * W >= W * H ? se0 : nw0;
       // Diagonal 1 (NW-SE): triangles (NW, NE, SE) where u >= v and (NW, SE, SW) elsewhere.
-      const double p1 = di * H >= dj * W ? znw + u * (zne - znw) + v * (zse - zne) : znw + v * (zsw - znw) + u * (zse - zsw);
+      const double ne1 = znw + u * (zne - znw) + v * (zse - zne), sw1 = znw + v * (zsw - znw) + u * (zse - zsw);
+      const double p1 = di * H >= dj * W ? ne1 : sw1;
       e0 = std::abs(zs - p0);
       e1 = std::abs(zs - p1);
     };
@@ -636,21 +639,29 @@ class Subdivider {
 
     sort_leaves();
     // corner_ still holds these polygons' corners: the last pass split nothing.
+    // Every polygon has at least 4 ring entries and 2 triangles: reserved at once rather than grown by
+    // doubling (each doubling copies and touches fresh pages); the fill polygons' share is reserved below.
+    out_.ring_offsets.reserve(leaves_.size() + 1);
+    out_.rings.reserve(4 * leaves_.size());
+    out_.triangles.reserve(6 * leaves_.size());
     out_.ring_offsets.push_back(0);
     std::vector<uint32_t> fill_rings;  // (size, ids...) per fill polygon
+    uint64_t fill_count = 0, fill_triangle_ids = 0;  // for the reservation
     for (const Rect& r : leaves_) {
       side_points(r, sides);
-      const uint32_t corners[4] = {id(r.i0, r.j1), id(r.i1, r.j1), id(r.i1, r.j0), id(r.i0, r.j0)};  // SW SE NE NW
+      const uint32_t ci[4] = {r.i0, r.i1, r.i1, r.i0}, cj[4] = {r.j1, r.j1, r.j0, r.j0};  // SW SE NE NW
       for (int s = 0; s < 4; ++s) {
-        out_.rings.push_back(corners[s]);
+        const uint32_t a = id(ci[s], cj[s]), b = id(ci[(s + 1) % 4], cj[(s + 1) % 4]);
+        out_.rings.push_back(a);
         if (extra) out_.rings.insert(out_.rings.end(), sides[s].begin(), sides[s].end());
-        // T-junction census: heights against this side's straight line, exactly (integer weights).
-        const uint32_t a = corners[s], b = corners[(s + 1) % 4];
-        const auto ai = int64_t(a % g_.width), aj = int64_t(a / g_.width), bi = int64_t(b % g_.width), bj = int64_t(b / g_.width);
-        const int64_t len = std::abs(bi - ai) + std::abs(bj - aj);
+        // T-junction census: heights against this side's straight line, exactly (integer weights). A
+        // side point's distance from a, in samples, is its id's distance along the row or column
+        // (sides are axis-aligned; no division per corner).
+        const bool along_row = cj[s] == cj[(s + 1) % 4];
+        const int64_t len = along_row ? std::abs(int64_t(ci[(s + 1) % 4]) - ci[s]) : std::abs(int64_t(cj[(s + 1) % 4]) - cj[s]);
         bool gap_here = false;
         for (uint32_t t : sides[s]) {
-          const int64_t at = std::abs(int64_t(t % g_.width) - ai) + std::abs(int64_t(t / g_.width) - aj);
+          const int64_t at = along_row ? std::abs(int64_t(t) - a) : std::abs(int64_t(t) - a) / g_.width;
           const double d = std::abs(double(g_.z[t]) * len - (double(g_.z[a]) * (len - at) + double(g_.z[b]) * at)) / len;
           ++out_.t_junctions;
           if (d > 0) {
@@ -664,6 +675,8 @@ class Subdivider {
           fill_rings.push_back(a);
           fill_rings.insert(fill_rings.end(), sides[s].begin(), sides[s].end());
           fill_rings.push_back(b);
+          ++fill_count;
+          fill_triangle_ids += 3 * sides[s].size();
         }
       }
       out_.ring_offsets.push_back(out_.rings.size());
@@ -672,6 +685,9 @@ class Subdivider {
     // Fill polygons: (A, t1 .. tk, B) over side AB, drawn as a fan from A. Seen in the vertical plane of
     // the side, every point between AB and the polyline A t1 .. tk B is on a segment from A to the polyline,
     // so the fan covers the gap.
+    out_.rings.reserve(out_.rings.size() + fill_rings.size() - fill_count);
+    out_.ring_offsets.reserve(out_.ring_offsets.size() + fill_count);
+    out_.triangles.reserve(out_.triangles.size() + fill_triangle_ids);
     for (size_t at = 0; at < fill_rings.size();) {
       const uint32_t n = fill_rings[at];
       const uint32_t* ring = &fill_rings[at + 1];
