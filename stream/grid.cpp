@@ -109,7 +109,7 @@ Result grid(const std::string& input, const GridOptions& go, const Options& opti
     so.method = go.method == GridMethod::growth ? core::Method::growth : core::Method::subdivision;
     so.seed = go.seed;
     so.merge = go.merge;
-    const core::Subdivision sub = stream::run_stage(&report.stages, "subdivide", [&](StageStats&) {
+    core::Subdivision sub = stream::run_stage(&report.stages, "subdivide", [&](StageStats&) {
       return core::subdivide(samples, so, [&](double f) { progress.report("subdivide", f); });
     });
 
@@ -123,20 +123,23 @@ Result grid(const std::string& input, const GridOptions& go, const Options& opti
       // One pass over a sample-sized map instead of sorting the ring entries.
       constexpr uint32_t kUnused = UINT32_MAX;
       std::vector<uint32_t> vid(n, kUnused);
-      for (uint32_t s : sub.rings) vid[s] = 0;
-      for (uint64_t s = 0; s < n; ++s)
-        if (vid[s] != kUnused) {
+      uint64_t vertices = 0;
+      for (uint32_t s : sub.rings)
+        if (vid[s] == kUnused) vid[s] = 0, ++vertices;
+      used.reserve(vertices);
+      poly.positions.reserve(3 * vertices);
+      for (uint32_t j = 0; j < g.height; ++j)
+        for (uint32_t i = 0; i < g.width; ++i) {
+          const uint64_t s = uint64_t(j) * g.width + i;
+          if (vid[s] == kUnused) continue;
           vid[s] = uint32_t(used.size());
           used.push_back(uint32_t(s));
+          poly.positions.insert(poly.positions.end(), {float(g.x(i)), float(g.y(j)), g.z[s]});
         }
-      poly.positions.reserve(3 * used.size());
-      for (uint32_t s : used) {
-        const uint32_t i = s % g.width, j = s / g.width;
-        poly.positions.insert(poly.positions.end(), {float(g.x(i)), float(g.y(j)), g.z[s]});
-      }
-      poly.offsets = sub.ring_offsets;
-      poly.indices.reserve(sub.rings.size());
-      for (uint32_t s : sub.rings) poly.indices.push_back(vid[s]);
+      // The rings are not needed as sample ids after this: their storage becomes the mesh's (no copy).
+      poly.offsets = std::move(sub.ring_offsets);
+      poly.indices = std::move(sub.rings);
+      for (uint32_t& s : poly.indices) s = vid[s];
       tri.triangles.reserve(sub.triangles.size());
       for (uint32_t s : sub.triangles) tri.triangles.push_back(vid[s]);
     });
