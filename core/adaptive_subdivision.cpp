@@ -639,14 +639,19 @@ class Subdivider {
 
     sort_leaves();
     // corner_ still holds these polygons' corners: the last pass split nothing.
-    // Every polygon has at least 4 ring entries and 2 triangles: reserved at once rather than grown by
-    // doubling (each doubling copies and touches fresh pages); the fill polygons' share is reserved below.
-    out_.ring_offsets.reserve(leaves_.size() + 1);
-    out_.rings.reserve(4 * leaves_.size());
-    out_.triangles.reserve(6 * leaves_.size());
+    // Reserved once, for at most as much as can be drawn, rather than grown by doubling (each doubling
+    // copies and touches fresh pages; capacity never written is address space, not memory). A side point
+    // is a corner strictly inside one side (two polygons' sides through it would leave no room for the
+    // polygon it is a corner of), so there are at most C (the distinct corners) of them in all. Per polygon 4
+    // ring entries and 2 triangles, plus one ring entry and one triangle per side point with extra
+    // vertices; with fill, per side with k >= 1 points, one fill polygon of k + 2 <= 3k entries and k
+    // triangles.
+    const uint64_t polys = leaves_.size(), corner_points = uint64_t(std::count(corner_.begin(), corner_.end(), uint8_t{1}));
+    out_.ring_offsets.reserve(polys + 1 + corner_points);
+    out_.rings.reserve(4 * polys + 3 * corner_points);
+    out_.triangles.reserve(3 * (2 * polys + corner_points));
     out_.ring_offsets.push_back(0);
     std::vector<uint32_t> fill_rings;  // (size, ids...) per fill polygon
-    uint64_t fill_count = 0, fill_triangle_ids = 0;  // for the reservation
     for (const Rect& r : leaves_) {
       side_points(r, sides);
       const uint32_t ci[4] = {r.i0, r.i1, r.i1, r.i0}, cj[4] = {r.j1, r.j1, r.j0, r.j0};  // SW SE NE NW
@@ -675,8 +680,6 @@ class Subdivider {
           fill_rings.push_back(a);
           fill_rings.insert(fill_rings.end(), sides[s].begin(), sides[s].end());
           fill_rings.push_back(b);
-          ++fill_count;
-          fill_triangle_ids += 3 * sides[s].size();
         }
       }
       out_.ring_offsets.push_back(out_.rings.size());
@@ -685,9 +688,6 @@ class Subdivider {
     // Fill polygons: (A, t1 .. tk, B) over side AB, drawn as a fan from A. Seen in the vertical plane of
     // the side, every point between AB and the polyline A t1 .. tk B is on a segment from A to the polyline,
     // so the fan covers the gap.
-    out_.rings.reserve(out_.rings.size() + fill_rings.size() - fill_count);
-    out_.ring_offsets.reserve(out_.ring_offsets.size() + fill_count);
-    out_.triangles.reserve(out_.triangles.size() + fill_triangle_ids);
     for (size_t at = 0; at < fill_rings.size();) {
       const uint32_t n = fill_rings[at];
       const uint32_t* ring = &fill_rings[at + 1];
