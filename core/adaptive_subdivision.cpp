@@ -106,6 +106,10 @@ class Subdivider {
     known_.resize(n);
     if (o.merge) failed_se_.assign(n, UINT32_MAX);
     if (o.split == SplitRule::curvature) compute_curvature();
+    // 1.0 / k for every rectangle side length k: the same values the trial would divide for (IEEE
+    // division is exact-rounded), without two divisions per trial.
+    inverse_.resize(std::max(g.width, g.height));
+    for (uint32_t k = 1; k < inverse_.size(); ++k) inverse_[k] = 1.0 / k;
     total_cells_ = double(g.width - 1) * double(g.height - 1);
   }
 
@@ -185,7 +189,7 @@ class Subdivider {
       return e;
     }
     const double znw = z(r.i0, r.j0), zne = z(r.i1, r.j0), zsw = z(r.i0, r.j1), zse = z(r.i1, r.j1);
-    const double fw = 1.0 / w, fh = 1.0 / h;
+    const double fw = inverse_[w], fh = inverse_[h];
     const int64_t W = w, H = h;
     double max_err[2] = {0, 0};
     Point arg[2] = {{r.i0, r.j0}, {r.i0, r.j0}}, first[2] = {{0, 0}, {0, 0}};
@@ -247,7 +251,7 @@ class Subdivider {
     e.error = max_err[d];
     // Within tolerance means the scan was complete (decide_only stops only when both diagonals are over),
     // so this is the polygon's exact error with diagonal d: kept for verify_and_draw().
-    if (e.error <= tol_) known_[id(r.i0, r.j0)] = {r.i1, r.j1, float_up(e.error), e.diagonal};
+    if (e.error <= tol_) known_[id(r.i0, r.j0)] = {id(r.i1, r.j1), e.diagonal ? -float_up(e.error) : float_up(e.error)};
     switch (o_.split) {
       case SplitRule::center: e.split = center; break;
       case SplitRule::first: e.split = over[d] ? first[d] : arg[d]; break;
@@ -444,14 +448,15 @@ class Subdivider {
   // outcomes, so the result and the trial count are those of full passes.
   void merge() {
     constexpr uint32_t kNone = UINT32_MAX;
-    sort_leaves();
+    // Polygon by its NW corner (what a visit looks up), by its NE and by its SW corner (for (b)).
+    std::vector<uint32_t> at;
+    sort_leaves(&at);
     const uint32_t n = uint32_t(leaves_.size());
     const uint64_t samples = uint64_t(g_.width) * g_.height;
-    // Polygon by its NW corner (what a visit looks up), by its NE and by its SW corner (for (b)).
-    std::vector<uint32_t> at(samples, kNone), ne_at(samples, kNone), sw_at(samples, kNone);
+    std::vector<uint32_t> ne_at(samples, kNone), sw_at(samples, kNone);
     for (uint32_t k = 0; k < n; ++k) {
       const Rect& r = leaves_[k];
-      at[id(r.i0, r.j0)] = ne_at[id(r.i1, r.j0)] = sw_at[id(r.i0, r.j1)] = k;
+      ne_at[id(r.i1, r.j0)] = sw_at[id(r.i0, r.j1)] = k;
     }
     std::vector<uint8_t> alive(n, 1);
     // The last union that failed per polygon and direction, by its SE corner (its NW corner is the
@@ -536,18 +541,26 @@ class Subdivider {
 
   // Sorts leaves_ by (j0, i0), that is by NW corner id. The polygons tile the grid, so no two share a NW
   // corner: one pass over a sample-sized map gives the order a comparison sort would (and is several
-  // times faster than sorting a few hundred thousand rectangles).
-  void sort_leaves() {
+  // times faster than sorting a few hundred thousand rectangles). by_corner_out: that map, polygon index
+  // by NW corner id (UINT32_MAX: none), after the sort.
+  void sort_leaves(std::vector<uint32_t>* by_corner_out = nullptr) {
     constexpr uint32_t kNone = UINT32_MAX;
     auto before = [](const Rect& a, const Rect& b) { return a.j0 != b.j0 ? a.j0 < b.j0 : a.i0 < b.i0; };
-    if (std::is_sorted(leaves_.begin(), leaves_.end(), before)) return;  // e.g. merge() left them sorted
+    const bool sorted_already = std::is_sorted(leaves_.begin(), leaves_.end(), before);  // e.g. by merge()
+    if (sorted_already && !by_corner_out) return;
     std::vector<uint32_t> by_corner(uint64_t(g_.width) * g_.height, kNone);
     for (uint32_t k = 0; k < leaves_.size(); ++k) by_corner[id(leaves_[k].i0, leaves_[k].j0)] = k;
-    std::vector<Rect> sorted;
-    sorted.reserve(leaves_.size());
-    for (uint32_t k : by_corner)
-      if (k != kNone) sorted.push_back(leaves_[k]);
-    leaves_ = std::move(sorted);
+    if (!sorted_already) {
+      std::vector<Rect> sorted;
+      sorted.reserve(leaves_.size());
+      for (uint32_t& k : by_corner)
+        if (k != kNone) {
+          sorted.push_back(leaves_[k]);
+          k = uint32_t(sorted.size() - 1);
+        }
+      leaves_ = std::move(sorted);
+    }
+    if (by_corner_out) *by_corner_out = std::move(by_corner);
   }
 
   // The points strictly inside the four sides of r that are corners of other polygons, in ring order.
@@ -589,7 +602,7 @@ class Subdivider {
     for (const auto& s : sides)
       if (!s.empty()) return false;
     const KnownError& k = known_[id(r.i0, r.j0)];
-    return k.i1 == r.i1 && k.j1 == r.j1 && k.diagonal == r.diagonal && double(k.error) <= proven_tol_;
+    return k.se == id(r.i1, r.j1) && std::signbit(k.error) == (r.diagonal == 1) && std::abs(double(k.error)) <= proven_tol_;
   }
 
   // Verifies every polygon against its final drawn triangles, splitting and refining the ones that fail,
@@ -712,13 +725,13 @@ class Subdivider {
   std::vector<uint8_t> valid_, corner_;
   bool any_nodata_ = false;
   std::vector<float> curvature_;
+  std::vector<double> inverse_;  // inverse_[k] = 1.0 / k
   std::vector<Rect> leaves_;
   // The last trial error within tolerance measured per NW corner, with the rectangle and diagonal it is
   // for (a cache of a function of those: an entry for another rectangle is simply not used).
   struct KnownError {
-    uint32_t i1 = 0, j1 = 0;
-    float error = 0;       // rounded up
-    uint8_t diagonal = 2;  // 2: none
+    uint32_t se = UINT32_MAX;  // the rectangle's SE corner id (its NW is the index); UINT32_MAX: none
+    float error = 0;           // rounded up; its sign bit is the diagonal (8 bytes per sample, not 16)
   };
   std::vector<KnownError> known_;
   // With merge: the SE corner of the last rectangle refine() split, by its NW corner (UINT32_MAX: none).
