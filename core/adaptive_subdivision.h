@@ -52,6 +52,10 @@ struct SubdivisionOptions {
   uint64_t target_polygons = 0;
   Method method = Method::subdivision;
   uint64_t seed = 1;                // SplitRule::random only
+  // After the subdivision or growth, merge two polygons sharing a whole side while their union passes
+  // the trial test (not in the thesis; see merge() in the .cpp). Ignored when a polygon target stopped
+  // the refinement (no tolerance left to test against).
+  bool merge = false;
 };
 
 struct Rect {
@@ -78,6 +82,7 @@ struct Subdivision {
   double max_gap = 0;
   uint64_t trials = 0;              // trial polygons tested
   uint64_t verify_splits = 0;       // polygons split again because extra vertices changed their surface
+  uint64_t merges = 0;              // SubdivisionOptions::merge: pairs of polygons merged
 };
 
 // Called now and then with the fraction done, in [0, 1]. To cancel, throw from it: the exception leaves

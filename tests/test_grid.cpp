@@ -255,6 +255,63 @@ TEST(GridFuji, EveryVariantIsWithinTolerance) {
   EXPECT_LE(core::vertical_error(f->view(), core::subdivide(f->view(), o).triangles).max, tol);
 }
 
+// The merge pass: every variant stays within tolerance with every gap mode, merges something, needs fewer
+// triangles than without it, and still tiles the grid; the extra-vertices surface stays watertight.
+TEST(GridFuji, MergeKeepsToleranceAndSavesTriangles) {
+  REQUIRE_FUJI();
+  const uint32_t w = f->grid.width, h = f->grid.height;
+  for (double tol : {1.0, 5.0, 20.0})
+    for (SplitRule rule : {SplitRule::center, SplitRule::greatest})
+      for (unsigned divide : {4u, 2u})
+        for (GapMode gaps : kGaps) {
+          core::SubdivisionOptions o = opts(tol, rule, gaps, divide);
+          const core::Subdivision plain = core::subdivide(f->view(), o);
+          o.merge = true;
+          const core::Subdivision s = core::subdivide(f->view(), o);
+          SCOPED_TRACE(testing::Message() << "tol " << tol << " split " << int(rule) << " divide " << divide << " gaps " << int(gaps));
+          const core::VerticalError e = core::vertical_error(f->view(), s.triangles);
+          EXPECT_LE(e.max, tol);
+          EXPECT_EQ(e.samples, 512u * 512u);
+          EXPECT_GT(s.merges, 0u);
+          EXPECT_LT(s.triangles.size(), plain.triangles.size());
+          EXPECT_EQ(s.cracks == 0, gaps != GapMode::none);
+          uint64_t cells = 0;
+          for (const core::Rect& r : s.polygons) cells += uint64_t(r.i1 - r.i0) * (r.j1 - r.j0);
+          EXPECT_EQ(cells, uint64_t(w - 1) * (h - 1));
+          if (gaps == GapMode::extra_vertices)
+            for (const auto& [edge, count] : ring_edges(s))
+              if (!on_border(edge.first, edge.second, w, h)) ASSERT_EQ(count, 2);
+        }
+  for (GapMode gaps : kGaps) {
+    core::SubdivisionOptions o = opts(5, SplitRule::greatest, gaps);
+    o.method = core::Method::growth;
+    o.merge = true;
+    const core::Subdivision s = core::subdivide(f->view(), o);
+    EXPECT_LE(core::vertical_error(f->view(), s.triangles).max, 5.0);
+  }
+  // Stopped by a polygon count there is no tolerance to merge against: the merge pass does nothing.
+  core::SubdivisionOptions o = opts(5, SplitRule::greatest, GapMode::fill);
+  o.target_polygons = 500;
+  const core::Subdivision a = core::subdivide(f->view(), o);
+  o.merge = true;
+  const core::Subdivision b = core::subdivide(f->view(), o);
+  EXPECT_EQ(b.merges, 0u);
+  EXPECT_EQ(a.triangles, b.triangles);
+}
+
+// The target, on the Fuji tile: center, divide 2, fill polygons and merge within 1.5 x Delatin's
+// triangles (377,514 / 123,279 / 20,354 at 1 / 5 / 20 m, tools/terrain_peers.js).
+TEST(GridFuji, MergeIsWithinOneAndAHalfDelatin) {
+  REQUIRE_FUJI();
+  const std::pair<double, double> delatin[] = {{1, 377514}, {5, 123279}, {20, 20354}};
+  for (const auto& [tol, tris] : delatin) {
+    core::SubdivisionOptions o = opts(tol, SplitRule::center, GapMode::fill, 2);
+    o.merge = true;
+    const core::Subdivision s = core::subdivide(f->view(), o);
+    EXPECT_LE(double(s.triangles.size() / 3), 1.5 * tris) << "tolerance " << tol;
+  }
+}
+
 TEST(GridFuji, ExtraVerticesLeaveNoBoundaryEdgeInsideTheGrid) {
   REQUIRE_FUJI();
   const uint32_t w = f->grid.width, h = f->grid.height;
@@ -372,6 +429,11 @@ TEST(Grid, DocumentedErrors) {
   bad.target_polygons = 10;
   EXPECT_EQ(grid(good, bad, o, &rep).status, Status::usage);
   bad = go;
+  bad.tolerance = -1;
+  bad.target_polygons = 10;
+  bad.merge = true;
+  EXPECT_EQ(grid(good, bad, o, &rep).status, Status::usage);  // merge needs a tolerance
+  bad = go;
   bad.output_dir = good + "/sub";  // a file in the way
   EXPECT_EQ(grid(good, bad, o, &rep).status, Status::io_error);
   ASSERT_TRUE(grid(good, go, o, &rep).ok());
@@ -392,6 +454,9 @@ TEST(Grid, CliExitCodes) {
   const auto j = nlohmann::json::parse(ok.out);
   EXPECT_EQ(j["polygons"], 1);
   EXPECT_EQ(j["options"]["gaps"], "fill");
+  const test::CliRun merged = test::run_cli({"grid", good, "-o", out, "--tolerance", "1", "--merge", "--json"}, tmp);
+  ASSERT_EQ(merged.exit_code, 0) << merged.err;
+  EXPECT_EQ(nlohmann::json::parse(merged.out)["options"]["merge"], true);
 }
 
 }  // namespace

@@ -10,12 +10,14 @@
 # tools/install-deps.sh uses ($LODSTREAM_NPM_PREFIX, default ~/.cache/lodstream-npm).
 # lodstream runs as `lodstream grid TILE -o OUT --tolerance E --split S --divide D --gaps G` (binary from
 # --build DIR; OUT is a directory); triangles, measured max error and seconds come from OUT/summary.json
-# (time: its "subdivide" stage; the total is kept in WORK/lodstream.jsonl).
-# Peers' times are medians over --peer-runs runs of the meshing alone; lodstream's the median of --runs.
+# (time: its "subdivide" + "index" stages, heights to indexed triangles; the total is kept in
+# WORK/lodstream.jsonl). Peers' times are medians over --peer-runs runs of the same (Martini's includes its
+# constructor: see tools/terrain_peers.js); lodstream's the median of --runs.
 #
 # usage: tools/bench_grid.sh [--tile PNG] [--build build] [--errors 1,5,20] [--runs 1] [--peer-runs 3]
 #                            [--splits center,first,greatest,curvature,random] [--divides 4,2]
-#                            [--gaps none,extra-vertices,fill] [--work DIR] [--skip-peers] [--skip-lodstream]
+#                            [--gaps none,extra-vertices,fill] [--merges off,on] [--work DIR] [--skip-peers]
+#                            [--skip-lodstream]      (--merges on: also with --merge)
 # Prints a markdown table (also in WORK/table.md); raw results in WORK/peers.jsonl and WORK/lodstream.jsonl.
 set -euo pipefail
 
@@ -27,12 +29,13 @@ runs=1
 peer_runs=3
 splits=center,first,greatest,curvature,random
 divides=4,2
+merges=off,on
 gaps=""
 work=""
 skip_peers=0
 skip_lod=0
 
-usage() { sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --tile) tile=$2; shift 2 ;;
@@ -43,6 +46,7 @@ while [[ $# -gt 0 ]]; do
     --splits) splits=$2; shift 2 ;;
     --divides) divides=$2; shift 2 ;;
     --gaps) gaps=$2; shift 2 ;;
+    --merges) merges=$2; shift 2 ;;
     --work) work=$2; shift 2 ;;
     --skip-peers) skip_peers=1; shift ;;
     --skip-lodstream) skip_lod=1; shift ;;
@@ -115,25 +119,31 @@ if [[ $skip_lod -eq 0 ]]; then
     IFS=, read -r -a s_list <<<"$splits"
     IFS=, read -r -a d_list <<<"$divides"
     IFS=, read -r -a g_list <<<"$gaps"
-    total=$(( ${#e_list[@]} * ${#s_list[@]} * ${#d_list[@]} * ${#g_list[@]} ))
+    IFS=, read -r -a m_list <<<"$merges"
+    # An older binary has no --merge: off only.
+    grep -q -- "--merge" <<<"$help" || m_list=(off)
+    total=$(( ${#e_list[@]} * ${#s_list[@]} * ${#d_list[@]} * ${#g_list[@]} * ${#m_list[@]} ))
     n=0
     cat "$tile" > /dev/null  # into the page cache before the first timed run
-    for s in "${s_list[@]}"; do for d in "${d_list[@]}"; do for g in "${g_list[@]}"; do for e in "${e_list[@]}"; do
+    for s in "${s_list[@]}"; do for d in "${d_list[@]}"; do for g in "${g_list[@]}"; do for m in "${m_list[@]}"; do
+    for e in "${e_list[@]}"; do
       n=$((n + 1))
-      echo "[$n/$total] lodstream grid --tolerance $e --split $s --divide $d --gaps $g" >&2
+      mflag=()
+      [[ "$m" == on ]] && mflag=(--merge)
+      echo "[$n/$total] lodstream grid --tolerance $e --split $s --divide $d --gaps $g ${mflag[*]+"${mflag[*]}"}" >&2
       for ((r = 1; r <= runs; r++)); do
-        out="$work/grid-$s-$d-$g-$e"
+        out="$work/grid-$s-$d-$g-$m-$e"
         t0=$(date +%s.%N)
         set +e
         "$bin" grid "$tile" -o "$out" --tolerance "$e" --split "$s" --divide "$d" --gaps "$g" \
-          > "$work/run.stdout" 2> "$work/run.stderr"
+          ${mflag[@]+"${mflag[@]}"} > "$work/run.stdout" 2> "$work/run.stderr"
         rc=$?
         set -e
         t1=$(date +%s.%N)
-        python3 - "$work/run.stdout" "$out" "$rc" "$s" "$d" "$g" "$e" "$t0" "$t1" "$work/run.stderr" \
+        python3 - "$work/run.stdout" "$out" "$rc" "$s" "$d" "$g" "$e" "$t0" "$t1" "$work/run.stderr" "$m" \
           >> "$work/lodstream.jsonl" <<'EOF'
 import json, os, sys
-stdout, out, rc, split, divide, gaps, e, t0, t1, stderr = sys.argv[1:]
+stdout, out, rc, split, divide, gaps, e, t0, t1, stderr, merge = sys.argv[1:]
 summary = None
 def objects(text):
     # Every JSON object in the text: the whole of it, or one per line.
@@ -167,24 +177,25 @@ for text in candidates:
             break
     if summary:
         break
-row = {'tool': 'lodstream', 'split': split, 'divide': int(divide), 'gaps': gaps, 'max_error': float(e),
+row = {'tool': 'lodstream', 'split': split, 'divide': int(divide), 'gaps': gaps, 'merge': merge == 'on', 'max_error': float(e),
        'exit': int(rc), 'wall_seconds': float(t1) - float(t0)}
 if summary:
     row['triangles'] = summary.get('triangles')
     row['measured_max_error'] = summary.get('max_error', summary.get('measured_max_error'))
     row['seconds'] = summary.get('seconds', row['wall_seconds'])
     row['cracks'] = summary.get('cracks', 0)
-    # The meshing alone, comparable with the peers' times: the "subdivide" stage when the summary has stages.
+    # The meshing alone, comparable with the peers' times: heights to indexed triangles, the "subdivide" and
+    # "index" stages (an older binary has no "index" stage: its subdivide alone).
     stages = {st.get('name'): st.get('seconds') for st in summary.get('stages', []) if isinstance(st, dict)}
     if stages.get('subdivide') is not None:
-        row['mesh_seconds'] = stages['subdivide']
+        row['mesh_seconds'] = stages['subdivide'] + (stages.get('index') or 0)
 else:
     row['error'] = (open(stderr).read().strip().splitlines() or ['no JSON summary found'])[-1][:300]
 print(json.dumps(row))
 EOF
         rm -rf "$out"
       done
-    done; done; done; done
+    done; done; done; done; done
   fi
 fi
 
@@ -215,10 +226,10 @@ for r in peers:
         put(names[r['tool']], float(r['max_error']), r['triangles'], r['seconds'], r.get('measured_max_error'))
 groups = {}
 for r in lod:
-    groups.setdefault((r['split'], r['divide'], r['gaps'], r['max_error']), []).append(r)
-for (s, d, g, e), rs in groups.items():
+    groups.setdefault((r['split'], r['divide'], r['gaps'], r.get('merge', False), r['max_error']), []).append(r)
+for (s, d, g, m, e), rs in groups.items():
     ok = [r for r in rs if r.get('triangles') is not None and r['exit'] == 0]
-    label = f'lodstream grid --split {s} --divide {d} --gaps {g}'
+    label = f'lodstream grid --split {s} --divide {d} --gaps {g}' + (' --merge' if m else '')
     if ok:
         put(label, e, ok[0]['triangles'], statistics.median(r.get('mesh_seconds', r['seconds']) for r in ok),
             ok[0].get('measured_max_error'), ok[0].get('cracks') or 0)
@@ -226,8 +237,8 @@ for (s, d, g, e), rs in groups.items():
         put(label, e, None, None, rs[0].get('error', f"exit {rs[0]['exit']}"))
 def fmt_e(e): return f'{e:g} m'
 print(f'Triangles needed for a max vertical error of {", ".join(fmt_e(e) for e in errors)} on {tile}; time in seconds '
-      '(the meshing alone: PNG decoding excluded for the peers, medians of their runs; lodstream\'s "subdivide" '
-      'stage, reading, measuring and writing excluded). † = measured max error above the target; '
+      '(heights to indexed triangles: PNG decoding excluded; Martini with its constructor, medians of the peers\' '
+      'runs; lodstream\'s "subdivide" + "index" stages, reading, measuring and writing excluded). † = measured max error above the target; '
       '‡ = open cracks (T-junction gaps) left in the surface.')
 print()
 head = '| tool / variant | ' + ' | '.join(f'{fmt_e(e)}: triangles | {fmt_e(e)}: s' for e in errors) + ' |'

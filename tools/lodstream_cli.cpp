@@ -346,6 +346,7 @@ int main(int argc, char** argv) {
   grid_cmd->add_option("--method", method, "subdivision or growth (polygon growth, slow)")
       ->check(CLI::IsMember({"subdivision", "growth"}));
   grid_cmd->add_option("--seed", go.seed, "Seed of --split random (default 1)");
+  grid_cmd->add_flag("--merge", go.merge, "Then merge polygons sharing a whole side while their union passes (not in the thesis)");
   grid_cmd->add_option("--z-scale", go.z_scale, "PGM: height = sample value x this (default 1)");
   grid_cmd->add_option("--spacing", go.spacing, "Sample distance, overriding the file's (default: file, or 1)");
   grid_cmd->add_flag("--no-obj", no_obj, "Do not write grid.obj");

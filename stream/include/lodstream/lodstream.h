@@ -246,6 +246,9 @@ struct GridOptions {
   uint64_t target_polygons = 0;
   GridMethod method = GridMethod::subdivision;  // growth: needs a tolerance, no target
   uint64_t seed = 1;       // GridSplit::random
+  // Then merge two polygons sharing a whole side while their union passes (not in the thesis: fewer
+  // polygons and T-junctions for the same tolerance). Needs a tolerance.
+  bool merge = false;
   double z_scale = 1;      // PGM samples only (io/grid_reader.h)
   double spacing = 0;      // > 0 overrides the file's sample distance
   bool write_obj = true;   // n-gons
@@ -268,7 +271,7 @@ struct GridReport {
   uint64_t measured_samples = 0, uncovered_samples = 0;
   uint64_t t_junctions = 0, gaps = 0, cracks = 0;  // cracks: gaps left open (GridGaps::none)
   double max_gap = 0;
-  uint64_t trials = 0, verify_splits = 0;
+  uint64_t trials = 0, verify_splits = 0, merges = 0;
   std::vector<std::string> files;       // written, relative to the output directory
   std::vector<StageStats> stages;
   double seconds = 0;
