@@ -278,9 +278,11 @@ TEST(GridFuji, MergeKeepsToleranceAndSavesTriangles) {
           uint64_t cells = 0;
           for (const core::Rect& r : s.polygons) cells += uint64_t(r.i1 - r.i0) * (r.j1 - r.j0);
           EXPECT_EQ(cells, uint64_t(w - 1) * (h - 1));
-          if (gaps == GapMode::extra_vertices)
-            for (const auto& [edge, count] : ring_edges(s))
+          if (gaps == GapMode::extra_vertices) {
+            for (const auto& [edge, count] : ring_edges(s)) {
               if (!on_border(edge.first, edge.second, w, h)) ASSERT_EQ(count, 2);
+            }
+          }
         }
   for (GapMode gaps : kGaps) {
     core::SubdivisionOptions o = opts(5, SplitRule::greatest, gaps);
