@@ -280,7 +280,9 @@ TEST(GridFuji, MergeKeepsToleranceAndSavesTriangles) {
           EXPECT_EQ(cells, uint64_t(w - 1) * (h - 1));
           if (gaps == GapMode::extra_vertices) {
             for (const auto& [edge, count] : ring_edges(s)) {
-              if (!on_border(edge.first, edge.second, w, h)) ASSERT_EQ(count, 2);
+              if (!on_border(edge.first, edge.second, w, h)) {
+                ASSERT_EQ(count, 2);
+              }
             }
           }
         }
