@@ -410,6 +410,15 @@ uint64_t Clusterer::dense_index(const Level& level, const int64_t square[3]) {
   return x + static_cast<uint64_t>(level.dims[0]) * (y + static_cast<uint64_t>(level.dims[1]) * z);
 }
 
+// Square i of a query's 2×2×2 block (bit a of i selects the neighbour along axis a), stored in q.square[i].
+inline const int64_t* block_square(Clusterer::Query& q, const int64_t other[3], int i) {
+  int64_t* sq = q.square[i];
+  sq[0] = (i & 1) ? other[0] : q.own[0];
+  sq[1] = (i & 2) ? other[1] : q.own[1];
+  sq[2] = (i & 4) ? other[2] : q.own[2];
+  return sq;
+}
+
 void Clusterer::query_floating(const Level& level, const double* p, Query& q) const {
   const double h = level.half;
   int64_t other[3];
@@ -426,11 +435,7 @@ void Clusterer::query_floating(const Level& level, const double* p, Query& q) co
     check_inside(level.first, level.dims, q.own);
     q.mask = 0;
     for (int i = 0; i < 8; ++i) {
-      int64_t* sq = q.square[i];
-      sq[0] = (i & 1) ? other[0] : q.own[0];
-      sq[1] = (i & 2) ? other[1] : q.own[1];
-      sq[2] = (i & 4) ? other[2] : q.own[2];
-      q.slot[i] = dense_index(level, sq);
+      q.slot[i] = dense_index(level, block_square(q, other, i));
     }
     return;
   }
@@ -440,11 +445,7 @@ void Clusterer::query_floating(const Level& level, const double* p, Query& q) co
     const uint64_t mask = level.packed.size() - 1;
     q.mask = mask;
     for (int i = 0; i < 8; ++i) {
-      int64_t* sq = q.square[i];
-      sq[0] = (i & 1) ? other[0] : q.own[0];
-      sq[1] = (i & 2) ? other[1] : q.own[1];
-      sq[2] = (i & 4) ? other[2] : q.own[2];
-      q.key[i] = pack(level, sq);
+      q.key[i] = pack(level, block_square(q, other, i));
       q.slot[i] = fmix64(q.key[i]) & mask;
       // Four slots share a cache line: the probe for an absent square runs on to the next empty slot,
       // which may be in the next line (no branch: a mispredicted one costs more than a redundant fetch).
@@ -457,12 +458,8 @@ void Clusterer::query_floating(const Level& level, const double* p, Query& q) co
   const uint64_t mask = level.table.size() - 1;
   q.mask = mask;
   for (int i = 0; i < 8; ++i) {
-    const int bx = i & 1, by = (i >> 1) & 1, bz = (i >> 2) & 1;
-    int64_t* sq = q.square[i];
-    sq[0] = bx ? other[0] : q.own[0];
-    sq[1] = by ? other[1] : q.own[1];
-    sq[2] = bz ? other[2] : q.own[2];
-    q.slot[i] = fmix64(term[0][bx] + term[1][by] + term[2][bz]) & mask;
+    block_square(q, other, i);
+    q.slot[i] = fmix64(term[0][i & 1] + term[1][(i >> 1) & 1] + term[2][(i >> 2) & 1]) & mask;
     // The probe for an absent square (most of them in the fine levels) runs on to the next empty slot,
     // often on the next cache line: fetch that too.
     __builtin_prefetch(&table[q.slot[i]]);
