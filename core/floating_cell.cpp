@@ -368,11 +368,10 @@ void Clusterer::prefetch_runs(const Level& level, const Query& q) const {
 }
 
 void Clusterer::prefetch_uniform(const Level& level, const double* p) const {
+  if (!level.dense.empty()) return;  // small enough to stay in cache
   int64_t square[3];
   for (int a = 0; a < 3; ++a) square[a] = half_index(p[a], level.half, level.size) >> 1;
-  if (!level.dense.empty()) return;  // small enough to stay in cache
-  if (!level.packed.empty()) {
-    check_inside(level.first, level.dims, square);
+  if (!level.packed.empty()) {  // only a hint: a square outside the bounds fetches some slot, harmlessly
     __builtin_prefetch(&level.packed[fmix64(pack(level, square)) & (level.packed.size() - 1)]);
     return;
   }

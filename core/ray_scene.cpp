@@ -139,12 +139,17 @@ struct RayScene::Impl {
     geoms.push_back({kind, nullptr, nullptr});
     return g;
   }
-  void finish(RTCGeometry g) {
+  // Commits `g`, attaches it to `s` (which then holds the only reference) and checks that it got the id
+  // `expected`: ids index geoms / query_geoms.
+  void attach(RTCScene s, RTCGeometry g, size_t expected, const char* what) {
     rtcCommitGeometry(g);
-    const unsigned id = rtcAttachGeometry(scene, g);
+    const unsigned id = rtcAttachGeometry(s, g);
     rtcReleaseGeometry(g);
-    check("attach geometry");
-    if (id != geoms.size() - 1) fail(Status::internal, "Embree geometry ids out of order");
+    check(what);
+    if (id != expected) fail(Status::internal, std::string("Embree ids out of order: ") + what);
+  }
+  void finish(RTCGeometry g) {
+    attach(scene, g, geoms.size() - 1, "attach geometry");
     has_primitives = true;
   }
 
@@ -175,11 +180,7 @@ struct RayScene::Impl {
     rtcSetGeometryUserPrimitiveCount(g, static_cast<unsigned>(primitives));
     rtcSetGeometryUserData(g, &query_geoms.back());
     rtcSetGeometryBoundsFunction(g, &Impl::bounds, nullptr);
-    rtcCommitGeometry(g);
-    const unsigned id = rtcAttachGeometry(query_scene, g);
-    rtcReleaseGeometry(g);
-    check("attach query geometry");
-    if (id != query_geoms.size() - 1) fail(Status::internal, "Embree query geometry ids out of order");
+    attach(query_scene, g, query_geoms.size() - 1, "attach query geometry");
     has_query_primitives = true;
   }
 };

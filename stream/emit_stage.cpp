@@ -1,4 +1,4 @@
-// Stage 5: emit one level. See emit_stage.h for the rules.
+// Stage 5: emit a group of levels in one pass over the input. See emit_stage.h for the rules.
 #include "stream/emit_stage.h"
 
 #include <algorithm>

@@ -14,7 +14,6 @@
 #include <tbb/task_arena.h>
 
 #include "core/status.h"
-#include "io/background_writer.h"
 #include "io/file_writer.h"
 #include "io/mapped_file.h"
 #include "stream/distinct_count.h"
@@ -323,8 +322,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     std::vector<uint8_t>().swap(used);
     std::vector<double>().swap(grades);
 
-    // The merge is serial: the index's page-cache copies go to a thread of their own.
-    io::BackgroundWriter out(index_path);
+    io::FileWriter out(index_path, 4 << 20);
     uint64_t written = 0;
     sorter.merge([&](const Record& rec) {
       out.write(&rec, sizeof rec);

@@ -18,7 +18,6 @@
 
 #include "core/mesh.h"
 #include "core/status.h"
-#include "io/background_writer.h"
 #include "io/file_writer.h"
 #include "io/glb_writer.h"
 #include "io/obj_writer.h"
@@ -400,51 +399,6 @@ TEST(WriterErrors, MissingDirectoryThrowsIoErrorAndLeavesNothing) {
   expect_io_error("x.obj", [&](const std::string& p) { io::write_obj(p, m, {}); });
   expect_io_error("x.glb", [&](const std::string& p) { io::write_glb(p, std::span(&level, 1), "g"); });
   EXPECT_FALSE(std::filesystem::exists(missing));
-}
-
-// BackgroundWriter: bytes written across many buffer hand-offs arrive in order; nothing is under the
-// final name before commit; a write that fails on the thread (ENOSPC from /dev/full) surfaces as an I/O
-// error in the caller and leaves no file.
-TEST(WriterBackground, WritesInOrderAndCommitsAtomically) {
-  TempDir dir;
-  const std::string path = dir.file("out.bin");
-  std::vector<uint32_t> values(100000);
-  for (uint32_t i = 0; i < values.size(); ++i) values[i] = i * 2654435761u;
-  {
-    io::BackgroundWriter w(path, 4096);
-    for (size_t i = 0; i < values.size(); i += 7)
-      w.write(&values[i], 4 * std::min<size_t>(7, values.size() - i));
-    EXPECT_FALSE(std::filesystem::exists(path));
-    w.commit();
-  }
-  ASSERT_EQ(std::filesystem::file_size(path), 4 * values.size());
-  std::vector<uint32_t> back(values.size());
-  FILE* f = std::fopen(path.c_str(), "rb");
-  ASSERT_NE(f, nullptr);
-  ASSERT_EQ(std::fread(back.data(), 4, back.size(), f), back.size());
-  std::fclose(f);
-  EXPECT_EQ(back, values);
-  EXPECT_FALSE(std::filesystem::exists(path + ".partial"));
-
-  const std::string gone = dir.file("gone.bin");
-  { io::BackgroundWriter w(gone, 4096); w.write(values.data(), 4 * values.size()); }  // no commit
-  EXPECT_FALSE(std::filesystem::exists(gone));
-  EXPECT_FALSE(std::filesystem::exists(gone + ".partial"));
-
-  if (std::filesystem::exists("/dev/full")) {
-    const std::string full = dir.file("full.bin");
-    std::filesystem::create_symlink("/dev/full", full + ".partial");
-    Status status = Status::ok;
-    try {
-      io::BackgroundWriter w(full, 4096);
-      w.write(values.data(), 4 * values.size());
-      w.commit();
-    } catch (const Failure& e) {
-      status = e.status();
-    }
-    EXPECT_EQ(status, Status::io_error);
-    EXPECT_FALSE(std::filesystem::exists(full));
-  }
 }
 
 TEST(WriterErrors, BadMeshIsAnInternalError) {
