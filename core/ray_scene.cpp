@@ -12,6 +12,7 @@
 #include <cstring>
 #include <deque>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -80,6 +81,13 @@ struct Geom {
   const uint32_t* indices = nullptr;  // triangles: 3 per primitive; segments: first vertex per primitive
 };
 
+// A new geometry's reference, released unless attach() hands it to a scene first: a check that throws
+// between rtcNewGeometry and the attachment (memory over --memory, say) leaks nothing.
+struct GeometryRelease {
+  void operator()(RTCGeometryTy* g) const { rtcReleaseGeometry(g); }
+};
+using GeometryHandle = std::unique_ptr<RTCGeometryTy, GeometryRelease>;
+
 }  // namespace
 
 struct RayScene::Impl {
@@ -133,23 +141,23 @@ struct RayScene::Impl {
     }
   }
 
-  RTCGeometry attach(RTCGeometryType type, PrimitiveKind kind) {
-    RTCGeometry g = rtcNewGeometry(device, type);
+  GeometryHandle attach(RTCGeometryType type, PrimitiveKind kind) {
+    GeometryHandle g(rtcNewGeometry(device, type));
     check("new geometry");
     geoms.push_back({kind, nullptr, nullptr});
     return g;
   }
   // Commits `g`, attaches it to `s` (which then holds the only reference) and checks that it got the id
   // `expected`: ids index geoms / query_geoms.
-  void attach(RTCScene s, RTCGeometry g, size_t expected, const char* what) {
-    rtcCommitGeometry(g);
-    const unsigned id = rtcAttachGeometry(s, g);
-    rtcReleaseGeometry(g);
+  void attach(RTCScene s, GeometryHandle g, size_t expected, const char* what) {
+    rtcCommitGeometry(g.get());
+    const unsigned id = rtcAttachGeometry(s, g.get());
+    g.reset();
     check(what);
     if (id != expected) fail(Status::internal, std::string("Embree ids out of order: ") + what);
   }
-  void finish(RTCGeometry g) {
-    attach(scene, g, geoms.size() - 1, "attach geometry");
+  void finish(GeometryHandle g) {
+    attach(scene, std::move(g), geoms.size() - 1, "attach geometry");
     has_primitives = true;
   }
 
@@ -176,11 +184,12 @@ struct RayScene::Impl {
       check("new query scene");
     }
     query_geoms.push_back(geoms.back());
-    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
-    rtcSetGeometryUserPrimitiveCount(g, static_cast<unsigned>(primitives));
-    rtcSetGeometryUserData(g, &query_geoms.back());
-    rtcSetGeometryBoundsFunction(g, &Impl::bounds, nullptr);
-    attach(query_scene, g, query_geoms.size() - 1, "attach query geometry");
+    GeometryHandle g(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER));
+    check("new query geometry");
+    rtcSetGeometryUserPrimitiveCount(g.get(), static_cast<unsigned>(primitives));
+    rtcSetGeometryUserData(g.get(), &query_geoms.back());
+    rtcSetGeometryBoundsFunction(g.get(), &Impl::bounds, nullptr);
+    attach(query_scene, std::move(g), query_geoms.size() - 1, "attach query geometry");
     has_query_primitives = true;
   }
 };
@@ -208,16 +217,16 @@ RayScene::TriangleBuffers RayScene::add_triangles(uint64_t vertex_count, uint64_
     fail(Status::usage, "more than 2^32 vertices or triangles in one ray-casting scene");
   if (triangle_count == 0) return {};
   Impl& s = *impl_;
-  RTCGeometry g = s.attach(RTC_GEOMETRY_TYPE_TRIANGLE, PrimitiveKind::triangle);
-  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+  GeometryHandle g = s.attach(RTC_GEOMETRY_TYPE_TRIANGLE, PrimitiveKind::triangle);
+  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g.get(), RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                                                         3 * sizeof(float), vertex_count));
   s.check("triangle vertices");
-  auto* i = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+  auto* i = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g.get(), RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
                                                            3 * sizeof(uint32_t), triangle_count));
   s.check("triangle indices");
   s.geoms.back().vertices = v;
   s.geoms.back().indices = i;
-  s.finish(g);
+  s.finish(std::move(g));
   return {std::span<float>(v, 3 * vertex_count), std::span<uint32_t>(i, 3 * triangle_count)};
 }
 
@@ -234,11 +243,11 @@ void RayScene::add_segments(std::span<const float> xyz, std::span<const uint32_t
   if (n == 0) return;
   if (2 * n > UINT32_MAX) fail(Status::usage, "more than 2^31 edges in one ray-casting scene");
   Impl& s = *impl_;
-  RTCGeometry g = s.attach(RTC_GEOMETRY_TYPE_FLAT_LINEAR_CURVE, PrimitiveKind::edge);
-  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
+  GeometryHandle g = s.attach(RTC_GEOMETRY_TYPE_FLAT_LINEAR_CURVE, PrimitiveKind::edge);
+  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g.get(), RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
                                                         4 * sizeof(float), 2 * n));
   s.check("edge vertices");
-  auto* i = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT,
+  auto* i = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g.get(), RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT,
                                                            sizeof(uint32_t), n));
   s.check("edge indices");
   for (uint64_t e = 0; e < n; ++e) {
@@ -251,7 +260,7 @@ void RayScene::add_segments(std::span<const float> xyz, std::span<const uint32_t
   }
   s.geoms.back().vertices = v;
   s.geoms.back().indices = i;
-  s.finish(g);
+  s.finish(std::move(g));
   s.add_query_twin(n);
 }
 
@@ -260,8 +269,8 @@ void RayScene::add_points(std::span<const float> xyz, std::span<const uint32_t> 
   if (n == 0) return;
   if (n > UINT32_MAX) fail(Status::usage, "more than 2^32 points in one ray-casting scene");
   Impl& s = *impl_;
-  RTCGeometry g = s.attach(RTC_GEOMETRY_TYPE_DISC_POINT, PrimitiveKind::point);
-  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
+  GeometryHandle g = s.attach(RTC_GEOMETRY_TYPE_DISC_POINT, PrimitiveKind::point);
+  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g.get(), RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
                                                         4 * sizeof(float), n));
   s.check("point vertices");
   for (uint64_t k = 0; k < n; ++k) {
@@ -270,7 +279,7 @@ void RayScene::add_points(std::span<const float> xyz, std::span<const uint32_t> 
     o[0] = p[0], o[1] = p[1], o[2] = p[2], o[3] = radius;
   }
   s.geoms.back().vertices = v;
-  s.finish(g);
+  s.finish(std::move(g));
   s.add_query_twin(n);
 }
 

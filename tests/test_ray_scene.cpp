@@ -430,6 +430,22 @@ TEST(RaySceneMemory, LimitReachedDuringTheBuildFailsWithUsage) {
   EXPECT_LE(scene.peak_embree_bytes(), limit);  // a refused allocation never happened
 }
 
+// A limit that holds the vertex buffer but not the index buffer: add_triangles fails, and the geometry it
+// had started is released with the buffer it already held (Embree reports the bytes returned).
+TEST(RaySceneMemory, FailedAddReleasesItsGeometry) {
+  const Mesh m = grid_mesh();
+  const uint64_t vertex_bytes = m.xyz.size() * sizeof(float);
+  RayScene scene(vertex_bytes + (64u << 10));
+  try {
+    scene.add_triangles(m.xyz, m.triangles);
+    ADD_FAILURE() << "add_triangles did not fail; Embree holds " << scene.embree_bytes() << " bytes";
+  } catch (const Failure& f) {
+    EXPECT_EQ(f.status(), Status::usage) << f.what();
+  }
+  EXPECT_GE(scene.peak_embree_bytes(), vertex_bytes);  // the vertex buffer was allocated
+  EXPECT_LT(scene.embree_bytes(), vertex_bytes);        // and is gone with its geometry
+}
+
 // Many scenes failing in a row (and succeeding afterwards): no crash, no stuck state.
 TEST(RaySceneMemory, RepeatedFailuresThenSuccess) {
   const Mesh m = grid_mesh();
