@@ -16,13 +16,29 @@ namespace {
 [[noreturn]] void io_fail(const std::string& path, const char* what, int err) {
   fail(Status::io_error, path + ": cannot " + what + ": " + std::strerror(err));
 }
+// Makes a rename in the directory of `path` durable. The file itself is already in place, so a failure is
+// reported (the caller asked for durability) but nothing is removed.
+void sync_directory_of(const std::string& path) {
+  const size_t slash = path.find_last_of('/');
+  const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) io_fail(dir, "open the directory to sync", errno);
+  int r;
+  while ((r = ::fsync(fd)) != 0 && errno == EINTR) {
+  }
+  const int e = errno;
+  ::close(fd);
+  // Some file systems cannot sync a directory (EINVAL): the rename is then as durable as they make it.
+  if (r != 0 && e != EINVAL) io_fail(dir, "sync the directory", e);
+}
 }  // namespace
 
 FileWriter::~FileWriter() { discard(); }
 
-void FileWriter::open(const std::string& path, size_t buffer_bytes) {
+void FileWriter::open(const std::string& path, size_t buffer_bytes, Sync sync) {
   discard();
   path_ = path;
+  sync_ = sync;
   const std::string partial = path + ".partial";
   fd_ = ::open(partial.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd_ < 0) io_fail(partial, "create", errno);
@@ -70,6 +86,18 @@ void FileWriter::commit() {
   if (fd_ < 0) return;
   flush();
   const std::string partial = path_ + ".partial";
+  if (sync_ == Sync::durable) {
+    int r;
+    while ((r = ::fdatasync(fd_)) != 0 && errno == EINTR) {
+    }
+    if (r != 0) {
+      const int e = errno;
+      ::close(fd_);
+      fd_ = -1;
+      ::unlink(partial.c_str());
+      io_fail(partial, "sync", e);
+    }
+  }
   if (::close(fd_) != 0) {
     const int e = errno;
     fd_ = -1;
@@ -82,6 +110,7 @@ void FileWriter::commit() {
     ::unlink(partial.c_str());
     io_fail(path_, "rename into place", e);
   }
+  if (sync_ == Sync::durable) sync_directory_of(path_);
 }
 
 void FileWriter::discard() {
@@ -91,8 +120,8 @@ void FileWriter::discard() {
   ::unlink((path_ + ".partial").c_str());
 }
 
-void write_file_atomic(const std::string& path, std::string_view contents) {
-  FileWriter w(path, contents.size() + 1);
+void write_file_atomic(const std::string& path, std::string_view contents, Sync sync) {
+  FileWriter w(path, contents.size() + 1, sync);
   w.write(contents);
   w.commit();
 }

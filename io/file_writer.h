@@ -1,6 +1,12 @@
 // Buffered sequential file output that never leaves a partial file under its final name: bytes go to
-// `<path>.partial`, and commit() flushes, syncs the data to the file and renames it into place.
-// Every failure (disk full included) throws Failure(io_error) naming the file.
+// `<path>.partial`, and commit() flushes and renames it into place. Every failure (disk full included)
+// throws Failure(io_error) naming the file.
+//
+// Durability: a committed file survives the process being killed either way (the page cache holds it).
+// Sync::durable also has commit() wait until the data (fdatasync) and then the rename (fsync of the
+// directory) are on the disk, so that a finished job's outputs survive a power loss too; the user's
+// output files use it. Work-directory files use Sync::none: a killed run resumes from them, but syncing
+// gigabytes of scratch would cost more than redoing the job after the rare power loss.
 #pragma once
 
 #include <cstddef>
@@ -12,15 +18,19 @@
 
 namespace lodstream::io {
 
+enum class Sync { none, durable };
+
 class FileWriter {
  public:
   FileWriter() = default;
-  explicit FileWriter(const std::string& path, size_t buffer_bytes = 1 << 20) { open(path, buffer_bytes); }
+  explicit FileWriter(const std::string& path, size_t buffer_bytes = 1 << 20, Sync sync = Sync::none) {
+    open(path, buffer_bytes, sync);
+  }
   FileWriter(const FileWriter&) = delete;
   FileWriter& operator=(const FileWriter&) = delete;
   ~FileWriter();  // discards the partial file if commit() was not called
 
-  void open(const std::string& path, size_t buffer_bytes = 1 << 20);
+  void open(const std::string& path, size_t buffer_bytes = 1 << 20, Sync sync = Sync::none);
   void write(const void* data, size_t bytes);
   void write(std::string_view s) { write(s.data(), s.size()); }
   template <class T>
@@ -38,10 +48,11 @@ class FileWriter {
   int fd_ = -1;
   std::vector<char> buffer_;
   size_t used_ = 0;
+  Sync sync_ = Sync::none;
 };
 
 // Writes a whole small file atomically (temporary + rename).
-void write_file_atomic(const std::string& path, std::string_view contents);
+void write_file_atomic(const std::string& path, std::string_view contents, Sync sync = Sync::none);
 
 // Reads a whole small file; throws Failure(io_error) on failure.
 std::string read_small_file(const std::string& path);

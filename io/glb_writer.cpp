@@ -255,7 +255,7 @@ void write_glb(const std::string& path, std::span<const GlbLevel> levels, const 
   if (total > UINT32_MAX) fail(Status::io_error, path + ": the levels do not fit in one GLB file (4 GiB at most)");
 
   // ---- Second pass: header, JSON chunk, BIN chunk.
-  FileWriter out(path);
+  FileWriter out(path, 1 << 20, Sync::durable);
   write_u32(out, kMagic);
   write_u32(out, 2);
   write_u32(out, total);

@@ -40,7 +40,7 @@ void write_obj(const std::string& path, const core::LodMesh& mesh, const std::ve
     fail(Status::internal, path + ": cannot write level: " + v);
   const bool normals = !mesh.normals.empty();
 
-  FileWriter out(path);
+  FileWriter out(path, 1 << 20, Sync::durable);
   for (const std::string& c : comments) {
     std::string line = "# ";
     for (char ch : c) line += static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f ? ' ' : ch;

@@ -59,7 +59,7 @@ void write_ply(const std::string& path, const core::LodMesh& mesh, const std::ve
   header += "property uint vertex\n";
   header += "end_header\n";
 
-  FileWriter out(path);
+  FileWriter out(path, 1 << 20, Sync::durable);
   out.write(header);
 
   // vertex: x y z [nx ny nz], 12 or 24 bytes

@@ -45,7 +45,7 @@ std::string polygon_convention_violation(const PolygonMesh& mesh) {
 void write_polygon_obj(const std::string& path, const PolygonMesh& mesh, const std::vector<std::string>& comments) {
   check(path, mesh);
   const bool normals = !mesh.normals.empty();
-  FileWriter out(path);
+  FileWriter out(path, 1 << 20, Sync::durable);
   for (const std::string& c : comments) out.write("# " + clean(c) + "\n");
   char buf[64];
   auto number = [&](auto x) {
@@ -92,7 +92,7 @@ void write_polygon_ply(const std::string& path, const PolygonMesh& mesh, const s
   header += "element face " + std::to_string(mesh.polygon_count()) + "\n";
   header += wide ? "property list uint uint vertex_indices\n" : "property list uchar uint vertex_indices\n";
   header += "end_header\n";
-  FileWriter out(path);
+  FileWriter out(path, 1 << 20, Sync::durable);
   out.write(header);
   write_ply_vertices(out, mesh.positions, mesh.normals);
   for (uint64_t p = 0; p < mesh.polygon_count(); ++p) {

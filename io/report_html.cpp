@@ -138,7 +138,7 @@ void write_report_html(const std::string& path, const Report& report, const Repo
        "document.getElementById('report-status').textContent=(ok==im.length?'ok ':'broken ')+ok+'/'+im.length;});"
        "</script>\n";
   h += "</body></html>\n";
-  write_file_atomic(path, h);
+  write_file_atomic(path, h, Sync::durable);
 }
 
 }  // namespace lodstream::io

@@ -244,7 +244,7 @@ Result grid(const std::string& input, const GridOptions& go, const Options& opti
     j["stages"] = stages;
     j["seconds"] = report.seconds;
     j["peak_rss_bytes"] = report.peak_rss_bytes;
-    io::write_file_atomic(go.output_dir + "/summary.json", j.dump(2) + "\n");
+    io::write_file_atomic(go.output_dir + "/summary.json", j.dump(2) + "\n", io::Sync::durable);
     if (out) *out = std::move(report);
   });
 }

@@ -460,7 +460,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     m["stages"] = stages;
     m["seconds"] = report.seconds;
     m["peak_rss_bytes"] = report.peak_rss_bytes;
-    io::write_file_atomic(so.output_dir + "/manifest.json", m.dump(2) + "\n");
+    io::write_file_atomic(so.output_dir + "/manifest.json", m.dump(2) + "\n", io::Sync::durable);
     *out = std::move(report);
   });
 }
