@@ -251,8 +251,10 @@ int64_t grid_square(double x, double size) {
   return half_index(x, size / 2, size) >> 1;
 }
 
-Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options, std::span<const double> bounds)
+Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options, std::span<const double> bounds,
+                     uint64_t max_dense_squares)
     : options_(options) {
+  max_dense_squares = std::min(max_dense_squares, kMaxDenseSquares);
   if (cell_sizes.empty()) fail(Status::usage, "clustering: no level (no cell size)");
   if (!bounds.empty() && bounds.size() != 6) fail(Status::internal, "clustering: bounds need 6 values");
   levels_.resize(cell_sizes.size());
@@ -277,7 +279,7 @@ Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options,
     }
     bool packable = !bounds.empty();
     for (int a = 0; a < 3; ++a) packable &= level.dims[a] > 0 && level.dims[a] < (int64_t{1} << 21);
-    if (squares <= kMaxDenseSquares)
+    if (squares <= max_dense_squares)
       level.dense.assign(squares, DenseSquare{kNoCell, 0});
     else if (packable)
       level.packed.assign(kInitialSlots, PackedSlot{0, kNoCell, 0});
@@ -597,6 +599,14 @@ uint64_t Clusterer::memory_bytes() const {
              level.table.capacity() * sizeof(Slot) + level.packed.capacity() * sizeof(PackedSlot) +
              level.dense.capacity() * sizeof(DenseSquare);
   return bytes + queries_.capacity() * sizeof(Query);
+}
+
+uint64_t Clusterer::growth_bytes() const {
+  uint64_t largest = 0;
+  for (const Level& level : levels_)
+    largest = std::max({largest, level.pool.capacity() * sizeof(Cell), level.where.capacity() * sizeof(uint32_t),
+                        level.table.capacity() * sizeof(Slot), level.packed.capacity() * sizeof(PackedSlot)});
+  return 2 * largest;
 }
 
 }  // namespace lodstream::core

@@ -123,8 +123,11 @@ class Clusterer {
   // directly (a dense array) instead of hashing them: the coarse levels, which meet every vertex but hold
   // few cells, then skip the hash and the probes. A finer level within 2^21 squares per axis keys its hash
   // table by one packed word (16-byte slots instead of 32). The ids are the same either way; a position
-  // outside the bounds is then a caller bug: Failure(Status::internal).
-  Clusterer(std::span<const double> cell_sizes, ClusterOptions options = {}, std::span<const double> bounds = {});
+  // outside the bounds is then a caller bug: Failure(Status::internal). max_dense_squares (at most
+  // kMaxDenseSquares) lowers the dense arrays' limit, for a caller whose memory is tight: a dense array
+  // takes 8 bytes per square of the bounds, occupied or not, a hashed level 16 or 32 per occupied square.
+  Clusterer(std::span<const double> cell_sizes, ClusterOptions options = {}, std::span<const double> bounds = {},
+            uint64_t max_dense_squares = kMaxDenseSquares);
   static constexpr uint64_t kMaxDenseSquares = uint64_t{1} << 21;  // 16 MiB of squares at 8 bytes
 
   // Assigns the next vertex in weight order (non-increasing grade, ties by vertex id: the caller's
@@ -163,6 +166,9 @@ class Clusterer {
   // Bytes held now (capacity of every array, plus the object), for the stream stage's budget. A growth
   // step briefly holds the old and the new array of one level: up to 1.5× a level's table or cell array.
   uint64_t memory_bytes() const;
+  // What the next growth step may briefly add to memory_bytes(): the largest growing array doubles while
+  // its old copy is still held, so twice that array.
+  uint64_t growth_bytes() const;
 
   // Exposed for tests and the documentation above: 32 bytes each. A square's cells are stored together, as
   // one run of Cell records in a per-level pool, so that the candidate test reads them from one or two

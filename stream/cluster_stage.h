@@ -7,6 +7,8 @@
 //   cells-L.u32          per level L: the cell id of each record, in weight order
 //   cells-L.info         per level L: one CellInfo per cell, in cell-id order
 // Memory: the clusterers' tables and one CellInfo per cell (it grows with the cells, not the vertices).
+// When they would outgrow `memory_bytes` (what the process may add to its resident set while the stage
+// runs), the stage stops with Failure(Status::usage) naming the cells so far, rather than pass the budget.
 #pragma once
 
 #include <cstdint>
@@ -40,7 +42,7 @@ struct ClusterSummary {
 // (core::Clusterer); the result is the same either way.
 ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, bool single_precision,
                               std::span<const double> bounds, std::span<const double> cell_sizes,
-                              const core::ClusterOptions& options,
+                              const core::ClusterOptions& options, uint64_t memory_bytes,
                               const WorkDir& work, Progress& progress, const std::string& prefix);
 
 std::string cells_path(const std::string& prefix, size_t level);

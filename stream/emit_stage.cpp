@@ -166,6 +166,17 @@ uint64_t mesh_bytes(const core::LodMesh& m) {
               m.thickness.capacity() + m.points.capacity());
 }
 
+void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t budget,
+                       uint64_t resident, const EmitOptions& options) {
+  const uint64_t need = resident + emit_map_bytes(vertices, emit_bits(cells[first])) + emit_level_bytes(cells[first], options);
+  if (need <= budget) return;
+  fail(Status::usage, "emitting level " + std::to_string(first) + " (" + std::to_string(cells[first]) +
+                          " cells) needs about " + std::to_string(need >> 20) + " MiB, more than --memory allows (" +
+                          std::to_string(budget >> 20) + " MiB for the stage" +
+                          (resident ? ", the finer levels' meshes included" : "") +
+                          "): raise --memory, or make the level coarser (--cell-sizes, --target-triangles)");
+}
+
 size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t budget,
                       uint64_t resident, const EmitOptions& options) {
   unsigned bits = emit_bits(cells[first]);

@@ -85,6 +85,11 @@ unsigned emit_bits(uint64_t cells);
 uint64_t emit_level_bytes(uint64_t cells, const EmitOptions& options);
 // The packed cluster maps of `vertices` stored vertices at `bits` bits each.
 uint64_t emit_map_bytes(uint64_t vertices, unsigned bits);
+// The memory contract: Failure(Status::usage), naming the level, its cells and the memory it needs, when
+// level `first` alone (its map and working memory) and `resident` do not fit in `budget`, so that the
+// stage stops instead of passing the budget.
+void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t budget,
+                       uint64_t resident, const EmitOptions& options);
 // The memory a finished level's mesh holds until it is written.
 uint64_t mesh_bytes(const core::LodMesh& mesh);
 // The end of the group that starts at level `first` (levels of `cells` cells, finest first): the levels

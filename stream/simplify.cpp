@@ -256,7 +256,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           bounds.insert(bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
         }
         const stream::ClusterSummary cs = stream::cluster_levels(index_path, grade.records, meta.single_precision, bounds, sizes, copts,
-                                                                    work, progress, prefix);
+                                                                    plan.stage_bytes, work, progress, prefix);
         std::vector<std::string> files{stream::order_path(prefix)};
         for (size_t l = 0; l < sizes.size(); ++l) {
           files.push_back(stream::cells_path(prefix, l));
@@ -273,6 +273,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         std::vector<stream::EmitCounts> counts;
         uint64_t resident = 0;  // finished meshes, held until they are written
         for (size_t first = 0; first < sizes.size();) {
+          stream::check_emit_budget(cells, first, meta.vertices, plan.stage_bytes, resident, eo);
           const size_t end = stream::emit_group_end(cells, first, meta.vertices, plan.stage_bytes, resident, eo);
           std::vector<stream::EmitLevel> group;
           for (size_t l = first; l < end; ++l) group.push_back({l, cells[l], sizes[l]});

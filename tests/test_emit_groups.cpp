@@ -12,6 +12,7 @@
 
 #include "core/floating_cell.h"
 #include "core/mesh.h"
+#include "core/status.h"
 #include "lodstream/lodstream.h"
 #include "stream/emit_stage.h"
 #include "stream/progress.h"
@@ -97,6 +98,37 @@ TEST(EmitGroups, GroupsFollowTheMemoryModel) {
   EXPECT_EQ(stream::emit_group_end(cells, 0, vertices, UINT64_MAX / 2, 0, quadric), 3u);
   // No memory to spare: one level per pass.
   for (size_t l = 0; l < cells.size(); ++l) EXPECT_EQ(stream::emit_group_end(cells, l, vertices, 1, 0, quadric), l + 1);
+}
+
+TEST(EmitGroups, ALevelThatCannotFitStopsWithUsage) {
+  // The city's finest level needs its map (22 bits × 34.8M vertices, 91 MiB) and 320 bytes a cell (781
+  // MiB): it fits in the stage's share of --memory 1G, not in that of 512M, nor beside 100 MiB of meshes
+  // when the budget is just what the level needs.
+  const std::vector<uint64_t> cells{2557792, 310283};
+  const uint64_t vertices = 34781752;
+  const stream::EmitOptions quadric{Representative::quadric, 30, true, false};
+  const uint64_t need = stream::emit_map_bytes(vertices, 22) + stream::emit_level_bytes(2557792, quadric);
+  EXPECT_EQ(need >> 20, 871u);
+  EXPECT_NO_THROW(stream::check_emit_budget(cells, 0, vertices, (1ull << 30) - (40ull << 20), 0, quadric));
+  EXPECT_NO_THROW(stream::check_emit_budget(cells, 0, vertices, need, 0, quadric));
+  auto failure = [&](uint64_t budget, uint64_t resident) -> std::string {
+    try {
+      stream::check_emit_budget(cells, 0, vertices, budget, resident, quadric);
+    } catch (const Failure& f) {
+      EXPECT_EQ(f.status(), Status::usage);
+      return f.what();
+    }
+    ADD_FAILURE() << "no failure at " << budget << " with " << resident << " resident";
+    return "";
+  };
+  const std::string at512 = failure((512ull << 20) - (40ull << 20), 0);
+  EXPECT_NE(at512.find("level 0 (2557792 cells) needs about 871 MiB"), std::string::npos) << at512;
+  EXPECT_NE(at512.find("--memory"), std::string::npos) << at512;
+  const std::string beside = failure(need, 100ull << 20);
+  EXPECT_NE(beside.find("finer levels' meshes"), std::string::npos) << beside;
+  // Counting only, no quadrics: 240 bytes a cell.
+  const stream::EmitOptions count_only{Representative::quadric, 30, true, true};
+  EXPECT_NO_THROW(stream::check_emit_budget(cells, 0, vertices, need - 80 * 2557792, 0, count_only));
 }
 
 }  // namespace

@@ -940,6 +940,67 @@ TEST(SimplifyCli, DiskFullWhileWritingLevelsExits74AndLeavesNoPartialFile) {
   }
 }
 
+TEST(SimplifyCli, CellsBeyondTheMemoryBudgetExit64AndTheRunResumesWithMore) {
+  // A 500 × 500 grid whose finest cells are smaller than its spacing: 250,000 cells, whose tables and
+  // records need more than --memory 64M leaves them. The cluster stage stops with exit 64 and a message
+  // naming --memory, writes nothing to the output, and the stages done before it are reused when the same
+  // command runs again with more memory.
+  test::TempDir tmp;
+  std::string obj;
+  constexpr int n = 500;
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) obj += fmt::format("v {} {} {}\n", x * 0.25, y * 0.25, ((x * 7 + y * 13) % 16) * 0.0625);
+  for (int y = 0; y + 1 < n; ++y)
+    for (int x = 0; x + 1 < n; ++x) {
+      const int a = y * n + x + 1;
+      obj += fmt::format("f {} {} {}\nf {} {} {}\n", a, a + 1, a + n, a + 1, a + n + 1, a + n);
+    }
+  const std::string input = tmp.write("grid.obj", obj);
+  const std::string out = tmp.file("out"), work = tmp.file("work");
+  const std::vector<std::string> args{"simplify", input, "-o", out, "--work", work, "--cell-sizes", "0.125,4",
+                                      "--progress", "none"};
+  std::vector<std::string> small = args, large = args;
+  small.insert(small.end(), {"--memory", "64M"});
+  large.insert(large.end(), {"--memory", "1G"});
+  const CliRun r = run_cli(small, tmp);
+  EXPECT_EQ(r.exit_code, 64) << r.err;
+  EXPECT_NE(r.err.find("clustering needs more memory than --memory allows"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("level 0: "), std::string::npos) << r.err;
+  EXPECT_TRUE(files_under(out).empty()) << "left " << files_under(out).front();
+  const CliRun ok = run_cli(large, tmp);
+  ASSERT_EQ(ok.exit_code, 0) << ok.err;
+  const Json m = manifest(out);
+  EXPECT_EQ(m["levels"][0]["cells"], n * n);
+  for (const Json& st : m["stages"])
+    if (st["name"] == "ingest" || st["name"] == "grade") EXPECT_TRUE(st["reused"].get<bool>()) << st;
+}
+
+TEST(SimplifyCli, AWeldMapBeyondTheMemoryBudgetExits64) {
+  // 4 million stored vertices (binary PLY, one triangle): their weld map alone is 15 MiB and, with its
+  // key batches, more than --memory 64M leaves a stage. The grade stage says so before allocating it.
+  test::TempDir tmp;
+  constexpr uint32_t n = 4'000'000;
+  std::string ply = fmt::format("ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\n"
+                                "property float y\nproperty float z\nelement face 1\n"
+                                "property list uchar int vertex_indices\nend_header\n", n);
+  std::vector<float> xyz(3 * size_t{n});
+  for (uint32_t i = 0; i < n; ++i) xyz[3 * i] = static_cast<float>(i % 2000), xyz[3 * i + 1] = static_cast<float>(i / 2000);
+  ply.append(reinterpret_cast<const char*>(xyz.data()), xyz.size() * sizeof(float));
+  const unsigned char count = 3;
+  const int32_t face[3] = {0, 1, 2000};
+  ply.append(reinterpret_cast<const char*>(&count), 1);
+  ply.append(reinterpret_cast<const char*>(face), sizeof face);
+  const std::string input = tmp.write("points.ply", ply);
+  const std::string out = tmp.file("out");
+  const CliRun r = run_cli({"simplify", input, "-o", out, "--memory", "64M", "--progress", "none"}, tmp);
+  EXPECT_EQ(r.exit_code, 64) << r.err;
+  EXPECT_NE(r.err.find("welding 4000000 stored vertices needs at least"), std::string::npos) << r.err;
+  EXPECT_TRUE(files_under(out).empty()) << "left " << files_under(out).front();
+  // With room for it, the same file simplifies.
+  const CliRun ok = run_cli({"simplify", input, "-o", out, "--memory", "256M", "--cell-sizes", "0.5,4", "--progress", "none"}, tmp);
+  EXPECT_EQ(ok.exit_code, 0) << ok.err;
+}
+
 // ---- 8: input lines and points ----
 
 TEST(SimplifyLinesAndPoints, SegmentsBecomeEdgesOrPointsAndCoveredOnesAreEliminated) {

@@ -35,7 +35,9 @@ struct Options {
   // Worker threads; 0 = all hardware threads. Output bytes never depend on it.
   unsigned threads = 0;
   // Cap on the process's peak resident memory (VmHWM, mapped file pages included), in bytes.
-  // 0 = half of physical memory. Minimum: min_memory_bytes. Output bytes never depend on it.
+  // 0 = half of physical memory. Minimum: min_memory_bytes. Output bytes never depend on it; whether a
+  // job fits does: memory that grows with the output (simplify's finest level's cells) is checked against
+  // it, and a job that needs more stops with Status::usage naming what it needs.
   uint64_t memory_bytes = 0;
   // Input bytes per parse chunk; 0 = derived from memory_bytes. Tests force tiny values (down to 1);
   // output bytes never depend on it.
