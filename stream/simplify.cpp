@@ -131,7 +131,10 @@ std::vector<double> default_cell_sizes(unsigned levels, uint64_t triangles, cons
   for (unsigned l = 0; l < levels; ++l) {
     const double target = std::max(1.0, t0 * std::pow(ratio, l + 1));
     double c;
-    if (area > 0) {
+    if (area > 0 && target >= t0) {
+      // No cell size brings the count below the input's (one triangle): the triangles' own scale.
+      c = std::sqrt(area / t0);
+    } else if (area > 0) {
       double lo = std::log(std::sqrt(area / t0)) - 40, hi = std::log(std::sqrt(area)) + 10;
       for (int i = 0; i < 100; ++i) {
         const double mid = (lo + hi) / 2;

@@ -564,7 +564,8 @@ TEST(SimplifyDefaults, InputsBelowTheCoarsestTargetGetUsableLevels) {
   // that already have fewer triangles than that (most single CAD parts and furniture models) must still
   // simplify, with finite, increasing cell sizes of a sensible scale, not fail.
   test::TempDir tmp;
-  const std::vector<std::pair<std::string, std::string>> inputs = {{"two.obj", kTwoTriangles},
+  const std::vector<std::pair<std::string, std::string>> inputs = {{"one.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
+                                                                   {"two.obj", kTwoTriangles},
                                                                    {"sphere.obj", obj_text({dyadic_sphere(6, 4)})}};
   for (const auto& [name, text] : inputs) {
     SCOPED_TRACE(name);
