@@ -201,6 +201,8 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
       info.commit();
       s.info.clear();
     }
+    grp.clusterer.reset();  // its memory goes to the groups still running
+    grp.bytes.store(0, std::memory_order_relaxed);
   });
   progress.check();  // a group that saw the cancellation returned early
   order.commit();
