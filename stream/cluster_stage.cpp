@@ -69,6 +69,7 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
   // split changes no result.
   struct Level {
     CellInfos info;
+    std::atomic<uint64_t> count{0};  // info.size() after the group's last block, for other groups to read
     io::FileWriter cells;
     std::vector<uint32_t> block;
   };
@@ -112,17 +113,20 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
   io::FileWriter order(order_path(prefix), kWriterBuffer);
   auto check_memory = [&](Group& grp, uint64_t first, uint64_t n) {
     uint64_t mine = grp.clusterer->memory_bytes() + grp.clusterer->growth_bytes();
-    for (size_t l : grp.levels) mine += state[l].info.bytes();
+    for (size_t l : grp.levels) {
+      mine += state[l].info.bytes();
+      state[l].count.store(state[l].info.size(), std::memory_order_relaxed);
+    }
     grp.bytes.store(mine, std::memory_order_relaxed);
     uint64_t total = 0;
     for (const Group& other : groups) total += other.bytes.load(std::memory_order_relaxed);
     if (total <= cell_budget) return;
-    std::string counts;  // this group's levels (the others' are still changing)
-    for (size_t l : grp.levels)
+    std::string counts;
+    for (size_t l = 0; l < levels; ++l)
       counts += (counts.empty() ? "" : ", ") + std::string("level ") + std::to_string(l) + ": " +
-                std::to_string(state[l].info.size());
-    fail(Status::usage, "clustering needs more memory than --memory allows (after " + std::to_string(first + n) +
-                            " of " + std::to_string(records) + " vertices, cells so far " + counts + "; about " +
+                std::to_string(state[l].count.load(std::memory_order_relaxed));
+    fail(Status::usage, "clustering needs more memory than --memory allows (cells after about " +
+                            std::to_string(first + n) + " of " + std::to_string(records) + " vertices: " + counts + "; about " +
                             std::to_string(total >> 20) + " MiB for the cells, " + std::to_string(cell_budget >> 20) +
                             " MiB available): raise --memory, or make the finest level coarser (--cell-sizes, "
                             "--target-triangles)");
