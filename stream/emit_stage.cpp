@@ -99,7 +99,11 @@ class PackedMap {
   void reset(std::vector<uint64_t>& words, uint64_t vertices, unsigned bits) {
     words_ = &words, bits_ = bits;
     mask_ = bits == 64 ? ~uint64_t{0} : (uint64_t{1} << bits) - 1;
-    words.assign((vertices * bits + 63) / 64 + 1, ~uint64_t{0});  // + 1: get() may read one word past
+    const uint64_t n = (vertices * bits + 63) / 64 + 1;  // + 1: get() may read one word past
+    // A larger map than the previous group's: free that one first, so that the two are never held
+    // together (the memory model counts one map).
+    if (words.capacity() < n) std::vector<uint64_t>().swap(words);
+    words.assign(n, ~uint64_t{0});
   }
   uint64_t get(uint64_t v) const {
     const uint64_t bit = v * bits_, s = bit % 64;
@@ -151,12 +155,15 @@ struct LevelState {
 
 unsigned emit_bits(uint64_t cells) { return std::max(1u, static_cast<unsigned>(std::bit_width(cells))); }
 
-uint64_t emit_level_bytes(uint64_t cells, const EmitOptions& options) {
+uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions& options) {
   // Measured on the 48M-triangle city scene at its finest level (2.56M cells, 5.4M output triangles): the
   // dedupe tables (half-full open addressing, doubled while they grow), the output arrays and the
-  // per-thread block tables peak at about 240 bytes per cell during pass A; the quadrics add 80.
+  // per-thread block tables peak at about 240 bytes per cell during pass A; the quadrics add 80. Measured
+  // on the 193M-triangle city with three coarse levels in one group (60K cells): each level also holds
+  // about 25 MB whatever its cells, its share of the block outputs and per-thread tables of the blocks in
+  // flight (two sets of 4 per thread, 16 here): 24 bytes per primitive in flight.
   const bool quadric = options.representative == Representative::quadric && !options.count_only;
-  return cells * (240 + (quadric ? sizeof(core::Quadric) : 0));
+  return cells * (240 + (quadric ? sizeof(core::Quadric) : 0)) + 24 * std::min(primitives, 16 * kEmitBlock);
 }
 
 uint64_t emit_map_bytes(uint64_t vertices, unsigned bits) { return (vertices * bits + 63) / 64 * 8 + 8; }
@@ -166,9 +173,10 @@ uint64_t mesh_bytes(const core::LodMesh& m) {
               m.thickness.capacity() + m.points.capacity());
 }
 
-void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t budget,
-                       uint64_t resident, const EmitOptions& options) {
-  const uint64_t need = resident + emit_map_bytes(vertices, emit_bits(cells[first])) + emit_level_bytes(cells[first], options);
+void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives,
+                       uint64_t budget, uint64_t resident, const EmitOptions& options) {
+  const uint64_t need =
+      resident + emit_map_bytes(vertices, emit_bits(cells[first])) + emit_level_bytes(cells[first], primitives, options);
   if (need <= budget) return;
   fail(Status::usage, "emitting level " + std::to_string(first) + " (" + std::to_string(cells[first]) +
                           " cells) needs about " + std::to_string(need >> 20) + " MiB, more than --memory allows (" +
@@ -177,14 +185,14 @@ void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t v
                           "): raise --memory, or make the level coarser (--cell-sizes, --target-triangles)");
 }
 
-size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t budget,
+size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives, uint64_t budget,
                       uint64_t resident, const EmitOptions& options) {
   unsigned bits = emit_bits(cells[first]);
-  uint64_t work = emit_level_bytes(cells[first], options);
+  uint64_t work = emit_level_bytes(cells[first], primitives, options);
   size_t end = first + 1;
   while (end < cells.size()) {
     const unsigned b = bits + emit_bits(cells[end]);
-    const uint64_t w = work + emit_level_bytes(cells[end], options);
+    const uint64_t w = work + emit_level_bytes(cells[end], primitives, options);
     if (b > 64 || resident + emit_map_bytes(vertices, b) + w > budget) break;
     bits = b, work = w, ++end;
   }

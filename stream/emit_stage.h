@@ -81,22 +81,23 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
 
 // Memory model of the grouping. A level of C cells takes emit_bits(C) bits of each packed map record.
 unsigned emit_bits(uint64_t cells);
-// Working memory of one level in a group (its dedupe tables, outputs and quadrics at the peak, pass A).
-uint64_t emit_level_bytes(uint64_t cells, const EmitOptions& options);
+// Working memory of one level in a group (its dedupe tables, outputs and quadrics at the peak, pass A,
+// plus its share of the buffers of the blocks in flight, of an input of `primitives` primitives).
+uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions& options);
 // The packed cluster maps of `vertices` stored vertices at `bits` bits each.
 uint64_t emit_map_bytes(uint64_t vertices, unsigned bits);
 // The memory contract: Failure(Status::usage), naming the level, its cells and the memory it needs, when
 // level `first` alone (its map and working memory) and `resident` do not fit in `budget`, so that the
 // stage stops instead of passing the budget.
-void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t budget,
-                       uint64_t resident, const EmitOptions& options);
+void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives,
+                       uint64_t budget, uint64_t resident, const EmitOptions& options);
 // The memory a finished level's mesh holds until it is written.
 uint64_t mesh_bytes(const core::LodMesh& mesh);
 // The end of the group that starts at level `first` (levels of `cells` cells, finest first): the levels
 // after it join while their records fit in 64 bits and the map, their working memory and `resident` (the
 // finished meshes held for writing) fit in `budget`. The first level always runs, alone if need be. The
 // grouping changes no output byte, only how many passes the input gets.
-size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t budget,
+size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives, uint64_t budget,
                       uint64_t resident, const EmitOptions& options);
 
 }  // namespace lodstream::stream

@@ -86,34 +86,34 @@ TEST(EmitGroups, GroupsFollowTheMemoryModel) {
   // The city scene's levels (34.8M stored vertices) under --memory 1G: the finest level alone, the
   // others together beside the finest level's mesh.
   const std::vector<uint64_t> cells{2557792, 310283, 40817, 5424, 1012};
-  const uint64_t vertices = 34781752, budget = (1ull << 30) - (40ull << 20);
+  const uint64_t vertices = 34781752, triangles = 48611194, budget = (1ull << 30) - (40ull << 20);
   const stream::EmitOptions quadric{Representative::quadric, 30, true, false};
   EXPECT_EQ(stream::emit_bits(2557792), 22u);
   EXPECT_EQ(stream::emit_bits(1), 1u);
   EXPECT_EQ(stream::emit_bits(255), 8u);
   EXPECT_EQ(stream::emit_bits(256), 9u);  // 256 cells and the all-ones "no cell"
-  EXPECT_EQ(stream::emit_group_end(cells, 0, vertices, budget, 0, quadric), 1u);
-  EXPECT_EQ(stream::emit_group_end(cells, 1, vertices, budget, 250ull << 20, quadric), 5u);
+  EXPECT_EQ(stream::emit_group_end(cells, 0, vertices, triangles, budget, 0, quadric), 1u);
+  EXPECT_EQ(stream::emit_group_end(cells, 1, vertices, triangles, budget, 250ull << 20, quadric), 5u);
   // Unlimited memory: levels join while their records fit in 64 bits (22 + 19 + 16 = 57, + 13 > 64).
-  EXPECT_EQ(stream::emit_group_end(cells, 0, vertices, UINT64_MAX / 2, 0, quadric), 3u);
+  EXPECT_EQ(stream::emit_group_end(cells, 0, vertices, triangles, UINT64_MAX / 2, 0, quadric), 3u);
   // No memory to spare: one level per pass.
-  for (size_t l = 0; l < cells.size(); ++l) EXPECT_EQ(stream::emit_group_end(cells, l, vertices, 1, 0, quadric), l + 1);
+  for (size_t l = 0; l < cells.size(); ++l) EXPECT_EQ(stream::emit_group_end(cells, l, vertices, triangles, 1, 0, quadric), l + 1);
 }
 
 TEST(EmitGroups, ALevelThatCannotFitStopsWithUsage) {
-  // The city's finest level needs its map (22 bits × 34.8M vertices, 91 MiB) and 320 bytes a cell (781
-  // MiB): it fits in the stage's share of --memory 1G, not in that of 512M, nor beside 100 MiB of meshes
-  // when the budget is just what the level needs.
+  // The city's finest level needs its map (22 bits × 34.8M vertices, 91 MiB), 320 bytes a cell (781 MiB)
+  // and 24 MiB of block buffers: it fits in the stage's share of --memory 1G, not in that of 512M, nor
+  // beside 100 MiB of meshes when the budget is just what the level needs.
   const std::vector<uint64_t> cells{2557792, 310283};
-  const uint64_t vertices = 34781752;
+  const uint64_t vertices = 34781752, triangles = 48611194;
   const stream::EmitOptions quadric{Representative::quadric, 30, true, false};
-  const uint64_t need = stream::emit_map_bytes(vertices, 22) + stream::emit_level_bytes(2557792, quadric);
-  EXPECT_EQ(need >> 20, 871u);
-  EXPECT_NO_THROW(stream::check_emit_budget(cells, 0, vertices, (1ull << 30) - (40ull << 20), 0, quadric));
-  EXPECT_NO_THROW(stream::check_emit_budget(cells, 0, vertices, need, 0, quadric));
+  const uint64_t need = stream::emit_map_bytes(vertices, 22) + stream::emit_level_bytes(2557792, triangles, quadric);
+  EXPECT_EQ(need >> 20, 895u);
+  EXPECT_NO_THROW(stream::check_emit_budget(cells, 0, vertices, triangles, (1ull << 30) - (40ull << 20), 0, quadric));
+  EXPECT_NO_THROW(stream::check_emit_budget(cells, 0, vertices, triangles, need, 0, quadric));
   auto failure = [&](uint64_t budget, uint64_t resident) -> std::string {
     try {
-      stream::check_emit_budget(cells, 0, vertices, budget, resident, quadric);
+      stream::check_emit_budget(cells, 0, vertices, triangles, budget, resident, quadric);
     } catch (const Failure& f) {
       EXPECT_EQ(f.status(), Status::usage);
       return f.what();
@@ -122,13 +122,13 @@ TEST(EmitGroups, ALevelThatCannotFitStopsWithUsage) {
     return "";
   };
   const std::string at512 = failure((512ull << 20) - (40ull << 20), 0);
-  EXPECT_NE(at512.find("level 0 (2557792 cells) needs about 871 MiB"), std::string::npos) << at512;
+  EXPECT_NE(at512.find("level 0 (2557792 cells) needs about 895 MiB"), std::string::npos) << at512;
   EXPECT_NE(at512.find("--memory"), std::string::npos) << at512;
   const std::string beside = failure(need, 100ull << 20);
   EXPECT_NE(beside.find("finer levels' meshes"), std::string::npos) << beside;
   // Counting only, no quadrics: 240 bytes a cell.
   const stream::EmitOptions count_only{Representative::quadric, 30, true, true};
-  EXPECT_NO_THROW(stream::check_emit_budget(cells, 0, vertices, need - 80 * 2557792, 0, count_only));
+  EXPECT_NO_THROW(stream::check_emit_budget(cells, 0, vertices, triangles, need - 80 * 2557792, 0, count_only));
 }
 
 }  // namespace
