@@ -972,8 +972,11 @@ TEST(SimplifyCli, CellsBeyondTheMemoryBudgetExit64AndTheRunResumesWithMore) {
   ASSERT_EQ(ok.exit_code, 0) << ok.err;
   const Json m = manifest(out);
   EXPECT_EQ(m["levels"][0]["cells"], n * n);
-  for (const Json& st : m["stages"])
-    if (st["name"] == "ingest" || st["name"] == "grade") EXPECT_TRUE(st["reused"].get<bool>()) << st;
+  for (const Json& st : m["stages"]) {
+    if (st["name"] == "ingest" || st["name"] == "grade") {
+      EXPECT_TRUE(st["reused"].get<bool>()) << st;
+    }
+  }
 }
 
 TEST(SimplifyCli, AWeldMapBeyondTheMemoryBudgetExits64) {
