@@ -50,7 +50,7 @@ void expect_same_store_everywhere(const std::string& input, const std::vector<ui
   for (unsigned threads : {1u, 2u})
     for (uint64_t chunk : chunk_sizes)
       for (uint64_t memory : {min_memory_bytes, uint64_t{2} << 30}) {
-        const std::string work = tmp.file("w" + std::to_string(n++));
+        const std::string work = tmp.file(std::string("w").append(std::to_string(n++)));  // not "w" + ...: GCC 12's -Wrestrict false positive
         const SceneInfo info = run_info(input, work, threads, memory, chunk);
         auto files = read_dir(fs::path(work) / "store");
         files.erase("census.json");

@@ -216,7 +216,7 @@ TEST(ReportErrors, DocumentedExitCodesAndNoReportLeftBehind) {
     const CliRun r = run_cli(cases[i].args, tmp);
     EXPECT_EQ(r.exit_code, cases[i].code) << "case " << i << ": " << r.err;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "case " << i << ": one line expected: " << r.err;
-    EXPECT_FALSE(fs::exists(tmp.file("o" + std::to_string(i + 1) + "/report.json"))) << "case " << i;
+    EXPECT_FALSE(fs::exists(tmp.file(std::string("o").append(std::to_string(i + 1)).append("/report.json")))) << "case " << i;
   }
 }
 
