@@ -979,6 +979,21 @@ TEST(SimplifyCli, CellsBeyondTheMemoryBudgetExit64AndTheRunResumesWithMore) {
   }
 }
 
+TEST(SimplifyCli, EveryStageStaysUnderTheMinimumBudget) {
+  // The memory contract on the sample room, run as its own process (VmHWM is per process): at --memory 64M
+  // every stage's peak in the manifest, mapped pages included, is at most 64 MiB.
+  test::TempDir tmp;
+  const std::string out = tmp.file("out");
+  const CliRun r = run_cli({"simplify", sample_room(), "-o", out, "--memory", "64M", "--progress", "none"}, tmp);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json m = manifest(out);
+  ASSERT_EQ(m["stages"].size(), 5u);
+  for (const Json& st : m["stages"]) {
+    EXPECT_GT(st["peak_rss_bytes"].get<uint64_t>(), 0u) << st;
+    EXPECT_LE(st["peak_rss_bytes"].get<uint64_t>(), uint64_t{64} << 20) << st;
+  }
+}
+
 TEST(SimplifyCli, AWeldMapBeyondTheMemoryBudgetExits64) {
   // 4 million stored vertices (binary PLY, one triangle): their weld map alone is 15 MiB and, with its
   // key batches, more than --memory 64M leaves a stage. The grade stage says so before allocating it.
