@@ -163,8 +163,8 @@ class Clusterer {
   }
   // Most cells attached to one grid square so far in a level (uniform: 1 once a vertex was assigned).
   uint32_t max_cells_per_square(size_t level) const { return levels_[level].max_per_square; }
-  // Bytes held now (capacity of every array, plus the object), for the stream stage's budget. A growth
-  // step briefly holds the old and the new array of one level: up to 1.5× a level's table or cell array.
+  // Bytes held now (capacity of every array, plus the object), for the stream stage's budget; a growth
+  // step briefly holds more (growth_bytes).
   uint64_t memory_bytes() const;
   // What the next growth step may briefly add to memory_bytes(): the largest growing array doubles while
   // its old copy is still held, so twice that array.

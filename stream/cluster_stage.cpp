@@ -71,7 +71,6 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
     CellInfos info;
     std::atomic<uint64_t> count{0};  // info.size() after the group's last block, for other groups to read
     io::FileWriter cells;
-    std::vector<uint32_t> block;
   };
   struct Group {
     std::vector<size_t> levels;  // increasing
@@ -98,7 +97,7 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
   // (index windows, the block's arrays, the writers' buffers) come off first, and the coarse levels' dense
   // arrays (faster than hashing, but 8 bytes a square of the bounds) take at most an eighth of the rest.
   constexpr uint64_t block = 1 << 14;
-  const uint64_t fixed = (levels + 1) * kWriterBuffer + n_groups * block * (4 + 8 + 24 + 8 * levels + record_bytes);
+  const uint64_t fixed = (levels + 1) * kWriterBuffer + n_groups * block * (4 + 8 + 24 + 4 * levels + record_bytes);
   const uint64_t cell_budget = memory_bytes > fixed ? memory_bytes - fixed : 0;
   const uint64_t max_dense = cell_budget / 8 / levels / sizeof(core::Clusterer::DenseSquare);
   for (Group& grp : groups) {
@@ -161,21 +160,20 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
       if (g == 0) order.write_array(std::span<const uint32_t>(ids));
       grp.cells.resize(grp.levels.size() * n);
       grp.clusterer->assign_block(ids, xyz, grp.cells);
-      for (size_t j = 0; j < grp.levels.size(); ++j)
-        state[grp.levels[j]].block.assign(grp.cells.begin() + j * n, grp.cells.begin() + (j + 1) * n);
       // The cells' sums, level by level once the block's cells are known, so that the cell records can be
       // fetched kAhead vertices ahead; each cell still adds its vertices in weight order.
       for (size_t j = 0; j < grp.levels.size(); ++j) {
         Level& s = state[grp.levels[j]];
+        const std::span<const uint32_t> block_cells(grp.cells.data() + j * n, n);  // this level's, in the group's array
         for (uint64_t i = 0; i < n; ++i) {
-          if (i + kAhead < n && s.block[i + kAhead] < s.info.size()) {
-            const char* ahead = reinterpret_cast<const char*>(s.info.address(s.block[i + kAhead]));
+          if (i + kAhead < n && block_cells[i + kAhead] < s.info.size()) {
+            const char* ahead = reinterpret_cast<const char*>(s.info.address(block_cells[i + kAhead]));
             __builtin_prefetch(ahead);
             __builtin_prefetch(ahead + sizeof(CellInfo) - 1);
           }
           const double* p = &xyz[3 * i];
           const double grade = grades[i];
-          const uint32_t cell = s.block[i];
+          const uint32_t cell = block_cells[i];
           if (cell == s.info.size()) {
             CellInfo c{};
             std::copy(p, p + 3, c.center);
@@ -190,7 +188,7 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
           c.weight += grade;
           ++c.vertices;
         }
-        s.cells.write_array(std::span<const uint32_t>(s.block));
+        s.cells.write_array(block_cells);
       }
       check_memory(grp, first, n);
       if (g == 0) progress.report("cluster", static_cast<double>(first + n) / static_cast<double>(records));

@@ -182,7 +182,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     constexpr size_t kParts = 8;
     std::vector<std::vector<uint32_t>> out(kParts * n_ranges);
     uint64_t done = 0;
-    const uint64_t total = meta.triangles + meta.lines + meta.points;
+    const uint64_t total = meta.primitives();
     visit_store(columns, canonical, [&](int kind, uint64_t, std::span<const uint32_t> ids) {
       const size_t arity = static_cast<size_t>(Columns::arity[kind]);
       if (kind == 0) block_area(ids, positions, summary.areas, area_scratch);
@@ -250,7 +250,6 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
           }
         }
       };
-      // Calls corner(local id, primitive ids, arity, k) in parallel for every corner k in the range.
       // Calls corner(local id, primitive ids, arity, k) for every corner k in the range. Each task owns a
       // slice of the range's vertices and scans the whole block for their corners: no two tasks touch one
       // vertex, so the counts and fills below need no atomic operations (which cost more than reading the

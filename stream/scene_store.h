@@ -77,6 +77,7 @@ struct StoreMeta {
   std::string format;
   bool single_precision = false;  // positions.f32 rather than positions.f64
   uint64_t vertices = 0, triangles = 0, lines = 0, points = 0;
+  uint64_t primitives() const { return triangles + lines + points; }
   uint64_t vertex_records = 0;  // vertex records in the file (STL: triangle corners before welding)
   uint64_t polygons = 0, degenerate = 0, degenerate_segments = 0, skipped = 0;
   std::vector<std::string> object_names;

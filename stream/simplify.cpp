@@ -194,7 +194,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       bool reused = false;
       const stream::StoreMeta meta =
           stream::run_ingest_stage(input, store_dir, plan, work, progress, &report.stages, &report.scene, &reused);
-      if (meta.triangles + meta.lines + meta.points == 0)
+      if (meta.primitives() == 0)
         fail(Status::bad_data, input + ": nothing to simplify (no triangles, lines or points)");
 
       // Grade and sort.
@@ -276,9 +276,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         std::vector<stream::EmitCounts> counts;
         uint64_t resident = 0;  // finished meshes, held until they are written
         for (size_t first = 0; first < sizes.size();) {
-          const uint64_t primitives = meta.triangles + meta.lines + meta.points;
-          stream::check_emit_budget(cells, first, meta.vertices, primitives, plan.stage_bytes, resident, eo);
-          const size_t end = stream::emit_group_end(cells, first, meta.vertices, primitives, plan.stage_bytes, resident, eo);
+          stream::check_emit_budget(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, resident, eo);
+          const size_t end =
+              stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, resident, eo);
           std::vector<stream::EmitLevel> group;
           for (size_t l = first; l < end; ++l) group.push_back({l, cells[l], sizes[l]});
           const std::vector<stream::EmitCounts> c = stream::emit_levels(store_dir, meta, canonical, prefix, group, grade.records,
