@@ -179,6 +179,8 @@ void print_grid(const lodstream::GridReport& r, const std::string& out_dir) {
               grouped(r.draw_vertices).c_str(), grouped(r.triangles).c_str(), grouped(r.bytes).c_str());
   std::printf("error        max %.6g, RMS %.6g over %s samples (%s uncovered)\n", r.max_error, r.rms_error,
               grouped(r.measured_samples).c_str(), grouped(r.uncovered_samples).c_str());
+  std::printf("faces        grid.obj and grid.ply hold the %s\n",
+              r.obj_ply_faces == "polygons" ? "polygons (n-gons)" : "drawn triangles (as grid.glb)");
   std::printf("junctions    %s T-junctions, %s with a gap (max %.6g), %s open cracks\n", grouped(r.t_junctions).c_str(),
               grouped(r.gaps).c_str(), r.max_gap, grouped(r.cracks).c_str());
   for (const auto& s : r.stages)
@@ -352,6 +354,10 @@ int main(int argc, char** argv) {
   grid_cmd->add_flag("--no-obj", no_obj, "Do not write grid.obj");
   grid_cmd->add_flag("--no-ply", no_ply, "Do not write grid.ply");
   grid_cmd->add_flag("--no-glb", no_glb, "Do not write grid.glb");
+  grid_cmd->add_flag(
+      "--polygons", go.polygons,
+      "grid.obj and grid.ply hold the n-gons, not the drawn triangles (a viewer's triangulation of "
+      "them may leave the tolerance)");
   grid_cmd->add_flag("--json", json, "Print summary.json instead of the table");
   add_common(grid_cmd);
 

@@ -253,9 +253,13 @@ struct GridOptions {
   bool merge = false;
   double z_scale = 1;      // PGM samples only (io/grid_reader.h)
   double spacing = 0;      // > 0 overrides the file's sample distance
-  bool write_obj = true;   // n-gons
-  bool write_ply = true;   // n-gons
+  bool write_obj = true;   // the drawn triangles (as the GLB), or the n-gons with `polygons`
+  bool write_ply = true;   // the drawn triangles (as the GLB), or the n-gons with `polygons`
   bool write_glb = true;   // the drawn triangles, one level
+  // OBJ and PLY hold the polygons (rings: n-gons with extra vertices, fill polygons) instead of the drawn
+  // triangles. The tolerance holds for the drawn triangles only: a viewer triangulates an n-gon its own
+  // way (mostly as a fan from its first corner), which may leave the tolerance.
+  bool polygons = false;
 };
 
 struct GridReport {
@@ -268,6 +272,7 @@ struct GridReport {
   // position and normal, 12 per polygon node, 4 per vertex reference), fill polygons and their references.
   uint64_t polygons = 0, fill_polygons = 0, fill_vertices = 0, vertices = 0, draw_vertices = 0, bytes = 0;
   uint64_t triangles = 0;               // the drawn triangulation (GLB), fill triangles included
+  std::string obj_ply_faces;            // what grid.obj and grid.ply hold: "triangles" (drawn) or "polygons"
   // Vertical error of every valid sample against the drawn triangles over it (z units).
   double max_error = 0, rms_error = 0;
   uint64_t measured_samples = 0, uncovered_samples = 0;
@@ -280,9 +285,10 @@ struct GridReport {
   uint64_t peak_rss_bytes = 0;
 };
 
-// Reads the height grid `input` (io/grid_reader.h formats), subdivides it and writes the polygons and
-// summary.json (last) into grid.output_dir. Errors: usage (options, unknown format), no_input, bad_data
-// (malformed grid, fewer than 2 x 2 samples), io_error, cancelled.
+// Reads the height grid `input` (io/grid_reader.h formats), subdivides it and writes the drawn triangles
+// (or the polygons, GridOptions::polygons) and summary.json (last) into grid.output_dir. Errors: usage
+// (options, unknown format), no_input, bad_data (malformed grid, fewer than 2 x 2 samples), io_error,
+// cancelled.
 Result grid(const std::string& input, const GridOptions& grid, const Options& options, GridReport* out);
 
 // Peak resident memory of this process so far (VmHWM), in bytes; 0 if unknown.
