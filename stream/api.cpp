@@ -11,6 +11,7 @@
 #include "lodstream/lodstream.h"
 #include "stream/ingest.h"
 #include "stream/job.h"
+#include "stream/kill_point.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
@@ -46,6 +47,7 @@ Result info(const std::string& path, const Options& options, SceneInfo* out) {
           }
         }
         const stream::Census c = stream::census(store_dir, meta, plan, work, progress);
+        stream::kill_point("census.json");
         io::write_file_atomic(cache, nlohmann::json{{"vertices_welded", c.vertices_welded},
                                                     {"unused_vertices", c.unused_vertices}}.dump() + "\n");
         return c;
