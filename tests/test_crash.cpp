@@ -353,5 +353,51 @@ TEST(CrashSafety, SimplifyAndReportResumeAfterKillNineAtEveryStageStartAndMiddle
                     rep_resumable, rep_order);
 }
 
+// A height field of n × n vertices as binary PLY: large enough that, under --memory 64M, the grade stage
+// scatters its primitives into range buckets and the sort spills runs, scratch files a kill leaves behind.
+std::string write_grid(const test::TempDir& tmp, int n) {
+  std::string ply = fmt::format(
+      "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face {}\nproperty list uchar uint vertex_indices\nend_header\n",
+      n * n, 2 * (n - 1) * (n - 1));
+  auto put = [&](const void* p, size_t bytes) { ply.append(static_cast<const char*>(p), bytes); };
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const float v[3] = {static_cast<float>(i) / n, static_cast<float>(j) / n,
+                          static_cast<float>(0.05 * std::sin(i * 0.1) * std::cos(j * 0.13))};
+      put(v, sizeof v);
+    }
+  for (int j = 0; j + 1 < n; ++j)
+    for (int i = 0; i + 1 < n; ++i) {
+      const uint32_t v = static_cast<uint32_t>(j * n + i), un = static_cast<uint32_t>(n);
+      const uint32_t tris[2][3] = {{v, v + 1, v + un}, {v + 1, v + un + 1, v + un}};
+      for (const auto& t : tris) {
+        const uint8_t three = 3;
+        put(&three, 1);
+        put(t, sizeof t);
+      }
+    }
+  return tmp.write("grid.ply", ply);
+}
+
+TEST(CrashSafety, ScratchFilesOfAKilledRunAreRemovedWhenItResumes) {
+  test::TempDir tmp;
+  const std::string grid = write_grid(tmp, 600);
+  auto args = [&](const std::string& out, const std::string& work) {
+    return std::vector<std::string>{"simplify", grid, "-o", out, "--work", work, "--levels", "2", "--memory", "64M",
+                                    "--progress", "json"};
+  };
+  const std::string ref_out = tmp.file("ref-out"), ref_work = tmp.file("ref-work");
+  std::vector<std::string> order;
+  std::set<std::string> resumable;
+  const std::vector<Line> lines = reference(args(ref_out, ref_work), ref_out, ref_work, "manifest.json", &order, &resumable);
+  const std::set<std::string> ref_work_files = files_under(ref_work);
+  for (const KillPoint& p : progress_kill_points(lines, order)) {
+    if (p.stage != "grade") continue;
+    const std::string out = tmp.file("out"), work = tmp.file("work");
+    kill_and_resume(p, args(out, work), out, work, "", ref_out, ref_work_files, "manifest.json", resumable, order);
+  }
+}
+
 }  // namespace
 }  // namespace lodstream
