@@ -57,7 +57,7 @@ struct Line {
   double fraction = 0;
 };
 
-struct Run {
+struct ChildRun {
   int exit_code = -1;  // 128 + signal when killed
   bool killed_at_line = false;
   std::vector<Line> lines;
@@ -66,7 +66,7 @@ struct Run {
 
 // Runs `lodstream args...` with `env` added to the environment, stopping after each progress line; kills
 // it (SIGKILL) at the first line for which `kill_at` is true.
-Run run_cli(std::vector<std::string> args, const std::vector<std::string>& env,
+ChildRun run_cli(std::vector<std::string> args, const std::vector<std::string>& env,
             const std::function<bool(const Line&)>& kill_at) {
   args.insert(args.begin(), LODSTREAM_CLI);
   std::vector<char*> argv;
@@ -90,7 +90,7 @@ Run run_cli(std::vector<std::string> args, const std::vector<std::string>& env,
   posix_spawn_file_actions_destroy(&fa);
   close(fds[1]);
 
-  Run r;
+  ChildRun r;
   int status = 0;
   bool reaped = false;
   std::string buffer;
@@ -134,7 +134,7 @@ Run run_cli(std::vector<std::string> args, const std::vector<std::string>& env,
   return r;
 }
 
-Run run_to_end(const std::vector<std::string>& args) {
+ChildRun run_to_end(const std::vector<std::string>& args) {
   return run_cli(args, {}, [](const Line&) { return false; });
 }
 
@@ -239,7 +239,7 @@ void kill_and_resume(const KillPoint& p, const std::vector<std::string>& args_wi
   std::vector<std::string> env;
   if (!p.named.empty()) env.push_back("LODSTREAM_TEST_KILL_AT=" + p.named);
   bool seen = false;
-  const Run killed = run_cli(args_with_dirs, env, [&](const Line& l) {
+  const ChildRun killed = run_cli(args_with_dirs, env, [&](const Line& l) {
     if (p.stage.empty() || l.stage != p.stage) return false;
     if (p.fraction < 0 || l.fraction >= p.fraction) return !seen && (seen = true);
     return false;
@@ -260,7 +260,7 @@ void kill_and_resume(const KillPoint& p, const std::vector<std::string>& args_wi
   }
   EXPECT_FALSE(after_kill.count(summary)) << summary << " written before the run finished";
 
-  const Run rerun = run_to_end(args_with_dirs);
+  const ChildRun rerun = run_to_end(args_with_dirs);
   ASSERT_EQ(rerun.exit_code, 0) << rerun.err;
   EXPECT_EQ(files_under(out), ref_files);
   for (const std::string& f : ref_files) {
@@ -282,14 +282,14 @@ void kill_and_resume(const KillPoint& p, const std::vector<std::string>& args_wi
 // lines, and fills the stages in order and those the rerun reuses.
 std::vector<Line> reference(const std::vector<std::string>& args, const std::string& out, const std::string& work,
                             const std::string& summary, std::vector<std::string>* order, std::set<std::string>* resumable) {
-  const Run first = run_to_end(args);
+  const ChildRun first = run_to_end(args);
   EXPECT_EQ(first.exit_code, 0) << first.err;
   const Json j = Json::parse(test::read_file(out + "/" + summary));
   *order = stage_names(j);
   const std::string copy = out + ".first";
   fs::copy(out, copy, fs::copy_options::recursive);
   const std::set<std::string> work_files = files_under(work);
-  const Run again = run_to_end(args);
+  const ChildRun again = run_to_end(args);
   EXPECT_EQ(again.exit_code, 0) << again.err;
   for (const std::string& f : files_under(copy)) {
     EXPECT_TRUE(same_as_reference(out, copy, f)) << f << " differs on an uninterrupted rerun";
@@ -397,6 +397,28 @@ TEST(CrashSafety, ScratchFilesOfAKilledRunAreRemovedWhenItResumes) {
     const std::string out = tmp.file("out"), work = tmp.file("work");
     kill_and_resume(p, args(out, work), out, work, "", ref_out, ref_work_files, "manifest.json", resumable, order);
   }
+}
+
+// `info` keeps its census beside the store (census.json) and reuses it with the store. The source file
+// changes, and the next run is killed after the new store is complete but before the new census is
+// written: the rerun must not take the old file's census for the new one.
+TEST(CrashSafety, InfoKilledBeforeItsCensusIsWrittenDoesNotReuseTheCensusOfAnOlderSource) {
+  test::TempDir tmp;
+  const std::string input = tmp.file("scene.obj"), work = tmp.file("work");
+  tmp.write("scene.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  ASSERT_EQ(test::run_cli({"info", input, "--work", work, "--json"}, tmp).exit_code, 0);
+  // Same triangle, every position stored twice: 6 vertices, 3 welded, 3 unused.
+  tmp.write("scene.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  const ChildRun killed = run_cli({"info", input, "--work", work, "--progress", "json"}, {"LODSTREAM_TEST_KILL_AT=census.json"},
+                             [](const Line&) { return false; });
+  ASSERT_EQ(killed.exit_code, 128 + SIGKILL) << killed.err;
+  const test::CliRun rerun = test::run_cli({"info", input, "--work", work, "--json"}, tmp);
+  ASSERT_EQ(rerun.exit_code, 0) << rerun.err;
+  const test::CliRun fresh = test::run_cli({"info", input, "--json"}, tmp);
+  ASSERT_EQ(fresh.exit_code, 0) << fresh.err;
+  const Json a = Json::parse(rerun.out), b = Json::parse(fresh.out);
+  EXPECT_EQ(a.at("vertices"), 6);
+  for (const char* k : {"vertices", "vertices_welded", "unused_vertices"}) EXPECT_EQ(a.at(k), b.at(k)) << k;
 }
 
 }  // namespace
