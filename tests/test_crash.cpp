@@ -232,6 +232,7 @@ void kill_and_resume(const KillPoint& p, const std::vector<std::string>& args_wi
                      const std::set<std::string>& ref_work, const std::string& summary,
                      const std::set<std::string>& resumable, const std::vector<std::string>& order) {
   SCOPED_TRACE("kill point: " + p.label);
+  std::printf("kill -9 at %s (stage %s)\n", p.label.c_str(), p.owner.c_str());
   fs::remove_all(out);
   fs::remove_all(work);
   if (!work_seed.empty()) fs::copy(work_seed, work, fs::copy_options::recursive);
@@ -336,20 +337,20 @@ TEST(CrashSafety, SimplifyAndReportResumeAfterKillNineAtEveryStageStartAndMiddle
   for (const KillPoint& p : points)
     kill_and_resume(p, simplify_args(out, work), out, work, "", ref_out, ref_work_files, "manifest.json", resumable, order);
 
-  // report, on the reference levels and a copy of the reference work directory (its store reused)
+  // report, on the reference levels, with a work directory of its own (so that its ingest is killed too)
   const std::string rep_ref = tmp.file("rep-ref"), rep_ref_work = tmp.file("rep-ref-work");
-  fs::copy(ref_work, rep_ref_work, fs::copy_options::recursive);
   std::vector<std::string> rep_order;
   std::set<std::string> rep_resumable;
   const std::vector<Line> rep_lines =
       reference(report_args(ref_out, rep_ref, rep_ref_work), rep_ref, rep_ref_work, "report.json", &rep_order, &rep_resumable);
   ASSERT_FALSE(rep_lines.empty());
+  EXPECT_TRUE(rep_resumable.count("ingest")) << "an uninterrupted rerun of report does not reuse its ingest";
   std::vector<KillPoint> rep_points = progress_kill_points(rep_lines, rep_order);
   rep_points.push_back({"before report.json is written", "", -1, "report.json", "write"});
   const std::set<std::string> rep_work_files = files_under(rep_ref_work);
   const std::string rep = tmp.file("rep"), rep_work = tmp.file("rep-work");
   for (const KillPoint& p : rep_points)
-    kill_and_resume(p, report_args(ref_out, rep, rep_work), rep, rep_work, ref_work, rep_ref, rep_work_files, "report.json",
+    kill_and_resume(p, report_args(ref_out, rep, rep_work), rep, rep_work, "", rep_ref, rep_work_files, "report.json",
                     rep_resumable, rep_order);
 }
 
