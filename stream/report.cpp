@@ -596,6 +596,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     stream::Progress progress(options);
     stream::WorkDir work(options.work_dir);
     stream::make_output_dir(ro.output_dir);
+    stream::remove_summary(ro.output_dir + "/report.json");
     Report rep;
     rep.runs.resize(runs.size());
     std::vector<std::vector<std::vector<io::HtmlView>>> views(runs.size());

@@ -344,6 +344,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
 
       // Emit and write.
       stream::make_output_dir(so.output_dir);
+      stream::remove_summary(so.output_dir + "/manifest.json");
       const double tan_half = std::tan(so.fov_degrees * M_PI / 360);
       const double diag = diagonal(meta.bbox);
       std::vector<core::LodMesh> meshes(sizes.size());

@@ -87,4 +87,10 @@ void make_output_dir(const std::string& path) {
     fail(Status::io_error, path + ": cannot create the output directory" + (ec ? ": " + ec.message() : ""));
 }
 
+void remove_summary(const std::string& path) {
+  std::error_code ec;
+  std::filesystem::remove(path, ec);
+  if (ec) fail(Status::io_error, path + ": cannot remove the previous run's file: " + ec.message());
+}
+
 }  // namespace lodstream::stream

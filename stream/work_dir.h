@@ -35,4 +35,10 @@ class WorkDir {
 // it cannot be created or is not a directory.
 void make_output_dir(const std::string& path);
 
+// Removes an output directory's summary file (manifest.json, report.json), which a job writes last so
+// that its presence means the directory is complete, before the job writes any other file there: an
+// older run's summary would otherwise vouch for a mix of its files and a killed run's. Throws
+// Failure(io_error) naming it when it exists and cannot be removed.
+void remove_summary(const std::string& path);
+
 }  // namespace lodstream::stream

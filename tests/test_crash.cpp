@@ -36,6 +36,7 @@
 #include <map>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <fmt/format.h>
@@ -398,6 +399,33 @@ TEST(CrashSafety, ScratchFilesOfAKilledRunAreRemovedWhenItResumes) {
     const std::string out = tmp.file("out"), work = tmp.file("work");
     kill_and_resume(p, args(out, work), out, work, "", ref_out, ref_work_files, "manifest.json", resumable, order);
   }
+}
+
+// manifest.json (report.json) is written last, so that its presence means the directory is complete. A
+// run over an older run's output directory, killed while it writes its own files, must not leave the
+// older summary vouching for a mix of the two runs' files.
+TEST(CrashSafety, ARunKilledOverAnOlderOutputLeavesNoSummaryOfTheOlderOne) {
+  test::TempDir tmp;
+  const std::string out = tmp.file("out"), rep = tmp.file("rep"), work = tmp.file("work");
+  auto simplify = [&](const char* levels) {
+    return std::vector<std::string>{"simplify", sample_room(), "-o", out, "--work", work, "--levels", levels, "--progress", "json"};
+  };
+  ASSERT_EQ(run_to_end(simplify("3")).exit_code, 0);
+  bool first_write = true;
+  const ChildRun killed = run_cli(simplify("2"), {}, [&](const Line& l) { return l.stage == "write" && std::exchange(first_write, false); });
+  ASSERT_TRUE(killed.killed_at_line) << killed.err;
+  EXPECT_FALSE(fs::exists(out + "/manifest.json")) << "the older run's manifest.json survived a run killed while writing its levels";
+  ASSERT_EQ(run_to_end(simplify("2")).exit_code, 0);
+  EXPECT_EQ(Json::parse(test::read_file(out + "/manifest.json")).at("levels").size(), 2u);
+
+  auto report = [&](const char* views) {
+    return std::vector<std::string>{"report", out, "-o", rep, "--work", work, "--views", views, "--resolution", "64",
+                                    "--samples", "2000", "--html-views", "1", "--progress", "json"};
+  };
+  ASSERT_EQ(run_to_end(report("4")).exit_code, 0);
+  const ChildRun killed_report = run_cli(report("5"), {"LODSTREAM_TEST_KILL_AT=report.json"}, [](const Line&) { return false; });
+  ASSERT_EQ(killed_report.exit_code, 128 + SIGKILL) << killed_report.err;
+  EXPECT_FALSE(fs::exists(rep + "/report.json")) << "the older run's report.json survived a run killed after writing its CSVs";
 }
 
 // `info` keeps its census beside the store (census.json) and reuses it with the store. The source file
