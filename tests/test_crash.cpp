@@ -226,17 +226,15 @@ std::vector<KillPoint> progress_kill_points(const std::vector<Line>& lines, cons
 }
 
 // One kill and rerun, checked against the reference output `ref_out` and work directory files `ref_work`.
-// `work_seed` (may be empty) is copied into the work directory first. `resumable`: the stages an
-// uninterrupted rerun reuses; `order`: the summary's stages in order.
+// `resumable`: the stages an uninterrupted rerun reuses; `order`: the summary's stages in order.
 void kill_and_resume(const KillPoint& p, const std::vector<std::string>& args_with_dirs, const std::string& out,
-                     const std::string& work, const std::string& work_seed, const std::string& ref_out,
+                     const std::string& work, const std::string& ref_out,
                      const std::set<std::string>& ref_work, const std::string& summary,
                      const std::set<std::string>& resumable, const std::vector<std::string>& order) {
   SCOPED_TRACE("kill point: " + p.label);
   std::printf("kill -9 at %s (stage %s)\n", p.label.c_str(), p.owner.c_str());
   fs::remove_all(out);
   fs::remove_all(work);
-  if (!work_seed.empty()) fs::copy(work_seed, work, fs::copy_options::recursive);
 
   std::vector<std::string> env;
   if (!p.named.empty()) env.push_back("LODSTREAM_TEST_KILL_AT=" + p.named);
@@ -336,7 +334,7 @@ TEST(CrashSafety, SimplifyAndReportResumeAfterKillNineAtEveryStageStartAndMiddle
   const std::set<std::string> ref_work_files = files_under(ref_work);
   const std::string out = tmp.file("out"), work = tmp.file("work");
   for (const KillPoint& p : points)
-    kill_and_resume(p, simplify_args(out, work), out, work, "", ref_out, ref_work_files, "manifest.json", resumable, order);
+    kill_and_resume(p, simplify_args(out, work), out, work, ref_out, ref_work_files, "manifest.json", resumable, order);
 
   // report, on the reference levels, with a work directory of its own (so that its ingest is killed too)
   const std::string rep_ref = tmp.file("rep-ref"), rep_ref_work = tmp.file("rep-ref-work");
@@ -351,7 +349,7 @@ TEST(CrashSafety, SimplifyAndReportResumeAfterKillNineAtEveryStageStartAndMiddle
   const std::set<std::string> rep_work_files = files_under(rep_ref_work);
   const std::string rep = tmp.file("rep"), rep_work = tmp.file("rep-work");
   for (const KillPoint& p : rep_points)
-    kill_and_resume(p, report_args(ref_out, rep, rep_work), rep, rep_work, "", rep_ref, rep_work_files, "report.json",
+    kill_and_resume(p, report_args(ref_out, rep, rep_work), rep, rep_work, rep_ref, rep_work_files, "report.json",
                     rep_resumable, rep_order);
 }
 
@@ -397,7 +395,7 @@ TEST(CrashSafety, ScratchFilesOfAKilledRunAreRemovedWhenItResumes) {
   for (const KillPoint& p : progress_kill_points(lines, order)) {
     if (p.stage != "grade") continue;
     const std::string out = tmp.file("out"), work = tmp.file("work");
-    kill_and_resume(p, args(out, work), out, work, "", ref_out, ref_work_files, "manifest.json", resumable, order);
+    kill_and_resume(p, args(out, work), out, work, ref_out, ref_work_files, "manifest.json", resumable, order);
   }
 }
 
