@@ -11,6 +11,7 @@
 #include "lodstream/lodstream.h"
 #include "stream/ingest.h"
 #include "stream/job.h"
+#include "stream/kill_point.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
@@ -36,17 +37,24 @@ Result info(const std::string& path, const Options& options, SceneInfo* out) {
       const stream::StoreMeta meta =
           stream::run_ingest_stage(path, store_dir, plan, work, progress, &info.stages, &info, &reused);
       const stream::Census census = run_stage(&info.stages, "census", [&](StageStats& st) {
+        // The census of the store's source: a run killed after a new store but before its census leaves the
+        // old source's census.json beside it, which must not be taken for the new one.
         const std::string cache = store_dir + "/census.json";
+        const nlohmann::json source{{"path", meta.source.path}, {"bytes", meta.source.bytes}, {"mtime_ns", meta.source.mtime_ns}};
         if (reused) {
           try {
             const auto j = nlohmann::json::parse(io::read_small_file(cache));
-            st.reused = true;
-            return stream::Census{j.at("vertices_welded").get<uint64_t>(), j.at("unused_vertices").get<uint64_t>()};
+            if (j.at("source") == source) {
+              st.reused = true;
+              return stream::Census{j.at("vertices_welded").get<uint64_t>(), j.at("unused_vertices").get<uint64_t>()};
+            }
           } catch (const std::exception&) {
           }
         }
         const stream::Census c = stream::census(store_dir, meta, plan, work, progress);
-        io::write_file_atomic(cache, nlohmann::json{{"vertices_welded", c.vertices_welded},
+        stream::kill_point("census.json");
+        io::write_file_atomic(cache, nlohmann::json{{"source", source},
+                                                    {"vertices_welded", c.vertices_welded},
                                                     {"unused_vertices", c.unused_vertices}}.dump() + "\n");
         return c;
       });

@@ -41,6 +41,7 @@
 #include "lodstream/lodstream.h"
 #include "stream/ingest.h"
 #include "stream/job.h"
+#include "stream/kill_point.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/scene_store.h"
@@ -595,6 +596,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     stream::Progress progress(options);
     stream::WorkDir work(options.work_dir);
     stream::make_output_dir(ro.output_dir);
+    stream::remove_summary(ro.output_dir + "/report.json");
     Report rep;
     rep.runs.resize(runs.size());
     std::vector<std::vector<std::vector<io::HtmlView>>> views(runs.size());
@@ -656,6 +658,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     rep.seconds = seconds_since(t0);
     for (const StageStats& s : rep.stages) rep.peak_rss_bytes = std::max(rep.peak_rss_bytes, s.peak_rss_bytes);
     // report.json last: its presence means the report is complete.
+    stream::kill_point("report.json");
     io::write_file_atomic(ro.output_dir + "/report.json", report_json(rep, ro).dump(2) + "\n", io::Sync::durable);
     *out = std::move(rep);
   });

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/status.h"
+#include "stream/kill_point.h"
 
 namespace lodstream::stream {
 
@@ -115,6 +116,7 @@ StoreMeta StoreWriter::commit(StoreMeta meta) {
   meta.points = points_.count;
   meta.bbox = bbox_;
   meta.vertex_chunk_bbox = vertex_chunk_bbox_;
+  kill_point("store.json");
   io::write_file_atomic(dir_ + "/store.json", store_meta_json(meta));
   return meta;
 }

@@ -26,6 +26,7 @@
 #include "stream/grade_stage.h"
 #include "stream/ingest.h"
 #include "stream/job.h"
+#include "stream/kill_point.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
@@ -172,6 +173,7 @@ bool stamp_matches(const std::string& path, const ordered_json& key, ordered_jso
 
 void write_stamp(const std::string& path, const ordered_json& key, const std::vector<std::string>& files,
                  const ordered_json& value) {
+  stream::kill_point(std::filesystem::path(path).filename().string());
   io::write_file_atomic(path, ordered_json{{"key", key}, {"files", files}, {"value", value}}.dump(1) + "\n");
 }
 
@@ -342,6 +344,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
 
       // Emit and write.
       stream::make_output_dir(so.output_dir);
+      stream::remove_summary(so.output_dir + "/manifest.json");
       const double tan_half = std::tan(so.fov_degrees * M_PI / 360);
       const double diag = diagonal(meta.bbox);
       std::vector<core::LodMesh> meshes(sizes.size());
@@ -465,6 +468,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     m["stages"] = stages;
     m["seconds"] = report.seconds;
     m["peak_rss_bytes"] = report.peak_rss_bytes;
+    stream::kill_point("manifest.json");
     io::write_file_atomic(so.output_dir + "/manifest.json", m.dump(2) + "\n", io::Sync::durable);
     *out = std::move(report);
   });

@@ -10,7 +10,8 @@ namespace lodstream::stream {
 
 class WorkDir {
  public:
-  // Uses `path`, creating it if needed; an empty path makes a fresh temporary directory.
+  // Uses `path`, creating it if needed; an empty path makes a fresh temporary directory. Scratch files
+  // left by a process that no longer runs (one killed with `kill -9`) are removed.
   // Throws Failure(io_error) if it cannot be created or written.
   explicit WorkDir(const std::string& path);
   WorkDir(const WorkDir&) = delete;
@@ -21,7 +22,7 @@ class WorkDir {
   std::string file(std::string_view name) const { return path_ + "/" + std::string(name); }
   // A subdirectory, created if needed.
   std::string subdir(std::string_view name) const;
-  // A fresh name for a scratch file inside the directory (not created).
+  // A fresh name for a scratch file inside the directory (not created): scratch-STEM-PID-N.
   std::string scratch(std::string_view stem) const;
 
  private:
@@ -33,5 +34,11 @@ class WorkDir {
 // Creates a job's output directory (and its parents) if missing. Throws Failure(io_error) naming it when
 // it cannot be created or is not a directory.
 void make_output_dir(const std::string& path);
+
+// Removes an output directory's summary file (manifest.json, report.json), which a job writes last so
+// that its presence means the directory is complete, before the job writes any other file there: an
+// older run's summary would otherwise vouch for a mix of its files and a killed run's. Throws
+// Failure(io_error) naming it when it exists and cannot be removed.
+void remove_summary(const std::string& path);
 
 }  // namespace lodstream::stream

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <mutex>
 #include <string>
@@ -26,6 +27,9 @@ enum class ProgressMode { automatic, bar, json, none };
 
 struct ProgressState {
   ProgressMode mode = ProgressMode::none;
+  // Test-only (LODSTREAM_TEST_STOP_AFTER_PROGRESS set): after each NDJSON line the process stops itself
+  // (SIGSTOP), so that tests/test_crash.cpp can kill it at exactly that line or let it go on (SIGCONT).
+  bool stop_after_line = false;
   std::mutex mutex;
   std::string last_stage;
   int last_percent = -1;
@@ -48,6 +52,8 @@ bool on_progress(void* user, const char* stage, double fraction) {
   st->last_percent = percent;
   if (st->mode == ProgressMode::json) {
     std::fprintf(stderr, "%s\n", nlohmann::json{{"stage", stage}, {"fraction", fraction}}.dump().c_str());
+    std::fflush(stderr);
+    if (st->stop_after_line) std::raise(SIGSTOP);
   } else {
     if (new_stage && st->bar_open) std::fputc('\n', stderr);
     const int width = 30, filled = percent * width / 100;
@@ -386,6 +392,7 @@ int main(int argc, char** argv) {
                   : progress_text == "none" ? ProgressMode::none
                   : isatty(STDERR_FILENO)   ? ProgressMode::bar
                                             : ProgressMode::none;
+  progress.stop_after_line = progress.mode == ProgressMode::json && std::getenv("LODSTREAM_TEST_STOP_AFTER_PROGRESS");
   options.progress = on_progress;
   options.progress_user = &progress;
   std::signal(SIGINT, on_sigint);
