@@ -160,8 +160,9 @@ std::vector<double> default_cell_sizes(unsigned levels, uint64_t triangles, cons
 
 // Default levels (SimplifyOptions::levels), counted before they are made. A level's count is its triangles;
 // for an input without triangles, or whose triangles no cell size keeps (each has two corners at one
-// position), its edges and points. `count(sizes)` clusters and emits at `sizes` and returns their counts,
-// exactly as the emit stage will make them, so what is decided here depends on the input and options only.
+// position), its edges and points. `count(sizes, triangles_only)` clusters and emits at `sizes` and returns
+// their counts, exactly as the emit stage will make them (with `triangles_only`, the triangles only, by the
+// cheaper count-only emit), so what is decided here depends on the input and options only.
 // 1. The finest level must count something. If at its estimated size it counts nothing, its size is
 //    searched below the estimate: quartered until it counts at least its target (the estimate's) or
 //    reaches `smallest`, then bisected on log c; of the sizes that count anything, the one whose count is
@@ -173,11 +174,11 @@ struct DefaultLevels {
   std::vector<double> sizes;
   std::string notice;
 };
-using CountFn = std::function<std::vector<stream::EmitCounts>(const std::vector<double>&)>;
+using CountFn = std::function<std::vector<stream::EmitCounts>(const std::vector<double>&, bool)>;
 DefaultLevels settle_default_levels(std::vector<double> sizes, std::span<const double> targets, bool exact,
                                     bool has_triangles, double smallest, const CountFn& count) {
   bool by_triangles = has_triangles;
-  std::vector<stream::EmitCounts> counts = count(sizes);
+  std::vector<stream::EmitCounts> counts = count(sizes, by_triangles);
   if (by_triangles && counts[0].triangles == 0) {
     const double target = targets[0];
     double lo = 0, hi = sizes[0], best = 0, best_err = INFINITY;
@@ -185,7 +186,7 @@ DefaultLevels settle_default_levels(std::vector<double> sizes, std::span<const d
       // invariant: sizes >= hi count fewer than the target; sizes <= lo (when lo > 0) at least the target
       const double c = lo > 0 ? std::sqrt(lo * hi) : std::max(hi / 4, smallest);
       if (!(c < hi && c > lo)) break;
-      const uint64_t got = count({c})[0].triangles;
+      const uint64_t got = count({c}, true)[0].triangles;
       if (got > 0 && std::abs(std::log(static_cast<double>(got) / target)) < best_err) {
         best_err = std::abs(std::log(static_cast<double>(got) / target));
         best = c;
@@ -194,9 +195,10 @@ DefaultLevels settle_default_levels(std::vector<double> sizes, std::span<const d
     }
     if (best > 0) {
       sizes[0] = best;
-      counts = count(sizes);
+      counts = count(sizes, true);
     } else {
       by_triangles = false;
+      counts = count(sizes, false);
     }
   }
   if (exact) return {sizes, {}};
@@ -365,7 +367,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         const unsigned levels = !so.target_triangles.empty() ? static_cast<unsigned>(so.target_triangles.size())
                                 : so.levels                   ? so.levels
                                                               : default_levels;
-        sizes = default_cell_sizes(levels, meta.triangles, grade.areas, diagonal(meta.bbox), &estimated_targets);
+        // An input without triangles aims its levels at its segments and points.
+        sizes = default_cell_sizes(levels, meta.triangles ? meta.triangles : meta.primitives(), grade.areas, diagonal(meta.bbox),
+                                   &estimated_targets);
       }
       report.levels_asked = static_cast<unsigned>(sizes.size());
       // Checked where the estimate aims below kCoarsestTarget, where a few cells more or less decide a count.
@@ -377,9 +381,10 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           for (int k = 0; k < 3; ++k) extent = std::max({extent, std::abs(meta.bbox.min[k]), std::abs(meta.bbox.max[k])});
           const DefaultLevels d = settle_default_levels(
               sizes, estimated_targets, so.levels != 0, meta.triangles > 0,
-              std::max(core::kMinCellSize, 4 * extent / core::kMaxSquaresPerAxis), [&](const std::vector<double>& s) {
+              std::max(core::kMinCellSize, 4 * extent / core::kMaxSquaresPerAxis),
+              [&](const std::vector<double>& s, bool triangles_only) {
                 std::vector<core::LodMesh> discarded(s.size());
-                return emit_all(s, cluster(s, nullptr), counting, discarded);
+                return emit_all(s, cluster(s, nullptr), triangles_only ? count_only : counting, discarded);
               });
           sizes = d.sizes;
           report.notice = d.notice;

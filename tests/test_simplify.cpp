@@ -654,6 +654,43 @@ TEST(SimplifyDefaults, SmallInputsStopWhereCountsStopFalling) {
   }
 }
 
+TEST(SimplifyDefaults, InputsWithoutTrianglesAreCountedByEdgesAndPoints) {
+  // Levels aim at the input's segments and points (before: at one primitive, so every level was one edge),
+  // and are kept while edges + points fall.
+  test::TempDir tmp;
+  std::string zigzag;
+  for (int i = 0; i <= 64; ++i) zigzag += fmt::format("v {} {} 0\n", i, i % 2);
+  zigzag += "l";
+  for (int i = 1; i <= 65; ++i) zigzag += fmt::format(" {}", i);
+  zigzag += "\n";
+  struct Case {
+    std::string name, text;
+    std::vector<uint64_t> edges, points;
+    std::string notice;
+  };
+  const std::vector<Case> cases = {
+      {"zigzag", zigzag, {10, 7, 5, 3, 2}, {0, 0, 0, 0, 0}, ""},
+      {"two-segments", "v 0 0 0\nv 1 0 0\nv 1 1 0\nl 1 2 3\n", {2, 0}, {0, 1},
+       "made 2 levels, not the 5 asked: a level with no edges or points, or no fewer than the level before, is left "
+       "out (edges and points per level at the estimated cell sizes: 2, 1, 1, 1, 1)"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    SimplifyOptions so = make_simplify(tmp.file(c.name));
+    SimplifyReport report;
+    ASSERT_TRUE(simplify_ok(tmp.write(c.name + ".obj", c.text), so, make_options(1), &report));
+    std::vector<uint64_t> edges, points;
+    for (const LevelStats& ls : report.levels) {
+      EXPECT_EQ(ls.triangles, 0u);
+      edges.push_back(ls.edges);
+      points.push_back(ls.points);
+    }
+    EXPECT_EQ(edges, c.edges);
+    EXPECT_EQ(points, c.points);
+    EXPECT_EQ(report.notice, c.notice);
+  }
+}
+
 TEST(SimplifyDefaults, TheNoticeNamesTheCounts) {
   test::TempDir tmp;
   SimplifyOptions so = make_simplify(tmp.file("out"));

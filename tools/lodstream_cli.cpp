@@ -408,7 +408,10 @@ int main(int argc, char** argv) {
     lodstream::SimplifyReport report;
     const lodstream::Result r = lodstream::simplify(input, so, options, &report);
     const int code = finish(r, progress, json ? so.output_dir + "/manifest.json" : std::string(), [&] { print_simplify(report, so.output_dir); });
-    if (code == 0 && !report.notice.empty()) std::fprintf(stderr, "notice: %s\n", report.notice.c_str());
+    if (code == 0 && !report.notice.empty()) {
+      std::fflush(stdout);  // after the table, when both go to one file
+      std::fprintf(stderr, "notice: %s\n", report.notice.c_str());
+    }
     return code;
   }
 

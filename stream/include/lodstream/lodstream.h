@@ -117,8 +117,8 @@ struct SimplifyOptions {
   // asks for exactly N. Either way the finest level has triangles whenever some cell size leaves any: its
   // size is searched for when the estimate leaves none. This is checked by counting the levels before
   // they are made, on inputs whose estimate aims below a few thousand triangles at its coarsest level
-  // (fewer than 4000 · 2^levels triangles: 128,000 at 5 levels). Larger inputs keep their estimated levels
-  // unchecked, at no extra cost.
+  // (fewer than 4000 · 2^levels triangles: 128,000 at 5 levels; every input without triangles, whose levels
+  // aim at its segments and points). Larger inputs keep their estimated levels unchecked, at no extra cost.
   std::vector<double> cell_sizes;
   std::vector<uint64_t> target_triangles;
   unsigned levels = 0;
