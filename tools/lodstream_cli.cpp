@@ -298,7 +298,7 @@ int main(int argc, char** argv) {
   simplify_cmd->add_option("--representative", rep, "Cell representative: center, mean (grade-weighted) or quadric")
       ->check(CLI::IsMember({"center", "mean", "quadric"}));
   simplify_cmd->add_option("--levels", so.levels, "Exactly N levels when no sizes or targets are given (default: up to 5, while counts fall)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(1u, 32u));
   simplify_cmd->add_option("--cell-sizes", sizes_text, "Cell sizes a,b,... in scene units, finest first");
   simplify_cmd->add_option("--target-triangles", targets_text, "Triangle counts t1,t2,... to aim at (searched, ±15%)");
   simplify_cmd->add_option("--crease", so.crease_degrees, "Crease angle for normals, degrees (default 30)");
