@@ -1362,8 +1362,8 @@ TEST(SimplifySharedData, EveryModelSimplifies) {
   }
   std::sort(files.begin(), files.end());
   test::TempDir tmp;
-  int done = 0, skipped = 0;
-  std::vector<std::string> failures;
+  int done = 0, skipped = 0, checked = 0;
+  std::vector<std::string> failures, not_falling;
   const auto t0 = std::chrono::steady_clock::now();
   for (const fs::path& f : files) {
     if (fs::file_size(f) > kMaxBytes) {
@@ -1379,6 +1379,18 @@ TEST(SimplifySharedData, EveryModelSimplifies) {
     if (r.ok()) {
       EXPECT_TRUE(fs::exists(tmp.file("out/manifest.json"))) << f;
       EXPECT_FALSE(report.levels.empty()) << f;
+      // Inputs whose default levels are checked: each level has triangles, fewer than the one before.
+      if (report.scene.triangles > 0 && report.scene.triangles < (uint64_t{4000} << default_levels)) {
+        ++checked;
+        uint64_t previous = UINT64_MAX;
+        for (const LevelStats& ls : report.levels) {
+          if (ls.triangles == 0 || ls.triangles >= previous) {
+            not_falling.push_back(f.string());
+            break;
+          }
+          previous = ls.triangles;
+        }
+      }
     }
     fs::remove_all(tmp.path() / "out");
     ++done;
@@ -1389,6 +1401,12 @@ TEST(SimplifySharedData, EveryModelSimplifies) {
   std::string list;
   for (const std::string& f : failures) list += "\n  " + f;
   EXPECT_TRUE(failures.empty()) << failures.size() << " of " << done << " models failed:" << list;
+  std::printf("%d models below %ju triangles: default levels checked\n", checked, static_cast<uintmax_t>(uint64_t{4000} << default_levels));
+  EXPECT_GT(checked, 0);
+  std::string empty_or_flat;
+  for (const std::string& f : not_falling) empty_or_flat += "\n  " + f;
+  EXPECT_TRUE(not_falling.empty()) << not_falling.size() << " models have a level without triangles or no fewer than the one before:"
+                                   << empty_or_flat;
 }
 
 TEST(SimplifySharedData, SmallRealModelsStopWhereCountsStopFalling) {
