@@ -18,8 +18,9 @@ done
 # who holds it, and only then fail (exit 75). Held locks are found in /proc/locks, which lists apt's and
 # dpkg's fcntl locks (and flock locks) by device and inode and needs neither root nor opening the lock
 # files. The wait is repeated before each apt-get call, and apt-get install itself waits as long again
-# (DPkg::Lock::Timeout, dpkg's locks) should another process take one between the check and the call. LODSTREAM_APT_LOCKS (paths, space-separated) replaces the lock list: for
-# the test (tests/install_deps_test.sh), which holds a lock of its own rather than the system's.
+# (DPkg::Lock::Timeout, dpkg's locks) should another process take one between the check and the call.
+# LODSTREAM_APT_LOCKS (paths, space-separated) replaces the lock list: for the test
+# (tests/install_deps_test.sh), which holds a lock of its own rather than the system's.
 apt_wait=${LODSTREAM_APT_WAIT:-300}
 read -r -a apt_locks <<< "${LODSTREAM_APT_LOCKS:-/var/lib/dpkg/lock-frontend /var/lib/dpkg/lock /var/lib/apt/lists/lock /var/cache/apt/archives/lock}"
 
