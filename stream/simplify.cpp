@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <functional>
+#include <span>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -72,7 +74,10 @@ void check_options(const SimplifyOptions& s) {
     if (i > 0 && !(s.target_triangles[i] < s.target_triangles[i - 1]))
       usage("--target-triangles must be strictly decreasing (finest level first)");
   }
-  const size_t levels = !s.cell_sizes.empty() ? s.cell_sizes.size() : !s.target_triangles.empty() ? s.target_triangles.size() : s.levels;
+  const size_t levels = !s.cell_sizes.empty()         ? s.cell_sizes.size()
+                        : !s.target_triangles.empty() ? s.target_triangles.size()
+                        : s.levels                    ? s.levels
+                                                      : default_levels;
   if (levels < 1 || levels > kMaxLevels) usage(fmt::format("--levels must be between 1 and {}", kMaxLevels));
   if (!(s.fov_degrees > 0 && s.fov_degrees < 180)) usage("--fov must be between 0 and 180 degrees");
   if (s.resolution == 0) usage("--resolution must be positive");
@@ -120,8 +125,10 @@ double estimated_triangles(const stream::AreaHistogram& h, double c) {
 }
 
 // Default cell sizes: targets falling geometrically from the input's triangle count to a few thousand, and
-// for each the size whose estimated triangle count (above) meets it, by bisection on log c.
-std::vector<double> default_cell_sizes(unsigned levels, uint64_t triangles, const stream::AreaHistogram& h, double diag) {
+// for each the size whose estimated triangle count (above) meets it, by bisection on log c. `targets`
+// receives the targets.
+std::vector<double> default_cell_sizes(unsigned levels, uint64_t triangles, const stream::AreaHistogram& h, double diag,
+                                       std::vector<double>* targets) {
   std::vector<double> sizes;
   const double t0 = static_cast<double>(std::max<uint64_t>(triangles, 1));
   // Small inputs halve at least once per level, so that every target is below the input's count.
@@ -131,6 +138,7 @@ std::vector<double> default_cell_sizes(unsigned levels, uint64_t triangles, cons
   for (double a : h.area) area += a;
   for (unsigned l = 0; l < levels; ++l) {
     const double target = std::max(1.0, t0 * std::pow(ratio, l + 1));
+    targets->push_back(target);
     double c;
     if (area > 0 && target >= t0) {
       // No cell size brings the count below the input's (one triangle): the triangles' own scale.
@@ -149,6 +157,68 @@ std::vector<double> default_cell_sizes(unsigned levels, uint64_t triangles, cons
     sizes.push_back(c);
   }
   return sizes;
+}
+
+// Default levels (SimplifyOptions::levels), counted before they are made. A level's count is its triangles;
+// for an input without triangles, or whose triangles no cell size keeps (each has two corners at one
+// position), its edges and points. `count(sizes, triangles_only)` clusters and emits at `sizes` and returns
+// their counts, exactly as the emit stage will make them (with `triangles_only`, the triangles only, by the
+// cheaper count-only emit), so what is decided here depends on the input and options only.
+// 1. The finest level must count something. If at its estimated size it counts nothing, its size is
+//    searched below the estimate: quartered until it counts at least its target (the estimate's) or
+//    reaches `smallest`, then bisected on log c; of the sizes that count anything, the one whose count is
+//    nearest the target in ratio is kept (within kTargetTolerance ends the search).
+// 2. Unless exactly as many levels were asked for (`exact`), levels are kept finest first while their counts
+//    fall: a level that counts nothing, or no fewer than the last level kept, is left out. So no level is
+//    empty or repeats its finer neighbour, and `notice` says when fewer levels are made than asked.
+struct DefaultLevels {
+  std::vector<double> sizes;
+  std::string notice;
+};
+using CountFn = std::function<std::vector<stream::EmitCounts>(const std::vector<double>&, bool)>;
+DefaultLevels settle_default_levels(std::vector<double> sizes, std::span<const double> targets, bool exact,
+                                    bool has_triangles, double smallest, const CountFn& count) {
+  bool by_triangles = has_triangles;
+  std::vector<stream::EmitCounts> counts = count(sizes, by_triangles);
+  if (by_triangles && counts[0].triangles == 0) {
+    const double target = targets[0];
+    double lo = 0, hi = sizes[0], best = 0, best_err = INFINITY;
+    for (unsigned pass = 0; pass < kMaxSearchPasses && best_err > std::log1p(kTargetTolerance); ++pass) {
+      // invariant: sizes >= hi count fewer than the target; sizes <= lo (when lo > 0) at least the target
+      const double c = lo > 0 ? std::sqrt(lo * hi) : std::max(hi / 4, smallest);
+      if (!(c < hi && c > lo)) break;
+      const uint64_t got = count({c}, true)[0].triangles;
+      if (got > 0 && std::abs(std::log(static_cast<double>(got) / target)) < best_err) {
+        best_err = std::abs(std::log(static_cast<double>(got) / target));
+        best = c;
+      }
+      (static_cast<double>(got) >= target ? lo : hi) = c;
+    }
+    if (best > 0) {
+      sizes[0] = best;
+      counts = count(sizes, true);
+    } else {
+      by_triangles = false;
+      counts = count(sizes, false);
+    }
+  }
+  if (exact) return {sizes, {}};
+  auto measure = [&](const stream::EmitCounts& c) { return by_triangles ? c.triangles : c.edges + c.points; };
+  DefaultLevels d;
+  uint64_t last = UINT64_MAX;
+  std::string list;
+  for (size_t l = 0; l < sizes.size(); ++l) {
+    const uint64_t n = measure(counts[l]);
+    list += fmt::format("{}{}", l ? ", " : "", n);
+    if (n > 0 && n < last) d.sizes.push_back(sizes[l]), last = n;
+  }
+  if (d.sizes.empty()) d.sizes.push_back(sizes[0]);  // not reached: every primitive leaves at least a point
+  if (d.sizes.size() < sizes.size())
+    d.notice = fmt::format("made {} level{}, not the {} asked: a level with no {}, or no fewer than the level before, "
+                           "is left out ({} per level at the estimated cell sizes: {})",
+                           d.sizes.size(), d.sizes.size() == 1 ? "" : "s", sizes.size(),
+                           by_triangles ? "triangles" : "edges or points", by_triangles ? "triangles" : "edges and points", list);
+  return d;
 }
 
 ordered_json source_json(const stream::StoreMeta& m) {
@@ -292,11 +362,35 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         return counts;
       };
 
-      // Cell sizes: given, searched for, or the default estimate.
+      // Cell sizes: given, searched for, or the default estimate (settled on small inputs).
       std::vector<double> sizes = so.cell_sizes;
+      std::vector<double> estimated_targets;
       if (sizes.empty()) {
-        const unsigned levels = so.target_triangles.empty() ? so.levels : static_cast<unsigned>(so.target_triangles.size());
-        sizes = default_cell_sizes(levels, meta.triangles, grade.areas, diagonal(meta.bbox));
+        const unsigned levels = !so.target_triangles.empty() ? static_cast<unsigned>(so.target_triangles.size())
+                                : so.levels                   ? so.levels
+                                                              : default_levels;
+        // An input without triangles aims its levels at its segments and points.
+        sizes = default_cell_sizes(levels, meta.triangles ? meta.triangles : meta.primitives(), grade.areas, diagonal(meta.bbox),
+                                   &estimated_targets);
+      }
+      report.levels_asked = static_cast<unsigned>(sizes.size());
+      // Checked where the estimate aims below kCoarsestTarget, where a few cells more or less decide a count.
+      if (so.cell_sizes.empty() && so.target_triangles.empty() &&
+          static_cast<double>(meta.triangles) < std::ldexp(static_cast<double>(kCoarsestTarget), static_cast<int>(sizes.size()))) {
+        run_stage(&report.stages, "levels", [&](StageStats&) {
+          const stream::EmitOptions counting{so.representative, so.crease_degrees, false, false};
+          double extent = 0;
+          for (int k = 0; k < 3; ++k) extent = std::max({extent, std::abs(meta.bbox.min[k]), std::abs(meta.bbox.max[k])});
+          const DefaultLevels d = settle_default_levels(
+              sizes, estimated_targets, so.levels != 0, meta.triangles > 0,
+              std::max(core::kMinCellSize, 4 * extent / core::kMaxSquaresPerAxis),
+              [&](const std::vector<double>& s, bool triangles_only) {
+                std::vector<core::LodMesh> discarded(s.size());
+                return emit_all(s, cluster(s, nullptr), triangles_only ? count_only : counting, discarded);
+              });
+          sizes = d.sizes;
+          report.notice = d.notice;
+        });
       }
       if (!so.target_triangles.empty()) {
         run_stage(&report.stages, "search", [&](StageStats&) {
@@ -459,6 +553,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       levels.push_back(j);
     }
     m["levels"] = levels;
+    m["levels_asked"] = report.levels_asked;
+    m["levels_made"] = report.levels.size();
+    if (!report.notice.empty()) m["notice"] = report.notice;
     if (so.write_glb) m["glb"] = "lods.glb";
     if (!so.target_triangles.empty())
       m["search"] = {{"passes", report.search_iterations}, {"seconds", report.search_seconds}};

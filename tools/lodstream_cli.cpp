@@ -305,7 +305,8 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"nearest", "heaviest"}));
   simplify_cmd->add_option("--representative", rep, "Cell representative: center, mean (grade-weighted) or quadric")
       ->check(CLI::IsMember({"center", "mean", "quadric"}));
-  simplify_cmd->add_option("--levels", so.levels, "Number of levels when no sizes or targets are given (default 5)");
+  simplify_cmd->add_option("--levels", so.levels, "Exactly N levels when no sizes or targets are given (default: up to 5, while counts fall)")
+      ->check(CLI::Range(1u, 32u));
   simplify_cmd->add_option("--cell-sizes", sizes_text, "Cell sizes a,b,... in scene units, finest first");
   simplify_cmd->add_option("--target-triangles", targets_text, "Triangle counts t1,t2,... to aim at (searched, ±15%)");
   simplify_cmd->add_option("--crease", so.crease_degrees, "Crease angle for normals, degrees (default 30)");
@@ -419,7 +420,12 @@ int main(int argc, char** argv) {
     so.write_glb = !no_glb;
     lodstream::SimplifyReport report;
     const lodstream::Result r = lodstream::simplify(input, so, options, &report);
-    return finish(r, progress, json ? so.output_dir + "/manifest.json" : std::string(), [&] { print_simplify(report, so.output_dir); });
+    const int code = finish(r, progress, json ? so.output_dir + "/manifest.json" : std::string(), [&] { print_simplify(report, so.output_dir); });
+    if (code == 0 && !report.notice.empty()) {
+      std::fflush(stdout);  // after the table, when both go to one file
+      std::fprintf(stderr, "notice: %s\n", report.notice.c_str());
+    }
+    return code;
   }
 
   if (grid_cmd->parsed()) {

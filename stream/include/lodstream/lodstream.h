@@ -110,10 +110,18 @@ struct SimplifyOptions {
   CellVariant variant = CellVariant::nearest;
   Representative representative = Representative::quadric;  // measured best (README, "quality of floating cells")
   // Levels: explicit cell sizes (strictly increasing), or target triangle counts (searched for), or
-  // neither: `levels` levels whose counts fall roughly geometrically from the input to a few thousand.
+  // neither: cell sizes estimated so that counts fall roughly geometrically from the input to a few
+  // thousand. Then `levels` = 0 (default) asks for up to default_levels levels and stops where the counts
+  // stop falling: a level with no triangles (for an input without triangles: no edges or points), or no
+  // fewer than the level kept before it, is left out, and SimplifyReport::notice says so. `levels` = N
+  // asks for exactly N. Either way the finest level has triangles whenever some cell size leaves any: its
+  // size is searched for when the estimate leaves none. This is checked by counting the levels before
+  // they are made, on inputs whose estimate aims below a few thousand triangles at its coarsest level
+  // (fewer than 4000 · 2^levels triangles: 128,000 at 5 levels; every input without triangles, whose levels
+  // aim at its segments and points). Larger inputs keep their estimated levels unchecked, at no extra cost.
   std::vector<double> cell_sizes;
   std::vector<uint64_t> target_triangles;
-  unsigned levels = 5;
+  unsigned levels = 0;
   double crease_degrees = 30;    // normals: faces meeting at a sharper angle keep separate normals
   // LOD selection (Low & Tan §4): a level of cell size c is used from the distance where c spans
   // pixels_per_cell pixels of a `resolution`-pixel-high image with vertical field of view fov_degrees.
@@ -127,6 +135,8 @@ struct SimplifyOptions {
   // at most 256, so the cap is raised to vertices / 256 when it is smaller.
   uint64_t grade_range_vertices = 0;
 };
+
+inline constexpr unsigned default_levels = 5;
 
 struct LevelStats {
   double cell_size = 0;
@@ -147,6 +157,8 @@ struct SimplifyReport {
   double surface_area = 0;
   uint64_t grade_ranges = 0;
   std::vector<LevelStats> levels;
+  unsigned levels_asked = 0;       // sizes or targets given, SimplifyOptions::levels, or default_levels
+  std::string notice;              // one line when fewer levels were made than asked, saying why; else empty
   unsigned search_iterations = 0;  // target search: clustering passes made
   double search_seconds = 0;
   std::vector<StageStats> stages;
