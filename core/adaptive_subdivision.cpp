@@ -97,7 +97,7 @@ struct Plane {
 };
 
 // Visits every sample whose ray from the axis meets the 3D triangle (a, b, c) (edges included, within a
-// relative 1e-9 of the triangle's size seen from the axis, more with round_to_float), with the radius of the triangle's plane along
+// relative 1e-9 of the triangle's size seen from the axis), with the radius of the triangle's plane along
 // that ray. Only samples in the triangle's (i, j) bounding box can: a point of the triangle is a convex
 // combination of its vertices, whose directions span less than 180 degrees (CylinderFrame), so its
 // longitude lies between theirs, and its height is between theirs. Triangles seen edge-on from the axis
@@ -106,11 +106,10 @@ template <class F>
 void for_each_ray_hit(const GridSamples& g, const CylinderGeometry& cg, uint32_t a, uint32_t b, uint32_t c,
                       bool round_to_float, F&& f) {
   const uint32_t ids[3] = {a, b, c};
-  double P[3][3];
+  double P[3][3], Q[3][3];  // exact, and as given (rounded or not)
   for (int k = 0; k < 3; ++k) {
     cg.point(g, ids[k], P[k]);
-    if (round_to_float)
-      for (double& x : P[k]) x = double(float(x));
+    for (int x = 0; x < 3; ++x) Q[k][x] = round_to_float ? double(float(P[k][x])) : P[k][x];
   }
   const uint32_t w = g.width;
   // A triangle on one column or one row (a fill polygon's) lies in a longitude's half-plane or a height's
@@ -121,10 +120,12 @@ void for_each_ray_hit(const GridSamples& g, const CylinderGeometry& cg, uint32_t
   for (int k = 0; k < 3; ++k)
     size = std::max({size, std::abs(P[k][0]) + std::abs(P[k][1]), std::abs(P[k][2] - P[2][2])});
   if (!(std::abs(ref) > 1e-10 * size * size)) return;
-  // Rounded to float, the vertices leave the rays through them by up to 2^-24 of their size: a ray along
-  // a shared edge would then slip between both triangles. The margin covers that rounding.
-  const double sign = ref > 0 ? 1 : -1, eps = 1e-9 * std::abs(ref) + (round_to_float ? 4e-7 * size * size : 0);
-  const Plane plane(P[0], P[1], P[2]);
+  // Which rays meet the triangle is decided on the exact points (rounded to float, the vertices leave the
+  // rays through them, and a ray along a shared edge could slip between both triangles); the radius is
+  // that of the plane of the points as given (rounded or not). Near an edge both triangles' rounded
+  // planes agree to that rounding, so this is what a watertight ray caster meets on the written mesh.
+  const double sign = ref > 0 ? 1 : -1, eps = 1e-9 * std::abs(ref);
+  const Plane plane(Q[0], Q[1], Q[2]);
   const uint32_t i0 = std::min({a % w, b % w, c % w}), i1 = std::max({a % w, b % w, c % w});
   const uint32_t j0 = std::min({a / w, b / w, c / w}), j1 = std::max({a / w, b / w, c / w});
   for (uint32_t j = j0; j <= j1; ++j)
