@@ -96,6 +96,21 @@ struct Plane {
   }
 };
 
+// Whether the ray from (0, 0, h) in direction (c, s, 0) meets triangle PQR, whose plane pl is through P,
+// Q, R in that order: 1 inside, 0 on its border (within a relative 1e-9), -1 outside or parallel to it (a
+// triangle edge-on from there). Inside, the three ray_side values share one sign, that of their sum,
+// which is pl.n . (c, s, 0) whatever the ray's origin. (Not the sign at a vertex's own ray: a steep
+// triangle's plane can cross the axis between its rows, and the sides' signs flip with the origin.)
+inline int ray_meets(const double* P, const double* Q, const double* R, const Plane& pl, double c, double s, double h) {
+  const double den = pl.n[0] * c + pl.n[1] * s;
+  const double nn = std::abs(pl.n[0]) + std::abs(pl.n[1]) + std::abs(pl.n[2]);
+  if (!(std::abs(den) > 1e-12 * nn)) return -1;
+  const double sg = den > 0 ? 1 : -1, eps = 1e-9 * std::abs(den);
+  const double a = sg * ray_side(P, Q, c, s, h), b = sg * ray_side(Q, R, c, s, h), d = sg * ray_side(R, P, c, s, h);
+  if (a < -eps || b < -eps || d < -eps) return -1;
+  return a > eps && b > eps && d > eps ? 1 : 0;
+}
+
 // Visits every sample whose ray from the axis meets the 3D triangle (a, b, c) (edges included, within a
 // relative 1e-9 of the triangle's size seen from the axis), with the radius of the triangle's plane along
 // that ray. Only samples in the triangle's (i, j) bounding box can: a point of the triangle is a convex
@@ -115,17 +130,11 @@ void for_each_ray_hit(const GridSamples& g, const CylinderGeometry& cg, uint32_t
   // A triangle on one column or one row (a fill polygon's) lies in a longitude's half-plane or a height's
   // plane: edge-on from the axis. Known from the ids, so that rounding cannot make it look otherwise.
   if ((a % w == b % w && b % w == c % w) || (a / w == b / w && b / w == c / w)) return;
-  const double ref = ray_side(P[0], P[1], cg.cos[c % w], cg.sin[c % w], cg.h[c / w]);
-  double size = 0;
-  for (int k = 0; k < 3; ++k)
-    size = std::max({size, std::abs(P[k][0]) + std::abs(P[k][1]), std::abs(P[k][2] - P[2][2])});
-  if (!(std::abs(ref) > 1e-10 * size * size)) return;
   // Which rays meet the triangle is decided on the exact points (rounded to float, the vertices leave the
   // rays through them, and a ray along a shared edge could slip between both triangles); the radius is
   // that of the plane of the points as given (rounded or not). Near an edge both triangles' rounded
   // planes agree to that rounding, so this is what a watertight ray caster meets on the written mesh.
-  const double sign = ref > 0 ? 1 : -1, eps = 1e-9 * std::abs(ref);
-  const Plane plane(Q[0], Q[1], Q[2]);
+  const Plane exact(P[0], P[1], P[2]), plane(Q[0], Q[1], Q[2]);
   const uint32_t i0 = std::min({a % w, b % w, c % w}), i1 = std::max({a % w, b % w, c % w});
   const uint32_t j0 = std::min({a / w, b / w, c / w}), j1 = std::max({a / w, b / w, c / w});
   for (uint32_t j = j0; j <= j1; ++j)
@@ -136,9 +145,7 @@ void for_each_ray_hit(const GridSamples& g, const CylinderGeometry& cg, uint32_t
         continue;
       }
       const double co = cg.cos[i], si = cg.sin[i], h = cg.h[j];
-      if (sign * ray_side(P[0], P[1], co, si, h) < -eps || sign * ray_side(P[1], P[2], co, si, h) < -eps ||
-          sign * ray_side(P[2], P[0], co, si, h) < -eps)
-        continue;
+      if (ray_meets(P[0], P[1], P[2], exact, co, si, h) < 0) continue;
       f(s, plane.radius(co, si, h));
     }
 }
@@ -314,14 +321,12 @@ class Subdivider {
     uint64_t best_dist = 0;
     Point curv{center};
     // The errors of sample (i0 + di, j0 + dj) against both diagonals' triangles.
-    // Cylinder: the corners' points, the planes of both diagonals' triangles -- diagonal 0: (SW, SE, NE),
-    // (SW, NE, NW); diagonal 1: (NW, NE, SE), (NW, SE, SW) -- and the side of each diagonal's half-plane
-    // (ray_side) that its first triangle is on, seen along the ray of that triangle's third corner. A ray
-    // within a relative 1e-9 of the diagonal is measured against both triangles (the verification's
-    // margin, for_each_ray_hit, is of the same size).
+    // Cylinder: the corners' points and the planes of both diagonals' triangles -- diagonal 0: (SW, SE,
+    // NE), (SW, NE, NW); diagonal 1: (NW, NE, SE), (NW, SE, SW). A ray is measured against the triangles
+    // it meets (ray_meets), both when it runs along the diagonal within the margin, as the verification
+    // (for_each_ray_hit) does.
     double psw[3], pse[3], pne[3], pnw[3];
     Plane pl[4];
-    double sgn[2] = {0, 0}, eps[2] = {0, 0};
     if (cyl_) {
       cyl_->point(g_, id(r.i0, r.j1), psw);
       cyl_->point(g_, id(r.i1, r.j1), pse);
@@ -331,12 +336,6 @@ class Subdivider {
       pl[1] = Plane(psw, pne, pnw);
       pl[2] = Plane(pnw, pne, pse);
       pl[3] = Plane(pnw, pse, psw);
-      const double ref0 = ray_side(psw, pne, cyl_->cos[r.i1], cyl_->sin[r.i1], cyl_->h[r.j1]);
-      const double ref1 = ray_side(pnw, pse, cyl_->cos[r.i1], cyl_->sin[r.i1], cyl_->h[r.j0]);
-      sgn[0] = ref0 > 0 ? 1 : ref0 < 0 ? -1 : 0;  // 0 (degenerate): every ray against both triangles
-      sgn[1] = ref1 > 0 ? 1 : ref1 < 0 ? -1 : 0;
-      eps[0] = 1e-9 * std::abs(ref0);
-      eps[1] = 1e-9 * std::abs(ref1);
     }
     const bool cylinder = cyl_.has_value();  // the same for every sample: a branch predicted right
     auto errors = [&](int64_t di, int64_t dj, double zs, double& e0, double& e1) {
@@ -344,9 +343,13 @@ class Subdivider {
         const uint32_t i = uint32_t(r.i0 + di), j = uint32_t(r.j0 + dj);
         const double c = cyl_->cos[i], s = cyl_->sin[i], hh = cyl_->h[j];
         auto err = [&](int t) { return std::abs(zs - pl[t].radius(c, s, hh)); };
-        const double s0 = sgn[0] * ray_side(psw, pne, c, s, hh), s1 = sgn[1] * ray_side(pnw, pse, c, s, hh);
-        e0 = s0 > eps[0] ? err(0) : s0 < -eps[0] ? err(1) : std::max(err(0), err(1));
-        e1 = s1 > eps[1] ? err(2) : s1 < -eps[1] ? err(3) : std::max(err(2), err(3));
+        // Of two triangles, the one the ray meets; both when it meets both (the diagonal) or, from
+        // rounding, neither.
+        auto pick = [&](int a, int b, int ma, int mb) {
+          return ma >= 0 && mb < 0 ? err(a) : mb >= 0 && ma < 0 ? err(b) : std::max(err(a), err(b));
+        };
+        e0 = pick(0, 1, ray_meets(psw, pse, pne, pl[0], c, s, hh), ray_meets(psw, pne, pnw, pl[1], c, s, hh));
+        e1 = pick(2, 3, ray_meets(pnw, pne, pse, pl[2], c, s, hh), ray_meets(pnw, pse, psw, pl[3], c, s, hh));
         return;
       }
       const double u = di * fw, v = dj * fh;
