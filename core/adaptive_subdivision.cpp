@@ -71,8 +71,8 @@ struct CylinderGeometry {
   }
 };
 
-// Which side of the half-plane through the axis point O = (0, 0, h) and segment PQ the ray from O in
-// direction (c, s, 0) lies on: D . ((P - O) x (Q - O)). Zero on that half-plane.
+// Which side of the plane through the axis point O = (0, 0, h), P and Q the ray from O in direction
+// D = (c, s, 0) lies on: D . ((P - O) x (Q - O)). Zero in that plane.
 inline double ray_side(const double* P, const double* Q, double c, double s, double h) {
   const double pa = P[2] - h, qa = Q[2] - h;
   return c * (P[1] * qa - pa * Q[1]) + s * (pa * Q[0] - P[0] * qa);
@@ -337,21 +337,21 @@ class Subdivider {
       pl[2] = Plane(pnw, pne, pse);
       pl[3] = Plane(pnw, pse, psw);
     }
-    const bool cylinder = cyl_.has_value();  // the same for every sample: a branch predicted right
-    auto errors = [&](int64_t di, int64_t dj, double zs, double& e0, double& e1) {
-      if (cylinder) {
-        const uint32_t i = uint32_t(r.i0 + di), j = uint32_t(r.j0 + dj);
-        const double c = cyl_->cos[i], s = cyl_->sin[i], hh = cyl_->h[j];
-        auto err = [&](int t) { return std::abs(zs - pl[t].radius(c, s, hh)); };
-        // Of two triangles, the one the ray meets; both when it meets both (the diagonal) or, from
-        // rounding, neither.
-        auto pick = [&](int a, int b, int ma, int mb) {
-          return ma >= 0 && mb < 0 ? err(a) : mb >= 0 && ma < 0 ? err(b) : std::max(err(a), err(b));
-        };
-        e0 = pick(0, 1, ray_meets(psw, pse, pne, pl[0], c, s, hh), ray_meets(psw, pne, pnw, pl[1], c, s, hh));
-        e1 = pick(2, 3, ray_meets(pnw, pne, pse, pl[2], c, s, hh), ray_meets(pnw, pse, psw, pl[3], c, s, hh));
-        return;
-      }
+    // The sample's errors against both diagonals' triangles: along its ray for a cylinder, vertical
+    // otherwise. Two functions, each scan instantiated for one, so the height grid's loop stays as lean.
+    auto radial = [&](int64_t di, int64_t dj, double zs, double& e0, double& e1) {
+      const uint32_t i = uint32_t(r.i0 + di), j = uint32_t(r.j0 + dj);
+      const double c = cyl_->cos[i], s = cyl_->sin[i], hh = cyl_->h[j];
+      auto err = [&](int t) { return std::abs(zs - pl[t].radius(c, s, hh)); };
+      // Of two triangles, the one the ray meets; both when it meets both (the diagonal) or, from
+      // rounding, neither.
+      auto pick = [&](int a, int b, int ma, int mb) {
+        return ma >= 0 && mb < 0 ? err(a) : mb >= 0 && ma < 0 ? err(b) : std::max(err(a), err(b));
+      };
+      e0 = pick(0, 1, ray_meets(psw, pse, pne, pl[0], c, s, hh), ray_meets(psw, pne, pnw, pl[1], c, s, hh));
+      e1 = pick(2, 3, ray_meets(pnw, pne, pse, pl[2], c, s, hh), ray_meets(pnw, pse, psw, pl[3], c, s, hh));
+    };
+    auto planar = [&](int64_t di, int64_t dj, double zs, double& e0, double& e1) {
       const double u = di * fw, v = dj * fh;
       // Both triangles' planes are computed and one is selected, without a branch: which triangle a
       // sample falls in changes from sample to sample, a branch there is mispredicted often.
@@ -364,41 +364,45 @@ class Subdivider {
       e0 = std::abs(zs - p0);
       e1 = std::abs(zs - p1);
     };
-    auto visit = [&](uint32_t i, uint32_t j) {
-      double e0, e1;
-      errors(int64_t(i) - r.i0, int64_t(j) - r.j0, z(i, j), e0, e1);
-      if (e0 > max_err[0]) max_err[0] = e0, arg[0] = {i, j};
-      if (e1 > max_err[1]) max_err[1] = e1, arg[1] = {i, j};
-      if (!over[0] && e0 > tol_) over[0] = true, first[0] = {i, j};
-      if (!over[1] && e1 > tol_) over[1] = true, first[1] = {i, j};
-      if (!curvature_.empty() && !((i == r.i0 || i == r.i1) && (j == r.j0 || j == r.j1))) {
-        const double c = curvature_[id(i, j)];
-        const uint64_t d = uint64_t(std::abs(int64_t(i) - center.i)) * std::abs(int64_t(i) - center.i) +
-                           uint64_t(std::abs(int64_t(j) - center.j)) * std::abs(int64_t(j) - center.j);
-        if (c > best_curv || (c == best_curv && d < best_dist)) best_curv = c, best_dist = d, curv = {i, j};
+    auto scan = [&](auto&& errors) {
+      auto visit = [&](uint32_t i, uint32_t j) {
+        double e0, e1;
+        errors(int64_t(i) - r.i0, int64_t(j) - r.j0, z(i, j), e0, e1);
+        if (e0 > max_err[0]) max_err[0] = e0, arg[0] = {i, j};
+        if (e1 > max_err[1]) max_err[1] = e1, arg[1] = {i, j};
+        if (!over[0] && e0 > tol_) over[0] = true, first[0] = {i, j};
+        if (!over[1] && e1 > tol_) over[1] = true, first[1] = {i, j};
+        if (!curvature_.empty() && !((i == r.i0 || i == r.i1) && (j == r.j0 || j == r.j1))) {
+          const double c = curvature_[id(i, j)];
+          const uint64_t d = uint64_t(std::abs(int64_t(i) - center.i)) * std::abs(int64_t(i) - center.i) +
+                             uint64_t(std::abs(int64_t(j) - center.j)) * std::abs(int64_t(j) - center.j);
+          if (c > best_curv || (c == best_curv && d < best_dist)) best_curv = c, best_dist = d, curv = {i, j};
+        }
+      };
+      if (decide_only) {
+        // Most trials (growth, merge, center and random splits): no sample to track, so a lean row-major
+        // scan of the two maxima. Any scan order gives the same maxima, and the scan stops only when both
+        // are over tolerance.
+        for (uint32_t j = r.j0; j <= r.j1 && !(max_err[0] > tol_ && max_err[1] > tol_); ++j) {
+          const float* row = &g_.z[id(0, j)];
+          const int64_t dj = j - r.j0;
+          for (uint32_t i = r.i0; i <= r.i1; ++i) {
+            double e0, e1;
+            errors(i - r.i0, dj, row[i], e0, e1);
+            max_err[0] = std::max(max_err[0], e0);
+            max_err[1] = std::max(max_err[1], e1);
+          }
+        }
+      } else if (w >= h) {  // the scan order of "first error": north to south when at least as wide as tall
+        for (uint32_t j = r.j0; j <= r.j1; ++j)
+          for (uint32_t i = r.i0; i <= r.i1; ++i) visit(i, j);
+      } else {  // else west to east
+        for (uint32_t i = r.i0; i <= r.i1; ++i)
+          for (uint32_t j = r.j0; j <= r.j1; ++j) visit(i, j);
       }
     };
-    if (decide_only) {
-      // Most trials (growth, merge, center and random splits): no sample to track, so a lean row-major
-      // scan of the two maxima. Any scan order gives the same maxima, and the scan stops only when both
-      // are over tolerance.
-      for (uint32_t j = r.j0; j <= r.j1 && !(max_err[0] > tol_ && max_err[1] > tol_); ++j) {
-        const float* row = &g_.z[id(0, j)];
-        const int64_t dj = j - r.j0;
-        for (uint32_t i = r.i0; i <= r.i1; ++i) {
-          double e0, e1;
-          errors(i - r.i0, dj, row[i], e0, e1);
-          max_err[0] = std::max(max_err[0], e0);
-          max_err[1] = std::max(max_err[1], e1);
-        }
-      }
-    } else if (w >= h) {  // the scan order of "first error": north to south when at least as wide as tall
-      for (uint32_t j = r.j0; j <= r.j1; ++j)
-        for (uint32_t i = r.i0; i <= r.i1; ++i) visit(i, j);
-    } else {  // else west to east
-      for (uint32_t i = r.i0; i <= r.i1; ++i)
-        for (uint32_t j = r.j0; j <= r.j1; ++j) visit(i, j);
-    }
+    if (cyl_) scan(radial);
+    else scan(planar);
     const int d = max_err[1] < max_err[0] ? 1 : 0;
     e.diagonal = uint8_t(d);
     e.error = max_err[d];
