@@ -15,12 +15,19 @@
 //   polygon's drawn triangles, for every gap mode.
 // - Polygon growth grows rectangles (east, south, west, north in turn, one row or column of cells at a
 //   time), so that its polygons go through the same gap treatment and error check as the subdivision's.
+// - Cylindrical scans (thesis §II.B) are measured in 3D: a sample's error is the distance, along its ray
+//   from the axis, between its radius and the drawn triangle's plane (CylinderFrame in the header). The
+//   trial test computes exactly that for both diagonals, and the verification measures every triangle
+//   each ray meets, so the invariant above holds for radii along rays. Longitude wraps: the seam's
+//   corners are shared, so its T-junctions are closed like any other.
 #include "core/adaptive_subdivision.h"
 
 #include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstdlib>
+#include <numbers>
+#include <optional>
 #include <queue>
 #include <ctime>
 #include <stdexcept>
@@ -35,9 +42,112 @@ struct Point {
   uint32_t i, j;
 };
 
-// NODATA: flagged invalid, or a non-finite height.
+// NODATA: flagged invalid, or a non-finite height (or, for a cylinder, a radius that is not > 0).
 bool sample_valid(const GridSamples& g, uint64_t s) {
-  return (g.valid.empty() || g.valid[s]) && std::isfinite(g.z[s]);
+  return (g.valid.empty() || g.valid[s]) && std::isfinite(g.z[s]) && (!g.cylinder || g.z[s] > 0);
+}
+
+// Cylindrical grids (CylinderFrame): each column's direction and each row's height, computed once. The
+// wrap column takes column 0's angle (0, not 2 pi: cos and sin of 2 pi are not exactly 1 and 0).
+struct CylinderGeometry {
+  std::vector<double> cos, sin, h;
+  explicit CylinderGeometry(const GridSamples& g) {
+    const CylinderFrame& f = *g.cylinder;
+    cos.resize(g.width);
+    sin.resize(g.width);
+    for (uint32_t i = 0; i < g.width; ++i) {
+      const double a = double(f.wrap && i == g.width - 1 ? 0 : i) * f.angle_step;
+      cos[i] = std::cos(a);
+      sin[i] = std::sin(a);
+    }
+    h.resize(g.height);
+    for (uint32_t j = 0; j < g.height; ++j) h[j] = f.y_bottom + double(g.height - 1 - j) * f.height_step;
+  }
+  void point(const GridSamples& g, uint32_t s, double p[3]) const {
+    const uint32_t i = s % g.width, j = s / g.width;
+    p[0] = double(g.z[s]) * cos[i];
+    p[1] = double(g.z[s]) * sin[i];
+    p[2] = h[j];
+  }
+};
+
+// Which side of the plane through the axis point O = (0, 0, h), P and Q the ray from O in direction
+// D = (c, s, 0) lies on: D . ((P - O) x (Q - O)). Zero in that plane.
+inline double ray_side(const double* P, const double* Q, double c, double s, double h) {
+  const double pa = P[2] - h, qa = Q[2] - h;
+  return c * (P[1] * qa - pa * Q[1]) + s * (pa * Q[0] - P[0] * qa);
+}
+
+// The plane through P, Q, R as n . X = d, and the distance along the ray from (0, 0, h) in direction
+// (c, s, 0) to it (+infinity when the ray is parallel to it or meets it behind the axis: a failure).
+struct Plane {
+  double n[3], d;
+  Plane() = default;
+  Plane(const double* P, const double* Q, const double* R) {
+    const double u[3] = {Q[0] - P[0], Q[1] - P[1], Q[2] - P[2]}, v[3] = {R[0] - P[0], R[1] - P[1], R[2] - P[2]};
+    n[0] = u[1] * v[2] - u[2] * v[1];
+    n[1] = u[2] * v[0] - u[0] * v[2];
+    n[2] = u[0] * v[1] - u[1] * v[0];
+    d = n[0] * P[0] + n[1] * P[1] + n[2] * P[2];
+  }
+  double radius(double c, double s, double h) const {
+    const double t = (d - n[2] * h) / (n[0] * c + n[1] * s);
+    return std::isfinite(t) && t >= 0 ? t : std::numeric_limits<double>::infinity();
+  }
+};
+
+// Whether the ray from (0, 0, h) in direction (c, s, 0) meets triangle PQR, whose plane pl is through P,
+// Q, R in that order: 1 inside, 0 on its border (within a relative 1e-9), -1 outside or parallel to it (a
+// triangle edge-on from there). Inside, the three ray_side values share one sign, that of their sum,
+// which is pl.n . (c, s, 0) whatever the ray's origin. (Not the sign at a vertex's own ray: a steep
+// triangle's plane can cross the axis between its rows, and the sides' signs flip with the origin.)
+inline int ray_meets(const double* P, const double* Q, const double* R, const Plane& pl, double c, double s, double h) {
+  const double den = pl.n[0] * c + pl.n[1] * s;
+  const double nn = std::abs(pl.n[0]) + std::abs(pl.n[1]) + std::abs(pl.n[2]);
+  if (!(std::abs(den) > 1e-12 * nn)) return -1;
+  const double sg = den > 0 ? 1 : -1, eps = 1e-9 * std::abs(den);
+  const double a = sg * ray_side(P, Q, c, s, h), b = sg * ray_side(Q, R, c, s, h), d = sg * ray_side(R, P, c, s, h);
+  if (a < -eps || b < -eps || d < -eps) return -1;
+  return a > eps && b > eps && d > eps ? 1 : 0;
+}
+
+// Visits every sample whose ray from the axis meets the 3D triangle (a, b, c) (edges included, within a
+// relative 1e-9 of the triangle's size seen from the axis), with the radius of the triangle's plane along
+// that ray. Only samples in the triangle's (i, j) bounding box can: a point of the triangle is a convex
+// combination of its vertices, whose directions span less than 180 degrees (CylinderFrame), so its
+// longitude lies between theirs, and its height is between theirs. Triangles seen edge-on from the axis
+// (fill polygons) are skipped. round_to_float: the vertices as a mesh file stores them.
+template <class F>
+void for_each_ray_hit(const GridSamples& g, const CylinderGeometry& cg, uint32_t a, uint32_t b, uint32_t c,
+                      bool round_to_float, F&& f) {
+  const uint32_t ids[3] = {a, b, c};
+  double P[3][3], Q[3][3];  // exact, and as given (rounded or not)
+  for (int k = 0; k < 3; ++k) {
+    cg.point(g, ids[k], P[k]);
+    for (int x = 0; x < 3; ++x) Q[k][x] = round_to_float ? double(float(P[k][x])) : P[k][x];
+  }
+  const uint32_t w = g.width;
+  // A triangle on one column or one row (a fill polygon's) lies in a longitude's half-plane or a height's
+  // plane: edge-on from the axis. Known from the ids, so that rounding cannot make it look otherwise.
+  if ((a % w == b % w && b % w == c % w) || (a / w == b / w && b / w == c / w)) return;
+  // Which rays meet the triangle is decided on the exact points (rounded to float, the vertices leave the
+  // rays through them, and a ray along a shared edge could slip between both triangles); the radius is
+  // that of the plane of the points as given (rounded or not). Near an edge both triangles' rounded
+  // planes agree to that rounding, so this is what a watertight ray caster meets on the written mesh.
+  const Plane exact(P[0], P[1], P[2]), plane(Q[0], Q[1], Q[2]);
+  const uint32_t i0 = std::min({a % w, b % w, c % w}), i1 = std::max({a % w, b % w, c % w});
+  const uint32_t j0 = std::min({a / w, b / w, c / w}), j1 = std::max({a / w, b / w, c / w});
+  for (uint32_t j = j0; j <= j1; ++j)
+    for (uint32_t i = i0; i <= i1; ++i) {
+      const uint32_t s = j * w + i;
+      if (!round_to_float && (s == a || s == b || s == c)) {
+        f(s, double(g.z[s]));  // at a vertex the surface is exactly the vertex: error 0
+        continue;
+      }
+      const double co = cg.cos[i], si = cg.sin[i], h = cg.h[j];
+      if (ray_meets(P[0], P[1], P[2], exact, co, si, h) < 0) continue;
+      f(s, plane.radius(co, si, h));
+    }
 }
 
 // x rounded up to a float (an upper bound is what verify_and_draw needs).
@@ -103,6 +213,14 @@ class Subdivider {
     for (uint64_t s = 0; s < n; ++s)
       if (valid_[s]) zmax = std::max(zmax, std::abs(double(g.z[s])));
     proven_tol_ = tol_ - std::ldexp(zmax, -30);
+    if (g.cylinder) {
+      // The trial and the verification compute the same planes from the same points but decide which
+      // triangle a ray near an edge meets with slightly different (1e-9 relative) margins: a wider margin.
+      cyl_.emplace(g);
+      max_cols_ = std::max<uint32_t>(1, uint32_t(std::floor(std::numbers::pi / 2 / g.cylinder->angle_step)));
+      const double span = std::max(std::abs(cyl_->h.front()), std::abs(cyl_->h.back()));
+      proven_tol_ = tol_ - std::ldexp(zmax + span, -24);
+    }
     known_.resize(n);
     if (o.merge) failed_se_.assign(n, UINT32_MAX);
     if (o.split == SplitRule::curvature) compute_curvature();
@@ -177,6 +295,11 @@ class Subdivider {
     Eval e;
     const uint32_t w = r.i1 - r.i0, h = r.j1 - r.j0;
     const Point center{r.i0 + w / 2, r.j0 + h / 2};
+    if (cyl_ && w > max_cols_) {  // wider than 90 degrees (CylinderFrame): split across longitude first
+      e.error = std::numeric_limits<double>::infinity();
+      e.split = {center.i, r.j0};
+      return e;
+    }
     for (uint32_t j = r.j0; any_nodata_ && j <= r.j1 && !e.nodata; ++j)
       for (uint32_t i = r.i0; i <= r.i1; ++i)
         if (!valid(i, j)) {
@@ -198,7 +321,37 @@ class Subdivider {
     uint64_t best_dist = 0;
     Point curv{center};
     // The errors of sample (i0 + di, j0 + dj) against both diagonals' triangles.
-    auto errors = [&](int64_t di, int64_t dj, double zs, double& e0, double& e1) {
+    // Cylinder: the corners' points and the planes of both diagonals' triangles -- diagonal 0: (SW, SE,
+    // NE), (SW, NE, NW); diagonal 1: (NW, NE, SE), (NW, SE, SW). A ray is measured against the triangles
+    // it meets (ray_meets), both when it runs along the diagonal within the margin, as the verification
+    // (for_each_ray_hit) does.
+    double psw[3], pse[3], pne[3], pnw[3];
+    Plane pl[4];
+    if (cyl_) {
+      cyl_->point(g_, id(r.i0, r.j1), psw);
+      cyl_->point(g_, id(r.i1, r.j1), pse);
+      cyl_->point(g_, id(r.i1, r.j0), pne);
+      cyl_->point(g_, id(r.i0, r.j0), pnw);
+      pl[0] = Plane(psw, pse, pne);
+      pl[1] = Plane(psw, pne, pnw);
+      pl[2] = Plane(pnw, pne, pse);
+      pl[3] = Plane(pnw, pse, psw);
+    }
+    // The sample's errors against both diagonals' triangles: along its ray for a cylinder, vertical
+    // otherwise. Two functions, each scan instantiated for one, so the height grid's loop stays as lean.
+    auto radial = [&](int64_t di, int64_t dj, double zs, double& e0, double& e1) {
+      const uint32_t i = uint32_t(r.i0 + di), j = uint32_t(r.j0 + dj);
+      const double c = cyl_->cos[i], s = cyl_->sin[i], hh = cyl_->h[j];
+      auto err = [&](int t) { return std::abs(zs - pl[t].radius(c, s, hh)); };
+      // Of two triangles, the one the ray meets; both when it meets both (the diagonal) or, from
+      // rounding, neither.
+      auto pick = [&](int a, int b, int ma, int mb) {
+        return ma >= 0 && mb < 0 ? err(a) : mb >= 0 && ma < 0 ? err(b) : std::max(err(a), err(b));
+      };
+      e0 = pick(0, 1, ray_meets(psw, pse, pne, pl[0], c, s, hh), ray_meets(psw, pne, pnw, pl[1], c, s, hh));
+      e1 = pick(2, 3, ray_meets(pnw, pne, pse, pl[2], c, s, hh), ray_meets(pnw, pse, psw, pl[3], c, s, hh));
+    };
+    auto planar = [&](int64_t di, int64_t dj, double zs, double& e0, double& e1) {
       const double u = di * fw, v = dj * fh;
       // Both triangles' planes are computed and one is selected, without a branch: which triangle a
       // sample falls in changes from sample to sample, a branch there is mispredicted often.
@@ -211,41 +364,45 @@ class Subdivider {
       e0 = std::abs(zs - p0);
       e1 = std::abs(zs - p1);
     };
-    auto visit = [&](uint32_t i, uint32_t j) {
-      double e0, e1;
-      errors(int64_t(i) - r.i0, int64_t(j) - r.j0, z(i, j), e0, e1);
-      if (e0 > max_err[0]) max_err[0] = e0, arg[0] = {i, j};
-      if (e1 > max_err[1]) max_err[1] = e1, arg[1] = {i, j};
-      if (!over[0] && e0 > tol_) over[0] = true, first[0] = {i, j};
-      if (!over[1] && e1 > tol_) over[1] = true, first[1] = {i, j};
-      if (!curvature_.empty() && !((i == r.i0 || i == r.i1) && (j == r.j0 || j == r.j1))) {
-        const double c = curvature_[id(i, j)];
-        const uint64_t d = uint64_t(std::abs(int64_t(i) - center.i)) * std::abs(int64_t(i) - center.i) +
-                           uint64_t(std::abs(int64_t(j) - center.j)) * std::abs(int64_t(j) - center.j);
-        if (c > best_curv || (c == best_curv && d < best_dist)) best_curv = c, best_dist = d, curv = {i, j};
+    auto scan = [&](auto&& errors) {
+      auto visit = [&](uint32_t i, uint32_t j) {
+        double e0, e1;
+        errors(int64_t(i) - r.i0, int64_t(j) - r.j0, z(i, j), e0, e1);
+        if (e0 > max_err[0]) max_err[0] = e0, arg[0] = {i, j};
+        if (e1 > max_err[1]) max_err[1] = e1, arg[1] = {i, j};
+        if (!over[0] && e0 > tol_) over[0] = true, first[0] = {i, j};
+        if (!over[1] && e1 > tol_) over[1] = true, first[1] = {i, j};
+        if (!curvature_.empty() && !((i == r.i0 || i == r.i1) && (j == r.j0 || j == r.j1))) {
+          const double c = curvature_[id(i, j)];
+          const uint64_t d = uint64_t(std::abs(int64_t(i) - center.i)) * std::abs(int64_t(i) - center.i) +
+                             uint64_t(std::abs(int64_t(j) - center.j)) * std::abs(int64_t(j) - center.j);
+          if (c > best_curv || (c == best_curv && d < best_dist)) best_curv = c, best_dist = d, curv = {i, j};
+        }
+      };
+      if (decide_only) {
+        // Most trials (growth, merge, center and random splits): no sample to track, so a lean row-major
+        // scan of the two maxima. Any scan order gives the same maxima, and the scan stops only when both
+        // are over tolerance.
+        for (uint32_t j = r.j0; j <= r.j1 && !(max_err[0] > tol_ && max_err[1] > tol_); ++j) {
+          const float* row = &g_.z[id(0, j)];
+          const int64_t dj = j - r.j0;
+          for (uint32_t i = r.i0; i <= r.i1; ++i) {
+            double e0, e1;
+            errors(i - r.i0, dj, row[i], e0, e1);
+            max_err[0] = std::max(max_err[0], e0);
+            max_err[1] = std::max(max_err[1], e1);
+          }
+        }
+      } else if (w >= h) {  // the scan order of "first error": north to south when at least as wide as tall
+        for (uint32_t j = r.j0; j <= r.j1; ++j)
+          for (uint32_t i = r.i0; i <= r.i1; ++i) visit(i, j);
+      } else {  // else west to east
+        for (uint32_t i = r.i0; i <= r.i1; ++i)
+          for (uint32_t j = r.j0; j <= r.j1; ++j) visit(i, j);
       }
     };
-    if (decide_only) {
-      // Most trials (growth, merge, center and random splits): no sample to track, so a lean row-major
-      // scan of the two maxima. Any scan order gives the same maxima, and the scan stops only when both
-      // are over tolerance.
-      for (uint32_t j = r.j0; j <= r.j1 && !(max_err[0] > tol_ && max_err[1] > tol_); ++j) {
-        const float* row = &g_.z[id(0, j)];
-        const int64_t dj = j - r.j0;
-        for (uint32_t i = r.i0; i <= r.i1; ++i) {
-          double e0, e1;
-          errors(i - r.i0, dj, row[i], e0, e1);
-          max_err[0] = std::max(max_err[0], e0);
-          max_err[1] = std::max(max_err[1], e1);
-        }
-      }
-    } else if (w >= h) {  // the scan order of "first error": north to south when at least as wide as tall
-      for (uint32_t j = r.j0; j <= r.j1; ++j)
-        for (uint32_t i = r.i0; i <= r.i1; ++i) visit(i, j);
-    } else {  // else west to east
-      for (uint32_t i = r.i0; i <= r.i1; ++i)
-        for (uint32_t j = r.j0; j <= r.j1; ++j) visit(i, j);
-    }
+    if (cyl_) scan(radial);
+    else scan(planar);
     const int d = max_err[1] < max_err[0] ? 1 : 0;
     e.diagonal = uint8_t(d);
     e.error = max_err[d];
@@ -580,17 +737,41 @@ class Subdivider {
     corner_.assign(uint64_t(g_.width) * g_.height, 0);
     for (const Rect& r : leaves_)
       corner_[id(r.i0, r.j0)] = corner_[id(r.i1, r.j0)] = corner_[id(r.i0, r.j1)] = corner_[id(r.i1, r.j1)] = 1;
+    // The seam: columns 0 and width - 1 are one column, so a corner on either is a corner on both, and
+    // the polygons on each side of it see the other side's corners as side points.
+    if (cyl_ && g_.cylinder->wrap)
+      for (uint32_t j = 0; j < g_.height; ++j) {
+        uint8_t& west = corner_[id(0, j)];
+        uint8_t& east = corner_[id(g_.width - 1, j)];
+        west = east = west | east;
+      }
+  }
+
+  // Cylinder: a horizontal side is the chord from a to b in their horizontal plane, not a linear
+  // interpolation of radii; the gap at t is the difference of t's radius and the chord's along t's ray.
+  // (A vertical side lies in its longitude's half-plane, where radius is linear in height: as above.)
+  double chord_gap(uint32_t a, uint32_t b, uint32_t t) const {
+    double A[3], B[3];
+    cyl_->point(g_, a, A);
+    cyl_->point(g_, b, B);
+    const uint32_t ti = t % g_.width;
+    const double ex = B[0] - A[0], ey = B[1] - A[1];
+    const double chord = (A[0] * B[1] - A[1] * B[0]) / (cyl_->cos[ti] * ey - cyl_->sin[ti] * ex);
+    return std::abs(double(g_.z[t]) - chord);
   }
 
   // Largest error over the samples under `tris`, and where (ties: the smallest sample id).
   std::pair<double, uint32_t> surface_error(const std::vector<uint32_t>& tris) const {
     double worst = -1;
     uint32_t at = 0;
-    for (size_t t = 0; t < tris.size(); t += 3)
-      for_each_sample(g_, tris[t], tris[t + 1], tris[t + 2], [&](uint32_t s, double h) {
-        const double e = std::abs(double(g_.z[s]) - h);
-        if (e > worst || (e == worst && s < at)) worst = e, at = s;
-      });
+    auto visit = [&](uint32_t s, double h) {
+      const double e = std::abs(double(g_.z[s]) - h);
+      if (e > worst || (e == worst && s < at)) worst = e, at = s;
+    };
+    for (size_t t = 0; t < tris.size(); t += 3) {
+      if (cyl_) for_each_ray_hit(g_, *cyl_, tris[t], tris[t + 1], tris[t + 2], false, visit);
+      else for_each_sample(g_, tris[t], tris[t + 1], tris[t + 2], visit);
+    }
     return {worst, at};
   }
 
@@ -680,7 +861,8 @@ class Subdivider {
         bool gap_here = false;
         for (uint32_t t : sides[s]) {
           const int64_t at = along_row ? std::abs(int64_t(t) - a) : std::abs(int64_t(t) - a) / g_.width;
-          const double d = std::abs(double(g_.z[t]) * len - (double(g_.z[a]) * (len - at) + double(g_.z[b]) * at)) / len;
+          const double d = cyl_ && along_row ? chord_gap(a, b, t)
+                                             : std::abs(double(g_.z[t]) * len - (double(g_.z[a]) * (len - at) + double(g_.z[b]) * at)) / len;
           ++out_.t_junctions;
           if (d > 0) {
             ++out_.gaps;
@@ -688,7 +870,10 @@ class Subdivider {
             out_.max_gap = std::max(out_.max_gap, d);
           }
         }
-        if (o_.gaps == GapMode::fill && gap_here) {
+        // Cylinders: a side with T-junctions and no gap still gets its (flat) fill polygon, so that the 3D
+        // mesh is closed edge to edge (every edge in two triangles but at rims and holes) as mesh tools
+        // check it; on quantized radii (16-bit PGM) gapless vertical sides are common.
+        if (o_.gaps == GapMode::fill && (gap_here || (cyl_ && !sides[s].empty()))) {
           fill_rings.push_back(uint32_t(sides[s].size() + 2));
           fill_rings.push_back(a);
           fill_rings.insert(fill_rings.end(), sides[s].begin(), sides[s].end());
@@ -726,6 +911,8 @@ class Subdivider {
   bool any_nodata_ = false;
   std::vector<float> curvature_;
   std::vector<double> inverse_;  // inverse_[k] = 1.0 / k
+  std::optional<CylinderGeometry> cyl_;
+  uint32_t max_cols_ = 0;        // cylinder: the widest rectangle, in columns (90 degrees)
   std::vector<Rect> leaves_;
   // The last trial error within tolerance measured per NW corner, with the rectangle and diagonal it is
   // for (a cache of a function of those: an entry for another rectangle is simply not used).
@@ -784,12 +971,63 @@ Subdivision subdivide(const GridSamples& grid, const SubdivisionOptions& options
   if (!grid.valid.empty() && grid.valid.size() != grid.z.size()) throw std::invalid_argument("subdivide: valid size");
   if (!(options.tolerance >= 0)) throw std::invalid_argument("subdivide: tolerance must be >= 0");
   if (options.divide != 2 && options.divide != 4) throw std::invalid_argument("subdivide: divide must be 2 or 4");
+  if (const CylinderFrame* f = grid.cylinder) {
+    if (!(f->angle_step > 0 && f->angle_step < std::numbers::pi)) throw std::invalid_argument("subdivide: angle step must be in (0, pi)");
+    if (!(f->height_step > 0) || !std::isfinite(f->height_step) || !std::isfinite(f->y_bottom))
+      throw std::invalid_argument("subdivide: height step must be > 0");
+    for (uint32_t j = 0; f->wrap && j < grid.height; ++j) {
+      const uint64_t first = uint64_t(j) * grid.width, last = first + grid.width - 1;
+      const bool same = (grid.z[first] == grid.z[last] || (std::isnan(grid.z[first]) && std::isnan(grid.z[last]))) &&
+                        (grid.valid.empty() || grid.valid[first] == grid.valid[last]);
+      if (!same) throw std::invalid_argument("subdivide: with wrap, the last column must repeat the first");
+    }
+  }
   return Subdivider(grid, options, progress).run();
 }
 
-VerticalError vertical_error(const GridSamples& g, std::span<const uint32_t> triangles) {
+void cylinder_point(const GridSamples& grid, uint32_t s, double out[3]) {
+  const CylinderFrame& f = *grid.cylinder;
+  const uint32_t i = s % grid.width, j = s / grid.width;
+  // As CylinderGeometry computes it, so that the points agree to the bit.
+  const double a = double(f.wrap && i == grid.width - 1 ? 0 : i) * f.angle_step;
+  out[0] = double(grid.z[s]) * std::cos(a);
+  out[1] = double(grid.z[s]) * std::sin(a);
+  out[2] = f.y_bottom + double(grid.height - 1 - j) * f.height_step;
+}
+
+VerticalError vertical_error(const GridSamples& g, std::span<const uint32_t> triangles, bool round_to_float) {
   std::vector<double> err(uint64_t(g.width) * g.height, -1);
   VerticalError r;
+  if (g.cylinder) {
+    const CylinderGeometry cg(g);
+    for (size_t t = 0; t + 2 < triangles.size(); t += 3)
+      for_each_ray_hit(g, cg, triangles[t], triangles[t + 1], triangles[t + 2], round_to_float,
+                       [&](uint32_t s, double h) { err[s] = std::max(err[s], std::abs(double(g.z[s]) - h)); });
+    // Triangles do not overlap seen from the axis: the area is that of the domain cells they cover, as
+    // for height grids (each rectangle's two halves).
+    for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+      const uint32_t a = triangles[t], b = triangles[t + 1], c = triangles[t + 2];
+      const int64_t ax = a % g.width, ay = a / g.width, bx = b % g.width, by = b / g.width, cx = c % g.width, cy = c / g.width;
+      r.covered_area += 0.5 * double(std::abs((bx - ax) * (cy - ay) - (by - ay) * (cx - ax)));
+    }
+    const bool wrap = g.cylinder->wrap;
+    double sum2 = 0;
+    for (uint64_t s = 0; s < err.size(); ++s) {
+      const uint64_t i = s % g.width;
+      if (!sample_valid(g, s) || (wrap && i == g.width - 1)) continue;
+      // A seam sample is one ray: the worst of what the polygons on both sides give it.
+      const double e = wrap && i == 0 ? std::max(err[s], err[s + g.width - 1]) : err[s];
+      if (e < 0) {
+        ++r.uncovered;
+        continue;
+      }
+      ++r.samples;
+      r.max = std::max(r.max, e);
+      sum2 += e * e;
+    }
+    r.rms = r.samples ? std::sqrt(sum2 / double(r.samples)) : 0;
+    return r;
+  }
   for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
     const uint32_t a = triangles[t], b = triangles[t + 1], c = triangles[t + 2];
     const int64_t ax = a % g.width, ay = a / g.width, bx = b % g.width, by = b / g.width, cx = c % g.width, cy = c / g.width;

@@ -6,6 +6,13 @@
 // i0 <= i <= i1, j0 <= j <= j1 lies. Its drawn surface is a triangulation defined once (draw_triangles())
 // and used both for the accuracy test and for the output, so that for the crack-free variants the
 // measured vertical error of the output is <= tolerance by construction.
+//
+// Cylindrical range grids (thesis §II.B: a Cyberware scan's radii at uniformly spaced latitudes and
+// longitudes) use the same rectangles in the (longitude, latitude) domain with GridSamples::cylinder set:
+// z is the radius, and the drawn triangles are the 3D triangles between the samples' points. The error of
+// a sample is then measured along its ray, from the axis at the sample's height in the sample's direction,
+// against the plane of the 3D triangle that ray passes through (a chord of a circle lies inside the arc,
+// so interpolating radii in the domain would miss it). See CylinderFrame.
 #pragma once
 
 #include <cstdint>
@@ -16,12 +23,40 @@
 
 namespace lodstream::core {
 
+// The frame of a cylindrical grid. In local coordinates (c, s, a) -- a right-handed frame whose third axis
+// is the cylinder's axis -- sample (i, j) of radius r is the point
+//   (r cos(i * angle_step), r sin(i * angle_step), y_bottom + (height - 1 - j) * height_step),
+// so longitude grows by the right-hand rule about the axis and row 0 is the top row. A rectangle's drawn
+// triangles, counter-clockwise in (longitude, height), then face away from the axis.
+//
+// Every rectangle spans at most 90 degrees of longitude (wider ones fail the trial test and split across
+// longitude). Then a polygon's vertices lie in an open half-space through the axis, no ray from the axis
+// meets a triangle twice, a polygon's triangles cover exactly its sector as seen from the axis (its west
+// and east sides lie in the half-planes of their longitudes, its north and south sides in their
+// horizontal planes), and the drawn mesh is star-shaped about the axis: each sample's ray meets the
+// surface at the triangles of the polygons over it only.
+struct CylinderFrame {
+  double angle_step = 0;   // radians, in (0, pi)
+  double height_step = 1;  // > 0
+  double y_bottom = 0;     // height of the last row
+  // A full turn: the last column is the first one again (the caller appends a copy of column 0, so
+  // width = columns + 1). Its corners are shared with column 0's, so the polygons on both sides of the
+  // seam get each other's corners as extra vertices (or fill polygons): no crack at 360 degrees. Sample
+  // ids in the output may name the last column: they stand for column 0's samples.
+  bool wrap = false;
+};
+
 struct GridSamples {
   uint32_t width = 0, height = 0;
   double spacing = 1;               // sample distance in x and y (z units), for normals (SplitRule::curvature)
   std::span<const float> z;         // width*height heights, row-major, row 0 = north
   std::span<const uint8_t> valid;   // empty = every sample valid; 0 = NODATA (non-finite z is NODATA too)
+  const CylinderFrame* cylinder = nullptr;  // set: z is a radius (> 0 where valid), see CylinderFrame
 };
+
+// The local-frame point of sample s of a cylindrical grid (CylinderFrame), the one the accuracy test
+// measures against; the wrap column gives column 0's point exactly.
+void cylinder_point(const GridSamples& grid, uint32_t s, double out[3]);
 
 // Where a polygon that fails the accuracy test is split (thesis §II.C.3).
 enum class SplitRule {
@@ -100,6 +135,9 @@ Subdivision subdivide(const GridSamples& grid, const SubdivisionOptions& options
 void draw_triangles(const GridSamples& grid, const Rect& rect, const std::vector<uint32_t> (&sides)[4],
                     std::vector<uint32_t>* out);
 
+// Cylindrical grids: the same figures along each sample's ray from the axis (the radius of the drawn
+// surface there against the sample's), every triangle the ray meets counted (edges included); triangles
+// seen edge-on from the axis (fill polygons) are skipped, and the wrap column is not counted twice.
 struct VerticalError {
   double max = 0, rms = 0;
   uint64_t samples = 0;     // valid samples under at least one non-vertical triangle
@@ -110,6 +148,8 @@ struct VerticalError {
 // Vertical error of every valid sample against the triangles (sample ids) over it, in z units: per
 // sample the largest |z - surface| over the triangles covering it (edges included); vertical triangles
 // (zero area seen from above) are skipped.
-VerticalError vertical_error(const GridSamples& grid, std::span<const uint32_t> triangles);
+// round_to_float (cylindrical grids only): measure the triangles with their vertices rounded to float, as
+// a mesh file stores cylinder_point(); the error can then exceed the tolerance by that rounding.
+VerticalError vertical_error(const GridSamples& grid, std::span<const uint32_t> triangles, bool round_to_float = false);
 
 }  // namespace lodstream::core

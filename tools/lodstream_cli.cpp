@@ -189,6 +189,10 @@ void print_grid(const lodstream::GridReport& r, const std::string& out_dir) {
               r.obj_ply_faces == "polygons" ? "polygons (n-gons)" : "drawn triangles (as grid.glb)");
   std::printf("junctions    %s T-junctions, %s with a gap (max %.6g), %s open cracks\n", grouped(r.t_junctions).c_str(),
               grouped(r.gaps).c_str(), r.max_gap, grouped(r.cracks).c_str());
+  if (r.angle_step > 0)
+    std::printf("cylinder     %.6g degrees and %g units per step, %s; %u empty rows trimmed at the top, %u at the bottom; errors are radii\n",
+                r.angle_step, r.height_step, r.closed ? "a full turn, seam closed" : "a partial turn", r.trimmed_rows_top,
+                r.trimmed_rows_bottom);
   for (const auto& s : r.stages)
     std::printf("stage        %-10s %8.3f s  peak %s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str());
   std::printf("total        %.3f s, peak %s; wrote %s/summary.json\n", r.seconds, human_bytes(r.peak_rss_bytes).c_str(),
@@ -358,6 +362,12 @@ int main(int argc, char** argv) {
   grid_cmd->add_flag("--merge", go.merge, "Then merge polygons sharing a whole side while their union passes (not in the thesis)");
   grid_cmd->add_option("--z-scale", go.z_scale, "PGM: height = sample value x this (default 1)");
   grid_cmd->add_option("--spacing", go.spacing, "Sample distance, overriding the file's (default: file, or 1)");
+  CLI::Option* cyl_flag = grid_cmd->add_flag("--cylindrical", go.cylindrical,
+                                             "The grid holds a cylindrical scan's radii (0 or NODATA: no return); a 3D mesh");
+  grid_cmd->add_option("--height-step", go.height_step, "Cylindrical: scene units per row (default: the file's cell size, or 1)")->needs(cyl_flag);
+  grid_cmd->add_option("--angle-step", go.angle_step, "Cylindrical: degrees per column (default 360 / columns: a full turn)")->needs(cyl_flag);
+  std::string axis = "y";
+  grid_cmd->add_option("--axis", axis, "Cylindrical: the axis, x, y (default) or z")->check(CLI::IsMember({"x", "y", "z"}))->needs(cyl_flag);
   grid_cmd->add_flag("--no-obj", no_obj, "Do not write grid.obj");
   grid_cmd->add_flag("--no-ply", no_ply, "Do not write grid.ply");
   grid_cmd->add_flag("--no-glb", no_glb, "Do not write grid.glb");
@@ -438,6 +448,7 @@ int main(int argc, char** argv) {
               : gaps == "fill" ? lodstream::GridGaps::fill
                                : lodstream::GridGaps::extra_vertices;
     go.method = method == "growth" ? lodstream::GridMethod::growth : lodstream::GridMethod::subdivision;
+    go.axis = axis == "x" ? lodstream::GridAxis::x : axis == "z" ? lodstream::GridAxis::z : lodstream::GridAxis::y;
     go.write_obj = !no_obj;
     go.write_ply = !no_ply;
     go.write_glb = !no_glb;

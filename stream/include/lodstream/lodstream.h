@@ -246,6 +246,7 @@ Result report(const ReportOptions& report, const Options& options, Report* out);
 enum class GridSplit { center, first, greatest, curvature, random };  // where a failing polygon splits
 enum class GridGaps { none, extra_vertices, fill };  // corners only (cracks), extra vertices, fill polygons
 enum class GridMethod { subdivision, growth };
+enum class GridAxis { x, y, z };  // the axis of a cylindrical scan
 
 struct GridOptions {
   std::string output_dir;  // created if missing; grid.obj, grid.ply, grid.glb and summary.json go here
@@ -272,6 +273,17 @@ struct GridOptions {
   // triangles. The tolerance holds for the drawn triangles only: a viewer triangulates an n-gon its own
   // way (mostly as a fan from its first corner), which may leave the tolerance.
   bool polygons = false;
+  // A cylindrical range grid (a Cyberware scan, DeHaemer 1989 §II.B): the samples are radii (PGM: value
+  // · z_scale), 0 or NODATA is no return (a hole); column i is at longitude i · angle_step about `axis`
+  // (right-hand rule, 0 at the axis' cyclic successor: +Z for y, +X for z, +Y for x), row j at height
+  // (rows - 1 - j) · height_step above the last row (plus the ASC's yll). Empty top and bottom rows are
+  // trimmed. The tolerance then bounds each sample's radius error along its ray from the axis, measured
+  // on the 3D triangles drawn; a full turn (columns · angle_step = 360) is closed at the seam with
+  // shared vertices. The output is a 3D mesh, open at the top and bottom rims (not capped).
+  bool cylindrical = false;
+  double height_step = 0;  // scene units per row; 0 = the file's cell size (ASC) or 1. Not with spacing.
+  double angle_step = 0;   // degrees per column; 0 = 360 / columns. Columns may not cover more than 360.
+  GridAxis axis = GridAxis::y;  // grid.obj and grid.ply; grid.glb always has the axis on glTF's up (Y)
 };
 
 struct GridReport {
@@ -291,6 +303,11 @@ struct GridReport {
   uint64_t t_junctions = 0, gaps = 0, cracks = 0;  // cracks: gaps left open (GridGaps::none)
   double max_gap = 0;
   uint64_t trials = 0, verify_splits = 0, merges = 0;
+  // Cylindrical grids: max_error and rms_error are radius errors along the samples' rays, measured on the
+  // written (float) vertices; the empty rows trimmed at the top and bottom; closed: a full turn.
+  uint32_t trimmed_rows_top = 0, trimmed_rows_bottom = 0;
+  double angle_step = 0, height_step = 0;  // degrees, scene units
+  bool closed = false;
   std::vector<std::string> files;       // written, relative to the output directory
   std::vector<StageStats> stages;
   double seconds = 0;
