@@ -203,7 +203,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
                                     const std::string& canonical_path, const std::string& prefix,
                                     std::span<const EmitLevel> group, uint64_t records,
                                     const core::ClusterOptions& cluster, const EmitOptions& options,
-                                    Progress& progress, EmitScratch& emit_scratch, core::LodMesh* out) {
+                                    Progress& progress, EmitScratch& emit_scratch, const EmitSink& sink) {
   const size_t nl = group.size();
   if (nl == 0) return {};
   std::vector<LevelState> levels(nl);
@@ -694,7 +694,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     counts[l].triangles = mesh.triangle_count();
     counts[l].edges = mesh.edge_count();
     counts[l].points = mesh.point_count();
-    out[l] = std::move(mesh);
+    sink(l, mesh);
   }
   return counts;
 }

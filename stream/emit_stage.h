@@ -29,6 +29,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <string>
 #include <vector>
@@ -71,13 +72,17 @@ struct EmitLevel {
 // Emits the levels of `group` (cells of all of them together fit in 64 bits per vertex: the sum over the
 // levels of emit_bits(cells)) in one pass over the input: each triangle's corners, positions and quadric
 // are read and formed once and serve every level. Every level gets the same bytes as when emitted alone:
-// its sums are still formed per block and merged in block order. `out` receives one mesh per level.
-// `canonical_path` empty: every stored vertex is canonical. `prefix`: the cluster stage's files.
+// its sums are still formed per block and merged in block order. `sink(i, mesh)` receives the mesh of
+// group[i] as soon as it is finished, in group order, and may consume it (move from it): it is freed when
+// the call returns, before the next level's mesh is built, so that one finished mesh is held at a time.
+// With options.count_only the sink is not called. `canonical_path` empty: every stored vertex is canonical.
+// `prefix`: the cluster stage's files.
+using EmitSink = std::function<void(size_t, core::LodMesh&)>;
 std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
                                     const std::string& canonical_path, const std::string& prefix,
                                     std::span<const EmitLevel> group, uint64_t records,
                                     const core::ClusterOptions& cluster, const EmitOptions& options,
-                                    Progress& progress, EmitScratch& scratch, core::LodMesh* out);
+                                    Progress& progress, EmitScratch& scratch, const EmitSink& sink);
 
 // Memory model of the grouping. A level of C cells takes emit_bits(C) bits of each packed map record.
 unsigned emit_bits(uint64_t cells);

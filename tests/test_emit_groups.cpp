@@ -67,13 +67,20 @@ TEST(EmitGroups, SameMeshesAloneAndGrouped) {
     const core::ClusterOptions copts;
     const stream::EmitOptions eo{rep, so.crease_degrees, true, false};
     std::vector<core::LodMesh> alone(levels.size()), four(4), pair(2);
+    // Each mesh comes to the sink once, in group order.
+    auto into = [](std::vector<core::LodMesh>& meshes, size_t offset) {
+      return [&meshes, offset, next = size_t{0}](size_t i, core::LodMesh& mesh) mutable {
+        EXPECT_EQ(i, next++);
+        meshes[offset + i] = std::move(mesh);
+      };
+    };
     for (size_t l = 0; l < levels.size(); ++l)
       stream::emit_levels(store_dir, meta, canonical, prefix, std::span(&levels[l], 1), records, copts, eo, progress,
-                          scratch, &alone[l]);
+                          scratch, into(alone, l));
     stream::emit_levels(store_dir, meta, canonical, prefix, std::span(levels).subspan(1), records, copts, eo, progress,
-                        scratch, four.data());
+                        scratch, into(four, 0));
     const stream::EmitLevel skip[2] = {levels[3], levels[0]};  // any levels, in any order
-    stream::emit_levels(store_dir, meta, canonical, prefix, skip, records, copts, eo, progress, scratch, pair.data());
+    stream::emit_levels(store_dir, meta, canonical, prefix, skip, records, copts, eo, progress, scratch, into(pair, 0));
     for (size_t l = 0; l < levels.size(); ++l) EXPECT_GT(alone[l].triangle_count(), 0u);
     for (size_t l = 1; l < levels.size(); ++l)
       expect_same_mesh(alone[l], four[l - 1], "level " + std::to_string(l) + " with levels 1 to 4");
