@@ -168,11 +168,6 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
 
 uint64_t emit_map_bytes(uint64_t vertices, unsigned bits) { return (vertices * bits + 63) / 64 * 8 + 8; }
 
-uint64_t mesh_bytes(const core::LodMesh& m) {
-  return 4 * (m.positions.capacity() + m.normals.capacity() + m.triangles.capacity() + m.edges.capacity() +
-              m.thickness.capacity() + m.points.capacity());
-}
-
 void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives,
                        uint64_t budget, uint64_t resident, const EmitOptions& options) {
   const uint64_t need =
@@ -181,7 +176,7 @@ void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t v
   fail(Status::usage, "emitting level " + std::to_string(first) + " (" + std::to_string(cells[first]) +
                           " cells) needs about " + std::to_string(need >> 20) + " MiB, more than --memory allows (" +
                           std::to_string(budget >> 20) + " MiB for the stage" +
-                          (resident ? ", the finer levels' meshes included" : "") +
+                          (resident ? ", what is already held included" : "") +
                           "): raise --memory, or make the level coarser (--cell-sizes, --target-triangles)");
 }
 

@@ -92,15 +92,14 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
 // The packed cluster maps of `vertices` stored vertices at `bits` bits each.
 uint64_t emit_map_bytes(uint64_t vertices, unsigned bits);
 // The memory contract: Failure(Status::usage), naming the level, its cells and the memory it needs, when
-// level `first` alone (its map and working memory) and `resident` do not fit in `budget`, so that the
-// stage stops instead of passing the budget.
+// level `first` alone (its map and working memory) and `resident` (what the caller holds beside the stage;
+// simplify holds nothing, since it writes each level as soon as it is finished) do not fit in `budget`, so
+// that the stage stops instead of passing the budget.
 void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives,
                        uint64_t budget, uint64_t resident, const EmitOptions& options);
-// The memory a finished level's mesh holds until it is written.
-uint64_t mesh_bytes(const core::LodMesh& mesh);
 // The end of the group that starts at level `first` (levels of `cells` cells, finest first): the levels
-// after it join while their records fit in 64 bits and the map, their working memory and `resident` (the
-// finished meshes held for writing) fit in `budget`. The first level always runs, alone if need be. The
+// after it join while their records fit in 64 bits and the map, their working memory and `resident` (as in
+// check_emit_budget) fit in `budget`. The first level always runs, alone if need be. The
 // grouping changes no output byte, only how many passes the input gets.
 size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives, uint64_t budget,
                       uint64_t resident, const EmitOptions& options);
