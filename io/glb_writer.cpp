@@ -4,14 +4,17 @@
 // (KhronosGroup/glTF extensions/2.0/Vendor/MSFT_lod: `ids` on the highest level, lower levels in order;
 // extras.MSFT_screencoverage with one value per level, highest level first).
 //
-// Two passes over the levels, so the binary data is never held whole in memory: the first plans every
-// accessor and buffer view (counts, byte lengths, POSITION min/max) and builds the JSON; the second streams
-// the same blocks, in the same order, into the BIN chunk.
+// One level at a time (GlbBuilder): a level's accessors and buffer views are planned (counts, byte lengths,
+// POSITION min/max, offsets from the running BIN size) and its blocks streamed, in the same order, to a
+// scratch file; the JSON, which needs every level's plan, is written last, in front of a copy of the
+// scratch file. So neither the binary data nor more than one level's mesh is ever held whole in memory.
 #include "io/glb_writer.h"
 
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
+#include <filesystem>
 #include <limits>
 #include <vector>
 
@@ -123,7 +126,7 @@ class Plan {
   uint64_t bin_bytes_ = 0;
 };
 
-// Second pass: the BIN chunk's contents, block by block, checked against the plan.
+// The BIN chunk's contents, block by block, checked against the plan.
 class BinWriter {
  public:
   BinWriter(FileWriter& out, const std::vector<uint64_t>& view_bytes) : out_(out), view_bytes_(view_bytes) {}
@@ -164,98 +167,146 @@ void write_u32(FileWriter& out, uint64_t value) {
   out.write(&v, 4);
 }
 
+void check_level(const std::string& path, const GlbLevel& level) {
+  if (level.mesh == nullptr) fail(Status::internal, path + ": level '" + level.name + "' has no mesh");
+  if (!std::isfinite(level.screen_coverage))
+    fail(Status::internal, path + ": level '" + level.name + "' has a non-finite screen coverage");
+  if (const std::string v = core::convention_violation(*level.mesh); !v.empty())
+    fail(Status::internal, path + ": cannot write level: " + v);
+}
+
 }  // namespace
 
-void write_glb(const std::string& path, std::span<const GlbLevel> levels, const std::string& generator) {
-  if (levels.empty()) fail(Status::internal, path + ": no level to write");
-  for (const GlbLevel& level : levels) {
-    if (level.mesh == nullptr) fail(Status::internal, path + ": level '" + level.name + "' has no mesh");
-    if (!std::isfinite(level.screen_coverage))
-      fail(Status::internal, path + ": level '" + level.name + "' has a non-finite screen coverage");
-    if (const std::string v = core::convention_violation(*level.mesh); !v.empty())
-      fail(Status::internal, path + ": cannot write level: " + v);
-  }
-
-  // ---- First pass: plan the accessors and build the JSON.
+struct GlbBuilder::State {
+  std::string path, scratch, generator;
   Plan plan;
   Json nodes = Json::array();
   Json meshes = Json::array();
-  for (const GlbLevel& level : levels) {
-    const core::LodMesh& mesh = *level.mesh;
-    Json primitives = Json::array();
-    if (!mesh.triangles.empty()) {
-      const CompactTriangles c = compact_triangles(mesh);
-      Json p;
-      p["attributes"]["POSITION"] = plan.add_positions(mesh, c.vertices);
-      if (!mesh.normals.empty()) p["attributes"]["NORMAL"] = plan.add(c.vertices.size(), 3, kFloat, "VEC3", kArrayBuffer);
-      p["indices"] = plan.add(c.indices.size(), 1, kUnsignedInt, "SCALAR", kElementArrayBuffer);
-      p["material"] = 0;
-      p["mode"] = kTriangles;
-      primitives.push_back(std::move(p));
-    }
-    if (!mesh.edges.empty()) {
-      Json p;
-      p["attributes"]["POSITION"] = plan.add_positions(mesh, mesh.edges);  // both ends of every edge
-      p["attributes"]["_THICKNESS"] = plan.add(mesh.edges.size(), 1, kFloat, "SCALAR", kArrayBuffer);
-      p["material"] = 0;
-      p["mode"] = kLines;
-      primitives.push_back(std::move(p));
-    }
-    if (!mesh.points.empty()) {
-      Json p;
-      p["attributes"]["POSITION"] = plan.add_positions(mesh, mesh.points);
-      p["material"] = 0;
-      p["mode"] = kPoints;
-      primitives.push_back(std::move(p));
-    }
-    Json node;
-    node["name"] = level.name;
-    if (!primitives.empty()) {
-      node["mesh"] = meshes.size();
-      Json m;
-      m["name"] = level.name;
-      m["primitives"] = std::move(primitives);
-      meshes.push_back(std::move(m));
-    }
-    nodes.push_back(std::move(node));
+  std::vector<double> coverage;
+  FileWriter bin;  // the scratch file, opened with the first block
+  std::unique_ptr<BinWriter> blocks;
+};
+
+GlbBuilder::GlbBuilder(std::string path, std::string scratch, std::string generator) : state_(std::make_unique<State>()) {
+  state_->path = std::move(path);
+  state_->scratch = std::move(scratch);
+  state_->generator = std::move(generator);
+}
+
+GlbBuilder::~GlbBuilder() {
+  std::error_code ec;
+  std::filesystem::remove(state_->scratch, ec);  // committed by finish() but not yet removed when it failed
+}
+
+void GlbBuilder::add(const GlbLevel& level) {
+  State& s = *state_;
+  check_level(s.path, level);
+  const core::LodMesh& mesh = *level.mesh;
+  Plan& plan = s.plan;
+  const size_t first_view = plan.view_bytes().size();
+  Json primitives = Json::array();
+  CompactTriangles c;
+  if (!mesh.triangles.empty()) {
+    c = compact_triangles(mesh);
+    Json p;
+    p["attributes"]["POSITION"] = plan.add_positions(mesh, c.vertices);
+    if (!mesh.normals.empty()) p["attributes"]["NORMAL"] = plan.add(c.vertices.size(), 3, kFloat, "VEC3", kArrayBuffer);
+    p["indices"] = plan.add(c.indices.size(), 1, kUnsignedInt, "SCALAR", kElementArrayBuffer);
+    p["material"] = 0;
+    p["mode"] = kTriangles;
+    primitives.push_back(std::move(p));
   }
-  if (levels.size() > 1) {
+  if (!mesh.edges.empty()) {
+    Json p;
+    p["attributes"]["POSITION"] = plan.add_positions(mesh, mesh.edges);  // both ends of every edge
+    p["attributes"]["_THICKNESS"] = plan.add(mesh.edges.size(), 1, kFloat, "SCALAR", kArrayBuffer);
+    p["material"] = 0;
+    p["mode"] = kLines;
+    primitives.push_back(std::move(p));
+  }
+  if (!mesh.points.empty()) {
+    Json p;
+    p["attributes"]["POSITION"] = plan.add_positions(mesh, mesh.points);
+    p["material"] = 0;
+    p["mode"] = kPoints;
+    primitives.push_back(std::move(p));
+  }
+  // The whole file must stay within 4 GiB (a 32-bit length field); the BIN chunk alone already tells.
+  if (plan.bin_bytes() > UINT32_MAX) fail(Status::io_error, s.path + ": the levels do not fit in one GLB file (4 GiB at most)");
+  Json node;
+  node["name"] = level.name;
+  if (!primitives.empty()) {
+    node["mesh"] = s.meshes.size();
+    Json m;
+    m["name"] = level.name;
+    m["primitives"] = std::move(primitives);
+    s.meshes.push_back(std::move(m));
+  }
+  s.nodes.push_back(std::move(node));
+  s.coverage.push_back(level.screen_coverage);
+
+  if (plan.view_bytes().size() == first_view) return;
+  if (!s.blocks) {
+    s.bin.open(s.scratch, 1 << 20);
+    s.blocks = std::make_unique<BinWriter>(s.bin, plan.view_bytes());
+  }
+  BinWriter& bin = *s.blocks;
+  if (!mesh.triangles.empty()) {
+    bin.vec3(mesh.positions, c.vertices);
+    if (!mesh.normals.empty()) bin.vec3(mesh.normals, c.vertices);
+    bin.u32(c.indices);
+  }
+  if (!mesh.edges.empty()) {
+    bin.vec3(mesh.positions, mesh.edges);
+    bin.f32_twice(mesh.thickness);
+  }
+  if (!mesh.points.empty()) bin.vec3(mesh.positions, mesh.points);
+  if (bin.blocks() != plan.view_bytes().size()) fail(Status::internal, s.path + ": GLB data does not match its plan");
+}
+
+void GlbBuilder::finish() {
+  State& s = *state_;
+  if (s.nodes.empty()) fail(Status::internal, s.path + ": no level to write");
+  const size_t levels = s.nodes.size();
+  if (levels > 1) {
     Json ids = Json::array();
     Json coverage = Json::array();
-    for (size_t i = 0; i < levels.size(); ++i) {
+    for (size_t i = 0; i < levels; ++i) {
       if (i > 0) ids.push_back(i);
-      coverage.push_back(levels[i].screen_coverage);
+      coverage.push_back(s.coverage[i]);
     }
-    nodes[0]["extensions"]["MSFT_lod"]["ids"] = std::move(ids);
-    nodes[0]["extras"]["MSFT_screencoverage"] = std::move(coverage);
+    s.nodes[0]["extensions"]["MSFT_lod"]["ids"] = std::move(ids);
+    s.nodes[0]["extras"]["MSFT_screencoverage"] = std::move(coverage);
   }
 
   Json gltf;
-  gltf["asset"]["generator"] = generator;
+  gltf["asset"]["generator"] = s.generator;
   gltf["asset"]["version"] = "2.0";
-  if (levels.size() > 1) gltf["extensionsUsed"] = Json::array({"MSFT_lod"});
+  if (levels > 1) gltf["extensionsUsed"] = Json::array({"MSFT_lod"});
   gltf["scene"] = 0;
   gltf["scenes"] = Json::array({Json{{"nodes", Json::array({0})}}});
-  gltf["nodes"] = std::move(nodes);
-  if (!meshes.empty()) {
-    gltf["meshes"] = std::move(meshes);
+  gltf["nodes"] = std::move(s.nodes);
+  if (!s.meshes.empty()) {
+    gltf["meshes"] = std::move(s.meshes);
     Json material;
     material["pbrMetallicRoughness"]["metallicFactor"] = 0.0;  // a plain diffuse surface, not a metal
     material["doubleSided"] = true;
     gltf["materials"] = Json::array({std::move(material)});
-    gltf["accessors"] = std::move(plan.accessors());
-    gltf["bufferViews"] = std::move(plan.views());
-    gltf["buffers"] = Json::array({Json{{"byteLength", plan.bin_bytes()}}});
+    gltf["accessors"] = std::move(s.plan.accessors());
+    gltf["bufferViews"] = std::move(s.plan.views());
+    gltf["buffers"] = Json::array({Json{{"byteLength", s.plan.bin_bytes()}}});
   }
+  s.nodes = Json::array();
+  s.meshes = Json::array();
 
   std::string json = gltf.dump();
   json.resize(align4(json.size()), ' ');
-  const uint64_t bin_bytes = plan.bin_bytes();  // already a multiple of 4
+  const uint64_t bin_bytes = s.plan.bin_bytes();  // already a multiple of 4
   const uint64_t total = 12 + 8 + json.size() + (bin_bytes > 0 ? 8 + bin_bytes : 0);
-  if (total > UINT32_MAX) fail(Status::io_error, path + ": the levels do not fit in one GLB file (4 GiB at most)");
+  if (total > UINT32_MAX) fail(Status::io_error, s.path + ": the levels do not fit in one GLB file (4 GiB at most)");
+  if (bin_bytes > 0) s.bin.commit();
 
-  // ---- Second pass: header, JSON chunk, BIN chunk.
-  FileWriter out(path, 1 << 20, Sync::durable);
+  FileWriter out(s.path, 1 << 20, Sync::durable);
   write_u32(out, kMagic);
   write_u32(out, 2);
   write_u32(out, total);
@@ -265,24 +316,25 @@ void write_glb(const std::string& path, std::span<const GlbLevel> levels, const 
   if (bin_bytes > 0) {
     write_u32(out, bin_bytes);
     write_u32(out, kChunkBin);
-    BinWriter bin(out, plan.view_bytes());
-    for (const GlbLevel& level : levels) {
-      const core::LodMesh& mesh = *level.mesh;
-      if (!mesh.triangles.empty()) {
-        const CompactTriangles c = compact_triangles(mesh);
-        bin.vec3(mesh.positions, c.vertices);
-        if (!mesh.normals.empty()) bin.vec3(mesh.normals, c.vertices);
-        bin.u32(c.indices);
-      }
-      if (!mesh.edges.empty()) {
-        bin.vec3(mesh.positions, mesh.edges);
-        bin.f32_twice(mesh.thickness);
-      }
-      if (!mesh.points.empty()) bin.vec3(mesh.positions, mesh.points);
-    }
-    if (bin.blocks() != plan.view_bytes().size()) fail(Status::internal, path + ": GLB data does not match its plan");
+    std::unique_ptr<FILE, int (*)(FILE*)> in(std::fopen(s.scratch.c_str(), "rb"), &std::fclose);
+    if (!in) fail(Status::io_error, s.scratch + ": cannot reopen the GLB's binary data");
+    std::vector<char> buffer(1 << 20);
+    uint64_t copied = 0;
+    for (size_t n; (n = std::fread(buffer.data(), 1, buffer.size(), in.get())) > 0; copied += n) out.write(buffer.data(), n);
+    if (std::ferror(in.get()) || copied != bin_bytes)
+      fail(Status::io_error, s.scratch + ": cannot read back the GLB's binary data");
   }
   out.commit();
+  std::error_code ec;
+  std::filesystem::remove(s.scratch, ec);
+}
+
+void write_glb(const std::string& path, std::span<const GlbLevel> levels, const std::string& generator) {
+  if (levels.empty()) fail(Status::internal, path + ": no level to write");
+  for (const GlbLevel& level : levels) check_level(path, level);
+  GlbBuilder builder(path, path + ".bin.partial", generator);  // a name that says "not a result" even once committed
+  for (const GlbLevel& level : levels) builder.add(level);
+  builder.finish();
 }
 
 }  // namespace lodstream::io

@@ -18,8 +18,15 @@
 // - one material, {doubleSided: true}, used by every primitive;
 // - one buffer (the BIN chunk); one bufferView per accessor, 4-byte aligned, with its target.
 // The bytes depend only on the arguments (no time stamps, fixed JSON key order).
+//
+// GlbBuilder writes the same file one level at a time, so that no two levels' meshes need to be held
+// together: each level's BIN blocks go to a scratch file as the level is added (its accessors and views
+// are planned then, at the running BIN offset), and finish() writes the header and JSON chunk and copies
+// the scratch file in behind them. write_glb is a GlbBuilder given every level at once; both give the same
+// bytes.
 #pragma once
 
+#include <memory>
 #include <span>
 #include <string>
 
@@ -38,5 +45,23 @@ struct GlbLevel {
 // Failure(internal) for no levels, a non-finite screen coverage, or a mesh that breaks the conventions of
 // core/mesh.h (array sizes, indices out of range).
 void write_glb(const std::string& path, std::span<const GlbLevel> levels, const std::string& generator);
+
+class GlbBuilder {
+ public:
+  // `scratch`: where the BIN chunk is gathered (a path of its own, not created yet; removed by finish() and
+  // by the destructor).
+  GlbBuilder(std::string path, std::string scratch, std::string generator);
+  GlbBuilder(const GlbBuilder&) = delete;
+  GlbBuilder& operator=(const GlbBuilder&) = delete;
+  ~GlbBuilder();
+  // Appends the next level (finest first); the mesh is not needed after the call. Failures as write_glb.
+  void add(const GlbLevel& level);
+  // Writes `path` (through `<path>.partial`); at least one level must have been added.
+  void finish();
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
 
 }  // namespace lodstream::io

@@ -168,11 +168,6 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
 
 uint64_t emit_map_bytes(uint64_t vertices, unsigned bits) { return (vertices * bits + 63) / 64 * 8 + 8; }
 
-uint64_t mesh_bytes(const core::LodMesh& m) {
-  return 4 * (m.positions.capacity() + m.normals.capacity() + m.triangles.capacity() + m.edges.capacity() +
-              m.thickness.capacity() + m.points.capacity());
-}
-
 void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives,
                        uint64_t budget, uint64_t resident, const EmitOptions& options) {
   const uint64_t need =
@@ -181,7 +176,7 @@ void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t v
   fail(Status::usage, "emitting level " + std::to_string(first) + " (" + std::to_string(cells[first]) +
                           " cells) needs about " + std::to_string(need >> 20) + " MiB, more than --memory allows (" +
                           std::to_string(budget >> 20) + " MiB for the stage" +
-                          (resident ? ", the finer levels' meshes included" : "") +
+                          (resident ? ", what is already held included" : "") +
                           "): raise --memory, or make the level coarser (--cell-sizes, --target-triangles)");
 }
 
@@ -203,7 +198,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
                                     const std::string& canonical_path, const std::string& prefix,
                                     std::span<const EmitLevel> group, uint64_t records,
                                     const core::ClusterOptions& cluster, const EmitOptions& options,
-                                    Progress& progress, EmitScratch& emit_scratch, core::LodMesh* out) {
+                                    Progress& progress, EmitScratch& emit_scratch, const EmitSink& sink) {
   const size_t nl = group.size();
   if (nl == 0) return {};
   std::vector<LevelState> levels(nl);
@@ -689,12 +684,17 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     for (uint32_t c : L.kept_points) mesh.points.push_back(end_vertex(c));
     std::vector<std::array<uint32_t, 2>>().swap(L.kept_edges);
     std::vector<uint32_t>().swap(L.kept_points);
+    // The mesh alone goes to the sink: the cell tables (about 36 bytes a used cell) are freed first.
+    std::vector<uint32_t>().swap(slot_of);
+    std::vector<uint32_t>().swap(slot_cell);
+    std::vector<uint32_t>().swap(out_vertex);
+    std::vector<double>().swap(rep);
 
     counts[l] = L.counts;
     counts[l].triangles = mesh.triangle_count();
     counts[l].edges = mesh.edge_count();
     counts[l].points = mesh.point_count();
-    out[l] = std::move(mesh);
+    sink(l, mesh);
   }
   return counts;
 }

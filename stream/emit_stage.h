@@ -29,6 +29,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <string>
 #include <vector>
@@ -71,13 +72,17 @@ struct EmitLevel {
 // Emits the levels of `group` (cells of all of them together fit in 64 bits per vertex: the sum over the
 // levels of emit_bits(cells)) in one pass over the input: each triangle's corners, positions and quadric
 // are read and formed once and serve every level. Every level gets the same bytes as when emitted alone:
-// its sums are still formed per block and merged in block order. `out` receives one mesh per level.
-// `canonical_path` empty: every stored vertex is canonical. `prefix`: the cluster stage's files.
+// its sums are still formed per block and merged in block order. `sink(i, mesh)` receives the mesh of
+// group[i] as soon as it is finished, in group order, and may consume it (move from it): it is freed when
+// the call returns, before the next level's mesh is built, so that one finished mesh is held at a time.
+// With options.count_only the sink is not called. `canonical_path` empty: every stored vertex is canonical.
+// `prefix`: the cluster stage's files.
+using EmitSink = std::function<void(size_t, core::LodMesh&)>;
 std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
                                     const std::string& canonical_path, const std::string& prefix,
                                     std::span<const EmitLevel> group, uint64_t records,
                                     const core::ClusterOptions& cluster, const EmitOptions& options,
-                                    Progress& progress, EmitScratch& scratch, core::LodMesh* out);
+                                    Progress& progress, EmitScratch& scratch, const EmitSink& sink);
 
 // Memory model of the grouping. A level of C cells takes emit_bits(C) bits of each packed map record.
 unsigned emit_bits(uint64_t cells);
@@ -87,15 +92,14 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
 // The packed cluster maps of `vertices` stored vertices at `bits` bits each.
 uint64_t emit_map_bytes(uint64_t vertices, unsigned bits);
 // The memory contract: Failure(Status::usage), naming the level, its cells and the memory it needs, when
-// level `first` alone (its map and working memory) and `resident` do not fit in `budget`, so that the
-// stage stops instead of passing the budget.
+// level `first` alone (its map and working memory) and `resident` (what the caller holds beside the stage;
+// simplify holds nothing, since it writes each level as soon as it is finished) do not fit in `budget`, so
+// that the stage stops instead of passing the budget.
 void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives,
                        uint64_t budget, uint64_t resident, const EmitOptions& options);
-// The memory a finished level's mesh holds until it is written.
-uint64_t mesh_bytes(const core::LodMesh& mesh);
 // The end of the group that starts at level `first` (levels of `cells` cells, finest first): the levels
-// after it join while their records fit in 64 bits and the map, their working memory and `resident` (the
-// finished meshes held for writing) fit in `budget`. The first level always runs, alone if need be. The
+// after it join while their records fit in 64 bits and the map, their working memory and `resident` (as in
+// check_emit_budget) fit in `budget`. The first level always runs, alone if need be. The
 // grouping changes no output byte, only how many passes the input gets.
 size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives, uint64_t budget,
                       uint64_t resident, const EmitOptions& options);

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <span>
 
 #include <fmt/format.h>
@@ -341,22 +342,25 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         return cs.cells;
       };
 
-      // Emits every level at `sizes` with `cells` cells into `meshes`, in groups that share a pass over the
-      // input as far as the memory plan allows (stream::emit_group_end); the grouping changes no byte.
+      // Emits every level at `sizes` with `cells` cells, handing each finished mesh to `sink` (level index,
+      // mesh), in groups that share a pass over the input as far as the memory plan allows
+      // (stream::emit_group_end); the grouping changes no byte. Each mesh is written as soon as it is
+      // finished, so no finished mesh is held while the next levels are emitted.
       auto emit_all = [&](const std::vector<double>& sizes, const std::vector<uint64_t>& cells,
-                          const stream::EmitOptions& eo, std::vector<core::LodMesh>& meshes) {
+                          const stream::EmitOptions& eo, const std::function<void(size_t, core::LodMesh&)>& sink) {
+        // Every level is checked before the first is written, so that a level that cannot fit stops the run
+        // before any output file appears.
+        for (size_t l = 0; l < sizes.size(); ++l)
+          stream::check_emit_budget(cells, l, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
         std::vector<stream::EmitCounts> counts;
-        uint64_t resident = 0;  // finished meshes, held until they are written
         for (size_t first = 0; first < sizes.size();) {
-          stream::check_emit_budget(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, resident, eo);
-          const size_t end =
-              stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, resident, eo);
+          const size_t end = stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
           std::vector<stream::EmitLevel> group;
           for (size_t l = first; l < end; ++l) group.push_back({l, cells[l], sizes[l]});
-          const std::vector<stream::EmitCounts> c = stream::emit_levels(store_dir, meta, canonical, prefix, group, grade.records,
-                                                                        copts, eo, progress, scratch, &meshes[first]);
+          const std::vector<stream::EmitCounts> c =
+              stream::emit_levels(store_dir, meta, canonical, prefix, group, grade.records, copts, eo, progress, scratch,
+                                  [&](size_t i, core::LodMesh& mesh) { sink(first + i, mesh); });
           counts.insert(counts.end(), c.begin(), c.end());
-          for (size_t l = first; l < end; ++l) resident += stream::mesh_bytes(meshes[l]);
           first = end;
         }
         return counts;
@@ -385,8 +389,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
               sizes, estimated_targets, so.levels != 0, meta.triangles > 0,
               std::max(core::kMinCellSize, 4 * extent / core::kMaxSquaresPerAxis),
               [&](const std::vector<double>& s, bool triangles_only) {
-                std::vector<core::LodMesh> discarded(s.size());
-                return emit_all(s, cluster(s, nullptr), triangles_only ? count_only : counting, discarded);
+                return emit_all(s, cluster(s, nullptr), triangles_only ? count_only : counting, [](size_t, core::LodMesh&) {});
               });
           sizes = d.sizes;
           report.notice = d.notice;
@@ -403,8 +406,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
             ++report.search_iterations;
             bool all_ok = true;
             std::vector<double> next(sizes);
-            std::vector<core::LodMesh> none(n);
-            const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, count_only, none);
+            const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, count_only, [](size_t, core::LodMesh&) {});
             for (size_t l = 0; l < n; ++l) {
               const stream::EmitCounts& c = counts[l];
               const double t = static_cast<double>(so.target_triangles[l]);
@@ -436,75 +438,63 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
 
       const std::vector<uint64_t> cells = run_stage(&report.stages, "cluster", [&](StageStats& st) { return cluster(sizes, &st); });
 
-      // Emit and write.
+      // Emit and write. Each level's PLY and OBJ files and its part of the GLB are written as soon as the
+      // emit stage finishes the level (the three side by side); the write stage then assembles the GLB
+      // (io::GlbBuilder), so that no two levels' meshes are ever held together.
       stream::make_output_dir(so.output_dir);
       stream::remove_summary(so.output_dir + "/manifest.json");
       const double tan_half = std::tan(so.fov_degrees * M_PI / 360);
       const double diag = diagonal(meta.bbox);
-      std::vector<core::LodMesh> meshes(sizes.size());
+      for (size_t l = 0; l < sizes.size(); ++l) {
+        LevelStats ls;
+        ls.cell_size = sizes[l];
+        ls.cells = cells[l];
+        ls.target_triangles = so.target_triangles.empty() ? 0 : so.target_triangles[l];
+        ls.switch_distance = sizes[l] * so.resolution / (2 * so.pixels_per_cell * tan_half);
+        ls.screen_coverage = diag > 0 ? diag / (2 * ls.switch_distance * tan_half) : 0;
+        report.levels.push_back(ls);
+      }
+      const std::string generator = std::string("lodstream ") + LODSTREAM_VERSION;
+      std::unique_ptr<io::GlbBuilder> glb;
+      if (so.write_glb) glb = std::make_unique<io::GlbBuilder>(so.output_dir + "/lods.glb", work.scratch("glb"), generator);
+      auto write_level = [&](size_t l, core::LodMesh& mesh) {
+        LevelStats& ls = report.levels[l];
+        ls.vertices = mesh.vertex_count();
+        const std::vector<std::string> comments{
+            generator, fmt::format("level {} of {}, cell size {}", l, sizes.size(), sizes[l]),
+            fmt::format("clustering {} {} {}, representative {}, grading {}", name(so.clustering), name(so.cell),
+                        name(so.variant), name(so.representative), name(so.grading))};
+        const std::string stem = fmt::format("lod{}", l);
+        tbb::task_group files;
+        if (so.write_ply) files.run([&] { io::write_ply(so.output_dir + "/" + stem + ".ply", mesh, comments); });
+        if (so.write_obj) files.run([&] { io::write_obj(so.output_dir + "/" + stem + ".obj", mesh, comments); });
+        // MSFT_screencoverage: level l is shown while the coverage is at least the coverage at which the next
+        // level takes over; the last level down to one pixel.
+        if (glb) {
+          const double lower = l + 1 < sizes.size() ? report.levels[l + 1].screen_coverage : 1.0 / so.resolution;
+          files.run([&] { glb->add({&mesh, stem, lower}); });
+        }
+        files.wait();
+        if (so.write_ply) ls.files.push_back(stem + ".ply");
+        if (so.write_obj) ls.files.push_back(stem + ".obj");
+      };
       const stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
       run_stage(&report.stages, "emit", [&](StageStats&) {
-        const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, emit_options, meshes);
+        const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, emit_options, write_level);
         for (size_t l = 0; l < sizes.size(); ++l) {
-          LevelStats ls;
-          ls.cell_size = sizes[l];
-          ls.cells = cells[l];
+          LevelStats& ls = report.levels[l];
           const stream::EmitCounts& c = counts[l];
-          ls.vertices = meshes[l].vertex_count();
           ls.triangles = c.triangles;
           ls.edges = c.edges;
           ls.points = c.points;
           ls.edges_on_triangles = c.edges_on_triangles;
           ls.points_covered = c.points_covered;
-          ls.target_triangles = so.target_triangles.empty() ? 0 : so.target_triangles[l];
-          ls.switch_distance = sizes[l] * so.resolution / (2 * so.pixels_per_cell * tan_half);
-          ls.screen_coverage = diag > 0 ? diag / (2 * ls.switch_distance * tan_half) : 0;
-          report.levels.push_back(ls);
         }
         scratch = stream::EmitScratch();
       });
       run_stage(&report.stages, "write", [&](StageStats&) {
-        const std::string generator = std::string("lodstream ") + LODSTREAM_VERSION;
-        // The GLB (every level) is written by a second task while this thread writes the per-level files:
-        // the two largest files of a run then go out side by side.
-        tbb::task_group glb_task;
-        if (so.write_glb) {
-          glb_task.run([&] {
-            // MSFT_screencoverage: level l is shown while the coverage is at least the coverage at which the
-            // next level takes over; the last level down to one pixel.
-            std::vector<io::GlbLevel> glb;
-            for (size_t l = 0; l < sizes.size(); ++l) {
-              const double lower = l + 1 < sizes.size() ? report.levels[l + 1].screen_coverage : 1.0 / so.resolution;
-              glb.push_back({&meshes[l], fmt::format("lod{}", l), lower});
-            }
-            io::write_glb(so.output_dir + "/lods.glb", glb, generator);
-          });
-        }
-        try {
-          for (size_t l = 0; l < sizes.size(); ++l) {
-            const std::vector<std::string> comments{
-                generator, fmt::format("level {} of {}, cell size {}", l, sizes.size(), sizes[l]),
-                fmt::format("clustering {} {} {}, representative {}, grading {}", name(so.clustering), name(so.cell),
-                            name(so.variant), name(so.representative), name(so.grading))};
-            const std::string stem = fmt::format("lod{}", l);
-            if (so.write_ply) {
-              io::write_ply(so.output_dir + "/" + stem + ".ply", meshes[l], comments);
-              report.levels[l].files.push_back(stem + ".ply");
-            }
-            if (so.write_obj) {
-              io::write_obj(so.output_dir + "/" + stem + ".obj", meshes[l], comments);
-              report.levels[l].files.push_back(stem + ".obj");
-            }
-            progress.report("write", static_cast<double>(l + 1) / static_cast<double>(sizes.size() + 1));
-          }
-        } catch (...) {
-          try {
-            glb_task.wait();  // never leave the task running; its own failure is second to this one
-          } catch (...) {
-          }
-          throw;
-        }
-        glb_task.wait();
+        if (glb) glb->finish();
+        glb.reset();
         progress.report("write", 1);
       });
     });

@@ -1120,6 +1120,28 @@ TEST(SimplifyCli, UnwritableGlbExits74WithoutManifestOrPartialFiles) {
   }
 }
 
+TEST(SimplifyCli, GlbScratchFileLeavesTheWorkDirectory) {
+  // The GLB's binary data is gathered level by level in a scratch file of the work directory
+  // (io::GlbBuilder): gone after the run, and after a run whose GLB cannot be written.
+  test::TempDir tmp;
+  const std::string obj = tmp.write("t.obj", kTwoTriangles);
+  const std::string out = tmp.file("out"), bad = tmp.file("bad"), work = tmp.file("work");
+  auto scratch_left = [&] {
+    std::vector<std::string> left;
+    for (const std::string& f : files_under(work))
+      if (f.find("scratch") != std::string::npos) left.push_back(f);
+    return left;
+  };
+  const CliRun ok = run_cli({"simplify", obj, "-o", out, "--work", work, "--cell-sizes", "0.5,4"}, tmp);
+  EXPECT_EQ(ok.exit_code, 0) << ok.err;
+  EXPECT_TRUE(fs::exists(out + "/lods.glb"));
+  EXPECT_TRUE(scratch_left().empty()) << scratch_left().front();
+  fs::create_directories(bad + "/lods.glb/x");
+  const CliRun r = run_cli({"simplify", obj, "-o", bad, "--work", work, "--cell-sizes", "0.5,4"}, tmp);
+  EXPECT_EQ(r.exit_code, 74) << r.err;
+  EXPECT_TRUE(scratch_left().empty()) << scratch_left().front();
+}
+
 TEST(SimplifyCli, DiskFullWhileWritingLevelsExits74AndLeavesNoPartialFile) {
   test::TempDir tmp;
   const std::string mnt = tmp.file("tiny");

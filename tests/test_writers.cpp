@@ -375,6 +375,34 @@ TEST(WriterGlb, DeterministicAndSingleLevel) {
   EXPECT_THROW(io::write_glb(dir.file("none.glb"), std::span<const io::GlbLevel>(), "g"), Failure);
 }
 
+TEST(WriterGlb, BuilderLevelByLevelGivesTheSameBytes) {
+  // GlbBuilder as the simplify pipeline uses it: each level added from a mesh that is gone right after,
+  // the BIN chunk gathered in a scratch file. Same bytes as write_glb with every level at once; the scratch
+  // file is gone after finish(), and a builder dropped before finish() leaves neither it nor the GLB.
+  TempDir dir;
+  Chain c;
+  io::write_glb(dir.file("whole.glb"), c.levels, "g");
+  {
+    io::GlbBuilder b(dir.file("built.glb"), dir.file("scratch"), "g");
+    for (const io::GlbLevel& level : c.levels) {
+      const LodMesh copy = *level.mesh;
+      b.add({&copy, level.name, level.screen_coverage});
+    }
+    b.finish();
+  }
+  EXPECT_EQ(io::read_small_file(dir.file("built.glb")), io::read_small_file(dir.file("whole.glb")));
+  EXPECT_FALSE(std::filesystem::exists(dir.file("scratch")));
+  {
+    io::GlbBuilder b(dir.file("dropped.glb"), dir.file("scratch2"), "g");
+    b.add(c.levels[0]);
+    b.add(c.levels[1]);
+  }
+  for (const char* f : {"scratch2", "scratch2.partial", "dropped.glb", "dropped.glb.partial"})
+    EXPECT_FALSE(std::filesystem::exists(dir.file(f))) << f;
+  io::GlbBuilder none(dir.file("none.glb"), dir.file("scratch3"), "g");
+  EXPECT_THROW(none.finish(), Failure);
+}
+
 // --------------------------------------------------------------------------------------------- errors
 
 TEST(WriterErrors, MissingDirectoryThrowsIoErrorAndLeavesNothing) {
