@@ -54,8 +54,7 @@ Result info(const std::string& path, const Options& options, SceneInfo* out) {
       info.unused_vertices = census.unused_vertices;
     });
     info.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    info.peak_rss_bytes = 0;
-    for (const StageStats& s : info.stages) info.peak_rss_bytes = std::max(info.peak_rss_bytes, s.peak_rss_bytes);
+    info.peak_rss_bytes = stream::peak_rss_bytes();
     *out = std::move(info);
   });
 }

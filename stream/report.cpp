@@ -654,7 +654,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
       io::write_report_html(ro.output_dir + "/report.html", rep, ro, views);
     });
     rep.seconds = seconds_since(t0);
-    for (const StageStats& s : rep.stages) rep.peak_rss_bytes = std::max(rep.peak_rss_bytes, s.peak_rss_bytes);
+    rep.peak_rss_bytes = stream::peak_rss_bytes();
     // report.json last: its presence means the report is complete.
     io::write_file_atomic(ro.output_dir + "/report.json", report_json(rep, ro).dump(2) + "\n", io::Sync::durable);
     *out = std::move(rep);

@@ -412,7 +412,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       });
     });
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    for (const StageStats& s : report.stages) report.peak_rss_bytes = std::max(report.peak_rss_bytes, s.peak_rss_bytes);
+    report.peak_rss_bytes = stream::peak_rss_bytes();
 
     // manifest.json, last: its presence means the output directory is complete.
     ordered_json m;

@@ -58,10 +58,15 @@ struct Result {
   bool ok() const { return status == Status::ok; }
 };
 
+// Memory figures. A job's peak_rss_bytes is the process's VmHWM when the job ends: what outside tools see
+// (/usr/bin/time -v, a parent's getrusage ru_maxrss, cgroups), never reset by lodstream, so in a process
+// that did other work first it includes that work's peak. A stage's peak_rss_bytes is the highest resident
+// set (mapped file pages included) sampled every 5 ms while the stage ran, by a thread the job runs for it:
+// a sampled figure, which can miss a spike shorter than the interval (the job's VmHWM cannot).
 struct StageStats {
   std::string name;
   double seconds = 0;
-  uint64_t peak_rss_bytes = 0;  // VmHWM during the stage
+  uint64_t peak_rss_bytes = 0;  // highest resident set sampled during the stage
   bool reused = false;          // the stage's output was already in the work directory
 };
 
@@ -86,12 +91,10 @@ struct SceneInfo {
   double bbox_max[3] = {0, 0, 0};
   std::vector<StageStats> stages;
   double seconds = 0;
-  uint64_t peak_rss_bytes = 0;
+  uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)
 };
 
 // Ingests `path` into the scene store of the work directory and reports its statistics.
-// To measure each stage's peak on its own, the process's VmHWM is reset at each stage boundary
-// (Linux /proc/self/clear_refs); read peak_rss_bytes() before calling if you need the earlier peak.
 Result info(const std::string& path, const Options& options, SceneInfo* out);
 
 // ---- simplify: the LOD pipeline (grade -> sort -> cluster -> emit -> write) ----
@@ -151,7 +154,7 @@ struct SimplifyReport {
   double search_seconds = 0;
   std::vector<StageStats> stages;
   double seconds = 0;
-  uint64_t peak_rss_bytes = 0;
+  uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)
 };
 
 // Simplifies `input` into the levels described by `simplify`, writing them and manifest.json into
@@ -223,7 +226,7 @@ struct Report {
   double query_seconds = 0;
   std::vector<StageStats> stages;
   double seconds = 0;
-  uint64_t peak_rss_bytes = 0;
+  uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)
 };
 
 // Measures every level of every run, writing report.json (written last), report.html and the CSVs.
@@ -277,7 +280,7 @@ struct GridReport {
   std::vector<std::string> files;       // written, relative to the output directory
   std::vector<StageStats> stages;
   double seconds = 0;
-  uint64_t peak_rss_bytes = 0;
+  uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)
 };
 
 // Reads the height grid `input` (io/grid_reader.h formats), subdivides it and writes the polygons and
