@@ -2,6 +2,7 @@
 // Result at the API boundary.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <new>
 #include <type_traits>
@@ -24,7 +25,9 @@ auto run_stage(std::vector<StageStats>* stages, const char* name, Body&& body) {
   st.name = name;
   auto finish = [&] {
     st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    st.peak_rss_bytes = peak.bytes();
+    // The kernel's resident counters are per-CPU and read approximately (a few pages either way), so a
+    // sample can exceed the high-water mark read later; the true resident set never does.
+    st.peak_rss_bytes = std::min(peak.bytes(), peak_rss_bytes());
     stages->push_back(st);
   };
   if constexpr (std::is_void_v<decltype(body(st))>) {

@@ -1,5 +1,6 @@
 #include "stream/work_dir.h"
 
+#include <signal.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -23,12 +24,30 @@ void make_dirs(const std::string& path) {
   if (access(path.c_str(), W_OK) != 0)
     fail(Status::io_error, path + ": work directory is not writable: " + std::strerror(errno));
 }
+// Scratch files are named scratch-<stem>-<pid>-<n> (WorkDir::scratch). Removes those of process `pid`,
+// or with pid 0 those of processes that no longer run (a run killed mid-stage leaves its own behind).
+void remove_scratch(const std::string& dir, pid_t pid) {
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind("scratch-", 0) != 0) continue;
+    const size_t last = name.rfind('-');
+    const size_t before = last == std::string::npos || last == 0 ? std::string::npos : name.rfind('-', last - 1);
+    if (before == std::string::npos) continue;
+    const pid_t owner = static_cast<pid_t>(std::strtol(name.c_str() + before + 1, nullptr, 10));
+    if (owner <= 0) continue;
+    const bool stale = pid ? owner == pid : owner == getpid() || (kill(owner, 0) != 0 && errno == ESRCH);
+    std::error_code e2;
+    if (stale) fs::remove(it->path(), e2);
+  }
+}
 }  // namespace
 
 WorkDir::WorkDir(const std::string& path) {
   if (!path.empty()) {
     path_ = path;
     make_dirs(path_);
+    remove_scratch(path_, 0);
     return;
   }
   const char* base = std::getenv("TMPDIR");
@@ -40,10 +59,10 @@ WorkDir::WorkDir(const std::string& path) {
 }
 
 WorkDir::~WorkDir() {
-  if (temporary_) {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
+  std::error_code ec;
+  if (temporary_) fs::remove_all(path_, ec);
+  // A job that failed (a full disk, say) leaves no scratch behind to fill the disk of the rerun.
+  else remove_scratch(path_, getpid());
 }
 
 std::string WorkDir::subdir(std::string_view name) const {
