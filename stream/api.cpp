@@ -9,6 +9,7 @@
 #include "core/status.h"
 #include "io/file_writer.h"
 #include "lodstream/lodstream.h"
+#include "stream/disk_space.h"
 #include "stream/ingest.h"
 #include "stream/job.h"
 #include "stream/kill_point.h"
@@ -29,6 +30,7 @@ Result info(const std::string& path, const Options& options, SceneInfo* out) {
     const stream::MemoryPlan plan = stream::plan_memory(options);
     stream::Progress progress(options);
     stream::WorkDir work(options.work_dir);
+    if (options.check_disk_space) stream::check_info_space(path, work.path());
     const std::string store_dir = work.subdir("store");
     SceneInfo info;
     tbb::task_arena arena(static_cast<int>(plan.threads));
@@ -62,8 +64,8 @@ Result info(const std::string& path, const Options& options, SceneInfo* out) {
       info.unused_vertices = census.unused_vertices;
     });
     info.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    info.peak_rss_bytes = 0;
-    for (const StageStats& s : info.stages) info.peak_rss_bytes = std::max(info.peak_rss_bytes, s.peak_rss_bytes);
+    info.peak_rss_bytes = stream::peak_rss_bytes();
+    info.work_dir = stream::work_dir_usage(work.path(), info.file_bytes);
     *out = std::move(info);
   });
 }

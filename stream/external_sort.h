@@ -5,7 +5,8 @@
 // otherwise by a k-way heap merge of the runs with one read buffer per run, the last run being the
 // records still in the buffer (sorted, never written: writes into the page cache cost more than the
 // sort); each run file is deleted as soon as it is exhausted (DuckDB's "free merged runs behind the
-// readers"). Memory: the buffer, then the buffer's records and the run readers within the same budget
+// readers"), and where the file system allows, the blocks of a run are released as they are read.
+// Memory: the buffer, then the buffer's records and the run readers within the same budget
 // (but at least 4096 records of read buffer per run file).
 //
 // Determinism: `Less` must be a total order on everything that distinguishes two records (break ties by
@@ -136,7 +137,8 @@ class ExternalSorter {
     void open(const Run& run, uint64_t records) {
       path_ = run.path;
       left_ = run.records;
-      fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+      // Read-write only to release what has been read (refill()).
+      fd_ = ::open(path_.c_str(), O_RDWR | O_CLOEXEC);
       if (fd_ < 0) fail(Status::io_error, path_ + ": cannot open sort run: " + std::strerror(errno));
       buf_.resize(static_cast<size_t>(std::min<uint64_t>(records, std::max<uint64_t>(left_, 1))));
       refill();
@@ -166,6 +168,14 @@ class ExternalSorter {
    private:
     void refill() {
       pos_ = len_ = 0;
+      // Every record read so far has been visited: give its blocks back to the file system, so that the
+      // runs shrink while the merged output grows and the merge needs little more disk than its output.
+      // Where the file system cannot punch holes the run is freed at the end, as before.
+      if (read_bytes_ > punched_bytes_) {
+        fallocate(fd_, FALLOC_FL_PUNCH_HOLE | FALLOC_FL_KEEP_SIZE, static_cast<off_t>(punched_bytes_),
+                  static_cast<off_t>(read_bytes_ - punched_bytes_));
+        punched_bytes_ = read_bytes_;
+      }
       if (left_ == 0) return;
       const size_t n = static_cast<size_t>(std::min<uint64_t>(left_, buf_.size()));
       char* p = reinterpret_cast<char*>(buf_.data());
@@ -176,6 +186,7 @@ class ExternalSorter {
         if (r <= 0) fail(Status::io_error, path_ + ": cannot read sort run: " + std::strerror(r < 0 ? errno : EIO));
         got += static_cast<size_t>(r);
       }
+      read_bytes_ += want;
       data_ = buf_.data();
       len_ = n;
       left_ -= n;
@@ -183,6 +194,7 @@ class ExternalSorter {
     std::string path_;
     int fd_ = -1;
     uint64_t left_ = 0;
+    uint64_t read_bytes_ = 0, punched_bytes_ = 0;
     std::vector<Rec> buf_;
     const Rec* data_ = nullptr;  // buf_, or the records given to open_memory
     size_t pos_ = 0, len_ = 0;

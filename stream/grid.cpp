@@ -403,7 +403,7 @@ Result grid(const std::string& input, const GridOptions& go, const Options& opti
       progress.report("write", 1);
     });
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    for (const StageStats& s : report.stages) report.peak_rss_bytes = std::max(report.peak_rss_bytes, s.peak_rss_bytes);
+    report.peak_rss_bytes = stream::peak_rss_bytes();
 
     ordered_json j;
     j["generator"] = generator;

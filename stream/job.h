@@ -2,6 +2,7 @@
 // Result at the API boundary.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <new>
 #include <type_traits>
@@ -14,16 +15,19 @@
 namespace lodstream::stream {
 
 // Runs `body(StageStats&)` as the named stage and appends its time and peak memory to `stages`. The
-// process's VmHWM is reset first, so each stage's peak is its own.
+// stage's peak is sampled (StagePeak): the process's VmHWM is never reset, so that outside tools see the
+// whole run's peak.
 template <class Body>
 auto run_stage(std::vector<StageStats>* stages, const char* name, Body&& body) {
-  reset_peak_rss();
+  StagePeak peak;
   const auto t0 = std::chrono::steady_clock::now();
   StageStats st;
   st.name = name;
   auto finish = [&] {
     st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    st.peak_rss_bytes = peak_rss_bytes();
+    // The kernel's resident counters are per-CPU and read approximately (a few pages either way), so a
+    // sample can exceed the high-water mark read later; the true resident set never does.
+    st.peak_rss_bytes = std::min(peak.bytes(), peak_rss_bytes());
     stages->push_back(st);
   };
   if constexpr (std::is_void_v<decltype(body(st))>) {

@@ -4,10 +4,15 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
+#include <condition_variable>
 #include <cstdio>
 #include <cstring>
+#include <mutex>
 #include <string>
+#include <system_error>
 #include <thread>
+#include <vector>
 
 #include "core/status.h"
 
@@ -41,12 +46,87 @@ uint64_t physical_memory_bytes() {
 
 uint64_t peak_rss_bytes() { return status_field_kib("VmHWM") << 10; }
 
-bool reset_peak_rss() {
-  const int fd = open("/proc/self/clear_refs", O_WRONLY | O_CLOEXEC);
-  if (fd < 0) return false;
-  const bool ok = write(fd, "5", 1) == 1;
+uint64_t resident_bytes() {
+  // statm is "size resident shared ..." in pages; one short read, cheaper than parsing status.
+  const int fd = open("/proc/self/statm", O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return 0;
+  char buf[128];
+  const ssize_t n = read(fd, buf, sizeof buf - 1);
   close(fd);
-  return ok;
+  if (n <= 0) return 0;
+  buf[n] = 0;
+  char* p = nullptr;
+  std::strtoull(buf, &p, 10);
+  static const uint64_t page = static_cast<uint64_t>(sysconf(_SC_PAGESIZE));
+  return std::strtoull(p, nullptr, 10) * page;
+}
+
+// The process-wide sampler behind StagePeak. `lifecycle` serialises starting and stopping the thread (a
+// stop joins it, and the thread needs `m` to finish its tick, so the join cannot happen under `m`).
+struct RssSampler {
+  std::mutex lifecycle;
+  std::mutex m;
+  std::condition_variable wake;
+  std::vector<StagePeak*> live;  // guarded by m
+  bool stop = false;             // guarded by m
+  std::thread thread;            // guarded by lifecycle
+
+  static RssSampler& get() {
+    // Never destroyed: a StagePeak in a static object's destructor must still find it.
+    static RssSampler* s = new RssSampler;
+    return *s;
+  }
+
+  void run() {
+    std::unique_lock lock(m);
+    while (!stop) {
+      const uint64_t rss = resident_bytes();
+      for (StagePeak* p : live) p->peak_ = std::max(p->peak_, rss);
+      wake.wait_for(lock, std::chrono::milliseconds(kRssSampleMilliseconds), [&] { return stop; });
+    }
+  }
+
+  void add(StagePeak* p) {
+    std::lock_guard life(lifecycle);
+    {
+      std::lock_guard lock(m);
+      p->peak_ = resident_bytes();
+      live.push_back(p);
+    }
+    if (!thread.joinable()) {
+      try {
+        thread = std::thread([this] { run(); });
+      } catch (const std::system_error&) {
+        // No thread to spare: the stage's peak is then its resident set at start and end.
+      }
+    }
+  }
+
+  void remove(StagePeak* p) {
+    std::lock_guard life(lifecycle);
+    {
+      std::lock_guard lock(m);
+      live.erase(std::find(live.begin(), live.end(), p));
+      if (!live.empty() || !thread.joinable()) return;
+      stop = true;
+    }
+    wake.notify_all();
+    thread.join();
+    std::lock_guard lock(m);
+    stop = false;
+  }
+};
+
+StagePeak::StagePeak() { RssSampler::get().add(this); }
+
+StagePeak::~StagePeak() { RssSampler::get().remove(this); }
+
+uint64_t StagePeak::bytes() {
+  RssSampler& s = RssSampler::get();
+  const uint64_t now = resident_bytes();
+  std::lock_guard lock(s.m);
+  peak_ = std::max(peak_, now);
+  return peak_;
 }
 
 MemoryPlan plan_memory(const Options& options) {

@@ -8,10 +8,33 @@
 namespace lodstream::stream {
 
 uint64_t physical_memory_bytes();
-uint64_t peak_rss_bytes();     // VmHWM
-// Resets VmHWM to the current RSS (Linux: "5" into /proc/self/clear_refs), so that a stage's peak can be
-// measured on its own. Returns false where the kernel does not allow it.
-bool reset_peak_rss();
+// The process's peak resident set so far (VmHWM): what outside tools see (/usr/bin/time -v, a parent's
+// getrusage ru_maxrss, cgroups). Never reset: a job's peak is the whole process's.
+uint64_t peak_rss_bytes();
+// The resident set now (/proc/self/statm), mapped file pages included; 0 if unknown.
+uint64_t resident_bytes();
+
+// How often StagePeak samples the resident set.
+inline constexpr unsigned kRssSampleMilliseconds = 5;
+
+// The highest resident set while a stage runs, measured without touching VmHWM: while any StagePeak is
+// alive, one process-wide sampler thread reads the resident set every kRssSampleMilliseconds and raises
+// the peak of every live StagePeak. A sampled figure: a spike shorter than the interval can be missed
+// (VmHWM, the run's figure, has it). Concurrent stages (several jobs in one process) see the same
+// process-wide resident set.
+class StagePeak {
+ public:
+  StagePeak();   // samples now, and starts the sampler thread if it is not running
+  ~StagePeak();  // stops the sampler thread when no other StagePeak is alive
+  StagePeak(const StagePeak&) = delete;
+  StagePeak& operator=(const StagePeak&) = delete;
+  // The highest resident set sampled since construction, a sample taken now included.
+  uint64_t bytes();
+
+ private:
+  friend struct RssSampler;
+  uint64_t peak_ = 0;  // guarded by the sampler's mutex
+};
 
 // How a job spends its memory budget. Derived from Options only, never from the input, and nothing in it
 // may change an output byte: it sizes buffers, it does not choose algorithms.

@@ -40,6 +40,7 @@
 #include <fmt/format.h>
 #include "lodstream/lodstream.h"
 #include "stream/ingest.h"
+#include "stream/disk_space.h"
 #include "stream/job.h"
 #include "stream/kill_point.h"
 #include "stream/memory.h"
@@ -576,6 +577,7 @@ nlohmann::ordered_json report_json(const Report& rep, const ReportOptions& ro) {
     stages.push_back({{"name", s.name}, {"seconds", s.seconds}, {"peak_rss_bytes", s.peak_rss_bytes}, {"reused", s.reused}});
   j["seconds"] = rep.seconds;
   j["peak_rss_bytes"] = rep.peak_rss_bytes;
+  j["work_dir"] = stream::work_dir_json(rep.work_dir);
   return j;
 }
 
@@ -595,9 +597,17 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     const std::vector<RunSpec> runs = resolve_runs(ro);
     stream::Progress progress(options);
     stream::WorkDir work(options.work_dir);
+    if (options.check_disk_space) {
+      std::vector<std::string> originals;
+      for (const RunSpec& r : runs)
+        if (std::find(originals.begin(), originals.end(), absolute(r.original)) == originals.end())
+          originals.push_back(absolute(r.original));
+      stream::check_report_space(originals, work.path());
+    }
     stream::make_output_dir(ro.output_dir);
     stream::remove_summary(ro.output_dir + "/report.json");
     Report rep;
+    uint64_t input_bytes = 0;  // the originals'
     rep.runs.resize(runs.size());
     std::vector<std::vector<std::vector<io::HtmlView>>> views(runs.size());
     std::vector<std::vector<std::string>> csvs(runs.size());
@@ -619,6 +629,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         bool reused = false;
         const stream::StoreMeta meta =
             stream::run_ingest_stage(originals[g], store_dir, plan, work, progress, &rep.stages, &scene, &reused);
+        input_bytes += scene.file_bytes;
         Original o;
         o.path = originals[g];
         run_stage(&rep.stages, "load", [&](StageStats&) { load_original(store_dir, meta, ro, original_limit, progress, &o); });
@@ -656,7 +667,8 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
       io::write_report_html(ro.output_dir + "/report.html", rep, ro, views);
     });
     rep.seconds = seconds_since(t0);
-    for (const StageStats& s : rep.stages) rep.peak_rss_bytes = std::max(rep.peak_rss_bytes, s.peak_rss_bytes);
+    rep.peak_rss_bytes = stream::peak_rss_bytes();
+    rep.work_dir = stream::work_dir_usage(work.path(), input_bytes);
     // report.json last: its presence means the report is complete.
     stream::kill_point("report.json");
     io::write_file_atomic(ro.output_dir + "/report.json", report_json(rep, ro).dump(2) + "\n", io::Sync::durable);

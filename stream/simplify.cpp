@@ -25,6 +25,7 @@
 #include "io/ply_writer.h"
 #include "lodstream/lodstream.h"
 #include "stream/cluster_stage.h"
+#include "stream/disk_space.h"
 #include "stream/emit_stage.h"
 #include "stream/grade_stage.h"
 #include "stream/ingest.h"
@@ -257,6 +258,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     const stream::MemoryPlan plan = stream::plan_memory(options);
     stream::Progress progress(options);
     stream::WorkDir work(options.work_dir);
+    if (options.check_disk_space) stream::check_simplify_space(input, so, work.path());
     const std::string store_dir = work.subdir("store");
     const core::ClusterOptions copts = cluster_options(so);
     SimplifyReport report;
@@ -499,7 +501,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       });
     });
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    for (const StageStats& s : report.stages) report.peak_rss_bytes = std::max(report.peak_rss_bytes, s.peak_rss_bytes);
+    report.peak_rss_bytes = stream::peak_rss_bytes();
+    report.work_dir = stream::work_dir_usage(work.path(), report.scene.file_bytes);
 
     // manifest.json, last: its presence means the output directory is complete.
     ordered_json m;
@@ -555,6 +558,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     m["stages"] = stages;
     m["seconds"] = report.seconds;
     m["peak_rss_bytes"] = report.peak_rss_bytes;
+    m["work_dir"] = stream::work_dir_json(report.work_dir);
     stream::kill_point("manifest.json");
     io::write_file_atomic(so.output_dir + "/manifest.json", m.dump(2) + "\n", io::Sync::durable);
     *out = std::move(report);

@@ -24,25 +24,22 @@ void make_dirs(const std::string& path) {
   if (access(path.c_str(), W_OK) != 0)
     fail(Status::io_error, path + ": work directory is not writable: " + std::strerror(errno));
 }
-
-// Scratch files are named scratch-STEM-PID-N (WorkDir::scratch). A process removes its own when done, so
-// one whose PID is no longer running was left by a killed run and is never read again; a live process's
-// (another job on the same work directory) is left alone.
-void remove_stale_scratch(const std::string& dir) {
+// Scratch files are named scratch-<stem>-<pid>-<n> (WorkDir::scratch). Removes those of process `pid`,
+// or with pid 0 those of processes that no longer run (a run killed mid-stage leaves its own behind).
+void remove_scratch(const std::string& dir, pid_t pid) {
   std::error_code ec;
-  for (auto it = fs::directory_iterator(dir, ec); !ec && it != fs::directory_iterator(); it.increment(ec)) {
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     const std::string name = it->path().filename().string();
     if (name.rfind("scratch-", 0) != 0) continue;
     const size_t last = name.rfind('-');
     const size_t before = last == std::string::npos || last == 0 ? std::string::npos : name.rfind('-', last - 1);
     if (before == std::string::npos) continue;
-    char* end = nullptr;
-    const long pid = std::strtol(name.c_str() + before + 1, &end, 10);
-    if (end != name.c_str() + last || pid <= 0) continue;
-    if (pid == getpid() || (::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH)) {
-      std::error_code rm;
-      fs::remove(it->path(), rm);
-    }
+    char* digits_end = nullptr;
+    const pid_t owner = static_cast<pid_t>(std::strtol(name.c_str() + before + 1, &digits_end, 10));
+    if (digits_end != name.c_str() + last || owner <= 0) continue;
+    const bool stale = pid ? owner == pid : owner == getpid() || (kill(owner, 0) != 0 && errno == ESRCH);
+    std::error_code e2;
+    if (stale) fs::remove(it->path(), e2);
   }
 }
 }  // namespace
@@ -51,7 +48,7 @@ WorkDir::WorkDir(const std::string& path) {
   if (!path.empty()) {
     path_ = path;
     make_dirs(path_);
-    remove_stale_scratch(path_);
+    remove_scratch(path_, 0);
     return;
   }
   const char* base = std::getenv("TMPDIR");
@@ -63,10 +60,10 @@ WorkDir::WorkDir(const std::string& path) {
 }
 
 WorkDir::~WorkDir() {
-  if (temporary_) {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
+  std::error_code ec;
+  if (temporary_) fs::remove_all(path_, ec);
+  // A job that failed (a full disk, say) leaves no scratch behind to fill the disk of the rerun.
+  else remove_scratch(path_, getpid());
 }
 
 std::string WorkDir::subdir(std::string_view name) const {

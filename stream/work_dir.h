@@ -1,5 +1,6 @@
 // The job's work directory: the scene store and every intermediate file live here, so a stage can be
-// rerun, resumed or inspected on its own. A temporary work directory is removed with the object.
+// rerun, resumed or inspected on its own. A temporary work directory is removed with the object; a kept
+// one loses its scratch files (scratch()) with the object, and those of dead processes when opened.
 #pragma once
 
 #include <atomic>

@@ -47,7 +47,7 @@ std::string grid_obj(int n, double z) {
 // report.json without what may differ between runs (times, memory, the directory of the files).
 json figures(const std::string& path) {
   json j = json::parse(read_file(path));
-  j.erase("stages"), j.erase("seconds"), j.erase("peak_rss_bytes"), j.erase("performance");
+  j.erase("stages"), j.erase("seconds"), j.erase("peak_rss_bytes"), j.erase("performance"), j.erase("work_dir");
   for (auto& run : j["runs"]) {
     run.erase("name");
     for (auto& level : run["levels"]) level.erase("seconds"), level.erase("file");

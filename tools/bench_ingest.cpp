@@ -1,6 +1,7 @@
 // Ingest benchmark: for each file, `cat FILE > /dev/null` and `lodstream info FILE` run in the same
 // process tree, alternately, several times; prints medians, throughputs, their ratio, and the peak
-// resident memory of the lodstream child (ru_maxrss, i.e. its VmHWM, mapped pages included).
+// resident memory of the lodstream child (ru_maxrss, i.e. its VmHWM, mapped pages included: the whole
+// run's peak; before issue 13.3 lodstream reset VmHWM at each stage, and this showed the last stage's).
 //
 // usage: bench_ingest [--runs N] [--memory 1G] [--threads N] [--lodstream PATH] [--work-root DIR]... FILE...
 // The first run of each file also warms the page cache; the benchmark measures files in page cache.

@@ -157,9 +157,6 @@ for run in $(seq 1 "$runs"); do
     busy=$(busy_since "$b0")
     if [[ $rc -eq 0 && -f "$out/manifest.json" ]]; then
       read -r wall rss cpu < <(time_fields "$work/lodstream.time")
-      # lodstream resets VmHWM at every stage, so /usr/bin/time sees only the last stage's peak: its peak
-      # is the largest per-stage peak in the manifest.
-      rss=$(python3 -c 'import json,sys; print(max(s["peak_rss_bytes"] for s in json.load(open(sys.argv[1]))["stages"]))' "$out/manifest.json")
       # level 0 = the finest level; its triangle count and cell size are the peers' targets
       lod_json=$(python3 - "$out/manifest.json" <<'EOF'
 import json, sys

@@ -106,6 +106,23 @@ std::string grouped(uint64_t n) {
   return s;
 }
 
+// The same object as manifest.json's and report.json's "work_dir" (stream/disk_space.h).
+nlohmann::ordered_json work_dir_json(const lodstream::WorkDirUsage& u) {
+  nlohmann::ordered_json entries = nlohmann::ordered_json::object();
+  for (const auto& [name, bytes] : u.entries) entries[name] = bytes;
+  return {{"path", u.path},
+          {"bytes", u.bytes},
+          {"input_bytes", u.input_bytes},
+          {"ratio", u.input_bytes ? static_cast<double>(u.bytes) / static_cast<double>(u.input_bytes) : 0.0},
+          {"entries", entries}};
+}
+
+std::string work_dir_text(const lodstream::WorkDirUsage& u) {
+  std::string s = human_bytes(u.bytes);
+  if (u.input_bytes) s += fmt::format(" ({:.2f}x the input)", static_cast<double>(u.bytes) / static_cast<double>(u.input_bytes));
+  return s;
+}
+
 nlohmann::ordered_json info_json(const lodstream::SceneInfo& in) {
   nlohmann::ordered_json stages = nlohmann::ordered_json::array();
   for (const auto& s : in.stages)
@@ -128,7 +145,8 @@ nlohmann::ordered_json info_json(const lodstream::SceneInfo& in) {
           {"bbox", {{"min", in.bbox_min}, {"max", in.bbox_max}}},
           {"seconds", in.seconds},
           {"peak_rss_bytes", in.peak_rss_bytes},
-          {"stages", stages}};
+          {"stages", stages},
+          {"work_dir", work_dir_json(in.work_dir)}};
 }
 
 void print_info(const lodstream::SceneInfo& in) {
@@ -151,6 +169,7 @@ void print_info(const lodstream::SceneInfo& in) {
     std::printf("stage        %-10s %8.3f s  peak %s%s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str(),
                 s.reused ? "  (reused from work directory)" : "");
   std::printf("total        %.3f s, peak %s\n", in.seconds, human_bytes(in.peak_rss_bytes).c_str());
+  std::printf("work dir     %s\n", work_dir_text(in.work_dir).c_str());
 }
 
 void print_simplify(const lodstream::SimplifyReport& r, const std::string& out_dir) {
@@ -174,6 +193,7 @@ void print_simplify(const lodstream::SimplifyReport& r, const std::string& out_d
                 s.reused ? "  (reused from work directory)" : "");
   std::printf("total        %.3f s, peak %s; wrote %s/manifest.json\n", r.seconds, human_bytes(r.peak_rss_bytes).c_str(),
               out_dir.c_str());
+  std::printf("work dir     %s\n", work_dir_text(r.work_dir).c_str());
 }
 
 void print_grid(const lodstream::GridReport& r, const std::string& out_dir) {
@@ -221,6 +241,7 @@ void print_report(const lodstream::Report& r, const std::string& out_dir) {
                 s.reused ? "  (reused from work directory)" : "");
   std::printf("total        %.3f s, peak %s; wrote %s/report.json and report.html\n", r.seconds,
               human_bytes(r.peak_rss_bytes).c_str(), out_dir.c_str());
+  std::printf("work dir     %s\n", work_dir_text(r.work_dir).c_str());
 }
 
 // How every subcommand ends: the progress bar's line closed; on failure the one-line error and its exit
@@ -285,6 +306,11 @@ int main(int argc, char** argv) {
     cmd->add_option("--progress", progress_text, "Progress on stderr: auto (bar on a terminal), bar, json (NDJSON), none")
         ->check(CLI::IsMember({"auto", "bar", "json", "none"}));
   };
+  bool no_space_check = false;
+  auto add_space_check = [&](CLI::App* cmd) {
+    cmd->add_flag("--no-space-check", no_space_check,
+                  "Start even when the free disk space looks too small for the estimated work directory and outputs");
+  };
 
   CLI::App* info_cmd = app.add_subcommand("info", "Ingest a scene and print its statistics");
   std::string input;
@@ -292,6 +318,7 @@ int main(int argc, char** argv) {
   info_cmd->add_option("FILE", input, "Input scene (.obj, .ply, .stl)")->required();
   info_cmd->add_flag("--json", json, "Print one JSON object instead of text");
   add_common(info_cmd);
+  add_space_check(info_cmd);
 
   CLI::App* simplify_cmd = app.add_subcommand("simplify", "Build a chain of levels of detail (Low & Tan vertex clustering)");
   lodstream::SimplifyOptions so;
@@ -322,6 +349,7 @@ int main(int argc, char** argv) {
   simplify_cmd->add_flag("--no-glb", no_glb, "Do not write lods.glb");
   simplify_cmd->add_flag("--json", json, "Print the manifest's summary as one JSON object");
   add_common(simplify_cmd);
+  add_space_check(simplify_cmd);
 
   CLI::App* report_cmd = app.add_subcommand(
       "report", "Measure each level's error in pixels at its switching distance (Embree ray casts, Hausdorff)");
@@ -342,6 +370,7 @@ int main(int argc, char** argv) {
   report_cmd->add_option("--html-views", ro.html_views, "Views per level rendered into report.html (default 3)");
   report_cmd->add_flag("--json", json, "Print report.json instead of the table");
   add_common(report_cmd);
+  add_space_check(report_cmd);
 
   CLI::App* grid_cmd = app.add_subcommand("grid", "Fit polygons to a height grid by adaptive subdivision (DeHaemer 1989)");
   lodstream::GridOptions go;
@@ -397,6 +426,7 @@ int main(int argc, char** argv) {
     return static_cast<int>(lodstream::Status::usage);
   }
 
+  options.check_disk_space = !no_space_check;
   ProgressState progress;
   progress.mode = progress_text == "json"   ? ProgressMode::json
                   : progress_text == "bar"  ? ProgressMode::bar

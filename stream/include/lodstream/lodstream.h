@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace lodstream {
@@ -48,6 +49,11 @@ struct Options {
   std::string work_dir;
   ProgressFn progress = nullptr;
   void* progress_user = nullptr;
+  // Before a job writes anything, its work directory's and outputs' bytes are estimated from the input's
+  // size and format and checked against the free space of the file systems they go to: a job that would
+  // not fit stops with Status::io_error and the figures. false skips the check (the estimate is typical,
+  // not a bound: a disk that fills anyway still ends the job with Status::io_error, resumable).
+  bool check_disk_space = true;
 };
 
 inline constexpr uint64_t min_memory_bytes = 64ull << 20;
@@ -58,11 +64,27 @@ struct Result {
   bool ok() const { return status == Status::ok; }
 };
 
+// Memory figures. A job's peak_rss_bytes is the process's VmHWM when the job ends: what outside tools see
+// (/usr/bin/time -v, a parent's getrusage ru_maxrss, cgroups), never reset by lodstream, so in a process
+// that did other work first it includes that work's peak. A stage's peak_rss_bytes is the highest resident
+// set (mapped file pages included) sampled every 5 ms while the stage ran, by a thread the job runs for it
+// (never above the VmHWM at the stage's end): a sampled figure, which can miss a spike shorter than the
+// interval (the job's VmHWM cannot).
 struct StageStats {
   std::string name;
   double seconds = 0;
-  uint64_t peak_rss_bytes = 0;  // VmHWM during the stage
+  uint64_t peak_rss_bytes = 0;  // highest resident set sampled during the stage
   bool reused = false;          // the stage's output was already in the work directory
+};
+
+// A job's work directory when the job ended (a temporary one just before it was removed): its files'
+// bytes in all and per top-level entry (a directory's files summed), and the input's bytes (a report's:
+// its originals').
+struct WorkDirUsage {
+  std::string path;
+  uint64_t bytes = 0;
+  uint64_t input_bytes = 0;
+  std::vector<std::pair<std::string, uint64_t>> entries;  // by name
 };
 
 // What `lodstream info` reports: ingest statistics of one input file.
@@ -86,12 +108,11 @@ struct SceneInfo {
   double bbox_max[3] = {0, 0, 0};
   std::vector<StageStats> stages;
   double seconds = 0;
-  uint64_t peak_rss_bytes = 0;
+  uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)
+  WorkDirUsage work_dir;
 };
 
 // Ingests `path` into the scene store of the work directory and reports its statistics.
-// To measure each stage's peak on its own, the process's VmHWM is reset at each stage boundary
-// (Linux /proc/self/clear_refs); read peak_rss_bytes() before calling if you need the earlier peak.
 Result info(const std::string& path, const Options& options, SceneInfo* out);
 
 // ---- simplify: the LOD pipeline (grade -> sort -> cluster -> emit -> write) ----
@@ -163,7 +184,8 @@ struct SimplifyReport {
   double search_seconds = 0;
   std::vector<StageStats> stages;
   double seconds = 0;
-  uint64_t peak_rss_bytes = 0;
+  uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)
+  WorkDirUsage work_dir;
 };
 
 // Simplifies `input` into the levels described by `simplify`, writing them and manifest.json into
@@ -235,7 +257,8 @@ struct Report {
   double query_seconds = 0;
   std::vector<StageStats> stages;
   double seconds = 0;
-  uint64_t peak_rss_bytes = 0;
+  uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)
+  WorkDirUsage work_dir;
 };
 
 // Measures every level of every run, writing report.json (written last), report.html and the CSVs.
@@ -311,7 +334,7 @@ struct GridReport {
   std::vector<std::string> files;       // written, relative to the output directory
   std::vector<StageStats> stages;
   double seconds = 0;
-  uint64_t peak_rss_bytes = 0;
+  uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)
 };
 
 // Reads the height grid `input` (io/grid_reader.h formats), subdivides it and writes the drawn triangles
