@@ -46,7 +46,7 @@
 //   its center and its id. Per level (floating): one pool record per cell (16 bytes with float_positions,
 //   else 32; runs are at least half full and freed runs are reused; the pool grows in place, by mremap,
 //   so a growth step never holds two copies) and one hash-table slot per occupied square (16 bytes packed,
-//   32 wide), in 64 sub-tables by the hash's top bits, each at most 3/4 full, so that a growth step
+//   32 wide), in 64 sub-tables by the hash's top bits, each at most 2/3 full, so that a growth step
 //   rehashes 1/64 of the table at a time — or, for a coarse level given bounds, a dense array of 8 bytes per
 //   square of the bounds (at most kMaxDenseSquares). Uniform cells need no record: the square's slot holds
 //   the id. The center vertex and position of a cell are not kept: they are the vertex that created it,
@@ -214,7 +214,7 @@ class Clusterer {
     uint32_t count;
   };
   // A hash table split into 2^kSubTableBits sub-tables by the top bits of the hash; each has a power-of-two
-  // size, linear probing on the hash's low bits, and is at most 3/4 full.
+  // size, linear probing on the hash's low bits, and is at most 2/3 full.
   static constexpr int kSubTableBits = 6;
   template <class S>
   struct Table {

@@ -214,25 +214,32 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
 
   // The sums pass: each level's CellInfo records, from the cluster maps just written and the index, both
   // read in order, so that every cell adds its vertices in weight order (as a running sum in the pass
-  // above would) and its first vertex, the one that created it, gives its center. The records of a level
-  // are made in ranges of cell ids, a few at a time side by side, within the memory the clusterers held
-  // at their peak (so the sums never raise the stage's peak), and within the budget: a range costs one
-  // more read of the index and maps, sequential, instead of holding 88 bytes a cell at once.
+  // above would) and its first vertex, the one that created it, gives its center. The records are made
+  // in ranges of cell ids, packed into one chunk per thread that takes what the clusterers held at their
+  // peak divided among the threads (so the sums never raise the stage's peak), within the budget; a
+  // chunk costs one more sequential read of the index and of its levels' maps, where holding every
+  // record at once would cost 88 bytes a cell.
   constexpr uint64_t kMinSumBytes = 16 << 20;
   const uint64_t sum_bytes = std::min(std::max(peak.load(), kMinSumBytes), std::max<uint64_t>(cell_budget, 1));
-  const uint64_t per_range = std::max<uint64_t>(1, sum_bytes / n_threads / sizeof(CellInfo));
+  uint64_t total_cells = 0;
+  for (uint64_t c : summary.cells) total_cells += c;
+  // As many chunks as that takes, rounded up to whole rounds of one per thread, and as even as can be.
+  const uint64_t most_per_chunk = std::max<uint64_t>(1, sum_bytes / n_threads / sizeof(CellInfo));
+  const uint64_t rounds = std::max<uint64_t>(1, (total_cells + most_per_chunk * n_threads - 1) / (most_per_chunk * n_threads));
+  const uint64_t per_chunk = std::max<uint64_t>(1, (total_cells + rounds * n_threads - 1) / (rounds * n_threads));
   struct Range {
     size_t level;
     uint64_t first, end;  // cell ids
   };
-  std::vector<Range> ranges;
-  uint64_t range_cells = 0;
+  std::vector<std::vector<Range>> chunks(1);
+  uint64_t room = per_chunk;
   for (size_t l = 0; l < levels; ++l) {
     uint64_t first = 0;
     do {
-      const uint64_t end = std::min(summary.cells[l], first + per_range);
-      ranges.push_back({l, first, end});
-      range_cells += end - first;
+      if (room == 0) chunks.emplace_back(), room = per_chunk;
+      const uint64_t end = std::min(summary.cells[l], first + room);
+      chunks.back().push_back({l, first, end});
+      room -= end - first;
       first = end;
     } while (first < summary.cells[l]);
   }
@@ -240,64 +247,69 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
   for (size_t l = 0; l < levels; ++l) maps[l] = std::make_unique<io::MappedFile>(cells_path(prefix, l));
   std::unique_ptr<io::FileWriter> info;  // the level of the range being written
   uint64_t done_cells = 0;
-  for (size_t round = 0; round < ranges.size(); round += n_threads) {
-    const size_t round_end = std::min(ranges.size(), round + n_threads);
-    std::vector<std::vector<CellInfo>> sums(round_end - round);
-    tbb::parallel_for(round, round_end, [&](size_t r) {
-      const Range& range = ranges[r];
-      std::vector<CellInfo>& out = sums[r - round];
-      out.assign(range.end - range.first, CellInfo{});
-      if (out.empty()) return;
+  for (size_t round = 0; round < chunks.size(); round += n_threads) {
+    const size_t round_end = std::min(chunks.size(), round + n_threads);
+    std::vector<std::vector<std::vector<CellInfo>>> sums(round_end - round);
+    tbb::parallel_for(round, round_end, [&](size_t k) {
+      const std::vector<Range>& chunk = chunks[k];
+      std::vector<std::vector<CellInfo>>& outs = sums[k - round];
+      for (const Range& range : chunk) outs.emplace_back(range.end - range.first, CellInfo{});
       constexpr uint64_t kAhead = 8;
       for (uint64_t first = 0; first < records; first += block) {
         progress.check();
         if (tbb::is_current_task_group_canceling()) return;
         const uint64_t n = std::min(block, records - first);
         const io::Window w = index.map(first * record_bytes, (first + n) * record_bytes);
-        const io::Window cw = maps[range.level]->map(first * 4, (first + n) * 4);
-        const uint32_t* cells = reinterpret_cast<const uint32_t*>(cw.data());
-        auto add = [&](const auto* rec) {
-          for (uint64_t i = 0; i < n; ++i) {
-            if (i + kAhead < n) {
-              const uint64_t ahead = cells[i + kAhead] - range.first;  // wraps below the range
-              if (ahead < out.size()) {
-                __builtin_prefetch(&out[ahead]);
-                __builtin_prefetch(reinterpret_cast<const char*>(&out[ahead]) + sizeof(CellInfo) - 1);
+        for (size_t r = 0; r < chunk.size(); ++r) {
+          std::vector<CellInfo>& out = outs[r];
+          if (out.empty()) continue;
+          const uint64_t base = chunk[r].first;
+          const io::Window cw = maps[chunk[r].level]->map(first * 4, (first + n) * 4);
+          const uint32_t* cells = reinterpret_cast<const uint32_t*>(cw.data());
+          auto add = [&](const auto* rec) {
+            for (uint64_t i = 0; i < n; ++i) {
+              if (i + kAhead < n) {
+                const uint64_t ahead = cells[i + kAhead] - base;  // wraps below the range
+                if (ahead < out.size()) {
+                  __builtin_prefetch(&out[ahead]);
+                  __builtin_prefetch(reinterpret_cast<const char*>(&out[ahead]) + sizeof(CellInfo) - 1);
+                }
               }
+              const uint64_t cell = cells[i] - base;
+              if (cell >= out.size()) continue;
+              CellInfo& c = out[cell];
+              const double p[3] = {static_cast<double>(rec[i].position[0]), static_cast<double>(rec[i].position[1]),
+                                   static_cast<double>(rec[i].position[2])};
+              const double grade = rec[i].grade;
+              if (c.vertices == 0) {
+                std::copy(p, p + 3, c.center);
+                c.center_vertex = rec[i].id;
+              }
+              for (int a = 0; a < 3; ++a) {
+                c.weighted[a] += grade * p[a];
+                c.sum[a] += p[a];
+              }
+              c.weight += grade;
+              ++c.vertices;
             }
-            const uint64_t cell = cells[i] - range.first;
-            if (cell >= out.size()) continue;
-            CellInfo& c = out[cell];
-            const double p[3] = {static_cast<double>(rec[i].position[0]), static_cast<double>(rec[i].position[1]),
-                                 static_cast<double>(rec[i].position[2])};
-            const double grade = rec[i].grade;
-            if (c.vertices == 0) {
-              std::copy(p, p + 3, c.center);
-              c.center_vertex = rec[i].id;
-            }
-            for (int k = 0; k < 3; ++k) {
-              c.weighted[k] += grade * p[k];
-              c.sum[k] += p[k];
-            }
-            c.weight += grade;
-            ++c.vertices;
-          }
-        };
-        if (single_precision) add(reinterpret_cast<const WeightRecord32*>(w.data()));
-        else add(reinterpret_cast<const WeightRecord64*>(w.data()));
+          };
+          if (single_precision) add(reinterpret_cast<const WeightRecord32*>(w.data()));
+          else add(reinterpret_cast<const WeightRecord64*>(w.data()));
+        }
       }
     });
     progress.check();
-    for (size_t r = round; r < round_end; ++r) {
-      const Range& range = ranges[r];
-      if (range.first == 0) info = std::make_unique<io::FileWriter>(cell_info_path(prefix, range.level), kWriterBuffer);
-      info->write_array(std::span<const CellInfo>(sums[r - round]));
-      std::vector<CellInfo>().swap(sums[r - round]);
-      if (range.end == summary.cells[range.level]) info->commit();
-      done_cells += range.end - range.first;
-    }
+    for (size_t k = round; k < round_end; ++k)
+      for (size_t r = 0; r < chunks[k].size(); ++r) {
+        const Range& range = chunks[k][r];
+        if (range.first == 0) info = std::make_unique<io::FileWriter>(cell_info_path(prefix, range.level), kWriterBuffer);
+        info->write_array(std::span<const CellInfo>(sums[k - round][r]));
+        std::vector<CellInfo>().swap(sums[k - round][r]);
+        if (range.end == summary.cells[range.level]) info->commit();
+        done_cells += range.end - range.first;
+      }
     progress.report("cluster", kClusterShare + (1 - kClusterShare) * static_cast<double>(done_cells) /
-                                                   static_cast<double>(std::max<uint64_t>(range_cells, 1)));
+                                                   static_cast<double>(std::max<uint64_t>(total_cells, 1)));
   }
   return summary;
 }

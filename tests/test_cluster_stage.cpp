@@ -65,8 +65,8 @@ TEST(ClusterStage, CellRecordsAreTheSumsInWeightOrderInAnyNumberOfRanges) {
   Options options;
   stream::Progress progress(options);
   std::vector<std::vector<std::vector<stream::CellInfo>>> runs;
-  // The sums pass makes ranges of at most 16 MiB (here: more than the clusterers' peak) per thread: one
-  // thread takes level 0's 150,000 records (13 MB) in one range, two threads in two.
+  // The sums pass makes its records in chunks of at most 16 MiB (here: more than the clusterers' peak)
+  // per thread: one thread makes level 0's 150,000 records (13 MB) in one range, two threads in two.
   for (int threads : {1, 2}) {
     stream::WorkDir work(tmp.file("work" + std::to_string(threads)));
     const std::string prefix = work.file("");

@@ -428,7 +428,7 @@ TEST(FloatingCell, MemoryGrowsWithCellsNotVertices) {
     }
     EXPECT_EQ(clusterer.cell_count(0), 10001u);
     EXPECT_GE(clusterer.memory_bytes(), after_one + 10000 * sizeof(Clusterer::DoubleCell));
-    // Records: one per cell, and the page they end on; table: below 8/3 slots per square (at most 3/4
+    // Records: one per cell, and the page they end on; table: below 3 slots per square (at most 2/3
     // full, doubling), with 64 sub-tables unevenly filled: allow 4.
     EXPECT_LT(clusterer.memory_bytes(), 10001 * (32 + 4 * 32) + 64 * 1024u);
   }

@@ -3,8 +3,9 @@
 # that one full `lodstream simplify ... --work DIR` has prepared (store, weight index), removes the cluster
 # stage's stamp and runs the same command again, so that ingest and grade are reused and the process
 # clusters; it is stopped (SIGTERM) as soon as the stage's stamp (cluster.json) appears. Per run: the
-# stage's wall time (process start to stamp) and the process's peak RSS (VmHWM, sampled every 0.05 s;
-# ingest and grade, reused, add next to nothing). Binaries given with --bin are run in alternation, run
+# stage's wall time (process start to stamp), its CPU time (user + system of the process, which on a
+# shared machine says more than the wall time) and the process's peak RSS (VmHWM, sampled every 0.05 s
+# until the stamp appears; ingest and grade, reused, add next to nothing). Binaries given with --bin are run in alternation, run
 # after run, so that a busy machine disturbs them alike; medians are printed.
 #
 # Bytes per cell at the stage's peak = (peak − fixed) / cells over all levels, where "fixed" is the peak
@@ -34,7 +35,10 @@ done
 out=$(mktemp -d "${TMPDIR:-/tmp}/bench_cluster.XXXXXX")
 trap 'rm -rf "$out"' EXIT
 
-# One clustering run: prints "seconds peak_bytes cells_total".
+# CPU seconds (user + system) of a process so far.
+cpu_of() { awk -v t="$(getconf CLK_TCK)" '{print ($14 + $15) / t}' "/proc/$1/stat" 2> /dev/null || echo 0; }
+
+# One clustering run: prints "seconds peak_bytes cells_total cpu_seconds".
 cluster_once() {
   local bin="$1"; shift
   rm -f "$work/cluster.json"
@@ -45,18 +49,18 @@ cluster_once() {
   while [ ! -f "$work/cluster.json" ]; do
     if ! kill -0 "$pid" 2> /dev/null; then echo "bench_cluster: $bin stopped before clustering:" >&2; cat "$out/log" >&2; exit 1; fi
     now=$(awk '/VmHWM/ {print $2 * 1024}' "/proc/$pid/status" 2> /dev/null || echo 0)
-    [ -n "$now" ] && [ "$now" -gt "$hwm" ] && hwm=$now
+    # A sample counts only if the stamp was still absent after it: the emit stage starts right after.
+    [ ! -f "$work/cluster.json" ] && [ -n "$now" ] && [ "$now" -gt "$hwm" ] && hwm=$now
     sleep 0.05
   done
-  local t1
+  local t1 cpu
   t1=$(date +%s.%N)
-  now=$(awk '/VmHWM/ {print $2 * 1024}' "/proc/$pid/status" 2> /dev/null || echo 0)
-  [ -n "$now" ] && [ "$now" -gt "$hwm" ] && hwm=$now
+  cpu=$(cpu_of "$pid")
   kill "$pid" 2> /dev/null || true
   wait "$pid" 2> /dev/null || true
   local cells
   cells=$(python3 -c "import json,sys; print(sum(json.load(open(sys.argv[1]))['value']['cells']))" "$work/cluster.json")
-  echo "$(echo "$t1 - $t0" | bc) $hwm $cells"
+  echo "$(echo "$t1 - $t0" | bc) $hwm $cells $cpu"
 }
 
 median() { sort -g | awk '{a[NR]=$1} END {print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2}'; }
@@ -66,7 +70,7 @@ for bin in "${bins[@]}"; do : > "$out/$(echo "$bin" | md5sum | cut -c1-8).runs";
 for ((r = 1; r <= runs; ++r)); do
   for bin in "${bins[@]}"; do
     line=$(cluster_once "$bin" "${extra[@]}")
-    echo "run $r $bin: $line (seconds, peak bytes, cells)"
+    echo "run $r $bin: $line (seconds, peak bytes, cells, CPU seconds)"
     echo "$line" >> "$out/$(echo "$bin" | md5sum | cut -c1-8).runs"
   done
 done
@@ -76,7 +80,8 @@ for bin in "${bins[@]}"; do
   secs=$(cut -d' ' -f1 "$f" | median)
   peak=$(cut -d' ' -f2 "$f" | median)
   cells=$(cut -d' ' -f3 "$f" | head -1)
-  echo "$bin: median ${secs} s, peak $((peak >> 20)) MiB, fixed $((fixed >> 20)) MiB, cells $cells," \
+  cpu=$(cut -d' ' -f4 "$f" | median)
+  echo "$bin: median ${secs} s (${cpu} CPU-s), peak $((peak >> 20)) MiB, fixed $((fixed >> 20)) MiB, cells $cells," \
        "$(( (peak - fixed) / cells )) bytes per cell at the peak"
 done
 rm -f "$work/cluster.json"
