@@ -42,11 +42,15 @@
 //   moves to one twice as large; freed runs are reused by size), so no fixed per-square capacity is
 //   reserved; assign checks the bound and throws
 //   Failure(Status::internal) if it is ever exceeded (a bug, never bad input).
-// - Memory grows with the number of cells, not of vertices: per level one 32-byte pool record per cell
-//   (runs are at least half full, and freed runs are reused), a 4-byte id-to-record index per cell, and an
-//   open-addressing hash table of 32-byte slots, one per occupied square, at most half full — or, for a
-//   coarse level given bounds, a dense array of 8 bytes per square of the bounds (at most
-//   kMaxDenseSquares). Nothing per vertex is kept: the caller receives the cell ids and writes them out.
+// - Memory grows with the number of cells, not of vertices, and a cell keeps only what later queries read:
+//   its center and its id. Per level (floating): one pool record per cell (16 bytes with float_positions,
+//   else 32; runs are at least half full and freed runs are reused; the pool grows in place, by mremap,
+//   so a growth step never holds two copies) and one hash-table slot per occupied square (16 bytes packed,
+//   32 wide), in 64 sub-tables by the hash's top bits, each at most 2/3 full, so that a growth step
+//   rehashes 1/64 of the table at a time — or, for a coarse level given bounds, a dense array of 8 bytes per
+//   square of the bounds (at most kMaxDenseSquares). Uniform cells need no record: the square's slot holds
+//   the id. The center vertex and position of a cell are not kept: they are the vertex that created it,
+//   which the caller sees (its cell id equals cell_count() before the call). Nothing per vertex is kept.
 //
 // Limits (Failure(Status::usage) from the constructor or assign, as the stream stage should have checked
 // them against the scene's bounding box first): cell sizes finite, in [kMinCellSize, kMaxCellSize] and
@@ -80,6 +84,10 @@ struct ClusterOptions {
   Clustering clustering = Clustering::floating;
   CellShape shape = CellShape::cube;       // floating only
   CellChoice choice = CellChoice::nearest;  // floating only
+  // Every position assigned is exactly a float (the caller's guarantee, e.g. a single-precision store;
+  // checked when a cell is created: Failure(Status::internal) otherwise). Cell centers are then kept as
+  // floats, 16 bytes a record instead of 32; every comparison sees the same values, so the ids are the same.
+  bool float_positions = false;
 };
 
 inline constexpr uint32_t kNoCell = UINT32_MAX;
@@ -113,6 +121,27 @@ struct HugePageAllocator {
   void deallocate(T* p, size_t n);
   template <class U>
   bool operator==(const HugePageAllocator<U>&) const { return true; }
+};
+
+// A byte buffer that grows without a copy: anonymous memory enlarged by mremap (Linux; elsewhere realloc),
+// marked for transparent huge pages like HugePageAllocator's blocks. Only the pages written are resident,
+// and a growth step never holds the old and the new block at once. New bytes are zero.
+class GrowableBuffer {
+ public:
+  GrowableBuffer() = default;
+  GrowableBuffer(GrowableBuffer&& o) noexcept;
+  GrowableBuffer& operator=(GrowableBuffer&& o) noexcept;
+  GrowableBuffer(const GrowableBuffer&) = delete;
+  GrowableBuffer& operator=(const GrowableBuffer&) = delete;
+  ~GrowableBuffer();
+  std::byte* data() const { return data_; }
+  size_t size() const { return size_; }
+  void resize(size_t bytes);  // larger only; capacity doubles (address space, not memory)
+  uint64_t resident_bytes() const;  // the bytes in use, rounded up to whole (huge) pages
+
+ private:
+  std::byte* data_ = nullptr;
+  size_t size_ = 0, capacity_ = 0;
 };
 
 class Clusterer {
@@ -149,34 +178,30 @@ class Clusterer {
   size_t levels() const { return levels_.size(); }
   double cell_size(size_t level) const { return levels_[level].size; }
   const ClusterOptions& options() const { return options_; }
-  uint32_t cell_count(size_t level) const { return static_cast<uint32_t>(levels_[level].where.size()); }
-  // The vertex that created the cell (floating: its center; uniform: the first, i.e. heaviest, vertex that
-  // fell in the square) and that vertex's position. cell < cell_count(level); the span stays valid until
-  // the next assign.
-  uint32_t center_vertex(size_t level, uint32_t cell) const {
-    const Level& l = levels_[level];
-    return l.pool[l.where[cell]].vertex;
-  }
-  std::span<const double, 3> center_position(size_t level, uint32_t cell) const {
-    const Level& l = levels_[level];
-    return std::span<const double, 3>(l.pool[l.where[cell]].position, 3);
-  }
+  // Cells so far. A vertex whose cell id in a level equals that level's count before its assignment
+  // created the cell (floating: it is the center; uniform: the first, i.e. heaviest, vertex in the square).
+  uint32_t cell_count(size_t level) const { return levels_[level].cells; }
   // Most cells attached to one grid square so far in a level (uniform: 1 once a vertex was assigned).
   uint32_t max_cells_per_square(size_t level) const { return levels_[level].max_per_square; }
-  // Bytes held now (capacity of every array, plus the object), for the stream stage's budget; a growth
-  // step briefly holds more (growth_bytes).
+  // Bytes held now (the hash tables' and dense arrays' capacity, the pools' resident pages, the object),
+  // for the stream stage's budget; a growth step briefly holds more (growth_bytes).
   uint64_t memory_bytes() const;
-  // What the next growth step may briefly add to memory_bytes(): the largest growing array doubles while
-  // its old copy is still held, so twice that array.
+  // What the next growth step may briefly add to memory_bytes(): a hash sub-table doubles while its old
+  // copy is still held (twice the largest sub-table), and a pool touches one more huge page per level.
   uint64_t growth_bytes() const;
 
-  // Exposed for tests and the documentation above: 32 bytes each. A square's cells are stored together, as
-  // one run of Cell records in a per-level pool, so that the candidate test reads them from one or two
-  // cache lines instead of following a list through records in creation order.
-  struct Cell {
+  // Exposed for tests and the documentation above. A square's cells are stored together, as one run of
+  // records in a per-level pool, so that the candidate test reads them from one or two cache lines instead
+  // of following a list through records in creation order. In the first record of a free run, id is the
+  // next free run of its size.
+  struct FloatCell {  // float_positions: 16 bytes
+    float position[3];
+    uint32_t id;
+  };
+  struct DoubleCell {  // 32 bytes
     double position[3];
-    uint32_t vertex;
-    uint32_t id;  // the cell's id; in the first record of a free run: the next free run of its size
+    uint32_t id;
+    uint32_t unused;
   };
   struct Slot {
     int64_t square[3];
@@ -188,6 +213,14 @@ class Clusterer {
     uint32_t run;
     uint32_t count;
   };
+  // A hash table split into 2^kSubTableBits sub-tables by the top bits of the hash; each has a power-of-two
+  // size, linear probing on the hash's low bits, and is at most 2/3 full.
+  static constexpr int kSubTableBits = 6;
+  template <class S>
+  struct Table {
+    std::vector<std::vector<S, HugePageAllocator<S>>> sub;
+    std::vector<uint64_t> used;  // occupied slots per sub-table
+  };
   struct DenseSquare {  // a square of a dense level: the fields of Slot without the key
     uint32_t run;
     uint32_t count;
@@ -198,8 +231,8 @@ class Clusterer {
   struct Query {
     int64_t own[3];       // p's square
     int64_t square[8][3]; // the block: bit a of the index selects the neighbour along axis a
-    uint64_t mask;        // the table's size − 1 when slot[] was computed (a table that grew since needs new slots)
-    uint64_t slot[8];     // hash & mask of each square; in a dense level, its index in the array
+    uint64_t slot[8];     // each square's hash (its sub-table and slot are taken when read, so a table
+                          // that grew since the query was made is still read right); dense: its index
     uint64_t key[8];      // packed levels: each square's packed key
     uint32_t run[8];      // each square's run in the pool
     uint32_t count[8];    // and its cell count (0: square absent)
@@ -213,14 +246,13 @@ class Clusterer {
     double size = 0;
     double half = 0;     // c/2, exact
     double half_sq = 0;  // fl((c/2)²)
-    std::vector<Cell, HugePageAllocator<Cell>> pool;  // runs, one per occupied square, and free runs
-    std::vector<uint32_t, HugePageAllocator<uint32_t>> where;  // cell id → its record in pool
+    GrowableBuffer pool;  // floating: FloatCell or DoubleCell records, runs, one per occupied square, and free runs
+    uint32_t records = 0;  // records in pool
+    uint32_t cells = 0;
     // The squares' index, one of three kinds: a dense array (dense non-empty), a hash table of packed
-    // slots (packed non-empty), or of wide slots (table); hash tables have a power-of-two size, linear
-    // probing, at most half full.
-    std::vector<Slot, HugePageAllocator<Slot>> table;
-    std::vector<PackedSlot, HugePageAllocator<PackedSlot>> packed;
-    uint64_t used = 0;  // occupied slots of the hash table
+    // slots (packed.sub non-empty), or of wide slots (table.sub non-empty).
+    Table<Slot> table;
+    Table<PackedSlot> packed;
     uint32_t max_per_square = 0;
     uint32_t free_run[kRunClasses] = {kNoCell, kNoCell, kNoCell, kNoCell, kNoCell, kNoCell, kNoCell};
     // Levels with bounds: squares first[a] .. first[a] + dims[a] − 1 per axis, which is the bounds'
@@ -236,13 +268,15 @@ class Clusterer {
   void find_runs(const Level& level, Query& q) const;
   void prefetch_runs(const Level& level, const Query& q) const;
   void prefetch_uniform(const Level& level, const double* p) const;
-  uint32_t assign_floating(Level& level, uint32_t vertex_id, const double* p, const Query& q);
-  uint32_t assign_uniform(Level& level, uint32_t vertex_id, const double* p);
-  static uint32_t add_cell(Level& level, uint32_t& run, uint32_t& count, uint32_t vertex_id, const double* p);
+  uint32_t assign_floating(Level& level, const double* p, const Query& q);
+  uint32_t assign_uniform(Level& level, const double* p);
+  template <class C>
+  static uint32_t add_cell(Level& level, uint32_t& run, uint32_t& count, const double* p);
   static uint64_t dense_index(const Level& level, const int64_t square[3]);
   static uint64_t pack(const Level& level, const int64_t square[3]);
   static void square_fields(Level& level, const int64_t square[3], uint32_t*& run, uint32_t*& count);
-  uint32_t start_cell(Level& level, uint32_t vertex_id, const double* p, const int64_t square[3]);
+  uint32_t start_cell(Level& level, const double* p, const int64_t square[3]);
+  size_t cell_bytes() const { return options_.float_positions ? sizeof(FloatCell) : sizeof(DoubleCell); }
 
   ClusterOptions options_;
   std::vector<Level> levels_;

@@ -23,43 +23,81 @@ std::string order_path(const std::string& prefix) { return prefix + "order.u32";
 
 namespace {
 
-// One CellInfo per cell, in chunks of kChunk: unlike a vector, it never holds twice its size while it
-// grows, nor copies what it holds.
-class CellInfos {
- public:
-  static constexpr uint32_t kShift = 12, kChunk = 1u << kShift;
-  uint64_t size() const { return size_; }
-  CellInfo& operator[](uint64_t i) { return chunks_[i >> kShift][i & (kChunk - 1)]; }
-  const CellInfo* address(uint64_t i) const { return &chunks_[i >> kShift][i & (kChunk - 1)]; }
-  void push_back(const CellInfo& c) {
-    if ((size_ & (kChunk - 1)) == 0) chunks_.push_back(std::make_unique_for_overwrite<CellInfo[]>(kChunk));
-    (*this)[size_++] = c;
-  }
-  uint64_t bytes() const { return chunks_.size() * (kChunk * sizeof(CellInfo) + sizeof(void*)); }
-  void write(io::FileWriter& out) const {
-    for (uint64_t first = 0; first < size_; first += kChunk)
-      out.write_array(std::span<const CellInfo>(chunks_[first >> kShift].get(), std::min<uint64_t>(kChunk, size_ - first)));
-  }
-  void clear() {
-    std::vector<std::unique_ptr<CellInfo[]>>().swap(chunks_);
-    size_ = 0;
-  }
+constexpr size_t kWriterBuffer = 256 << 10;
+constexpr uint64_t kBlock = 1 << 14;
 
- private:
-  std::vector<std::unique_ptr<CellInfo[]>> chunks_;
-  uint64_t size_ = 0;
-};
+size_t thread_groups(size_t levels) {
+  return std::clamp<size_t>(static_cast<size_t>(tbb::this_task_arena::max_concurrency()), 1, levels);
+}
+
+// What `memory_bytes` leaves the clusterers: the fixed buffers (the writers', the index windows, the
+// block's arrays per group) come off first.
+uint64_t cell_budget(size_t levels, uint64_t record_bytes, uint64_t memory_bytes) {
+  const uint64_t fixed = (levels + 1) * kWriterBuffer + thread_groups(levels) * kBlock * (4 + 24 + 4 * levels + record_bytes);
+  return memory_bytes > fixed ? memory_bytes - fixed : 0;
+}
+
+// The coarse levels' dense arrays take at most an eighth of the cells' budget.
+uint64_t max_dense_squares(uint64_t budget, size_t levels) {
+  return budget / 8 / levels / sizeof(core::Clusterer::DenseSquare);
+}
 
 }  // namespace
 
+uint64_t estimated_cells(const AreaHistogram& areas, double cell_size, uint64_t records) {
+  uint64_t triangles = 0;
+  for (uint64_t n : areas.count) triangles += n;
+  if (triangles == 0) return 0;
+  const double per_triangle = static_cast<double>(records) / static_cast<double>(triangles);
+  double cells = 0;
+  for (int b = 0; b < kAreaBins; ++b)
+    if (areas.count[b])
+      cells += std::min(per_triangle * static_cast<double>(areas.count[b]),
+                        kEstimatedCellsPerArea * areas.area[b] / (cell_size * cell_size));
+  return static_cast<uint64_t>(std::min(cells, static_cast<double>(records)));
+}
+
+void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, bool single_precision,
+                            std::span<const double> bounds, std::span<const double> cell_sizes,
+                            uint64_t memory_bytes) {
+  const uint64_t budget = cell_budget(cell_sizes.size(), weight_record_bytes(single_precision), memory_bytes);
+  uint64_t dense = 0;  // bytes of the dense arrays, chosen as core::Clusterer chooses them
+  for (double c : cell_sizes) {
+    uint64_t squares = bounds.empty() ? UINT64_MAX : 1;
+    for (size_t a = 0; a < 3 && !bounds.empty(); ++a) {
+      const uint64_t dims = static_cast<uint64_t>(core::grid_square(bounds[3 + a], c) - core::grid_square(bounds[a], c) + 3);
+      squares = dims <= core::Clusterer::kMaxDenseSquares && squares <= core::Clusterer::kMaxDenseSquares ? squares * dims : UINT64_MAX;
+    }
+    if (squares <= max_dense_squares(budget, cell_sizes.size())) dense += squares * sizeof(core::Clusterer::DenseSquare);
+  }
+  uint64_t cells = 0;
+  std::string per_level;
+  for (size_t l = 0; l < cell_sizes.size(); ++l) {
+    const uint64_t n = estimated_cells(areas, cell_sizes[l], records);
+    cells += n;
+    per_level += (per_level.empty() ? "" : ", ") + std::to_string(n);
+  }
+  const uint64_t need = cells * kClusterBytesPerCell[single_precision ? 1 : 0] + dense;
+  if (need <= budget) return;
+  fail(Status::usage, "clustering would need more memory than --memory allows (estimated cells per level: " + per_level +
+                          "; about " + std::to_string(need >> 20) + " MiB at " +
+                          std::to_string(kClusterBytesPerCell[single_precision ? 1 : 0]) + " bytes a cell" +
+                          (dense ? " and " + std::to_string(dense >> 20) + " MiB of dense squares" : std::string()) + ", " +
+                          std::to_string(budget >> 20) + " MiB available): raise --memory, or make the finest level "
+                          "coarser (--cell-sizes, --target-triangles)");
+}
+
 ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, bool single_precision,
                               std::span<const double> bounds, std::span<const double> cell_sizes,
-                              const core::ClusterOptions& options, uint64_t memory_bytes,
+                              const core::ClusterOptions& cluster_options, uint64_t memory_bytes,
                               const WorkDir& work, Progress& progress, const std::string& prefix) {
   const size_t levels = cell_sizes.size();
   const uint64_t record_bytes = weight_record_bytes(single_precision);
   io::MappedFile index(index_path);
   if (index.size() != records * record_bytes) fail(Status::io_error, index_path + ": size does not match");
+  // A float store's positions are all floats: the clusterer keeps its centers as floats (same ids).
+  core::ClusterOptions options = cluster_options;
+  options.float_positions = single_precision;
 
   // Levels are split into one group per thread, each group one multi-level Clusterer (whose staged
   // prefetch overlaps the levels' cache misses). Measured on a 48M-triangle scene, the finest level costs
@@ -68,20 +106,19 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
   // lowest group): with two threads and five levels, {0, 4} and {1, 2, 3}. Levels are independent, so the
   // split changes no result.
   struct Level {
-    CellInfos info;
-    std::atomic<uint64_t> count{0};  // info.size() after the group's last block, for other groups to read
+    std::atomic<uint64_t> count{0};  // cells after the group's last block, for other groups to read
     io::FileWriter cells;
   };
   struct Group {
     std::vector<size_t> levels;  // increasing
     std::unique_ptr<core::Clusterer> clusterer;
     std::vector<uint32_t> cells;  // the block's cells, level-major (Clusterer::assign_block)
-    std::atomic<uint64_t> bytes{0};  // the group's tables and cell records, after its last block
+    std::atomic<uint64_t> bytes{0};  // the group's clusterer, after its last block
   };
   std::vector<Level> state(levels);
-  constexpr size_t kWriterBuffer = 256 << 10;
   for (size_t l = 0; l < levels; ++l) state[l].cells.open(cells_path(prefix, l), kWriterBuffer);
-  const size_t n_groups = std::clamp<size_t>(static_cast<size_t>(tbb::this_task_arena::max_concurrency()), 1, levels);
+  const size_t n_threads = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  const size_t n_groups = thread_groups(levels);
   std::vector<Group> groups(n_groups);
   {
     std::vector<unsigned> cost(n_groups, 0);
@@ -93,13 +130,12 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
   }
   // The memory contract: what the cells need grows with the cells, and when it outgrows `memory_bytes`
   // the stage stops with a usage error instead of going past it. Checked after every block against the
-  // groups' tables (with the headroom of their next growth step) and cell records; the fixed buffers
-  // (index windows, the block's arrays, the writers' buffers) come off first, and the coarse levels' dense
-  // arrays (faster than hashing, but 8 bytes a square of the bounds) take at most an eighth of the rest.
-  constexpr uint64_t block = 1 << 14;
-  const uint64_t fixed = (levels + 1) * kWriterBuffer + n_groups * block * (4 + 8 + 24 + 4 * levels + record_bytes);
-  const uint64_t cell_budget = memory_bytes > fixed ? memory_bytes - fixed : 0;
-  const uint64_t max_dense = cell_budget / 8 / levels / sizeof(core::Clusterer::DenseSquare);
+  // groups' clusterers (with the headroom of their next growth step); the fixed buffers (index windows,
+  // the block's arrays, the writers' buffers) come off first, and the coarse levels' dense arrays (faster
+  // than hashing, but 8 bytes a square of the bounds) take at most an eighth of the rest.
+  constexpr uint64_t block = kBlock;
+  const uint64_t cell_budget = stream::cell_budget(levels, record_bytes, memory_bytes);
+  const uint64_t max_dense = max_dense_squares(cell_budget, levels);
   for (Group& grp : groups) {
     std::vector<double> sizes;
     for (size_t l : grp.levels) sizes.push_back(cell_sizes[l]);
@@ -110,15 +146,17 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
   // Group 0 also writes the order file and reports progress; every group checks for cancellation per
   // block, and stops when another has failed.
   io::FileWriter order(order_path(prefix), kWriterBuffer);
+  std::atomic<uint64_t> peak{0};  // the most the groups held together
   auto check_memory = [&](Group& grp, uint64_t first, uint64_t n) {
-    uint64_t mine = grp.clusterer->memory_bytes() + grp.clusterer->growth_bytes();
-    for (size_t l : grp.levels) {
-      mine += state[l].info.bytes();
-      state[l].count.store(state[l].info.size(), std::memory_order_relaxed);
-    }
+    const uint64_t mine = grp.clusterer->memory_bytes() + grp.clusterer->growth_bytes();
+    for (size_t j = 0; j < grp.levels.size(); ++j)
+      state[grp.levels[j]].count.store(grp.clusterer->cell_count(j), std::memory_order_relaxed);
     grp.bytes.store(mine, std::memory_order_relaxed);
     uint64_t total = 0;
     for (const Group& other : groups) total += other.bytes.load(std::memory_order_relaxed);
+    uint64_t seen = peak.load(std::memory_order_relaxed);
+    while (seen < total && !peak.compare_exchange_weak(seen, total, std::memory_order_relaxed)) {
+    }
     if (total <= cell_budget) return;
     std::string counts;
     for (size_t l = 0; l < levels; ++l)
@@ -130,13 +168,14 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
                             " MiB available): raise --memory, or make the finest level coarser (--cell-sizes, "
                             "--target-triangles)");
   };
-  constexpr uint64_t kAhead = 8;
+  // Progress: the clustering pass is about three quarters of the stage, the sums pass the rest.
+  constexpr double kClusterShare = 0.75;
   ClusterSummary summary;
   summary.cells.resize(levels);
   tbb::parallel_for(size_t{0}, n_groups, [&](size_t g) {
     Group& grp = groups[g];
     std::vector<uint32_t> ids;
-    std::vector<double> grades, xyz;
+    std::vector<double> xyz;
     for (uint64_t first = 0; first < records; first += block) {
       progress.check();
       if (tbb::is_current_task_group_canceling()) return;
@@ -145,12 +184,10 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
         const io::Window w = index.map(first * record_bytes, (first + n) * record_bytes);
         // The block's records as plain arrays, positions widened to double (exact for float).
         ids.resize(n);
-        grades.resize(n);
         xyz.resize(3 * n);
         auto unpack = [&](const auto* rec) {
           for (uint64_t i = 0; i < n; ++i) {
             ids[i] = rec[i].id;
-            grades[i] = rec[i].grade;
             for (int k = 0; k < 3; ++k) xyz[3 * i + k] = rec[i].position[k];
           }
         };
@@ -160,54 +197,120 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
       if (g == 0) order.write_array(std::span<const uint32_t>(ids));
       grp.cells.resize(grp.levels.size() * n);
       grp.clusterer->assign_block(ids, xyz, grp.cells);
-      // The cells' sums, level by level once the block's cells are known, so that the cell records can be
-      // fetched kAhead vertices ahead; each cell still adds its vertices in weight order.
-      for (size_t j = 0; j < grp.levels.size(); ++j) {
-        Level& s = state[grp.levels[j]];
-        const std::span<const uint32_t> block_cells(grp.cells.data() + j * n, n);  // this level's, in the group's array
-        for (uint64_t i = 0; i < n; ++i) {
-          if (i + kAhead < n && block_cells[i + kAhead] < s.info.size()) {
-            const char* ahead = reinterpret_cast<const char*>(s.info.address(block_cells[i + kAhead]));
-            __builtin_prefetch(ahead);
-            __builtin_prefetch(ahead + sizeof(CellInfo) - 1);
-          }
-          const double* p = &xyz[3 * i];
-          const double grade = grades[i];
-          const uint32_t cell = block_cells[i];
-          if (cell == s.info.size()) {
-            CellInfo c{};
-            std::copy(p, p + 3, c.center);
-            c.center_vertex = ids[i];
-            s.info.push_back(c);
-          }
-          CellInfo& c = s.info[cell];
-          for (int k = 0; k < 3; ++k) {
-            c.weighted[k] += grade * p[k];
-            c.sum[k] += p[k];
-          }
-          c.weight += grade;
-          ++c.vertices;
-        }
-        s.cells.write_array(block_cells);
-      }
+      for (size_t j = 0; j < grp.levels.size(); ++j)
+        state[grp.levels[j]].cells.write_array(std::span<const uint32_t>(grp.cells.data() + j * n, n));
       check_memory(grp, first, n);
-      if (g == 0) progress.report("cluster", static_cast<double>(first + n) / static_cast<double>(records));
+      if (g == 0) progress.report("cluster", kClusterShare * static_cast<double>(first + n) / static_cast<double>(records));
     }
-    // The group's levels' files, while the other groups may still be clustering.
-    for (size_t l : grp.levels) {
-      Level& s = state[l];
-      s.cells.commit();
-      summary.cells[l] = s.info.size();
-      io::FileWriter info(cell_info_path(prefix, l), kWriterBuffer);
-      s.info.write(info);
-      info.commit();
-      s.info.clear();
+    for (size_t j = 0; j < grp.levels.size(); ++j) {
+      state[grp.levels[j]].cells.commit();
+      summary.cells[grp.levels[j]] = grp.clusterer->cell_count(j);
     }
     grp.clusterer.reset();  // its memory goes to the groups still running
     grp.bytes.store(0, std::memory_order_relaxed);
   });
   progress.check();  // a group that saw the cancellation returned early
   order.commit();
+
+  // The sums pass: each level's CellInfo records, from the cluster maps just written and the index, both
+  // read in order, so that every cell adds its vertices in weight order (as a running sum in the pass
+  // above would) and its first vertex, the one that created it, gives its center. The records are made
+  // in ranges of cell ids, packed into one chunk per thread that takes what the clusterers held at their
+  // peak divided among the threads (so the sums never raise the stage's peak), within the budget; a
+  // chunk costs one more sequential read of the index and of its levels' maps, where holding every
+  // record at once would cost 88 bytes a cell.
+  constexpr uint64_t kMinSumBytes = 16 << 20;
+  const uint64_t sum_bytes = std::min(std::max(peak.load(), kMinSumBytes), std::max<uint64_t>(cell_budget, 1));
+  uint64_t total_cells = 0;
+  for (uint64_t c : summary.cells) total_cells += c;
+  // As many chunks as that takes, rounded up to whole rounds of one per thread, and as even as can be.
+  const uint64_t most_per_chunk = std::max<uint64_t>(1, sum_bytes / n_threads / sizeof(CellInfo));
+  const uint64_t rounds = std::max<uint64_t>(1, (total_cells + most_per_chunk * n_threads - 1) / (most_per_chunk * n_threads));
+  const uint64_t per_chunk = std::max<uint64_t>(1, (total_cells + rounds * n_threads - 1) / (rounds * n_threads));
+  struct Range {
+    size_t level;
+    uint64_t first, end;  // cell ids
+  };
+  std::vector<std::vector<Range>> chunks(1);
+  uint64_t room = per_chunk;
+  for (size_t l = 0; l < levels; ++l) {
+    uint64_t first = 0;
+    do {
+      if (room == 0) chunks.emplace_back(), room = per_chunk;
+      const uint64_t end = std::min(summary.cells[l], first + room);
+      chunks.back().push_back({l, first, end});
+      room -= end - first;
+      first = end;
+    } while (first < summary.cells[l]);
+  }
+  std::vector<std::unique_ptr<io::MappedFile>> maps(levels);
+  for (size_t l = 0; l < levels; ++l) maps[l] = std::make_unique<io::MappedFile>(cells_path(prefix, l));
+  std::unique_ptr<io::FileWriter> info;  // the level of the range being written
+  uint64_t done_cells = 0;
+  for (size_t round = 0; round < chunks.size(); round += n_threads) {
+    const size_t round_end = std::min(chunks.size(), round + n_threads);
+    std::vector<std::vector<std::vector<CellInfo>>> sums(round_end - round);
+    tbb::parallel_for(round, round_end, [&](size_t k) {
+      const std::vector<Range>& chunk = chunks[k];
+      std::vector<std::vector<CellInfo>>& outs = sums[k - round];
+      for (const Range& range : chunk) outs.emplace_back(range.end - range.first, CellInfo{});
+      constexpr uint64_t kAhead = 8;
+      for (uint64_t first = 0; first < records; first += block) {
+        progress.check();
+        if (tbb::is_current_task_group_canceling()) return;
+        const uint64_t n = std::min(block, records - first);
+        const io::Window w = index.map(first * record_bytes, (first + n) * record_bytes);
+        for (size_t r = 0; r < chunk.size(); ++r) {
+          std::vector<CellInfo>& out = outs[r];
+          if (out.empty()) continue;
+          const uint64_t base = chunk[r].first;
+          const io::Window cw = maps[chunk[r].level]->map(first * 4, (first + n) * 4);
+          const uint32_t* cells = reinterpret_cast<const uint32_t*>(cw.data());
+          auto add = [&](const auto* rec) {
+            for (uint64_t i = 0; i < n; ++i) {
+              if (i + kAhead < n) {
+                const uint64_t ahead = cells[i + kAhead] - base;  // wraps below the range
+                if (ahead < out.size()) {
+                  __builtin_prefetch(&out[ahead]);
+                  __builtin_prefetch(reinterpret_cast<const char*>(&out[ahead]) + sizeof(CellInfo) - 1);
+                }
+              }
+              const uint64_t cell = cells[i] - base;
+              if (cell >= out.size()) continue;
+              CellInfo& c = out[cell];
+              const double p[3] = {static_cast<double>(rec[i].position[0]), static_cast<double>(rec[i].position[1]),
+                                   static_cast<double>(rec[i].position[2])};
+              const double grade = rec[i].grade;
+              if (c.vertices == 0) {
+                std::copy(p, p + 3, c.center);
+                c.center_vertex = rec[i].id;
+              }
+              for (int a = 0; a < 3; ++a) {
+                c.weighted[a] += grade * p[a];
+                c.sum[a] += p[a];
+              }
+              c.weight += grade;
+              ++c.vertices;
+            }
+          };
+          if (single_precision) add(reinterpret_cast<const WeightRecord32*>(w.data()));
+          else add(reinterpret_cast<const WeightRecord64*>(w.data()));
+        }
+      }
+    });
+    progress.check();
+    for (size_t k = round; k < round_end; ++k)
+      for (size_t r = 0; r < chunks[k].size(); ++r) {
+        const Range& range = chunks[k][r];
+        if (range.first == 0) info = std::make_unique<io::FileWriter>(cell_info_path(prefix, range.level), kWriterBuffer);
+        info->write_array(std::span<const CellInfo>(sums[k - round][r]));
+        std::vector<CellInfo>().swap(sums[k - round][r]);
+        if (range.end == summary.cells[range.level]) info->commit();
+        done_cells += range.end - range.first;
+      }
+    progress.report("cluster", kClusterShare + (1 - kClusterShare) * static_cast<double>(done_cells) /
+                                                   static_cast<double>(std::max<uint64_t>(total_cells, 1)));
+  }
   return summary;
 }
 

@@ -333,6 +333,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           bounds.assign(meta.bbox.min.begin(), meta.bbox.min.end());
           bounds.insert(bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
         }
+        stream::check_cluster_estimate(grade.areas, grade.records, meta.single_precision, bounds, sizes, plan.stage_bytes);
         const stream::ClusterSummary cs = stream::cluster_levels(index_path, grade.records, meta.single_precision, bounds, sizes, copts,
                                                                     plan.stage_bytes, work, progress, prefix);
         std::vector<std::string> files{stream::order_path(prefix)};

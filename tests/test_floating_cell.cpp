@@ -7,16 +7,20 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <fstream>
 #include <limits>
 #include <map>
 #include <numeric>
 #include <random>
 #include <span>
 #include <tuple>
+#include <unordered_map>
 #include <vector>
 
 #include "core/floating_cell.h"
+#include "core/hash.h"
 #include "core/status.h"
+#include "test_util.h"
 
 namespace lodstream {
 namespace {
@@ -89,13 +93,22 @@ std::vector<uint32_t> brute_force(double size, ClusterOptions options, const std
   return cells;
 }
 
+// The vertex that created `cell` (its center): the first one assigned to it.
+uint32_t center_vertex(const std::vector<uint32_t>& cells, uint32_t cell) {
+  return static_cast<uint32_t>(std::find(cells.begin(), cells.end(), cell) - cells.begin());
+}
+
 // Most cell centers in one grid square, tallied independently of the clusterer's own counter.
-uint32_t max_centers_per_square(const Clusterer& clusterer, size_t level) {
+uint32_t max_centers_per_square(const Clusterer& clusterer, size_t level, const std::vector<uint32_t>& cells,
+                                const std::vector<P>& points) {
   std::map<std::tuple<int64_t, int64_t, int64_t>, uint32_t> count;
+  std::vector<bool> seen(clusterer.cell_count(level), false);
   uint32_t most = 0;
   const double c = clusterer.cell_size(level);
-  for (uint32_t cell = 0; cell < clusterer.cell_count(level); ++cell) {
-    const auto q = clusterer.center_position(level, cell);
+  for (size_t v = 0; v < points.size(); ++v) {
+    if (seen[cells[v]]) continue;
+    seen[cells[v]] = true;
+    const P& q = points[v];
     most = std::max(most, ++count[{core::grid_square(q[0], c), core::grid_square(q[1], c),
                                    core::grid_square(q[2], c)}]);
   }
@@ -119,14 +132,12 @@ TEST(FloatingCell, CubeHandPlaced) {
   EXPECT_EQ(run1(2, kCubeHeaviest, points), (std::vector<uint32_t>{0, 0, 1, 0, 2, 1, 0, 3}));
 
   Clusterer clusterer(std::vector<double>{2}, kCubeNearest);
-  run(clusterer, points);
+  const std::vector<uint32_t> cells = run(clusterer, points)[0];
   ASSERT_EQ(clusterer.cell_count(0), 4u);
-  EXPECT_EQ(clusterer.center_vertex(0, 0), 0u);
-  EXPECT_EQ(clusterer.center_vertex(0, 1), 2u);
-  EXPECT_EQ(clusterer.center_vertex(0, 2), 4u);
-  EXPECT_EQ(clusterer.center_vertex(0, 3), 7u);
-  EXPECT_EQ(clusterer.center_position(0, 1)[0], 1.5);
-  EXPECT_EQ(clusterer.center_position(0, 3)[2], std::nextafter(-1.0, -2.0));
+  EXPECT_EQ(center_vertex(cells, 0), 0u);
+  EXPECT_EQ(center_vertex(cells, 1), 2u);
+  EXPECT_EQ(center_vertex(cells, 2), 4u);
+  EXPECT_EQ(center_vertex(cells, 3), 7u);
 }
 
 TEST(FloatingCell, SphereHandPlaced) {
@@ -217,13 +228,10 @@ Plate5 make_plate5(double size) {
 
 // For each vertex of A: the position of its cell's center. Equal vectors mean equal cells (centers differ
 // between cells of a level) and equal grouping, whatever the ids.
-std::vector<P> centers_of_a(const Clusterer& clusterer, const std::vector<uint32_t>& cells,
+std::vector<P> centers_of_a(const std::vector<P>& points, const std::vector<uint32_t>& cells,
                             const std::vector<uint32_t>& index_of_a) {
   std::vector<P> out;
-  for (uint32_t i : index_of_a) {
-    const auto q = clusterer.center_position(0, cells[i]);
-    out.push_back({q[0], q[1], q[2]});
-  }
+  for (uint32_t i : index_of_a) out.push_back(points[center_vertex(cells, cells[i])]);
   return out;
 }
 
@@ -236,7 +244,7 @@ TEST(FloatingCell, Plate5DistantObjectChangesNothing) {
     Clusterer alone(std::span<const double>(&size, 1), o), both(std::span<const double>(&size, 1), o);
     const auto cells_alone = run(alone, s.a)[0];
     const auto cells_both = run(both, s.merged)[0];
-    EXPECT_EQ(centers_of_a(alone, cells_alone, identity), centers_of_a(both, cells_both, s.merged_of_a));
+    EXPECT_EQ(centers_of_a(s.a, cells_alone, identity), centers_of_a(s.merged, cells_both, s.merged_of_a));
     EXPECT_GT(both.cell_count(0), alone.cell_count(0));  // B did get cells of its own
   }
 }
@@ -259,10 +267,8 @@ TEST(FloatingCell, Plate5BoundingBoxAnchoredGridWouldChange) {
   EXPECT_EQ(run1(c, kUniform, a), (std::vector<uint32_t>{0, 1}));
   EXPECT_EQ(run1(c, kUniform, ab), (std::vector<uint32_t>{0, 1, 2}));
   Clusterer alone(std::span<const double>(&c, 1), kUniform), both(std::span<const double>(&c, 1), kUniform);
-  run(alone, a);
-  run(both, ab);
-  EXPECT_EQ(alone.center_vertex(0, 1), 1u);
-  EXPECT_EQ(both.center_vertex(0, 2), 2u);  // the same vertex (A's second) names the same square
+  EXPECT_EQ(center_vertex(run(alone, a)[0], 1), 1u);
+  EXPECT_EQ(center_vertex(run(both, ab)[0], 2), 2u);  // the same vertex (A's second) names the same square
 }
 
 TEST(FloatingCell, MatchesBruteForceOnRandomCloud) {
@@ -303,9 +309,9 @@ TEST(FloatingCell, AtMostEightCubesPerSquareOnDenseCloud) {
   const std::vector<double> sizes = {0.01, 0.03, 0.1, 0.3};
   for (const ClusterOptions& o : kFloatingVariants) {
     Clusterer clusterer(sizes, o);
-    run(clusterer, points);  // would throw Failure(internal) past the bound
+    const auto cells = run(clusterer, points);  // would throw Failure(internal) past the bound
     for (size_t l = 0; l < sizes.size(); ++l) {
-      const uint32_t most = max_centers_per_square(clusterer, l);
+      const uint32_t most = max_centers_per_square(clusterer, l, cells[l], points);
       EXPECT_EQ(clusterer.max_cells_per_square(l), most);
       EXPECT_LE(most, o.shape == CellShape::cube ? core::kMaxCubeCellsPerSquare : core::kMaxSphereCellsPerSquare);
       if (o.shape == CellShape::cube) {
@@ -372,10 +378,9 @@ TEST(FloatingCell, UniformNegativeCoordinatesAndBoundaries) {
   };
   const double c = 1;
   Clusterer clusterer(std::span<const double>(&c, 1), kUniform);
-  EXPECT_EQ(run(clusterer, points)[0], (std::vector<uint32_t>{0, 1, 0, 2, 1, 3, 4}));
-  EXPECT_EQ(clusterer.center_vertex(0, 0), 0u);
-  EXPECT_EQ(clusterer.center_vertex(0, 4), 6u);
-  EXPECT_EQ(clusterer.center_position(0, 0)[0], -0.5);
+  const std::vector<uint32_t> cells = run(clusterer, points)[0];
+  EXPECT_EQ(cells, (std::vector<uint32_t>{0, 1, 0, 2, 1, 3, 4}));
+  EXPECT_EQ(clusterer.cell_count(0), 5u);
 }
 
 TEST(FloatingCell, FloatingNegativeCoordinatesAcrossSquares) {
@@ -413,17 +418,19 @@ TEST(FloatingCell, MemoryGrowsWithCellsNotVertices) {
     }
     EXPECT_EQ(clusterer.cell_count(0), 1u);
     EXPECT_EQ(clusterer.memory_bytes(), after_one);
-    EXPECT_LT(clusterer.memory_bytes(), 2048u);
+    // The empty tables (64 sub-tables of 16 wide slots), one page of records, the query scratch.
+    EXPECT_LT(clusterer.memory_bytes(), 64 * 1024u);
 
-    // 10000 vertices 2 apart: 10000 cells, at least 32 bytes each.
+    // 10000 vertices 2 apart: 10000 cells, each a 32-byte record (floating) or a 32-byte slot at least.
     for (uint32_t v = 0; v < 10000; ++v) {
       const P p = {10.0 + 2.0 * v, 0, 0};
       clusterer.assign(100000 + v, p, cell);
     }
     EXPECT_EQ(clusterer.cell_count(0), 10001u);
-    EXPECT_GE(clusterer.memory_bytes(), after_one + 10000 * sizeof(Clusterer::Cell));
-    // Cells: capacity below 2n records; table: below 4n slots (at most half full, doubling).
-    EXPECT_LT(clusterer.memory_bytes(), 10001 * 6 * 32 + 4096u);
+    EXPECT_GE(clusterer.memory_bytes(), after_one + 10000 * sizeof(Clusterer::DoubleCell));
+    // Records: one per cell, and the page they end on; table: below 3 slots per square (at most 2/3
+    // full, doubling), with 64 sub-tables unevenly filled: allow 4.
+    EXPECT_LT(clusterer.memory_bytes(), 10001 * (32 + 4 * 32) + 64 * 1024u);
   }
 }
 
@@ -458,27 +465,141 @@ TEST(FloatingCell, RejectsBadInput) {
   }
 }
 
-TEST(FloatingCell, CentersSurviveRunMoves) {
-  // A square's cells move to a larger run as it fills (and freed runs are reused): each cell's center must
-  // still be the vertex that created it, i.e. the first vertex assigned to it, at that vertex's position.
-  const std::vector<P> points = random_cloud(20000, 8);
-  const std::vector<double> sizes = {0.05, 0.2};
-  for (const ClusterOptions& o : {kCubeNearest, kSphereHeaviest, kUniform}) {
-    Clusterer clusterer(sizes, o);
-    const auto cells = run(clusterer, points);
-    for (size_t l = 0; l < sizes.size(); ++l) {
-      std::vector<bool> seen(clusterer.cell_count(l), false);
-      for (uint32_t v = 0; v < points.size(); ++v) {
-        const uint32_t c = cells[l][v];
-        if (seen[c]) continue;
-        seen[c] = true;
-        ASSERT_EQ(clusterer.center_vertex(l, c), v) << "level " << l;
-        const auto q = clusterer.center_position(l, c);
-        ASSERT_EQ(q[0], points[v][0]);
-        ASSERT_EQ(q[1], points[v][1]);
-        ASSERT_EQ(q[2], points[v][2]);
+// Cell centers kept as floats (ClusterOptions::float_positions) give exactly the ids of doubles, when
+// every position is a float: on a cloud rounded to float, at sizes where squares hold many cells, in
+// every variant, with and without bounds; and a position that is not a float is refused, not rounded.
+TEST(FloatingCell, FloatCentersGiveTheSameIds) {
+  std::vector<P> points = random_cloud(30000, 9, -2, 2);
+  for (P& p : points)
+    for (double& x : p) x = static_cast<float>(x);
+  const std::vector<double> sizes = {0.02, 0.1, 0.5};
+  const double bounds[] = {-2, -2, -2, 2, 2, 2};
+  std::vector<ClusterOptions> variants(std::begin(kFloatingVariants), std::end(kFloatingVariants));
+  variants.push_back(kUniform);
+  for (ClusterOptions o : variants) {
+    Clusterer doubles(sizes, o);
+    const auto expected = run(doubles, points);
+    o.float_positions = true;
+    for (bool bounded : {false, true}) {
+      Clusterer floats = bounded ? Clusterer(sizes, o, bounds) : Clusterer(sizes, o);
+      EXPECT_EQ(run(floats, points), expected) << "bounded " << bounded;
+    }
+  }
+  ClusterOptions o = kCubeNearest;
+  o.float_positions = true;
+  Clusterer floats(sizes, o);
+  std::vector<uint32_t> cells(sizes.size());
+  Status status = Status::ok;
+  try {
+    floats.assign(0, P{0.1, 0, 0}, cells);
+  } catch (const Failure& e) {
+    status = e.status();
+  }
+  EXPECT_EQ(status, Status::internal);
+}
+
+// The definition of floating_cell.h written out plainly, for real data: a map from grid square to the
+// cells whose centers lie in it, and for each vertex every cell of the 27 squares around its own, tested
+// exactly as brute_force does (on float positions the differences are exact). Uniform: a map from square
+// to the id of its first vertex.
+std::vector<uint32_t> reference(double size, ClusterOptions options, const std::vector<P>& points) {
+  struct Hash {
+    size_t operator()(const std::array<int64_t, 3>& k) const {
+      return core::fmix64(static_cast<uint64_t>(k[0]) * 0x9E3779B97F4A7C15ull ^ static_cast<uint64_t>(k[1]) * 0xC2B2AE3D27D4EB4Full ^
+                          static_cast<uint64_t>(k[2]));
+    }
+  };
+  std::unordered_map<std::array<int64_t, 3>, std::vector<uint32_t>, Hash> squares;
+  std::vector<P> centers;
+  std::vector<uint32_t> cells;
+  const double h = size / 2;
+  for (const P& p : points) {
+    const std::array<int64_t, 3> own = {core::grid_square(p[0], size), core::grid_square(p[1], size),
+                                        core::grid_square(p[2], size)};
+    uint32_t best = core::kNoCell;
+    if (options.clustering == Clustering::uniform) {
+      auto it = squares.find(own);
+      if (it != squares.end()) best = it->second[0];
+    } else {
+      double best_d2 = 0;
+      for (int64_t dx = -1; dx <= 1; ++dx)
+        for (int64_t dy = -1; dy <= 1; ++dy)
+          for (int64_t dz = -1; dz <= 1; ++dz) {
+            auto it = squares.find({own[0] + dx, own[1] + dy, own[2] + dz});
+            if (it == squares.end()) continue;
+            for (uint32_t c : it->second) {
+              const double ex = p[0] - centers[c][0], ey = p[1] - centers[c][1], ez = p[2] - centers[c][2];
+              if (std::fabs(ex) > h || std::fabs(ey) > h || std::fabs(ez) > h) continue;
+              const double d2 = ex * ex + ey * ey + ez * ez;
+              if (options.shape == CellShape::sphere && d2 > h * h) continue;
+              const bool better = best == core::kNoCell ||
+                                  (options.choice == CellChoice::nearest ? d2 < best_d2 || (d2 == best_d2 && c < best)
+                                                                          : c < best);
+              if (better) best = c, best_d2 = d2;
+            }
+          }
+    }
+    if (best == core::kNoCell) {
+      best = static_cast<uint32_t>(centers.size());
+      centers.push_back(p);
+      squares[own].push_back(best);
+    }
+    cells.push_back(best);
+  }
+  return cells;
+}
+
+// The compact clusterer as the cluster stage runs it (float centers, the scene's bounds, so that coarse
+// levels are dense arrays and fine ones packed hash tables, assign_block in blocks) gives exactly the
+// reference's ids on real models: a CAD building and a scan, their vertices in a shuffled order (as weight
+// order is spatially random), levels from tens of thousands of cells down to hundreds, in every variant.
+TEST(FloatingCell, CompactMatchesReferenceOnRealData) {
+  LODSTREAM_REQUIRE_SHARED_DATA(data);
+  for (const char* model : {"buildings/Office_A_20110811.obj", "scans/nefertiti.obj"}) {
+    std::ifstream in(data + "/" + model);
+    ASSERT_TRUE(in) << model;
+    std::vector<P> points;
+    double bounds[6] = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY};
+    for (std::string line; std::getline(in, line);) {
+      float x, y, z;
+      if (line.rfind("v ", 0) != 0 || std::sscanf(line.c_str() + 2, "%f %f %f", &x, &y, &z) != 3) continue;
+      points.push_back({x, y, z});
+      for (int a = 0; a < 3; ++a) {
+        bounds[a] = std::min(bounds[a], points.back()[a]);
+        bounds[3 + a] = std::max(bounds[3 + a], points.back()[a]);
       }
-      EXPECT_TRUE(std::all_of(seen.begin(), seen.end(), [](bool b) { return b; }));
+    }
+    ASSERT_GT(points.size(), 40000u) << model;
+    std::shuffle(points.begin(), points.end(), std::mt19937_64(17));
+    const double diag = std::hypot(bounds[3] - bounds[0], bounds[4] - bounds[1], bounds[5] - bounds[2]);
+    const std::vector<double> sizes = {diag / 1200, diag / 300, diag / 60};
+    std::vector<ClusterOptions> variants(std::begin(kFloatingVariants), std::end(kFloatingVariants));
+    variants.push_back(kUniform);
+    for (ClusterOptions o : variants) {
+      o.float_positions = true;
+      Clusterer clusterer(sizes, o, bounds, 1 << 16);  // the coarsest level dense, the others hashed
+      std::vector<std::vector<uint32_t>> cells(sizes.size());
+      constexpr size_t kBlock = 5000;
+      for (size_t first = 0; first < points.size(); first += kBlock) {
+        const size_t n = std::min(kBlock, points.size() - first);
+        std::vector<uint32_t> ids(n), out(sizes.size() * n);
+        std::vector<double> xyz(3 * n);
+        for (size_t i = 0; i < n; ++i) {
+          ids[i] = static_cast<uint32_t>(first + i);
+          std::copy(points[first + i].begin(), points[first + i].end(), &xyz[3 * i]);
+        }
+        clusterer.assign_block(ids, xyz, out);
+        for (size_t l = 0; l < sizes.size(); ++l) cells[l].insert(cells[l].end(), out.begin() + l * n, out.begin() + (l + 1) * n);
+      }
+      for (size_t l = 0; l < sizes.size(); ++l) {
+        const std::vector<uint32_t> expected = reference(sizes[l], o, points);
+        EXPECT_EQ(cells[l], expected) << model << " clustering " << int(o.clustering) << " shape " << int(o.shape)
+                                      << " choice " << int(o.choice) << " level " << l;
+        EXPECT_EQ(clusterer.cell_count(l), *std::max_element(expected.begin(), expected.end()) + 1);
+        if (l == 0) {
+          EXPECT_GT(clusterer.cell_count(l), 5000u) << model;
+        }
+      }
     }
   }
 }
