@@ -249,75 +249,117 @@ class Feeder {
 };
 
 // Replaces each planar face's fan in triangles.u32 by core::triangulate_polygon's triangles (see the top
-// of this file). Faces are independent: batches of them run in parallel, each face read and written with
-// pread/pwrite on its own byte range (positions read per corner, so no mapping of the whole positions
-// column counts against the memory budget); only faces whose triangles change are written.
+// of this file). Faces go in batches of consecutive records whose triangles span at most kSpanBytes: the
+// batch's triangles are read with one pread, and the positions its faces name with one more when they
+// span at most kSpanBytes too (faces name nearby vertices in real files), else corner by corner. The
+// faces of a batch are triangulated in parallel; only those whose triangles change are written back.
+// Memory: two buffers of at most kSpanBytes (plus one face larger than that), nothing mapped.
 void triangulate_planar_faces(const std::string& store_dir, bool single, const std::string& faces_path,
                               uint64_t faces, StoreMeta* meta, Progress& progress) {
+  constexpr uint64_t kSpanBytes = 8 << 20;
   struct Fd {
     int fd;
-    explicit Fd(const std::string& path, int flags) : fd(::open(path.c_str(), flags | O_CLOEXEC)) {
+    std::string path;
+    Fd(const std::string& p, int flags) : fd(::open(p.c_str(), flags | O_CLOEXEC)), path(p) {
       if (fd < 0) fail(Status::io_error, path + ": cannot open: " + std::strerror(errno));
     }
     ~Fd() { ::close(fd); }
+    void read(void* data, size_t bytes, uint64_t offset) const {
+      if (::pread(fd, data, bytes, static_cast<off_t>(offset)) != static_cast<ssize_t>(bytes))
+        fail(Status::io_error, path + ": read failed at byte " + std::to_string(offset));
+    }
+    void write(const void* data, size_t bytes, uint64_t offset) const {
+      if (::pwrite(fd, data, bytes, static_cast<off_t>(offset)) != static_cast<ssize_t>(bytes))
+        fail(Status::io_error, path + ": write failed at byte " + std::to_string(offset));
+    }
   };
-  const std::string tri_path = store_dir + "/triangles.u32";
-  const std::string pos_path = store_dir + (single ? "/positions.f32" : "/positions.f64");
-  Fd tri(tri_path, O_RDWR), pos(pos_path, O_RDONLY);
-  auto read_at = [](const Fd& f, const std::string& path, void* data, size_t bytes, uint64_t offset) {
-    if (::pread(f.fd, data, bytes, static_cast<off_t>(offset)) != static_cast<ssize_t>(bytes))
-      fail(Status::io_error, path + ": read failed at byte " + std::to_string(offset));
-  };
+  const Fd tri(store_dir + "/triangles.u32", O_RDWR);
+  const Fd pos(store_dir + (single ? "/positions.f32" : "/positions.f64"), O_RDONLY);
+  const uint64_t stride = single ? 12 : 24;
   struct Scratch {
-    std::vector<uint32_t> fan, ids, out;
+    std::vector<uint32_t> local;
     std::vector<double> xyz;
     core::PolygonScratch polygon;
     uint64_t concave = 0, fallback = 0;
   };
   tbb::enumerable_thread_specific<Scratch> scratch;
   io::MappedFile list(faces_path);
-  constexpr uint64_t batch = 1 << 16;
-  for (uint64_t begin = 0; begin < faces; begin += batch) {
+  std::vector<uint32_t> fans;       // the batch's triangles, from its first face's first triangle
+  std::vector<char> corners;        // positions lo..hi of the vertices the batch names
+  std::vector<uint8_t> changed;     // per face of the batch
+  constexpr uint64_t kWindow = 1 << 16;  // records mapped at a time
+  uint64_t done = 0;
+  while (done < faces) {
     progress.check();
-    const uint64_t end = std::min(faces, begin + batch);
-    const io::Window w = list.map(begin * sizeof(PlanarFace), end * sizeof(PlanarFace));
+    const uint64_t window_end = std::min(faces, done + kWindow);
+    const io::Window w = list.map(done * sizeof(PlanarFace), window_end * sizeof(PlanarFace));
     const PlanarFace* records = reinterpret_cast<const PlanarFace*>(w.data());
-    tbb::parallel_for(tbb::blocked_range<uint64_t>(0, end - begin, 256), [&](const tbb::blocked_range<uint64_t>& r) {
-      Scratch& s = scratch.local();
-      for (uint64_t i = r.begin(); i < r.end(); ++i) {
-        const uint32_t m = static_cast<uint32_t>(records[i].corners);
-        const uint64_t offset = records[i].first_triangle * 12;
-        s.fan.resize(3 * size_t{m - 2});
-        read_at(tri, tri_path, s.fan.data(), s.fan.size() * 4, offset);
-        s.ids.assign({s.fan[0], s.fan[1]});
-        for (uint32_t t = 0; t + 2 < m; ++t) s.ids.push_back(s.fan[3 * t + 2]);
-        s.xyz.resize(3 * size_t{m});
-        for (uint32_t k = 0; k < m; ++k) {
-          if (single) {
-            float f[3];
-            read_at(pos, pos_path, f, sizeof f, uint64_t{s.ids[k]} * sizeof f);
-            for (int a = 0; a < 3; ++a) s.xyz[3 * k + a] = f[a];
-          } else {
-            read_at(pos, pos_path, &s.xyz[3 * k], 24, uint64_t{s.ids[k]} * 24);
-          }
-        }
-        s.out.resize(s.fan.size());
-        const core::Triangulation how = core::triangulate_polygon(s.xyz.data(), m, s.out.data(), &s.polygon);
-        if (how == core::Triangulation::fan) continue;
-        if (how == core::Triangulation::fallback) {
-          ++s.fallback;
-          if (std::equal(s.out.begin(), s.out.end(), s.fan.begin(), [&](uint32_t k, uint32_t id) { return s.ids[k] == id; }))
-            continue;
-        } else {
-          ++s.concave;
-        }
-        for (uint32_t& k : s.out) k = s.ids[k];
-        if (::pwrite(tri.fd, s.out.data(), s.out.size() * 4, static_cast<off_t>(offset)) !=
-            static_cast<ssize_t>(s.out.size() * 4))
-          fail(Status::io_error, tri_path + ": write failed at byte " + std::to_string(offset));
+    const uint64_t in_window = window_end - done;
+    for (uint64_t b = 0; b < in_window;) {
+      // The batch: records b..e, their triangles first..last.
+      const uint64_t first = records[b].first_triangle;
+      uint64_t e = b + 1;
+      while (e < in_window && (records[e].first_triangle + records[e].corners - 2 - first) * 12 <= kSpanBytes) ++e;
+      const uint64_t last = records[e - 1].first_triangle + records[e - 1].corners - 2;
+      fans.resize(3 * (last - first));
+      tri.read(fans.data(), fans.size() * 4, first * 12);
+      uint32_t lo = UINT32_MAX, hi = 0;
+      for (uint64_t k = b; k < e; ++k) {
+        const uint32_t* f = &fans[3 * (records[k].first_triangle - first)];
+        const uint64_t m = records[k].corners;
+        auto see = [&](uint32_t id) { lo = std::min(lo, id), hi = std::max(hi, id); };
+        see(f[0]), see(f[1]);
+        for (uint64_t t = 0; t + 2 < m; ++t) see(f[3 * t + 2]);
       }
-    });
-    progress.report("triangulate", static_cast<double>(end) / static_cast<double>(faces));
+      const bool in_memory = (uint64_t{hi} - lo + 1) * stride <= kSpanBytes;
+      if (in_memory) {
+        corners.resize((uint64_t{hi} - lo + 1) * stride);
+        pos.read(corners.data(), corners.size(), uint64_t{lo} * stride);
+      }
+      changed.assign(e - b, 0);
+      tbb::parallel_for(tbb::blocked_range<uint64_t>(b, e, 64), [&](const tbb::blocked_range<uint64_t>& r) {
+        Scratch& s = scratch.local();
+        for (uint64_t k = r.begin(); k < r.end(); ++k) {
+          const uint32_t m = static_cast<uint32_t>(records[k].corners);
+          uint32_t* f = &fans[3 * (records[k].first_triangle - first)];
+          s.xyz.resize(3 * size_t{m});
+          for (uint32_t c = 0; c < m; ++c) {
+            const uint32_t id = c < 2 ? f[c] : f[3 * (c - 2) + 2];
+            char bytes[24];
+            const char* at = bytes;
+            if (in_memory) at = &corners[(uint64_t{id} - lo) * stride];
+            else pos.read(bytes, stride, uint64_t{id} * stride);
+            if (single) {
+              float v[3];
+              std::memcpy(v, at, 12);
+              for (int a = 0; a < 3; ++a) s.xyz[3 * c + a] = v[a];
+            } else {
+              std::memcpy(&s.xyz[3 * c], at, 24);
+            }
+          }
+          s.local.resize(3 * size_t{m - 2});
+          const core::Triangulation how = core::triangulate_polygon(s.xyz.data(), m, s.local.data(), &s.polygon);
+          if (how == core::Triangulation::fan) continue;
+          if (how == core::Triangulation::fallback) {
+            ++s.fallback;
+            continue;  // the fallback is the fan the store holds
+          }
+          ++s.concave;
+          // Corner numbers to vertex ids: corner 0, 1 and then the third corner of each fan triangle.
+          for (uint32_t& c : s.local) c = c < 2 ? f[c] : f[3 * (c - 2) + 2];
+          std::copy(s.local.begin(), s.local.end(), f);
+          changed[k - b] = 1;
+        }
+      });
+      for (uint64_t k = b; k < e; ++k)
+        if (changed[k - b]) {
+          const uint64_t at = records[k].first_triangle;
+          tri.write(&fans[3 * (at - first)], (records[k].corners - 2) * 12, at * 12);
+        }
+      b = e;
+    }
+    done = window_end;
+    progress.report("triangulate", static_cast<double>(done) / static_cast<double>(faces));
   }
   for (const Scratch& s : scratch) {
     meta->polygons_concave += s.concave;

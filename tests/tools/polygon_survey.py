@@ -8,8 +8,10 @@ A face's ring is its corners less each corner equal to the previous one (the fir
 has m >= 4 distinct vertices are surveyed. In the face's Newell plane (projected along the normal's largest
 axis, counter-clockwise), the fan is inside when none of its triangles turns clockwise by more than
 1e-12 * extent^2 (the tolerance of core/polygon_triangulation.cpp); otherwise the face is concave for the
-fan. The fan's excess is sum(|fan triangle areas|) - polygon area: the area its triangles cover outside
-the face or twice inside it (a fan's signed areas always sum to the polygon's area).
+fan, and either simple (no two edges cross: lodstream triangulates it inside itself, `polygons_concave`)
+or self-intersecting (no inside: lodstream keeps the fan). The fan's excess on a simple concave face is
+sum(|fan triangle areas|) - polygon area: the area its triangles cover outside the face or twice inside
+it (a fan's signed areas always sum to the polygon's area).
 
 usage: polygon_survey.py FILE.obj|DIR...   (prints one line per file with n-gons, then the totals)
 """
@@ -33,7 +35,8 @@ def newell(p):
 
 
 def survey_face(p):
-    """(concave, polygon area, fan excess area) in the face's plane; None when it has no plane."""
+    """(concave, polygon area, fan excess area, concave and simple) in the face's plane; None when it has
+    no plane."""
     normal = newell(p)
     k = max(range(3), key=lambda a: (abs(normal[a]), -a))
     nk = normal[k]
@@ -57,7 +60,28 @@ def survey_face(p):
     concave = any(c < -eps for c in fan)
     area = sum(fan) / 2 * scale
     excess = sum(abs(c) for c in fan) / 2 * scale - area
-    return concave, area, excess
+    return concave, area, excess, concave and simple(uv, eps)
+
+
+def simple(uv, eps):
+    """No two edges cross at a point inside both (by more than eps on each side)."""
+    n = len(uv)
+
+    def cross(a, b, c):
+        return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+
+    def opposite(d1, d2):
+        return (d1 > eps and d2 < -eps) or (d1 < -eps and d2 > eps)
+
+    for i in range(n):
+        a, b = uv[i], uv[(i + 1) % n]
+        for j in range(i + 2, n):
+            if (j + 1) % n == i:
+                continue
+            c, d = uv[j], uv[(j + 1) % n]
+            if opposite(cross(a, b, c), cross(a, b, d)) and opposite(cross(c, d, a), cross(c, d, b)):
+                return False
+    return True
 
 
 def obj_faces(path):
@@ -85,19 +109,20 @@ def obj_faces(path):
 
 
 def survey(path):
-    faces = concave = no_plane = 0
+    faces = concave = no_plane = crossing = 0
     concave_area = excess = 0.0
     for ring, positions in obj_faces(path):
         faces += 1
         r = survey_face([positions[i] for i in ring])
         if r is None:
             no_plane += 1
-            continue
-        if r[0]:
+        elif r[3]:
             concave += 1
             concave_area += r[1]
             excess += r[2]
-    return faces, concave, no_plane, concave_area, excess
+        elif r[0]:
+            crossing += 1
+    return faces, concave, no_plane, concave_area, excess, crossing
 
 
 def main():
@@ -108,7 +133,7 @@ def main():
                 paths += [os.path.join(root, n) for n in names if n.lower().endswith(".obj")]
         else:
             paths.append(arg)
-    total = [0, 0, 0, 0.0, 0.0]
+    total = [0, 0, 0, 0.0, 0.0, 0]
     files_with = 0
     for path in sorted(paths):
         r = survey(path)
@@ -117,12 +142,13 @@ def main():
         files_with += 1
         total = [t + x for t, x in zip(total, r)]
         share = f"{100 * r[4] / r[3]:.1f} %" if r[3] else "-"
-        print(f"{path}: {r[0]} faces of 4+ corners, {r[1]} concave for the fan, {r[2]} without a plane, "
-              f"fan excess {r[4]:.6g} on {r[3]:.6g} of concave-face area ({share})")
+        print(f"{path}: {r[0]} faces of 4+ corners, {r[1]} simple and concave for the fan, {r[5]} concave "
+              f"and self-intersecting, {r[2]} without a plane, fan excess {r[4]:.6g} on {r[3]:.6g} of "
+              f"simple concave-face area ({share})")
     share = f"{100 * total[4] / total[3]:.1f} %" if total[3] else "-"
     print(f"total: {len(paths)} files, {files_with} with faces of 4+ corners: {total[0]} such faces, {total[1]} "
-          f"concave for the fan, {total[2]} without a plane, fan excess {total[4]:.6g} on {total[3]:.6g} "
-          f"of concave-face area ({share})")
+          f"simple and concave for the fan, {total[5]} concave and self-intersecting, {total[2]} without a "
+          f"plane, fan excess {total[4]:.6g} on {total[3]:.6g} of simple concave-face area ({share})")
 
 
 if __name__ == "__main__":
