@@ -356,21 +356,39 @@ TEST(Ingest, ObjAndPlyGiveTheSameTrianglesForTheSamePolygon) {
   }
 }
 
+TEST(Ingest, VertexNamedByAbsoluteAndRelativeIndexInOneFace) {
+  // f 1 2 3 -4 names vertex 1 twice (the parse cannot tell: the encodings differ): its ring is the
+  // triangle 1 2 3, as the counting rule says, and the store holds no triangle naming a vertex twice.
+  test::TempDir tmp;
+  const std::string path = tmp.write("mixed.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 -4\n");
+  const std::string work = tmp.file("w");
+  const SceneInfo info = run_info(path, work, 2, 0, 0);
+  EXPECT_EQ(info.triangles, 1u);
+  EXPECT_EQ(info.degenerate, 1u);
+  EXPECT_EQ(stored_triangles(work), (std::vector<uint32_t>{0, 1, 2}));
+}
+
 TEST(Ingest, PlanarFacesAreTheSameForEveryChunkingThreadsAndMemory) {
   // Concave faces (L, U, notched) naming vertices of earlier chunks, later chunks (forward references)
   // and by relative indices, among convex quads, triangles and faces repeating a vertex.
   test::TempDir tmp;
   std::string obj;
   const double u[8][2] = {{3, 3}, {2, 3}, {2, 1}, {1, 1}, {1, 3}, {0, 3}, {0, 0}, {3, 0}};
+  auto face = [&obj](std::initializer_list<int> corners) {
+    obj.append("f");
+    for (int c : corners) obj.append(" ").append(std::to_string(c));
+    obj.append("\n");
+  };
   for (int k = 0; k < 30; ++k) {
     const int base = 8 * k;
-    for (const auto& p : u) obj += "v " + std::to_string(p[0] + 5 * k) + " " + std::to_string(p[1]) + " " + std::to_string(k) + "\n";
-    if (k % 3 == 0) obj += "f -8 -7 -6 -5 -4 -3 -2 -1\n";
-    if (k % 3 == 1) obj += "f " + std::to_string(base + 9) + " " + std::to_string(base + 10) + " " + std::to_string(base + 11) + " " + std::to_string(base + 12) + " 1 1\n";
+    for (const auto& p : u)
+      obj.append("v ").append(std::to_string(p[0] + 5 * k)).append(" ").append(std::to_string(p[1])).append(" ")
+          .append(std::to_string(k)).append("\n");
+    if (k % 3 == 0) face({-8, -7, -6, -5, -4, -3, -2, -1});
+    if (k % 3 == 1) face({base + 9, base + 10, base + 11, base + 12, 1, 1});  // forward references
     if (k > 0) {
-      std::string f = "f";
-      for (int i = 0; i < 8; ++i) f += " " + std::to_string(base - 8 + i + 1);
-      obj += f + "\nf " + std::to_string(base + 2) + " " + std::to_string(base + 3) + " " + std::to_string(base + 3) + "\n";
+      face({base - 7, base - 6, base - 5, base - 4, base - 3, base - 2, base - 1, base});
+      face({base + 2, base + 3, base + 3});
     }
   }
   const std::string path = tmp.write("u.obj", obj);
