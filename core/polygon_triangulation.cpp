@@ -8,7 +8,8 @@
 //      factor |N_k| / |N| >= 1/sqrt(3)), keep axes (k+1, k+2) in cyclic order, and mirror the second when
 //      N_k < 0, so that the ring is counter-clockwise in (u, v). Coordinates are taken relative to corner 0
 //      for precision. Projection along an axis is an affine map of the plane: it keeps inside/outside,
-//      collinearity and area ratios, so a triangulation valid in (u, v) is valid in the plane.
+//      collinearity and area ratios, so a triangulation valid in (u, v) is valid in the plane. A face that
+//      is not quite planar (real models: up to a few % of its extent) is triangulated as seen along k.
 //   3. fan_is_inside: the fan (0, i, i+1) is kept whenever every one of its triangles turns
 //      counter-clockwise (within the tolerance). For a simple polygon that means the chain 1..n-1 is
 //      angularly monotone around corner 0, i.e. the polygon is star-shaped from corner 0 and the fan is a
@@ -25,7 +26,7 @@
 //      there is none either, the polygon is not simple (or is numerically degenerate).
 //   6. covers_exactly: ear clipping may also run to the end on a self-intersecting ring, with triangles
 //      that overlap or leave it; the sum of their unsigned areas then exceeds the polygon's.
-//   When 5 or 6 fails (or the ring is not simple), the polygon gets the fan (0, i, i+1): deterministic, n - 2 triangles, and what the
+//   When 5 or 6 fails, the polygon gets the fan (0, i, i+1): deterministic, n - 2 triangles, and what the
 //   file's order gives; a self-intersecting ring has no inside to keep to.
 // Invariant of the loop: the triangles emitted so far and the remaining ring of `left` corners together
 // cover the polygon, and emitted + (left - 2) == n - 2 (each clip emits one triangle and removes one corner).

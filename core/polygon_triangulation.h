@@ -41,10 +41,11 @@ struct PolygonScratch {
 //
 // Guarantees, for a simple polygon (no two edges crossing; corners may repeat positions or be
 // collinear): the triangles cover the polygon's projection onto its Newell plane exactly, do not overlap
-// (zero-area triangles may be emitted for collinear corners), and have the ring's orientation. A convex
-// polygon (within a relative tolerance of 1e-12 on the turns) gets the fan (0, i, i+1), so a convex quad
-// is cut along 0-2 as before; a concave quad along 1-3. The result depends on the positions alone (no
-// state is carried between calls), so it is the same for any chunking or thread.
+// (zero-area triangles may be emitted for collinear corners), and have the ring's orientation. Whenever
+// the fan (0, i, i+1) lies inside the polygon (every convex polygon, within a relative tolerance of 1e-12
+// on the turns) it is the result, so convex faces keep the triangles a fan triangulator gave them; a
+// concave quad whose diagonal 0-2 lies outside is cut along 1-3. The result depends on the positions
+// alone (no state is carried between calls), so it is the same for any chunking or thread.
 Triangulation triangulate_polygon(const double* xyz, uint32_t n, uint32_t* triangles, PolygonScratch* scratch);
 
 // Twice the signed area of the polygon in its Newell plane (the length of the Newell normal): the
