@@ -3,8 +3,9 @@
 // Chunks are whole lines (io::next_line_chunk), extended so that a line continued with a trailing
 // backslash never ends a chunk. parse() is a single pass over the chunk, one statement per logical line:
 //   v x y z [...]          position (extra values such as w or r g b are ignored)
-//   f a b c [...]          polygon, fan-triangulated (0,i,i+1); corners v, v/vt, v//vn or v/vt/vn;
-//                          a two-corner face (an exporter's loose edge) becomes a line segment
+//   f a b c [...]          polygon, split by io::add_face (n-gons triangulated in their plane at ingest);
+//                          corners v, v/vt, v//vn or v/vt/vn; a two-corner face (an exporter's loose
+//                          edge) becomes a line segment
 //   l a b [...]            polyline, split into segments
 //   p a [...]              points
 //   o name / g name...     current object = the rest of the line, trimmed, comment removed
@@ -25,6 +26,10 @@
 // Object ids: parse() numbers the objects of a chunk locally: 0 = the object current when the chunk
 // starts, i >= 1 = the object of the i-th o/g statement of the chunk, named in out->object_names[i - 1].
 // resolve() maps names to global ids in order of first appearance.
+//
+// Repeated corners are recognised by their encoded references, so a face naming one vertex once by an
+// absolute and once by a relative index is not seen as repeating it; ingest then finds the repeat in the
+// global ids and keeps that face's fan (dropping its triangles that name a vertex twice).
 #include <algorithm>
 #include <charconv>
 #include <cstdio>
@@ -364,37 +369,29 @@ class Parser {
   }
 
   const char* face(const char* p) {
-    int64_t first = 0, previous = 0;
-    uint64_t corners = 0;
+    std::vector<int64_t>& corners = out_->face_scratch;
+    corners.clear();
     for (;;) {
       p = skip_ws(p);
       if (at_statement_end(p)) break;
       int64_t ref;
       if (!reference(p, "f", &ref)) return nullptr;
-      if (corners == 0) {
-        first = ref;
-      } else if (corners >= 2) {
-        out_->triangles.push_back(first);
-        out_->triangles.push_back(previous);
-        out_->triangles.push_back(ref);
-        out_->triangle_objects.push_back(object_);
-      }
-      previous = ref;
-      ++corners;
+      corners.push_back(ref);
     }
-    if (corners == 2) {
+    const size_t n = corners.size();
+    if (n == 2) {
       // Exporters (Blender among them) write loose edges as two-corner faces: keep the edge as a line
       // segment rather than refuse real files or drop what the user gave.
-      out_->lines.push_back(first);
-      out_->lines.push_back(previous);
+      out_->lines.push_back(corners[0]);
+      out_->lines.push_back(corners[1]);
       out_->line_objects.push_back(object_);
       return finish_statement(p);
     }
-    if (corners < 3) {
-      return error(stmt_, "face with " + std::to_string(corners) + " corner" + (corners == 1 ? "" : "s") +
-                              " (needs at least 2)"),
+    if (n < 3) {
+      return error(stmt_, "face with " + std::to_string(n) + " corner" + (n == 1 ? "" : "s") + " (needs at least 2)"),
              nullptr;
     }
+    add_face(corners.data(), n, object_, &out_->triangles, out_);
     ++out_->polygons;
     return finish_statement(p);
   }

@@ -3,7 +3,7 @@
 // open() parses the header (io/ply_header.h) into element layouts and rejects counts the file cannot hold.
 // next_chunk() cuts whole records of one element at a time: by arithmetic for fixed-size binary records, by
 // walking the list counts for variable-size binary records, and by lines for ascii. parse() turns vertex records
-// into positions, face records into fan-triangulated triangles (PLY indices are absolute, so they are
+// into positions, face records into triangles and segments by io::add_face (PLY indices are absolute, so they are
 // final after parse), edge records into lines, and only counts the records of any other element.
 //
 // Truncation and broken list counts are never thrown by next_chunk(): it hands parse() a chunk that claims
@@ -198,7 +198,7 @@ class PlyReader final : public Reader {
   template <typename T, bool Swap>
   void fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* out) const;
   void parse_ascii(const Chunk& chunk, const Element& e, ParsedChunk* out) const;
-  bool emit_face(const int64_t* idx, uint64_t n, ParsedChunk* out, std::string* message) const;
+  bool emit_face(int64_t* idx, uint64_t n, ParsedChunk* out, std::string* message) const;
   std::string truncation_message(const Element& e, uint64_t record, uint64_t offset) const;
 
   Fmt fmt_ = Fmt::ascii;
@@ -560,7 +560,7 @@ void PlyReader::parse(const Chunk& chunk, ParsedChunk* out) const {
   out->line_objects.resize(out->lines.size() / 2, 0);  // edge elements and two-index faces
 }
 
-bool PlyReader::emit_face(const int64_t* idx, uint64_t n, ParsedChunk* out, std::string* message) const {
+bool PlyReader::emit_face(int64_t* idx, uint64_t n, ParsedChunk* out, std::string* message) const {
   if (n < 2) {
     *message = small_face_message(n);
     return false;
@@ -577,11 +577,7 @@ bool PlyReader::emit_face(const int64_t* idx, uint64_t n, ParsedChunk* out, std:
     out->lines.push_back(idx[1]);
     return true;
   }
-  for (uint64_t i = 1; i + 1 < n; ++i) {
-    out->triangles.push_back(idx[0]);
-    out->triangles.push_back(idx[i]);
-    out->triangles.push_back(idx[i + 1]);
-  }
+  add_face(idx, n, 0, &out->triangles, out);
   ++out->polygons;
   return true;
 }
@@ -656,7 +652,7 @@ void PlyReader::fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* ou
   tri.reserve(tri.size() + 3 * rc);
   // Triangles go through a small buffer, appended a batch at a time (see fast_vertices).
   constexpr size_t kBatch = 3 * 512;
-  uint32_t buf[kBatch + 3 * 253];
+  uint32_t buf[kBatch + 3];
   size_t t = 0;
   const char* p = b;
   uint64_t i = 0, edges = 0;
@@ -668,7 +664,8 @@ void PlyReader::fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* ou
     __builtin_prefetch(p + 1024);
     if (end - p >= 13 && *p == 3) {
       const int64_t a = load<T, Swap>(p + 1), c1 = load<T, Swap>(p + 5), c2 = load<T, Swap>(p + 9);
-      if ((static_cast<uint64_t>(a) < vc) & (static_cast<uint64_t>(c1) < vc) & (static_cast<uint64_t>(c2) < vc)) {
+      if ((static_cast<uint64_t>(a) < vc) & (static_cast<uint64_t>(c1) < vc) & (static_cast<uint64_t>(c2) < vc) &
+          (a != c1) & (c1 != c2) & (a != c2)) {
         buf[t] = static_cast<uint32_t>(a);
         buf[t + 1] = static_cast<uint32_t>(c1);
         buf[t + 2] = static_cast<uint32_t>(c2);
@@ -714,12 +711,11 @@ void PlyReader::fast_faces(const Chunk& chunk, const Element& e, ParsedChunk* ou
       p += 9;
       continue;
     }
-    for (unsigned j = 1; j + 1 < n; ++j) {  // at most 253 triangles: the buffer has room past kBatch
-      buf[t] = static_cast<uint32_t>(idx[0]);
-      buf[t + 1] = static_cast<uint32_t>(idx[j]);
-      buf[t + 2] = static_cast<uint32_t>(idx[j + 1]);
-      t += 3;
-    }
+    // Quads, n-gons and faces repeating a vertex: split by add_face, after the batch (planar_faces
+    // numbers the face's triangles in `tri`).
+    tri.insert(tri.end(), buf, buf + t);
+    t = 0;
+    add_face(idx, n, 0, &tri, out);
     p += 1 + 4 * static_cast<uint64_t>(n);
   }
   tri.insert(tri.end(), buf, buf + t);

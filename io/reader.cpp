@@ -20,10 +20,89 @@ void ParsedChunk::clear() {
   line_objects.clear();
   point_objects.clear();
   object_names.clear();
+  planar_faces.clear();
   polygons = skipped = newlines = 0;
+  degenerate = face_segments = 0;
   reader_state = 0;
   error = ParseError{};
 }
+
+template <class T>
+void add_face(int64_t* c, size_t n, uint32_t object, std::vector<T>* triangles, ParsedChunk* out) {
+  auto triangle = [&](int64_t a, int64_t b, int64_t d) {
+    triangles->push_back(static_cast<T>(a));
+    triangles->push_back(static_cast<T>(b));
+    triangles->push_back(static_cast<T>(d));
+    out->triangle_objects.push_back(object);
+  };
+  auto segment = [&](int64_t a, int64_t b) {
+    out->lines.push_back(a);
+    out->lines.push_back(b);
+    out->line_objects.push_back(object);
+    ++out->face_segments;
+  };
+  if (n == 3 && c[0] != c[1] && c[1] != c[2] && c[0] != c[2]) {
+    triangle(c[0], c[1], c[2]);
+    return;
+  }
+  size_t m = 1;
+  for (size_t i = 1; i < n; ++i)
+    if (c[i] != c[m - 1]) c[m++] = c[i];
+  while (m > 1 && c[m - 1] == c[0]) --m;
+  if (m == 1) {
+    out->degenerate += n - 2;
+    return;
+  }
+  if (m == 2) {
+    segment(c[0], c[1]);
+    out->degenerate += n - 2;
+    return;
+  }
+  bool distinct = true;
+  if (m <= 32) {
+    for (size_t i = 0; i < m && distinct; ++i)
+      for (size_t j = i + 1; j < m; ++j)
+        if (c[i] == c[j]) {
+          distinct = false;
+          break;
+        }
+  } else {
+    std::vector<int64_t>& sorted = out->face_scratch;
+    if (sorted.data() == c) {
+      // The caller collected the corners in face_scratch: sort a copy at its end.
+      sorted.resize(n + m);
+      c = sorted.data();
+      std::copy(c, c + m, c + n);
+      std::sort(c + n, c + n + m);
+      distinct = std::adjacent_find(c + n, c + n + m) == c + n + m;
+    } else {
+      sorted.assign(c, c + m);
+      std::sort(sorted.begin(), sorted.end());
+      distinct = std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end();
+    }
+  }
+  out->degenerate += n - m;
+  if (distinct) {
+    if (m >= 4) {
+      out->planar_faces.push_back(triangles->size() / 3);
+      out->planar_faces.push_back(m);
+    }
+    for (size_t i = 1; i + 1 < m; ++i) triangle(c[0], c[i], c[i + 1]);
+    return;
+  }
+  for (size_t i = 1; i + 1 < m; ++i) {
+    // c[i] != c[i + 1] and c[0] differs from c[1] and c[m - 1], by the reduction.
+    if (c[0] != c[i] && c[0] != c[i + 1]) {
+      triangle(c[0], c[i], c[i + 1]);
+    } else {
+      segment(c[0], c[0] == c[i] ? c[i + 1] : c[i]);
+      ++out->degenerate;
+    }
+  }
+}
+
+template void add_face<int64_t>(int64_t*, size_t, uint32_t, std::vector<int64_t>*, ParsedChunk*);
+template void add_face<uint32_t>(int64_t*, size_t, uint32_t, std::vector<uint32_t>*, ParsedChunk*);
 
 void fail_at_line(const MappedFile& file, uint64_t line, const std::string& message) {
   fail(Status::bad_data, file.path() + ":" + std::to_string(line) + ": " + message);

@@ -42,7 +42,7 @@ struct ParseError {
 struct ParsedChunk {
   uint64_t seq = 0;
   std::vector<double> positions;   // x, y, z per vertex record (per triangle corner for soup readers)
-  std::vector<int64_t> triangles;  // 3 references per triangle, polygons already fan-triangulated
+  std::vector<int64_t> triangles;  // 3 references per triangle, faces already split by add_face()
   // Compact forms a non-soup reader may fill instead, to save the widening and narrowing copies on hot
   // paths: positions32 (only when single_precision(); exact) in place of positions, and triangles32 in
   // place of triangles, holding final global vertex ids already checked against the vertex count. A chunk
@@ -56,6 +56,13 @@ struct ParsedChunk {
   std::vector<uint32_t> point_objects;     // one per point
   std::vector<std::string> object_names;   // reader-defined: names met in this chunk, for resolve()
   uint64_t polygons = 0;   // input faces in this chunk (OBJ f, PLY face records, STL facets)
+  // Faces of m >= 4 distinct vertices, whose triangles need the positions: pairs (index of the face's first
+  // triangle in this chunk, m). Their triangles are a placeholder, the fan (r0, ri, ri+1) of the face's
+  // ring r, which ingest replaces by core::triangulate_polygon's triangles in place (same count, m - 2).
+  std::vector<uint64_t> planar_faces;
+  uint64_t degenerate = 0;     // triangle slots faces lost to repeated corners (see add_face)
+  uint64_t face_segments = 0;  // line segments made from faces (see add_face), counted among `lines`
+  std::vector<int64_t> face_scratch;  // reader scratch for one face, kept across chunks by clear()
   uint64_t skipped = 0;    // records recognised and deliberately not used (OBJ vt/vn/usemtl, ...)
   uint64_t newlines = 0;   // line breaks in the chunk (text formats), so resolve() can number lines
   int64_t reader_state = 0;  // reader-defined scratch value carried from parse() to resolve()
@@ -103,6 +110,21 @@ class Reader {
   const MappedFile& file_;
   std::vector<std::string> object_names_{std::string()};
 };
+
+// Splits one face of n >= 3 corners (references in the reader's encoding, equal exactly when they name
+// the same vertex; overwritten as scratch) into triangles appended to `triangles` (with `object` in
+// out->triangle_objects), line segments in out->lines / line_objects, and counts. The rule, by the face's
+// ring r: the corners with each corner equal to its predecessor (cyclically, corner 0 kept) removed:
+//   m = |r| = 1        nothing: out->degenerate += n - 2 (a face that is one vertex)
+//   m = 2              the segment (r0, r1): degenerate += n - 2, face_segments += 1
+//   m >= 3, distinct   m - 2 triangles, degenerate += n - m; m = 3 is the triangle itself, m >= 4 is
+//                      recorded in out->planar_faces to be triangulated in its plane
+//   m >= 3, a vertex   the ring touches itself (r = a b c b d ...): the fan (r0, ri, ri+1) in the file's
+//     repeats          own order, each fan triangle naming a vertex twice kept as the segment it
+//                      describes (degenerate += 1, face_segments += 1 each)
+// so that, over all faces, sum (n - 2) = triangles + degenerate. Does not count out->polygons.
+template <class T>
+void add_face(int64_t* corners, size_t n, uint32_t object, std::vector<T>* triangles, ParsedChunk* out);
 
 // Picks the reader for a file by its contents and extension.
 // Throws Failure(usage) for an unrecognised format and Failure(bad_data) for an empty file.

@@ -5,6 +5,13 @@
 // in file order, and this file appends the result to the store. Soups (STL) are then welded by exact
 // position with two external sorts, so their memory is bounded too.
 //
+// Faces of four corners or more are stored first as the fan of their ring (io::add_face), a placeholder
+// of the right size: their triangles need positions that a chunk's parse does not have (faces name
+// vertices of any earlier or later chunk). Once every vertex is stored, triangulate_planar_faces rewrites
+// each such face's triangles in place with core::triangulate_polygon (only those that differ from the
+// fan), before store.json marks the store complete; the result depends on the face and its positions
+// alone, so it is the same for any chunking, thread count or budget.
+//
 // Invariant of the store: every reference is a valid vertex id, no triangle names a vertex twice, and the
 // bytes depend on the input alone (the order of everything is file order, or position order for welded
 // soups), never on threads, budget or chunk size.
@@ -12,14 +19,22 @@
 
 #include <algorithm>
 #include <bit>
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <vector>
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
 
+#include "core/polygon_triangulation.h"
 #include "core/status.h"
 #include "io/file_writer.h"
 #include "io/mapped_file.h"
@@ -42,7 +57,9 @@ struct Prepared {
   std::vector<LocalRun> triangle_runs, line_runs, point_runs;
   std::vector<float> positions32;  // for single-precision stores
   std::vector<std::pair<uint64_t, Bbox>> vertex_boxes;
-  uint64_t degenerate = 0, degenerate_segments = 0;
+  std::vector<uint64_t> planar_faces;  // pairs (index among this chunk's kept triangles, corners)
+  std::vector<int64_t> ring;           // scratch
+  uint64_t degenerate = 0, degenerate_segments = 0, face_segments = 0;
   int64_t max_ref = -1;
   bool negative_ref = false;
 
@@ -51,7 +68,8 @@ struct Prepared {
     for (auto* v : {&triangle_runs, &line_runs, &point_runs}) v->clear();
     positions32.clear();
     vertex_boxes.clear();
-    degenerate = degenerate_segments = 0;
+    planar_faces.clear();
+    degenerate = degenerate_segments = face_segments = 0;
     max_ref = -1;
     negative_ref = false;
   }
@@ -93,6 +111,49 @@ uint64_t narrow_primitives(const std::vector<Ref>& refs, const std::vector<uint3
   return dropped;
 }
 
+bool distinct(std::vector<int64_t>* ring) {
+  const size_t m = ring->size();
+  const int64_t* r = ring->data();
+  if (m <= 32) {
+    for (size_t i = 0; i < m; ++i)
+      for (size_t j = i + 1; j < m; ++j)
+        if (r[i] == r[j]) return false;
+    return true;
+  }
+  std::sort(ring->begin(), ring->end());
+  return std::adjacent_find(ring->begin(), ring->end()) == ring->end();
+}
+
+// The chunk's planar faces (io::ParsedChunk::planar_faces) renumbered among the kept triangles. A face
+// whose ring repeats a vertex in global ids (OBJ: one vertex named by an absolute and a relative index,
+// which parse() cannot compare) is not triangulated in its plane: it keeps its fan, less the triangles
+// narrow_primitives dropped.
+template <class Ref>
+void select_planar_faces(const std::vector<Ref>& refs, const std::vector<uint64_t>& faces, bool any_dropped,
+                         Prepared* p) {
+  auto repeats = [&](uint64_t t) {
+    const Ref* r = &refs[3 * t];
+    return r[0] == r[1] || r[1] == r[2] || r[0] == r[2];
+  };
+  uint64_t scanned = 0, dropped = 0;
+  for (size_t k = 0; k < faces.size(); k += 2) {
+    const uint64_t first = faces[k], m = faces[k + 1];
+    if (any_dropped) {
+      for (; scanned < first; ++scanned) dropped += repeats(scanned);
+      bool lost = false;
+      for (uint64_t t = first; t < first + m - 2; ++t) lost = lost || repeats(t);
+      if (lost) continue;
+    }
+    p->ring.clear();
+    p->ring.push_back(static_cast<int64_t>(refs[3 * first]));
+    p->ring.push_back(static_cast<int64_t>(refs[3 * first + 1]));
+    for (uint64_t t = first; t < first + m - 2; ++t) p->ring.push_back(static_cast<int64_t>(refs[3 * t + 2]));
+    if (!distinct(&p->ring)) continue;
+    p->planar_faces.push_back(first - dropped);
+    p->planar_faces.push_back(m);
+  }
+}
+
 void prepare(const io::ParsedChunk& c, bool soup, bool single, uint64_t first_vertex, Prepared* p) {
   p->clear();
   if (!soup) {
@@ -109,15 +170,28 @@ void prepare(const io::ParsedChunk& c, bool soup, bool single, uint64_t first_ve
     p->degenerate = c.triangles32.empty()
                         ? narrow_primitives<3>(c.triangles, c.triangle_objects, &p->triangles, &p->triangle_runs, p)
                         : narrow_primitives<3>(c.triangles32, c.triangle_objects, &p->triangles, &p->triangle_runs, p);
+    if (!c.planar_faces.empty()) {
+      if (c.triangles32.empty()) select_planar_faces(c.triangles, c.planar_faces, p->degenerate != 0, p);
+      else select_planar_faces(c.triangles32, c.planar_faces, p->degenerate != 0, p);
+    }
+    p->degenerate += c.degenerate;
+    p->face_segments = c.face_segments;
   }
   p->degenerate_segments = narrow_primitives<2>(c.lines, c.line_objects, &p->lines, &p->line_runs, p);
   narrow_primitives<1>(c.points, c.point_objects, &p->points, &p->point_runs, p);
 }
 
-// Appends prepared primitives to the store in file order and keeps the totals.
+// A face to triangulate in its plane: its first triangle in triangles.u32 and its corner count.
+struct PlanarFace {
+  uint64_t first_triangle;
+  uint64_t corners;
+};
+
+// Appends prepared primitives to the store in file order and keeps the totals. Planar faces go to a
+// scratch file, in file order, for triangulate_planar_faces.
 class Feeder {
  public:
-  explicit Feeder(StoreWriter& store) : store_(store) {}
+  Feeder(StoreWriter& store, const std::string& planar_path) : store_(store), planar_path_(planar_path) {}
 
   void add(const Prepared& p) {
     if (p.negative_ref) fail(Status::internal, "a reader let through a negative vertex reference");
@@ -125,6 +199,16 @@ class Feeder {
     max_ref_ = std::max(max_ref_, p.max_ref);
     degenerate_ += p.degenerate;
     degenerate_segments_ += p.degenerate_segments;
+    face_segments_ += p.face_segments;
+    if (!p.planar_faces.empty()) {
+      if (!planar_.has_value()) planar_.emplace(planar_path_, 1 << 20);
+      for (size_t k = 0; k < p.planar_faces.size(); k += 2) {
+        const PlanarFace f{triangles_ + p.planar_faces[k], p.planar_faces[k + 1]};
+        planar_->write(&f, sizeof f);
+        ++planar_faces_;
+      }
+    }
+    triangles_ += p.triangles.size() / 3;
     for (const auto* runs : {&p.triangle_runs, &p.line_runs, &p.point_runs})
       for (const LocalRun& r : *runs) {
         if (r.object >= objects_used_.size()) objects_used_.resize(std::max<size_t>(r.object + 1, objects_used_.size() * 2), 0);
@@ -144,16 +228,145 @@ class Feeder {
                                  std::to_string(v));
     meta->degenerate = degenerate_;
     meta->degenerate_segments = degenerate_segments_;
+    meta->face_segments = face_segments_;
     meta->objects_used = 0;
     for (uint8_t u : objects_used_) meta->objects_used += u;
   }
 
+  // The planar faces written, committed to their scratch file (none: 0 and no file).
+  uint64_t commit_planar_faces() {
+    if (planar_.has_value()) planar_->commit();
+    return planar_faces_;
+  }
+
  private:
   StoreWriter& store_;
+  std::string planar_path_;
+  std::optional<io::FileWriter> planar_;
   std::vector<uint8_t> objects_used_;
   int64_t max_ref_ = -1;
-  uint64_t degenerate_ = 0, degenerate_segments_ = 0;
+  uint64_t degenerate_ = 0, degenerate_segments_ = 0, face_segments_ = 0;
+  uint64_t triangles_ = 0, planar_faces_ = 0;
 };
+
+// Replaces each planar face's fan in triangles.u32 by core::triangulate_polygon's triangles (see the top
+// of this file). Faces go in batches of consecutive records whose triangles span at most kSpanBytes: the
+// batch's triangles are read with one pread, and the positions its faces name with one more when they
+// span at most kSpanBytes too (faces name nearby vertices in real files), else corner by corner. The
+// faces of a batch are triangulated in parallel; only those whose triangles change are written back.
+// Memory: two buffers of at most kSpanBytes (plus one face larger than that), nothing mapped.
+void triangulate_planar_faces(const std::string& store_dir, bool single, const std::string& faces_path,
+                              uint64_t faces, StoreMeta* meta, Progress& progress) {
+  constexpr uint64_t kSpanBytes = 8 << 20;
+  struct Fd {
+    int fd;
+    std::string path;
+    Fd(const std::string& p, int flags) : fd(::open(p.c_str(), flags | O_CLOEXEC)), path(p) {
+      if (fd < 0) fail(Status::io_error, path + ": cannot open: " + std::strerror(errno));
+    }
+    ~Fd() { ::close(fd); }
+    void read(void* data, size_t bytes, uint64_t offset) const {
+      if (::pread(fd, data, bytes, static_cast<off_t>(offset)) != static_cast<ssize_t>(bytes))
+        fail(Status::io_error, path + ": read failed at byte " + std::to_string(offset));
+    }
+    void write(const void* data, size_t bytes, uint64_t offset) const {
+      if (::pwrite(fd, data, bytes, static_cast<off_t>(offset)) != static_cast<ssize_t>(bytes))
+        fail(Status::io_error, path + ": write failed at byte " + std::to_string(offset));
+    }
+  };
+  const Fd tri(store_dir + "/triangles.u32", O_RDWR);
+  const Fd pos(store_dir + (single ? "/positions.f32" : "/positions.f64"), O_RDONLY);
+  const uint64_t stride = single ? 12 : 24;
+  struct Scratch {
+    std::vector<uint32_t> local;
+    std::vector<double> xyz;
+    core::PolygonScratch polygon;
+    uint64_t concave = 0, fallback = 0;
+  };
+  tbb::enumerable_thread_specific<Scratch> scratch;
+  io::MappedFile list(faces_path);
+  std::vector<uint32_t> fans;       // the batch's triangles, from its first face's first triangle
+  std::vector<char> corners;        // positions lo..hi of the vertices the batch names
+  std::vector<uint8_t> changed;     // per face of the batch
+  constexpr uint64_t kWindow = 1 << 16;  // records mapped at a time
+  uint64_t done = 0;
+  while (done < faces) {
+    progress.check();
+    const uint64_t window_end = std::min(faces, done + kWindow);
+    const io::Window w = list.map(done * sizeof(PlanarFace), window_end * sizeof(PlanarFace));
+    const PlanarFace* records = reinterpret_cast<const PlanarFace*>(w.data());
+    const uint64_t in_window = window_end - done;
+    for (uint64_t b = 0; b < in_window;) {
+      // The batch: records b..e, their triangles first..last.
+      const uint64_t first = records[b].first_triangle;
+      uint64_t e = b + 1;
+      while (e < in_window && (records[e].first_triangle + records[e].corners - 2 - first) * 12 <= kSpanBytes) ++e;
+      const uint64_t last = records[e - 1].first_triangle + records[e - 1].corners - 2;
+      fans.resize(3 * (last - first));
+      tri.read(fans.data(), fans.size() * 4, first * 12);
+      uint32_t lo = UINT32_MAX, hi = 0;
+      for (uint64_t k = b; k < e; ++k) {
+        const uint32_t* f = &fans[3 * (records[k].first_triangle - first)];
+        const uint64_t m = records[k].corners;
+        auto see = [&](uint32_t id) { lo = std::min(lo, id), hi = std::max(hi, id); };
+        see(f[0]), see(f[1]);
+        for (uint64_t t = 0; t + 2 < m; ++t) see(f[3 * t + 2]);
+      }
+      const bool in_memory = (uint64_t{hi} - lo + 1) * stride <= kSpanBytes;
+      if (in_memory) {
+        corners.resize((uint64_t{hi} - lo + 1) * stride);
+        pos.read(corners.data(), corners.size(), uint64_t{lo} * stride);
+      }
+      changed.assign(e - b, 0);
+      tbb::parallel_for(tbb::blocked_range<uint64_t>(b, e, 64), [&](const tbb::blocked_range<uint64_t>& r) {
+        Scratch& s = scratch.local();
+        for (uint64_t k = r.begin(); k < r.end(); ++k) {
+          const uint32_t m = static_cast<uint32_t>(records[k].corners);
+          uint32_t* f = &fans[3 * (records[k].first_triangle - first)];
+          s.xyz.resize(3 * size_t{m});
+          for (uint32_t c = 0; c < m; ++c) {
+            const uint32_t id = c < 2 ? f[c] : f[3 * (c - 2) + 2];
+            char bytes[24];
+            const char* at = bytes;
+            if (in_memory) at = &corners[(uint64_t{id} - lo) * stride];
+            else pos.read(bytes, stride, uint64_t{id} * stride);
+            if (single) {
+              float v[3];
+              std::memcpy(v, at, 12);
+              for (int a = 0; a < 3; ++a) s.xyz[3 * c + a] = v[a];
+            } else {
+              std::memcpy(&s.xyz[3 * c], at, 24);
+            }
+          }
+          s.local.resize(3 * size_t{m - 2});
+          const core::Triangulation how = core::triangulate_polygon(s.xyz.data(), m, s.local.data(), &s.polygon);
+          if (how == core::Triangulation::fan) continue;
+          if (how == core::Triangulation::fallback) {
+            ++s.fallback;
+            continue;  // the fallback is the fan the store holds
+          }
+          ++s.concave;
+          // Corner numbers to vertex ids: corner 0, 1 and then the third corner of each fan triangle.
+          for (uint32_t& c : s.local) c = c < 2 ? f[c] : f[3 * (c - 2) + 2];
+          std::copy(s.local.begin(), s.local.end(), f);
+          changed[k - b] = 1;
+        }
+      });
+      for (uint64_t k = b; k < e; ++k)
+        if (changed[k - b]) {
+          const uint64_t at = records[k].first_triangle;
+          tri.write(&fans[3 * (at - first)], (records[k].corners - 2) * 12, at * 12);
+        }
+      b = e;
+    }
+    done = window_end;
+    progress.report("triangulate", static_cast<double>(done) / static_cast<double>(faces));
+  }
+  for (const Scratch& s : scratch) {
+    meta->polygons_concave += s.concave;
+    meta->polygons_fallback += s.fallback;
+  }
+}
 
 // Soup welding (STL): corners are sorted by (position, corner index); each distinct position becomes a
 // vertex, in position order; the (corner, vertex id) pairs are sorted back into corner order to form the
@@ -286,7 +499,16 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   meta.format = reader->format();
 
   StoreWriter store(store_dir, reader->single_precision());
-  Feeder feeder(store);
+  const std::string planar_path = work.scratch("planar-faces");
+  struct RemoveFile {
+    const std::string& path;
+    ~RemoveFile() {
+      std::error_code ec;
+      std::filesystem::remove(path, ec);
+      std::filesystem::remove(path + ".partial", ec);
+    }
+  } remove_planar{planar_path};
+  Feeder feeder(store, planar_path);
   std::unique_ptr<SoupWelder> welder;
   if (reader->soup()) welder = std::make_unique<SoupWelder>(work, plan);
 
@@ -372,6 +594,11 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   meta.vertex_records = vertex_records;
   meta.object_names = reader->object_names();
   feeder.finish(&meta);
+  const uint64_t planar_faces = feeder.commit_planar_faces();
+  if (planar_faces) {
+    store.commit_columns();
+    triangulate_planar_faces(store_dir, single, planar_path, planar_faces, &meta, progress);
+  }
   return store.commit(std::move(meta));
 }
 
@@ -429,6 +656,9 @@ StoreMeta run_ingest_stage(const std::string& input, const std::string& store_di
   scene->triangles = meta.triangles;
   scene->degenerate = meta.degenerate;
   scene->degenerate_segments = meta.degenerate_segments;
+  scene->face_segments = meta.face_segments;
+  scene->polygons_concave = meta.polygons_concave;
+  scene->polygons_fallback = meta.polygons_fallback;
   scene->lines = meta.lines;
   scene->points = meta.points;
   scene->objects = meta.objects_used;

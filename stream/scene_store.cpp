@@ -105,10 +105,16 @@ void StoreWriter::add_triangles(std::span<const uint32_t> ids, std::span<const L
 void StoreWriter::add_lines(std::span<const uint32_t> ids, std::span<const LocalRun> runs) { lines_.add(ids, 2, runs); }
 void StoreWriter::add_points(std::span<const uint32_t> ids, std::span<const LocalRun> runs) { points_.add(ids, 1, runs); }
 
-StoreMeta StoreWriter::commit(StoreMeta meta) {
+void StoreWriter::commit_columns() {
+  if (columns_committed_) return;
   for (io::FileWriter* w : {&positions_, &triangles_.ids, &triangles_.runs, &lines_.ids, &lines_.runs, &points_.ids,
                             &points_.runs})
     w->commit();
+  columns_committed_ = true;
+}
+
+StoreMeta StoreWriter::commit(StoreMeta meta) {
+  commit_columns();
   meta.single_precision = single_;
   meta.vertices = vertices_;
   meta.triangles = triangles_.count;
@@ -143,6 +149,9 @@ std::string store_meta_json(const StoreMeta& m) {
   j["polygons"] = m.polygons;
   j["degenerate"] = m.degenerate;
   j["degenerate_segments"] = m.degenerate_segments;
+  j["face_segments"] = m.face_segments;
+  j["polygons_concave"] = m.polygons_concave;
+  j["polygons_fallback"] = m.polygons_fallback;
   j["skipped"] = m.skipped;
   j["objects_used"] = m.objects_used;
   j["bbox"] = bbox_json(m.bbox);
@@ -174,6 +183,9 @@ bool read_store_meta(const std::string& dir, StoreMeta* m) {
     m->polygons = j.at("polygons").get<uint64_t>();
     m->degenerate = j.at("degenerate").get<uint64_t>();
     m->degenerate_segments = j.at("degenerate_segments").get<uint64_t>();
+    m->face_segments = j.at("face_segments").get<uint64_t>();
+    m->polygons_concave = j.at("polygons_concave").get<uint64_t>();
+    m->polygons_fallback = j.at("polygons_fallback").get<uint64_t>();
     m->skipped = j.at("skipped").get<uint64_t>();
     m->objects_used = j.at("objects_used").get<uint64_t>();
     m->object_names = j.at("object_names").get<std::vector<std::string>>();

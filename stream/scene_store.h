@@ -24,7 +24,8 @@
 namespace lodstream::stream {
 
 inline constexpr uint64_t store_chunk_elements = 1 << 20;
-inline constexpr int store_version = 2;
+// 3: n-gons triangulated in their plane, faces naming two vertices kept as segments (was: fan).
+inline constexpr int store_version = 3;
 
 // Elements first, first + 1, ... up to the next run's `first` belong to `object`.
 struct ObjectRun {
@@ -80,6 +81,9 @@ struct StoreMeta {
   uint64_t primitives() const { return triangles + lines + points; }
   uint64_t vertex_records = 0;  // vertex records in the file (STL: triangle corners before welding)
   uint64_t polygons = 0, degenerate = 0, degenerate_segments = 0, skipped = 0;
+  uint64_t face_segments = 0;  // line segments made from faces (io::add_face), counted in `lines`
+  uint64_t polygons_concave = 0;   // faces whose fan left them: cut along the other diagonal or by ear clipping
+  uint64_t polygons_fallback = 0;  // faces with no plane or not simple: the fan of the file's order kept
   std::vector<std::string> object_names;
   uint64_t objects_used = 0;
   Bbox bbox;
@@ -102,6 +106,9 @@ class StoreWriter {
   void add_triangles(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
   void add_lines(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
   void add_points(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
+  // Renames every column into place without writing store.json, so that a pass may still rewrite a column
+  // in place (ingest's triangulation of planar faces); commit() then only writes store.json.
+  void commit_columns();
   // Renames every column into place, then writes store.json. `meta`'s counts, bbox and chunk table are
   // filled in from what was written; returns the completed metadata (what store.json now holds).
   StoreMeta commit(StoreMeta meta);
@@ -124,6 +131,7 @@ class StoreWriter {
   std::vector<float> scratch32_;
   Bbox bbox_;
   std::vector<Bbox> vertex_chunk_bbox_;
+  bool columns_committed_ = false;
 };
 
 // Bounding boxes of the parts of `xyz` (vertices first_vertex, first_vertex + 1, ...) in each store chunk.

@@ -21,6 +21,7 @@ struct ReadAll {
   std::vector<uint32_t> triangle_objects, line_objects, point_objects;
   std::vector<std::string> object_names;
   uint64_t polygons = 0, skipped = 0, chunks = 0;
+  uint64_t degenerate = 0, face_segments = 0, planar_faces = 0;
   uint64_t vertex_count() const { return soup ? 0 : positions.size() / 3; }
 };
 
@@ -36,6 +37,9 @@ inline void append(ReadAll* r, const io::ParsedChunk& parsed) {
   add(r->line_objects, parsed.line_objects);
   add(r->point_objects, parsed.point_objects);
   r->polygons += parsed.polygons;
+  r->degenerate += parsed.degenerate;
+  r->face_segments += parsed.face_segments;
+  r->planar_faces += parsed.planar_faces.size() / 2;
   r->skipped += parsed.skipped;
 }
 
@@ -117,6 +121,9 @@ inline void expect_same(const ReadAll& a, const ReadAll& b, const std::string& c
   EXPECT_EQ(a.point_objects, b.point_objects);
   EXPECT_EQ(a.object_names, b.object_names);
   EXPECT_EQ(a.polygons, b.polygons);
+  EXPECT_EQ(a.degenerate, b.degenerate);
+  EXPECT_EQ(a.face_segments, b.face_segments);
+  EXPECT_EQ(a.planar_faces, b.planar_faces);
   EXPECT_EQ(a.skipped, b.skipped);
 }
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Every model in ../shared/data ingests, and `lodstream info --json` agrees with an independent count
 (tests/tools/count_mesh.py) on vertices, welded vertices, polygons, triangles, degenerate triangles, lines,
-points and objects. Skipped, with a notice, when ../shared/data is absent.
+segments made from faces, points and objects. Skipped, with a notice, when ../shared/data is absent.
 
 usage: shared_data_test.py LODSTREAM_BINARY SOURCE_DIR
 """
@@ -14,7 +14,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), "tools"))
 import count_mesh  # noqa: E402
 from shared_data import shared_data_dir  # noqa: E402
 
-KEYS = ["vertices", "vertices_welded", "polygons", "triangles", "degenerate", "lines", "points", "objects"]
+KEYS = ["vertices", "vertices_welded", "polygons", "triangles", "degenerate", "lines", "face_segments", "points",
+        "objects"]
 
 
 def main():

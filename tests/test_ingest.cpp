@@ -2,6 +2,7 @@
 // chunk size; soup welding; degenerate and unused accounting; resuming; cancelling.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -101,7 +102,8 @@ TEST(Ingest, StoreColumnsHoldExactlyTheInput) {
   EXPECT_EQ(info.polygons, 3u);
   EXPECT_EQ(info.triangles, 4u);
   EXPECT_EQ(info.degenerate, 1u);
-  EXPECT_EQ(info.lines, 2u);
+  EXPECT_EQ(info.lines, 3u);  // f 1 1 2 is the segment 1-2
+  EXPECT_EQ(info.face_segments, 1u);
   EXPECT_EQ(info.points, 1u);
   EXPECT_EQ(info.objects, 2u);
   EXPECT_EQ(info.bbox_max[0], 5.0);
@@ -114,9 +116,9 @@ TEST(Ingest, StoreColumnsHoldExactlyTheInput) {
   ASSERT_EQ(files["triangle_objects.runs"].size(), sizeof runs);
   EXPECT_EQ(std::memcmp(files["triangle_objects.runs"].data(), runs, sizeof runs), 0);
   EXPECT_EQ(files.count("positions.f32"), 0u);  // OBJ text keeps double precision
-  const std::vector<uint32_t> lines = {0, 1, 1, 2};
-  ASSERT_EQ(files["lines.u32"].size(), 16u);
-  EXPECT_EQ(std::memcmp(files["lines.u32"].data(), lines.data(), 16), 0);
+  const std::vector<uint32_t> lines = {0, 1, 0, 1, 1, 2};
+  ASSERT_EQ(files["lines.u32"].size(), 24u);
+  EXPECT_EQ(std::memcmp(files["lines.u32"].data(), lines.data(), 24), 0);
   ASSERT_EQ(files["positions.f64"].size(), 5u * 24);
   double p[15];
   std::memcpy(p, files["positions.f64"].data(), sizeof p);
@@ -278,6 +280,122 @@ TEST(Ingest, TemporaryWorkDirectoryIsRemoved) {
   unsetenv("TMPDIR");
   ASSERT_TRUE(r.ok()) << r.message;
   EXPECT_TRUE(fs::is_empty(tmpdir));
+}
+
+std::vector<uint32_t> stored_triangles(const std::string& work) {
+  std::ifstream f(fs::path(work) / "store" / "triangles.u32", std::ios::binary);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  const std::string bytes = ss.str();
+  std::vector<uint32_t> t(bytes.size() / 4);
+  std::memcpy(t.data(), bytes.data(), bytes.size());
+  return t;
+}
+
+// The L-shaped slab (2,2) (1,2) (1,1) (0,1) (0,0) (2,0), area 3: the fan from corner 0 would cut across
+// the notch; ear clipping gives these four triangles, all inside.
+const std::vector<uint32_t> kLTriangles = {5, 0, 1, 5, 1, 2, 5, 2, 3, 3, 4, 5};
+const double kL[6][2] = {{2, 2}, {1, 2}, {1, 1}, {0, 1}, {0, 0}, {2, 0}};
+
+TEST(Ingest, ConcavePolygonIsTriangulatedInsideIt) {
+  test::TempDir tmp;
+  std::string obj;
+  for (const auto& p : kL) obj += "v " + std::to_string(p[0]) + " 7 " + std::to_string(p[1]) + "\n";  // plane y = 7
+  obj += "f 1 2 3 4 5 6\n";
+  const std::string path = tmp.write("l.obj", obj);
+  const std::string work = tmp.file("w");
+  const SceneInfo info = run_info(path, work, 2, 0, 0);
+  EXPECT_EQ(info.polygons, 1u);
+  EXPECT_EQ(info.triangles, 4u);
+  EXPECT_EQ(info.polygons_concave, 1u);
+  EXPECT_EQ(info.polygons_fallback, 0u);
+  const std::vector<uint32_t> t = stored_triangles(work);
+  EXPECT_EQ(t, kLTriangles);
+  double area = 0;
+  for (size_t i = 0; i < t.size(); i += 3) {
+    const double* a = kL[t[i]];
+    const double* b = kL[t[i + 1]];
+    const double* c = kL[t[i + 2]];
+    area += std::fabs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])) / 2;
+  }
+  EXPECT_DOUBLE_EQ(area, 3.0);
+}
+
+TEST(Ingest, ObjAndPlyGiveTheSameTrianglesForTheSamePolygon) {
+  test::TempDir tmp;
+  std::string obj = "o slab\n";
+  for (const auto& p : kL) obj += "v " + std::to_string(p[0]) + " " + std::to_string(p[1]) + " 0\n";
+  obj += "f 1 2 3 4 5 6\nf 1 2 2\n";
+  std::string header = "ply\nformat FORMAT 1.0\nelement vertex 6\nproperty float x\nproperty float y\n"
+                       "property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n";
+  std::string ascii = header, binary = header;
+  ascii.replace(ascii.find("FORMAT"), 6, "ascii");
+  binary.replace(binary.find("FORMAT"), 6, "binary_little_endian");
+  for (const auto& p : kL) {
+    ascii += std::to_string(p[0]) + " " + std::to_string(p[1]) + " 0\n";
+    const float xyz[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), 0.0f};
+    binary.append(reinterpret_cast<const char*>(xyz), sizeof xyz);
+  }
+  ascii += "6 0 1 2 3 4 5\n3 0 1 1\n";
+  const int32_t faces[] = {0, 1, 2, 3, 4, 5, 0, 1, 1};
+  binary += char(6);
+  binary.append(reinterpret_cast<const char*>(faces), 24);
+  binary += char(3);
+  binary.append(reinterpret_cast<const char*>(faces + 6), 12);
+  int n = 0;
+  for (const std::string& path : {tmp.write("l.obj", obj), tmp.write("l-ascii.ply", ascii), tmp.write("l-le.ply", binary)}) {
+    SCOPED_TRACE(path);
+    const std::string work = tmp.file(std::string("w").append(std::to_string(n++)));
+    const SceneInfo info = run_info(path, work, 2, 0, 0);
+    EXPECT_EQ(stored_triangles(work), kLTriangles);
+    EXPECT_EQ(info.polygons, 2u);
+    EXPECT_EQ(info.lines, 1u);  // (0, 1, 1) is the segment 0-1
+    EXPECT_EQ(info.face_segments, 1u);
+    EXPECT_EQ(info.degenerate, 1u);
+    EXPECT_EQ(info.polygons_concave, 1u);
+  }
+}
+
+TEST(Ingest, VertexNamedByAbsoluteAndRelativeIndexInOneFace) {
+  // f 1 2 3 -4 names vertex 1 twice (the parse cannot tell: the encodings differ): its ring is the
+  // triangle 1 2 3, as the counting rule says, and the store holds no triangle naming a vertex twice.
+  test::TempDir tmp;
+  const std::string path = tmp.write("mixed.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 -4\n");
+  const std::string work = tmp.file("w");
+  const SceneInfo info = run_info(path, work, 2, 0, 0);
+  EXPECT_EQ(info.triangles, 1u);
+  EXPECT_EQ(info.degenerate, 1u);
+  EXPECT_EQ(stored_triangles(work), (std::vector<uint32_t>{0, 1, 2}));
+}
+
+TEST(Ingest, PlanarFacesAreTheSameForEveryChunkingThreadsAndMemory) {
+  // Concave faces (L, U, notched) naming vertices of earlier chunks, later chunks (forward references)
+  // and by relative indices, among convex quads, triangles and faces repeating a vertex.
+  test::TempDir tmp;
+  std::string obj;
+  const double u[8][2] = {{3, 3}, {2, 3}, {2, 1}, {1, 1}, {1, 3}, {0, 3}, {0, 0}, {3, 0}};
+  auto face = [&obj](std::initializer_list<int> corners) {
+    obj.append("f");
+    for (int c : corners) obj.append(" ").append(std::to_string(c));
+    obj.append("\n");
+  };
+  for (int k = 0; k < 30; ++k) {
+    const int base = 8 * k;
+    for (const auto& p : u)
+      obj.append("v ").append(std::to_string(p[0] + 5 * k)).append(" ").append(std::to_string(p[1])).append(" ")
+          .append(std::to_string(k)).append("\n");
+    if (k % 3 == 0) face({-8, -7, -6, -5, -4, -3, -2, -1});
+    if (k % 3 == 1) face({base + 9, base + 10, base + 11, base + 12, 1, 1});  // forward references
+    if (k > 0) {
+      face({base - 7, base - 6, base - 5, base - 4, base - 3, base - 2, base - 1, base});
+      face({base + 2, base + 3, base + 3});
+    }
+  }
+  const std::string path = tmp.write("u.obj", obj);
+  expect_same_store_everywhere(path, {1, 37, 200, 0});
+  const SceneInfo info = run_info(path, tmp.file("check"), 2, 0, 1);
+  EXPECT_GE(info.polygons_concave, 10u + 29u);  // every U, and whichever of the bent pentagons are concave
+  EXPECT_EQ(info.face_segments, 29u);
 }
 
 }  // namespace

@@ -80,6 +80,26 @@ TEST(ObjReader, TriangleAndQuad) {
   EXPECT_TRUE(r.points.empty());
 }
 
+TEST(ObjReader, FacesRepeatingAVertex) {
+  // (a, b, b) is the segment a-b; a repeated corner in a larger face is dropped from its ring; (a, a, a) is
+  // nothing; a ring that touches itself (1 2 3 1 4 5) keeps its fan, the fan triangles naming a vertex
+  // twice becoming segments. sum (n - 2) = 1 + 3 + 1 + 4 + 2 = 11 = 5 triangles + 6 degenerate.
+  const ReadAll r = read_obj(
+      "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 2 0\n"
+      "f 1 2 2\n"
+      "f 1 2 2 3 1\n"
+      "f 4 4 4\n"
+      "f 1 2 3 1 4 5\n"
+      "f 1 2 3 4\n");
+  EXPECT_EQ(r.triangles, (std::vector<int64_t>{0, 1, 2, 0, 1, 2, 0, 3, 4, 0, 1, 2, 0, 2, 3}));
+  EXPECT_EQ(r.lines, (std::vector<int64_t>{0, 1, 0, 2, 0, 3}));
+  EXPECT_EQ(r.line_objects.size(), 3u);
+  EXPECT_EQ(r.polygons, 5u);
+  EXPECT_EQ(r.degenerate, 1u + 2u + 1u + 2u);
+  EXPECT_EQ(r.face_segments, 3u);
+  EXPECT_EQ(r.planar_faces, 1u);  // only the quad of distinct vertices waits for its plane
+}
+
 TEST(ObjReader, VertexSyntax) {
   const ReadAll r = read_obj(
       "v 1.5 -2.25 3e2\n"                  // exponent

@@ -305,6 +305,32 @@ TEST(PlyReader, PlainTrianglesFastPath) {
   }
 }
 
+TEST(PlyReader, FacesRepeatingAVertex) {
+  // As in OBJ (io::add_face): (a, b, b) is the segment a-b, (a, b, b, c) the triangle (a, b, c), (d, d, d)
+  // nothing; the quad of distinct vertices is the fan placeholder of a planar face. Every format and the
+  // fast path (list uchar int|uint).
+  TempDir dir;
+  for (Fmt f : {Fmt::le, Fmt::be, Fmt::ascii}) {
+    for (const char* index : {"int", "uint", "ushort"}) {
+      Elem v{"vertex", {{"float", "x", ""}, {"float", "y", ""}, {"float", "z", ""}}, {}};
+      for (const auto& p : {std::vector<double>{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}})
+        v.records.push_back({{p[0]}, {p[1]}, {p[2]}});
+      Elem face{"face", {{index, "vertex_indices", "uchar"}}, {}};
+      face.records = {{{0, 1, 1}}, {{0, 1, 1, 2}}, {{3, 3, 3}}, {{0, 1, 2, 3}}, {{2, 3, 0}}};
+      const std::string path = dir.write(std::string("repeat-") + fmt_name(f) + index + ".ply", ply(f, {v, face}));
+      SCOPED_TRACE(path);
+      const ReadAll r = read_all(path, 1 << 20);
+      EXPECT_EQ(r.triangles, (std::vector<int64_t>{0, 1, 2, 0, 1, 2, 0, 2, 3, 2, 3, 0}));
+      EXPECT_EQ(r.lines, (std::vector<int64_t>{0, 1}));
+      EXPECT_EQ(r.polygons, 5u);
+      EXPECT_EQ(r.degenerate, 3u);
+      EXPECT_EQ(r.face_segments, 1u);
+      EXPECT_EQ(r.planar_faces, 1u);
+      expect_every_target_same(path, r);
+    }
+  }
+}
+
 TEST(PlyReader, FacesBeforeVerticesAndEmptyElements) {
   TempDir dir;
   for (Fmt f : {Fmt::ascii, Fmt::le}) {

@@ -138,6 +138,9 @@ nlohmann::ordered_json info_json(const lodstream::SceneInfo& in) {
           {"triangles", in.triangles},
           {"degenerate", in.degenerate},
           {"degenerate_segments", in.degenerate_segments},
+          {"face_segments", in.face_segments},
+          {"polygons_concave", in.polygons_concave},
+          {"polygons_fallback", in.polygons_fallback},
           {"lines", in.lines},
           {"points", in.points},
           {"objects", in.objects},
@@ -156,9 +159,12 @@ void print_info(const lodstream::SceneInfo& in) {
   if (in.vertex_records != in.vertices) std::printf(" (%s vertex records in the file)", grouped(in.vertex_records).c_str());
   if (in.unused_vertices) std::printf(", %s unused", grouped(in.unused_vertices).c_str());
   std::printf("\n");
-  std::printf("triangles    %s from %s polygons, %s degenerate dropped\n", grouped(in.triangles).c_str(),
+  std::printf("triangles    %s from %s polygons, %s degenerate dropped", grouped(in.triangles).c_str(),
               grouped(in.polygons).c_str(), grouped(in.degenerate).c_str());
-  std::printf("lines        %s", grouped(in.lines).c_str());
+  if (in.polygons_concave) std::printf(", %s concave polygons", grouped(in.polygons_concave).c_str());
+  if (in.polygons_fallback) std::printf(", %s without a plane or self-intersecting (fan)", grouped(in.polygons_fallback).c_str());
+  std::printf("\nlines        %s", grouped(in.lines).c_str());
+  if (in.face_segments) std::printf(" (%s from faces naming two vertices)", grouped(in.face_segments).c_str());
   if (in.degenerate_segments) std::printf(" (%s zero-length dropped)", grouped(in.degenerate_segments).c_str());
   std::printf("\npoints       %s\n", grouped(in.points).c_str());
   std::printf("objects      %s\n", grouped(in.objects).c_str());

@@ -3,29 +3,46 @@
 `lodstream info --json` against. Standard library only.
 
 Prints one JSON object: vertices (as stored: STL welded by exact position), vertices_welded, polygons,
-triangles (fan triangles that do not name a vertex twice), degenerate, lines, points, objects (objects
-owning at least one primitive).
+triangles, degenerate, lines, face_segments, points, objects (objects owning at least one primitive).
+
+The rule for a face (README, "Polygons"): its ring is the corners less every corner equal to the one
+before it (cyclically, the first corner kept). A ring of one vertex is nothing; of two vertices, the line
+segment it describes; of m >= 3 distinct vertices, m - 2 triangles; a ring that names a vertex twice
+further on (it touches itself) gives the fan of its own order, each fan triangle naming a vertex twice
+becoming the segment between its two vertices. `degenerate` counts the triangle slots a face lost, so that
+sum(n - 2) over faces = triangles + degenerate.
 """
 import json
 import struct
 import sys
 
 
-def fan(face):
-    """Fan triangles of a polygon, split into kept and degenerate."""
-    kept = degenerate = 0
-    for i in range(1, len(face) - 1):
-        a, b, c = face[0], face[i], face[i + 1]
-        if a == b or b == c or a == c:
-            degenerate += 1
+def split_face(face):
+    """(triangles, degenerate, segments) of one face of n >= 3 corners."""
+    n = len(face)
+    ring = [face[0]]
+    for corner in face[1:]:
+        if corner != ring[-1]:
+            ring.append(corner)
+    while len(ring) > 1 and ring[-1] == ring[0]:
+        ring.pop()
+    m = len(ring)
+    if m <= 2:
+        return 0, n - 2, 1 if m == 2 else 0
+    if len(set(ring)) == m:
+        return m - 2, n - m, 0
+    triangles = segments = 0
+    for i in range(1, m - 1):
+        if len({ring[0], ring[i], ring[i + 1]}) == 3:
+            triangles += 1
         else:
-            kept += 1
-    return kept, degenerate
+            segments += 1
+    return triangles, n - m + segments, segments
 
 
 def obj_counts(path):
     positions = []
-    polygons = triangles = degenerate = lines = points = 0
+    polygons = triangles = degenerate = lines = face_segments = points = 0
     used_objects = set()
     current = ""
     pending = ""
@@ -59,10 +76,12 @@ def obj_counts(path):
                 key = "l"  # exporters write loose edges as two-corner faces: kept as a line segment
             if key == "f":
                 polygons += 1
-                k, d = fan(refs)
+                k, d, segs = split_face(refs)
                 triangles += k
                 degenerate += d
-                if k:
+                lines += segs
+                face_segments += segs
+                if k or segs:
                     used_objects.add(current)
             elif key == "l":
                 segs = sum(1 for a, b in zip(refs, refs[1:]) if a != b)
@@ -73,8 +92,8 @@ def obj_counts(path):
                 points += len(refs)
                 used_objects.add(current)
     return dict(vertices=len(positions), vertices_welded=len(set(positions)), polygons=polygons,
-                triangles=triangles, degenerate=degenerate, lines=lines, points=points,
-                objects=len(used_objects))
+                triangles=triangles, degenerate=degenerate, lines=lines, face_segments=face_segments,
+                points=points, objects=len(used_objects))
 
 
 PLY_TYPES = {"char": "b", "int8": "b", "uchar": "B", "uint8": "B", "short": "h", "int16": "h",
@@ -134,17 +153,18 @@ def ply_counts(path):
                         (rec[p[1]],) = struct.unpack_from(order + tf, data, at)
                         at += struct.calcsize(tf)
                 collect(name, rec, positions, faces, edges)
-    triangles = degenerate = 0
+    triangles = degenerate = face_segments = 0
     edges += [(f[0], f[1]) for f in faces if len(f) == 2]  # two-index faces are kept as line segments
     faces = [f for f in faces if len(f) != 2]
     for face in faces:
-        k, d = fan(face)
+        k, d, segs = split_face(face)
         triangles += k
         degenerate += d
-    lines = sum(1 for a, b in edges if a != b)
+        face_segments += segs
+    lines = sum(1 for a, b in edges if a != b) + face_segments
     return dict(vertices=len(positions), vertices_welded=len(set(positions)), polygons=len(faces),
-                triangles=triangles, degenerate=degenerate, lines=lines, points=0,
-                objects=1 if triangles or lines else 0)
+                triangles=triangles, degenerate=degenerate, lines=lines, face_segments=face_segments,
+                points=0, objects=1 if triangles or lines else 0)
 
 
 def collect(name, rec, positions, faces, edges):
@@ -193,8 +213,10 @@ def stl_counts(path):
         else:
             triangles += 1
             used.add(objects[t])
+    # STL has no indices: a facet with two equal corners is a sliver the welding found, dropped as before.
     return dict(vertices=len(ids), vertices_welded=len(ids), polygons=len(corners) // 3,
-                triangles=triangles, degenerate=degenerate, lines=0, points=0, objects=len(used))
+                triangles=triangles, degenerate=degenerate, lines=0, face_segments=0, points=0,
+                objects=len(used))
 
 
 def counts(path):

@@ -97,10 +97,13 @@ struct SceneInfo {
   uint64_t vertices_welded = 0;  // distinct positions among stored vertices
   uint64_t unused_vertices = 0;  // stored vertices no triangle, line or point refers to
   uint64_t polygons = 0;         // input faces (STL facets, OBJ f, PLY face records)
-  uint64_t triangles = 0;        // triangles kept, after fan triangulation and degenerate removal
-  uint64_t degenerate = 0;       // fan triangles dropped: two corners name the same vertex
+  uint64_t triangles = 0;        // triangles kept: n - 2 per face of n distinct corners, in the face's plane
+  uint64_t degenerate = 0;       // triangle slots lost to repeated corners: sum of (n - 2) = triangles + degenerate
   uint64_t degenerate_segments = 0; // line segments dropped: both ends name the same vertex
-  uint64_t lines = 0;            // line segments (OBJ l, PLY edge elements)
+  uint64_t lines = 0;            // line segments (OBJ l, PLY edge elements, two-corner faces, face_segments)
+  uint64_t face_segments = 0;    // segments made from faces naming two vertices (f a b b), counted in lines
+  uint64_t polygons_concave = 0; // faces of 4+ corners the fan would leave: triangulated inside them instead
+  uint64_t polygons_fallback = 0; // faces of 4+ corners with no plane or self-intersecting: fan kept
   uint64_t points = 0;           // points (OBJ p)
   uint64_t objects = 0;          // objects that own at least one primitive (OBJ o/g, STL solids)
   uint64_t skipped_statements = 0; // recognised but unused records (OBJ vt/vn/usemtl..., PLY other elements)
