@@ -22,6 +22,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <span>
 #include <string>
@@ -56,8 +57,11 @@ class RayScene {
   void commit();
 
   // Distance from p to the nearest primitive, or +infinity when the scene is empty. Thread-safe after
-  // commit(). `closest` (optional) receives the nearest point.
-  float closest_distance(const float p[3], float* closest = nullptr) const;
+  // commit(). `closest` (optional) receives the nearest point. With `within`, primitives further than that
+  // may be skipped (the result is then > within, possibly +infinity): min(within, result) is the same
+  // either way, and a scene far from p costs little (a chunk of an original, p already close to another).
+  float closest_distance(const float p[3], float* closest = nullptr,
+                         float within = std::numeric_limits<float>::infinity()) const;
 
   PrimitiveKind kind_of(unsigned geom_id) const;
   uint64_t embree_bytes() const;  // bytes Embree holds now

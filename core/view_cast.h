@@ -41,7 +41,13 @@ struct ViewImage {
 };
 
 // Row-major, row 0 at the top. The nearest hit over all `scenes` counts (an original's triangles and its
-// one-pixel lines live in separate scenes). Returns the number of rays cast.
-uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out);
+// one-pixel lines live in separate scenes); of hits at equal distance, the first scene's, then the lowest
+// geometry id's, then the lowest primitive id's (core/nearest_hit.h). With `accumulate`, `out` holds the
+// image of earlier chunks of the same scene list (same camera): a pixel changes only where this chunk's hit
+// is strictly nearer, so tracing the chunks of a scene in order, each as `scenes`, gives the image of the
+// whole scene when a chunk's primitives come after every earlier chunk's in that key order. Returns the
+// number of rays cast.
+uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out,
+                   bool accumulate = false);
 
 }  // namespace lodstream::core
