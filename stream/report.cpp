@@ -2,18 +2,28 @@
 // (../shared/DESIGN.md "Error report").
 //
 // For every original (ingested into the scene store, reused from a simplify work directory when it is the
-// same file), one Embree scene of its triangles is built once; its lines and points, which are drawn one
-// pixel wide, go into a small second scene rebuilt for each level's distance. For every level:
-// 1. read the LOD file, build its scene (thick edges as flat curves of radius max(T/2, half a pixel),
-//    points as one-pixel discs);
-// 2. two-sided Hausdorff distance: Metro-style samples of each mesh (core/surface_sampling.h), closest
-//    points on the other by Embree point queries;
+// same file), traced out of core: the store is cut into chunks (stream/store_chunks.h) that fit what
+// --memory leaves, one chunk in core. Its samples and view targets are drawn in two passes over the chunks.
+// For every level:
+// 1. read the LOD file, draw its samples, and the original → level Hausdorff distances against its scene
+//    (thick edges as flat curves of radius max(T/2, half a pixel), points as one-pixel discs);
+// 2. chunk-outer passes over the original: each chunk's Embree scene (its triangles; its lines and points,
+//    drawn one pixel wide, in a small second scene per level distance) is built once per pass, every
+//    level's samples are lowered to their distance to it (level → original Hausdorff), and every view of
+//    the levels of the pass accumulates its image; then it is freed;
 // 3. views: K directions on a Fibonacci sphere, view k aimed at the k-th of K points sampled uniformly
 //    by area on the original's surface, the camera at the level's switching distance from that point;
-//    original and LOD ray cast into H × H images; silhouette error from exact distance transforms of the
-//    original's coverage (core/silhouette_error.h); depth and normal error where both cover.
-// Everything drawn at random comes from counter-based streams of --seed (views, targets, samples), and
-// every sum is formed in a fixed order, so the figures are the same for any thread count or memory budget.
+//    the level ray cast into H × H images, compared with the original's: silhouette error from exact
+//    distance transforms of the original's coverage (core/silhouette_error.h); depth and normal error
+//    where both cover.
+// Levels whose distance comes from their Hausdorff max take one more pass (distances first). What stays
+// between chunks: the samples and their distances so far, and for the levels of a pass the original's
+// view images (depth, normal, kind: 17 bytes a pixel); levels are grouped into passes so that these take
+// at most half of what --memory leaves. A level too large for the rest is traced in chunks as well.
+// Everything drawn at random comes from counter-based streams of --seed (views, targets, samples), every
+// sum is formed in a fixed order, distances are minima over chunks and a pixel keeps the hit of lowest
+// (distance, primitive order) over chunks (core/nearest_hit.h), so the figures are the same for any
+// thread count, memory budget or chunking.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -325,7 +335,7 @@ void load_original(const std::string& store_dir, const stream::StoreMeta& meta, 
   }
   s.begin(o->chunks->used_vertices());
   for (size_t c = 0; c < n; ++c) {
-    o->chunks->read(c, &g);
+    if (n > 1) o->chunks->read(c, &g);  // one chunk: still there
     s.sample(g.xyz, g.triangles, g.lines);
     progress.report("load", 0.5 + 0.4 * double(c + 1) / double(n));
   }
