@@ -539,7 +539,9 @@ uint64_t mesh_bytes(const core::LodMesh& m) {
 // What is left of `bytes` once `held` is taken, at least 16 MiB (the memory monitor stays the guard).
 uint64_t left_of(uint64_t bytes, uint64_t held) { return std::max<uint64_t>(bytes - std::min(bytes, held), 16ull << 20); }
 
-void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint64_t embree_limit) {
+// embree_limit: what the level's scene may take; chunk_cap: --chunk-bytes (0 = none), which cuts a level
+// into chunks of at most that many bytes as it does the original.
+void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint64_t embree_limit, uint64_t chunk_cap) {
   const auto t0 = std::chrono::steady_clock::now();
   const LevelSpec& spec = w.run->levels[w.index];
   ReportLevel& L = w.out.level;
@@ -556,8 +558,8 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   w.samples = sample_mesh(mesh, ro.samples, ro.seed, kStreamLodSamples);
   w.to_original.assign(w.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
   // Segment and point radii do not enter the point queries: any distance builds the same query scene.
-  const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh));
-  LevelChunks chunks(mesh, limit);
+  const uint64_t limit = left_of(embree_limit, 2 * mesh_bytes(mesh));  // the level and a chunk's copy
+  LevelChunks chunks(mesh, chunk_cap ? std::min(chunk_cap, limit) : limit);
   w.level_chunks = chunks.size();
   std::vector<float> d(o.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
   for (size_t c = 0; c < chunks.size(); ++c) {
@@ -685,7 +687,7 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
 }
 
 // The level's own images, compared with the original's view by view.
-void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint64_t embree_limit) {
+void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint64_t embree_limit, uint64_t chunk_cap) {
   const auto t0 = std::chrono::steady_clock::now();
   ReportLevel& L = w.out.level;
   const core::LodMesh mesh = io::read_lod_mesh(w.run->levels[w.index].file);
@@ -694,8 +696,9 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   const float half_pixel = static_cast<float>(w.pixel_at(w.distance, ro.resolution) / 2);
   // In one chunk, each view is cast and compared in turn; in several, every view's image is accumulated
   // chunk by chunk first (the level's images then take as much memory as the original's).
-  const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh) + pixels * kViewPixelBytes * w.views);
-  LevelChunks chunks(mesh, limit);
+  // The level, a chunk's copy of at most as much, and with several chunks every view's image.
+  const uint64_t limit = left_of(embree_limit, 2 * mesh_bytes(mesh) + pixels * kViewPixelBytes * w.views);
+  LevelChunks chunks(mesh, chunk_cap ? std::min(chunk_cap, limit) : limit);
   w.level_chunks = std::max<uint64_t>(w.level_chunks, chunks.size());
   std::vector<core::ViewImage> lod_views(chunks.size() > 1 ? w.views : 1);
   std::unique_ptr<core::RayScene> lod;
@@ -754,6 +757,8 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
       hv.heat_rgb = heat(vo, vl, distance_image);
       w.out.views.push_back(std::move(hv));
     }
+    w.original_views[k] = {};
+    if (!lod) lod_views[k] = {};
   }
   w.original_views = {};
   lod_views = {};
@@ -884,7 +889,10 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         // images of a group of levels (traced in one pass over the chunks; at most half of it, or one
         // level) and one chunk's scene.
         const uint64_t view_bytes = uint64_t{ro.views} * ro.resolution * ro.resolution * kViewPixelBytes;
-        const uint64_t held = resident_bytes() + (works.size() + 1) * 3 * ro.samples * 16 + (32ull << 20);
+        // Held besides: the samples and their distances, a level's depth and normal errors (8 bytes a
+        // pixel of every view) while it is compared, and a margin.
+        const uint64_t held = resident_bytes() + (works.size() + 1) * 3 * ro.samples * 16 + view_bytes / kViewPixelBytes * 8 +
+                              (32ull << 20);
         const uint64_t avail = plan.budget - std::min(plan.budget, held);
         const uint64_t levels_per_group = std::max<uint64_t>(1, avail / 2 / std::max<uint64_t>(1, view_bytes));
         const uint64_t group_bytes = std::min<uint64_t>(levels_per_group, works.size()) * view_bytes;
@@ -893,7 +901,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         run_stage(&rep.stages, "load", [&](StageStats&) { load_original(store_dir, meta, ro, chunk_bytes, progress, &o); });
         rep.original_chunks += o.chunks->chunks().size();
         run_stage(&rep.stages, "measure", [&](StageStats&) {
-          for (LevelWork& w : works) begin_level(o, w, ro, embree_limit);
+          for (LevelWork& w : works) begin_level(o, w, ro, embree_limit, options.chunk_bytes);
           std::unique_ptr<ChunkScene> cache;
           TraceTotals totals;
           std::vector<LevelWork*> pending;  // levels whose samples have not met the original's chunks yet
@@ -912,7 +920,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
             trace_original(o, pending, group, ro, embree_limit, progress, cache, totals);
             for (LevelWork* w : pending) finish_hausdorff(o, *w, ro);
             pending.clear();
-            for (LevelWork* w : group) finish_level(o, *w, ro, embree_limit);
+            for (LevelWork* w : group) finish_level(o, *w, ro, embree_limit, options.chunk_bytes);
           }
           rep.chunk_scenes += totals.chunks;
           for (const LevelWork& w : works) rep.level_chunks = std::max(rep.level_chunks, w.level_chunks);

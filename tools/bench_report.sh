@@ -22,7 +22,7 @@ while [[ $# -gt 0 ]]; do
     --memory) memory=$2; shift 2 ;;
     --work) work=$2; shift 2 ;;
     --threads) thread_list=$2; shift 2 ;;
-    -h|--help) sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "bench_report: unknown option $1" >&2; exit 64 ;;
   esac
 done
