@@ -23,7 +23,7 @@ void cross(const double a[3], const double b[3], double out[3]) {
   out[2] = a[0] * b[1] - a[1] * b[0];
 }
 
-constexpr unsigned kTile = 4;  // 4×4 pixels = one 16-ray packet
+constexpr unsigned kTile = 4;  // 4×4 pixels, traced in turn
 
 }  // namespace
 
@@ -105,7 +105,24 @@ uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera
           rtcInitIntersectContext(&context.embree);
           context.embree.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
           context.scene = s;
-          rtcIntersect16(valid, static_cast<RTCScene>(scenes[s]->handle()), &context.embree, &packet);
+          // One ray at a time: Embree's packet traversal switches to single-ray traversal where few rays
+          // of a packet remain, and its two intersectors may round a hit differently; which one runs
+          // depends on the BVH, so on the chunking. The single-ray one alone gives every primitive's hit
+          // the same bits in any scene.
+          for (unsigned i = 0; i < 16; ++i) {
+            if (!valid[i]) continue;
+            RTCRayHit r;
+            r.ray.org_x = packet.ray.org_x[i], r.ray.org_y = packet.ray.org_y[i], r.ray.org_z = packet.ray.org_z[i];
+            r.ray.dir_x = packet.ray.dir_x[i], r.ray.dir_y = packet.ray.dir_y[i], r.ray.dir_z = packet.ray.dir_z[i];
+            r.ray.tnear = packet.ray.tnear[i], r.ray.tfar = packet.ray.tfar[i], r.ray.time = 0.0f;
+            r.ray.mask = 0xFFFFFFFFu, r.ray.id = i, r.ray.flags = 0;
+            r.hit.geomID = RTC_INVALID_GEOMETRY_ID, r.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+            rtcIntersect1(static_cast<RTCScene>(scenes[s]->handle()), &context.embree, &r);
+            if (r.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
+            packet.ray.tfar[i] = r.ray.tfar;
+            packet.hit.geomID[i] = r.hit.geomID, packet.hit.primID[i] = r.hit.primID;
+            packet.hit.Ng_x[i] = r.hit.Ng_x, packet.hit.Ng_y[i] = r.hit.Ng_y, packet.hit.Ng_z[i] = r.hit.Ng_z;
+          }
         }
         for (unsigned i = 0; i < 16; ++i) {
           // Embree's hit is the filter's best: the last hit it accepted.
