@@ -73,7 +73,7 @@ enum : uint64_t { kStreamTargets = 101, kStreamOriginalSamples = 102, kStreamLod
 // Bytes of a chunk of the original while its scene is built, as Embree's memory monitor counts them (it
 // counts what Embree reserves, more than becomes resident) plus the chunk's own arrays: measured on the
 // city scenes (README, "report out of core"), rounded up.
-constexpr stream::ChunkCosts kChunkCosts{.triangle = 80, .line = 96, .point = 64, .vertex = 28};
+constexpr stream::ChunkCosts kChunkCosts{.triangle = 80, .line = 224, .point = 160, .vertex = 28};
 
 // Resident bytes of the process now (/proc/self/statm), 0 where unknown.
 uint64_t resident_bytes() {
@@ -539,6 +539,12 @@ uint64_t mesh_bytes(const core::LodMesh& m) {
 // What is left of `bytes` once `held` is taken, at least 16 MiB (the memory monitor stays the guard).
 uint64_t left_of(uint64_t bytes, uint64_t held) { return std::max<uint64_t>(bytes - std::min(bytes, held), 16ull << 20); }
 
+// Estimated bytes of a level's chunk within `limit` (its Embree scene's guard): three quarters of it, the
+// rest for the chunk's own copy of its part of the level (about a quarter of its scene's bytes).
+uint64_t level_chunk_bytes(uint64_t limit, uint64_t chunk_cap) {
+  return chunk_cap ? std::min(chunk_cap, limit / 4 * 3) : limit / 4 * 3;
+}
+
 // embree_limit: what the level's scene may take; chunk_cap: --chunk-bytes (0 = none), which cuts a level
 // into chunks of at most that many bytes as it does the original.
 void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint64_t embree_limit, uint64_t chunk_cap) {
@@ -558,8 +564,8 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   w.samples = sample_mesh(mesh, ro.samples, ro.seed, kStreamLodSamples);
   w.to_original.assign(w.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
   // Segment and point radii do not enter the point queries: any distance builds the same query scene.
-  const uint64_t limit = left_of(embree_limit, 2 * mesh_bytes(mesh));  // the level and a chunk's copy
-  LevelChunks chunks(mesh, chunk_cap ? std::min(chunk_cap, limit) : limit);
+  const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh));
+  LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap));
   w.level_chunks = chunks.size();
   std::vector<float> d(o.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
   for (size_t c = 0; c < chunks.size(); ++c) {
@@ -696,9 +702,9 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   const float half_pixel = static_cast<float>(w.pixel_at(w.distance, ro.resolution) / 2);
   // In one chunk, each view is cast and compared in turn; in several, every view's image is accumulated
   // chunk by chunk first (the level's images then take as much memory as the original's).
-  // The level, a chunk's copy of at most as much, and with several chunks every view's image.
-  const uint64_t limit = left_of(embree_limit, 2 * mesh_bytes(mesh) + pixels * kViewPixelBytes * w.views);
-  LevelChunks chunks(mesh, chunk_cap ? std::min(chunk_cap, limit) : limit);
+  // Besides the level: with several chunks, every view's image.
+  const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh) + pixels * kViewPixelBytes * w.views);
+  LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap));
   w.level_chunks = std::max<uint64_t>(w.level_chunks, chunks.size());
   std::vector<core::ViewImage> lod_views(chunks.size() > 1 ? w.views : 1);
   std::unique_ptr<core::RayScene> lod;
