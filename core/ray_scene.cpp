@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "core/nearest_hit.h"
 #include "core/status.h"
 
 namespace lodstream::core {
@@ -144,6 +145,7 @@ struct RayScene::Impl {
   GeometryHandle attach(RTCGeometryType type, PrimitiveKind kind) {
     GeometryHandle g(rtcNewGeometry(device, type));
     check("new geometry");
+    rtcSetGeometryIntersectFilterFunction(g.get(), &nearest_hit_filter);
     geoms.push_back({kind, nullptr, nullptr});
     return g;
   }
@@ -331,17 +333,20 @@ static bool closest_callback(RTCPointQueryFunctionArguments* args) {
   if (d2 < q->best_d2) {
     q->best_d2 = d2;
     q->best = c;
-    args->query->radius = static_cast<float>(std::sqrt(d2));
+    // Rounded up, so that no primitive nearer than the best is culled: the distance is then the minimum
+    // over every primitive, whatever the BVH (and the chunk the primitive is traced in).
+    args->query->radius = std::nextafter(static_cast<float>(std::sqrt(d2)), std::numeric_limits<float>::infinity());
     return true;
   }
   return false;
 }
 
-float RayScene::closest_distance(const float p[3], float* closest) const {
+float RayScene::closest_distance(const float p[3], float* closest, float within) const {
   QueryState state{&impl_->geoms, nullptr, load(p), std::numeric_limits<double>::infinity(), {0, 0, 0}};
   RTCPointQuery query;
   query.x = p[0], query.y = p[1], query.z = p[2];
-  query.radius = std::numeric_limits<float>::infinity();
+  // Rounded up like the callback's radius: nothing nearer than `within` is culled.
+  query.radius = std::nextafter(within, std::numeric_limits<float>::infinity());
   query.time = 0;
   RTCPointQueryContext context;
   if (impl_->has_primitives) {
@@ -352,12 +357,29 @@ float RayScene::closest_distance(const float p[3], float* closest) const {
     state.geoms = nullptr;
     state.query_geoms = &impl_->query_geoms;
     query.radius = std::isfinite(state.best_d2) ? static_cast<float>(std::sqrt(state.best_d2)) * 1.0001f + 1e-30f
-                                                : std::numeric_limits<float>::infinity();
+                                                : std::nextafter(within, std::numeric_limits<float>::infinity());
     rtcInitPointQueryContext(&context);
     rtcPointQuery(impl_->query_scene, &query, &context, closest_callback, &state);
   }
   if (closest) closest[0] = float(state.best.x), closest[1] = float(state.best.y), closest[2] = float(state.best.z);
   return static_cast<float>(std::sqrt(state.best_d2));
+}
+
+void nearest_hit_filter(const RTCFilterFunctionNArguments* args) {
+  auto* c = reinterpret_cast<NearestHitContext*>(const_cast<RTCIntersectContext*>(args->context));
+  const unsigned n = args->N;
+  for (unsigned i = 0; i < n; ++i) {
+    if (!args->valid[i]) continue;
+    const unsigned id = RTCRayN_id(args->ray, n, i);
+    const float t = RTCRayN_tfar(args->ray, n, i);
+    const uint64_t key = (uint64_t{c->scene} << 40) | (uint64_t{RTCHitN_geomID(args->hit, n, i)} << 32) |
+                         RTCHitN_primID(args->hit, n, i);
+    if (t < c->best_t[id] || (t == c->best_t[id] && key < c->best_key[id])) {
+      c->best_t[id] = t, c->best_key[id] = key, c->best_scene[id] = static_cast<int>(c->scene);
+    } else {
+      args->valid[i] = 0;
+    }
+  }
 }
 
 PrimitiveKind RayScene::kind_of(unsigned geom_id) const {

@@ -12,6 +12,10 @@
 // through a shared edge never slips between two triangles (that would count as a silhouette mismatch), and
 // RTC_SCENE_FLAG_COMPACT, to keep the original's BVH small.
 //
+// Every ray geometry carries core/nearest_hit.h's intersection filter: of hits at equal distance, the lowest
+// (scene, geometry id, primitive id) counts, whatever the BVH, so that a scene traced in chunks gives the
+// same images as in one piece.
+//
 // Closest points (Metro-style Hausdorff sampling) use rtcPointQuery with one callback for every geometry:
 // the distance to a triangle, to an edge's axis (its thickness is a rendering width, not geometry), or to
 // a point.
@@ -22,6 +26,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <span>
 #include <string>
@@ -56,8 +61,11 @@ class RayScene {
   void commit();
 
   // Distance from p to the nearest primitive, or +infinity when the scene is empty. Thread-safe after
-  // commit(). `closest` (optional) receives the nearest point.
-  float closest_distance(const float p[3], float* closest = nullptr) const;
+  // commit(). `closest` (optional) receives the nearest point. With `within`, primitives further than that
+  // may be skipped (the result is then > within, possibly +infinity): min(within, result) is the same
+  // either way, and a scene far from p costs little (a chunk of an original, p already close to another).
+  float closest_distance(const float p[3], float* closest = nullptr,
+                         float within = std::numeric_limits<float>::infinity()) const;
 
   PrimitiveKind kind_of(unsigned geom_id) const;
   uint64_t embree_bytes() const;  // bytes Embree holds now

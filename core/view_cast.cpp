@@ -8,6 +8,8 @@
 #include <cmath>
 #include <limits>
 
+#include "core/nearest_hit.h"
+
 namespace lodstream::core {
 namespace {
 
@@ -21,7 +23,7 @@ void cross(const double a[3], const double b[3], double out[3]) {
   out[2] = a[0] * b[1] - a[1] * b[0];
 }
 
-constexpr unsigned kTile = 4;  // 4×4 pixels = one 16-ray packet
+constexpr unsigned kTile = 4;  // 4×4 pixels, traced in turn
 
 }  // namespace
 
@@ -53,21 +55,21 @@ void fibonacci_direction(unsigned k, unsigned count, double out[3]) {
   out[2] = z;
 }
 
-uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out) {
+uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out, bool accumulate) {
   const unsigned h = camera.resolution;
   const uint64_t pixels = uint64_t{h} * h;
-  out->resolution = h;
-  out->depth.assign(pixels, std::numeric_limits<float>::infinity());
-  out->normal.assign(3 * pixels, 0.0f);
-  out->kind.assign(pixels, 0);
+  if (!accumulate || out->resolution != h || out->depth.size() != pixels) {
+    out->resolution = h;
+    out->depth.assign(pixels, std::numeric_limits<float>::infinity());
+    out->normal.assign(3 * pixels, 0.0f);
+    out->kind.assign(pixels, 0);
+  }
   if (h == 0) return pixels;
   const unsigned tiles = (h + kTile - 1) / kTile;
   tbb::parallel_for(tbb::blocked_range<unsigned>(0, tiles), [&](const tbb::blocked_range<unsigned>& rows) {
     alignas(64) RTCRayHit16 packet;
     alignas(64) int valid[16];
-    float before[16];
-    unsigned which[16];
-    RTCIntersectContext context;
+    NearestHitContext context;
     for (unsigned ty = rows.begin(); ty != rows.end(); ++ty) {
       for (unsigned tx = 0; tx < tiles; ++tx) {
         for (unsigned i = 0; i < 16; ++i) {
@@ -84,8 +86,13 @@ uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera
           packet.ray.dir_x[i] = static_cast<float>(d[0]);
           packet.ray.dir_y[i] = static_cast<float>(d[1]);
           packet.ray.dir_z[i] = static_cast<float>(d[2]);
+          // An earlier chunk's hit bounds the ray and wins ties (key 0).
+          const float best = valid[i] ? out->depth[uint64_t{y} * h + x] : std::numeric_limits<float>::infinity();
           packet.ray.tnear[i] = 0.0f;
-          packet.ray.tfar[i] = std::numeric_limits<float>::infinity();
+          packet.ray.tfar[i] = best;
+          context.best_t[i] = best;
+          context.best_key[i] = best < std::numeric_limits<float>::infinity() ? 0 : UINT64_MAX;
+          context.best_scene[i] = -1;
           packet.ray.time[i] = 0.0f;
           packet.ray.mask[i] = 0xFFFFFFFFu;
           packet.ray.id[i] = i;
@@ -95,19 +102,35 @@ uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera
         }
         for (unsigned s = 0; s < scenes.size(); ++s) {
           if (scenes[s]->empty()) continue;
-          for (unsigned i = 0; i < 16; ++i) before[i] = packet.ray.tfar[i];
-          rtcInitIntersectContext(&context);
-          context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-          rtcIntersect16(valid, static_cast<RTCScene>(scenes[s]->handle()), &context, &packet);
-          for (unsigned i = 0; i < 16; ++i)
-            if (packet.ray.tfar[i] < before[i]) which[i] = s;
+          rtcInitIntersectContext(&context.embree);
+          context.embree.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+          context.scene = s;
+          // One ray at a time: Embree's packet traversal switches to single-ray traversal where few rays
+          // of a packet remain, and its two intersectors may round a hit differently; which one runs
+          // depends on the BVH, so on the chunking. The single-ray one alone gives every primitive's hit
+          // the same bits in any scene.
+          for (unsigned i = 0; i < 16; ++i) {
+            if (!valid[i]) continue;
+            RTCRayHit r;
+            r.ray.org_x = packet.ray.org_x[i], r.ray.org_y = packet.ray.org_y[i], r.ray.org_z = packet.ray.org_z[i];
+            r.ray.dir_x = packet.ray.dir_x[i], r.ray.dir_y = packet.ray.dir_y[i], r.ray.dir_z = packet.ray.dir_z[i];
+            r.ray.tnear = packet.ray.tnear[i], r.ray.tfar = packet.ray.tfar[i], r.ray.time = 0.0f;
+            r.ray.mask = 0xFFFFFFFFu, r.ray.id = i, r.ray.flags = 0;
+            r.hit.geomID = RTC_INVALID_GEOMETRY_ID, r.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+            rtcIntersect1(static_cast<RTCScene>(scenes[s]->handle()), &context.embree, &r);
+            if (r.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
+            packet.ray.tfar[i] = r.ray.tfar;
+            packet.hit.geomID[i] = r.hit.geomID, packet.hit.primID[i] = r.hit.primID;
+            packet.hit.Ng_x[i] = r.hit.Ng_x, packet.hit.Ng_y[i] = r.hit.Ng_y, packet.hit.Ng_z[i] = r.hit.Ng_z;
+          }
         }
         for (unsigned i = 0; i < 16; ++i) {
-          if (!valid[i] || packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+          // Embree's hit is the filter's best: the last hit it accepted.
+          if (!valid[i] || context.best_scene[i] < 0) continue;
           const unsigned x = tx * kTile + i % kTile, y = ty * kTile + i / kTile;
           const uint64_t p = uint64_t{y} * h + x;
           out->depth[p] = packet.ray.tfar[i];
-          const PrimitiveKind kind = scenes[which[i]]->kind_of(packet.hit.geomID[i]);
+          const PrimitiveKind kind = scenes[context.best_scene[i]]->kind_of(packet.hit.geomID[i]);
           out->kind[p] = static_cast<uint8_t>(kind);
           double n[3] = {packet.hit.Ng_x[i], packet.hit.Ng_y[i], packet.hit.Ng_z[i]};
           const double dir[3] = {packet.ray.dir_x[i], packet.ray.dir_y[i], packet.ray.dir_z[i]};

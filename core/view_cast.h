@@ -1,8 +1,11 @@
 // Primary-ray images of a RayScene (../shared/DESIGN.md "Error report"): one ray through the centre of
-// every pixel of a square pinhole camera, cast as 16-ray packets over 4×4 pixel tiles (coherent rays,
-// rtcIntersect16), tiles in parallel. Each pixel gets the hit distance along its unit ray, the geometric
-// normal turned to face the camera (so one- and two-sided faces compare alike), and the kind of primitive
-// hit. A pixel's result depends on that pixel's ray only, so images are the same for any thread count.
+// every pixel of a square pinhole camera, traced one ray at a time (rtcIntersect1) over 4×4 pixel tiles,
+// tiles in parallel. Not as 16-ray packets: Embree's packet traversal falls back to its single-ray
+// intersector where few rays of a packet remain, the two can round a hit's distance or normal differently,
+// and where that happens depends on the BVH, so an image would depend on how the scene is chunked. Each
+// pixel gets the hit distance along its unit ray, the geometric normal turned to face the camera (so one-
+// and two-sided faces compare alike), and the kind of primitive hit. A pixel's result depends on that
+// pixel's ray only, so images are the same for any thread count.
 //
 // Views for the report lie on a Fibonacci sphere (González, "Measurement of areas on a sphere using
 // Fibonacci and latitude–longitude lattices", 2010): K directions of near-equal spacing, deterministic.
@@ -41,7 +44,13 @@ struct ViewImage {
 };
 
 // Row-major, row 0 at the top. The nearest hit over all `scenes` counts (an original's triangles and its
-// one-pixel lines live in separate scenes). Returns the number of rays cast.
-uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out);
+// one-pixel lines live in separate scenes); of hits at equal distance, the first scene's, then the lowest
+// geometry id's, then the lowest primitive id's (core/nearest_hit.h). With `accumulate`, `out` holds the
+// image of earlier chunks of the same scene list (same camera): a pixel changes only where this chunk's hit
+// is strictly nearer, so tracing the chunks of a scene in order, each as `scenes`, gives the image of the
+// whole scene when a chunk's primitives come after every earlier chunk's in that key order. Returns the
+// number of rays cast.
+uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out,
+                   bool accumulate = false);
 
 }  // namespace lodstream::core

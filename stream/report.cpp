@@ -2,22 +2,34 @@
 // (../shared/DESIGN.md "Error report").
 //
 // For every original (ingested into the scene store, reused from a simplify work directory when it is the
-// same file), one Embree scene of its triangles is built once; its lines and points, which are drawn one
-// pixel wide, go into a small second scene rebuilt for each level's distance. For every level:
-// 1. read the LOD file, build its scene (thick edges as flat curves of radius max(T/2, half a pixel),
-//    points as one-pixel discs);
-// 2. two-sided Hausdorff distance: Metro-style samples of each mesh (core/surface_sampling.h), closest
-//    points on the other by Embree point queries;
+// same file), traced out of core: the store is cut into chunks (stream/store_chunks.h) that fit what
+// --memory leaves, one chunk in core. Its samples and view targets are drawn in two passes over the chunks.
+// For every level:
+// 1. read the LOD file, draw its samples, and the original → level Hausdorff distances against its scene
+//    (thick edges as flat curves of radius max(T/2, half a pixel), points as one-pixel discs);
+// 2. chunk-outer passes over the original: each chunk's Embree scene (its triangles; its lines and points,
+//    drawn one pixel wide, in a small second scene per level distance) is built once per pass, every
+//    level's samples are lowered to their distance to it (level → original Hausdorff), and every view of
+//    the levels of the pass accumulates its image; then it is freed;
 // 3. views: K directions on a Fibonacci sphere, view k aimed at the k-th of K points sampled uniformly
 //    by area on the original's surface, the camera at the level's switching distance from that point;
-//    original and LOD ray cast into H × H images; silhouette error from exact distance transforms of the
-//    original's coverage (core/silhouette_error.h); depth and normal error where both cover.
-// Everything drawn at random comes from counter-based streams of --seed (views, targets, samples), and
-// every sum is formed in a fixed order, so the figures are the same for any thread count or memory budget.
+//    the level ray cast into H × H images, compared with the original's: silhouette error from exact
+//    distance transforms of the original's coverage (core/silhouette_error.h); depth and normal error
+//    where both cover.
+// Levels whose distance comes from their Hausdorff max take one more pass (distances first). What stays
+// between chunks: the samples and their distances so far, and for the levels of a pass the original's
+// view images (depth, normal, kind: 17 bytes a pixel); levels are grouped into passes so that these take
+// at most half of what --memory leaves. A level too large for the rest is traced in chunks as well.
+// Everything drawn at random comes from counter-based streams of --seed (views, targets, samples), every
+// sum is formed in a fixed order, distances are minima over chunks and a pixel keeps the hit of lowest
+// (distance, primitive order) over chunks (core/nearest_hit.h), so the figures are the same for any
+// thread count, memory budget or chunking.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <map>
 #include <numeric>
@@ -47,6 +59,7 @@
 #include "stream/progress.h"
 #include "stream/scene_store.h"
 #include "stream/store_access.h"
+#include "stream/store_chunks.h"
 #include "stream/work_dir.h"
 
 namespace lodstream {
@@ -58,6 +71,21 @@ using stream::run_stage;
 // Random streams of the seed (core/surface_sampling.h): one per use, so that changing one use never
 // moves the numbers of another.
 enum : uint64_t { kStreamTargets = 101, kStreamOriginalSamples = 102, kStreamLodSamples = 103 };
+
+// Bytes of a chunk of the original while its scene is built, as Embree's memory monitor counts them (it
+// counts what Embree reserves, more than becomes resident) plus the chunk's own arrays: measured on the
+// city scenes (README, "report out of core"), rounded up.
+constexpr stream::ChunkCosts kChunkCosts{.triangle = 80, .line = 224, .point = 160, .vertex = 28};
+
+// Resident bytes of the process now (/proc/self/statm), 0 where unknown.
+uint64_t resident_bytes() {
+  std::FILE* f = std::fopen("/proc/self/statm", "r");
+  if (!f) return 0;
+  unsigned long long size = 0, resident = 0;
+  const int got = std::fscanf(f, "%llu %llu", &size, &resident);
+  std::fclose(f);
+  return got == 2 ? resident * 4096ull : 0;
+}
 
 struct LevelSpec {
   std::string file;
@@ -192,132 +220,155 @@ ErrorStats hausdorff_stats(std::vector<float>& d, size_t faces) {
 
 // ------------------------------------------------------------------------------------------- meshes
 
-// Metro-style samples of a mesh given as arrays (positions, triangles, segments, points): face samples
-// first, then edge and vertex samples.
+// Metro-style samples of a mesh (faces, edges, vertices): face samples first, then edge and vertex samples.
 struct Samples {
   std::vector<float> xyz;
   size_t faces = 0;  // the first `faces` samples are uniform by area
 };
 
-// With `targets`, also K view targets in the same two passes (the original is streamed once for both): points
-// uniform by area on the triangles; with no triangles, uniform by length on the segments; with neither,
-// the points themselves in turn.
-Samples sample_mesh(std::span<const float> xyz, std::span<const uint32_t> triangles,
-                    std::span<const uint32_t> segments, std::span<const uint32_t> points, uint64_t n, uint64_t seed,
-                    uint64_t stream, unsigned k = 0, std::vector<float>* targets = nullptr) {
-  core::SurfaceSampler sampler(n, seed, stream), aim(k, seed, kStreamTargets);
-  const uint64_t vertex_count = xyz.size() / 3;
-  std::vector<uint8_t> used(vertex_count, 0);
-  for (auto ids : {triangles, segments, points})
+// Samples of a mesh streamed in parts, in its primitive order (every triangle, then every segment; a
+// part's triangles and segments come after the earlier parts'), measured in one pass over the parts and
+// sampled in a second; the used vertices are sampled in vertex order. With k > 0, also k view targets
+// from the same passes: points uniform by area on the triangles; with no triangles, uniform by length on
+// the segments; with neither, the points themselves in turn. The samples depend on the mesh alone, never
+// on how it is cut into parts.
+class MeshSampling {
+ public:
+  MeshSampling(uint64_t n, uint64_t seed, uint64_t stream, unsigned k, bool any_triangles)
+      : sampler_(n, seed, stream), aim_(k, seed, kStreamTargets), n_(n), k_(k), any_triangles_(any_triangles) {}
+
+  void measure(std::span<const float> xyz, std::span<const uint32_t> triangles, std::span<const uint32_t> segments) {
+    const float* p = xyz.data();
+    for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+      const float *a = p + 3ull * triangles[t], *b = p + 3ull * triangles[t + 1], *c = p + 3ull * triangles[t + 2];
+      sampler_.measure_triangle(a, b, c);
+      if (k_) aim_.measure_triangle(a, b, c);
+    }
+    for (size_t e = 0; e + 1 < segments.size(); e += 2) {
+      const float *a = p + 3ull * segments[e], *b = p + 3ull * segments[e + 1];
+      sampler_.measure_segment(a, b);
+      if (k_ && !any_triangles_) aim_.measure_segment(a, b);
+    }
+  }
+  void begin(uint64_t used_vertices) {
+    for (uint64_t v = 0; v < used_vertices; ++v) sampler_.measure_vertex();
+    sampler_.begin_sampling();
+    aim_.begin_sampling();
+    faces_.reserve(3 * n_), edges_.reserve(3 * n_), vertices_.reserve(3 * std::min(n_, used_vertices));
+  }
+  void sample(std::span<const float> xyz, std::span<const uint32_t> triangles, std::span<const uint32_t> segments) {
+    const float* p = xyz.data();
+    for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+      const float *a = p + 3ull * triangles[t], *b = p + 3ull * triangles[t + 1], *c = p + 3ull * triangles[t + 2];
+      sampler_.sample_triangle(a, b, c, faces_, edges_);
+      if (k_) aim_.sample_triangle(a, b, c, aim_faces_, aim_unused_);
+    }
+    for (size_t e = 0; e + 1 < segments.size(); e += 2) {
+      const float *a = p + 3ull * segments[e], *b = p + 3ull * segments[e + 1];
+      sampler_.sample_segment(a, b, edges_);
+      if (k_ && aim_faces_.empty()) aim_.sample_segment(a, b, aim_edges_);  // every triangle came before
+    }
+  }
+  // Consecutive used vertices, in vertex order.
+  void sample_vertices(std::span<const float> xyz) {
+    for (size_t v = 0; v + 2 < xyz.size(); v += 3) sampler_.sample_vertex(xyz.data() + v, vertices_);
+  }
+  // `point_xyz`: positions of points 0, 1, ... (cyclically, k of them), the targets of a mesh of points.
+  Samples finish(std::vector<float>* targets, const std::function<std::vector<float>()>& point_xyz) {
+    if (targets) {
+      *targets = !aim_faces_.empty() ? std::move(aim_faces_) : std::move(aim_edges_);
+      if (targets->empty()) *targets = point_xyz();
+    }
+    Samples out;
+    out.faces = faces_.size() / 3;
+    faces_.insert(faces_.end(), edges_.begin(), edges_.end());
+    faces_.insert(faces_.end(), vertices_.begin(), vertices_.end());
+    out.xyz = std::move(faces_);
+    return out;
+  }
+
+ private:
+  core::SurfaceSampler sampler_, aim_;
+  uint64_t n_;
+  unsigned k_;
+  bool any_triangles_;
+  std::vector<float> faces_, edges_, vertices_, aim_faces_, aim_edges_, aim_unused_;
+};
+
+// Samples of a mesh held in memory (a level).
+Samples sample_mesh(const core::LodMesh& m, uint64_t n, uint64_t seed, uint64_t stream) {
+  MeshSampling s(n, seed, stream, 0, !m.triangles.empty());
+  s.measure(m.positions, m.triangles, m.edges);
+  std::vector<uint8_t> used(m.positions.size() / 3, 0);
+  for (auto ids : {std::span<const uint32_t>(m.triangles), std::span<const uint32_t>(m.edges), std::span<const uint32_t>(m.points)})
     for (uint32_t v : ids) used[v] = 1;
-  const float* p = xyz.data();
-  auto corner = [&](std::span<const uint32_t> ids, size_t i) { return p + 3ull * ids[i]; };
-  for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
-    sampler.measure_triangle(corner(triangles, t), corner(triangles, t + 1), corner(triangles, t + 2));
-    if (targets) aim.measure_triangle(corner(triangles, t), corner(triangles, t + 1), corner(triangles, t + 2));
-  }
-  for (size_t e = 0; e + 1 < segments.size(); e += 2) {
-    sampler.measure_segment(corner(segments, e), corner(segments, e + 1));
-    if (targets && triangles.empty()) aim.measure_segment(corner(segments, e), corner(segments, e + 1));
-  }
-  for (uint64_t v = 0; v < vertex_count; ++v)
-    if (used[v]) sampler.measure_vertex();
-  sampler.begin_sampling();
-  aim.begin_sampling();
-  std::vector<float> faces, edges, vertices, aim_faces, aim_edges, aim_unused;
-  faces.reserve(3 * n), edges.reserve(3 * n), vertices.reserve(3 * std::min(n, vertex_count));
-  for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
-    sampler.sample_triangle(corner(triangles, t), corner(triangles, t + 1), corner(triangles, t + 2), faces, edges);
-    if (targets)
-      aim.sample_triangle(corner(triangles, t), corner(triangles, t + 1), corner(triangles, t + 2), aim_faces, aim_unused);
-  }
-  const bool aim_at_segments = targets && aim_faces.empty();
-  for (size_t e = 0; e + 1 < segments.size(); e += 2) {
-    sampler.sample_segment(corner(segments, e), corner(segments, e + 1), edges);
-    if (aim_at_segments) aim.sample_segment(corner(segments, e), corner(segments, e + 1), aim_edges);
-  }
-  for (uint64_t v = 0; v < vertex_count; ++v)
-    if (used[v]) sampler.sample_vertex(p + 3 * v, vertices);
-  if (targets) {
-    *targets = !aim_faces.empty() ? std::move(aim_faces) : std::move(aim_edges);
-    if (targets->empty() && !points.empty())
-      for (unsigned i = 0; i < k; ++i) targets->insert(targets->end(), corner(points, i % points.size()), corner(points, i % points.size()) + 3);
-  }
-  Samples out;
-  out.faces = faces.size() / 3;
-  faces.insert(faces.end(), edges.begin(), edges.end());
-  faces.insert(faces.end(), vertices.begin(), vertices.end());
-  out.xyz = std::move(faces);
-  return out;
+  s.begin(static_cast<uint64_t>(std::count(used.begin(), used.end(), 1)));
+  s.sample(m.positions, m.triangles, m.edges);
+  for (size_t v = 0; v < used.size(); ++v)
+    if (used[v]) s.sample_vertices(std::span<const float>(m.positions.data() + 3 * v, 3));
+  return s.finish(nullptr, {});
 }
 
-// An original, loaded once for all the levels measured against it.
+// An original: its scene store, cut into chunks that each fit the memory left for tracing.
 struct Original {
   std::string path;
   stream::StoreMeta meta;
-  std::unique_ptr<core::RayScene> triangles;  // its triangles (Embree holds the positions and indices)
-  std::vector<float> own_xyz;                 // positions, when there are no triangles to hold them
-  std::span<const float> xyz;
-  std::span<const uint32_t> tris;
-  std::vector<uint32_t> lines, points;        // drawn one pixel wide: a scene per level distance
-  Samples samples;                            // Metro-style samples
-  std::vector<float> targets;                 // view targets
+  std::unique_ptr<stream::StoreChunks> chunks;
+  Samples samples;              // Metro-style samples
+  std::vector<float> targets;   // view targets
   double diagonal = 0;
 };
 
+// Cuts the original into chunks of at most `chunk_bytes` and draws its samples and view targets: two
+// passes over the chunks (measure, sample), then its used vertices in store order.
 void load_original(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
-                   uint64_t embree_limit, stream::Progress& progress, Original* o) {
+                   uint64_t chunk_bytes, stream::Progress& progress, Original* o) {
   o->meta = meta;
-  o->triangles = std::make_unique<core::RayScene>(embree_limit);
-  const core::RayScene::TriangleBuffers buffers = o->triangles->add_triangles(meta.vertices, meta.triangles);
-  std::span<float> xyz = buffers.xyz;
-  if (meta.triangles == 0) {
-    o->own_xyz.resize(3 * meta.vertices);
-    xyz = o->own_xyz;
+  o->chunks = std::make_unique<stream::StoreChunks>(store_dir, meta);
+  o->chunks->plan(kChunkCosts, chunk_bytes);
+  progress.report("load", 0.1);
+  const size_t n = o->chunks->chunks().size();
+  MeshSampling s(ro.samples, ro.seed, kStreamOriginalSamples, ro.views, meta.triangles > 0);
+  stream::ChunkGeometry g;
+  for (size_t c = 0; c < n; ++c) {
+    o->chunks->read(c, &g);
+    s.measure(g.xyz, g.triangles, g.lines);
+    progress.report("load", 0.1 + 0.4 * double(c + 1) / double(n));
   }
-  stream::StorePositions positions(store_dir, meta);
-  positions.acquire();
-  for (uint64_t v = 0; v < meta.vertices; ++v) {
-    double p[3];
-    positions.get(v, p);
-    for (int k = 0; k < 3; ++k) xyz[3 * v + k] = static_cast<float>(p[k]);
-    if ((v & 0xFFFFF) == 0) progress.report("load", 0.3 * double(v) / double(meta.vertices));
+  s.begin(o->chunks->used_vertices());
+  for (size_t c = 0; c < n; ++c) {
+    if (n > 1) o->chunks->read(c, &g);  // one chunk: still there
+    s.sample(g.xyz, g.triangles, g.lines);
+    progress.report("load", 0.5 + 0.4 * double(c + 1) / double(n));
   }
-  positions.release();
-  stream::for_column_blocks(store_dir + "/triangles.u32", meta.triangles, 3, 1 << 20,
-                            [&](uint64_t first, std::span<const uint32_t> ids) {
-                              std::copy(ids.begin(), ids.end(), buffers.indices.begin() + 3 * first);
-                              progress.report("load", 0.3 + 0.2 * double(first) / double(meta.triangles));
-                            });
-  stream::for_column_blocks(store_dir + "/lines.u32", meta.lines, 2, 1 << 20, [&](uint64_t, std::span<const uint32_t> ids) {
-    o->lines.insert(o->lines.end(), ids.begin(), ids.end());
+  g = {};
+  o->chunks->for_used_vertices([&](std::span<const float> xyz) { s.sample_vertices(xyz); });
+  o->samples = s.finish(&o->targets, [&] {
+    std::vector<uint32_t> ids;
+    stream::for_column_blocks(store_dir + "/points.u32", meta.points, 1, 1 << 20, [&](uint64_t, std::span<const uint32_t> p) {
+      for (size_t i = 0; i < p.size() && ids.size() < ro.views; ++i) ids.push_back(p[i]);
+    });
+    const size_t have = ids.size();
+    for (size_t i = have; have > 0 && i < ro.views; ++i) ids.push_back(ids[i % have]);
+    return o->chunks->positions_of(ids);
   });
-  stream::for_column_blocks(store_dir + "/points.u32", meta.points, 1, 1 << 20, [&](uint64_t, std::span<const uint32_t> ids) {
-    o->points.insert(o->points.end(), ids.begin(), ids.end());
-  });
-  o->xyz = xyz;
-  o->tris = buffers.indices;
-  o->triangles->commit();
-  progress.report("load", 0.8);
-  o->samples = sample_mesh(o->xyz, o->tris, o->lines, o->points, ro.samples, ro.seed, kStreamOriginalSamples,
-                           ro.views, &o->targets);
   const double d[3] = {meta.bbox.max[0] - meta.bbox.min[0], meta.bbox.max[1] - meta.bbox.min[1],
                        meta.bbox.max[2] - meta.bbox.min[2]};
   o->diagonal = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
   progress.report("load", 1);
 }
 
-// Distances from every sample to the nearest primitive of any of `scenes`, in sample order.
-std::vector<float> closest_distances(const std::vector<float>& samples, std::span<const core::RayScene* const> scenes) {
+// Distances from every sample to the nearest primitive of any of `scenes`, lowered into `d` (sample order).
+void lower_closest_distances(const std::vector<float>& samples, std::span<const core::RayScene* const> scenes,
+                             std::vector<float>& d) {
   const size_t n = samples.size() / 3;
-  std::vector<float> d(n, std::numeric_limits<float>::infinity());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 512), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i)
       for (const core::RayScene* s : scenes)
-        if (!s->empty()) d[i] = std::min(d[i], s->closest_distance(samples.data() + 3 * i));
+        if (!s->empty()) d[i] = std::min(d[i], s->closest_distance(samples.data() + 3 * i, nullptr, d[i]));
   });
-  return d;
 }
+
 
 // ------------------------------------------------------------------------------------------- images
 
@@ -380,101 +431,312 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-LevelResult measure_level(const Original& o, const RunSpec& run, size_t index, const ReportOptions& ro,
-                          uint64_t embree_limit, stream::Progress& progress) {
-  const auto t_level = std::chrono::steady_clock::now();
-  const LevelSpec& spec = run.levels[index];
+// One level's measurement, in three phases around the original's chunk passes:
+// 1. begin_level: read the level, draw its samples, original → level Hausdorff (its own scene);
+// 2. chunk passes (trace_original): level → original distances, lowered chunk by chunk; the original's
+//    image of each view, accumulated chunk by chunk;
+// 3. finish_level: the level's own images, compared with the original's.
+struct LevelWork {
+  const RunSpec* run = nullptr;
+  size_t index = 0;
   LevelResult out;
-  ReportLevel& L = out.level;
+  Samples samples;                 // of the level
+  std::vector<float> to_original;  // per sample: distance to the original's chunks traced so far
+  bool distance_known = false;
+  double distance = 0;             // camera distance of every view
+  double tan_half = 0;
+  unsigned views = 0;
+  std::vector<core::Camera> cameras;
+  std::vector<core::ViewImage> original_views;  // during the passes that trace its views
+  uint64_t level_chunks = 1;                    // chunks the level itself was traced in
+  double pixel_at(double d, unsigned resolution) const { return 2 * d * tan_half / resolution; }
+};
+
+// Per-pixel bytes of a view image held between chunks: depth, normal, kind.
+constexpr uint64_t kViewPixelBytes = 4 + 12 + 1;
+
+std::unique_ptr<core::RayScene> build_level_scene(const core::LodMesh& mesh, float half_pixel, uint64_t embree_limit) {
+  auto scene = std::make_unique<core::RayScene>(embree_limit);
+  scene->add_triangles(mesh.positions, mesh.triangles);
+  std::vector<float> radius(mesh.edge_count());
+  for (size_t e = 0; e < radius.size(); ++e) radius[e] = std::max(mesh.thickness[e] / 2, half_pixel);
+  scene->add_segments(mesh.positions, mesh.edges, radius);
+  scene->add_points(mesh.positions, mesh.points, half_pixel);
+  scene->commit();
+  return scene;
+}
+
+// A level too large for one scene is traced the same way as an original, in chunks: consecutive ranges of
+// its primitives (triangles, then edges, then points: the order of build_level_scene's geometries, so the
+// tie rule picks the same hit), each with its own vertices.
+class LevelChunks {
+ public:
+  LevelChunks(const core::LodMesh& m, uint64_t bytes) : m_(m) {
+    const uint64_t prims = m.triangle_count() + m.edge_count() + m.point_count();
+    const double per_vertex = prims ? kChunkCosts.vertex * double(m.vertex_count()) / double(prims) : 0;
+    const double cost[3] = {kChunkCosts.triangle + per_vertex, kChunkCosts.line + per_vertex, kChunkCosts.point + per_vertex};
+    const uint64_t count[3] = {m.triangle_count(), m.edge_count(), m.point_count()};
+    double total = 0;
+    for (int k = 0; k < 3; ++k) total += cost[k] * double(count[k]);
+    if (total <= double(bytes)) {
+      ranges_.push_back({0, prims});
+      return;
+    }
+    uint64_t first = 0, g = 0;
+    double used = 0;
+    for (int k = 0; k < 3; ++k)
+      for (uint64_t i = 0; i < count[k]; ++i, ++g) {
+        if (g > first && used + cost[k] > double(bytes)) ranges_.push_back({first, g}), first = g, used = 0;
+        used += cost[k];
+      }
+    ranges_.push_back({first, prims});
+  }
+  size_t size() const { return ranges_.size(); }
+  // The scene of chunk c; the whole level's for a level in one chunk.
+  std::unique_ptr<core::RayScene> scene(size_t c, float half_pixel, uint64_t embree_limit) {
+    if (ranges_.size() == 1) return build_level_scene(m_, half_pixel, embree_limit);
+    const auto [first, end] = ranges_[c];
+    core::LodMesh part;
+    if (local_.empty()) local_.assign(m_.vertex_count(), UINT32_MAX);
+    std::vector<uint32_t> touched;
+    // Appends the chunk's primitives of one column (global ids from `base`); returns the first one's index.
+    const auto take = [&](const std::vector<uint32_t>& ids, uint64_t arity, uint64_t base, std::vector<uint32_t>& out) {
+      const uint64_t n = ids.size() / arity;
+      const uint64_t lo = std::max(first, base) - base, hi = std::min(end, base + n) - base;
+      for (uint64_t i = lo; i < hi; ++i)
+        for (uint64_t k = 0; k < arity; ++k) {
+          const uint32_t v = ids[i * arity + k];
+          if (local_[v] == UINT32_MAX) {
+            local_[v] = static_cast<uint32_t>(part.positions.size() / 3);
+            part.positions.insert(part.positions.end(), m_.positions.begin() + 3 * v, m_.positions.begin() + 3 * v + 3);
+            touched.push_back(v);
+          }
+          out.push_back(local_[v]);
+        }
+      return lo;
+    };
+    const uint64_t t = m_.triangle_count(), e = m_.edge_count();
+    if (first < t) take(m_.triangles, 3, 0, part.triangles);
+    if (first < t + e && end > t) {
+      const uint64_t from = take(m_.edges, 2, t, part.edges);
+      part.thickness.assign(m_.thickness.begin() + static_cast<std::ptrdiff_t>(from),
+                            m_.thickness.begin() + static_cast<std::ptrdiff_t>(from + part.edges.size() / 2));
+    }
+    if (end > t + e) take(m_.points, 1, t + e, part.points);
+    for (uint32_t v : touched) local_[v] = UINT32_MAX;
+    return build_level_scene(part, half_pixel, embree_limit);
+  }
+
+ private:
+  const core::LodMesh& m_;
+  std::vector<std::pair<uint64_t, uint64_t>> ranges_;
+  std::vector<uint32_t> local_;  // store vertex -> chunk vertex, UINT32_MAX outside the chunk being made
+};
+
+// Bytes of a level in memory (its arrays), for the share of the budget its chunks get.
+uint64_t mesh_bytes(const core::LodMesh& m) {
+  return 4 * (m.positions.size() + m.normals.size() + m.triangles.size() + m.edges.size() + m.thickness.size() + m.points.size());
+}
+
+// What is left of `bytes` once `held` is taken, at least 16 MiB (the memory monitor stays the guard).
+uint64_t left_of(uint64_t bytes, uint64_t held) { return std::max<uint64_t>(bytes - std::min(bytes, held), 16ull << 20); }
+
+// Estimated bytes of a level's chunk within `limit` (its Embree scene's guard): three quarters of it, the
+// rest for the chunk's own copy of its part of the level (about a quarter of its scene's bytes).
+uint64_t level_chunk_bytes(uint64_t limit, uint64_t chunk_cap) {
+  return chunk_cap ? std::min(chunk_cap, limit / 4 * 3) : limit / 4 * 3;
+}
+
+// embree_limit: what the level's scene may take; chunk_cap: --chunk-bytes (0 = none), which cuts a level
+// into chunks of at most that many bytes as it does the original.
+void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint64_t embree_limit, uint64_t chunk_cap) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const LevelSpec& spec = w.run->levels[w.index];
+  ReportLevel& L = w.out.level;
   L.file = spec.file;
   L.cell_size = spec.cell_size;
   const core::LodMesh mesh = io::read_lod_mesh(spec.file);
   L.vertices = mesh.vertex_count(), L.triangles = mesh.triangle_count(), L.edges = mesh.edge_count(),
   L.points = mesh.point_count();
   if (L.triangles + L.edges + L.points == 0) fail(Status::bad_data, spec.file + ": the level has no primitives");
-  const double tan_half = std::tan(run.fov_degrees * M_PI / 360.0);
-  auto pixel_at = [&](double d) { return 2 * d * tan_half / ro.resolution; };
+  w.tan_half = std::tan(w.run->fov_degrees * M_PI / 360.0);
+  w.distance_known = spec.switch_distance > 0;
+  w.distance = w.distance_known ? spec.switch_distance : 1.0;
+  w.views = std::min<unsigned>(ro.views, static_cast<unsigned>(o.targets.size() / 3));
+  w.samples = sample_mesh(mesh, ro.samples, ro.seed, kStreamLodSamples);
+  w.to_original.assign(w.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
+  // Segment and point radii do not enter the point queries: any distance builds the same query scene.
+  const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh));
+  LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap));
+  w.level_chunks = chunks.size();
+  std::vector<float> d(o.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
+  for (size_t c = 0; c < chunks.size(); ++c) {
+    const auto scene = chunks.scene(c, static_cast<float>(w.pixel_at(w.distance, ro.resolution) / 2), limit);
+    const auto t_q = std::chrono::steady_clock::now();
+    const core::RayScene* to_lod[] = {scene.get()};
+    lower_closest_distances(o.samples.xyz, to_lod, d);
+    w.out.queries += d.size();
+    w.out.query_seconds += seconds_since(t_q);
+  }
+  L.original_to_lod = hausdorff_stats(d, o.samples.faces);
+  L.seconds += seconds_since(t0);
+}
 
-  // Hausdorff first: without a given distance, the level is shown from where its max spans
-  // pixels_per_cell pixels. Segment and point radii do not enter the point queries.
-  const auto build = [&](double distance) {
-    auto scene = std::make_unique<core::RayScene>(embree_limit);
-    const float half_pixel = static_cast<float>(pixel_at(distance) / 2);
-    scene->add_triangles(mesh.positions, mesh.triangles);
-    std::vector<float> radius(mesh.edge_count());
-    for (size_t e = 0; e < radius.size(); ++e) radius[e] = std::max(mesh.thickness[e] / 2, half_pixel);
-    scene->add_segments(mesh.positions, mesh.edges, radius);
-    scene->add_points(mesh.positions, mesh.points, half_pixel);
-    scene->commit();
-    return scene;
-  };
-  const auto build_wire = [&](double distance) {
-    auto scene = std::make_unique<core::RayScene>(embree_limit);
-    const float half_pixel = static_cast<float>(pixel_at(distance) / 2);
-    scene->add_segments(o.xyz, o.lines, std::vector<float>(o.lines.size() / 2, half_pixel));
-    scene->add_points(o.xyz, o.points, half_pixel);
-    scene->commit();
-    return scene;
-  };
-  const std::string stage = "level " + std::to_string(index);
-  double distance = spec.switch_distance > 0 ? spec.switch_distance : 1.0;
-  std::unique_ptr<core::RayScene> lod = build(distance), wire = build_wire(distance);
-  progress.report(stage.c_str(), 0.05);
-  const auto t_q = std::chrono::steady_clock::now();
-  const Samples lod_samples =
-      sample_mesh(mesh.positions, mesh.triangles, mesh.edges, mesh.points, ro.samples, ro.seed, kStreamLodSamples);
-  {
-    const core::RayScene* to_original[] = {o.triangles.get(), wire.get()};
-    std::vector<float> d = closest_distances(lod_samples.xyz, to_original);
-    L.lod_to_original = hausdorff_stats(d, lod_samples.faces);
-  }
-  {
-    const core::RayScene* to_lod[] = {lod.get()};
-    std::vector<float> d = closest_distances(o.samples.xyz, to_lod);
-    L.original_to_lod = hausdorff_stats(d, o.samples.faces);
-  }
-  out.queries = lod_samples.xyz.size() / 3 + o.samples.xyz.size() / 3;
-  out.query_seconds = seconds_since(t_q);
-  progress.report(stage.c_str(), 0.3);
+// After every chunk lowered the level's distances: the two-sided figures, and the camera distance when none
+// was given (where the Hausdorff max spans pixels_per_cell pixels, at least a tiny positive distance).
+void finish_hausdorff(const Original& o, LevelWork& w, const ReportOptions& ro) {
+  ReportLevel& L = w.out.level;
+  L.lod_to_original = hausdorff_stats(w.to_original, w.samples.faces);
+  w.to_original = {};
   const ErrorStats& a = L.lod_to_original;
   const ErrorStats& b = L.original_to_lod;
   L.hausdorff_max = std::max(a.max, b.max);
   L.hausdorff_mean = std::max(a.mean, b.mean);
   L.hausdorff_rms = std::max(a.rms, b.rms);
-  if (spec.switch_distance <= 0) {
-    // Shown from where the Hausdorff max spans pixels_per_cell pixels (at least a tiny positive distance).
-    distance = std::max(L.hausdorff_max * ro.resolution / (ro.pixels_per_cell * 2 * tan_half), o.diagonal * 1e-6);
-    lod = build(distance);
-    wire = build_wire(distance);
+  if (!w.distance_known) {
+    w.distance = std::max(L.hausdorff_max * ro.resolution / (ro.pixels_per_cell * 2 * w.tan_half), o.diagonal * 1e-6);
+    w.distance_known = true;
   }
-  L.switch_distance = distance;
-  L.pixel_size = pixel_at(distance);
+  L.switch_distance = w.distance;
+  L.pixel_size = w.pixel_at(w.distance, ro.resolution);
   if (o.diagonal > 0) {
     L.hausdorff_max_percent = 100 * L.hausdorff_max / o.diagonal;
     L.hausdorff_mean_percent = 100 * L.hausdorff_mean / o.diagonal;
   }
   L.hausdorff_max_pixels = L.hausdorff_max / L.pixel_size;
   L.hausdorff_mean_pixels = L.hausdorff_mean / L.pixel_size;
+}
 
-  // Views.
+// View k: from the Fibonacci direction k, at the level's distance from the original's k-th target.
+void view_geometry(const Original& o, const LevelWork& w, const ReportOptions& ro, unsigned k, double dir[3],
+                   double target[3], double eye[3]) {
+  core::fibonacci_direction(k, ro.views, dir);
+  for (int c = 0; c < 3; ++c) target[c] = o.targets[3 * k + c], eye[c] = target[c] + dir[c] * w.distance;
+}
+
+void begin_views(const Original& o, LevelWork& w, const ReportOptions& ro) {
+  w.cameras.clear();
+  for (unsigned k = 0; k < w.views; ++k) {
+    double dir[3], target[3], eye[3];
+    view_geometry(o, w, ro, k, dir, target, eye);
+    w.cameras.push_back(core::look_at(eye, target, w.run->fov_degrees, ro.resolution));
+  }
+  w.original_views.assign(w.views, core::ViewImage{});
+}
+
+// A chunk of the original as Embree scenes: its triangles, built once, and its lines and points (drawn
+// one pixel wide), built for each level's distance.
+struct ChunkScene {
+  stream::ChunkGeometry geometry;  // without its triangles, which Embree holds
+  std::unique_ptr<core::RayScene> triangles;
+};
+
+std::unique_ptr<core::RayScene> build_wire(const stream::ChunkGeometry& g, float half_pixel, uint64_t embree_limit) {
+  auto scene = std::make_unique<core::RayScene>(embree_limit);
+  scene->add_segments(g.xyz, g.lines, std::vector<float>(g.lines.size() / 2, half_pixel));
+  scene->add_points(g.xyz, g.points, half_pixel);
+  scene->commit();
+  return scene;
+}
+
+struct TraceTotals {
+  uint64_t chunks = 0;              // chunk scenes built
+  uint64_t embree_peak_bytes = 0;   // the largest chunk scene's peak, as Embree's monitor counts it
+  uint64_t chunk_triangles = 0;     // triangles of that chunk
+};
+
+// One pass over the original's chunks: each chunk's scene is built, the samples of `queries` levels are
+// lowered to their distance to it, and the views of `viewed` levels accumulate its image; then it is
+// freed. Every figure is the same for any chunking: distances are minima, and view pixels keep the hit
+// with the lowest (distance, primitive order) over all chunks (core/nearest_hit.h), chunks being
+// consecutive in the store's primitive order. With one chunk, its scene is kept in `cache` for the next pass.
+void trace_original(const Original& o, const std::vector<LevelWork*>& queries, const std::vector<LevelWork*>& viewed,
+                    const ReportOptions& ro, uint64_t embree_limit, stream::Progress& progress,
+                    std::unique_ptr<ChunkScene>& cache, TraceTotals& totals) {
+  const size_t n = o.chunks->chunks().size();
+  for (size_t c = 0; c < n; ++c) {
+    std::unique_ptr<ChunkScene> chunk = std::move(cache);
+    if (!chunk) {
+      chunk = std::make_unique<ChunkScene>();
+      o.chunks->read(c, &chunk->geometry);
+      chunk->triangles = std::make_unique<core::RayScene>(embree_limit);
+      chunk->triangles->add_triangles(chunk->geometry.xyz, chunk->geometry.triangles);
+      const uint64_t triangles = chunk->geometry.triangles.size() / 3;
+      chunk->geometry.triangles = {};
+      chunk->triangles->commit();
+      ++totals.chunks;
+      if (chunk->triangles->peak_embree_bytes() > totals.embree_peak_bytes)
+        totals.embree_peak_bytes = chunk->triangles->peak_embree_bytes(), totals.chunk_triangles = triangles;
+    }
+    const bool wire = !chunk->geometry.lines.empty() || !chunk->geometry.points.empty();
+    for (LevelWork* w : queries) {
+      const auto t0 = std::chrono::steady_clock::now();
+      std::unique_ptr<core::RayScene> lines = wire ? build_wire(chunk->geometry, 1.0f, embree_limit) : nullptr;
+      const core::RayScene* scenes[] = {chunk->triangles.get(), lines ? lines.get() : chunk->triangles.get()};
+      lower_closest_distances(w->samples.xyz, std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->to_original);
+      w->out.queries += w->to_original.size();
+      w->out.query_seconds += seconds_since(t0);
+      w->out.level.seconds += seconds_since(t0);
+    }
+    for (LevelWork* w : viewed) {
+      const auto t0 = std::chrono::steady_clock::now();
+      std::unique_ptr<core::RayScene> lines =
+          wire ? build_wire(chunk->geometry, static_cast<float>(w->pixel_at(w->distance, ro.resolution) / 2), embree_limit) : nullptr;
+      const core::RayScene* scenes[] = {chunk->triangles.get(), lines.get()};
+      for (unsigned k = 0; k < w->views; ++k)
+        w->out.rays += core::cast_view(std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->cameras[k],
+                                       &w->original_views[k], true);
+      w->out.ray_seconds += seconds_since(t0);
+      w->out.level.seconds += seconds_since(t0);
+    }
+    progress.report("measure", double(c + 1) / double(n));
+    if (n == 1) cache = std::move(chunk);
+  }
+}
+
+// The level's own images, compared with the original's view by view.
+void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint64_t embree_limit, uint64_t chunk_cap) {
+  const auto t0 = std::chrono::steady_clock::now();
+  ReportLevel& L = w.out.level;
+  const core::LodMesh mesh = io::read_lod_mesh(w.run->levels[w.index].file);
   const unsigned h = ro.resolution;
   const uint64_t pixels = uint64_t{h} * h;
+  const float half_pixel = static_cast<float>(w.pixel_at(w.distance, ro.resolution) / 2);
+  // In one chunk, each view is cast and compared in turn; in several, every view's image is accumulated
+  // chunk by chunk first (the level's images then take as much memory as the original's).
+  // Besides the level: with several chunks, every view's image.
+  const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh) + pixels * kViewPixelBytes * w.views);
+  LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap));
+  w.level_chunks = std::max<uint64_t>(w.level_chunks, chunks.size());
+  std::vector<core::ViewImage> lod_views(chunks.size() > 1 ? w.views : 1);
+  std::unique_ptr<core::RayScene> lod;
+  if (chunks.size() > 1) {
+    for (size_t c = 0; c < chunks.size(); ++c) {
+      lod = chunks.scene(c, half_pixel, limit);
+      const core::RayScene* lod_scenes[] = {lod.get()};
+      const auto t_r = std::chrono::steady_clock::now();
+      for (unsigned k = 0; k < w.views; ++k) w.out.rays += core::cast_view(lod_scenes, w.cameras[k], &lod_views[k], true);
+      w.out.ray_seconds += seconds_since(t_r);
+    }
+    lod.reset();
+  } else {
+    lod = chunks.scene(0, half_pixel, limit);
+  }
   core::SilhouetteCounts total;
   core::SilhouetteScratch scratch;
   std::vector<float> depth_err, normal_err, distance_image(pixels);
-  core::ViewImage vo, vl;
-  const core::RayScene* original_scenes[] = {o.triangles.get(), wire.get()};
-  const core::RayScene* lod_scenes[] = {lod.get()};
-  const unsigned views = std::min<unsigned>(ro.views, static_cast<unsigned>(o.targets.size() / 3));
-  for (unsigned k = 0; k < views; ++k) {
+  for (unsigned k = 0; k < w.views; ++k) {
     double dir[3], target[3], eye[3];
-    core::fibonacci_direction(k, ro.views, dir);
-    for (int c = 0; c < 3; ++c) target[c] = o.targets[3 * k + c], eye[c] = target[c] + dir[c] * distance;
-    const core::Camera cam = core::look_at(eye, target, run.fov_degrees, h);
-    const auto t_r = std::chrono::steady_clock::now();
-    out.rays += core::cast_view(original_scenes, cam, &vo);
-    out.rays += core::cast_view(lod_scenes, cam, &vl);
-    out.ray_seconds += seconds_since(t_r);
+    view_geometry(o, w, ro, k, dir, target, eye);
+    const core::Camera& cam = w.cameras[k];
+    const core::ViewImage& vo = w.original_views[k];
+    core::ViewImage& vl = lod ? lod_views[0] : lod_views[k];
+    if (lod) {
+      const core::RayScene* lod_scenes[] = {lod.get()};
+      const auto t_r = std::chrono::steady_clock::now();
+      w.out.rays += core::cast_view(lod_scenes, cam, &vl);
+      w.out.ray_seconds += seconds_since(t_r);
+    }
     core::SilhouetteCounts view;
     core::compare_silhouettes(vo.kind, vl.kind, int(h), int(h), scratch, view, distance_image);
     core::add_silhouette_counts(total, view);
@@ -492,8 +754,8 @@ LevelResult measure_level(const Original& o, const RunSpec& run, size_t index, c
       depth_err.push_back(de), normal_err.push_back(ne);
       depth_sum += de, normal_sum += ne, ++both;
     }
-    out.csv_rows.push_back(fmt_csv_row(k, dir, target, eye, vs, both, both ? depth_sum / both : 0,
-                                       both ? normal_sum / both : 0));
+    w.out.csv_rows.push_back(fmt_csv_row(k, dir, target, eye, vs, both, both ? depth_sum / both : 0,
+                                         both ? normal_sum / both : 0));
     if (k < ro.html_views) {
       io::HtmlView hv;
       hv.view = k;
@@ -501,10 +763,13 @@ LevelResult measure_level(const Original& o, const RunSpec& run, size_t index, c
       hv.original_rgb = shade(vo, cam);
       hv.lod_rgb = shade(vl, cam);
       hv.heat_rgb = heat(vo, vl, distance_image);
-      out.views.push_back(std::move(hv));
+      w.out.views.push_back(std::move(hv));
     }
-    progress.report(stage.c_str(), 0.3 + 0.7 * double(k + 1) / views);
+    w.original_views[k] = {};
+    if (!lod) lod_views[k] = {};
   }
+  w.original_views = {};
+  lod_views = {};
   const core::SilhouetteStats s = core::silhouette_stats(total);
   L.silhouette.max = s.max, L.silhouette.p95 = s.p95, L.silhouette.mean = s.mean, L.silhouette.count = s.mismatched;
   double sum2 = 0;
@@ -515,9 +780,9 @@ LevelResult measure_level(const Original& o, const RunSpec& run, size_t index, c
   L.mismatch_fraction = s.mismatch_fraction;
   L.depth = stats_of(depth_err);
   L.normal = stats_of(normal_err);
-  L.seconds = seconds_since(t_level);
-  return out;
+  L.seconds += seconds_since(t0);
 }
+
 
 nlohmann::ordered_json stats_json(const ErrorStats& s) {
   return {{"max", s.max}, {"p95", s.p95}, {"mean", s.mean}, {"rms", s.rms}, {"count", s.count}};
@@ -571,7 +836,10 @@ nlohmann::ordered_json report_json(const Report& rep, const ReportOptions& ro) {
   j["performance"] = {{"rays", rep.rays}, {"ray_seconds", rep.ray_seconds},
                       {"rays_per_second", rep.ray_seconds > 0 ? double(rep.rays) / rep.ray_seconds : 0.0},
                       {"point_queries", rep.point_queries}, {"query_seconds", rep.query_seconds},
-                      {"queries_per_second", rep.query_seconds > 0 ? double(rep.point_queries) / rep.query_seconds : 0.0}};
+                      {"queries_per_second", rep.query_seconds > 0 ? double(rep.point_queries) / rep.query_seconds : 0.0},
+                      {"original_chunks", rep.original_chunks}, {"chunk_scenes", rep.chunk_scenes},
+                      {"chunk_embree_peak_bytes", rep.chunk_embree_peak_bytes}, {"chunk_triangles", rep.chunk_triangles},
+                      {"level_chunks", rep.level_chunks}};
   auto& stages = j["stages"] = nlohmann::ordered_json::array();
   for (const StageStats& s : rep.stages)
     stages.push_back({{"name", s.name}, {"seconds", s.seconds}, {"peak_rss_bytes", s.peak_rss_bytes}, {"reused", s.reused}});
@@ -611,9 +879,6 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     rep.runs.resize(runs.size());
     std::vector<std::vector<std::vector<io::HtmlView>>> views(runs.size());
     std::vector<std::vector<std::string>> csvs(runs.size());
-    // Embree's monitor counts what it reserves, which is more than becomes resident (build scratch is
-    // reserved in large blocks), so the whole budget is its guard; the measured VmHWM is what the contract caps.
-    const uint64_t original_limit = plan.budget;
     tbb::task_arena arena(static_cast<int>(plan.threads));
     arena.execute([&] {
       // One original at a time, each loaded once for every run that measures against it.
@@ -632,11 +897,56 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         input_bytes += scene.file_bytes;
         Original o;
         o.path = originals[g];
-        run_stage(&rep.stages, "load", [&](StageStats&) { load_original(store_dir, meta, ro, original_limit, progress, &o); });
-        const uint64_t lod_limit = std::max<uint64_t>(64ull << 20, original_limit - std::min(original_limit, o.triangles->embree_bytes()));
+        std::vector<LevelWork> works;
+        for (size_t r = 0; r < runs.size(); ++r)
+          if (run_original[r] == o.path)
+            for (size_t l = 0; l < runs[r].levels.size(); ++l) {
+              works.emplace_back();
+              works.back().run = &runs[r], works.back().index = l;
+            }
+        // Memory: what the process holds now and the samples aside, the rest is split between the view
+        // images of a group of levels (traced in one pass over the chunks; at most half of it, or one
+        // level) and one chunk's scene.
+        const uint64_t view_bytes = uint64_t{ro.views} * ro.resolution * ro.resolution * kViewPixelBytes;
+        // Held besides: the samples and their distances, a level's depth and normal errors (8 bytes a
+        // pixel of every view) while it is compared, and a margin.
+        const uint64_t held = resident_bytes() + (works.size() + 1) * 3 * ro.samples * 16 + view_bytes / kViewPixelBytes * 8 +
+                              (32ull << 20);
+        const uint64_t avail = plan.budget - std::min(plan.budget, held);
+        const uint64_t levels_per_group = std::max<uint64_t>(1, avail / 2 / std::max<uint64_t>(1, view_bytes));
+        const uint64_t group_bytes = std::min<uint64_t>(levels_per_group, works.size()) * view_bytes;
+        const uint64_t embree_limit = left_of(avail, group_bytes);
+        const uint64_t chunk_bytes = options.chunk_bytes ? std::min(options.chunk_bytes, embree_limit) : embree_limit;
+        run_stage(&rep.stages, "load", [&](StageStats&) { load_original(store_dir, meta, ro, chunk_bytes, progress, &o); });
+        rep.original_chunks += o.chunks->chunks().size();
         run_stage(&rep.stages, "measure", [&](StageStats&) {
-          for (size_t r = 0; r < runs.size(); ++r) {
-            if (run_original[r] != o.path) continue;
+          for (LevelWork& w : works) begin_level(o, w, ro, embree_limit, options.chunk_bytes);
+          std::unique_ptr<ChunkScene> cache;
+          TraceTotals totals;
+          std::vector<LevelWork*> pending;  // levels whose samples have not met the original's chunks yet
+          for (LevelWork& w : works) pending.push_back(&w);
+          // Levels without a given distance need their Hausdorff max before their views.
+          const bool unknown = std::any_of(works.begin(), works.end(), [](const LevelWork& w) { return !w.distance_known; });
+          if (unknown) {
+            trace_original(o, pending, {}, ro, embree_limit, progress, cache, totals);
+            for (LevelWork* w : pending) finish_hausdorff(o, *w, ro);
+            pending.clear();
+          }
+          for (size_t first = 0; first < works.size(); first += levels_per_group) {
+            std::vector<LevelWork*> group;
+            for (size_t i = first; i < std::min<size_t>(works.size(), first + levels_per_group); ++i) group.push_back(&works[i]);
+            for (LevelWork* w : group) begin_views(o, *w, ro);
+            trace_original(o, pending, group, ro, embree_limit, progress, cache, totals);
+            for (LevelWork* w : pending) finish_hausdorff(o, *w, ro);
+            pending.clear();
+            for (LevelWork* w : group) finish_level(o, *w, ro, embree_limit, options.chunk_bytes);
+          }
+          rep.chunk_scenes += totals.chunks;
+          for (const LevelWork& w : works) rep.level_chunks = std::max(rep.level_chunks, w.level_chunks);
+          if (totals.embree_peak_bytes > rep.chunk_embree_peak_bytes)
+            rep.chunk_embree_peak_bytes = totals.embree_peak_bytes, rep.chunk_triangles = totals.chunk_triangles;
+          for (LevelWork& w : works) {
+            const size_t r = static_cast<size_t>(w.run - runs.data()), l = w.index;
             ReportRun& rr = rep.runs[r];
             rr.name = runs[r].name;
             rr.original = runs[r].original;
@@ -645,17 +955,17 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
             rr.bbox_diagonal = o.diagonal;
             rr.fov_degrees = runs[r].fov_degrees;
             views[r].resize(runs[r].levels.size());
-            for (size_t l = 0; l < runs[r].levels.size(); ++l) {
-              LevelResult lr = measure_level(o, runs[r], l, ro, lod_limit, progress);
-              lr.level.csv = runs.size() > 1 ? fmt::format("run{}-lod{}.csv", r, l) : fmt::format("lod{}.csv", l);
-              std::string csv = kCsvHeader;
-              for (const std::string& row : lr.csv_rows) csv += row;
-              csvs[r].push_back(std::move(csv));
-              views[r][l] = std::move(lr.views);
-              rep.rays += lr.rays, rep.point_queries += lr.queries;
-              rep.ray_seconds += lr.ray_seconds, rep.query_seconds += lr.query_seconds;
-              rr.levels.push_back(std::move(lr.level));
-            }
+            csvs[r].resize(runs[r].levels.size());
+            rr.levels.resize(runs[r].levels.size());
+            LevelResult& lr = w.out;
+            lr.level.csv = runs.size() > 1 ? fmt::format("run{}-lod{}.csv", r, l) : fmt::format("lod{}.csv", l);
+            std::string csv = kCsvHeader;
+            for (const std::string& row : lr.csv_rows) csv += row;
+            csvs[r][l] = std::move(csv);
+            views[r][l] = std::move(lr.views);
+            rep.rays += lr.rays, rep.point_queries += lr.queries;
+            rep.ray_seconds += lr.ray_seconds, rep.query_seconds += lr.query_seconds;
+            rr.levels[l] = std::move(lr.level);
           }
         });
       }

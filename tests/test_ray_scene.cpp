@@ -21,7 +21,9 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <random>
+#include <span>
 #include <vector>
 
 #include "core/ray_scene.h"
@@ -453,6 +455,45 @@ TEST(RaySceneMemory, RepeatedFailuresThenSuccess) {
     EXPECT_EQ(build_status(limit, m), Status::usage) << limit;
   EXPECT_EQ(build_status(uint64_t{1} << 30, m), Status::ok);
   EXPECT_EQ(build_status(0, m), Status::ok);
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Chunks: a scene traced in consecutive parts, each image accumulated over the parts in order, is the image
+// of the whole scene bit for bit, ties included: the wavy grid with every triangle twice (the copy's corners
+// rotated, so the two give equal or nearly equal distances and one of two normals' rounding), cut in 3.
+
+TEST(RaySceneChunks, PartsTracedInOrderGiveTheWholeImage) {
+  Mesh m = grid_mesh();
+  const size_t n = m.triangles.size();
+  for (size_t t = 0; t < n; t += 3) m.triangles.insert(m.triangles.end(), {m.triangles[t + 1], m.triangles[t + 2], m.triangles[t]});
+  RayScene whole;
+  whole.add_triangles(m.xyz, m.triangles);
+  whole.commit();
+  std::vector<std::unique_ptr<RayScene>> parts;
+  const size_t per = (m.triangles.size() / 3 + 2) / 3;
+  for (size_t first = 0; first < m.triangles.size() / 3; first += per) {
+    const size_t end = std::min(m.triangles.size() / 3, first + per);
+    parts.push_back(std::make_unique<RayScene>());
+    parts.back()->add_triangles(m.xyz, std::span<const uint32_t>(m.triangles.data() + 3 * first, 3 * (end - first)));
+    parts.back()->commit();
+  }
+  for (const auto& [eye, target] : {std::pair{std::array<double, 3>{1.6, 1.5, 2.0}, std::array<double, 3>{1.6, 1.6, 0.0}},
+                                    std::pair{std::array<double, 3>{-1.0, -0.5, 0.8}, std::array<double, 3>{1.5, 1.5, 0.0}}}) {
+    const core::Camera cam = core::look_at(eye.data(), target.data(), 60, 128);
+    core::ViewImage a, b;
+    const RayScene* w[] = {&whole};
+    core::cast_view(w, cam, &a);
+    for (const auto& p : parts) {
+      const RayScene* one[] = {p.get()};
+      core::cast_view(one, cam, &b, true);
+    }
+    uint64_t covered = 0;
+    for (uint8_t k : a.kind) covered += k != 0;
+    EXPECT_GT(covered, 1000u);
+    EXPECT_EQ(a.kind, b.kind);
+    EXPECT_EQ(0, std::memcmp(a.depth.data(), b.depth.data(), a.depth.size() * sizeof(float)));
+    EXPECT_EQ(0, std::memcmp(a.normal.data(), b.normal.data(), a.normal.size() * sizeof(float)));
+  }
 }
 
 // ---------------------------------------------------------------------------------------------------------

@@ -117,6 +117,32 @@ TEST_F(ReportRoom, SameFiguresForOneAndTwoThreadsAndAnyMemory) {
   EXPECT_EQ(read_file(tmp_->file("t1/report.html")), read_file(tmp_->file("base/report.html")));
 }
 
+// The original traced in several chunks (--memory 64M leaves room for about 200 K of its 262 K triangles
+// per chunk; --chunk-bytes 2M cuts it and the finest level finer still) gives report.json, every CSV and
+// report.html byte for byte as in one chunk, timings aside.
+TEST_F(ReportRoom, SameBytesInOneChunkAndInSeveral) {
+  const CliRun one = run_cli(cat({"report", tmp_->file("room"), "-o", tmp_->file("one"), "--memory", "4G"}, kQuick), *tmp_);
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  const CliRun some = run_cli(cat({"report", tmp_->file("room"), "-o", tmp_->file("some"), "--memory", "64M"}, kQuick), *tmp_);
+  ASSERT_EQ(some.exit_code, 0) << some.err;
+  const CliRun many = run_cli(cat({"report", tmp_->file("room"), "-o", tmp_->file("many"), "--chunk-bytes", "2M"}, kQuick), *tmp_);
+  ASSERT_EQ(many.exit_code, 0) << many.err;
+  const json j1 = json::parse(read_file(tmp_->file("one/report.json")));
+  EXPECT_EQ(j1["performance"]["original_chunks"], 1);
+  EXPECT_GE(json::parse(read_file(tmp_->file("some/report.json")))["performance"]["original_chunks"].get<int>(), 2);
+  const json many_perf = json::parse(read_file(tmp_->file("many/report.json")))["performance"];
+  EXPECT_GE(many_perf["original_chunks"].get<int>(), 8);
+  EXPECT_GE(many_perf["level_chunks"].get<int>(), 2);  // the finest level (84 K triangles) is cut too
+  for (const char* dir : {"some", "many"}) {
+    EXPECT_EQ(figures(tmp_->file(std::string(dir) + "/report.json")), figures(tmp_->file("one/report.json"))) << dir;
+    for (int l = 0; l < 5; ++l) {
+      const std::string name = "/lod" + std::to_string(l) + ".csv";
+      EXPECT_EQ(read_file(tmp_->file(dir) + name), read_file(tmp_->file("one") + name)) << dir << name;
+    }
+    EXPECT_EQ(read_file(tmp_->file(dir) + "/report.html"), read_file(tmp_->file("one/report.html"))) << dir;
+  }
+}
+
 TEST_F(ReportRoom, AnotherSeedMovesTheViews) {
   const CliRun r = run_cli(cat({"report", tmp_->file("room"), "-o", tmp_->file("seed2"), "--seed", "2"}, kQuick), *tmp_);
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -190,6 +216,30 @@ TEST(ReportExact, ALevelMovedByAnOffsetIsThatFarOff) {
   EXPECT_NEAR(v["hausdorff"]["max_px"].get<double>(), 5.0, 1e-4);
   EXPECT_NEAR(pixel, 0.01 / 5, 1e-8);
   EXPECT_NEAR(v["hausdorff"]["max_percent_diagonal"].get<double>(), 100 * 0.01 / std::sqrt(2.0), 1e-4);
+}
+
+// A larger real scene (a building of ../shared/data, given as --lod files of its simplify output, so that
+// the distances come from the Hausdorff pass over the chunks too): the same bytes in one chunk and in many.
+TEST(ReportChunks, ABuildingInOneChunkAndInManyGivesTheSameBytes) {
+  LODSTREAM_REQUIRE_SHARED_DATA(data);
+  TempDir tmp;
+  const std::string building = data + "/buildings/ISSUE_021_Mini_Project.obj";
+  const CliRun s = run_cli({"simplify", building, "-o", tmp.file("lods"), "--progress", "none"}, tmp);
+  ASSERT_EQ(s.exit_code, 0) << s.err;
+  std::vector<std::string> lods = {"report", "--original", building};
+  for (int l = 0; l < 3; ++l) lods.insert(lods.end(), {"--lod", tmp.file("lods/lod" + std::to_string(l) + ".ply")});
+  const CliRun one = run_cli(cat(cat(lods, {"-o", tmp.file("one"), "--memory", "4G"}), kQuick), tmp);
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  const CliRun many = run_cli(cat(cat(lods, {"-o", tmp.file("many"), "--memory", "64M", "--chunk-bytes", "3M"}), kQuick), tmp);
+  ASSERT_EQ(many.exit_code, 0) << many.err;
+  EXPECT_EQ(json::parse(read_file(tmp.file("one/report.json")))["performance"]["original_chunks"], 1);
+  EXPECT_GE(json::parse(read_file(tmp.file("many/report.json")))["performance"]["original_chunks"].get<int>(), 4);
+  EXPECT_EQ(figures(tmp.file("many/report.json")), figures(tmp.file("one/report.json")));
+  for (int l = 0; l < 3; ++l) {
+    const std::string name = "/lod" + std::to_string(l) + ".csv";
+    EXPECT_EQ(read_file(tmp.file("many") + name), read_file(tmp.file("one") + name)) << name;
+  }
+  EXPECT_EQ(read_file(tmp.file("many/report.html")), read_file(tmp.file("one/report.html")));
 }
 
 TEST(ReportErrors, DocumentedExitCodesAndNoReportLeftBehind) {

@@ -2,16 +2,18 @@
 # Benchmark: `lodstream report` on the five levels of a simplify output (default: the city scene), with
 # --memory 4G, once with all threads and once with --threads 1 (the per-core figures), N runs each.
 # Prints per run the wall time and the peak resident memory (/usr/bin/time -v; report.json's peak_rss_bytes
-# is the same VmHWM), primary rays per second and point queries per second (report.json
+# is the same VmHWM), the chunks the original was traced in (1 = in core; more when it does not fit
+# --memory), primary rays per second and point queries per second (report.json
 # "performance": rays and queries over the wall time spent casting and querying), and the CPU seconds
 # other processes used meanwhile; then the medians.
 #
-# usage: tools/bench_report.sh [--runs N] [--build DIR] [--lods DIR] [--memory 4G] [--work DIR]
+# usage: tools/bench_report.sh [--runs N] [--build DIR] [--lods DIR] [--memory 4G] [--work DIR] [--threads "0 1"]
 #   --lods DIR: a simplify output directory (default: made first, from /work/scenes/city.ply, into the
 #               work directory)
+#   --threads LIST: thread counts to run (0 = all; default "0 1")
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
-runs=3; build=build; lods=""; memory=4G; work=""
+runs=3; build=build; lods=""; memory=4G; work=""; thread_list="0 1"
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --runs) runs=$2; shift 2 ;;
@@ -19,7 +21,8 @@ while [[ $# -gt 0 ]]; do
     --lods) lods=$2; shift 2 ;;
     --memory) memory=$2; shift 2 ;;
     --work) work=$2; shift 2 ;;
-    -h|--help) sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --threads) thread_list=$2; shift 2 ;;
+    -h|--help) sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "bench_report: unknown option $1" >&2; exit 64 ;;
   esac
 done
@@ -36,7 +39,7 @@ fi
 # Busy CPU jiffies of the whole machine (/proc/stat); minus our own CPU time, what others used.
 others_cpu() { awk '/^cpu / {print $2+$3+$4+$7+$8+$9}' /proc/stat; }
 results="$work/runs.jsonl"; : > "$results"
-for threads in 0 1; do
+for threads in $thread_list; do
   for ((r = 1; r <= runs; r++)); do
     out="$work/report-t$threads-$r"
     rm -rf "$out"
@@ -57,6 +60,7 @@ print(json.dumps({"threads": int(sys.argv[3]) or "all", "run": int(sys.argv[4]),
                   "peak_gb": int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", tv).group(1)) * 1024 / 1e9,
                   "rays_per_s": p["rays_per_second"], "queries_per_s": p["queries_per_second"],
                   "levels": len(rep["runs"][0]["levels"]), "others_cpu_s": round(max(others, 0), 1),
+                  "chunks": p.get("original_chunks", 1), "level_chunks": p.get("level_chunks", 1),
                   "stages": {s["name"]: round(s["seconds"], 2) for s in rep["stages"]}}))
 PY
     tail -1 "$results"
@@ -65,12 +69,12 @@ done
 python3 - "$results" <<'PY'
 import json, statistics, sys
 rows = [json.loads(l) for l in open(sys.argv[1])]
-print("\n| threads | runs | wall (median) | peak | primary rays/s | point queries/s |")
-print("|---|---|---|---|---|---|")
+print("\n| threads | runs | wall (median) | peak | chunks | primary rays/s | point queries/s |")
+print("|---|---|---|---|---|---|---|")
 for t in ("all", 1):
     rs = [r for r in rows if r["threads"] == t]
     if not rs: continue
     med = lambda k: statistics.median(r[k] for r in rs)
-    print(f"| {t} | {len(rs)} | {med('wall_s'):.1f} s | {max(r['peak_gb'] for r in rs):.2f} GB | "
+    print(f"| {t} | {len(rs)} | {med('wall_s'):.1f} s | {max(r['peak_gb'] for r in rs):.2f} GB | {rs[0]['chunks']} | "
           f"{med('rays_per_s')/1e6:.2f} M | {med('queries_per_s')/1e6:.3f} M |")
 PY

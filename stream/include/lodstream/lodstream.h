@@ -258,6 +258,11 @@ struct Report {
   double ray_seconds = 0;         // wall time spent casting them
   uint64_t point_queries = 0;
   double query_seconds = 0;
+  uint64_t original_chunks = 0;          // chunks the originals were cut into to fit --memory (1 = in core)
+  uint64_t chunk_scenes = 0;             // chunk scenes built (a chunk is built once per pass over them)
+  uint64_t chunk_embree_peak_bytes = 0;  // the largest chunk scene's peak by Embree's memory monitor
+  uint64_t chunk_triangles = 0;          // triangles of that chunk
+  uint64_t level_chunks = 0;             // the most chunks a level was traced in (1 = in core)
   std::vector<StageStats> stages;
   double seconds = 0;
   uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)

@@ -1,0 +1,69 @@
+// A scene store's primitives in chunks that each carry their own vertices, for the report's out-of-core
+// tracing of an original (stream/report.cpp): the primitives in store order, triangles, then lines, then
+// points ("global ids" 0..primitives), cut into consecutive ranges whose estimated bytes stay within a
+// budget. A chunk's vertices are the distinct vertices its primitives use, numbered in increasing store
+// id, so a chunk's arrays depend on its range only; its positions are read through short mapped windows
+// (the positions column is never mapped whole: its pages would count as resident).
+//
+// Memory: a bit per store vertex and a 32-bit count per 64 of them (3/16 byte a vertex), beside the
+// chunk's own arrays.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "stream/scene_store.h"
+
+namespace lodstream::stream {
+
+// Estimated bytes of a chunk: per triangle, line, point and distinct vertex.
+struct ChunkCosts {
+  double triangle = 0, line = 0, point = 0, vertex = 0;
+};
+
+struct StoreChunk {
+  uint64_t first = 0, end = 0;  // global ids [first, end)
+  uint64_t vertices = 0;        // distinct vertices its primitives use
+};
+
+struct ChunkGeometry {
+  uint64_t first = 0;                              // global id of the chunk's first primitive
+  std::vector<float> xyz;                          // its vertices (store positions as float)
+  std::vector<uint32_t> triangles, lines, points;  // local vertex ids
+};
+
+class StoreChunks {
+ public:
+  StoreChunks(const std::string& store_dir, const StoreMeta& meta);
+
+  // Cuts the store into chunks of at most `bytes` by `costs` (at least one primitive each). Also marks
+  // every vertex any primitive uses (used()).
+  void plan(const ChunkCosts& costs, uint64_t bytes);
+  const std::vector<StoreChunk>& chunks() const { return chunks_; }
+  // Reads chunk `index` into `out`.
+  void read(size_t index, ChunkGeometry* out);
+
+  // Vertices used by any primitive, after plan(): the count, and their positions in store order.
+  uint64_t used_vertices() const { return used_count_; }
+  void for_used_vertices(const std::function<void(std::span<const float> xyz)>& visit_block) const;
+  // Positions of the given store vertices (any order), as float.
+  std::vector<float> positions_of(const std::vector<uint32_t>& ids) const;
+
+ private:
+  // visit(global id of the first primitive, arity, its ids) over consecutive blocks of [first, end).
+  void for_ids(uint64_t first, uint64_t end,
+               const std::function<void(uint64_t, int, std::span<const uint32_t>)>& visit) const;
+  // Positions of the vertices whose bits are set, bits[0] being store word word0, in increasing order.
+  void read_positions(std::span<const uint64_t> bits, uint64_t word0, uint64_t count, std::vector<float>& xyz) const;
+
+  std::string dir_;
+  StoreMeta meta_;
+  std::vector<StoreChunk> chunks_;
+  std::vector<uint64_t> used_;  // bit per vertex
+  uint64_t used_count_ = 0;
+};
+
+}  // namespace lodstream::stream
