@@ -84,6 +84,7 @@ struct Buffer {
   std::unique_ptr<MappedFile> file;   // kind file
   std::vector<uint8_t> data;          // kind data URI (or decoded meshopt view)
   enum Kind { glb, external, memory } kind = memory;
+  bool fallback = false;  // EXT_meshopt_compression fallback buffer without data: only compressed views use it
 };
 
 struct View {
@@ -316,6 +317,14 @@ void GltfReader::load_buffers() {
     buf.length = get_uint(b, "byteLength", ptr, 0, true);
     const json& uri = member(b, "uri", ptr);
     uint64_t available = 0;
+    const json& ext = member(b, "extensions", ptr);
+    const json& meshopt = ext.is_object() ? member(ext, "EXT_meshopt_compression", ptr + "/extensions") : ext;
+    if (uri.is_null() && meshopt.is_object() && member(meshopt, "fallback", ptr).is_boolean() &&
+        meshopt["fallback"].get<bool>() && !(glb_ && i == 0 && has_bin_)) {
+      buf.fallback = true;
+      buffers_.push_back(std::move(buf));
+      continue;
+    }
     if (uri.is_null()) {
       if (!glb_ || i != 0 || !has_bin_) bad(ptr, "no uri, and it is not the GLB's BIN chunk (missing buffer)");
       buf.kind = Buffer::glb;
@@ -382,7 +391,8 @@ void GltfReader::load_views() {
       const uint64_t count = get_uint(meshopt, "count", mp, 0, true);
       const json& mode = member(meshopt, "mode", mp);
       const json& filter = member(meshopt, "filter", mp);
-      if (src >= buffers_.size()) bad(mp + "/buffer", "buffer " + std::to_string(src) + " does not exist");
+      if (src >= buffers_.size() || buffers_[src].fallback)
+        bad(mp + "/buffer", "buffer " + std::to_string(src) + " does not exist or has no data");
       if (src_offset + src_length > buffers_[src].length)
         bad(mp, "bytes " + std::to_string(src_offset) + " + " + std::to_string(src_length) + " past the end of buffer " +
                     std::to_string(src) + " (" + std::to_string(buffers_[src].length) + " bytes)");
@@ -403,6 +413,7 @@ void GltfReader::load_views() {
         rc = meshopt_decodeVertexBuffer(decoded.data.data(), count, stride, in.p, src_length);
       } else if (m == "TRIANGLES" || m == "INDICES") {
         if (stride != 2 && stride != 4) bad(mp + "/byteStride", "indices need 2 or 4");
+        if (m == "TRIANGLES" && count % 3 != 0) bad(mp + "/count", "TRIANGLES needs a multiple of 3");
         rc = m == "TRIANGLES" ? meshopt_decodeIndexBuffer(decoded.data.data(), count, stride, in.p, src_length)
                               : meshopt_decodeIndexSequence(decoded.data.data(), count, stride, in.p, src_length);
       } else {
@@ -434,6 +445,8 @@ void GltfReader::load_views() {
 #endif
     }
     if (buffer >= buffers_.size()) bad(ptr + "/buffer", "buffer " + std::to_string(buffer) + " does not exist");
+    if (buffers_[buffer].fallback)
+      bad(ptr + "/buffer", "buffer " + std::to_string(buffer) + " is an EXT_meshopt_compression fallback with no data");
     if (v.offset + v.length > buffers_[buffer].length)
       bad(ptr, "bytes " + std::to_string(v.offset) + " + " + std::to_string(v.length) + " past the end of buffer " +
                    std::to_string(buffer) + " (" + std::to_string(buffers_[buffer].length) + " bytes)");
@@ -765,7 +778,6 @@ void GltfReader::open() {
 }
 
 bool GltfReader::next_chunk(uint64_t target_bytes, Chunk* chunk) {
-  const uint64_t max_elements = std::max<uint64_t>(1, target_bytes / 12);
   while (at_instance_ < instances_.size()) {
     const std::vector<Primitive>& prims = meshes_[instances_[at_instance_].mesh];
     if (at_primitive_ >= prims.size()) {
@@ -788,6 +800,10 @@ bool GltfReader::next_chunk(uint64_t target_bytes, Chunk* chunk) {
       at_element_ = 0;
       continue;
     }
+    // About target_bytes of parsed output: 24 bytes per vertex (x, y, z as doubles), 8 per reference (plus
+    // the scratch copy of the indices the elements read).
+    const uint64_t arity = p.mode == kPoints ? 1 : p.mode <= kLineStrip ? 2 : 3;
+    const uint64_t max_elements = std::max<uint64_t>(1, target_bytes / (at_kind_ == 0 ? 24 : 16 * arity));
     const uint64_t n = std::min(max_elements, total - at_element_);
     chunk->section = at_kind_ | (at_primitive_ << 1);
     chunk->first_line = at_instance_;
