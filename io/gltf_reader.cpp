@@ -50,13 +50,16 @@ namespace {
 
 using json = nlohmann::json;
 
-constexpr uint32_t kGlbMagic = 0x46546C67;  // "glTF"
 constexpr uint32_t kChunkJson = 0x4E4F534A;
 constexpr uint32_t kChunkBin = 0x004E4942;
 // Data URIs are decoded into memory: they are small by nature (every byte is in the JSON, 4/3 larger).
 constexpr uint64_t kMaxDataUriBytes = uint64_t{64} << 20;
-// Decoded EXT_meshopt_compression views are held whole (meshopt decodes a view at once).
+// Decoded EXT_meshopt_compression views are held whole (meshopt decodes a view at once): this many bytes
+// in all.
 constexpr uint64_t kMaxMeshoptViewBytes = uint64_t{256} << 20;
+// An accessor without a bufferView is zeros (plus sparse values): nothing in the file bounds its count, so
+// this does, far above any real use (sparse morph targets and the like).
+constexpr uint64_t kMaxZeroAccessorCount = uint64_t{1} << 24;
 
 enum Mode : int { kPoints = 0, kLines = 1, kLineLoop = 2, kLineStrip = 3, kTriangles = 4, kStrip = 5, kFan = 6 };
 
@@ -172,6 +175,7 @@ class GltfReader final : public Reader {
   std::vector<Accessor> accessors_;
   std::vector<std::vector<Primitive>> meshes_;
   std::vector<Instance> instances_;
+  uint64_t decoded_bytes_ = 0;  // of EXT_meshopt_compression views
 
   // Cursor of next_chunk: instance, primitive, kind, element.
   uint64_t at_instance_ = 0, at_element_ = 0;
@@ -396,9 +400,11 @@ void GltfReader::load_views() {
       if (src_offset + src_length > buffers_[src].length)
         bad(mp, "bytes " + std::to_string(src_offset) + " + " + std::to_string(src_length) + " past the end of buffer " +
                     std::to_string(src) + " (" + std::to_string(buffers_[src].length) + " bytes)");
-      if (stride == 0 || count * stride > kMaxMeshoptViewBytes)
+      decoded_bytes_ += count * stride;
+      if (stride == 0 || decoded_bytes_ > kMaxMeshoptViewBytes)
         fail(Status::usage, file_.path() + ": " + mp + ": a compressed view of " + std::to_string(count) + " x " +
                                 std::to_string(stride) + " bytes; decoded views are held in memory and limited to " +
+                                "a total of " +
                                 std::to_string(kMaxMeshoptViewBytes) + " bytes");
       if (!mode.is_string()) bad(mp + "/mode", "expected a string");
       const std::string m = mode.get<std::string>();
@@ -510,6 +516,10 @@ const Accessor& GltfReader::accessor(uint64_t index, const std::string& from) {
     check_range(static_cast<uint64_t>(a.view), a.offset, a.count, a.stride, elem, ptr, "accessor");
   } else {
     a.stride = elem;
+    if (a.count > kMaxZeroAccessorCount)
+      fail(Status::usage, file_.path() + ": " + ptr + "/count: " + std::to_string(a.count) +
+                              " elements without a bufferView (zeros); at most " + std::to_string(kMaxZeroAccessorCount) +
+                              " are supported");
   }
   const json& sparse = member(j, "sparse", ptr);
   if (!sparse.is_null()) {
