@@ -162,8 +162,8 @@ class GltfReader final : public Reader {
 
   Bytes bytes(const View& v, uint64_t begin, uint64_t end) const;
   // Reads elements [first, first + n) of accessor `a` as doubles (components per element), dequantized
-  // when normalized, with sparse substitution. Returns false with *error set on bad data.
-  bool read(const Accessor& a, uint64_t first, uint64_t n, double* out) const;
+  // when normalized, with sparse substitution. open() checked every byte range it can touch.
+  void read(const Accessor& a, uint64_t first, uint64_t n, double* out) const;
 
   bool glb_;
   json doc_;
@@ -568,10 +568,9 @@ void GltfReader::load_meshes() {
   const json& list = member(doc_, "meshes", "");
   if (list.is_null()) return;
   if (!list.is_array()) bad("/meshes", "expected an array");
-  meshes_.resize(list.size());
+  meshes_.resize(list.size());  // primitives filled by walk_scene() when a node first draws the mesh
 }
 
-// Per-mesh primitives, validated when a node first uses the mesh (unused meshes are not read).
 void multiply(const double* a, const double* b, double* out) {  // 3x4 affine rows: out = a * b
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 4; ++c) {
@@ -863,9 +862,9 @@ double component(const uint8_t* p, uint32_t type, bool normalized) {
   }
 }
 
-bool GltfReader::read(const Accessor& a, uint64_t first, uint64_t n, double* out) const {
+void GltfReader::read(const Accessor& a, uint64_t first, uint64_t n, double* out) const {
   const uint32_t comps = a.components;
-  if (n == 0) return true;
+  if (n == 0) return;
   if (a.view >= 0) {
     const Bytes span = bytes(views_[static_cast<size_t>(a.view)], a.offset + first * a.stride,
                              a.offset + (first + n - 1) * a.stride + uint64_t{comps} * a.component_bytes);
@@ -900,7 +899,6 @@ bool GltfReader::read(const Accessor& a, uint64_t first, uint64_t n, double* out
       }
     }
   }
-  return true;
 }
 
 void GltfReader::parse(const Chunk& chunk, ParsedChunk* out) const {
