@@ -209,8 +209,12 @@ std::unique_ptr<Reader> open_reader(const MappedFile& file) {
     return make_stl_reader(file, false);  // reports the size mismatch with both numbers
   }
 
+  if (head.substr(0, 4) == "glTF") return make_gltf_reader(file, true);
+  if (ext == "glb") fail_at_offset(file, 0, "not a GLB file: it does not start with the magic 'glTF'");
+  if (ext == "gltf") return make_gltf_reader(file, false);
+
   if (ext == "obj" || looks_like_obj(head)) return make_obj_reader(file);
-  fail(Status::usage, file.path() + ": unrecognised format (supported: .obj, .ply, .stl)");
+  fail(Status::usage, file.path() + ": unrecognised format (supported: .obj, .ply, .stl, .gltf, .glb)");
 }
 
 }  // namespace lodstream::io

@@ -76,7 +76,7 @@ class Reader {
   explicit Reader(const MappedFile& file) : file_(file) {}
   virtual ~Reader() = default;
 
-  // "obj", "ply-ascii", "ply-binary-le", "ply-binary-be", "stl-binary", "stl-ascii".
+  // "obj", "ply-ascii", "ply-binary-le", "ply-binary-be", "stl-binary", "stl-ascii", "glb", "gltf".
   virtual std::string format() const = 0;
   // True when positions are per triangle corner with no shared indices (STL): the pipeline welds them by
   // exact position, and triangles/lines/points stay empty.
@@ -145,4 +145,5 @@ namespace lodstream::io {
 std::unique_ptr<Reader> make_obj_reader(const MappedFile& file);
 std::unique_ptr<Reader> make_ply_reader(const MappedFile& file);
 std::unique_ptr<Reader> make_stl_reader(const MappedFile& file, bool ascii);
+std::unique_ptr<Reader> make_gltf_reader(const MappedFile& file, bool glb);  // io/gltf_reader.cpp
 }  // namespace lodstream::io

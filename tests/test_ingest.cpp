@@ -86,6 +86,10 @@ TEST(Ingest, ObjStoreIsIdenticalForEveryChunkSize) {
   expect_same_store_everywhere(path, {1, 7, 64, 0});
 }
 
+TEST(Ingest, GlbStoreIsIdenticalForThreadsChunksAndMemory) {
+  expect_same_store_everywhere(test::source_dir() + "/tests/data/gltf/bench.glb", {64, 0});
+}
+
 TEST(Ingest, StoreColumnsHoldExactlyTheInput) {
   test::TempDir tmp;
   // Two squares as quads (4 triangles), a degenerate triangle, a polyline of 3 vertices, a point, an

@@ -321,7 +321,7 @@ int main(int argc, char** argv) {
   CLI::App* info_cmd = app.add_subcommand("info", "Ingest a scene and print its statistics");
   std::string input;
   bool json = false;
-  info_cmd->add_option("FILE", input, "Input scene (.obj, .ply, .stl)")->required();
+  info_cmd->add_option("FILE", input, "Input scene (.obj, .ply, .stl, .glb, .gltf)")->required();
   info_cmd->add_flag("--json", json, "Print one JSON object instead of text");
   add_common(info_cmd);
   add_space_check(info_cmd);
@@ -331,7 +331,7 @@ int main(int argc, char** argv) {
   std::string grading = "lowtan", clustering = "floating", cell = "cube", variant = "nearest", rep = "quadric";
   std::string sizes_text, targets_text;
   bool obj = false, no_glb = false, no_ply = false;
-  simplify_cmd->add_option("INPUT", input, "Input scene (.obj, .ply, .stl)")->required();
+  simplify_cmd->add_option("INPUT", input, "Input scene (.obj, .ply, .stl, .glb, .gltf)")->required();
   simplify_cmd->add_option("-o,--output", so.output_dir, "Output directory (created if missing)")->required();
   simplify_cmd->add_option("--grading", grading, "Vertex grade: lowtan (cos(θ/2)·Lmax) or rossignac (Lmax/θ)")
       ->check(CLI::IsMember({"lowtan", "rossignac"}));

@@ -142,3 +142,50 @@ w("stl_ascii_four_vertices.stl", "solid s\n" + FACET.format("0 0 0").replace(" e
   "endsolid s\n")
 w("stl_ascii_binary_bytes.stl", b"solid s\n" + garbage(120, 3))
 w("stl_garbage_bytes.stl", garbage(200, 4))
+
+# ---------------------------------------------------------------------------------------------- glTF
+import json
+
+
+def glb(doc, binary, length=None, json_length=None):
+    binary = binary + b"\0" * (-len(binary) % 4)
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    body = struct.pack("<II", len(text) if json_length is None else json_length, 0x4E4F534A) + text
+    if binary:
+        body += struct.pack("<II", len(binary), 0x004E4942) + binary
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(body) if length is None else length) + body
+
+
+GLTF_BIN = struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0) + struct.pack("<3H", 0, 1, 2) + b"\0\0"
+
+
+def gltf_doc(**changes):
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+           "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"},
+                         {"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}],
+           "bufferViews": [{"buffer": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 6}],
+           "buffers": [{"byteLength": 44}]}
+    doc.update(changes)
+    return doc
+
+
+d = gltf_doc()
+d["accessors"][0]["count"] = 1000
+w("gltf_accessor_past_view.glb", glb(d, GLTF_BIN))
+w("gltf_index_out_of_range.glb", glb(gltf_doc(), struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0) + struct.pack("<3H", 0, 1, 7)))
+w("gltf_cyclic_nodes.glb", glb(gltf_doc(nodes=[{"mesh": 0, "children": [1]}, {"children": [2]}, {"children": [1]}]), GLTF_BIN))
+w("gltf_header_length_lies.glb", glb(gltf_doc(), GLTF_BIN, length=4000))
+def fix_length(b):  # the header's total length made to agree with the (cut) file, so a chunk is what lies
+    return b[:8] + struct.pack("<I", len(b)) + b[12:]
+
+
+w("gltf_json_chunk_length_lies.glb", fix_length(glb(gltf_doc(), GLTF_BIN, json_length=100000)[:400]))
+w("gltf_truncated_bin_chunk.glb", fix_length(glb(gltf_doc(), GLTF_BIN)[:-30]))
+w("gltf_buffer_byte_length_lies.glb", glb(gltf_doc(buffers=[{"byteLength": 1 << 40}]), GLTF_BIN))
+w("gltf_missing_buffer_file.gltf", json.dumps(gltf_doc(buffers=[{"byteLength": 44, "uri": "no-such-file.bin"}])))
+w("gltf_bad_json.gltf", json.dumps(gltf_doc())[:-20])
+w("gltf_bad_data_uri.gltf", json.dumps(gltf_doc(buffers=[{"byteLength": 44, "uri": "data:application/octet-stream;base64,AA*A"}])))
+w("gltf_required_draco.glb", glb(gltf_doc(extensionsRequired=["KHR_draco_mesh_compression"]), GLTF_BIN))
+w("gltf_not_glb_magic.glb", b"GLTF" + GLTF_BIN)

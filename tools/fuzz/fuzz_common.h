@@ -1,4 +1,4 @@
-// Shared body of the reader fuzz targets (fuzz_obj.cpp, fuzz_ply.cpp, fuzz_stl.cpp).
+// Shared body of the reader fuzz targets (fuzz_obj.cpp, fuzz_ply.cpp, fuzz_stl.cpp, fuzz_glb.cpp).
 //
 // Each input is written to one file per process, named with the format's extension, and read the way
 // tests/reader_harness.h reads it (next_chunk, parse, resolve, finish) at three chunk sizes. The reader
@@ -86,8 +86,9 @@ inline void check_success(const test::ReadAll& r) {
   ids_ok(r.point_objects, r.points.size(), "points");
 }
 
-// After the path: ":LINE: " or ": byte OFFSET: ".
+// After the path: ":LINE: ", ": byte OFFSET: " or (glTF) ": /JSON/POINTER: ".
 inline bool has_location(const std::string& rest) {
+  if (rest.rfind(": /", 0) == 0) return rest.find(": ", 3) != std::string::npos;
   size_t i = 0;
   if (rest.rfind(": byte ", 0) == 0) i = 7;
   else if (rest.rfind(":", 0) == 0) i = 1;

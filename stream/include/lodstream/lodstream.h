@@ -90,7 +90,7 @@ struct WorkDirUsage {
 // What `lodstream info` reports: ingest statistics of one input file.
 struct SceneInfo {
   std::string path;
-  std::string format;            // "obj", "ply-ascii", "ply-binary-le", "ply-binary-be", "stl-binary", "stl-ascii"
+  std::string format;            // "obj", "ply-ascii", "ply-binary-le", "ply-binary-be", "stl-binary", "stl-ascii", "glb", "gltf"
   uint64_t file_bytes = 0;
   uint64_t vertex_records = 0;   // vertex records in the file (for STL: triangle corners)
   uint64_t vertices = 0;         // vertices as stored (for STL: after welding corners by exact position)
