@@ -2,9 +2,11 @@
 // distance, the one with the lowest key counts, key = (scene index, geometry id, primitive id). Embree
 // alone takes whichever of two hits at equal t its BVH visits last (its depth test is t <= tfar), and the
 // BVH depends on what else is in the scene; an original traced chunk by chunk (stream/report.cpp) must
-// pick the same hit as in one scene, so every ray geometry of a RayScene carries nearest_hit_filter.
+// pick the same hit as in one scene. So a cast that needs the rule passes a NearestHitContext whose
+// embree.filter is nearest_hit_filter (a context filter: RayScene's scenes enable them), and a caller that
+// does not, with a plain RTCIntersectContext, gets Embree's own behaviour and no read past its context.
 //
-// The filter reads and keeps each ray's best (t, key) in a NearestHitContext, passed to rtcIntersect16 in
+// The filter reads and keeps each ray's best (t, key) in the NearestHitContext, passed to rtcIntersect1 in
 // place of a plain RTCIntersectContext (its first member), indexed by the ray's id (0..15: its lane).
 // Embree sets a ray's tfar to the candidate's distance before calling the filter and restores it when
 // the filter rejects the hit, so tfar == best_t outside the filter.

@@ -145,7 +145,6 @@ struct RayScene::Impl {
   GeometryHandle attach(RTCGeometryType type, PrimitiveKind kind) {
     GeometryHandle g(rtcNewGeometry(device, type));
     check("new geometry");
-    rtcSetGeometryIntersectFilterFunction(g.get(), &nearest_hit_filter);
     geoms.push_back({kind, nullptr, nullptr});
     return g;
   }
@@ -203,7 +202,7 @@ RayScene::RayScene(uint64_t memory_limit) : impl_(std::make_unique<Impl>()) {
   rtcSetDeviceErrorFunction(impl_->device, &Impl::on_error, impl_.get());
   rtcSetDeviceMemoryMonitorFunction(impl_->device, &Impl::monitor, impl_.get());
   impl_->scene = rtcNewScene(impl_->device);
-  rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_COMPACT);
+  rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_COMPACT | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
   rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_MEDIUM);
   impl_->check("new scene");
 }

@@ -12,9 +12,10 @@
 // through a shared edge never slips between two triangles (that would count as a silhouette mismatch), and
 // RTC_SCENE_FLAG_COMPACT, to keep the original's BVH small.
 //
-// Every ray geometry carries core/nearest_hit.h's intersection filter: of hits at equal distance, the lowest
-// (scene, geometry id, primitive id) counts, whatever the BVH, so that a scene traced in chunks gives the
-// same images as in one piece.
+// Scenes accept a context filter (RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION): a cast through a
+// core/nearest_hit.h NearestHitContext, whose filter is nearest_hit_filter, counts of the hits at equal
+// distance the lowest (scene, geometry id, primitive id), whatever the BVH, so that a scene traced in chunks
+// gives the same images as in one piece. A plain RTCIntersectContext (no filter) traces as Embree does.
 //
 // Closest points (Metro-style Hausdorff sampling) use rtcPointQuery with one callback for every geometry:
 // the distance to a triangle, to an edge's axis (its thickness is a rendering width, not geometry), or to

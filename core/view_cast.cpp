@@ -104,6 +104,7 @@ uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera
           if (scenes[s]->empty()) continue;
           rtcInitIntersectContext(&context.embree);
           context.embree.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+          context.embree.filter = &nearest_hit_filter;
           context.scene = s;
           // One ray at a time: Embree's packet traversal switches to single-ray traversal where few rays
           // of a packet remain, and its two intersectors may round a hit differently; which one runs

@@ -216,3 +216,5 @@ nlohmann::ordered_json work_dir_json(const WorkDirUsage& u) {
 }
 
 }  // namespace lodstream::stream
+
+std::string lodstream::work_dir_json(const WorkDirUsage& usage) { return stream::work_dir_json(usage).dump(); }

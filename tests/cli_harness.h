@@ -6,6 +6,7 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -33,6 +34,7 @@ inline std::string read_file(const std::string& path) {
 struct CliRun {
   int exit_code = -1;  // 128 + signal when killed by one
   std::string out, err;
+  uint64_t max_rss_bytes = 0;  // the child's ru_maxrss (wait4), as /usr/bin/time -v and any parent see it
 };
 
 // Runs `lodstream args...`; with sigint_after_ms >= 0, sends SIGINT after that many milliseconds.
@@ -54,9 +56,11 @@ inline CliRun run_cli(std::vector<std::string> args, const TempDir& tmp, int sig
     kill(pid, SIGINT);
   }
   int status = 0;
-  waitpid(pid, &status, 0);
+  rusage ru{};
+  EXPECT_EQ(wait4(pid, &status, 0, &ru), pid);
   CliRun r;
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  r.max_rss_bytes = static_cast<uint64_t>(ru.ru_maxrss) << 10;  // Linux: KiB
   r.out = read_file(out);
   r.err = read_file(err);
   return r;

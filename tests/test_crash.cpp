@@ -148,10 +148,12 @@ std::set<std::string> files_under(const std::string& dir) {
   return out;
 }
 
-// manifest.json / report.json without what differs between any two runs: times, peaks, rates, reuse.
+// manifest.json / report.json without what differs between any two runs: times, peaks, rates, reuse, and
+// the work directory (its path).
 Json without_timings(Json j) {
   static const std::set<std::string> volatile_keys{"seconds", "peak_rss_bytes", "reused", "ray_seconds",
-                                                   "query_seconds", "rays_per_second", "queries_per_second"};
+                                                   "query_seconds", "rays_per_second", "queries_per_second",
+                                                   "work_dir"};
   if (j.is_object()) {
     Json o = Json::object();
     for (auto& [k, v] : j.items())
@@ -178,6 +180,7 @@ bool same_as_reference(const std::string& dir, const std::string& reference, con
 std::string summary_stage(const std::string& progress_stage, const std::vector<std::string>& stages) {
   std::string s = progress_stage;
   if (s == "weld" || s == "sort") s = "grade";
+  if (s == "triangulate") s = "ingest";  // ingest's pass over concave polygons, before store.json
   if (s.rfind("level ", 0) == 0) s = "measure";
   return std::find(stages.begin(), stages.end(), s) != stages.end() ? s : std::string();
 }

@@ -106,17 +106,6 @@ std::string grouped(uint64_t n) {
   return s;
 }
 
-// The same object as manifest.json's and report.json's "work_dir" (stream/disk_space.h).
-nlohmann::ordered_json work_dir_json(const lodstream::WorkDirUsage& u) {
-  nlohmann::ordered_json entries = nlohmann::ordered_json::object();
-  for (const auto& [name, bytes] : u.entries) entries[name] = bytes;
-  return {{"path", u.path},
-          {"bytes", u.bytes},
-          {"input_bytes", u.input_bytes},
-          {"ratio", u.input_bytes ? static_cast<double>(u.bytes) / static_cast<double>(u.input_bytes) : 0.0},
-          {"entries", entries}};
-}
-
 std::string work_dir_text(const lodstream::WorkDirUsage& u) {
   std::string s = human_bytes(u.bytes);
   if (u.input_bytes) s += fmt::format(" ({:.2f}x the input)", static_cast<double>(u.bytes) / static_cast<double>(u.input_bytes));
@@ -149,7 +138,7 @@ nlohmann::ordered_json info_json(const lodstream::SceneInfo& in) {
           {"seconds", in.seconds},
           {"peak_rss_bytes", in.peak_rss_bytes},
           {"stages", stages},
-          {"work_dir", work_dir_json(in.work_dir)}};
+          {"work_dir", nlohmann::ordered_json::parse(lodstream::work_dir_json(in.work_dir))}};
 }
 
 void print_info(const lodstream::SceneInfo& in) {

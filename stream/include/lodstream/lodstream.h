@@ -86,6 +86,8 @@ struct WorkDirUsage {
   uint64_t input_bytes = 0;
   std::vector<std::pair<std::string, uint64_t>> entries;  // by name
 };
+// `usage` as the JSON object manifest.json, report.json and `info --json` give under "work_dir".
+std::string work_dir_json(const WorkDirUsage& usage);
 
 // What `lodstream info` reports: ingest statistics of one input file.
 struct SceneInfo {
