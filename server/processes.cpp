@@ -73,6 +73,7 @@ const std::map<std::string, ojson>& descriptions() {
     si["obj"] = input("Also write lodN.obj", {{"type", "boolean"}, {"default", false}});
     si["report"] = input("Then measure each level's error in pixels (lodstream report: report.html)", {{"type", "boolean"}, {"default", true}});
     si["views"] = input("Report: view directions per level", {{"type", "integer"}, {"minimum", 1}, {"maximum", 1024}, {"default", 32}});
+    si["samples"] = input("Report: Hausdorff samples of each kind per direction", {{"type", "integer"}, {"minimum", 1}, {"maximum", 100000000}});
     si["memory"] = input("Cap on the job's peak resident memory", size_schema());
     ojson so;
     so["manifest"] = output("manifest.json: levels, cell sizes, counts, switching distances", "application/json");
@@ -319,7 +320,8 @@ bool plan_job(const std::string& process, const nlohmann::json& body, const Plan
     plan->step_names.push_back("simplify");
     if (inputs.value("report", true)) {
       std::vector<std::string> r = {"report", out_dir};
-      if (inputs.contains("views")) r.insert(r.end(), {"--views", number_text(inputs["views"])});
+      for (const char* opt : {"views", "samples"})
+        if (inputs.contains(opt)) r.insert(r.end(), {std::string("--") + opt, number_text(inputs[opt])});
       plan->steps.push_back(with_common(r, "report"));
       plan->step_names.push_back("report");
     }
