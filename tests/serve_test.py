@@ -201,6 +201,8 @@ def run(tmp, ref):
     check(status == 413, f"a 2 MiB JSON body: 413 ({status})")
     status, _, _ = srv.request("GET", "/jobs", headers={f"X-Filler-{i}": "y" for i in range(100)})
     check(status == 431, f"100 header fields: 431 ({status})")
+    status, _, _ = srv.request("GET", "/jobs", headers={"X-Big": "x" * 100000})
+    check(status == 400, f"a 100 kB header line: 400 ({status})")
 
     # A job to the end; its files whole and by range.
     job = submit(srv, {"input": "room.ply", "report": False})
