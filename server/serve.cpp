@@ -366,6 +366,11 @@ int run(const ServeOptions& o) {
                   {"title", "jobs"}}}}});
   });
 
+  svr.Get("/viewer", [&](const httplib::Request&, httplib::Response& res) {
+    res.set_header("Content-Security-Policy", "default-src 'self'; script-src 'unsafe-inline'; style-src 'unsafe-inline'");
+    res.set_content(viewer_page(), "text/html; charset=utf-8");
+  });
+
   svr.Get("/conformance", [&](const httplib::Request&, httplib::Response& res) {
     const std::string base = "http://www.opengis.net/spec/ogcapi-processes-1/1.0/conf/";
     send_json(res, 200, {{"conformsTo", {base + "core", base + "ogc-process-description", base + "json", base + "html",

@@ -88,7 +88,7 @@ async function main() {
     const base = `http://127.0.0.1:${port}`;
 
     const profile = path.join(tmp, "profile");
-    const chromium = spawn(chromiumBin, ["--headless", "--no-sandbox", "--disable-gpu", "--no-proxy-server",
+    const chromium = spawn(chromiumBin, ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-proxy-server",
                                          "--remote-debugging-port=0", "--user-data-dir=" + profile,
                                          "--window-size=1400,900", "about:blank"], {stdio: "ignore"});
     procs.push(chromium);
@@ -123,10 +123,10 @@ async function main() {
 
     // The token page, then the jobs page.
     await send("Page.navigate", {url: base + "/"});
-    await until(() => evaluate("document.readyState === 'complete' && !!document.getElementById('t')"), "the token page", 30000);
+    await until(() => evaluate("document.readyState === 'complete' && !!document.getElementById('t')"), "the token page", 90000);
     check(true, "token page first");
     await evaluate(`document.getElementById('t').value = ${JSON.stringify(TOKEN)}; document.getElementById('f').requestSubmit(); true`);
-    await until(() => evaluate("document.readyState === 'complete' && !!document.getElementById('submit-form')"), "the jobs page", 30000);
+    await until(() => evaluate("document.readyState === 'complete' && !!document.getElementById('submit-form')"), "the jobs page", 90000);
     check(true, "jobs page after the token");
 
     // A job with a report, through the API: its row must link report.html.
@@ -176,6 +176,29 @@ async function main() {
     const png = Buffer.from(shot.result.data, "base64");
     if (shotArg) fs.writeFileSync(shotArg, png);
     check(png.length > 5000 && pngNotFlat(png), "screenshot is a picture (" + png.length + " bytes)");
+
+    // The viewer: lods.glb (this job has no tiles), then a tileset. The tileset is written here by hand, a
+    // stand-in for the `--tiles` output (a root and one child, both pointing at lods.glb), to exercise the
+    // viewer's traversal, REPLACE refinement and content fetches.
+    check(await evaluate(`!!${row}.querySelector('a[href="/viewer?job=${job}"]')`), "viewer link in the row");
+    const viewerStatus = async (what, done) => {
+      await send("Page.navigate", {url: `${base}/viewer?job=${job}`});
+      return until(() => evaluate(`(() => { const e = document.getElementById('viewer-status');
+        const t = e ? e.textContent : ''; return t; })()`).then(t => (t.startsWith("error") || done.test(t)) && t), what, 60000);
+    };
+    const glbStatus = await viewerStatus("the GLB viewer", /^ok/);
+    check(/^ok: [1-9]\d* triangles drawn, level 1 of/.test(glbStatus), "viewer draws lods.glb: " + glbStatus);
+    const view = Buffer.from((await send("Page.captureScreenshot", {format: "png"})).result.data, "base64");
+    if (shotArg) fs.writeFileSync(shotArg.replace(/\.png$/, "") + "-viewer.png", view);
+    check(pngNotFlat(view), "viewer screenshot is a picture");
+    const sphere = [3.6, -1, 2.8, 5];
+    fs.mkdirSync(path.join(tmp, "jobs", job, "out", "tiles"));
+    fs.writeFileSync(path.join(tmp, "jobs", job, "out", "tiles", "tileset.json"), JSON.stringify({
+      asset: {version: "1.1"}, geometricError: 100,
+      root: {boundingVolume: {sphere}, geometricError: 50, refine: "REPLACE", content: {uri: "../lods.glb"},
+             children: [{boundingVolume: {sphere}, geometricError: 0, content: {uri: "../lods.glb"}}]}}));
+    const tilesStatus = await viewerStatus("the tiles viewer", /2 of 2 tiles loaded/);
+    check(/^ok: [1-9]\d* triangles drawn, 2 of 2 tiles loaded/.test(tilesStatus), "viewer draws the tileset: " + tilesStatus);
 
     // The report opens in the browser (the cookie carries the token).
     await send("Page.navigate", {url: base + reportHref});
