@@ -121,6 +121,27 @@ const char* content_type(const std::string& path) {
   return "application/octet-stream";  // .ply, .b3dm, .subtree
 }
 
+// Whether `text` nests arrays and objects at most `max_depth` deep (strings skipped). nlohmann::json
+// recurses on nesting, so a 1 MiB body of '[' would overflow the stack: such a body is refused first.
+bool nesting_within(const std::string& text, int max_depth) {
+  int depth = 0;
+  bool in_string = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      if (c == '\\') ++i;
+      else if (c == '"') in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > max_depth) return false;
+    } else if (c == ']' || c == '}') {
+      --depth;
+    }
+  }
+  return true;
+}
+
 bool is_job_id(const std::string& s) {
   if (s.size() != 32) return false;
   for (char c : s)
@@ -399,6 +420,8 @@ int run(const ServeOptions& o) {
     const std::string process = req.matches[1];
     if (!process_description(process)) return send_problem(res, 404, "no-such-process", "no process named '" + process + "'");
     if (!jobs.accepting()) return send_problem(res, 503, "service-unavailable", "the server is shutting down");
+    if (!nesting_within(req.body, 32))
+      return send_problem(res, 400, "invalid-parameter-value", "body: nested more than 32 levels deep", "body");
     nlohmann::json body;
     try {
       body = nlohmann::json::parse(req.body);

@@ -197,6 +197,8 @@ def run(tmp, ref):
               f"{inputs}: 400 naming {field} ({status} {body})")
     status, _, body = srv.json("POST", "/processes/simplify/execution", b"{not json")
     check(status == 400 and body.get("field") == "body", "malformed JSON: 400 naming the body")
+    status, _, body = srv.json("POST", "/processes/simplify/execution", b'{"inputs": {"bogus": ' + b"[" * 300000 + b"]" * 300000 + b"}}")
+    check(status == 400 and body.get("field") == "body", f"JSON nested 300,000 deep: 400 ({status})")
     status, _, _ = srv.request("POST", "/processes/simplify/execution", b"x" * (2 << 20))
     check(status == 413, f"a 2 MiB JSON body: 413 ({status})")
     status, _, _ = srv.request("GET", "/jobs", headers={f"X-Filler-{i}": "y" for i in range(100)})
