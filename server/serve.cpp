@@ -254,6 +254,9 @@ int run(const ServeOptions& o) {
   }
   std::string host = o.bind.substr(0, colon);
   if (host.size() > 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+  if (o.token_file.empty() && host != "127.0.0.1" && host != "localhost" && host != "::1")
+    std::fprintf(stderr, "lodstream serve: warning: listening on %s without --token-file: anyone who reaches it can run jobs\n",
+                 host.c_str());
   const std::string data_root = canonical(o.data_root);
   if (data_root.empty() || !fs::is_directory(data_root)) {
     std::fprintf(stderr, "lodstream serve: --data-root: '%s' is not a directory\n", o.data_root.c_str());
