@@ -8,7 +8,7 @@ submitted, polled to successful, its results fetched whole and with Range (206, 
 end), its files byte-identical to the CLI's own run; 400 naming the bad field (type, enum, unknown input,
 missing input, memory); paths outside the data root refused (.., absolute, a symlink out of the root,
 traversal in a file URL); uploads (201, and 413 over the cap); bounded bodies and headers; an idle client
-timed out; a job whose child is killed ends failed and the server lives; a server killed with kill -9 in
+timed out; the report and grid processes; admission by --max-jobs and --memory; a job whose child is killed ends failed and the server lives; a server killed with kill -9 in
 the middle of a job restarts and the job resumes to identical bytes; SIGTERM drains (exit 0, the job queued
 again) and the job completes after the next start; DELETE cancels and dismisses. Standard library only.
 """
@@ -42,10 +42,11 @@ def check(cond, what):
 class Server:
     def __init__(self, tmp, *extra):
         self.tmp = tmp
-        self.proc = subprocess.Popen(
-            [CLI, "serve", "--bind", "127.0.0.1:0", "--data-root", os.path.join(tmp, "data"), "--jobs-dir",
-             os.path.join(tmp, "jobs"), "--token-file", os.path.join(tmp, "token"), "--max-jobs", "2", "--memory", "1G",
-             "--job-threads", "1", *extra], stdout=subprocess.PIPE, stderr=open(os.path.join(tmp, "server.err"), "ab"))
+        opts = {"--bind": "127.0.0.1:0", "--data-root": os.path.join(tmp, "data"), "--jobs-dir": os.path.join(tmp, "jobs"),
+                "--token-file": os.path.join(tmp, "token"), "--max-jobs": "2", "--memory": "1G", "--job-threads": "1"}
+        opts.update(zip(extra[::2], extra[1::2]))
+        self.proc = subprocess.Popen([CLI, "serve", *[x for kv in opts.items() for x in kv]], stdout=subprocess.PIPE,
+                                     stderr=open(os.path.join(tmp, "server.err"), "ab"))
         line = self.proc.stdout.readline().decode()
         if "listening on http://127.0.0.1:" not in line:
             raise RuntimeError("server did not start: " + line)
@@ -144,6 +145,7 @@ def main():
         os.makedirs(os.path.join(tmp, "data"))
         shutil.copy(ROOM, os.path.join(tmp, "data", "room.ply"))
         shutil.copy(ROOM, os.path.join(tmp, "outside.ply"))
+        shutil.copy(os.path.join(SRC, "tests", "data", "grids", "hill.asc"), os.path.join(tmp, "data", "hill.asc"))
         os.symlink(os.path.join(tmp, "outside.ply"), os.path.join(tmp, "data", "link-out.ply"))
         with open(os.path.join(tmp, "token"), "w") as f:
             f.write(TOKEN + "\n")
@@ -227,6 +229,24 @@ def run(tmp, ref):
     check(srv.json("GET", "/jobs/0123456789abcdef0123456789abcdef")[0] == 404, "unknown job: 404")
     check(len(job) == 32 and job != submit(srv, {"input": "room.ply", "report": False}), "job ids: 128 random bits")
 
+    # The report and grid processes.
+    status, _, body = srv.json("POST", "/processes/report/execution", {"inputs": {"job": job, "views": 1, "samples": 2000}})
+    check(status == 201, f"report job: 201 ({status} {body})")
+    s = wait_status(srv, body["jobID"], ("successful", "failed"))
+    res = srv.json("GET", f"/jobs/{body['jobID']}/results")[2]
+    check(s["status"] == "successful" and res.get("report", {}).get("type", "").startswith("text/html") and "report_json" in res,
+          f"report job: report.html and report.json ({s['message']})")
+    status, _, body = srv.json("POST", "/processes/report/execution", {"inputs": {"job": "0" * 32}})
+    check(status == 400 and body.get("field") == "inputs.job", "report of an unknown job: 400 naming inputs.job")
+    status, _, body = srv.json("POST", "/processes/grid/execution", {"inputs": {"input": "hill.asc", "tolerance": 0.5}})
+    check(status == 201, f"grid job: 201 ({status} {body})")
+    s = wait_status(srv, body["jobID"], ("successful", "failed"))
+    res = srv.json("GET", f"/jobs/{body['jobID']}/results")[2]
+    check(s["status"] == "successful" and "summary" in res and res["glb"]["type"] == "model/gltf-binary",
+          f"grid job: summary.json and grid.glb ({s['message']})")
+    status, _, body = srv.json("POST", "/processes/grid/execution", {"inputs": {"input": "hill.asc", "divide": 3}})
+    check(status == 400 and body.get("field") == "inputs.divide", "grid with divide 3: 400 naming inputs.divide")
+
     # Uploads.
     room = open(ROOM, "rb").read()
     status, _, up = srv.json("POST", "/uploads?name=room.ply", room, headers={"Content-Type": "application/octet-stream"})
@@ -309,6 +329,29 @@ def run(tmp, ref):
     s = wait_status(srv, drained, ("successful", "failed"))
     check(s["status"] == "successful" and same_outputs(os.path.join(jobs_dir, drained, "out"), ref),
           "drained job completes after the next start, identical bytes")
+    check(srv.stop() == 0, "server exits 0")
+
+    # Admission: at most --max-jobs children, and their --memory caps add up to at most the server's.
+    srv = Server(tmp, "--max-jobs", "3")
+    for memory, least, most in (("600M", 1, 1), ("300M", 2, 3)):
+        ids = [submit(srv, {"input": "room.ply", "report": False, "memory": memory}) for _ in range(4)]
+        peak, caps = 0, set()
+        while True:
+            listing = srv.json("GET", "/jobs")[2]["jobs"]
+            mine = [j for j in listing if j["jobID"] in ids]
+            peak = max(peak, sum(j["status"] == "running" for j in mine))
+            for pid in srv.children():
+                try:
+                    argv = open(f"/proc/{pid}/cmdline", "rb").read().split(b"\0")
+                    caps.add(int(argv[argv.index(b"--memory") + 1]))
+                except (OSError, ValueError, IndexError):
+                    pass
+            if all(j["status"] in ("successful", "failed") for j in mine):
+                break
+            time.sleep(0.02)
+        check(all(j["status"] == "successful" for j in mine) and least <= peak <= most,
+              f"memory {memory}: {least} to {most} running at once (saw {peak})")
+        check(caps <= {int(memory[:-1]) << 20}, f"memory {memory}: the children's --memory ({caps})")
     check(srv.stop() == 0, "last server exits 0")
 
 
