@@ -36,6 +36,10 @@ ojson output(const char* title, const char* media_type, bool array = false) {
 }
 
 ojson describe(const char* id, const char* title, const char* description, ojson inputs, ojson outputs) {
+  for (auto& [key, in] : inputs.items()) {
+    in["minOccurs"] = key == "input" || key == "job" ? 1 : 0;
+    in["maxOccurs"] = 1;
+  }
   return {{"id", id},
           {"title", title},
           {"description", description},

@@ -519,6 +519,15 @@ int run(const ServeOptions& o) {
     send_json(res, 201, {{"input", "upload:" + id + "/" + name}, {"bytes", bytes}});
   });
 
+  svr.Delete(R"(/uploads/([^/]+))", [&](const httplib::Request& req, httplib::Response& res) {
+    const std::string id = req.matches[1];
+    std::error_code rm;
+    if (!is_job_id(id) || !fs::is_directory(uploads_dir + "/" + id))
+      return send_problem(res, 404, "not-found", "no upload '" + id + "'");
+    fs::remove_all(uploads_dir + "/" + id, rm);
+    res.status = 204;
+  });
+
   svr.set_error_handler([&](const httplib::Request&, httplib::Response& res) {
     if (res.body.empty()) send_problem(res, res.status, "http-error", status_title(res.status));
   });

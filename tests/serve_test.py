@@ -254,6 +254,12 @@ def run(tmp, ref):
     status, _, body = srv.json("POST", "/uploads?name=../x.ply", b"ply")
     check(status == 400 and body.get("field") == "name", "upload with a path in its name: 400")
     up_job = submit(srv, {"input": up["input"], "report": False})
+    up2 = json.loads(srv.request("POST", "/uploads?name=gone.ply", b"ply\n")[2])["input"]
+    up2_id = up2.split(":")[1].split("/")[0]
+    check(srv.request("DELETE", "/uploads/" + up2_id)[0] == 204 and not os.path.exists(os.path.join(jobs_dir, "uploads", up2_id)),
+          "DELETE /uploads/ID: 204, removed")
+    status, _, body = srv.json("POST", "/processes/simplify/execution", {"inputs": {"input": up2}})
+    check(status == 400 and body.get("field") == "inputs.input", "a removed upload: 400 naming inputs.input")
 
     # DELETE: cancel and dismiss.
     status, _, s = srv.json("DELETE", "/jobs/" + up_job)
