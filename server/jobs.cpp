@@ -376,6 +376,15 @@ void JobManager::start_ready(double now) {
   }
   std::sort(queue.begin(), queue.end(), [](const Job* a, const Job* b) { return a->seq < b->seq; });
   for (Job* job : queue) {
+    if (job->memory_bytes > memory_bytes_) {
+      // Possible after a restart with a smaller --memory: such a job would hold the queue forever.
+      job->status = "failed";
+      job->message = "needs --memory " + std::to_string(job->memory_bytes >> 20) + "M, more than the server's " +
+                     std::to_string(memory_bytes_ >> 20) + "M";
+      job->finished = job->updated = now;
+      save(*job);
+      continue;
+    }
     // First in, first out: a job that does not fit yet holds back those behind it, so a large job is
     // never starved by small ones.
     if (running >= max_jobs_ || memory + job->memory_bytes > memory_bytes_) break;
