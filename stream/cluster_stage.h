@@ -39,6 +39,16 @@ struct ClusterSummary {
   std::vector<uint64_t> cells;  // per level
 };
 
+// Cells of two sizes in a level (simplify's silhouette labels, core/silhouette_labels.h): a record whose
+// label is at most near[l] (scene units) joins level l's fine grid, of cell size sizes[l] (0: the level
+// has none; core/floating_cell.h). labels_path: one float per weight-index record, in weight order,
+// read in blocks beside the index.
+struct FineCells {
+  std::string labels_path;
+  std::vector<double> sizes;
+  std::vector<double> near;
+};
+
 // index_path: the weight index of `records` records (WeightRecord32 if single_precision, else
 // WeightRecord64; stream/grade_stage.h). bounds: empty, or the min and max corners (6 values) of a box
 // holding every position in the index, which lets the coarse levels index their squares directly
@@ -46,7 +56,8 @@ struct ClusterSummary {
 ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, bool single_precision,
                               std::span<const double> bounds, std::span<const double> cell_sizes,
                               const core::ClusterOptions& options, uint64_t memory_bytes,
-                              const WorkDir& work, Progress& progress, const std::string& prefix);
+                              const WorkDir& work, Progress& progress, const std::string& prefix,
+                              const FineCells* fine = nullptr);
 
 // The early estimate (before the stage runs, so that a run that cannot fit stops at once rather than
 // after minutes of clustering). Cells of a level of size c: a surface of area A cut into cells of side c
