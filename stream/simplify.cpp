@@ -292,12 +292,17 @@ std::vector<double> measure_silhouette_p95(const std::string& original, const st
   return p95;
 }
 
-// --max-error-px: each level keeps the switching distance of its first cell size; while a level's
-// silhouette p95 there is above the bound, its fine factor is halved (with labels, down to 1/8) and then
-// its cell size lowered in proportion (p95 in pixels grows about as the cell size at a fixed distance),
-// by at most 4× and at least 10 % a pass; every pass clusters, emits and measures every level again, so the
-// figures kept are those of the sizes used. Finer levels are lowered with coarser ones to stay strictly
-// smaller. Returns the manifest's "max_error" record.
+// --max-error-px: each level keeps the switching distance of its first cell size, and a level's mesh
+// depends on its own cell size and factor only, so each level is searched on its own, all levels in the
+// same passes (one clustering, emit and measurement each). A level above the bound first halves its fine
+// factor (with labels, down to 1/8), then its cell size is searched in a bracket: `lo` the largest size
+// measured within the bound, `hi` the smallest above it; a failing size steps down in proportion to
+// E / p95 (p95 in pixels grows about as the cell size at a fixed distance; by 10 % to 4× a pass) or
+// bisects the bracket on log c, and a size within the bound bisects towards `hi` while hi/lo > 1.25 (the
+// first size is never exceeded). The silhouette p95 is a square root of an integer (1, 1.41, 2, ...) and
+// not monotone in c, hence the bracket. Sizes stay strictly increasing (a finer level is lowered below
+// the next); the sizes kept are each level's `lo` (its first size when none met the bound), measured
+// once more when they differ from the last pass, so that the figures are those of the sizes used.
 using EmitFn = std::function<void(const std::vector<double>&, const std::function<void(size_t, core::LodMesh&)>&)>;
 ordered_json bound_silhouette_error(const std::string& input, const SimplifyOptions& so, const Options& options,
                                     const stream::WorkDir& work, std::vector<double>& sizes, std::vector<double>& factors,
@@ -310,40 +315,60 @@ ordered_json bound_silhouette_error(const std::string& input, const SimplifyOpti
   const bool labels = so.silhouette_interval > 0;
   const std::string dir = work.subdir("max-error");
   ordered_json passes = ordered_json::array();
-  std::vector<double> p95;
-  bool met = false;
-  for (unsigned pass = 0; pass < kMaxSearchPasses && !met; ++pass) {
+  auto measure = [&] {
+    for (size_t l = n - 1; l > 0; --l)
+      if (!(sizes[l - 1] < sizes[l])) sizes[l - 1] = sizes[l] * (1 - 1e-6);
     std::vector<std::string> files(n);
     emit(sizes, [&](size_t l, core::LodMesh& mesh) {
       files[l] = fmt::format("{}/lod{}.ply", dir, l);
       io::write_ply(files[l], mesh, {});
     });
-    p95 = measure_silhouette_p95(input, files, distances, so, options, work.subdir("max-error-work"), dir + "/report");
+    std::vector<double> p95 = measure_silhouette_p95(input, files, distances, so, options, work.subdir("max-error-work"), dir + "/report");
     ++report.error_passes;
     passes.push_back({{"cell_sizes", sizes}, {"factors", labels ? ordered_json(factors) : ordered_json()}, {"p95_px", p95}});
-    met = true;
+    return p95;
+  };
+  const std::vector<double> first(sizes);
+  std::vector<double> lo(n, 0), hi(n, 0), lo_factor(factors);
+  std::vector<double> p95;
+  for (unsigned pass = 0; pass < kMaxSearchPasses; ++pass) {
+    p95 = measure();
+    bool done = true;
+    std::vector<double> next(sizes);
     for (size_t l = 0; l < n; ++l) {
-      if (p95[l] <= so.max_error_px) continue;
-      met = false;
-      if (labels && factors[l] > 0.125) {
+      if (p95[l] <= so.max_error_px) {
+        if (sizes[l] > lo[l]) lo[l] = sizes[l], lo_factor[l] = factors[l];
+        if (hi[l] > 0 && hi[l] / lo[l] > 1.25) next[l] = std::sqrt(lo[l] * hi[l]), done = false;
+        continue;
+      }
+      done = false;
+      if (labels && factors[l] > 0.125 && lo[l] == 0 && hi[l] == 0) {
         factors[l] /= 2;
         continue;
       }
-      sizes[l] *= std::clamp(so.max_error_px / p95[l], 0.25, 0.9);
+      hi[l] = hi[l] > 0 ? std::min(hi[l], sizes[l]) : sizes[l];
+      next[l] = lo[l] > 0 ? std::sqrt(lo[l] * hi[l]) : sizes[l] * std::clamp(so.max_error_px / p95[l], 0.25, 0.9);
     }
-    for (size_t l = n - 1; l > 0; --l)
-      if (!(sizes[l - 1] < sizes[l])) sizes[l - 1] = sizes[l] * (1 - 1e-6);
-    if (!met && pass + 1 == kMaxSearchPasses) {
-      // The sizes were just lowered past the last measurement: go back to the measured ones.
-      sizes = passes.back()["cell_sizes"].get<std::vector<double>>();
-      if (labels) factors = passes.back()["factors"].get<std::vector<double>>();
-    }
+    if (done) break;
+    sizes = next;
   }
+  std::vector<double> kept(n);
+  for (size_t l = 0; l < n; ++l) {
+    kept[l] = lo[l] > 0 ? lo[l] : first[l];
+    if (lo[l] > 0) factors[l] = lo_factor[l];
+  }
+  if (kept != passes.back()["cell_sizes"].get<std::vector<double>>() ||
+      (labels && factors != passes.back()["factors"].get<std::vector<double>>())) {
+    sizes = kept;
+    p95 = measure();
+  }
+  bool met = true;
+  for (double v : p95) met = met && v <= so.max_error_px;
   ordered_json out{{"target_px", so.max_error_px}, {"views", so.max_error_views}, {"met", met},
                    {"passes", passes}, {"p95_px", p95}};
   if (!met) report.notice += (report.notice.empty() ? "" : "; ") +
-                             fmt::format("--max-error-px {}: not met after {} passes (p95 per level: {})", so.max_error_px,
-                                         kMaxSearchPasses, fmt::join(p95, ", "));
+                             fmt::format("--max-error-px {}: not met (p95 per level after {} passes: {})", so.max_error_px,
+                                         passes.size(), fmt::join(p95, ", "));
   return out;
 }
 
