@@ -31,7 +31,7 @@ constexpr uint64_t kMinSceneBytes = 16 << 20;  // the chunk scene's share is at 
 
 LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta, const std::string& index_path,
                             uint64_t records, bool single_precision, const LabelOptions& options, uint64_t memory_bytes,
-                            Progress& progress, const std::string& out_path) {
+                            uint64_t chunk_cap, Progress& progress, const std::string& out_path) {
   if (options.views == 0 || options.resolution < 8 || options.resolution > 8192)
     fail(Status::usage, "silhouette labels: views must be at least 1 and the resolution within 8 .. 8192");
   LabelSummary summary;
@@ -52,7 +52,7 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
   const uint64_t scene_bytes =
       std::max(kMinSceneBytes, memory_bytes - std::min(memory_bytes, per_group * pixels * kViewPixelBytes));
   StoreChunks chunks(store_dir, meta);
-  chunks.plan(kChunkSceneCosts, scene_bytes / 4 * 3);
+  chunks.plan(kChunkSceneCosts, chunk_cap ? std::min(chunk_cap, scene_bytes / 4 * 3) : scene_bytes / 4 * 3);
   const size_t n_chunks = chunks.chunks().size();
   const uint64_t groups = (options.views + per_group - 1) / per_group;
   summary.view_groups = groups;

@@ -36,8 +36,10 @@ struct LabelSummary {
   uint64_t labelled = 0;    // records with a label (seen by some view)
 };
 
+// chunk_cap: at most this many bytes a chunk of the original (0 = from memory_bytes alone), as report's
+// --chunk-bytes, for tests that cut a small original into many chunks.
 LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta, const std::string& index_path,
                             uint64_t records, bool single_precision, const LabelOptions& options, uint64_t memory_bytes,
-                            Progress& progress, const std::string& out_path);
+                            uint64_t chunk_cap, Progress& progress, const std::string& out_path);
 
 }  // namespace lodstream::stream

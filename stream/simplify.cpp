@@ -376,8 +376,8 @@ ordered_json bound_silhouette_error(const std::string& input, const SimplifyOpti
 // Returns its stamp key (null when labels are off), part of the cluster stage's key.
 ordered_json run_labels_stage(const SimplifyOptions& so, const std::string& store_dir, const stream::StoreMeta& meta,
                               uint64_t records, const std::string& index_path, const std::string& labels_path,
-                              const ordered_json& grade_key, const stream::MemoryPlan& plan, stream::Progress& progress,
-                              const stream::WorkDir& work, SimplifyReport* report) {
+                              const ordered_json& grade_key, const stream::MemoryPlan& plan, uint64_t chunk_cap,
+                              stream::Progress& progress, const stream::WorkDir& work, SimplifyReport* report) {
   if (so.silhouette_interval <= 0) return nullptr;
   const ordered_json key{{"grade", grade_key},
                          {"views", so.silhouette_views},
@@ -393,8 +393,10 @@ ordered_json run_labels_stage(const SimplifyOptions& so, const std::string& stor
     std::filesystem::remove(work.file("labels.json"));
     const stream::LabelSummary sum = stream::compute_labels(
         store_dir, meta, index_path, records, meta.single_precision,
-        {so.silhouette_views, so.silhouette_resolution, so.fov_degrees}, plan.stage_bytes, progress, labels_path);
+        {so.silhouette_views, so.silhouette_resolution, so.fov_degrees}, plan.stage_bytes, chunk_cap, progress, labels_path);
     report->labelled_vertices = sum.labelled;
+    report->label_chunks = sum.chunks;
+    report->label_view_groups = sum.view_groups;
     write_stamp(work.file("labels.json"), key, {labels_path}, {{"labelled", sum.labelled}});
   });
   return key;
@@ -461,7 +463,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       const std::string canonical = grade.distinct_positions < meta.vertices ? canonical_path : std::string();
       const std::string labels_path = work.file("labels.f32");
       const ordered_json labels_key = run_labels_stage(so, store_dir, meta, grade.records, index_path, labels_path,
-                                                       grade_key, plan, progress, work, &report);
+                                                       grade_key, plan, options.chunk_bytes, progress, work, &report);
 
       const stream::EmitOptions count_only{so.representative, so.crease_degrees, true, true};
       stream::EmitScratch scratch;

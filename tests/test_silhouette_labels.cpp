@@ -20,6 +20,7 @@
 #include <unordered_map>
 #include <span>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -264,16 +265,29 @@ TEST(SilhouetteSimplify, LabelsAndOutputsAreTheSameForAnyThreadsAndMemory) {
   test::TempDir tmp;
   std::string first_labels, first_level;
   int run = 0;
-  for (const auto& [threads, memory] : {std::pair<unsigned, uint64_t>{1, 0}, {2, 64ull << 20}, {0, 80ull << 20}}) {
+  // 24 views of 256² take 33 MB: at 64 MiB they are traced in several groups; --chunk-bytes 1 MiB cuts
+  // the room into several chunks.
+  for (const auto& [threads, memory, chunk] :
+       {std::tuple<unsigned, uint64_t, uint64_t>{1, 0, 0}, {2, 64ull << 20, 0}, {0, 80ull << 20, 1ull << 20}}) {
     Options o;
     o.threads = threads;
     o.memory_bytes = memory;
+    o.chunk_bytes = chunk;
     o.work_dir = tmp.file("work" + std::to_string(run));
     const std::string out = tmp.file("out" + std::to_string(run));
     SimplifyReport rep;
-    const Result r = simplify(sample_room(), labelled(out), o, &rep);
+    SimplifyOptions so = labelled(out);
+    so.silhouette_resolution = 256;
+    so.silhouette_views = 24;
+    const Result r = simplify(sample_room(), so, o, &rep);
     ASSERT_TRUE(r.ok()) << r.message;
     EXPECT_GT(rep.labelled_vertices, 0u);
+    if (memory == 64ull << 20) {
+      EXPECT_GT(rep.label_view_groups, 1u) << "the views were meant to be traced in groups";
+    }
+    if (chunk) {
+      EXPECT_GT(rep.label_chunks, rep.label_view_groups) << "the room was meant to be traced in chunks";
+    }
     ASSERT_GT(rep.levels.at(0).fine_cell_size, 0);
     const std::string labels = slurp(o.work_dir + "/labels.f32"), level = slurp(out + "/lod0.ply");
     ASSERT_FALSE(labels.empty());

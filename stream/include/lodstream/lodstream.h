@@ -202,6 +202,7 @@ struct SimplifyReport {
   unsigned levels_asked = 0;       // sizes or targets given, SimplifyOptions::levels, or default_levels
   std::string notice;              // one line when fewer levels were made than asked, saying why; else empty
   uint64_t labelled_vertices = 0;  // silhouette labels: index records some view sees
+  uint64_t label_chunks = 0, label_view_groups = 0;  // and the chunk scenes and view groups traced (0 when reused)
   unsigned error_passes = 0;       // max_error_px: clustering and measuring passes made
   unsigned search_iterations = 0;  // target search: clustering passes made
   double search_seconds = 0;
