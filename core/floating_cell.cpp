@@ -364,17 +364,32 @@ int64_t grid_square(double x, double size) {
 }
 
 Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options, std::span<const double> bounds,
-                     uint64_t max_dense_squares)
+                     uint64_t max_dense_squares, std::span<const double> fine_sizes)
     : options_(options) {
   max_dense_squares = std::min(max_dense_squares, kMaxDenseSquares);
   if (cell_sizes.empty()) fail(Status::usage, "clustering: no level (no cell size)");
   if (!bounds.empty() && bounds.size() != 6) fail(Status::internal, "clustering: bounds need 6 values");
-  levels_.resize(cell_sizes.size());
-  for (size_t l = 0; l < cell_sizes.size(); ++l) {
-    const double c = cell_sizes[l];
+  if (!fine_sizes.empty() && fine_sizes.size() != cell_sizes.size())
+    fail(Status::internal, "clustering: fine_sizes needs one size (or 0) per level");
+  if (cell_sizes.size() > kMaxFineLevels && !fine_sizes.empty())
+    fail(Status::usage, "clustering: fine cells take at most " + std::to_string(kMaxFineLevels) + " levels");
+  // Internal grids: the levels' own first, then one fine grid per level that has one, in level order.
+  external_ = cell_sizes.size();
+  std::vector<double> sizes(cell_sizes.begin(), cell_sizes.end());
+  fine_of_.assign(external_, kNoCell);
+  for (size_t l = 0; l < fine_sizes.size(); ++l) {
+    if (fine_sizes[l] == 0) continue;
+    if (!(fine_sizes[l] >= kMinCellSize && fine_sizes[l] < cell_sizes[l]))
+      fail(Status::usage, "clustering: a fine cell size must be positive and below its level's cell size");
+    fine_of_[l] = static_cast<uint32_t>(sizes.size());
+    sizes.push_back(fine_sizes[l]);
+  }
+  levels_.resize(sizes.size());
+  for (size_t l = 0; l < sizes.size(); ++l) {
+    const double c = sizes[l];
     if (!(c >= kMinCellSize && c <= kMaxCellSize))
       fail(Status::usage, "clustering: cell size " + std::to_string(c) + " out of range");
-    if (l > 0 && !(c > cell_sizes[l - 1]))
+    if (l > 0 && l < external_ && !(c > sizes[l - 1]))
       fail(Status::usage, "clustering: cell sizes must be strictly increasing");
     Level& level = levels_[l];
     level.size = c;
@@ -398,39 +413,55 @@ Clusterer::Clusterer(std::span<const double> cell_sizes, ClusterOptions options,
     else
       init_table(level.table);
   }
+  // A fine grid numbers its cells from its level's counter, so that the level's ids stay 0, 1, 2, ... in
+  // order of creation over both grids.
+  for (size_t l = 0; l < levels_.size(); ++l) levels_[l].next_id = &levels_[l].cells;
+  for (size_t l = 0; l < external_; ++l)
+    if (fine_of_[l] != kNoCell) levels_[fine_of_[l]].next_id = &levels_[l].cells;
   if (options_.clustering == Clustering::floating) {
-    queries_.resize(levels_.size());
-    ring_.resize(kQueryRing * levels_.size());
+    queries_.resize(external_);
+    ring_.resize(kQueryRing * external_);
   }
 }
 
-void Clusterer::assign(uint32_t vertex_id, std::span<const double, 3> position, std::span<uint32_t> cells) {
-  if (cells.size() != levels_.size()) fail(Status::internal, "Clusterer::assign: cells.size() != levels()");
+double Clusterer::fine_cell_size(size_t level) const {
+  return fine_of_[level] == kNoCell ? 0 : levels_[fine_of_[level]].size;
+}
+
+uint32_t Clusterer::max_cells_per_square(size_t level) const {
+  const uint32_t own = levels_[level].max_per_square;
+  return fine_of_[level] == kNoCell ? own : std::max(own, levels_[fine_of_[level]].max_per_square);
+}
+
+void Clusterer::assign(uint32_t vertex_id, std::span<const double, 3> position, std::span<uint32_t> cells,
+                       uint32_t fine_mask) {
+  if (cells.size() != external_) fail(Status::internal, "Clusterer::assign: cells.size() != levels()");
   const double p[3] = {position[0], position[1], position[2]};
   if (options_.clustering == Clustering::floating) {
     // Three passes over the levels, each issuing independent memory accesses for all of them: the table
     // slots, then the list heads, then the lists. Levels do not interact, so the order changes nothing.
-    for (size_t l = 0; l < levels_.size(); ++l) query_floating(levels_[l], p, queries_[l]);
-    for (size_t l = 0; l < levels_.size(); ++l) find_runs(levels_[l], queries_[l]);
-    for (size_t l = 0; l < levels_.size(); ++l) cells[l] = assign_floating(levels_[l], p, queries_[l]);
+    for (size_t l = 0; l < external_; ++l) query_floating(grid(l, fine_mask), p, queries_[l]);
+    for (size_t l = 0; l < external_; ++l) find_runs(grid(l, fine_mask), queries_[l]);
+    for (size_t l = 0; l < external_; ++l) cells[l] = assign_floating(grid(l, fine_mask), p, queries_[l]);
   } else {
-    for (size_t l = 0; l < levels_.size(); ++l) cells[l] = assign_uniform(levels_[l], p);
+    for (size_t l = 0; l < external_; ++l) cells[l] = assign_uniform(grid(l, fine_mask), p);
   }
   static_cast<void>(vertex_id);  // the order is the caller's; no vertex id is kept
 }
 
 void Clusterer::assign_block(std::span<const uint32_t> ids, std::span<const double> positions,
-                             std::span<uint32_t> cells) {
-  const size_t n = ids.size(), nl = levels_.size();
-  if (positions.size() != 3 * n || cells.size() != nl * n)
-    fail(Status::internal, "Clusterer::assign_block: positions or cells do not match the ids");
+                             std::span<uint32_t> cells, std::span<const uint32_t> fine_masks) {
+  const size_t n = ids.size(), nl = external_;
+  if (positions.size() != 3 * n || cells.size() != nl * n || (!fine_masks.empty() && fine_masks.size() != n))
+    fail(Status::internal, "Clusterer::assign_block: positions, cells or fine masks do not match the ids");
   const double* xyz = positions.data();
+  auto mask = [&](size_t i) { return fine_masks.empty() ? 0u : fine_masks[i]; };
   if (options_.clustering == Clustering::uniform) {
     constexpr size_t kAhead = 8;
     for (size_t i = 0; i < n; ++i) {
       if (i + kAhead < n)
-        for (size_t l = 0; l < nl; ++l) prefetch_uniform(levels_[l], xyz + 3 * (i + kAhead));
-      for (size_t l = 0; l < nl; ++l) cells[l * n + i] = assign_uniform(levels_[l], xyz + 3 * i);
+        for (size_t l = 0; l < nl; ++l) prefetch_uniform(grid(l, mask(i + kAhead)), xyz + 3 * (i + kAhead));
+      for (size_t l = 0; l < nl; ++l) cells[l * n + i] = assign_uniform(grid(l, mask(i)), xyz + 3 * i);
     }
     return;
   }
@@ -444,18 +475,19 @@ void Clusterer::assign_block(std::span<const uint32_t> ids, std::span<const doub
   auto ring = [&](size_t i) { return &ring_[(i % kQueryRing) * nl]; };
   auto query = [&](size_t i) {
     Query* q = ring(i);
-    for (size_t l = 0; l < nl; ++l) query_floating(levels_[l], xyz + 3 * i, q[l]);
+    for (size_t l = 0; l < nl; ++l) query_floating(grid(l, mask(i)), xyz + 3 * i, q[l]);
   };
   for (size_t i = 0; i < std::min(n, kSlotsAhead); ++i) query(i);
   for (size_t i = 0; i < n; ++i) {
     if (i + kSlotsAhead < n) query(i + kSlotsAhead);
     if (i + kRunsAhead < n) {
       const Query* q = ring(i + kRunsAhead);
-      for (size_t l = 0; l < nl; ++l) prefetch_runs(levels_[l], q[l]);
+      for (size_t l = 0; l < nl; ++l) prefetch_runs(grid(l, mask(i + kRunsAhead)), q[l]);
     }
     Query* q = ring(i);
-    for (size_t l = 0; l < nl; ++l) find_runs(levels_[l], q[l]);
-    for (size_t l = 0; l < nl; ++l) cells[l * n + i] = assign_floating(levels_[l], xyz + 3 * i, q[l]);
+    const uint32_t m = mask(i);
+    for (size_t l = 0; l < nl; ++l) find_runs(grid(l, m), q[l]);
+    for (size_t l = 0; l < nl; ++l) cells[l * n + i] = assign_floating(grid(l, m), xyz + 3 * i, q[l]);
   }
 }
 
@@ -653,8 +685,8 @@ uint32_t Clusterer::assign_uniform(Level& level, const double* p) {
   if (*count == 0) {
     // The first vertex to reach a square is its heaviest: it names the cell and numbers it. A square holds
     // one cell and nothing reads its center, so the slot keeps the id itself, and no record.
-    if (level.cells == kNoCell) fail(Status::internal, "clustering: more than 2^32 - 1 cells in one level");
-    *run = level.cells++;
+    if (*level.next_id == kNoCell) fail(Status::internal, "clustering: more than 2^32 - 1 cells in one level");
+    *run = (*level.next_id)++;
     *count = 1;
     level.max_per_square = 1;
   }
@@ -667,7 +699,7 @@ template <class Cell>
 uint32_t Clusterer::add_cell(Level& level, uint32_t& slot_run, uint32_t& slot_count, const double* p) {
   // Cell ids share uint32 with vertex ids and kNoCell is reserved; a pass creates at most one cell per
   // vertex, so reaching it means the caller fed more than 2^32 − 1 vertices.
-  if (level.cells == kNoCell) fail(Status::internal, "clustering: more than 2^32 - 1 cells in one level");
+  if (*level.next_id == kNoCell) fail(Status::internal, "clustering: more than 2^32 - 1 cells in one level");
   using Position = std::remove_extent_t<decltype(Cell::position)>;
   const Position c[3] = {static_cast<Position>(p[0]), static_cast<Position>(p[1]), static_cast<Position>(p[2])};
   if (!(c[0] == p[0] && c[1] == p[1] && c[2] == p[2]))
@@ -697,7 +729,7 @@ uint32_t Clusterer::add_cell(Level& level, uint32_t& slot_run, uint32_t& slot_co
     }
     slot_run = run;
   }
-  const uint32_t id = level.cells++;
+  const uint32_t id = (*level.next_id)++;
   Cell& cell = reinterpret_cast<Cell*>(level.pool.data())[slot_run + n];
   std::copy(c, c + 3, cell.position);
   cell.id = id;

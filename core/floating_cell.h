@@ -52,6 +52,23 @@
 //   the id. The center vertex and position of a cell are not kept: they are the vertex that created it,
 //   which the caller sees (its cell id equals cell_count() before the call). Nothing per vertex is kept.
 //
+// Cells of two sizes in one level (Mata et al., GRAPP 2006, §3.4: a smaller error allowed near the
+// outline; core/silhouette_labels.h gives the labels): a level may have a fine grid of size f < c beside
+// its own. The caller says, per vertex and level, which grid the vertex uses (a bit of its fine mask), and
+// the vertex is assigned exactly as above but within that grid only: it joins or starts a cell of that
+// grid, and never sees the other grid's cells. Both grids number their cells from the level's one counter.
+// Invariants with fine grids (the proofs above hold grid by grid, since each grid sees only its vertices,
+// in weight order, and one size):
+// - No lost vertex: every vertex gets one cell id per level, below cell_count(level) — the id of a cell
+//   of the grid it was sent to, which exists in that grid only.
+// - Deterministic ids: a level's ids are 0, 1, 2, ... in order of creation over both grids; creation
+//   depends on the vertex order, the positions and the masks only.
+// - Per-square bound: a square of either grid holds at most kMaxCubeCellsPerSquare (cubes) or
+//   kMaxSphereCellsPerSquare (spheres) cells, since every center of a grid lies in no earlier cell of
+//   that grid; cells of the two grids may overlap, and are never in one square's run together.
+// - Memory: a cell is a record of one grid only, so the bytes per cell do not change; a fine grid adds its
+//   own index (table or dense array), chosen like a level's.
+//
 // Limits (Failure(Status::usage) from the constructor or assign, as the stream stage should have checked
 // them against the scene's bounding box first): cell sizes finite, in [kMinCellSize, kMaxCellSize] and
 // strictly increasing; every coordinate within kMaxSquaresPerAxis · c/2 of the origin for every level c
@@ -155,9 +172,13 @@ class Clusterer {
   // outside the bounds is then a caller bug: Failure(Status::internal). max_dense_squares (at most
   // kMaxDenseSquares) lowers the dense arrays' limit, for a caller whose memory is tight: a dense array
   // takes 8 bytes per square of the bounds, occupied or not, a hashed level 16 or 32 per occupied square.
+  // fine_sizes: empty, or one value per level: 0 (no fine grid) or the fine grid's cell size, in
+  // [kMinCellSize, cell_sizes[l]) (else Failure(Status::usage)); the fine grids need at most
+  // kMaxFineLevels levels, one bit each in a fine mask.
   Clusterer(std::span<const double> cell_sizes, ClusterOptions options = {}, std::span<const double> bounds = {},
-            uint64_t max_dense_squares = kMaxDenseSquares);
+            uint64_t max_dense_squares = kMaxDenseSquares, std::span<const double> fine_sizes = {});
   static constexpr uint64_t kMaxDenseSquares = uint64_t{1} << 21;  // 16 MiB of squares at 8 bytes
+  static constexpr size_t kMaxFineLevels = 32;
 
   // Assigns the next vertex in weight order (non-increasing grade, ties by vertex id: the caller's
   // guarantee; the clusterer cannot check it) at `position` (xyz) in every level, and writes its cell id in
@@ -165,7 +186,8 @@ class Clusterer {
   // starts a cell becomes its center vertex. Cost per level: O(1) hash probes (8 for floating cells, 1 for
   // uniform) and the cells attached to the probed squares (at most 64 cubes; about 10 in a dense random cloud).
   // Allocates only when a level's pool, index or hash table grows (doubling).
-  void assign(uint32_t vertex_id, std::span<const double, 3> position, std::span<uint32_t> cells);
+  // fine_mask: bit l set sends the vertex to level l's fine grid (ignored for a level without one).
+  void assign(uint32_t vertex_id, std::span<const double, 3> position, std::span<uint32_t> cells, uint32_t fine_mask = 0);
 
   // The same for n = ids.size() consecutive vertices in weight order: vertex i has id ids[i] and position
   // positions[3i .. 3i + 3), and its cell in level l is written to cells[l · n + i] (level-major, so that
@@ -173,16 +195,20 @@ class Clusterer {
   // assign would give; faster, because the table slots and cell runs of the vertices a few places ahead
   // are fetched while the current one is assigned (a later vertex's squares do not depend on earlier
   // vertices, and a fetch is only a hint, so a stale one costs time, never a wrong answer).
-  void assign_block(std::span<const uint32_t> ids, std::span<const double> positions, std::span<uint32_t> cells);
+  // fine_masks: empty (every vertex in the levels' own grids) or vertex i's fine mask at fine_masks[i].
+  void assign_block(std::span<const uint32_t> ids, std::span<const double> positions, std::span<uint32_t> cells,
+                    std::span<const uint32_t> fine_masks = {});
 
-  size_t levels() const { return levels_.size(); }
+  size_t levels() const { return external_; }
   double cell_size(size_t level) const { return levels_[level].size; }
+  double fine_cell_size(size_t level) const;  // 0 when the level has no fine grid
   const ClusterOptions& options() const { return options_; }
   // Cells so far. A vertex whose cell id in a level equals that level's count before its assignment
   // created the cell (floating: it is the center; uniform: the first, i.e. heaviest, vertex in the square).
   uint32_t cell_count(size_t level) const { return levels_[level].cells; }
   // Most cells attached to one grid square so far in a level (uniform: 1 once a vertex was assigned).
-  uint32_t max_cells_per_square(size_t level) const { return levels_[level].max_per_square; }
+  // With a fine grid: the larger of the two grids' figures.
+  uint32_t max_cells_per_square(size_t level) const;
   // Bytes held now (the hash tables' and dense arrays' capacity, the pools' resident pages, the object),
   // for the stream stage's budget; a growth step briefly holds more (growth_bytes).
   uint64_t memory_bytes() const;
@@ -249,6 +275,7 @@ class Clusterer {
     GrowableBuffer pool;  // floating: FloatCell or DoubleCell records, runs, one per occupied square, and free runs
     uint32_t records = 0;  // records in pool
     uint32_t cells = 0;
+    uint32_t* next_id = nullptr;  // the counter ids are drawn from: its own `cells`, or its level's for a fine grid
     // The squares' index, one of three kinds: a dense array (dense non-empty), a hash table of packed
     // slots (packed.sub non-empty), or of wide slots (table.sub non-empty).
     Table<Slot> table;
@@ -278,8 +305,15 @@ class Clusterer {
   uint32_t start_cell(Level& level, const double* p, const int64_t square[3]);
   size_t cell_bytes() const { return options_.float_positions ? sizeof(FloatCell) : sizeof(DoubleCell); }
 
+  // The grid of level l that a vertex with this fine mask uses.
+  Level& grid(size_t l, uint32_t fine_mask) {
+    return fine_of_[l] != kNoCell && (fine_mask >> l & 1) ? levels_[fine_of_[l]] : levels_[l];
+  }
+
   ClusterOptions options_;
-  std::vector<Level> levels_;
+  std::vector<Level> levels_;  // the levels' own grids (external_ of them), then the fine grids
+  size_t external_ = 0;
+  std::vector<uint32_t> fine_of_;  // per level: its fine grid's index in levels_, or kNoCell
   // Scratch for assign (one per level) and assign_block (kQueryRing per level, level-major), sized once.
   static constexpr size_t kQueryRing = 32;
   std::vector<Query> queries_;

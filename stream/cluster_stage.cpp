@@ -116,6 +116,19 @@ uint64_t max_dense_squares(uint64_t budget, size_t levels) {
   return budget / 8 / levels / sizeof(core::Clusterer::DenseSquare);
 }
 
+// The fine masks of records [first, first + n) for a group's levels (bit j: level levels[j]'s fine grid).
+void fine_masks(const io::MappedFile& labels, const FineCells& fine, const std::vector<size_t>& levels, uint64_t first,
+                uint64_t n, std::vector<uint32_t>& masks) {
+  const io::Window w = labels.map(first * 4, (first + n) * 4);
+  const float* label = reinterpret_cast<const float*>(w.data());
+  masks.assign(n, 0);
+  for (size_t j = 0; j < levels.size(); ++j) {
+    if (fine.sizes.at(levels[j]) == 0) continue;
+    const double near = fine.near.at(levels[j]);
+    for (uint64_t i = 0; i < n; ++i) masks[i] |= static_cast<uint32_t>(double(label[i]) <= near) << j;
+  }
+}
+
 }  // namespace
 
 uint64_t estimated_cells(const AreaHistogram& areas, double cell_size, uint64_t records) {
@@ -163,7 +176,8 @@ void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, uint64
 
 ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double> bounds, std::span<const double> cell_sizes,
                               const core::ClusterOptions& cluster_options, CellInfoKind info_kind, uint64_t memory_bytes,
-                              const WorkDir&, Progress& progress, const std::string& prefix) {
+                              const WorkDir&, Progress& progress, const std::string& prefix,
+                              const FineCells* fine) {
   const size_t levels = cell_sizes.size();
   const uint64_t records = weights.records;
   const bool single_precision = weights.single_precision;
@@ -221,11 +235,22 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   // than hashing, but 8 bytes a square of the bounds) take at most an eighth of the rest.
   constexpr uint64_t block = kBlock;
   const uint64_t cell_budget = stream::cell_budget(levels, weights.vertices, single_precision, memory_bytes);
-  const uint64_t max_dense = max_dense_squares(cell_budget, levels);
+  // Fine grids count as levels here: the dense arrays keep their eighth of the budget in all.
+  size_t grids = levels;
+  if (fine)
+    for (double f : fine->sizes) grids += f > 0;
+  const uint64_t max_dense = max_dense_squares(cell_budget, grids);
   for (Group& grp : groups) {
-    std::vector<double> sizes;
+    std::vector<double> sizes, fine_sizes;
     for (size_t l : grp.levels) sizes.push_back(cell_sizes[l]);
-    grp.clusterer = std::make_unique<core::Clusterer>(sizes, options, bounds, max_dense);
+    if (fine)
+      for (size_t l : grp.levels) fine_sizes.push_back(fine->sizes.at(l));
+    grp.clusterer = std::make_unique<core::Clusterer>(sizes, options, bounds, max_dense, fine_sizes);
+  }
+  std::unique_ptr<io::MappedFile> labels;
+  if (fine) {
+    labels = std::make_unique<io::MappedFile>(fine->labels_path);
+    if (labels->size() != records * 4) fail(Status::io_error, fine->labels_path + ": size does not match the weight index");
   }
   // Each group runs through the whole index on its own task, fetching the positions itself: no barrier per
   // block, so a group held up (its core busy with page-cache writeback, say) does not stall the other.
@@ -259,7 +284,7 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   summary.cells.resize(levels);
   tbb::parallel_for(size_t{0}, n_groups, [&](size_t g) {
     Group& grp = groups[g];
-    std::vector<uint32_t> ids;
+    std::vector<uint32_t> ids, masks;
     std::vector<double> xyz;
     for (uint64_t first = 0; first < records; first += block) {
       progress.check();
@@ -274,7 +299,8 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
         fetch_positions(positions, ids, xyz);
       }
       grp.cells.resize(grp.levels.size() * n);
-      grp.clusterer->assign_block(ids, xyz, grp.cells);
+      if (labels) fine_masks(*labels, *fine, grp.levels, first, n, masks);
+      grp.clusterer->assign_block(ids, xyz, grp.cells, labels ? std::span<const uint32_t>(masks) : std::span<const uint32_t>());
       for (size_t j = 0; j < grp.levels.size(); ++j) {
         Level& L = state[grp.levels[j]];
         const std::span<const uint32_t> cells(grp.cells.data() + j * n, n);

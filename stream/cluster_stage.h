@@ -72,6 +72,16 @@ struct ClusterSummary {
   std::vector<uint64_t> cells;  // per level
 };
 
+// Cells of two sizes in a level (simplify's silhouette labels, core/silhouette_labels.h): a record whose
+// label is at most near[l] (scene units) joins level l's fine grid, of cell size sizes[l] (0: the level
+// has none; core/floating_cell.h). labels_path: one float per weight-index record, in weight order,
+// read in blocks beside the index.
+struct FineCells {
+  std::string labels_path;
+  std::vector<double> sizes;
+  std::vector<double> near;
+};
+
 // The weight index and where its positions are: `order_path` holds `records` canonical ids (uint32) in
 // weight order, `grades_path` their grades (double; read for CellInfoKind::mean only), and
 // `positions_path` the store's positions of `vertices` vertices (float if single_precision, else double).
@@ -85,7 +95,8 @@ struct WeightIndex {
 // either way.
 ClusterSummary cluster_levels(const WeightIndex& index, std::span<const double> bounds, std::span<const double> cell_sizes,
                               const core::ClusterOptions& options, CellInfoKind info, uint64_t memory_bytes,
-                              const WorkDir& work, Progress& progress, const std::string& prefix);
+                              const WorkDir& work, Progress& progress, const std::string& prefix,
+                              const FineCells* fine = nullptr);
 
 // The early estimate (before the stage runs, so that a run that cannot fit stops at once rather than
 // after minutes of clustering). Cells of a level of size c: a surface of area A cut into cells of side c

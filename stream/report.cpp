@@ -59,6 +59,7 @@
 #include "stream/progress.h"
 #include "stream/scene_store.h"
 #include "stream/store_access.h"
+#include "stream/chunk_scene.h"
 #include "stream/store_chunks.h"
 #include "stream/work_dir.h"
 
@@ -72,10 +73,7 @@ using stream::run_stage;
 // moves the numbers of another.
 enum : uint64_t { kStreamTargets = 101, kStreamOriginalSamples = 102, kStreamLodSamples = 103 };
 
-// Bytes of a chunk of the original while its scene is built, as Embree's memory monitor counts them (it
-// counts what Embree reserves, more than becomes resident) plus the chunk's own arrays: measured on the
-// city scenes (README, "report out of core"), rounded up.
-constexpr stream::ChunkCosts kChunkCosts{.triangle = 80, .line = 224, .point = 160, .vertex = 28};
+constexpr stream::ChunkCosts kChunkCosts = stream::kChunkSceneCosts;
 
 // Resident bytes of the process now (/proc/self/statm), 0 where unknown.
 uint64_t resident_bytes() {
@@ -624,20 +622,8 @@ void begin_views(const Original& o, LevelWork& w, const ReportOptions& ro) {
   w.original_views.assign(w.views, core::ViewImage{});
 }
 
-// A chunk of the original as Embree scenes: its triangles, built once, and its lines and points (drawn
-// one pixel wide), built for each level's distance.
-struct ChunkScene {
-  stream::ChunkGeometry geometry;  // without its triangles, which Embree holds
-  std::unique_ptr<core::RayScene> triangles;
-};
-
-std::unique_ptr<core::RayScene> build_wire(const stream::ChunkGeometry& g, float half_pixel, uint64_t embree_limit) {
-  auto scene = std::make_unique<core::RayScene>(embree_limit);
-  scene->add_segments(g.xyz, g.lines, std::vector<float>(g.lines.size() / 2, half_pixel));
-  scene->add_points(g.xyz, g.points, half_pixel);
-  scene->commit();
-  return scene;
-}
+using stream::build_wire;
+using stream::ChunkScene;
 
 struct TraceTotals {
   uint64_t chunks = 0;              // chunk scenes built
@@ -657,18 +643,12 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
   for (size_t c = 0; c < n; ++c) {
     std::unique_ptr<ChunkScene> chunk = std::move(cache);
     if (!chunk) {
-      chunk = std::make_unique<ChunkScene>();
-      o.chunks->read(c, &chunk->geometry);
-      chunk->triangles = std::make_unique<core::RayScene>(embree_limit);
-      chunk->triangles->add_triangles(chunk->geometry.xyz, chunk->geometry.triangles);
-      const uint64_t triangles = chunk->geometry.triangles.size() / 3;
-      chunk->geometry.triangles = {};
-      chunk->triangles->commit();
+      chunk = stream::load_chunk_scene(*o.chunks, c, embree_limit);
       ++totals.chunks;
       if (chunk->triangles->peak_embree_bytes() > totals.embree_peak_bytes)
-        totals.embree_peak_bytes = chunk->triangles->peak_embree_bytes(), totals.chunk_triangles = triangles;
+        totals.embree_peak_bytes = chunk->triangles->peak_embree_bytes(), totals.chunk_triangles = chunk->triangle_count;
     }
-    const bool wire = !chunk->geometry.lines.empty() || !chunk->geometry.points.empty();
+    const bool wire = chunk->has_wire();
     for (LevelWork* w : queries) {
       const auto t0 = std::chrono::steady_clock::now();
       std::unique_ptr<core::RayScene> lines = wire ? build_wire(chunk->geometry, 1.0f, embree_limit) : nullptr;

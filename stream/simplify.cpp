@@ -31,6 +31,7 @@
 #include "stream/ingest.h"
 #include "stream/job.h"
 #include "stream/kill_point.h"
+#include "stream/labels_stage.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
@@ -63,6 +64,20 @@ const char* name(Representative r) {
 // Exact text for a double (hex float), for stamps.
 std::string exact(double v) { return fmt::format("{:a}", v); }
 
+// Silhouette labels and the error bound (README "Silhouette labels").
+void check_silhouette_options(const SimplifyOptions& s) {
+  auto usage = [](const std::string& m) { fail(Status::usage, m); };
+  if (!(s.silhouette_interval >= 0 && std::isfinite(s.silhouette_interval)))
+    usage("--silhouette-interval must be 0 (off) or a positive number of pixels");
+  if (!(s.silhouette_factor > 0 && s.silhouette_factor < 1)) usage("--silhouette-factor must be between 0 and 1");
+  if (s.silhouette_views == 0) usage("--silhouette-views must be at least 1");
+  if (s.silhouette_resolution < 8 || s.silhouette_resolution > 8192) usage("--silhouette-resolution must be between 8 and 8192");
+  if (!(s.max_error_px >= 0 && std::isfinite(s.max_error_px))) usage("--max-error-px must be 0 (off) or a positive number of pixels");
+  if (s.max_error_px > 0 && !s.target_triangles.empty()) usage("give --max-error-px or --target-triangles, not both");
+  if (s.max_error_px > 0 && s.max_error_views == 0) usage("--max-error-views must be at least 1");
+  if (s.max_error_px > 0 && s.resolution > 8192) usage("--max-error-px measures at --resolution, which must then be at most 8192");
+}
+
 void check_options(const SimplifyOptions& s) {
   auto usage = [](const std::string& m) { fail(Status::usage, m); };
   if (s.output_dir.empty()) usage("an output directory is required (-o DIR)");
@@ -87,6 +102,7 @@ void check_options(const SimplifyOptions& s) {
   if (!(s.pixels_per_cell > 0 && std::isfinite(s.pixels_per_cell))) usage("--pixels-per-cell must be positive");
   if (!(s.crease_degrees >= 0 && s.crease_degrees <= 180)) usage("--crease must be between 0 and 180 degrees");
   if (!s.write_ply && !s.write_obj && !s.write_glb) usage("nothing to write: enable at least one of PLY, OBJ, GLB");
+  check_silhouette_options(s);
 }
 
 core::ClusterOptions cluster_options(const SimplifyOptions& s) {
@@ -250,6 +266,143 @@ void write_stamp(const std::string& path, const ordered_json& key, const std::ve
   io::write_file_atomic(path, ordered_json{{"key", key}, {"files", files}, {"value", value}}.dump(1) + "\n");
 }
 
+// Silhouette p95 (pixels) of each level file seen from its switching distance, by `report`'s own rule on
+// `views` views: the one place simplify measures a level, so that it always agrees with report.
+std::vector<double> measure_silhouette_p95(const std::string& original, const std::vector<std::string>& files,
+                                           const std::vector<double>& distances, const SimplifyOptions& so,
+                                           const Options& options, const std::string& work_dir, const std::string& out_dir) {
+  ReportOptions ro;
+  ro.output_dir = out_dir;
+  ro.original = original;
+  ro.lods = files;
+  ro.switch_distances = distances;
+  ro.views = so.max_error_views;
+  ro.resolution = so.resolution;
+  ro.fov_degrees = so.fov_degrees;
+  ro.samples = 4096;  // Hausdorff samples, not used here
+  ro.html_views = 0;
+  Options o = options;
+  o.work_dir = work_dir;
+  o.check_disk_space = false;
+  o.progress = nullptr;
+  Report rep;
+  const Result r = report(ro, o, &rep);
+  if (!r.ok()) fail(r.status, "--max-error-px: measuring the levels: " + r.message);
+  std::vector<double> p95;
+  for (const ReportLevel& l : rep.runs.at(0).levels) p95.push_back(l.silhouette.p95);
+  return p95;
+}
+
+// --max-error-px: each level keeps the switching distance of its first cell size, and a level's mesh
+// depends on its own cell size and factor only, so each level is searched on its own, all levels in the
+// same passes (one clustering, emit and measurement each). A level above the bound first halves its fine
+// factor (with labels, down to 1/8), then its cell size is searched in a bracket: `lo` the largest size
+// measured within the bound, `hi` the smallest above it; a failing size steps down in proportion to
+// E / p95 (p95 in pixels grows about as the cell size at a fixed distance; by 10 % to 4× a pass) or
+// bisects the bracket on log c, and a size within the bound bisects towards `hi` while hi/lo > 1.25 (the
+// first size is never exceeded). The silhouette p95 is a square root of an integer (1, 1.41, 2, ...) and
+// not monotone in c, hence the bracket. Sizes stay strictly increasing (a finer level is lowered below
+// the next); the sizes kept are each level's `lo` (its first size when none met the bound), measured
+// once more when they differ from the last pass, so that the figures are those of the sizes used.
+using EmitFn = std::function<void(const std::vector<double>&, const std::function<void(size_t, core::LodMesh&)>&)>;
+ordered_json bound_silhouette_error(const std::string& input, const SimplifyOptions& so, const Options& options,
+                                    const stream::WorkDir& work, std::vector<double>& sizes, std::vector<double>& factors,
+                                    std::vector<double>& distances, SimplifyReport& report, const EmitFn& emit) {
+  const size_t n = sizes.size();
+  const double tan_half = std::tan(so.fov_degrees * M_PI / 360);
+  distances.clear();
+  for (double c : sizes) distances.push_back(c * so.resolution / (2 * so.pixels_per_cell * tan_half));
+  factors.assign(n, so.silhouette_factor);
+  const bool labels = so.silhouette_interval > 0;
+  const std::string dir = work.subdir("max-error");
+  ordered_json passes = ordered_json::array();
+  auto measure = [&] {
+    for (size_t l = n - 1; l > 0; --l)
+      if (!(sizes[l - 1] < sizes[l])) sizes[l - 1] = sizes[l] * (1 - 1e-6);
+    std::vector<std::string> files(n);
+    emit(sizes, [&](size_t l, core::LodMesh& mesh) {
+      files[l] = fmt::format("{}/lod{}.ply", dir, l);
+      io::write_ply(files[l], mesh, {});
+    });
+    std::vector<double> p95 = measure_silhouette_p95(input, files, distances, so, options, work.subdir("max-error-work"), dir + "/report");
+    ++report.error_passes;
+    passes.push_back({{"cell_sizes", sizes}, {"factors", labels ? ordered_json(factors) : ordered_json()}, {"p95_px", p95}});
+    return p95;
+  };
+  const std::vector<double> first(sizes);
+  std::vector<double> lo(n, 0), hi(n, 0), lo_factor(factors);
+  std::vector<double> p95;
+  for (unsigned pass = 0; pass < kMaxSearchPasses; ++pass) {
+    p95 = measure();
+    bool done = true;
+    std::vector<double> next(sizes);
+    for (size_t l = 0; l < n; ++l) {
+      if (p95[l] <= so.max_error_px) {
+        if (sizes[l] > lo[l]) lo[l] = sizes[l], lo_factor[l] = factors[l];
+        if (hi[l] > 0 && hi[l] / lo[l] > 1.25) next[l] = std::sqrt(lo[l] * hi[l]), done = false;
+        continue;
+      }
+      done = false;
+      if (labels && factors[l] > 0.125 && lo[l] == 0 && hi[l] == 0) {
+        factors[l] /= 2;
+        continue;
+      }
+      hi[l] = hi[l] > 0 ? std::min(hi[l], sizes[l]) : sizes[l];
+      next[l] = lo[l] > 0 ? std::sqrt(lo[l] * hi[l]) : sizes[l] * std::clamp(so.max_error_px / p95[l], 0.25, 0.9);
+    }
+    if (done) break;
+    sizes = next;
+  }
+  std::vector<double> kept(n);
+  for (size_t l = 0; l < n; ++l) {
+    kept[l] = lo[l] > 0 ? lo[l] : first[l];
+    if (lo[l] > 0) factors[l] = lo_factor[l];
+  }
+  if (kept != passes.back()["cell_sizes"].get<std::vector<double>>() ||
+      (labels && factors != passes.back()["factors"].get<std::vector<double>>())) {
+    sizes = kept;
+    p95 = measure();
+  }
+  bool met = true;
+  for (double v : p95) met = met && v <= so.max_error_px;
+  ordered_json out{{"target_px", so.max_error_px}, {"views", so.max_error_views}, {"met", met},
+                   {"passes", passes}, {"p95_px", p95}};
+  if (!met) report.notice += (report.notice.empty() ? "" : "; ") +
+                             fmt::format("--max-error-px {}: not met (p95 per level after {} passes: {})", so.max_error_px,
+                                         passes.size(), fmt::join(p95, ", "));
+  return out;
+}
+
+// The silhouette labels stage (stream/labels_stage.h), when labels are on: reused when its stamp matches.
+// Returns its stamp key (null when labels are off), part of the cluster stage's key.
+ordered_json run_labels_stage(const SimplifyOptions& so, const std::string& store_dir, const stream::StoreMeta& meta,
+                              uint64_t records, const std::string& order_path, const std::string& labels_path,
+                              const ordered_json& grade_key, const stream::MemoryPlan& plan, uint64_t chunk_cap,
+                              stream::Progress& progress, const stream::WorkDir& work, SimplifyReport* report) {
+  if (so.silhouette_interval <= 0) return nullptr;
+  const ordered_json key{{"grade", grade_key},
+                         {"views", so.silhouette_views},
+                         {"resolution", so.silhouette_resolution},
+                         {"fov", exact(so.fov_degrees)}};
+  run_stage(&report->stages, "labels", [&](StageStats& st) {
+    ordered_json v;
+    if (stamp_matches(work.file("labels.json"), key, &v)) {
+      st.reused = true;
+      report->labelled_vertices = v.at("labelled");
+      return;
+    }
+    std::filesystem::remove(work.file("labels.json"));
+    const stream::LabelSummary sum = stream::compute_labels(
+        store_dir, meta, order_path, records,
+        {so.silhouette_views, so.silhouette_resolution, so.fov_degrees}, plan.stage_bytes, chunk_cap, progress, labels_path);
+    report->labelled_vertices = sum.labelled;
+    report->label_chunks = sum.chunks;
+    report->label_view_groups = sum.view_groups;
+    write_stamp(work.file("labels.json"), key, {labels_path}, {{"labelled", sum.labelled}});
+  });
+  return key;
+}
+
 }  // namespace
 
 Result simplify(const std::string& input, const SimplifyOptions& so, const Options& options, SimplifyReport* out) {
@@ -264,6 +417,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     const core::ClusterOptions copts = cluster_options(so);
     SimplifyReport report;
     report.input = input;
+    ordered_json error_json;  // --max-error-px: the passes and figures, for the manifest
 
     tbb::task_arena arena(static_cast<int>(plan.threads));
     arena.execute([&] {
@@ -318,6 +472,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       report.surface_area = grade.surface_area;
       report.grade_ranges = grade.ranges;
       const std::string canonical = grade.distinct_positions < meta.vertices ? canonical_path : std::string();
+      const std::string labels_path = work.file("labels.f32");
+      const ordered_json labels_key = run_labels_stage(so, store_dir, meta, grade.records, order_path, labels_path,
+                                                       grade_key, plan, options.chunk_bytes, progress, work, &report);
 
       const stream::EmitOptions count_only{so.representative, so.crease_degrees, true, true};
       stream::EmitScratch scratch;
@@ -328,11 +485,37 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                       {"variant", name(so.variant)},
                                       {"cell_info", name(so.representative)}};
       // Clusters at `sizes` unless the stamp says it is done; returns cells per level.
+      // Silhouette labels: per level, the fine cell size and the label under which a vertex is near the
+      // outline (fine_factors and switch_distances when set for these sizes, else the options' factor and
+      // the distance the size gives).
+      std::vector<double> fine_factors, switch_distances;
+      auto fine_cells = [&](const std::vector<double>& sizes) {
+        std::unique_ptr<stream::FineCells> f;
+        if (so.silhouette_interval <= 0) return f;
+        f = std::make_unique<stream::FineCells>();
+        f->labels_path = labels_path;
+        const double tan_half = std::tan(so.fov_degrees * M_PI / 360);
+        for (size_t l = 0; l < sizes.size(); ++l) {
+          const bool given = fine_factors.size() == sizes.size();
+          f->sizes.push_back(sizes[l] * (given ? fine_factors[l] : so.silhouette_factor));
+          const double d = given ? switch_distances[l] : sizes[l] * so.resolution / (2 * so.pixels_per_cell * tan_half);
+          f->near.push_back(so.silhouette_interval * 2 * d * tan_half / so.resolution);
+        }
+        return f;
+      };
       auto cluster = [&](const std::vector<double>& sizes, StageStats* st) {
         ordered_json key = cluster_base;
         std::vector<std::string> hex;
         for (double c : sizes) hex.push_back(exact(c));
         key["cell_sizes"] = hex;
+        const std::unique_ptr<stream::FineCells> fine = fine_cells(sizes);
+        if (fine) {
+          std::vector<std::string> fh, nh;
+          for (size_t l = 0; l < sizes.size(); ++l) fh.push_back(exact(fine->sizes[l])), nh.push_back(exact(fine->near[l]));
+          key["labels"] = labels_key;
+          key["fine_sizes"] = fh;
+          key["near"] = nh;
+        }
         ordered_json v;
         if (stamp_matches(work.file("cluster.json"), key, &v)) {
           if (st) st->reused = true;
@@ -354,7 +537,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                         meta.vertices,
                                         meta.single_precision};
         const stream::ClusterSummary cs =
-            stream::cluster_levels(index, bounds, sizes, copts, info_kind, plan.stage_bytes, work, progress, prefix);
+            stream::cluster_levels(index, bounds, sizes, copts, info_kind, plan.stage_bytes, work, progress, prefix,
+                                  fine.get());
         std::vector<std::string> files;
         for (size_t l = 0; l < sizes.size(); ++l) {
           files.push_back(stream::cells_path(prefix, l));
@@ -458,6 +642,15 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         });
       }
 
+      if (so.max_error_px > 0)
+        run_stage(&report.stages, "error", [&](StageStats&) {
+          error_json = bound_silhouette_error(input, so, options, work, sizes, fine_factors, switch_distances, report,
+                                              [&](const std::vector<double>& s, const std::function<void(size_t, core::LodMesh&)>& sink) {
+                                                const stream::EmitOptions eo{so.representative, so.crease_degrees, true, false};
+                                                emit_all(s, cluster(s, nullptr), eo, sink);
+                                              });
+        });
+
       const std::vector<uint64_t> cells = run_stage(&report.stages, "cluster", [&](StageStats& st) { return cluster(sizes, &st); });
 
       // Emit and write. Each level's PLY and OBJ files and its part of the GLB are written as soon as the
@@ -472,7 +665,11 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         ls.cell_size = sizes[l];
         ls.cells = cells[l];
         ls.target_triangles = so.target_triangles.empty() ? 0 : so.target_triangles[l];
-        ls.switch_distance = sizes[l] * so.resolution / (2 * so.pixels_per_cell * tan_half);
+        ls.switch_distance = switch_distances.size() == sizes.size() ? switch_distances[l]
+                                                                     : sizes[l] * so.resolution / (2 * so.pixels_per_cell * tan_half);
+        if (const std::unique_ptr<stream::FineCells> fine = fine_cells(sizes))
+          ls.fine_cell_size = fine->sizes[l], ls.near_outline = fine->near[l];
+        if (!error_json.is_null()) ls.measured_p95_px = error_json["p95_px"][l].get<double>();
         ls.screen_coverage = diag > 0 ? diag / (2 * ls.switch_distance * tan_half) : 0;
         report.levels.push_back(ls);
       }
@@ -552,6 +749,10 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                     {"fov_degrees", so.fov_degrees},
                     {"resolution", so.resolution},
                     {"pixels_per_cell", so.pixels_per_cell}};
+    if (so.silhouette_interval > 0)
+      m["options"]["silhouette"] = {{"interval_px", so.silhouette_interval}, {"factor", so.silhouette_factor},
+                                    {"views", so.silhouette_views}, {"resolution", so.silhouette_resolution},
+                                    {"labelled_vertices", report.labelled_vertices}};
     ordered_json levels = ordered_json::array();
     for (size_t l = 0; l < report.levels.size(); ++l) {
       const LevelStats& ls = report.levels[l];
@@ -567,6 +768,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                      {"screen_coverage", ls.screen_coverage},
                      {"files", ls.files}};
       if (ls.target_triangles) j["target_triangles"] = ls.target_triangles;
+      if (ls.fine_cell_size > 0) j["silhouette"] = {{"fine_cell_size", ls.fine_cell_size}, {"near_outline", ls.near_outline}};
+      if (ls.measured_p95_px >= 0) j["silhouette_p95_px"] = ls.measured_p95_px;
       levels.push_back(j);
     }
     m["levels"] = levels;
@@ -574,6 +777,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     m["levels_made"] = report.levels.size();
     if (!report.notice.empty()) m["notice"] = report.notice;
     if (so.write_glb) m["glb"] = "lods.glb";
+    if (so.max_error_px > 0) m["max_error"] = error_json;
     if (!so.target_triangles.empty())
       m["search"] = {{"passes", report.search_iterations}, {"seconds", report.search_seconds}};
     ordered_json stages = ordered_json::array();

@@ -340,6 +340,15 @@ int main(int argc, char** argv) {
   simplify_cmd->add_option("--fov", so.fov_degrees, "Vertical field of view for switching distances, degrees (default 60)");
   simplify_cmd->add_option("--resolution", so.resolution, "Image height in pixels for switching distances (default 1080)");
   simplify_cmd->add_option("--pixels-per-cell", so.pixels_per_cell, "X of Low & Tan §4: cell width in pixels at the switch (default 5)");
+  simplify_cmd->add_option("--silhouette-interval", so.silhouette_interval,
+                           "Mata et al. distance interval D: vertices within D pixels of an outline get finer cells (0 = off, the default)");
+  simplify_cmd->add_option("--silhouette-factor", so.silhouette_factor,
+                           "Mata et al. error factor f: near the outline, cells are f times the level's size (default 0.5)");
+  simplify_cmd->add_option("--silhouette-views", so.silhouette_views, "Views the silhouette labels are taken from (default 16)");
+  simplify_cmd->add_option("--silhouette-resolution", so.silhouette_resolution, "Pixels per side of a label view (default 512)");
+  simplify_cmd->add_option("--max-error-px", so.max_error_px,
+                           "Lower each level's cells until its silhouette p95 at its switching distance is at most E pixels (0 = off)");
+  simplify_cmd->add_option("--max-error-views", so.max_error_views, "Views --max-error-px measures on (default 8)");
   simplify_cmd->add_flag("--obj", obj, "Also write lodN.obj");
   simplify_cmd->add_flag("--no-ply", no_ply, "Do not write lodN.ply");
   simplify_cmd->add_flag("--no-glb", no_glb, "Do not write lods.glb");

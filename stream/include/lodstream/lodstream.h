@@ -160,6 +160,19 @@ struct SimplifyOptions {
   // Testing: cap the vertices graded at once (0 = from the memory budget), to force seams. Ranges are
   // at most 256, so the cap is raised to vertices / 256 when it is smaller.
   uint64_t grade_range_vertices = 0;
+  // Silhouette labels (Mata et al. 2006; README "Silhouette labels"): with silhouette_interval D > 0, a
+  // vertex within D pixels of an outline (its label: the minimum over silhouette_views views of its
+  // distance to the outline, seen at the level's switching distance) gets cells silhouette_factor times
+  // the level's cell size (0 < f < 1). 0 = off.
+  double silhouette_interval = 0;
+  double silhouette_factor = 0.5;
+  unsigned silhouette_views = 16;
+  unsigned silhouette_resolution = 512;
+  // With max_error_px E > 0: each level keeps the switching distance of its first cell size, and its cell
+  // size (and, with labels, first its factor) is lowered until its silhouette p95 there, measured by
+  // `report`'s rule on max_error_views views, is at most E (or the passes run out: the manifest says so).
+  double max_error_px = 0;
+  unsigned max_error_views = 8;
 };
 
 inline constexpr unsigned default_levels = 5;
@@ -173,6 +186,9 @@ struct LevelStats {
   double switch_distance = 0;     // use this level from this camera distance on (scene units)
   double screen_coverage = 0;     // the scene's bounding-box diagonal over the image height at that distance
   std::vector<std::string> files; // written, relative to the output directory
+  double fine_cell_size = 0;      // silhouette labels: the cell size near the outline (0 = none)
+  double near_outline = 0;        // silhouette labels: the label below which a vertex is near (scene units)
+  double measured_p95_px = -1;    // max_error_px: the silhouette p95 of the last pass (-1 = not measured)
 };
 
 struct SimplifyReport {
@@ -185,6 +201,9 @@ struct SimplifyReport {
   std::vector<LevelStats> levels;
   unsigned levels_asked = 0;       // sizes or targets given, SimplifyOptions::levels, or default_levels
   std::string notice;              // one line when fewer levels were made than asked, saying why; else empty
+  uint64_t labelled_vertices = 0;  // silhouette labels: index records some view sees
+  uint64_t label_chunks = 0, label_view_groups = 0;  // and the chunk scenes and view groups traced (0 when reused)
+  unsigned error_passes = 0;       // max_error_px: clustering and measuring passes made
   unsigned search_iterations = 0;  // target search: clustering passes made
   double search_seconds = 0;
   std::vector<StageStats> stages;

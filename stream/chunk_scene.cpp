@@ -1,0 +1,27 @@
+// Chunks of an original as Embree scenes; see chunk_scene.h.
+#include "stream/chunk_scene.h"
+
+#include <vector>
+
+namespace lodstream::stream {
+
+std::unique_ptr<ChunkScene> load_chunk_scene(StoreChunks& chunks, size_t index, uint64_t embree_limit) {
+  auto chunk = std::make_unique<ChunkScene>();
+  chunks.read(index, &chunk->geometry);
+  chunk->triangles = std::make_unique<core::RayScene>(embree_limit);
+  chunk->triangles->add_triangles(chunk->geometry.xyz, chunk->geometry.triangles);
+  chunk->triangle_count = chunk->geometry.triangles.size() / 3;
+  chunk->geometry.triangles = {};
+  chunk->triangles->commit();
+  return chunk;
+}
+
+std::unique_ptr<core::RayScene> build_wire(const ChunkGeometry& g, float half_pixel, uint64_t embree_limit) {
+  auto scene = std::make_unique<core::RayScene>(embree_limit);
+  scene->add_segments(g.xyz, g.lines, std::vector<float>(g.lines.size() / 2, half_pixel));
+  scene->add_points(g.xyz, g.points, half_pixel);
+  scene->commit();
+  return scene;
+}
+
+}  // namespace lodstream::stream
