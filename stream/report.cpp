@@ -112,6 +112,7 @@ std::vector<RunSpec> resolve_runs(const ReportOptions& ro) {
   if (ro.views == 0) fail(Status::usage, "--views must be at least 1");
   if (ro.resolution < 8 || ro.resolution > 8192) fail(Status::usage, "--resolution must be between 8 and 8192");
   if (!(ro.fov_degrees > 0 && ro.fov_degrees < 180)) fail(Status::usage, "--fov must be between 0 and 180 degrees");
+  if (ro.supersample < 1 || ro.supersample > 16) fail(Status::usage, "--supersample must be between 1 and 16");
   if (!(ro.pixels_per_cell > 0)) fail(Status::usage, "--pixels-per-cell must be positive");
   for (const std::string& dir : ro.runs) {
     const std::string manifest_path = dir + "/manifest.json";
@@ -410,13 +411,13 @@ std::vector<uint8_t> heat(const core::ViewImage& o, const core::ViewImage& l, st
 
 const char* kCsvHeader =
     "view,dir_x,dir_y,dir_z,target_x,target_y,target_z,eye_x,eye_y,eye_z,covered_pixels,mismatched_pixels,"
-    "silhouette_max_px,silhouette_mean_px,both_pixels,depth_mean_px,normal_mean_deg\n";
+    "silhouette_max_px,silhouette_mean_px,both_pixels,depth_mean_px,normal_mean_deg,thin_pixels,thin_kept_pixels\n";
 
 std::string fmt_csv_row(unsigned k, const double* dir, const double* target, const double* eye,
                         const core::SilhouetteStats& s, uint64_t both, double depth_mean, double normal_mean) {
-  return fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", k, dir[0], dir[1], dir[2], target[0],
+  return fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", k, dir[0], dir[1], dir[2], target[0],
                      target[1], target[2], eye[0], eye[1], eye[2], s.covered_either, s.mismatched, s.max, s.mean,
-                     both, depth_mean, normal_mean);
+                     both, depth_mean, normal_mean, s.thin, s.thin_kept);
 }
 
 struct LevelResult {
@@ -452,17 +453,40 @@ struct LevelWork {
   double pixel_at(double d, unsigned resolution) const { return 2 * d * tan_half / resolution; }
 };
 
-// Per-pixel bytes of a view image held between chunks: depth, normal, kind.
-constexpr uint64_t kViewPixelBytes = 4 + 12 + 1;
+// Per-pixel bytes of a view image held between chunks: depth, normal, kind, centre.
+constexpr uint64_t kViewPixelBytes = 4 + 12 + 1 + 1;
 
-std::unique_ptr<core::RayScene> build_level_scene(const core::LodMesh& mesh, float half_pixel, uint64_t embree_limit) {
-  auto scene = std::make_unique<core::RayScene>(embree_limit);
-  scene->add_triangles(mesh.positions, mesh.triangles);
+// What a renderer draws one pixel wide (an original's lines and points, a level's points and its edges of
+// thickness 0), at the radii of core::one_pixel_radii for the pixel's width at the level's distance.
+struct WireRadii {
+  float line = 0, point = 0;
+  WireRadii(double pixel, unsigned k) {
+    const core::OnePixelRadii r = core::one_pixel_radii(pixel, k);
+    line = r.line, point = r.point;
+  }
+};
+
+// A level (or a chunk of it) as two scenes: its triangles (cast in packets) and its edges and points. Their
+// order keeps the key order of the tie rule: triangles, then edges, then points.
+struct LevelScene {
+  std::unique_ptr<core::RayScene> triangles, wire;
+  std::vector<const core::RayScene*> list() const { return {triangles.get(), wire.get()}; }
+};
+
+// Thick edges at their true width (radius T / 2), with no floor: a part of the original thinner than the
+// rays can resolve is missed on both sides alike. An edge of thickness 0 (an original line kept as it is)
+// and a point are drawn one pixel wide, as the original's are.
+LevelScene build_level_scene(const core::LodMesh& mesh, const WireRadii& wire, uint64_t embree_limit) {
+  LevelScene scene;
+  scene.triangles = std::make_unique<core::RayScene>(embree_limit);
+  scene.triangles->add_triangles(mesh.positions, mesh.triangles);
+  scene.triangles->commit();
+  scene.wire = std::make_unique<core::RayScene>(embree_limit);
   std::vector<float> radius(mesh.edge_count());
-  for (size_t e = 0; e < radius.size(); ++e) radius[e] = std::max(mesh.thickness[e] / 2, half_pixel);
-  scene->add_segments(mesh.positions, mesh.edges, radius);
-  scene->add_points(mesh.positions, mesh.points, half_pixel);
-  scene->commit();
+  for (size_t e = 0; e < radius.size(); ++e) radius[e] = mesh.thickness[e] > 0 ? mesh.thickness[e] / 2 : wire.line;
+  scene.wire->add_segments(mesh.positions, mesh.edges, radius);
+  scene.wire->add_points(mesh.positions, mesh.points, wire.point);
+  scene.wire->commit();
   return scene;
 }
 
@@ -493,8 +517,8 @@ class LevelChunks {
   }
   size_t size() const { return ranges_.size(); }
   // The scene of chunk c; the whole level's for a level in one chunk.
-  std::unique_ptr<core::RayScene> scene(size_t c, float half_pixel, uint64_t embree_limit) {
-    if (ranges_.size() == 1) return build_level_scene(m_, half_pixel, embree_limit);
+  LevelScene scene(size_t c, const WireRadii& wire, uint64_t embree_limit) {
+    if (ranges_.size() == 1) return build_level_scene(m_, wire, embree_limit);
     const auto [first, end] = ranges_[c];
     core::LodMesh part;
     if (local_.empty()) local_.assign(m_.vertex_count(), UINT32_MAX);
@@ -524,7 +548,7 @@ class LevelChunks {
     }
     if (end > t + e) take(m_.points, 1, t + e, part.points);
     for (uint32_t v : touched) local_[v] = UINT32_MAX;
-    return build_level_scene(part, half_pixel, embree_limit);
+    return build_level_scene(part, wire, embree_limit);
   }
 
  private:
@@ -571,10 +595,9 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   w.level_chunks = chunks.size();
   std::vector<float> d(o.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
   for (size_t c = 0; c < chunks.size(); ++c) {
-    const auto scene = chunks.scene(c, static_cast<float>(w.pixel_at(w.distance, ro.resolution) / 2), limit);
+    const LevelScene scene = chunks.scene(c, WireRadii(w.pixel_at(w.distance, ro.resolution), ro.supersample), limit);
     const auto t_q = std::chrono::steady_clock::now();
-    const core::RayScene* to_lod[] = {scene.get()};
-    lower_closest_distances(o.samples.xyz, to_lod, d);
+    lower_closest_distances(o.samples.xyz, scene.list(), d);
     w.out.queries += d.size();
     w.out.query_seconds += seconds_since(t_q);
   }
@@ -620,21 +643,22 @@ void begin_views(const Original& o, LevelWork& w, const ReportOptions& ro) {
     double dir[3], target[3], eye[3];
     view_geometry(o, w, ro, k, dir, target, eye);
     w.cameras.push_back(core::look_at(eye, target, w.run->fov_degrees, ro.resolution));
+    w.cameras.back().supersample = ro.supersample;
   }
   w.original_views.assign(w.views, core::ViewImage{});
 }
 
 // A chunk of the original as Embree scenes: its triangles, built once, and its lines and points (drawn
-// one pixel wide), built for each level's distance.
+// one pixel wide: WireRadii), built for each level's distance.
 struct ChunkScene {
   stream::ChunkGeometry geometry;  // without its triangles, which Embree holds
   std::unique_ptr<core::RayScene> triangles;
 };
 
-std::unique_ptr<core::RayScene> build_wire(const stream::ChunkGeometry& g, float half_pixel, uint64_t embree_limit) {
+std::unique_ptr<core::RayScene> build_wire(const stream::ChunkGeometry& g, const WireRadii& wire, uint64_t embree_limit) {
   auto scene = std::make_unique<core::RayScene>(embree_limit);
-  scene->add_segments(g.xyz, g.lines, std::vector<float>(g.lines.size() / 2, half_pixel));
-  scene->add_points(g.xyz, g.points, half_pixel);
+  scene->add_segments(g.xyz, g.lines, std::vector<float>(g.lines.size() / 2, wire.line));
+  scene->add_points(g.xyz, g.points, wire.point);
   scene->commit();
   return scene;
 }
@@ -671,7 +695,8 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
     const bool wire = !chunk->geometry.lines.empty() || !chunk->geometry.points.empty();
     for (LevelWork* w : queries) {
       const auto t0 = std::chrono::steady_clock::now();
-      std::unique_ptr<core::RayScene> lines = wire ? build_wire(chunk->geometry, 1.0f, embree_limit) : nullptr;
+      // Radii do not enter the point queries.
+      std::unique_ptr<core::RayScene> lines = wire ? build_wire(chunk->geometry, WireRadii(1.0, 1), embree_limit) : nullptr;
       const core::RayScene* scenes[] = {chunk->triangles.get(), lines ? lines.get() : chunk->triangles.get()};
       lower_closest_distances(w->samples.xyz, std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->to_original);
       w->out.queries += w->to_original.size();
@@ -681,7 +706,7 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
     for (LevelWork* w : viewed) {
       const auto t0 = std::chrono::steady_clock::now();
       std::unique_ptr<core::RayScene> lines =
-          wire ? build_wire(chunk->geometry, static_cast<float>(w->pixel_at(w->distance, ro.resolution) / 2), embree_limit) : nullptr;
+          wire ? build_wire(chunk->geometry, WireRadii(w->pixel_at(w->distance, ro.resolution), ro.supersample), embree_limit) : nullptr;
       const core::RayScene* scenes[] = {chunk->triangles.get(), lines.get()};
       for (unsigned k = 0; k < w->views; ++k)
         w->out.rays += core::cast_view(std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->cameras[k],
@@ -701,7 +726,7 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   const core::LodMesh mesh = io::read_lod_mesh(w.run->levels[w.index].file);
   const unsigned h = ro.resolution;
   const uint64_t pixels = uint64_t{h} * h;
-  const float half_pixel = static_cast<float>(w.pixel_at(w.distance, ro.resolution) / 2);
+  const WireRadii wire(w.pixel_at(w.distance, ro.resolution), ro.supersample);
   // In one chunk, each view is cast and compared in turn; in several, every view's image is accumulated
   // chunk by chunk first (the level's images then take as much memory as the original's).
   // Besides the level: with several chunks, every view's image.
@@ -709,18 +734,18 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap));
   w.level_chunks = std::max<uint64_t>(w.level_chunks, chunks.size());
   std::vector<core::ViewImage> lod_views(chunks.size() > 1 ? w.views : 1);
-  std::unique_ptr<core::RayScene> lod;
+  LevelScene lod;
   if (chunks.size() > 1) {
     for (size_t c = 0; c < chunks.size(); ++c) {
-      lod = chunks.scene(c, half_pixel, limit);
-      const core::RayScene* lod_scenes[] = {lod.get()};
+      lod = chunks.scene(c, wire, limit);
+      const auto lod_scenes = lod.list();
       const auto t_r = std::chrono::steady_clock::now();
       for (unsigned k = 0; k < w.views; ++k) w.out.rays += core::cast_view(lod_scenes, w.cameras[k], &lod_views[k], true);
       w.out.ray_seconds += seconds_since(t_r);
     }
-    lod.reset();
+    lod = {};
   } else {
-    lod = chunks.scene(0, half_pixel, limit);
+    lod = chunks.scene(0, wire, limit);
   }
   core::SilhouetteCounts total;
   core::SilhouetteScratch scratch;
@@ -730,9 +755,9 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
     view_geometry(o, w, ro, k, dir, target, eye);
     const core::Camera& cam = w.cameras[k];
     const core::ViewImage& vo = w.original_views[k];
-    core::ViewImage& vl = lod ? lod_views[0] : lod_views[k];
-    if (lod) {
-      const core::RayScene* lod_scenes[] = {lod.get()};
+    core::ViewImage& vl = lod.triangles ? lod_views[0] : lod_views[k];
+    if (lod.triangles) {
+      const auto lod_scenes = lod.list();
       const auto t_r = std::chrono::steady_clock::now();
       w.out.rays += core::cast_view(lod_scenes, cam, &vl);
       w.out.ray_seconds += seconds_since(t_r);
@@ -766,7 +791,7 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
       w.out.views.push_back(std::move(hv));
     }
     w.original_views[k] = {};
-    if (!lod) lod_views[k] = {};
+    if (!lod.triangles) lod_views[k] = {};
   }
   w.original_views = {};
   lod_views = {};
@@ -778,6 +803,7 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   L.mismatched_pixels = s.mismatched;
   L.covered_pixels = s.covered_either;
   L.mismatch_fraction = s.mismatch_fraction;
+  L.thin_pixels = s.thin, L.thin_kept_pixels = s.thin_kept, L.thin_kept_fraction = s.thin_kept_fraction;
   L.depth = stats_of(depth_err);
   L.normal = stats_of(normal_err);
   L.seconds += seconds_since(t0);
@@ -792,7 +818,7 @@ nlohmann::ordered_json report_json(const Report& rep, const ReportOptions& ro) {
   nlohmann::ordered_json j;
   j["generator"] = std::string("lodstream ") + LODSTREAM_VERSION;
   j["options"] = {{"views", ro.views}, {"resolution", ro.resolution}, {"seed", ro.seed}, {"samples", ro.samples},
-                  {"pixels_per_cell", ro.pixels_per_cell}};
+                  {"pixels_per_cell", ro.pixels_per_cell}, {"supersample", ro.supersample}};
   j["units"] = {{"pixels", "pixels of the resolution × resolution report images, camera at the switching distance"},
                 {"hausdorff", "scene units"},
                 {"normal", "degrees"}};
@@ -819,7 +845,9 @@ nlohmann::ordered_json report_json(const Report& rep, const ReportOptions& ro) {
                                         {"mean_px", l.silhouette.mean}, {"rms_px", l.silhouette.rms},
                                         {"mismatched_pixels", l.mismatched_pixels},
                                         {"covered_pixels", l.covered_pixels},
-                                        {"mismatch_fraction", l.mismatch_fraction}}},
+                                        {"mismatch_fraction", l.mismatch_fraction},
+                                        {"thin_pixels", l.thin_pixels}, {"thin_kept_pixels", l.thin_kept_pixels},
+                                        {"thin_kept_fraction", l.thin_kept_fraction}}},
                         {"depth_px", stats_json(l.depth)},
                         {"normal_degrees", stats_json(l.normal)},
                         {"hausdorff", {{"max", l.hausdorff_max}, {"mean", l.hausdorff_mean}, {"rms", l.hausdorff_rms},
