@@ -14,7 +14,8 @@
 // in double), not taken from Embree. Embree's packet intersector and its single-ray one (which its packet
 // traversal falls back to where few rays of a packet remain, at places that depend on the BVH) can round
 // the same hit differently, so Embree's own t would make an image depend on the chunking. Curves and discs
-// keep Embree's t: they are traced one ray at a time (core/view_cast.cpp), always by the same intersector.
+// keep Embree's t: a ray that hits them is traced again alone (core/view_cast.cpp), so their hits always
+// come from the single-ray intersector.
 // Since Embree culls by its own t, the filter leaves the ray's tfar a little beyond the best canonical t
 // (enlarged_tfar): a primitive whose canonical t ties or beats the best still reaches the filter (Embree
 // keeps a filter's tfar, and offers the other hits of a leaf while their t <= tfar).

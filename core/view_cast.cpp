@@ -27,8 +27,8 @@ void cross(const double a[3], const double b[3], double out[3]) {
 
 constexpr unsigned kTile = 4;  // 4×4 pixels, traced in turn
 
-// Up to 16 rays traced together through a scene list under the tie rule: in one packet on a triangle-only
-// scene, one at a time on others.
+// Up to 16 rays traced together through a scene list under the tie rule: in one packet; on a scene that is
+// not triangles only, the rays that hit it again one at a time.
 struct Batch {
   alignas(64) RTCRayHit16 packet;
   alignas(64) int valid[16];
@@ -79,16 +79,30 @@ struct Batch {
             ng[i][0] = packet.hit.Ng_x[i], ng[i][1] = packet.hit.Ng_y[i], ng[i][2] = packet.hit.Ng_z[i];
         continue;
       }
+      // Lines and points: a packet first, which for most rays finds nothing here; a ray whose hit the
+      // filter accepted is traced again alone from where it was, so that its hit always has the single-ray
+      // intersector's bits.
+      float tfar[16], best_t[16];
+      uint64_t best_key[16];
+      int best_scene[16];
       for (unsigned i = 0; i < count; ++i) {
+        tfar[i] = packet.ray.tfar[i], best_t[i] = context.best_t[i], best_key[i] = context.best_key[i];
+        best_scene[i] = context.best_scene[i];
+        packet.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID, packet.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+      }
+      rtcIntersect16(valid, scene, &context.embree, &packet);
+      for (unsigned i = 0; i < count; ++i) {
+        if (packet.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+        context.best_t[i] = best_t[i], context.best_key[i] = best_key[i], context.best_scene[i] = best_scene[i];
         RTCRayHit r;
         r.ray.org_x = packet.ray.org_x[i], r.ray.org_y = packet.ray.org_y[i], r.ray.org_z = packet.ray.org_z[i];
         r.ray.dir_x = packet.ray.dir_x[i], r.ray.dir_y = packet.ray.dir_y[i], r.ray.dir_z = packet.ray.dir_z[i];
-        r.ray.tnear = packet.ray.tnear[i], r.ray.tfar = packet.ray.tfar[i], r.ray.time = 0.0f;
+        r.ray.tnear = packet.ray.tnear[i], r.ray.tfar = tfar[i], r.ray.time = 0.0f;
         r.ray.mask = 0xFFFFFFFFu, r.ray.id = i, r.ray.flags = 0;
         r.hit.geomID = RTC_INVALID_GEOMETRY_ID, r.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
         rtcIntersect1(scene, &context.embree, &r);
-        if (r.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
         packet.ray.tfar[i] = r.ray.tfar;
+        if (r.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
         ng[i][0] = r.hit.Ng_x, ng[i][1] = r.hit.Ng_y, ng[i][2] = r.hit.Ng_z;
       }
     }

@@ -5,10 +5,10 @@
 // or else the nearest of the k × k hits. So a part of a scene that crosses a pixel without meeting its
 // centre still covers it, when it is wider than about 1/k pixel, whatever kind of primitive it is.
 //
-// Rays on triangle-only scenes go in 16-ray packets (rtcIntersect16), others one at a time (rtcIntersect1):
-// a triangle's distance and normal are recomputed from its corners (core/nearest_hit.h), so they do not
-// depend on which of Embree's intersectors found the hit, while a curve's or a disc's come from Embree's
-// single-ray intersector, always. Each pixel gets the hit distance along its unit ray, the geometric normal
+// Rays go in 16-ray packets (rtcIntersect16): a triangle's distance and normal are recomputed from its
+// corners (core/nearest_hit.h), so they do not depend on which of Embree's intersectors found the hit; on a
+// scene of lines and points, a ray whose packet found a hit there is traced again alone (rtcIntersect1),
+// so a curve's or a disc's hit always comes from Embree's single-ray intersector. Each pixel gets the hit distance along its unit ray, the geometric normal
 // turned to face the camera (so one- and two-sided faces compare alike), and the kind of primitive hit. A
 // pixel's result depends on that pixel's rays only, so images are the same for any thread count.
 //
