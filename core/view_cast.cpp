@@ -269,6 +269,9 @@ uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera
           if (out->centre[p]) continue;
           any = true;
           for (unsigned sub = 0; sub < k * k; ++sub) {
+            // With k odd, the middle ray is the centre ray, which missed this chunk (and no earlier
+            // chunk's hit can make it hit): not cast again.
+            if (k % 2 == 1 && sub == k * k / 2) continue;
             double d[3];
             ray(x + (sub % k + 0.5) / k, y + (sub / k + 0.5) / k, d);
             const unsigned l = batch.add(eye, d, out->depth[p]);

@@ -6,19 +6,22 @@
 // --memory leaves, one chunk in core. Its samples and view targets are drawn in two passes over the chunks.
 // For every level:
 // 1. read the LOD file, draw its samples, and the original → level Hausdorff distances against its scene
-//    (thick edges as flat curves of radius max(T/2, half a pixel), points as one-pixel discs);
+//    (its triangles, and its thick edges and points as flat curves and discs, whose radii do not enter
+//    the distances);
 // 2. chunk-outer passes over the original: each chunk's Embree scene (its triangles; its lines and points,
 //    drawn one pixel wide, in a small second scene per level distance) is built once per pass, every
 //    level's samples are lowered to their distance to it (level → original Hausdorff), and every view of
 //    the levels of the pass accumulates its image; then it is freed;
 // 3. views: K directions on a Fibonacci sphere, view k aimed at the k-th of K points sampled uniformly
 //    by area on the original's surface, the camera at the level's switching distance from that point;
-//    the level ray cast into H × H images, compared with the original's: silhouette error from exact
+//    the level ray cast into H × H images under the same pixel rule as the original (core/view_cast.h:
+//    centre ray, else any of k × k rays; thick edges at their true width), compared with the original's:
+//    silhouette error and thin-feature share from exact
 //    distance transforms of the original's coverage (core/silhouette_error.h); depth and normal error
 //    where both cover.
 // Levels whose distance comes from their Hausdorff max take one more pass (distances first). What stays
 // between chunks: the samples and their distances so far, and for the levels of a pass the original's
-// view images (depth, normal, kind: 17 bytes a pixel); levels are grouped into passes so that these take
+// view images (depth, normal, kind, centre: 18 bytes a pixel); levels are grouped into passes so that these take
 // at most half of what --memory leaves. A level too large for the rest is traced in chunks as well.
 // Everything drawn at random comes from counter-based streams of --seed (views, targets, samples), every
 // sum is formed in a fixed order, distances are minima over chunks and a pixel keeps the hit of lowest
