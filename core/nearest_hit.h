@@ -6,10 +6,19 @@
 // embree.filter is nearest_hit_filter (a context filter: RayScene's scenes enable them), and a caller that
 // does not, with a plain RTCIntersectContext, gets Embree's own behaviour and no read past its context.
 //
-// The filter reads and keeps each ray's best (t, key) in the NearestHitContext, passed to rtcIntersect1 in
-// place of a plain RTCIntersectContext (its first member), indexed by the ray's id (0..15: its lane).
-// Embree sets a ray's tfar to the candidate's distance before calling the filter and restores it when
-// the filter rejects the hit, so tfar == best_t outside the filter.
+// The filter reads and keeps each ray's best (t, key) in the NearestHitContext, passed to rtcIntersect1 or
+// rtcIntersect16 in place of a plain RTCIntersectContext (its first member), indexed by the ray's id (0..15:
+// its lane).
+//
+// Canonical distances: a triangle's t is recomputed by the filter from its corners (RayScene::triangle_hit,
+// in double), not taken from Embree. Embree's packet intersector and its single-ray one (which its packet
+// traversal falls back to where few rays of a packet remain, at places that depend on the BVH) can round
+// the same hit differently, so Embree's own t would make an image depend on the chunking. Curves and discs
+// keep Embree's t: a ray that hits them is traced again alone (core/view_cast.cpp), so their hits always
+// come from the single-ray intersector.
+// Since Embree culls by its own t, the filter leaves the ray's tfar a little beyond the best canonical t
+// (enlarged_tfar): a primitive whose canonical t ties or beats the best still reaches the filter (Embree
+// keeps a filter's tfar, and offers the other hits of a leaf while their t <= tfar).
 #pragma once
 
 #include <embree3/rtcore.h>
@@ -18,13 +27,25 @@
 
 namespace lodstream::core {
 
+class RayScene;
+
 struct NearestHitContext {
   RTCIntersectContext embree;  // first: Embree hands this pointer back to the filter
   unsigned scene = 0;          // index of the scene being traced, the key's high part
+  const RayScene* ray_scene = nullptr;  // that scene, for canonical triangle distances
   float best_t[16];
   uint64_t best_key[16];       // 0 = the best hit comes from an earlier chunk, which wins every tie
   int best_scene[16];          // the scene whose hit is the best so far in this cast; -1 = none yet
 };
+
+// The tfar that lets every hit within rounding of t reach the filter: t (1 + 2^-12). Embree's float t of a
+// triangle differs from the canonical one by a few ulps (2^-23 each) away from grazing incidence.
+inline float enlarged_tfar(float t) { return t + t * 0x1p-12f; }
+
+// Key of a hit: scene index (24 bits), geometry id (8 bits), primitive id (32 bits).
+inline uint64_t hit_key(unsigned scene, unsigned geom, unsigned prim) {
+  return (uint64_t{scene} << 40) | (uint64_t{geom} << 32) | prim;
+}
 
 void nearest_hit_filter(const RTCFilterFunctionNArguments* args);
 

@@ -370,15 +370,49 @@ void nearest_hit_filter(const RTCFilterFunctionNArguments* args) {
   for (unsigned i = 0; i < n; ++i) {
     if (!args->valid[i]) continue;
     const unsigned id = RTCRayN_id(args->ray, n, i);
-    const float t = RTCRayN_tfar(args->ray, n, i);
-    const uint64_t key = (uint64_t{c->scene} << 40) | (uint64_t{RTCHitN_geomID(args->hit, n, i)} << 32) |
-                         RTCHitN_primID(args->hit, n, i);
+    const unsigned geom = RTCHitN_geomID(args->hit, n, i), prim = RTCHitN_primID(args->hit, n, i);
+    float t = RTCRayN_tfar(args->ray, n, i);
+    if (c->ray_scene) {
+      const float org[3] = {RTCRayN_org_x(args->ray, n, i), RTCRayN_org_y(args->ray, n, i), RTCRayN_org_z(args->ray, n, i)};
+      const float dir[3] = {RTCRayN_dir_x(args->ray, n, i), RTCRayN_dir_y(args->ray, n, i), RTCRayN_dir_z(args->ray, n, i)};
+      float canonical;
+      if (c->ray_scene->triangle_hit(geom, prim, org, dir, &canonical)) t = canonical;
+    }
+    const uint64_t key = hit_key(c->scene, geom, prim);
     if (t < c->best_t[id] || (t == c->best_t[id] && key < c->best_key[id])) {
       c->best_t[id] = t, c->best_key[id] = key, c->best_scene[id] = static_cast<int>(c->scene);
+      // Embree keeps this tfar (it restores its own only for a rejected hit).
+      RTCRayN_tfar(args->ray, n, i) = enlarged_tfar(t);
     } else {
       args->valid[i] = 0;
     }
   }
+}
+
+bool RayScene::triangle_hit(unsigned geom, unsigned prim, const float org[3], const float dir[3], float* t,
+                            double normal[3]) const {
+  if (geom >= impl_->geoms.size()) return false;
+  const Geom& g = impl_->geoms[geom];
+  if (g.kind != PrimitiveKind::triangle) return false;
+  const uint32_t* tri = g.indices + 3ull * prim;
+  const Vec a = load(g.vertices + 3ull * tri[0]), b = load(g.vertices + 3ull * tri[1]), c = load(g.vertices + 3ull * tri[2]);
+  const Vec e1 = sub(b, a), e2 = sub(c, a);
+  const Vec nn = {e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x};
+  const Vec d = load(dir);
+  const double denom = dot(d, nn);
+  if (!(denom != 0)) return false;
+  *t = static_cast<float>(dot(sub(a, load(org)), nn) / denom);
+  if (normal) {
+    const double len = std::sqrt(dot(nn, nn));
+    normal[0] = nn.x / len, normal[1] = nn.y / len, normal[2] = nn.z / len;
+  }
+  return true;
+}
+
+bool RayScene::only_triangles() const {
+  for (const Geom& g : impl_->geoms)
+    if (g.kind != PrimitiveKind::triangle) return false;
+  return true;
 }
 
 PrimitiveKind RayScene::kind_of(unsigned geom_id) const {

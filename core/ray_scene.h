@@ -69,6 +69,14 @@ class RayScene {
                          float within = std::numeric_limits<float>::infinity()) const;
 
   PrimitiveKind kind_of(unsigned geom_id) const;
+  // The canonical hit of a ray (origin org, direction dir) on triangle `prim` of geometry `geom`: where the
+  // ray meets the triangle's plane, t in units of dir, and the plane's unit normal (either side), computed
+  // in double from the stored corners, so the same bits whatever intersector reported the hit. False for
+  // a geometry that is not triangles, or a ray parallel to the plane (or a zero-area triangle).
+  bool triangle_hit(unsigned geom, unsigned prim, const float org[3], const float dir[3], float* t,
+                    double normal[3] = nullptr) const;
+  // Triangles only (no segments or points): rays may be cast in packets (core/nearest_hit.h).
+  bool only_triangles() const;
   uint64_t embree_bytes() const;  // bytes Embree holds now
   uint64_t peak_embree_bytes() const;
   void* handle() const;           // the RTCScene, for the ray caster

@@ -42,6 +42,21 @@ void compare_silhouettes(std::span<const uint8_t> original, std::span<const uint
     original_only += o && !l;
   }
   out.mismatched = lod_only + original_only;
+  out.thin = 0;
+  out.thin_kept = 0;
+  // A pixel is thick when one of the (up to) four 2 × 2 blocks around it lies wholly in O.
+  const auto block = [&](int x, int y) {  // the block whose top left pixel is (x, y)
+    if (x < 0 || y < 0 || x + 1 >= width || y + 1 >= height) return false;
+    const size_t i = static_cast<size_t>(y) * static_cast<size_t>(width) + static_cast<size_t>(x);
+    return original[i] && original[i + 1] && original[i + width] && original[i + width + 1];
+  };
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      const size_t i = static_cast<size_t>(y) * static_cast<size_t>(width) + static_cast<size_t>(x);
+      if (!original[i] || block(x, y) || block(x - 1, y) || block(x, y - 1) || block(x - 1, y - 1)) continue;
+      ++out.thin;
+      out.thin_kept += lod[i] != 0;
+    }
   if (!distance_image.empty()) std::fill(distance_image.begin(), distance_image.end(), 0.0f);
   if (out.mismatched == 0) return;
 
@@ -76,6 +91,8 @@ void add_silhouette_counts(SilhouetteCounts& total, const SilhouetteCounts& view
   total.mismatched += view.mismatched;
   total.covered_either += view.covered_either;
   total.covered_both += view.covered_both;
+  total.thin += view.thin;
+  total.thin_kept += view.thin_kept;
   if (view.histogram.empty()) return;
   std::vector<SquaredDistanceCount> merged;
   merged.reserve(total.histogram.size() + view.histogram.size());
@@ -121,6 +138,9 @@ SilhouetteStats silhouette_stats(const SilhouetteCounts& counts) {
   s.mismatched = counts.mismatched;
   s.covered_either = counts.covered_either;
   s.covered_both = counts.covered_both;
+  s.thin = counts.thin;
+  s.thin_kept = counts.thin_kept;
+  s.thin_kept_fraction = counts.thin == 0 ? 1.0 : static_cast<double>(counts.thin_kept) / static_cast<double>(counts.thin);
   s.mismatch_fraction = counts.covered_either == 0 ? 0.0
                                                    : static_cast<double>(counts.mismatched) /
                                                          static_cast<double>(counts.covered_either);

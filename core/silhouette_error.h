@@ -16,6 +16,11 @@
 // border is nearer than anything in view. (Without that bound, a pinhole in a view the original fills
 // would count as the image diagonal.)
 //
+// Thin features: a pixel of O that no 2 × 2 block of O's pixels contains belongs to a part of the original
+// at most about one pixel wide (a pole, a railing, a wire) or small (a lamp), or to a one-pixel sliver of a
+// larger part. The share of those pixels that L covers too says whether the level keeps the features that
+// a one-ray-a-pixel comparison would count as silhouette errors far from any outline.
+//
 // Exactness: every distance is kept as its squared value, an integer dx² + dy² (< 2^31), in a histogram keyed
 // by that value; counts are exact integers. So max and p95 are exact (the square root of an exact integer),
 // and summing views (add_silhouette_counts) gives the same histogram in any order. The mean is a double sum
@@ -41,6 +46,8 @@ struct SilhouetteCounts {
   uint64_t mismatched = 0;      // pixels covered by exactly one of O and L
   uint64_t covered_either = 0;  // pixels covered by O or L
   uint64_t covered_both = 0;    // pixels covered by O and L
+  uint64_t thin = 0;            // pixels of O in no 2 × 2 block of O's pixels
+  uint64_t thin_kept = 0;       // of those, pixels covered by L
   // Distances of the mismatched pixels: increasing `squared`, each value once; counts sum to `mismatched`.
   std::vector<SquaredDistanceCount> histogram;
 };
@@ -70,6 +77,8 @@ struct SilhouetteStats {
   uint64_t mismatched = 0;
   uint64_t covered_either = 0;
   uint64_t covered_both = 0;
+  uint64_t thin = 0, thin_kept = 0;
+  double thin_kept_fraction = 1; // thin_kept / thin, 1 when the original has no thin pixel
   double max = 0;                // largest distance (0 when nothing is mismatched)
   double p95 = 0;                // nearest-rank 95th percentile of the distances
   double mean = 0;               // mean distance over the mismatched pixels

@@ -1,11 +1,16 @@
-// Primary-ray images of a RayScene (../shared/DESIGN.md "Error report"): one ray through the centre of
-// every pixel of a square pinhole camera, traced one ray at a time (rtcIntersect1) over 4×4 pixel tiles,
-// tiles in parallel. Not as 16-ray packets: Embree's packet traversal falls back to its single-ray
-// intersector where few rays of a packet remain, the two can round a hit's distance or normal differently,
-// and where that happens depends on the BVH, so an image would depend on how the scene is chunked. Each
-// pixel gets the hit distance along its unit ray, the geometric normal turned to face the camera (so one-
-// and two-sided faces compare alike), and the kind of primitive hit. A pixel's result depends on that
-// pixel's ray only, so images are the same for any thread count.
+// Primary-ray images of a RayScene (../shared/DESIGN.md "Error report"): a square pinhole camera, traced
+// over 4×4 pixel tiles, tiles in parallel. The pixel rule, the same for an original and a level: a pixel is
+// covered when its centre ray hits, or else when any of k × k rays spread evenly over it (camera.supersample
+// = k, at ((i + ½) / k, (j + ½) / k) of the pixel) hits; its depth, normal and kind are the centre ray's hit,
+// or else the nearest of the k × k hits. So a part of a scene that crosses a pixel without meeting its
+// centre still covers it, when it is wider than about 1/k pixel, whatever kind of primitive it is.
+//
+// Rays go in 16-ray packets (rtcIntersect16): a triangle's distance and normal are recomputed from its
+// corners (core/nearest_hit.h), so they do not depend on which of Embree's intersectors found the hit; on a
+// scene of lines and points, a ray whose packet found a hit there is traced again alone (rtcIntersect1),
+// so a curve's or a disc's hit always comes from Embree's single-ray intersector. Each pixel gets the hit distance along its unit ray, the geometric normal
+// turned to face the camera (so one- and two-sided faces compare alike), and the kind of primitive hit. A
+// pixel's result depends on that pixel's rays only, so images are the same for any thread count.
 //
 // Views for the report lie on a Fibonacci sphere (González, "Measurement of areas on a sphere using
 // Fibonacci and latitude–longitude lattices", 2010): K directions of near-equal spacing, deterministic.
@@ -24,6 +29,7 @@ struct Camera {
   double forward[3] = {0, 0, 1}, right[3] = {1, 0, 0}, up[3] = {0, 1, 0};  // orthonormal
   double tan_half_fov = 0.5773502691896257;
   unsigned resolution = 512;
+  unsigned supersample = 1;  // k: k × k rays a pixel where the centre ray misses (1 = the centre ray only)
   // Object-space width of one pixel at distance `range` from the eye (along the view axis).
   double pixel_size(double range) const { return 2 * range * tan_half_fov / resolution; }
 };
@@ -35,21 +41,32 @@ Camera look_at(const double eye[3], const double target[3], double fov_degrees, 
 // Unit direction k of K on the Fibonacci sphere: z = 1 - (2k + 1) / K, longitude k·π(3 − √5).
 void fibonacci_direction(unsigned k, unsigned count, double out[3]);
 
+// Embree radii that draw a line or a point one pixel wide under the pixel rule, as a renderer draws an
+// original's lines and points: with k × k rays a pixel spaced s = pixel / k apart, a line of radius s / 2
+// meets one of them in every pixel it crosses, and a disc of radius s / √2 (the square lattice's covering
+// radius) always meets one, in its pixel or a neighbour. `pixel`: the width of a pixel where they are.
+struct OnePixelRadii {
+  float line = 0, point = 0;
+};
+OnePixelRadii one_pixel_radii(double pixel, unsigned k);
+
 struct ViewImage {
   unsigned resolution = 0;
   std::vector<float> depth;        // distance along the pixel's unit ray; +inf where nothing was hit
   std::vector<float> normal;       // xyz per pixel, unit, facing the camera; 0 where nothing was hit
   std::vector<uint8_t> kind;       // PrimitiveKind per pixel (none = background)
+  std::vector<uint8_t> centre;     // 1 where the pixel's hit is its centre ray's (else one of its k × k rays')
   bool covered(uint64_t pixel) const { return kind[pixel] != 0; }
 };
 
 // Row-major, row 0 at the top. The nearest hit over all `scenes` counts (an original's triangles and its
-// one-pixel lines live in separate scenes); of hits at equal distance, the first scene's, then the lowest
-// geometry id's, then the lowest primitive id's (core/nearest_hit.h). With `accumulate`, `out` holds the
-// image of earlier chunks of the same scene list (same camera): a pixel changes only where this chunk's hit
-// is strictly nearer, so tracing the chunks of a scene in order, each as `scenes`, gives the image of the
-// whole scene when a chunk's primitives come after every earlier chunk's in that key order. Returns the
-// number of rays cast.
+// lines and points live in separate scenes); of hits at equal distance, the first scene's, then the lowest
+// geometry id's, then the lowest primitive id's (core/nearest_hit.h), then, among a pixel's k × k rays, the
+// first's. With `accumulate`, `out` holds the image of earlier chunks of the same scene list (same camera):
+// a pixel changes only where this chunk's hit is strictly nearer (a centre hit always replaces a k × k
+// one), so tracing the chunks of a scene in order, each as `scenes`, gives the image of the whole scene
+// when a chunk's primitives come after every earlier chunk's in that key order. The k × k rays of a pixel
+// are cast only while no chunk's centre ray has hit it. Returns the number of rays cast (per scene).
 uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out,
                    bool accumulate = false);
 

@@ -95,8 +95,11 @@ void write_report_html(const std::string& path, const Report& report, const Repo
        ".caption{font-size:12px;color:#555}.plots svg{margin-right:16px}</style></head><body>\n";
   h += "<h1>lodstream error report</h1>\n";
   h += fmt::format("<p>{} views per level, {}×{} pixels, seed {}, {} Hausdorff samples of each kind per direction. "
-                   "Pixel figures are pixels of these images, with the camera at the level's switching distance.</p>\n",
-                   options.views, options.resolution, options.resolution, options.seed, options.samples);
+                   "Pixel figures are pixels of these images, with the camera at the level's switching distance. "
+                   "A pixel is covered when its centre ray or any of {}×{} rays over it hits, for original and level "
+                   "alike.</p>\n",
+                   options.views, options.resolution, options.resolution, options.seed, options.samples,
+                   options.supersample, options.supersample);
   h += "<div class=\"plots\">";
   h += plot(report, "silhouette error p95 vs triangles", "pixels", [](const ReportLevel& l) { return l.silhouette.p95; });
   h += plot(report, "Hausdorff mean vs triangles", "% of bbox diagonal", [](const ReportLevel& l) { return l.hausdorff_mean_percent; });
@@ -106,14 +109,15 @@ void write_report_html(const std::string& path, const Report& report, const Repo
     h += fmt::format("<h2>{}</h2>\n<p>original {}: {} triangles, bbox diagonal {}</p>\n", escape(run.name),
                      escape(run.original), run.original_triangles, num(run.bbox_diagonal));
     h += "<table><tr><th>level</th><th>triangles</th><th>edges</th><th>points</th><th>switch distance</th>"
-         "<th>silhouette max / p95 / mean (px)</th><th>mismatch</th><th>depth p95 (px)</th><th>normal p95 (°)</th>"
+         "<th>silhouette max / p95 / mean (px)</th><th>mismatch</th><th>thin kept</th><th>depth p95 (px)</th><th>normal p95 (°)</th>"
          "<th>Hausdorff max / mean (% diag)</th><th>Hausdorff max / mean (px)</th></tr>\n";
     for (size_t l = 0; l < run.levels.size(); ++l) {
       const ReportLevel& v = run.levels[l];
       h += fmt::format("<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{} / {} / {}</td><td>{:.3f}%</td>"
-                       "<td>{}</td><td>{}</td><td>{} / {}</td><td>{} / {}</td></tr>\n",
+                       "<td>{:.1f}%</td><td>{}</td><td>{}</td><td>{} / {}</td><td>{} / {}</td></tr>\n",
                        l, v.triangles, v.edges, v.points, num(v.switch_distance), num(v.silhouette.max),
-                       num(v.silhouette.p95), num(v.silhouette.mean), 100 * v.mismatch_fraction, num(v.depth.p95),
+                       num(v.silhouette.p95), num(v.silhouette.mean), 100 * v.mismatch_fraction,
+                       100 * v.thin_kept_fraction, num(v.depth.p95),
                        num(v.normal.p95), num(v.hausdorff_max_percent), num(v.hausdorff_mean_percent),
                        num(v.hausdorff_max_pixels), num(v.hausdorff_mean_pixels));
     }

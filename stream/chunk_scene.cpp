@@ -16,10 +16,11 @@ std::unique_ptr<ChunkScene> load_chunk_scene(StoreChunks& chunks, size_t index, 
   return chunk;
 }
 
-std::unique_ptr<core::RayScene> build_wire(const ChunkGeometry& g, float half_pixel, uint64_t embree_limit) {
+std::unique_ptr<core::RayScene> build_wire(const ChunkGeometry& g, float line_radius, float point_radius,
+                                           uint64_t embree_limit) {
   auto scene = std::make_unique<core::RayScene>(embree_limit);
-  scene->add_segments(g.xyz, g.lines, std::vector<float>(g.lines.size() / 2, half_pixel));
-  scene->add_points(g.xyz, g.points, half_pixel);
+  scene->add_segments(g.xyz, g.lines, std::vector<float>(g.lines.size() / 2, line_radius));
+  scene->add_points(g.xyz, g.points, point_radius);
   scene->commit();
   return scene;
 }

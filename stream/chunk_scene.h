@@ -29,7 +29,9 @@ struct ChunkScene {
 // Reads chunk `index` and builds its triangle scene within `embree_limit` bytes.
 std::unique_ptr<ChunkScene> load_chunk_scene(StoreChunks& chunks, size_t index, uint64_t embree_limit);
 
-// The chunk's lines and points as segments and discs of radius `half_pixel`.
-std::unique_ptr<core::RayScene> build_wire(const ChunkGeometry& g, float half_pixel, uint64_t embree_limit);
+// The chunk's lines and points as segments and discs of the given radii (what a renderer draws one pixel
+// wide, at the radii of the caller's pixel rule).
+std::unique_ptr<core::RayScene> build_wire(const ChunkGeometry& g, float line_radius, float point_radius,
+                                           uint64_t embree_limit);
 
 }  // namespace lodstream::stream

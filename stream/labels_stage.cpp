@@ -79,7 +79,8 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
                                                (cam.eye[1] - center[1]) * (cam.eye[1] - center[1]) +
                                                (cam.eye[2] - center[2]) * (cam.eye[2] - center[2]));
         std::unique_ptr<core::RayScene> wire =
-            chunk->has_wire() ? build_wire(chunk->geometry, static_cast<float>(cam.pixel_size(eye_to_center) / 2), scene_bytes)
+            chunk->has_wire() ? build_wire(chunk->geometry, static_cast<float>(cam.pixel_size(eye_to_center) / 2),
+                                           static_cast<float>(cam.pixel_size(eye_to_center) / 2), scene_bytes)
                               : nullptr;
         const core::RayScene* scenes[] = {chunk->triangles.get(), wire.get()};
         core::cast_view(std::span<const core::RayScene* const>(scenes, wire ? 2 : 1), cam, &images[v], true);

@@ -6,19 +6,22 @@
 // --memory leaves, one chunk in core. Its samples and view targets are drawn in two passes over the chunks.
 // For every level:
 // 1. read the LOD file, draw its samples, and the original → level Hausdorff distances against its scene
-//    (thick edges as flat curves of radius max(T/2, half a pixel), points as one-pixel discs);
+//    (its triangles, and its thick edges and points as flat curves and discs, whose radii do not enter
+//    the distances);
 // 2. chunk-outer passes over the original: each chunk's Embree scene (its triangles; its lines and points,
 //    drawn one pixel wide, in a small second scene per level distance) is built once per pass, every
 //    level's samples are lowered to their distance to it (level → original Hausdorff), and every view of
 //    the levels of the pass accumulates its image; then it is freed;
 // 3. views: K directions on a Fibonacci sphere, view k aimed at the k-th of K points sampled uniformly
 //    by area on the original's surface, the camera at the level's switching distance from that point;
-//    the level ray cast into H × H images, compared with the original's: silhouette error from exact
+//    the level ray cast into H × H images under the same pixel rule as the original (core/view_cast.h:
+//    centre ray, else any of k × k rays; thick edges at their true width), compared with the original's:
+//    silhouette error and thin-feature share from exact
 //    distance transforms of the original's coverage (core/silhouette_error.h); depth and normal error
 //    where both cover.
 // Levels whose distance comes from their Hausdorff max take one more pass (distances first). What stays
 // between chunks: the samples and their distances so far, and for the levels of a pass the original's
-// view images (depth, normal, kind: 17 bytes a pixel); levels are grouped into passes so that these take
+// view images (depth, normal, kind, centre: 18 bytes a pixel); levels are grouped into passes so that these take
 // at most half of what --memory leaves. A level too large for the rest is traced in chunks as well.
 // Everything drawn at random comes from counter-based streams of --seed (views, targets, samples), every
 // sum is formed in a fixed order, distances are minima over chunks and a pixel keeps the hit of lowest
@@ -110,6 +113,7 @@ std::vector<RunSpec> resolve_runs(const ReportOptions& ro) {
   if (ro.views == 0) fail(Status::usage, "--views must be at least 1");
   if (ro.resolution < 8 || ro.resolution > 8192) fail(Status::usage, "--resolution must be between 8 and 8192");
   if (!(ro.fov_degrees > 0 && ro.fov_degrees < 180)) fail(Status::usage, "--fov must be between 0 and 180 degrees");
+  if (ro.supersample < 1 || ro.supersample > 16) fail(Status::usage, "--supersample must be between 1 and 16");
   if (!(ro.pixels_per_cell > 0)) fail(Status::usage, "--pixels-per-cell must be positive");
   for (const std::string& dir : ro.runs) {
     const std::string manifest_path = dir + "/manifest.json";
@@ -408,13 +412,13 @@ std::vector<uint8_t> heat(const core::ViewImage& o, const core::ViewImage& l, st
 
 const char* kCsvHeader =
     "view,dir_x,dir_y,dir_z,target_x,target_y,target_z,eye_x,eye_y,eye_z,covered_pixels,mismatched_pixels,"
-    "silhouette_max_px,silhouette_mean_px,both_pixels,depth_mean_px,normal_mean_deg\n";
+    "silhouette_max_px,silhouette_mean_px,both_pixels,depth_mean_px,normal_mean_deg,thin_pixels,thin_kept_pixels\n";
 
 std::string fmt_csv_row(unsigned k, const double* dir, const double* target, const double* eye,
                         const core::SilhouetteStats& s, uint64_t both, double depth_mean, double normal_mean) {
-  return fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", k, dir[0], dir[1], dir[2], target[0],
+  return fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", k, dir[0], dir[1], dir[2], target[0],
                      target[1], target[2], eye[0], eye[1], eye[2], s.covered_either, s.mismatched, s.max, s.mean,
-                     both, depth_mean, normal_mean);
+                     both, depth_mean, normal_mean, s.thin, s.thin_kept);
 }
 
 struct LevelResult {
@@ -450,17 +454,40 @@ struct LevelWork {
   double pixel_at(double d, unsigned resolution) const { return 2 * d * tan_half / resolution; }
 };
 
-// Per-pixel bytes of a view image held between chunks: depth, normal, kind.
-constexpr uint64_t kViewPixelBytes = 4 + 12 + 1;
+// Per-pixel bytes of a view image held between chunks: depth, normal, kind, centre.
+constexpr uint64_t kViewPixelBytes = 4 + 12 + 1 + 1;
 
-std::unique_ptr<core::RayScene> build_level_scene(const core::LodMesh& mesh, float half_pixel, uint64_t embree_limit) {
-  auto scene = std::make_unique<core::RayScene>(embree_limit);
-  scene->add_triangles(mesh.positions, mesh.triangles);
+// What a renderer draws one pixel wide (an original's lines and points, a level's points and its edges of
+// thickness 0), at the radii of core::one_pixel_radii for the pixel's width at the level's distance.
+struct WireRadii {
+  float line = 0, point = 0;
+  WireRadii(double pixel, unsigned k) {
+    const core::OnePixelRadii r = core::one_pixel_radii(pixel, k);
+    line = r.line, point = r.point;
+  }
+};
+
+// A level (or a chunk of it) as two scenes: its triangles (cast in packets) and its edges and points. Their
+// order keeps the key order of the tie rule: triangles, then edges, then points.
+struct LevelScene {
+  std::unique_ptr<core::RayScene> triangles, wire;
+  std::vector<const core::RayScene*> list() const { return {triangles.get(), wire.get()}; }
+};
+
+// Thick edges at their true width (radius T / 2), with no floor: a part of the original thinner than the
+// rays can resolve is missed on both sides alike. An edge of thickness 0 (an original line kept as it is)
+// and a point are drawn one pixel wide, as the original's are.
+LevelScene build_level_scene(const core::LodMesh& mesh, const WireRadii& wire, uint64_t embree_limit) {
+  LevelScene scene;
+  scene.triangles = std::make_unique<core::RayScene>(embree_limit);
+  scene.triangles->add_triangles(mesh.positions, mesh.triangles);
+  scene.triangles->commit();
+  scene.wire = std::make_unique<core::RayScene>(embree_limit);
   std::vector<float> radius(mesh.edge_count());
-  for (size_t e = 0; e < radius.size(); ++e) radius[e] = std::max(mesh.thickness[e] / 2, half_pixel);
-  scene->add_segments(mesh.positions, mesh.edges, radius);
-  scene->add_points(mesh.positions, mesh.points, half_pixel);
-  scene->commit();
+  for (size_t e = 0; e < radius.size(); ++e) radius[e] = mesh.thickness[e] > 0 ? mesh.thickness[e] / 2 : wire.line;
+  scene.wire->add_segments(mesh.positions, mesh.edges, radius);
+  scene.wire->add_points(mesh.positions, mesh.points, wire.point);
+  scene.wire->commit();
   return scene;
 }
 
@@ -491,8 +518,8 @@ class LevelChunks {
   }
   size_t size() const { return ranges_.size(); }
   // The scene of chunk c; the whole level's for a level in one chunk.
-  std::unique_ptr<core::RayScene> scene(size_t c, float half_pixel, uint64_t embree_limit) {
-    if (ranges_.size() == 1) return build_level_scene(m_, half_pixel, embree_limit);
+  LevelScene scene(size_t c, const WireRadii& wire, uint64_t embree_limit) {
+    if (ranges_.size() == 1) return build_level_scene(m_, wire, embree_limit);
     const auto [first, end] = ranges_[c];
     core::LodMesh part;
     if (local_.empty()) local_.assign(m_.vertex_count(), UINT32_MAX);
@@ -522,7 +549,7 @@ class LevelChunks {
     }
     if (end > t + e) take(m_.points, 1, t + e, part.points);
     for (uint32_t v : touched) local_[v] = UINT32_MAX;
-    return build_level_scene(part, half_pixel, embree_limit);
+    return build_level_scene(part, wire, embree_limit);
   }
 
  private:
@@ -569,10 +596,9 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   w.level_chunks = chunks.size();
   std::vector<float> d(o.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
   for (size_t c = 0; c < chunks.size(); ++c) {
-    const auto scene = chunks.scene(c, static_cast<float>(w.pixel_at(w.distance, ro.resolution) / 2), limit);
+    const LevelScene scene = chunks.scene(c, WireRadii(w.pixel_at(w.distance, ro.resolution), ro.supersample), limit);
     const auto t_q = std::chrono::steady_clock::now();
-    const core::RayScene* to_lod[] = {scene.get()};
-    lower_closest_distances(o.samples.xyz, to_lod, d);
+    lower_closest_distances(o.samples.xyz, scene.list(), d);
     w.out.queries += d.size();
     w.out.query_seconds += seconds_since(t_q);
   }
@@ -618,12 +644,17 @@ void begin_views(const Original& o, LevelWork& w, const ReportOptions& ro) {
     double dir[3], target[3], eye[3];
     view_geometry(o, w, ro, k, dir, target, eye);
     w.cameras.push_back(core::look_at(eye, target, w.run->fov_degrees, ro.resolution));
+    w.cameras.back().supersample = ro.supersample;
   }
   w.original_views.assign(w.views, core::ViewImage{});
 }
 
-using stream::build_wire;
 using stream::ChunkScene;
+
+// A chunk's lines and points drawn one pixel wide (WireRadii) for a level's distance.
+std::unique_ptr<core::RayScene> build_wire(const stream::ChunkGeometry& g, const WireRadii& wire, uint64_t embree_limit) {
+  return stream::build_wire(g, wire.line, wire.point, embree_limit);
+}
 
 struct TraceTotals {
   uint64_t chunks = 0;              // chunk scenes built
@@ -651,7 +682,8 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
     const bool wire = chunk->has_wire();
     for (LevelWork* w : queries) {
       const auto t0 = std::chrono::steady_clock::now();
-      std::unique_ptr<core::RayScene> lines = wire ? build_wire(chunk->geometry, 1.0f, embree_limit) : nullptr;
+      // Radii do not enter the point queries.
+      std::unique_ptr<core::RayScene> lines = wire ? build_wire(chunk->geometry, WireRadii(1.0, 1), embree_limit) : nullptr;
       const core::RayScene* scenes[] = {chunk->triangles.get(), lines ? lines.get() : chunk->triangles.get()};
       lower_closest_distances(w->samples.xyz, std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->to_original);
       w->out.queries += w->to_original.size();
@@ -661,7 +693,7 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
     for (LevelWork* w : viewed) {
       const auto t0 = std::chrono::steady_clock::now();
       std::unique_ptr<core::RayScene> lines =
-          wire ? build_wire(chunk->geometry, static_cast<float>(w->pixel_at(w->distance, ro.resolution) / 2), embree_limit) : nullptr;
+          wire ? build_wire(chunk->geometry, WireRadii(w->pixel_at(w->distance, ro.resolution), ro.supersample), embree_limit) : nullptr;
       const core::RayScene* scenes[] = {chunk->triangles.get(), lines.get()};
       for (unsigned k = 0; k < w->views; ++k)
         w->out.rays += core::cast_view(std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->cameras[k],
@@ -681,7 +713,7 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   const core::LodMesh mesh = io::read_lod_mesh(w.run->levels[w.index].file);
   const unsigned h = ro.resolution;
   const uint64_t pixels = uint64_t{h} * h;
-  const float half_pixel = static_cast<float>(w.pixel_at(w.distance, ro.resolution) / 2);
+  const WireRadii wire(w.pixel_at(w.distance, ro.resolution), ro.supersample);
   // In one chunk, each view is cast and compared in turn; in several, every view's image is accumulated
   // chunk by chunk first (the level's images then take as much memory as the original's).
   // Besides the level: with several chunks, every view's image.
@@ -689,18 +721,18 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap));
   w.level_chunks = std::max<uint64_t>(w.level_chunks, chunks.size());
   std::vector<core::ViewImage> lod_views(chunks.size() > 1 ? w.views : 1);
-  std::unique_ptr<core::RayScene> lod;
+  LevelScene lod;
   if (chunks.size() > 1) {
     for (size_t c = 0; c < chunks.size(); ++c) {
-      lod = chunks.scene(c, half_pixel, limit);
-      const core::RayScene* lod_scenes[] = {lod.get()};
+      lod = chunks.scene(c, wire, limit);
+      const auto lod_scenes = lod.list();
       const auto t_r = std::chrono::steady_clock::now();
       for (unsigned k = 0; k < w.views; ++k) w.out.rays += core::cast_view(lod_scenes, w.cameras[k], &lod_views[k], true);
       w.out.ray_seconds += seconds_since(t_r);
     }
-    lod.reset();
+    lod = {};
   } else {
-    lod = chunks.scene(0, half_pixel, limit);
+    lod = chunks.scene(0, wire, limit);
   }
   core::SilhouetteCounts total;
   core::SilhouetteScratch scratch;
@@ -710,9 +742,9 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
     view_geometry(o, w, ro, k, dir, target, eye);
     const core::Camera& cam = w.cameras[k];
     const core::ViewImage& vo = w.original_views[k];
-    core::ViewImage& vl = lod ? lod_views[0] : lod_views[k];
-    if (lod) {
-      const core::RayScene* lod_scenes[] = {lod.get()};
+    core::ViewImage& vl = lod.triangles ? lod_views[0] : lod_views[k];
+    if (lod.triangles) {
+      const auto lod_scenes = lod.list();
       const auto t_r = std::chrono::steady_clock::now();
       w.out.rays += core::cast_view(lod_scenes, cam, &vl);
       w.out.ray_seconds += seconds_since(t_r);
@@ -746,7 +778,7 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
       w.out.views.push_back(std::move(hv));
     }
     w.original_views[k] = {};
-    if (!lod) lod_views[k] = {};
+    if (!lod.triangles) lod_views[k] = {};
   }
   w.original_views = {};
   lod_views = {};
@@ -758,6 +790,7 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   L.mismatched_pixels = s.mismatched;
   L.covered_pixels = s.covered_either;
   L.mismatch_fraction = s.mismatch_fraction;
+  L.thin_pixels = s.thin, L.thin_kept_pixels = s.thin_kept, L.thin_kept_fraction = s.thin_kept_fraction;
   L.depth = stats_of(depth_err);
   L.normal = stats_of(normal_err);
   L.seconds += seconds_since(t0);
@@ -772,7 +805,7 @@ nlohmann::ordered_json report_json(const Report& rep, const ReportOptions& ro) {
   nlohmann::ordered_json j;
   j["generator"] = std::string("lodstream ") + LODSTREAM_VERSION;
   j["options"] = {{"views", ro.views}, {"resolution", ro.resolution}, {"seed", ro.seed}, {"samples", ro.samples},
-                  {"pixels_per_cell", ro.pixels_per_cell}};
+                  {"pixels_per_cell", ro.pixels_per_cell}, {"supersample", ro.supersample}};
   j["units"] = {{"pixels", "pixels of the resolution × resolution report images, camera at the switching distance"},
                 {"hausdorff", "scene units"},
                 {"normal", "degrees"}};
@@ -799,7 +832,9 @@ nlohmann::ordered_json report_json(const Report& rep, const ReportOptions& ro) {
                                         {"mean_px", l.silhouette.mean}, {"rms_px", l.silhouette.rms},
                                         {"mismatched_pixels", l.mismatched_pixels},
                                         {"covered_pixels", l.covered_pixels},
-                                        {"mismatch_fraction", l.mismatch_fraction}}},
+                                        {"mismatch_fraction", l.mismatch_fraction},
+                                        {"thin_pixels", l.thin_pixels}, {"thin_kept_pixels", l.thin_kept_pixels},
+                                        {"thin_kept_fraction", l.thin_kept_fraction}}},
                         {"depth_px", stats_json(l.depth)},
                         {"normal_degrees", stats_json(l.normal)},
                         {"hausdorff", {{"max", l.hausdorff_max}, {"mean", l.hausdorff_mean}, {"rms", l.hausdorff_rms},

@@ -219,14 +219,14 @@ void print_report(const lodstream::Report& r, const std::string& out_dir) {
   for (const auto& run : r.runs) {
     std::printf("run          %s: original %s, %s triangles\n", run.name.c_str(), run.original.c_str(),
                 grouped(run.original_triangles).c_str());
-    std::printf("%-6s %12s %12s %26s %10s %12s %24s\n", "level", "triangles", "switch dist", "silhouette max/p95/mean px",
-                "mismatch", "normal p95", "Hausdorff max/mean %diag");
+    std::printf("%-6s %12s %12s %26s %10s %10s %12s %24s\n", "level", "triangles", "switch dist", "silhouette max/p95/mean px",
+                "mismatch", "thin kept", "normal p95", "Hausdorff max/mean %diag");
     for (size_t l = 0; l < run.levels.size(); ++l) {
       const auto& v = run.levels[l];
       const std::string sil = fmt::format("{:.3g} / {:.3g} / {:.3g}", v.silhouette.max, v.silhouette.p95, v.silhouette.mean);
       const std::string hd = fmt::format("{:.3g} / {:.3g}", v.hausdorff_max_percent, v.hausdorff_mean_percent);
-      std::printf("%-6zu %12s %12.6g %26s %9.3f%% %11.3g° %24s\n", l, grouped(v.triangles).c_str(), v.switch_distance,
-                  sil.c_str(), 100 * v.mismatch_fraction, v.normal.p95, hd.c_str());
+      std::printf("%-6zu %12s %12.6g %26s %9.3f%% %9.1f%% %11.3g° %24s\n", l, grouped(v.triangles).c_str(), v.switch_distance,
+                  sil.c_str(), 100 * v.mismatch_fraction, 100 * v.thin_kept_fraction, v.normal.p95, hd.c_str());
     }
   }
   std::printf("rays         %s in %.3f s (%.3g M/s); %s point queries in %.3f s (%.3g M/s)\n", grouped(r.rays).c_str(),
@@ -373,6 +373,8 @@ int main(int argc, char** argv) {
   report_cmd->add_option("--pixels-per-cell", ro.pixels_per_cell,
                          "With --lod and no distances: the Hausdorff max spans this many pixels at the switch (default 5)");
   report_cmd->add_option("--html-views", ro.html_views, "Views per level rendered into report.html (default 3)");
+  report_cmd->add_option("--supersample", ro.supersample,
+                         "k: a pixel is covered when its centre ray or any of k x k rays over it hits, for original and level alike (1-16, default 3)");
   report_cmd->add_flag("--json", json, "Print report.json instead of the table");
   add_common(report_cmd);
   add_space_check(report_cmd);

@@ -234,6 +234,10 @@ struct ReportOptions {
   double fov_degrees = 60;                  // for `lods` (runs use their manifest's)
   double pixels_per_cell = 5;               // for `lods` without distances: Hausdorff max spans this many pixels
   unsigned html_views = 3;                  // views rendered into report.html per level
+  // The pixel rule, for original and level alike: a pixel is covered when its centre ray hits, or else any
+  // of k × k rays spread over it (k = supersample, 1 to 16). Lines and points are drawn one pixel wide,
+  // thick edges at their thickness (README, "report").
+  unsigned supersample = 3;
 };
 
 // Distribution of an error over pixels or samples. Units depend on the field.
@@ -253,6 +257,10 @@ struct ReportLevel {
   ErrorStats silhouette;
   uint64_t mismatched_pixels = 0, covered_pixels = 0;  // covered: by either image
   double mismatch_fraction = 0;   // mismatched / covered
+  // Thin features: pixels of the original in no 2 × 2 block of its pixels (parts about a pixel wide or
+  // small), and of those, the ones the level covers too.
+  uint64_t thin_pixels = 0, thin_kept_pixels = 0;
+  double thin_kept_fraction = 1;  // thin_kept_pixels / thin_pixels (1 when there are none)
   ErrorStats depth;               // pixels covered by both: |depth difference| in pixels at that depth
   ErrorStats normal;              // pixels covered by both: angle between camera-facing normals, degrees
   // Two-sided Hausdorff distance (scene units) by Metro-style sampling; closest points by Embree.
