@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <memory>
 #include <span>
 
@@ -26,11 +27,13 @@
 #include "lodstream/lodstream.h"
 #include "stream/cluster_stage.h"
 #include "stream/disk_space.h"
+#include "stream/emit_regions.h"
 #include "stream/emit_stage.h"
 #include "stream/grade_stage.h"
 #include "stream/ingest.h"
 #include "stream/job.h"
 #include "stream/kill_point.h"
+#include "stream/level_files.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
@@ -345,25 +348,79 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         return cs.cells;
       };
 
-      // Emits every level at `sizes` with `cells` cells, handing each finished mesh to `sink` (level index,
-      // mesh), in groups that share a pass over the input as far as the memory plan allows
-      // (stream::emit_group_end); the grouping changes no byte. Each mesh is written as soon as it is
-      // finished, so no finished mesh is held while the next levels are emitted.
-      auto emit_all = [&](const std::vector<double>& sizes, const std::vector<uint64_t>& cells,
-                          const stream::EmitOptions& eo, const std::function<void(size_t, core::LodMesh&)>& sink) {
-        // Every level is checked before the first is written, so that a level that cannot fit stops the run
+      // Emits every level at `sizes` with `cells` cells. Counting (eo.count_only): whole levels, in groups that
+      // share a pass over the input as far as the memory plan allows (stream::emit_group_end). Otherwise
+      // region by region (stream/emit_regions.h): `sink(level, region info, part)` gets every region's part,
+      // level by level, each level's in region order, and `level_done(level)` follows its last part. Levels
+      // that fit whole share passes as when counting; the others are emitted in batches of regions. Neither
+      // the grouping nor the batches change a byte.
+      using PartSink = std::function<void(size_t, const stream::RegionInfo&, stream::RegionPart&)>;
+      auto emit_all = [&](const std::vector<double>& sizes, const std::vector<uint64_t>& cells, const stream::EmitOptions& eo,
+                          const PartSink& sink, const std::function<void(size_t)>& level_done) {
+        std::vector<stream::EmitCounts> counts(sizes.size());
+        if (eo.count_only) {
+          for (size_t l = 0; l < sizes.size(); ++l)
+            stream::check_emit_budget(cells, l, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
+          for (size_t first = 0; first < sizes.size();) {
+            const size_t end = stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
+            std::vector<stream::EmitLevel> group;
+            for (size_t l = first; l < end; ++l) group.push_back({l, cells[l], sizes[l]});
+            const std::vector<stream::EmitCounts> c = stream::emit_levels(
+                store_dir, meta, canonical, prefix, group, grade.records, copts, eo, progress, scratch, [](size_t, stream::RegionPart&) {});
+            std::copy(c.begin(), c.end(), counts.begin() + static_cast<ptrdiff_t>(first));
+            first = end;
+          }
+          return counts;
+        }
+        const core::SceneCube cube = stream::scene_cube_of(meta);
+        const std::vector<stream::LevelCut> cuts = stream::cut_levels(prefix, cells, cube, stream::kRegionMaxCells);
+        // Every level is planned before the first is written, so that a level that cannot fit stops the run
         // before any output file appears.
+        std::vector<stream::EmitLevelPlan> plans;
         for (size_t l = 0; l < sizes.size(); ++l)
-          stream::check_emit_budget(cells, l, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
-        std::vector<stream::EmitCounts> counts;
+          plans.push_back(stream::plan_emit_level(l, cells[l], *std::max_element(cuts[l].cells.begin(), cuts[l].cells.end()),
+                                                  meta.vertices, meta.primitives(), plan.stage_bytes, eo));
+        auto info = [&](size_t l, uint32_t r) {
+          stream::RegionInfo i;
+          i.level = l, i.key = cuts[l].regions[r], i.cell_size = sizes[l], i.cells = cuts[l].cells[r];
+          core::region_box(cube, i.key, i.box_min, i.box_max);
+          return i;
+        };
+        auto add = [&](size_t l, const stream::EmitCounts& c) {
+          counts[l].triangles += c.triangles, counts[l].edges += c.edges, counts[l].points += c.points;
+          counts[l].edges_on_triangles += c.edges_on_triangles, counts[l].points_covered += c.points_covered;
+        };
         for (size_t first = 0; first < sizes.size();) {
-          const size_t end = stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
+          if (plans[first].batched) {
+            const size_t l = first++;
+            stream::write_representatives(store_dir, meta, canonical, prefix, l, cells[l], sizes[l], grade.records, copts,
+                                          eo.representative, plans[l].reps_range_cells, progress);
+            const std::vector<uint32_t> region_of = stream::load_region_of(prefix, l, cells[l], cube, cuts[l]);
+            for (const auto& [r0, r1] : stream::region_batches(cuts[l], plans[l].batch_cells)) {
+              stream::EmitLevel level{l, cells[l], sizes[l], &cuts[l], region_of.data(), r0, r1, true};
+              const std::vector<stream::EmitCounts> c = stream::emit_levels(
+                  store_dir, meta, canonical, prefix, std::span<const stream::EmitLevel>(&level, 1), grade.records, copts, eo,
+                  progress, scratch, [&](size_t, stream::RegionPart& part) { sink(l, info(l, part.region), part); });
+              add(l, c[0]);
+            }
+            std::filesystem::remove(stream::representatives_path(prefix, l));
+            level_done(l);
+            continue;
+          }
+          size_t end = stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
+          end = static_cast<size_t>(std::find_if(plans.begin() + static_cast<ptrdiff_t>(first), plans.begin() + static_cast<ptrdiff_t>(end),
+                                                 [](const stream::EmitLevelPlan& p) { return p.batched; }) -
+                                    plans.begin());
+          std::vector<std::vector<uint32_t>> region_of;
           std::vector<stream::EmitLevel> group;
-          for (size_t l = first; l < end; ++l) group.push_back({l, cells[l], sizes[l]});
+          for (size_t l = first; l < end; ++l) region_of.push_back(stream::load_region_of(prefix, l, cells[l], cube, cuts[l]));
+          for (size_t l = first; l < end; ++l)
+            group.push_back({l, cells[l], sizes[l], &cuts[l], region_of[l - first].data(), 0,
+                             static_cast<uint32_t>(cuts[l].regions.size()), false});
           const std::vector<stream::EmitCounts> c =
               stream::emit_levels(store_dir, meta, canonical, prefix, group, grade.records, copts, eo, progress, scratch,
-                                  [&](size_t i, core::LodMesh& mesh) { sink(first + i, mesh); });
-          counts.insert(counts.end(), c.begin(), c.end());
+                                  [&](size_t i, stream::RegionPart& part) { sink(first + i, info(first + i, part.region), part); });
+          for (size_t l = first; l < end; ++l) add(l, c[l - first]), level_done(l);
           first = end;
         }
         return counts;
@@ -392,7 +449,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
               sizes, estimated_targets, so.levels != 0, meta.triangles > 0,
               std::max(core::kMinCellSize, 4 * extent / core::kMaxSquaresPerAxis),
               [&](const std::vector<double>& s, bool triangles_only) {
-                return emit_all(s, cluster(s, nullptr), triangles_only ? count_only : counting, [](size_t, core::LodMesh&) {});
+                return emit_all(s, cluster(s, nullptr), triangles_only ? count_only : counting,
+                                [](size_t, const stream::RegionInfo&, stream::RegionPart&) {}, [](size_t) {});
               });
           sizes = d.sizes;
           report.notice = d.notice;
@@ -409,7 +467,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
             ++report.search_iterations;
             bool all_ok = true;
             std::vector<double> next(sizes);
-            const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, count_only, [](size_t, core::LodMesh&) {});
+            const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, count_only, nullptr, nullptr);
             for (size_t l = 0; l < n; ++l) {
               const stream::EmitCounts& c = counts[l];
               const double t = static_cast<double>(so.target_triangles[l]);
@@ -460,22 +518,38 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       const std::string generator = std::string("lodstream ") + LODSTREAM_VERSION;
       std::unique_ptr<io::GlbBuilder> glb;
       if (so.write_glb) glb = std::make_unique<io::GlbBuilder>(so.output_dir + "/lods.glb", work.scratch("glb"), generator);
-      auto write_level = [&](size_t l, core::LodMesh& mesh) {
+      // Each level's parts are welded into its files (stream/level_files.h) as they come; the level's PLY and
+      // OBJ files and its part of the GLB are written after its last part (the three side by side).
+      std::map<size_t, std::unique_ptr<stream::LevelFiles>> open_levels;
+      // The region sink of the 3D Tiles output (/work/REGIONS.md): called for every region of every level;
+      // none is plugged in yet.
+      const stream::RegionSink region_sink;
+      auto add_part = [&](size_t l, const stream::RegionInfo& info, stream::RegionPart& part) {
+        std::unique_ptr<stream::LevelFiles>& files = open_levels[l];
+        if (!files) files = std::make_unique<stream::LevelFiles>(work.scratch(fmt::format("level{}", l)), cells[l]);
+        if (region_sink) region_sink(l, info, part.mesh);
+        files->add(part);
+      };
+      auto write_level = [&](size_t l) {
+        std::unique_ptr<stream::LevelFiles> level = std::move(open_levels[l]);
+        open_levels.erase(l);
+        if (!level) fail(Status::internal, fmt::format("emit: level {} has no region", l));
+        level->close();
         LevelStats& ls = report.levels[l];
-        ls.vertices = mesh.vertex_count();
+        ls.vertices = level->vertices();
         const std::vector<std::string> comments{
             generator, fmt::format("level {} of {}, cell size {}", l, sizes.size(), sizes[l]),
             fmt::format("clustering {} {} {}, representative {}, grading {}", name(so.clustering), name(so.cell),
                         name(so.variant), name(so.representative), name(so.grading))};
         const std::string stem = fmt::format("lod{}", l);
         tbb::task_group files;
-        if (so.write_ply) files.run([&] { io::write_ply(so.output_dir + "/" + stem + ".ply", mesh, comments); });
-        if (so.write_obj) files.run([&] { io::write_obj(so.output_dir + "/" + stem + ".obj", mesh, comments); });
+        if (so.write_ply) files.run([&] { level->write_ply(so.output_dir + "/" + stem + ".ply", comments); });
+        if (so.write_obj) files.run([&] { level->write_obj(so.output_dir + "/" + stem + ".obj", comments); });
         // MSFT_screencoverage: level l is shown while the coverage is at least the coverage at which the next
         // level takes over; the last level down to one pixel.
         if (glb) {
           const double lower = l + 1 < sizes.size() ? report.levels[l + 1].screen_coverage : 1.0 / so.resolution;
-          files.run([&] { glb->add({&mesh, stem, lower}); });
+          files.run([&] { glb->add(level->glb(stem, lower)); });
         }
         files.wait();
         if (so.write_ply) ls.files.push_back(stem + ".ply");
@@ -483,7 +557,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       };
       const stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
       run_stage(&report.stages, "emit", [&](StageStats&) {
-        const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, emit_options, write_level);
+        const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, emit_options, add_part, write_level);
         for (size_t l = 0; l < sizes.size(); ++l) {
           LevelStats& ls = report.levels[l];
           const stream::EmitCounts& c = counts[l];
