@@ -31,7 +31,8 @@ uint64_t count_in(std::span<const uint64_t> sorted, uint64_t first, uint64_t spa
 }
 
 // Appends `key` to `out`, split (depth first, children in Morton order) while it holds more than max_cells.
-// invariant: the regions appended are disjoint, inside `key`, in region order, and hold every code `key` holds.
+// invariant: the regions appended are disjoint, in region order, and tile `key` (empty children are kept,
+// so that a cut tiles the whole cube and a finer level's cells, wherever they are, fall in the coarser cut).
 void split(std::span<const uint64_t> sorted, const RegionKey& key, uint64_t cells, uint64_t max_cells,
            std::vector<RegionKey>& out) {
   if (cells <= max_cells || key.depth >= kMaxRegionDepth) {
@@ -41,8 +42,7 @@ void split(std::span<const uint64_t> sorted, const RegionKey& key, uint64_t cell
   for (uint32_t child = 0; child < 8; ++child) {
     const RegionKey c{static_cast<uint8_t>(key.depth + 1), key.x * 2 + (child & 1), key.y * 2 + (child >> 1 & 1),
                       key.z * 2 + (child >> 2 & 1)};
-    const uint64_t n = count_in(sorted, region_code(c), region_span(c));
-    if (n > 0) split(sorted, c, n, max_cells, out);
+    split(sorted, c, count_in(sorted, region_code(c), region_span(c)), max_cells, out);
   }
 }
 
@@ -102,15 +102,13 @@ std::vector<RegionKey> cut_regions(std::span<const uint64_t> sorted_codes, std::
   std::vector<RegionKey> out;
   if (coarser.empty()) {
     split(sorted_codes, RegionKey{}, sorted_codes.size(), max_cells, out);
-    if (out.empty()) out.push_back(RegionKey{});  // a level without cells: the root, empty
     return out;
   }
   uint64_t held = 0;
   for (const RegionKey& r : coarser) {
     const uint64_t n = count_in(sorted_codes, region_code(r), region_span(r));
     held += n;
-    if (n == 0) out.push_back(r);
-    else split(sorted_codes, r, n, max_cells, out);
+    split(sorted_codes, r, n, max_cells, out);
   }
   if (held != sorted_codes.size()) fail(Status::internal, "cut_regions: the coarser cut does not hold every cell");
   return out;

@@ -12,10 +12,10 @@
 //   Its code at kMaxRegionDepth (point_code) locates it in every node that holds it: node n holds the codes
 //   [code(n), code(n) + 8^(kMaxRegionDepth - depth(n))).
 // - The cut of a level (cut_regions): starting from the next coarser level's cut (or the root), a node is
-//   split into its non-empty children while it holds more than max_cells of the level's cells and its depth
-//   is below kMaxRegionDepth. Inherited nodes stay in the cut even when the level has no cell in them, so
-//   every region of a level is inside exactly one region of the next coarser level. The cut depends on the
-//   cells' points and max_cells only.
+//   split into its eight children (empty ones included) while it holds more than max_cells of the level's
+//   cells and its depth is below kMaxRegionDepth. So a cut tiles the whole cube, and every region of a level
+//   is inside exactly one region of the next coarser level. The cut depends on the cells' points and
+//   max_cells only.
 #pragma once
 
 #include <cstdint>

@@ -24,9 +24,6 @@
 
 namespace lodstream::stream {
 
-// Default largest number of cells of a level in one region (REGIONS.md: tile_triangles / 2).
-inline constexpr uint64_t kRegionMaxCells = 100'000;
-
 struct LevelCut {
   std::vector<core::RegionKey> regions;  // in region order
   std::vector<uint64_t> cells;           // per region: the level's cells in it

@@ -87,6 +87,7 @@ void check_options(const SimplifyOptions& s) {
   if (!(s.fov_degrees > 0 && s.fov_degrees < 180)) usage("--fov must be between 0 and 180 degrees");
   if (s.resolution == 0) usage("--resolution must be positive");
   if (!(s.pixels_per_cell > 0 && std::isfinite(s.pixels_per_cell))) usage("--pixels-per-cell must be positive");
+  if (s.tile_triangles < 2) usage("--tile-triangles must be at least 2");
   if (!(s.crease_degrees >= 0 && s.crease_degrees <= 180)) usage("--crease must be between 0 and 180 degrees");
   if (!s.write_ply && !s.write_obj && !s.write_glb) usage("nothing to write: enable at least one of PLY, OBJ, GLB");
 }
@@ -373,7 +374,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           return counts;
         }
         const core::SceneCube cube = stream::scene_cube_of(meta);
-        const std::vector<stream::LevelCut> cuts = stream::cut_levels(prefix, cells, cube, stream::kRegionMaxCells);
+        const std::vector<stream::LevelCut> cuts = stream::cut_levels(prefix, cells, cube, so.tile_triangles / 2);
         // Every level is planned before the first is written, so that a level that cannot fit stops the run
         // before any output file appears.
         std::vector<stream::EmitLevelPlan> plans;
