@@ -1,7 +1,7 @@
 // The spatial regions a level is emitted in, and that the 3D Tiles output reuses as its tiles: disjoint
-// nodes of one octree over the scene's bounding cube (/work/REGIONS.md is the contract with the tiles
-// writer). A loose octree cut in the manner of Cignoni et al., "Adaptive TetraPuzzles" (2004) and the
-// 3D Tiles implicit tiling scheme (OGC 3D Tiles 1.1, §"Implicit Tiling": octree subdivision, Morton order).
+// nodes of one octree over the scene's bounding cube (the contract with the tiles writer). Node numbering
+// and order as in the 3D Tiles implicit tiling scheme (OGC 3D Tiles 1.1, "Implicit Tiling": octree
+// subdivision, Morton order).
 //
 // - Scene cube: the bounding box (float positions as stored, read as double) expanded to a cube about its
 //   center, side = largest extent · (1 + 2^-20), at least 1e-30, so that every position is inside.

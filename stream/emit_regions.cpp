@@ -142,13 +142,12 @@ void write_representative_range(const std::string& prefix, size_t level, uint64_
 void write_representatives(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
                            const std::string& prefix, size_t level, uint64_t cells, double cell_size, uint64_t records,
                            const core::ClusterOptions& cluster, Representative representative, uint64_t range_cells,
-                           Progress& progress) {
+                           Progress& progress, EmitScratch& scratch) {
   std::filesystem::remove(representatives_path(prefix, level));
   if (representative != Representative::quadric) {
     write_representative_range(prefix, level, cells, 0, cells, {}, representative, cluster, cell_size);
     return;
   }
-  EmitScratch scratch;
   EmitOptions options;
   options.representative = representative;
   options.representatives_only = true;

@@ -1,5 +1,5 @@
-// The spatial regions the emit stage works in (core/octree_regions.h; /work/REGIONS.md is the contract
-// with the 3D Tiles writer): every level's cut, the region of each of its cells, the batches of regions
+// The spatial regions the emit stage works in (core/octree_regions.h, the contract with the 3D Tiles
+// writer): every level's cut, the region of each of its cells, the batches of regions
 // that the memory plan lets one pass hold, and each cell's representative written ahead to the work
 // directory, so that a batch reads the representatives of its neighbours' cells as they will be.
 //
@@ -24,12 +24,14 @@
 
 namespace lodstream::stream {
 
+struct EmitScratch;
+
 struct LevelCut {
   std::vector<core::RegionKey> regions;  // in region order
   std::vector<uint64_t> cells;           // per region: the level's cells in it
 };
 
-// What the region sink of REGIONS.md is told about a region.
+// What the region sink (the 3D Tiles output) is told about a region.
 struct RegionInfo {
   size_t level = 0;
   core::RegionKey key;
@@ -38,7 +40,7 @@ struct RegionInfo {
   double box_min[3] = {0, 0, 0}, box_max[3] = {0, 0, 0};  // scene units, the scene's own frame
 };
 // Called, per level, for each region of its cut in region order, once, with the primitives it owns
-// (REGIONS.md "The sink"). May not keep `part`.
+// (RegionPart::mesh, stream/emit_stage.h). May not keep `part`.
 using RegionSink = std::function<void(size_t level, const RegionInfo& info, const core::LodMesh& part)>;
 
 core::SceneCube scene_cube_of(const StoreMeta& meta);
@@ -72,7 +74,7 @@ std::string representatives_path(const std::string& prefix, size_t level);
 void write_representatives(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
                            const std::string& prefix, size_t level, uint64_t cells, double cell_size,
                            uint64_t records, const core::ClusterOptions& cluster, Representative representative,
-                           uint64_t range_cells, Progress& progress);
+                           uint64_t range_cells, Progress& progress, EmitScratch& scratch);
 
 // Writes the representatives of cells [first, first + count) of the level; quadrics: one per cell, or empty.
 void write_representative_range(const std::string& prefix, size_t level, uint64_t cells, uint64_t first, uint64_t count,

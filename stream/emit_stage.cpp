@@ -314,7 +314,7 @@ Buckets bucket(size_t n, uint32_t regions, Region&& region) {
 }
 
 // Classify .. thickness done: the batch's regions' parts, each handed to `sink` in region order. A triangle
-// is owned with its lowest cell, an edge with its lower one (REGIONS.md); only the batch's own edges and
+// is owned with its lowest cell, an edge with its lower one; only the batch's own edges and
 // points were kept.
 template <class Sink>
 void build_parts(LevelState& L, const std::vector<float>& thickness, const std::string& prefix,

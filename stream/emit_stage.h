@@ -83,12 +83,16 @@ struct EmitLevel {
   uint64_t first_cell = 0, end_cell = 0;
 };
 
-// One region's part of a level, as emit hands it on: the sink's part (REGIONS.md), and what welds the parts
+// One region's part of a level, as emit hands it on: the part the region sink gets, and what welds the parts
 // into the level's mesh. A vertex of the level is (cell, variant): the variant-th output vertex of the cell
 // (its corners split by normal, in order of first appearance over the level's triangles; a cell used only
 // by edges and points has one vertex, with a zero normal).
+// `mesh` holds exactly the primitives the region owns (a triangle with its lowest cell, an edge with its lower
+// cell, a point with its cell), in the level's order, and the vertices they use numbered in order of first
+// use; a vertex of a neighbouring region's cell appears with the same position and normal, to the bit, as
+// in that region's parts.
 struct RegionPart {
-  uint32_t region = 0;
+  uint32_t region = 0;  // index in the level's cut
   core::LodMesh mesh;
   std::vector<uint64_t> vertex_key;  // per vertex of mesh: cell << 32 | variant
   // The vertices the region owns (those of its cells used by the level), in cell order, then variant.

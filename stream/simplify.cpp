@@ -395,7 +395,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           if (plans[first].batched) {
             const size_t l = first++;
             stream::write_representatives(store_dir, meta, canonical, prefix, l, cells[l], sizes[l], grade.records, copts,
-                                          eo.representative, plans[l].reps_range_cells, progress);
+                                          eo.representative, plans[l].reps_range_cells, progress, scratch);
             const std::vector<uint32_t> region_of = stream::load_region_of(prefix, l, cells[l], cube, cuts[l]);
             for (const auto& [r0, r1] : stream::region_batches(cuts[l], plans[l].batch_cells)) {
               stream::EmitLevel level{l, cells[l], sizes[l], &cuts[l], region_of.data(), r0, r1, true};
@@ -408,7 +408,10 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
             level_done(l);
             continue;
           }
-          size_t end = stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
+          // Beside the group's working memory, its levels' per-cell tables (stream::kLevelBytesPerCell).
+          uint64_t tables = 0;
+          for (size_t l = first; l < sizes.size(); ++l) tables += stream::kLevelBytesPerCell * cells[l];
+          size_t end = stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, tables, eo);
           end = static_cast<size_t>(std::find_if(plans.begin() + static_cast<ptrdiff_t>(first), plans.begin() + static_cast<ptrdiff_t>(end),
                                                  [](const stream::EmitLevelPlan& p) { return p.batched; }) -
                                     plans.begin());
@@ -522,7 +525,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       // Each level's parts are welded into its files (stream/level_files.h) as they come; the level's PLY and
       // OBJ files and its part of the GLB are written after its last part (the three side by side).
       std::map<size_t, std::unique_ptr<stream::LevelFiles>> open_levels;
-      // The region sink of the 3D Tiles output (/work/REGIONS.md): called for every region of every level;
+      // The region sink of the 3D Tiles output (stream/emit_regions.h): called for every region of every level;
       // none is plugged in yet.
       const stream::RegionSink region_sink;
       auto add_part = [&](size_t l, const stream::RegionInfo& info, stream::RegionPart& part) {

@@ -109,7 +109,7 @@ TEST(EmitGroups, SameMeshesAloneAndGrouped) {
     stream::emit_levels(store_dir, meta, canonical, prefix, skip, records, copts, eo, progress, scratch, into(pair, 0));
     // The finest level in batches of regions (each with its halo), its representatives written ahead.
     stream::write_representatives(store_dir, meta, canonical, prefix, 0, cells[0], levels[0].cell_size, records, copts, rep,
-                                  cells[0] / 3 + 1, progress);
+                                  cells[0] / 3 + 1, progress, scratch);
     const auto batches = stream::region_batches(cuts[0], cells[0] / 4);
     ASSERT_GE(batches.size(), 3u);
     for (const auto& [r0, r1] : batches) {

@@ -1,5 +1,5 @@
 // Emit region by region (stream/emit_regions.h, core/octree_regions.h): the octree cut follows
-// /work/REGIONS.md; the level files do not depend on how many batches the memory cap makes; and the union of
+// core/octree_regions.h; the level files do not depend on how many batches the memory cap makes; and the union of
 // a level's region parts is the level (same triangles, edges and points as one region holding it all).
 #include <gtest/gtest.h>
 
@@ -97,6 +97,29 @@ TEST(OctreeRegions, CutSplitsFullNodesAndNestsInTheCoarserCut) {
   }
   // The cut does not depend on anything but the codes and max_cells.
   EXPECT_EQ(core::cut_regions(fine, c, 30), f);
+}
+
+TEST(EmitRegions, TheLargeCityIsPlannedInBatchesAt1G) {
+  // make-scene.sh 18 1 (192.5 M triangles, 136.6 M stored vertices) at --memory 1G: its finest level
+  // (7.53 M cells) needed about 2.7 GiB whole; in batches of regions of at most 100,000 cells it needs its
+  // map (23 bits a vertex, 375 MiB), 18 bytes a cell (129 MiB) and one region.
+  const uint64_t vertices = 136'600'000, triangles = 192'500'000, budget = (1ull << 30) - (40ull << 20);
+  const stream::EmitOptions quadric{Representative::quadric, 30, true, false};
+  const stream::EmitLevelPlan plan = stream::plan_emit_level(0, 7'530'459, 100'000, vertices, triangles, budget, quadric);
+  EXPECT_TRUE(plan.batched);
+  EXPECT_GT(plan.batch_cells, 1'000'000u);
+  EXPECT_LT(plan.batch_cells, 1'500'000u);  // 6 to 8 batches
+  EXPECT_GT(plan.reps_range_cells, 3'750'000u);  // the quadrics in two passes
+  // Its second level (1 M cells, say) whole.
+  EXPECT_FALSE(stream::plan_emit_level(1, 1'000'000, 100'000, vertices, triangles, budget, quadric).batched);
+  // At 512M not even one region fits beside the map and the tables: exit 64 with the figures.
+  try {
+    stream::plan_emit_level(0, 7'530'459, 100'000, vertices, triangles, (512ull << 20) - (40ull << 20), quadric);
+    ADD_FAILURE() << "no failure";
+  } catch (const Failure& f) {
+    EXPECT_EQ(f.status(), Status::usage);
+    EXPECT_NE(std::string(f.what()).find("level 0 (7530459 cells) region by region needs about"), std::string::npos) << f.what();
+  }
 }
 
 // A bumpy n × n grid of quads as a binary PLY (2 n² triangles), with a few needle triangles that collapse.
