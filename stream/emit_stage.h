@@ -19,7 +19,10 @@
 // Determinism: primitives are processed in fixed blocks of the store (not of the parse or memory plan),
 // each block's sums are formed in store order and merged in block order; output primitives and vertices
 // are numbered in order of first appearance. So the bytes depend on the input and options only.
-// Levels are emitted in groups that share one pass over the input (emit_levels, emit_group_end below).
+// Levels are emitted in groups that share one pass over the input (emit_levels, emit_group_end below), and
+// each level region by region (stream/emit_regions.h): a level too large for the memory plan in batches of
+// regions, each batch visiting the primitives that touch its cells or its halo's, so that every cell it
+// outputs, and every neighbour's vertex its parts use, sees its whole neighbourhood.
 // Memory: the group's packed cluster maps (bit_width(cells) bits per stored vertex and level, kept in
 // EmitScratch between groups) and per level one bit per input triangle and segment (collapsed to an edge
 // or not), plus what grows with the output: at the peak (classification), the triangle and edge dedupe
