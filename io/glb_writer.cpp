@@ -108,6 +108,17 @@ class Plan {
     accessors_.push_back(std::move(a));
     return static_cast<int>(accessors_.size()) - 1;
   }
+  int add_positions(uint64_t count, const float* lo, const float* hi) {
+    const int a = add(count, 3, kFloat, "VEC3", kArrayBuffer);
+    Json& accessor = accessors_[static_cast<size_t>(a)];
+    accessor["min"] = Json::array();
+    accessor["max"] = Json::array();
+    for (int c = 0; c < 3; ++c) {
+      accessor["min"].push_back(static_cast<double>(lo[c]));
+      accessor["max"].push_back(static_cast<double>(hi[c]));
+    }
+    return a;
+  }
   int add_positions(const core::LodMesh& mesh, const std::vector<uint32_t>& ids) {
     const int a = add(ids.size(), 3, kFloat, "VEC3", kArrayBuffer);
     Json& accessor = accessors_[static_cast<size_t>(a)];
@@ -146,6 +157,16 @@ class BinWriter {
       out_.write(pair, sizeof pair);
     }
     end_block(values.size() * 8);
+  }
+  // A block written by `fill`, `bytes` long.
+  void stream(uint64_t bytes, const GlbStreamedLevel::Block& fill) {
+    uint64_t written = 0;
+    fill([&](const void* data, size_t n) {
+      out_.write(data, n);
+      written += n;
+    });
+    if (written != bytes) fail(Status::internal, out_.path() + ": GLB data does not match its plan");
+    end_block(bytes);
   }
   size_t blocks() const { return block_; }
 
@@ -261,6 +282,69 @@ void GlbBuilder::add(const GlbLevel& level) {
     bin.f32_twice(mesh.thickness);
   }
   if (!mesh.points.empty()) bin.vec3(mesh.positions, mesh.points);
+  if (bin.blocks() != plan.view_bytes().size()) fail(Status::internal, s.path + ": GLB data does not match its plan");
+}
+
+void GlbBuilder::add(const GlbStreamedLevel& level) {
+  State& s = *state_;
+  if (!std::isfinite(level.screen_coverage))
+    fail(Status::internal, s.path + ": level '" + level.name + "' has a non-finite screen coverage");
+  Plan& plan = s.plan;
+  const size_t first_view = plan.view_bytes().size();
+  Json primitives = Json::array();
+  if (level.triangles > 0) {
+    Json p;
+    p["attributes"]["POSITION"] = plan.add_positions(level.triangle_vertices, level.triangle_min, level.triangle_max);
+    if (level.normals) p["attributes"]["NORMAL"] = plan.add(level.triangle_vertices, 3, kFloat, "VEC3", kArrayBuffer);
+    p["indices"] = plan.add(3 * level.triangles, 1, kUnsignedInt, "SCALAR", kElementArrayBuffer);
+    p["material"] = 0;
+    p["mode"] = kTriangles;
+    primitives.push_back(std::move(p));
+  }
+  if (level.edges > 0) {
+    Json p;
+    p["attributes"]["POSITION"] = plan.add_positions(2 * level.edges, level.edge_min, level.edge_max);
+    p["attributes"]["_THICKNESS"] = plan.add(2 * level.edges, 1, kFloat, "SCALAR", kArrayBuffer);
+    p["material"] = 0;
+    p["mode"] = kLines;
+    primitives.push_back(std::move(p));
+  }
+  if (level.points > 0) {
+    Json p;
+    p["attributes"]["POSITION"] = plan.add_positions(level.points, level.point_min, level.point_max);
+    p["material"] = 0;
+    p["mode"] = kPoints;
+    primitives.push_back(std::move(p));
+  }
+  if (plan.bin_bytes() > UINT32_MAX) fail(Status::io_error, s.path + ": the levels do not fit in one GLB file (4 GiB at most)");
+  Json node;
+  node["name"] = level.name;
+  if (!primitives.empty()) {
+    node["mesh"] = s.meshes.size();
+    Json m;
+    m["name"] = level.name;
+    m["primitives"] = std::move(primitives);
+    s.meshes.push_back(std::move(m));
+  }
+  s.nodes.push_back(std::move(node));
+  s.coverage.push_back(level.screen_coverage);
+
+  if (plan.view_bytes().size() == first_view) return;
+  if (!s.blocks) {
+    s.bin.open(s.scratch, 1 << 20);
+    s.blocks = std::make_unique<BinWriter>(s.bin, plan.view_bytes());
+  }
+  BinWriter& bin = *s.blocks;
+  if (level.triangles > 0) {
+    bin.stream(12 * level.triangle_vertices, level.triangle_positions);
+    if (level.normals) bin.stream(12 * level.triangle_vertices, level.triangle_normals);
+    bin.stream(12 * level.triangles, level.triangle_indices);
+  }
+  if (level.edges > 0) {
+    bin.stream(24 * level.edges, level.edge_positions);
+    bin.stream(8 * level.edges, level.edge_thickness);
+  }
+  if (level.points > 0) bin.stream(12 * level.points, level.point_positions);
   if (bin.blocks() != plan.view_bytes().size()) fail(Status::internal, s.path + ": GLB data does not match its plan");
 }
 

@@ -26,6 +26,7 @@
 // bytes.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -46,6 +47,23 @@ struct GlbLevel {
 // core/mesh.h (array sizes, indices out of range).
 void write_glb(const std::string& path, std::span<const GlbLevel> levels, const std::string& generator);
 
+// A level given as its blocks rather than as a mesh, so that it need not be held (stream/level_files.h):
+// the triangles' own vertex array (positions and, with `normals`, normals), their indices into it, both
+// ends of every edge with its thickness, and the points. Each block function writes exactly its block's
+// bytes (count · 12 for vec3 blocks, indices 12 per triangle, positions 24 and thickness 8 per edge) through
+// `write`, in one or more calls; the builder checks the lengths. Bounds: the min and max of each kind's
+// positions (unused for a kind with none).
+struct GlbStreamedLevel {
+  using Write = std::function<void(const void*, size_t)>;
+  using Block = std::function<void(const Write&)>;
+  std::string name;
+  double screen_coverage = 0;
+  uint64_t triangle_vertices = 0, triangles = 0, edges = 0, points = 0;
+  bool normals = true;
+  float triangle_min[3], triangle_max[3], edge_min[3], edge_max[3], point_min[3], point_max[3];
+  Block triangle_positions, triangle_normals, triangle_indices, edge_positions, edge_thickness, point_positions;
+};
+
 class GlbBuilder {
  public:
   // `scratch`: where the BIN chunk is gathered (a path of its own, not created yet; removed by finish() and
@@ -56,6 +74,8 @@ class GlbBuilder {
   ~GlbBuilder();
   // Appends the next level (finest first); the mesh is not needed after the call. Failures as write_glb.
   void add(const GlbLevel& level);
+  // The same for a level given by its blocks.
+  void add(const GlbStreamedLevel& level);
   // Writes `path` (through `<path>.partial`); at least one level must have been added.
   void finish();
 

@@ -89,4 +89,63 @@ void write_obj(const std::string& path, const core::LodMesh& mesh, const std::ve
   out.commit();
 }
 
+struct ObjStream::State {
+  FileWriter out;
+  Line line;
+};
+
+ObjStream::ObjStream(const std::string& path, const std::vector<std::string>& comments) : state_(std::make_unique<State>()) {
+  state_->out.open(path, 1 << 20, Sync::durable);
+  for (const std::string& c : comments) {
+    std::string line = "# ";
+    for (char ch : c) line += static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f ? ' ' : ch;
+    line += '\n';
+    state_->out.write(line);
+  }
+}
+
+ObjStream::~ObjStream() = default;
+
+void ObjStream::vec3(const char* tag, const float* xyz) {
+  Line& line = state_->line;
+  line.text(tag);
+  for (int c = 0; c < 3; ++c) {
+    line.text(" ");
+    line.number(xyz[c]);
+  }
+  line.finish(state_->out);
+}
+
+void ObjStream::face(const uint64_t* ids, bool normals) {
+  Line& line = state_->line;
+  line.text("f");
+  for (int c = 0; c < 3; ++c) {
+    line.text(" ");
+    line.number(ids[c] + 1);
+    if (normals) {
+      line.text("//");
+      line.number(ids[c] + 1);
+    }
+  }
+  line.finish(state_->out);
+}
+
+void ObjStream::line(uint64_t a, uint64_t b) {
+  Line& line = state_->line;
+  line.text("l ");
+  line.number(a + 1);
+  line.text(" ");
+  line.number(b + 1);
+  line.finish(state_->out);
+}
+
+void ObjStream::point(uint64_t p) {
+  Line& line = state_->line;
+  line.text("p ");
+  line.number(p + 1);
+  line.finish(state_->out);
+}
+
+void ObjStream::commit() { state_->out.commit(); }
+
 }  // namespace lodstream::io

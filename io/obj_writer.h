@@ -10,6 +10,8 @@
 //   p a                per point
 #pragma once
 
+#include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -22,5 +24,22 @@ namespace lodstream::io {
 // Throws Failure(io_error) when the file cannot be written, Failure(internal) when the mesh breaks the
 // conventions of core/mesh.h (array sizes, indices out of range).
 void write_obj(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments);
+
+// The statements write_obj writes, one at a time, for a level written element by element elsewhere
+// (stream/level_files.cpp): all `v` first, then all `vn`, then `f`, `l`, `p`; ids are 0-based here.
+class ObjStream {
+ public:
+  ObjStream(const std::string& path, const std::vector<std::string>& comments);
+  ~ObjStream();  // discards the file unless committed
+  void vec3(const char* tag, const float* xyz);  // "v" or "vn"
+  void face(const uint64_t* ids, bool normals);
+  void line(uint64_t a, uint64_t b);
+  void point(uint64_t p);
+  void commit();
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
 
 }  // namespace lodstream::io

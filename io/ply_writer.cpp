@@ -42,22 +42,29 @@ std::string comment_line(const std::string& text) {
 
 }  // namespace
 
+std::string ply_level_header(const std::vector<std::string>& comments, uint64_t vertices, bool normals, uint64_t triangles,
+                             uint64_t edges, uint64_t points) {
+  std::string header = "ply\nformat binary_little_endian 1.0\n";
+  for (const std::string& c : comments) header += comment_line(c);
+  header += "comment element point: one vertex index per point primitive\n";
+  header += ply_vertex_header(vertices, normals);
+  header += "element face " + std::to_string(triangles) + "\n";
+  header += "property list uchar uint vertex_indices\n";
+  header += "element edge " + std::to_string(edges) + "\n";
+  header += "property uint vertex1\nproperty uint vertex2\nproperty float thickness\n";
+  header += "element point " + std::to_string(points) + "\n";
+  header += "property uint vertex\n";
+  header += "end_header\n";
+  return header;
+}
+
 void write_ply(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments) {
   if (const std::string v = core::convention_violation(mesh); !v.empty())
     fail(Status::internal, path + ": cannot write level: " + v);
   const bool normals = !mesh.normals.empty();
 
-  std::string header = "ply\nformat binary_little_endian 1.0\n";
-  for (const std::string& c : comments) header += comment_line(c);
-  header += "comment element point: one vertex index per point primitive\n";
-  header += ply_vertex_header(mesh.vertex_count(), normals);
-  header += "element face " + std::to_string(mesh.triangle_count()) + "\n";
-  header += "property list uchar uint vertex_indices\n";
-  header += "element edge " + std::to_string(mesh.edge_count()) + "\n";
-  header += "property uint vertex1\nproperty uint vertex2\nproperty float thickness\n";
-  header += "element point " + std::to_string(mesh.point_count()) + "\n";
-  header += "property uint vertex\n";
-  header += "end_header\n";
+  const std::string header =
+      ply_level_header(comments, mesh.vertex_count(), normals, mesh.triangle_count(), mesh.edge_count(), mesh.point_count());
 
   FileWriter out(path, 1 << 20, Sync::durable);
   out.write(header);

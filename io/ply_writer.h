@@ -31,6 +31,12 @@ void write_ply_vertices(FileWriter& out, std::span<const float> positions, std::
 // `comment ...` header line; line breaks and other control characters in it are replaced by spaces.
 // Throws Failure(io_error) when the file cannot be written, Failure(internal) when the mesh breaks the
 // conventions of core/mesh.h (array sizes, indices out of range).
+// The header write_ply writes (vertex records 24 bytes with normals, else 12; faces 13 bytes: uchar 3 and
+// three uint ids; edges 12: two uint ids and a float thickness; points 4), for a level written record by
+// record elsewhere (stream/level_files.cpp).
+std::string ply_level_header(const std::vector<std::string>& comments, uint64_t vertices, bool normals, uint64_t triangles,
+                             uint64_t edges, uint64_t points);
+
 void write_ply(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments);
 
 }  // namespace lodstream::io

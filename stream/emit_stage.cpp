@@ -22,6 +22,7 @@
 #include "io/mapped_file.h"
 #include "stream/cell_map_file.h"
 #include "stream/cluster_stage.h"
+#include "stream/emit_regions.h"
 #include "stream/flat_map.h"
 #include "stream/store_access.h"
 #include "stream/weld_file.h"
@@ -130,6 +131,9 @@ class PackedMap {
 // One level of a group: its field in the packed map and what it accumulates.
 struct LevelState {
   EmitLevel in;
+  // Batched levels: per cell 0 (not visited), kOwned (a cell of the batch's regions) or kHalo.
+  std::vector<uint8_t> role;
+  uint64_t quadric_base = 0;  // representatives_only: the first cell of the range summed
   unsigned shift = 0;
   uint64_t mask = 0;  // field mask after the shift; all ones is "no cell"
   // Pass A.
@@ -140,6 +144,7 @@ struct LevelState {
   std::vector<std::array<uint32_t, 2>> edges;
   std::vector<uint32_t> points;
   std::vector<core::Quadric> quadrics;
+  std::vector<uint8_t> used;  // per cell: kByTriangle | kByKeptEdge
   // One bit per input triangle and segment that collapsed to an edge, so that passes B and C visit only
   // those.
   std::vector<uint64_t> collapsed[2];
@@ -153,7 +158,239 @@ struct LevelState {
   EmitCounts counts;
 };
 
+constexpr uint8_t kOwned = 1, kHalo = 2;
+// Bits of a cell's use in a level (elimination).
+constexpr uint8_t kByTriangle = 1, kByKeptEdge = 2;
+
+bool owned(const LevelState& L, uint32_t c) { return !L.in.batched || L.role[c] == kOwned; }
+bool visited(const LevelState& L, const uint32_t* c, size_t arity) {
+  if (!L.in.batched) return true;
+  for (size_t k = 0; k < arity; ++k)
+    if (L.role[c[k]]) return true;
+  return false;
+}
+
 }  // namespace
+
+// The halo of every batched level of the group: marks kHalo every cell that shares an input triangle or
+// segment with a cell of the batch (kOwned). Roles only go from 0 to kHalo during the pass, and a primitive's
+// test reads kOwned only, so the result does not depend on the threads.
+template <class RunBlocks, class RecordOf, class CellOf>
+void find_halos(std::vector<LevelState>& levels, RunBlocks& run_blocks, RecordOf& record_of, CellOf& cell) {
+  bool any = false;
+  for (LevelState& L : levels) {
+    if (!L.in.batched) continue;
+    any = true;
+    L.role.assign(L.in.cells, 0);
+    for (uint64_t c = 0; c < L.in.cells; ++c)
+      if (L.in.region_of[c] >= L.in.first_region && L.in.region_of[c] < L.in.end_region) L.role[c] = kOwned;
+  }
+  if (!any) return;
+  run_blocks(
+      "emit", true,
+      [&](const Block& b, std::span<const uint32_t> ids, BlockOut*, Scratch*) {
+        const size_t arity = static_cast<size_t>(3 - b.kind);
+        for (size_t i = 0; i < ids.size(); i += arity) {
+          uint64_t r[3];
+          for (size_t k = 0; k < arity; ++k) r[k] = record_of(ids[i + k]);
+          for (LevelState& L : levels) {
+            if (!L.in.batched) continue;
+            uint32_t c[3];
+            bool touches = false;
+            for (size_t k = 0; k < arity; ++k) c[k] = cell(L, r[k]), touches = touches || L.role[c[k]] == kOwned;
+            if (!touches) continue;
+            for (size_t k = 0; k < arity; ++k)
+              if (L.role[c[k]] != kOwned) std::atomic_ref<uint8_t>(L.role[c[k]]).store(kHalo, std::memory_order_relaxed);
+          }
+        }
+      },
+      [](BlockOut*) {});
+}
+
+// The cells a batch of a level needs, numbered in order of first use: triangle corners, then the ends of
+// its kept edges, its kept points, and its cells that only other batches' kept edges use.
+struct CellSlots {
+  std::vector<uint32_t> slot_of;  // per cell of the level, or UINT32_MAX
+  std::vector<uint32_t> cell;     // per slot
+  size_t triangle_slots = 0;
+  std::vector<uint32_t> triangles;  // 3 slots per triangle of L.triangles
+  std::vector<double> rep;          // xyz per slot
+};
+
+void number_cells(const LevelState& L, CellSlots& s) {
+  s.slot_of.assign(L.in.cells, UINT32_MAX);
+  auto use = [&](uint32_t c) {
+    if (s.slot_of[c] == UINT32_MAX) s.slot_of[c] = static_cast<uint32_t>(s.cell.size()), s.cell.push_back(c);
+    return s.slot_of[c];
+  };
+  s.triangles.reserve(3 * L.triangles.size());
+  for (const auto& t : L.triangles)
+    for (uint32_t c : t) s.triangles.push_back(use(c));
+  s.triangle_slots = s.cell.size();
+  for (const auto& e : L.kept_edges) use(e[0]), use(e[1]);
+  for (uint32_t c : L.kept_points) use(c);
+  for (uint64_t c = 0; c < L.in.cells; ++c)
+    if ((L.used[c] & kByKeptEdge) && owned(L, static_cast<uint32_t>(c))) use(static_cast<uint32_t>(c));
+}
+
+// The representatives of the slots: read from the level's representatives file (batched levels, so that a
+// cell's representative is the same in every batch that needs it), or formed from the cell table and the
+// quadrics summed in pass A. Windows of cells in cell order, in parallel (each representative depends on its
+// cell alone, so the bytes do not depend on the threads).
+void load_representatives(const LevelState& L, const std::string& prefix, const core::ClusterOptions& cluster,
+                          const EmitOptions& options, bool single_precision, CellSlots& s) {
+  s.rep.resize(3 * s.cell.size());
+  const uint64_t cells = L.in.cells;
+  constexpr size_t record = 3 * sizeof(double);
+  std::unique_ptr<io::MappedFile> reps;
+  std::unique_ptr<CellInfoReader> table;
+  if (L.in.batched) {
+    reps = std::make_unique<io::MappedFile>(representatives_path(prefix, L.in.level));
+    if (reps->size() != cells * record) fail(Status::io_error, reps->path() + ": size does not match");
+  } else {
+    table = std::make_unique<CellInfoReader>(cell_info_path(prefix, L.in.level), cells,
+                                             cell_info_kind(options.representative), single_precision);
+  }
+  constexpr uint64_t window_cells = 1 << 16;
+  tbb::parallel_for(uint64_t{0}, (cells + window_cells - 1) / window_cells, [&](uint64_t window) {
+    const uint64_t first = window * window_cells, end = std::min(cells, first + window_cells);
+    io::Window w;
+    for (uint64_t c = first; c < end; ++c) {
+      const uint32_t slot = s.slot_of[c];
+      if (slot == UINT32_MAX) continue;
+      if (L.in.batched) {
+        if (!w.data()) w = reps->map(first * record, end * record);
+        std::memcpy(&s.rep[3 * slot], w.data() + (c - first) * record, record);
+        continue;
+      }
+      if (!w.data()) w = table->map(first, end);
+      const CellInfo ci = table->get(w, c - first);
+      cell_representative(ci, L.quadrics.empty() ? nullptr : &L.quadrics[c], options.representative, cluster,
+                          L.in.cell_size, &s.rep[3 * slot]);
+    }
+  });
+}
+
+// The batch's output vertices: the triangle corners split by normal (core/normals.h), then one vertex with a
+// zero normal for each cell that only edges and points use. A cell's triangles are all in the batch when the
+// cell is owned or in the halo, so its vertices (and their order, the variants) are the level's.
+struct BatchVertices {
+  std::vector<uint32_t> slot, variant;  // per vertex
+  std::vector<float> normals;           // xyz per vertex
+  std::vector<uint32_t> triangles;      // 3 vertices per triangle of L.triangles
+  std::vector<uint32_t> end_vertex;     // per slot: the vertex an edge or point end at its cell uses
+};
+
+void make_vertices(const CellSlots& s, const EmitOptions& options, BatchVertices& v) {
+  core::CreaseNormals normals;
+  core::crease_normals(std::span<const double>(s.rep.data(), 3 * s.triangle_slots), s.triangles,
+                       options.normals ? options.crease_degrees : 180.0, normals);
+  v.slot = std::move(normals.vertex);
+  v.normals = std::move(normals.normals);
+  v.triangles = std::move(normals.triangles);
+  std::vector<uint32_t> next(s.cell.size(), 0);
+  v.end_vertex.assign(s.cell.size(), UINT32_MAX);
+  v.variant.resize(v.slot.size());
+  for (size_t i = 0; i < v.slot.size(); ++i) {
+    v.variant[i] = next[v.slot[i]]++;
+    if (v.end_vertex[v.slot[i]] == UINT32_MAX) v.end_vertex[v.slot[i]] = static_cast<uint32_t>(i);
+  }
+  for (size_t slot = s.triangle_slots; slot < s.cell.size(); ++slot) {
+    v.end_vertex[slot] = static_cast<uint32_t>(v.slot.size());
+    v.slot.push_back(static_cast<uint32_t>(slot));
+    v.variant.push_back(0);
+    v.normals.insert(v.normals.end(), {0.0f, 0.0f, 0.0f});
+  }
+}
+
+// Ids 0 .. n - 1 grouped by region (region(i) < regions, or UINT32_MAX for none), in id order within each.
+struct Buckets {
+  std::vector<uint32_t> start, ids;
+  std::span<const uint32_t> of(uint32_t r) const { return {ids.data() + start[r], ids.data() + start[r + 1]}; }
+};
+template <class Region>
+Buckets bucket(size_t n, uint32_t regions, Region&& region) {
+  Buckets b;
+  b.start.assign(regions + 2, 0);
+  for (size_t i = 0; i < n; ++i)
+    if (const uint32_t r = region(i); r != UINT32_MAX) ++b.start[r + 2];
+  for (uint32_t r = 0; r < regions; ++r) b.start[r + 2] += b.start[r + 1];
+  b.ids.resize(b.start[regions + 1]);
+  for (size_t i = 0; i < n; ++i)
+    if (const uint32_t r = region(i); r != UINT32_MAX) b.ids[b.start[r + 1]++] = static_cast<uint32_t>(i);
+  return b;
+}
+
+// Classify .. thickness done: the batch's regions' parts, each handed to `sink` in region order. A triangle
+// is owned with its lowest cell, an edge with its lower one; only the batch's own edges and
+// points were kept.
+template <class Sink>
+void build_parts(LevelState& L, const std::vector<float>& thickness, const std::string& prefix,
+                 const core::ClusterOptions& cluster, const EmitOptions& options, bool single_precision, Sink&& sink) {
+  CellSlots s;
+  number_cells(L, s);
+  load_representatives(L, prefix, cluster, options, single_precision, s);
+  std::vector<core::Quadric>().swap(L.quadrics);
+  BatchVertices v;
+  make_vertices(s, options, v);
+  std::vector<uint32_t>().swap(s.triangles);
+
+  const uint32_t first = L.in.first_region, regions = L.in.end_region - first;
+  auto region = [&](uint32_t c) { return owned(L, c) ? L.in.region_of[c] - first : UINT32_MAX; };
+  const Buckets triangles = bucket(L.triangles.size(), regions, [&](size_t t) {
+    const auto& c = L.triangles[t];
+    return region(std::min({c[0], c[1], c[2]}));
+  });
+  const Buckets edges = bucket(L.kept_edges.size(), regions, [&](size_t e) { return region(L.kept_edges[e][0]); });
+  const Buckets points = bucket(L.kept_points.size(), regions, [&](size_t p) { return region(L.kept_points[p]); });
+  Buckets own = bucket(v.slot.size(), regions, [&](size_t i) { return region(s.cell[v.slot[i]]); });
+  auto key = [&](uint32_t i) { return uint64_t{s.cell[v.slot[i]]} << 32 | v.variant[i]; };
+  for (uint32_t r = 0; r < regions; ++r)
+    std::sort(own.ids.begin() + own.start[r], own.ids.begin() + own.start[r + 1],
+              [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+
+  std::vector<uint32_t> local(v.slot.size(), UINT32_MAX);
+  for (uint32_t r = 0; r < regions; ++r) {
+    RegionPart part;
+    part.region = first + r;
+    core::LodMesh& mesh = part.mesh;
+    auto position = [&](uint32_t i, std::vector<float>& out) {
+      for (int k = 0; k < 3; ++k) out.push_back(static_cast<float>(s.rep[3 * v.slot[i] + k]));
+    };
+    auto add = [&](uint32_t i) {
+      if (local[i] == UINT32_MAX) {
+        local[i] = static_cast<uint32_t>(part.vertex_key.size());
+        part.vertex_key.push_back(key(i));
+        position(i, mesh.positions);
+        mesh.normals.insert(mesh.normals.end(), &v.normals[3 * uint64_t{i}], &v.normals[3 * uint64_t{i}] + 3);
+      }
+      return local[i];
+    };
+    for (uint32_t t : triangles.of(r))
+      for (int k = 0; k < 3; ++k) mesh.triangles.push_back(add(v.triangles[3 * uint64_t{t} + k]));
+    for (uint32_t e : edges.of(r)) {
+      for (uint32_t c : L.kept_edges[e]) mesh.edges.push_back(add(v.end_vertex[s.slot_of[c]]));
+      mesh.thickness.push_back(thickness[e]);
+    }
+    for (uint32_t p : points.of(r)) mesh.points.push_back(add(v.end_vertex[s.slot_of[L.kept_points[p]]]));
+    for (uint32_t i : own.of(r)) {
+      part.owned_key.push_back(key(i));
+      position(i, part.owned_positions);
+      part.owned_normals.insert(part.owned_normals.end(), &v.normals[3 * uint64_t{i}], &v.normals[3 * uint64_t{i}] + 3);
+    }
+    L.counts.triangles += mesh.triangle_count();
+    L.counts.edges += mesh.edge_count();
+    L.counts.points += mesh.point_count();
+    // Reset the numbering for the next region: the vertices this part used are those of its triangles,
+    // edges and points.
+    for (uint32_t t : triangles.of(r))
+      for (int k = 0; k < 3; ++k) local[v.triangles[3 * uint64_t{t} + k]] = UINT32_MAX;
+    for (uint32_t e : edges.of(r))
+      for (uint32_t c : L.kept_edges[e]) local[v.end_vertex[s.slot_of[c]]] = UINT32_MAX;
+    for (uint32_t p : points.of(r)) local[v.end_vertex[s.slot_of[L.kept_points[p]]]] = UINT32_MAX;
+    sink(part);
+  }
+}
 
 unsigned emit_bits(uint64_t cells) { return std::max(1u, static_cast<unsigned>(std::bit_width(cells))); }
 
@@ -194,6 +431,37 @@ size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t ve
     bits = b, work = w, ++end;
   }
   return end;
+}
+
+EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_region, uint64_t vertices,
+                              uint64_t primitives, uint64_t budget, const EmitOptions& options) {
+  EmitLevelPlan plan;
+  const uint64_t map = emit_map_bytes(vertices, emit_bits(cells));
+  const uint64_t tables = kLevelBytesPerCell * cells;
+  if (map + tables + emit_level_bytes(cells, primitives, options) <= budget) {
+    plan.batch_cells = cells;
+    return plan;
+  }
+  plan.batched = true;
+  // A batch holds pass A's tables for its cells and its halo (counted as half its cells again), without
+  // quadrics (its representatives are read from the file), plus the block outputs in flight.
+  EmitOptions no_quadric = options;
+  no_quadric.representative = Representative::center;
+  const uint64_t per_cell = emit_level_bytes(1, 0, no_quadric) * 3 / 2;
+  const uint64_t in_flight = emit_level_bytes(0, primitives, no_quadric);
+  const uint64_t need = map + tables + in_flight + per_cell * largest_region;
+  if (need > budget)
+    fail(Status::usage, "emitting level " + std::to_string(level) + " (" + std::to_string(cells) + " cells) region by region needs about " +
+                            std::to_string(need >> 20) + " MiB (its cluster map " + std::to_string(map >> 20) + " MiB, " +
+                            std::to_string(kLevelBytesPerCell) + " bytes a cell " + std::to_string(tables >> 20) +
+                            " MiB, a region of " + std::to_string(largest_region) + " cells), more than --memory allows (" +
+                            std::to_string(budget >> 20) + " MiB for the stage): raise --memory, or make the level coarser "
+                            "(--cell-sizes, --target-triangles)");
+  plan.batch_cells = (budget - map - tables - in_flight) / per_cell;
+  // The representatives pass holds a quadric per cell of its range, and its blocks' quadrics in flight.
+  const uint64_t quadric_bytes = sizeof(core::Quadric) + 8;
+  plan.reps_range_cells = std::max<uint64_t>(1, (budget - map - tables - in_flight) / quadric_bytes);
+  return plan;
 }
 
 std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
@@ -325,10 +593,14 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   // hence one thread.
   static_assert(kEmitBlock % 64 == 0);
   for (LevelState& L : levels) {
-    if (quadric) L.quadrics.resize(L.in.cells);
+    if (quadric && !L.in.batched) {
+      L.quadric_base = options.representatives_only ? L.in.first_cell : 0;
+      L.quadrics.resize(options.representatives_only ? L.in.end_cell - L.in.first_cell : L.in.cells);
+    }
     for (int kind = 0; kind < 2; ++kind)
-      if (!options.count_only) L.collapsed[kind].assign((column_count[kind] + 63) / 64, 0);
+      if (!options.count_only && !options.representatives_only) L.collapsed[kind].assign((column_count[kind] + 63) / 64, 0);
   }
+  find_halos(levels, run_blocks, record_of, cell);
   auto classify = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
     auto mark = [&](LevelState& L, size_t i) {
       if (options.count_only) return;
@@ -345,6 +617,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       if (s.points.insert({c}, 0).second) o.points.push_back(c);
     };
     const size_t arity = static_cast<size_t>(3 - b.kind);
+    if (options.representatives_only && arity != 3) return;
     for (size_t i = 0; i < ids.size(); i += arity) {
       if (arity == 3) {
         const uint32_t v[3] = {ids[i], ids[i + 1], ids[i + 2]};
@@ -360,9 +633,11 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
           BlockOut& o = outs_l[l];
           Scratch& s = scratch_l[l];
           const uint32_t c[3] = {cell(L, r[0]), cell(L, r[1]), cell(L, r[2])};
-          if (quadric) {
+          if (!visited(L, c, 3)) continue;
+          if (quadric && !L.in.batched) {
             for (int k = 0; k < 3; ++k) {
               if ((k > 0 && c[k] == c[0]) || (k > 1 && c[k] == c[1])) continue;
+              if (options.representatives_only && (c[k] < L.in.first_cell || c[k] >= L.in.end_cell)) continue;
               if (c[k] == s.last_cell) {
                 o.quadrics[s.last_slot].add(q);
                 continue;
@@ -373,6 +648,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
               s.last_cell = c[k], s.last_slot = slot;
             }
           }
+          if (options.representatives_only) continue;
           if (c[0] != c[1] && c[1] != c[2] && c[0] != c[2]) {
             std::array<uint32_t, 3> key{c[0], c[1], c[2]};
             std::sort(key.begin(), key.end());
@@ -388,6 +664,8 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
         const uint64_t r0 = record_of(ids[i]), r1 = record_of(ids[i + 1]);
         for (size_t l = 0; l < nl; ++l) {
           const uint32_t c0 = cell(levels[l], r0), c1 = cell(levels[l], r1);
+          const uint32_t c[2] = {c0, c1};
+          if (!visited(levels[l], c, 2)) continue;
           if (c0 == c1) {
             point(outs_l[l], scratch_l[l], c0);
           } else {
@@ -397,7 +675,10 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
         }
       } else {
         const uint64_t r0 = record_of(ids[i]);
-        for (size_t l = 0; l < nl; ++l) point(outs_l[l], scratch_l[l], cell(levels[l], r0));
+        for (size_t l = 0; l < nl; ++l) {
+          const uint32_t c = cell(levels[l], r0);
+          if (visited(levels[l], &c, 1)) point(outs_l[l], scratch_l[l], c);
+        }
       }
     }
   };
@@ -414,9 +695,15 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
         if (L.g_edges.insert(e, static_cast<uint32_t>(L.edges.size())).second) L.edges.push_back(e);
       for (uint32_t c : o.points)
         if (L.g_points.insert({c}, 0).second) L.points.push_back(c);
-      for (size_t i = 0; i < o.quadric_cells.size(); ++i) L.quadrics[o.quadric_cells[i]].add(o.quadrics[i]);
+      for (size_t i = 0; i < o.quadric_cells.size(); ++i) L.quadrics[o.quadric_cells[i] - L.quadric_base].add(o.quadrics[i]);
     }
   });
+  if (options.representatives_only) {
+    for (LevelState& L : levels)
+      write_representative_range(prefix, L.in.level, L.in.cells, L.in.first_cell, L.in.end_cell - L.in.first_cell, L.quadrics,
+                                 options.representative, cluster, L.in.cell_size, meta.single_precision);
+    return std::vector<EmitCounts>(nl);
+  }
 
   std::vector<EmitCounts> counts(nl);
   if (options.count_only) {
@@ -435,13 +722,14 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     L.g_triangles = FlatMap<3, false>();
     L.g_points = FlatMap<1, false>();
     std::vector<uint8_t> on_triangle(L.edges.size(), 0);
-    std::vector<uint8_t> used(L.in.cells, 0);
+    std::vector<uint8_t>& used = L.used;
+    used.assign(L.in.cells, 0);
     // In parallel: the flags only ever go from 0 to 1, so the result does not depend on the threads.
     tbb::parallel_for(tbb::blocked_range<size_t>(0, L.triangles.size(), 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t i = r.begin(); i < r.end(); ++i) {
         const auto& t = L.triangles[i];
         for (int k = 0; k < 3; ++k) {
-          std::atomic_ref<uint8_t>(used[t[k]]).store(1, std::memory_order_relaxed);
+          std::atomic_ref<uint8_t>(used[t[k]]).store(kByTriangle, std::memory_order_relaxed);
           if (L.edges.empty()) continue;
           const uint32_t e = L.g_edges.find({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});
           if (e != FlatMap<2>::empty) std::atomic_ref<uint8_t>(on_triangle[e]).store(1, std::memory_order_relaxed);
@@ -449,17 +737,22 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       }
     });
     L.g_edges = FlatMap<2>();
+    // A batch keeps the edges and points it owns (an edge is owned with its lower cell); every kept edge
+    // marks its cells used, so that a point or a vertex of the batch's cells sees every edge that uses it.
     for (size_t i = 0; i < L.edges.size(); ++i) {
+      const bool own = owned(L, L.edges[i][0]);
       if (on_triangle[i]) {
-        ++L.counts.edges_on_triangles;
+        if (own) ++L.counts.edges_on_triangles;
         continue;
       }
+      used[L.edges[i][0]] |= kByKeptEdge, used[L.edges[i][1]] |= kByKeptEdge;
+      if (!own) continue;
       L.k_edges.insert(L.edges[i], static_cast<uint32_t>(L.kept_edges.size()));
       L.kept_edges.push_back(L.edges[i]);
-      used[L.edges[i][0]] = used[L.edges[i][1]] = 1;
     }
     std::vector<std::array<uint32_t, 2>>().swap(L.edges);
     for (uint32_t c : L.points) {
+      if (!owned(L, c)) continue;
       if (used[c]) {
         ++L.counts.points_covered;
         continue;
@@ -575,8 +868,6 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
 
   for (size_t l = 0; l < nl; ++l) {
     LevelState& L = levels[l];
-    const uint64_t cells = L.in.cells;
-    const double cell_size = L.in.cell_size;
     for (auto& b : L.collapsed) std::vector<uint64_t>().swap(b);
     L.k_edges = FlatMap<2>();
     std::vector<float> thickness(L.kept_edges.size());
@@ -589,105 +880,8 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     std::vector<Distances>().swap(L.distances);
     std::vector<std::array<double, 3>>().swap(L.pa);
     std::vector<std::array<double, 3>>().swap(L.pb);
-
-    // The cells in use, numbered in order of first use: triangle corners, then edge and point ends.
-    std::vector<uint32_t> slot_of(cells, UINT32_MAX);
-    std::vector<uint32_t> slot_cell;
-    auto use = [&](uint32_t c) {
-      if (slot_of[c] == UINT32_MAX) slot_of[c] = static_cast<uint32_t>(slot_cell.size()), slot_cell.push_back(c);
-      return slot_of[c];
-    };
-    std::vector<uint32_t> tri_slots;
-    tri_slots.reserve(3 * L.triangles.size());
-    for (const auto& t : L.triangles)
-      for (uint32_t c : t) tri_slots.push_back(use(c));
-    std::vector<std::array<uint32_t, 3>>().swap(L.triangles);
-    const size_t triangle_slots = slot_cell.size();
-    for (const auto& e : L.kept_edges) use(e[0]), use(e[1]);
-    for (uint32_t c : L.kept_points) use(c);
-
-    // Their representatives, reading the cell table through windows in cell order, the windows in parallel
-    // (each representative depends on its cell alone, so the bytes do not depend on the threads).
-    std::vector<double> rep(3 * slot_cell.size());
-    {
-      const CellInfoReader f(cell_info_path(prefix, L.in.level), cells, cell_info_kind(options.representative), meta.single_precision);
-      constexpr uint64_t window_cells = 1 << 16;
-      tbb::parallel_for(uint64_t{0}, (cells + window_cells - 1) / window_cells, [&](uint64_t window) {
-        const uint64_t first = window * window_cells, end = std::min(cells, first + window_cells);
-        io::Window w;
-        for (uint64_t c = first; c < end; ++c) {
-          const uint32_t slot = slot_of[c];
-          if (slot == UINT32_MAX) continue;
-          if (!w.data()) w = f.map(first, end);
-          const CellInfo ci = f.get(w, c - first);
-          double* p = &rep[3 * slot];
-          double mean[3];
-          for (int k = 0; k < 3; ++k) mean[k] = ci.sum[k] / static_cast<double>(ci.vertices);
-          if (options.representative == Representative::center) {
-            std::copy(ci.center, ci.center + 3, p);
-          } else if (options.representative == Representative::mean) {
-            for (int k = 0; k < 3; ++k) p[k] = ci.weight > 0 ? ci.weighted[k] / ci.weight : mean[k];
-          } else {
-            double lo[3], hi[3];
-            for (int k = 0; k < 3; ++k) {
-              if (cluster.clustering == core::Clustering::uniform) {
-                const double sq = static_cast<double>(core::grid_square(ci.center[k], cell_size));
-                lo[k] = sq * cell_size, hi[k] = (sq + 1) * cell_size;
-              } else {
-                lo[k] = ci.center[k] - cell_size / 2, hi[k] = ci.center[k] + cell_size / 2;
-              }
-            }
-            const std::array<double, 3> x = core::quadric_minimizer(L.quadrics[c], mean, lo, hi);
-            std::copy(x.begin(), x.end(), p);
-          }
-        }
-      });
-    }
-    std::vector<core::Quadric>().swap(L.quadrics);
-
-    // Output vertices: triangle corners split by normal (core/normals.h), then edge and point ends, which
-    // reuse a triangle vertex of their cell when there is one.
-    core::LodMesh mesh;
-    core::CreaseNormals normals;
-    core::crease_normals(std::span<const double>(rep.data(), 3 * triangle_slots), tri_slots,
-                         options.normals ? options.crease_degrees : 180.0, normals);
-    std::vector<uint32_t>().swap(tri_slots);
-    mesh.positions.reserve(3 * (normals.vertex.size() + slot_cell.size() - triangle_slots));
-    for (uint32_t v : normals.vertex)
-      for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(rep[3 * v + k]));
-    mesh.normals = std::move(normals.normals);
-    mesh.triangles = std::move(normals.triangles);
-    std::vector<uint32_t> out_vertex(slot_cell.size(), UINT32_MAX);
-    for (size_t i = 0; i < normals.vertex.size(); ++i)
-      if (out_vertex[normals.vertex[i]] == UINT32_MAX) out_vertex[normals.vertex[i]] = static_cast<uint32_t>(i);
-    std::vector<uint32_t>().swap(normals.vertex);
-    auto end_vertex = [&](uint32_t c) {
-      const uint32_t slot = slot_of[c];
-      if (out_vertex[slot] == UINT32_MAX) {
-        out_vertex[slot] = static_cast<uint32_t>(mesh.positions.size() / 3);
-        for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(rep[3 * slot + k])), mesh.normals.push_back(0.0f);
-      }
-      return out_vertex[slot];
-    };
-    for (const auto& e : L.kept_edges) {
-      mesh.edges.push_back(end_vertex(e[0]));
-      mesh.edges.push_back(end_vertex(e[1]));
-    }
-    mesh.thickness = std::move(thickness);
-    for (uint32_t c : L.kept_points) mesh.points.push_back(end_vertex(c));
-    std::vector<std::array<uint32_t, 2>>().swap(L.kept_edges);
-    std::vector<uint32_t>().swap(L.kept_points);
-    // The mesh alone goes to the sink: the cell tables (about 36 bytes a used cell) are freed first.
-    std::vector<uint32_t>().swap(slot_of);
-    std::vector<uint32_t>().swap(slot_cell);
-    std::vector<uint32_t>().swap(out_vertex);
-    std::vector<double>().swap(rep);
-
+    build_parts(L, thickness, prefix, cluster, options, meta.single_precision, [&](RegionPart& part) { sink(l, part); });
     counts[l] = L.counts;
-    counts[l].triangles = mesh.triangle_count();
-    counts[l].edges = mesh.edge_count();
-    counts[l].points = mesh.point_count();
-    sink(l, mesh);
   }
   return counts;
 }

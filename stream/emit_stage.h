@@ -19,7 +19,10 @@
 // Determinism: primitives are processed in fixed blocks of the store (not of the parse or memory plan),
 // each block's sums are formed in store order and merged in block order; output primitives and vertices
 // are numbered in order of first appearance. So the bytes depend on the input and options only.
-// Levels are emitted in groups that share one pass over the input (emit_levels, emit_group_end below).
+// Levels are emitted in groups that share one pass over the input (emit_levels, emit_group_end below), and
+// each level region by region (stream/emit_regions.h): a level too large for the memory plan in batches of
+// regions, each batch visiting the primitives that touch its cells or its halo's, so that every cell it
+// outputs, and every neighbour's vertex its parts use, sees its whole neighbourhood.
 // Memory: the group's packed cluster maps (bit_width(cells) bits per stored vertex and level, kept in
 // EmitScratch between groups) and per level one bit per input triangle and segment (collapsed to an edge
 // or not), plus what grows with the output: at the peak (classification), the triangle and edge dedupe
@@ -38,6 +41,7 @@
 #include "core/mesh.h"
 #include "lodstream/lodstream.h"
 #include "stream/memory.h"
+#include "stream/emit_regions.h"
 #include "stream/progress.h"
 #include "stream/scene_store.h"
 
@@ -48,6 +52,8 @@ struct EmitOptions {
   double crease_degrees = 30;
   bool normals = true;
   bool count_only = false;  // stop after classification and triangle dedupe (target search)
+  // Only sum the quadrics of the levels' cell ranges and write their representatives (emit_regions.h).
+  bool representatives_only = false;
 };
 
 struct EmitCounts {
@@ -67,17 +73,45 @@ struct EmitLevel {
   size_t level = 0;
   uint64_t cells = 0;
   double cell_size = 0;
+  // Partitioned emit (neither count_only nor representatives_only): the level's cut and the region of each
+  // of its cells; the parts of regions [first_region, end_region) are made. `batched`: those regions are not
+  // the whole level: only the input primitives touching a cell of theirs or of their halo (the cells that
+  // share an input primitive with one of theirs) are visited, which gives every cell of either its complete
+  // neighbourhood, and representatives are read from representatives_path (written before).
+  const LevelCut* cut = nullptr;
+  const uint32_t* region_of = nullptr;
+  uint32_t first_region = 0, end_region = 0;
+  bool batched = false;
+  // representatives_only: the cells whose quadrics are summed.
+  uint64_t first_cell = 0, end_cell = 0;
+};
+
+// One region's part of a level, as emit hands it on: the part the region sink gets, and what welds the parts
+// into the level's mesh. A vertex of the level is (cell, variant): the variant-th output vertex of the cell
+// (its corners split by normal, in order of first appearance over the level's triangles; a cell used only
+// by edges and points has one vertex, with a zero normal).
+// `mesh` holds exactly the primitives the region owns (a triangle with its lowest cell, an edge with its lower
+// cell, a point with its cell), in the level's order, and the vertices they use numbered in order of first
+// use; a vertex of a neighbouring region's cell appears with the same position and normal, to the bit, as
+// in that region's parts.
+struct RegionPart {
+  uint32_t region = 0;  // index in the level's cut
+  core::LodMesh mesh;
+  std::vector<uint64_t> vertex_key;  // per vertex of mesh: cell << 32 | variant
+  // The vertices the region owns (those of its cells used by the level), in cell order, then variant.
+  std::vector<uint64_t> owned_key;
+  std::vector<float> owned_positions, owned_normals;
 };
 
 // Emits the levels of `group` (cells of all of them together fit in 64 bits per vertex: the sum over the
 // levels of emit_bits(cells)) in one pass over the input: each triangle's corners, positions and quadric
 // are read and formed once and serve every level. Every level gets the same bytes as when emitted alone:
-// its sums are still formed per block and merged in block order. `sink(i, mesh)` receives the mesh of
-// group[i] as soon as it is finished, in group order, and may consume it (move from it): it is freed when
-// the call returns, before the next level's mesh is built, so that one finished mesh is held at a time.
+// its sums are still formed per block and merged in block order. `sink(i, part)` receives the parts of
+// group[i], region by region in region order, as soon as the level's batch is finished, in group order,
+// and may consume them.
 // With options.count_only the sink is not called. `canonical_path` empty: every stored vertex is canonical.
 // `prefix`: the cluster stage's files.
-using EmitSink = std::function<void(size_t, core::LodMesh&)>;
+using EmitSink = std::function<void(size_t, RegionPart&)>;
 std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
                                     const std::string& canonical_path, const std::string& prefix,
                                     std::span<const EmitLevel> group, uint64_t records,
@@ -103,5 +137,21 @@ void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t v
 // grouping changes no output byte, only how many passes the input gets.
 size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives, uint64_t budget,
                       uint64_t resident, const EmitOptions& options);
+
+// Partitioned emit (not count_only). A level is emitted whole (one batch of every region, sharing a pass
+// with other levels as emit_group_end allows) when its map, its working memory (emit_level_bytes) and its
+// per-cell tables fit in `budget`; otherwise in batches of regions, each batch's owned cells at most
+// batch_cells, after its representatives are written in ranges of at most reps_range_cells cells. A level
+// holds kLevelBytesPerCell bytes a cell beside its batches: its cells' regions (4), a batch's roles (1) and
+// uses (1) and slots (4), the level files' tables (8).
+inline constexpr uint64_t kLevelBytesPerCell = 18;
+struct EmitLevelPlan {
+  bool batched = false;
+  uint64_t batch_cells = 0, reps_range_cells = 0;
+};
+// Fails with Status::usage, naming the level, its cells and the memory it needs, when even a batch of its
+// largest region (`largest_region` cells) does not fit, so that the stage stops before it starts.
+EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_region, uint64_t vertices,
+                              uint64_t primitives, uint64_t budget, const EmitOptions& options);
 
 }  // namespace lodstream::stream

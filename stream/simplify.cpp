@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <memory>
 #include <span>
 
@@ -26,12 +27,14 @@
 #include "lodstream/lodstream.h"
 #include "stream/cluster_stage.h"
 #include "stream/disk_space.h"
+#include "stream/emit_regions.h"
 #include "stream/emit_stage.h"
 #include "stream/grade_stage.h"
 #include "stream/ingest.h"
 #include "stream/job.h"
 #include "stream/kill_point.h"
 #include "stream/labels_stage.h"
+#include "stream/level_files.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
@@ -100,6 +103,7 @@ void check_options(const SimplifyOptions& s) {
   if (!(s.fov_degrees > 0 && s.fov_degrees < 180)) usage("--fov must be between 0 and 180 degrees");
   if (s.resolution == 0) usage("--resolution must be positive");
   if (!(s.pixels_per_cell > 0 && std::isfinite(s.pixels_per_cell))) usage("--pixels-per-cell must be positive");
+  if (s.tile_triangles < 2) usage("--tile-triangles must be at least 2");
   if (!(s.crease_degrees >= 0 && s.crease_degrees <= 180)) usage("--crease must be between 0 and 180 degrees");
   if (!s.write_ply && !s.write_obj && !s.write_glb) usage("nothing to write: enable at least one of PLY, OBJ, GLB");
   check_silhouette_options(s);
@@ -304,7 +308,8 @@ std::vector<double> measure_silhouette_p95(const std::string& original, const st
 // not monotone in c, hence the bracket. Sizes stay strictly increasing (a finer level is lowered below
 // the next); the sizes kept are each level's `lo` (its first size when none met the bound), measured
 // once more when they differ from the last pass, so that the figures are those of the sizes used.
-using EmitFn = std::function<void(const std::vector<double>&, const std::function<void(size_t, core::LodMesh&)>&)>;
+// Emits the levels at the given cell sizes, writing level l as a PLY at the l-th path.
+using EmitFn = std::function<void(const std::vector<double>&, const std::vector<std::string>&)>;
 ordered_json bound_silhouette_error(const std::string& input, const SimplifyOptions& so, const Options& options,
                                     const stream::WorkDir& work, std::vector<double>& sizes, std::vector<double>& factors,
                                     std::vector<double>& distances, SimplifyReport& report, const EmitFn& emit) {
@@ -320,10 +325,8 @@ ordered_json bound_silhouette_error(const std::string& input, const SimplifyOpti
     for (size_t l = n - 1; l > 0; --l)
       if (!(sizes[l - 1] < sizes[l])) sizes[l - 1] = sizes[l] * (1 - 1e-6);
     std::vector<std::string> files(n);
-    emit(sizes, [&](size_t l, core::LodMesh& mesh) {
-      files[l] = fmt::format("{}/lod{}.ply", dir, l);
-      io::write_ply(files[l], mesh, {});
-    });
+    for (size_t l = 0; l < n; ++l) files[l] = fmt::format("{}/lod{}.ply", dir, l);
+    emit(sizes, files);
     std::vector<double> p95 = measure_silhouette_p95(input, files, distances, so, options, work.subdir("max-error-work"), dir + "/report");
     ++report.error_passes;
     passes.push_back({{"cell_sizes", sizes}, {"factors", labels ? ordered_json(factors) : ordered_json()}, {"p95_px", p95}});
@@ -548,25 +551,83 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         return cs.cells;
       };
 
-      // Emits every level at `sizes` with `cells` cells, handing each finished mesh to `sink` (level index,
-      // mesh), in groups that share a pass over the input as far as the memory plan allows
-      // (stream::emit_group_end); the grouping changes no byte. Each mesh is written as soon as it is
-      // finished, so no finished mesh is held while the next levels are emitted.
-      auto emit_all = [&](const std::vector<double>& sizes, const std::vector<uint64_t>& cells,
-                          const stream::EmitOptions& eo, const std::function<void(size_t, core::LodMesh&)>& sink) {
-        // Every level is checked before the first is written, so that a level that cannot fit stops the run
+      // Emits every level at `sizes` with `cells` cells. Counting (eo.count_only): whole levels, in groups that
+      // share a pass over the input as far as the memory plan allows (stream::emit_group_end). Otherwise
+      // region by region (stream/emit_regions.h): `sink(level, region info, part)` gets every region's part,
+      // level by level, each level's in region order, and `level_done(level)` follows its last part. Levels
+      // that fit whole share passes as when counting; the others are emitted in batches of regions. Neither
+      // the grouping nor the batches change a byte.
+      using PartSink = std::function<void(size_t, const stream::RegionInfo&, stream::RegionPart&)>;
+      auto emit_all = [&](const std::vector<double>& sizes, const std::vector<uint64_t>& cells, const stream::EmitOptions& eo,
+                          const PartSink& sink, const std::function<void(size_t)>& level_done) {
+        std::vector<stream::EmitCounts> counts(sizes.size());
+        if (eo.count_only) {
+          for (size_t l = 0; l < sizes.size(); ++l)
+            stream::check_emit_budget(cells, l, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
+          for (size_t first = 0; first < sizes.size();) {
+            const size_t end = stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
+            std::vector<stream::EmitLevel> group;
+            for (size_t l = first; l < end; ++l) group.push_back({l, cells[l], sizes[l]});
+            const std::vector<stream::EmitCounts> c = stream::emit_levels(
+                store_dir, meta, canonical, prefix, group, grade.records, copts, eo, progress, scratch, [](size_t, stream::RegionPart&) {});
+            std::copy(c.begin(), c.end(), counts.begin() + static_cast<ptrdiff_t>(first));
+            first = end;
+          }
+          return counts;
+        }
+        const core::SceneCube cube = stream::scene_cube_of(meta);
+        const std::vector<stream::LevelCut> cuts = stream::cut_levels(prefix, cells, cube, so.tile_triangles / 2, so.representative,
+                                                                                  meta.single_precision);
+        // Every level is planned before the first is written, so that a level that cannot fit stops the run
         // before any output file appears.
+        std::vector<stream::EmitLevelPlan> plans;
         for (size_t l = 0; l < sizes.size(); ++l)
-          stream::check_emit_budget(cells, l, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
-        std::vector<stream::EmitCounts> counts;
+          plans.push_back(stream::plan_emit_level(l, cells[l], *std::max_element(cuts[l].cells.begin(), cuts[l].cells.end()),
+                                                  meta.vertices, meta.primitives(), plan.stage_bytes, eo));
+        auto info = [&](size_t l, uint32_t r) {
+          stream::RegionInfo i;
+          i.level = l, i.key = cuts[l].regions[r], i.cell_size = sizes[l], i.cells = cuts[l].cells[r];
+          core::region_box(cube, i.key, i.box_min, i.box_max);
+          return i;
+        };
+        auto add = [&](size_t l, const stream::EmitCounts& c) {
+          counts[l].triangles += c.triangles, counts[l].edges += c.edges, counts[l].points += c.points;
+          counts[l].edges_on_triangles += c.edges_on_triangles, counts[l].points_covered += c.points_covered;
+        };
         for (size_t first = 0; first < sizes.size();) {
-          const size_t end = stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, 0, eo);
+          if (plans[first].batched) {
+            const size_t l = first++;
+            stream::write_representatives(store_dir, meta, canonical, prefix, l, cells[l], sizes[l], grade.records, copts,
+                                          eo.representative, plans[l].reps_range_cells, progress, scratch);
+            const std::vector<uint32_t> region_of = stream::load_region_of(prefix, l, cells[l], cube, cuts[l], so.representative, meta.single_precision);
+            for (const auto& [r0, r1] : stream::region_batches(cuts[l], plans[l].batch_cells)) {
+              stream::EmitLevel level{l, cells[l], sizes[l], &cuts[l], region_of.data(), r0, r1, true};
+              const std::vector<stream::EmitCounts> c = stream::emit_levels(
+                  store_dir, meta, canonical, prefix, std::span<const stream::EmitLevel>(&level, 1), grade.records, copts, eo,
+                  progress, scratch, [&](size_t, stream::RegionPart& part) { sink(l, info(l, part.region), part); });
+              add(l, c[0]);
+            }
+            std::filesystem::remove(stream::representatives_path(prefix, l));
+            level_done(l);
+            continue;
+          }
+          // Beside the group's working memory, its levels' per-cell tables (stream::kLevelBytesPerCell).
+          uint64_t tables = 0;
+          for (size_t l = first; l < sizes.size(); ++l) tables += stream::kLevelBytesPerCell * cells[l];
+          size_t end = stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), plan.stage_bytes, tables, eo);
+          end = static_cast<size_t>(std::find_if(plans.begin() + static_cast<ptrdiff_t>(first), plans.begin() + static_cast<ptrdiff_t>(end),
+                                                 [](const stream::EmitLevelPlan& p) { return p.batched; }) -
+                                    plans.begin());
+          std::vector<std::vector<uint32_t>> region_of;
           std::vector<stream::EmitLevel> group;
-          for (size_t l = first; l < end; ++l) group.push_back({l, cells[l], sizes[l]});
+          for (size_t l = first; l < end; ++l) region_of.push_back(stream::load_region_of(prefix, l, cells[l], cube, cuts[l], so.representative, meta.single_precision));
+          for (size_t l = first; l < end; ++l)
+            group.push_back({l, cells[l], sizes[l], &cuts[l], region_of[l - first].data(), 0,
+                             static_cast<uint32_t>(cuts[l].regions.size()), false});
           const std::vector<stream::EmitCounts> c =
               stream::emit_levels(store_dir, meta, canonical, prefix, group, grade.records, copts, eo, progress, scratch,
-                                  [&](size_t i, core::LodMesh& mesh) { sink(first + i, mesh); });
-          counts.insert(counts.end(), c.begin(), c.end());
+                                  [&](size_t i, stream::RegionPart& part) { sink(first + i, info(first + i, part.region), part); });
+          for (size_t l = first; l < end; ++l) add(l, c[l - first]), level_done(l);
           first = end;
         }
         return counts;
@@ -595,7 +656,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
               sizes, estimated_targets, so.levels != 0, meta.triangles > 0,
               std::max(core::kMinCellSize, 4 * extent / core::kMaxSquaresPerAxis),
               [&](const std::vector<double>& s, bool triangles_only) {
-                return emit_all(s, cluster(s, nullptr), triangles_only ? count_only : counting, [](size_t, core::LodMesh&) {});
+                return emit_all(s, cluster(s, nullptr), triangles_only ? count_only : counting,
+                                [](size_t, const stream::RegionInfo&, stream::RegionPart&) {}, [](size_t) {});
               });
           sizes = d.sizes;
           report.notice = d.notice;
@@ -612,7 +674,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
             ++report.search_iterations;
             bool all_ok = true;
             std::vector<double> next(sizes);
-            const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, count_only, [](size_t, core::LodMesh&) {});
+            const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, count_only, nullptr, nullptr);
             for (size_t l = 0; l < n; ++l) {
               const stream::EmitCounts& c = counts[l];
               const double t = static_cast<double>(so.target_triangles[l]);
@@ -642,12 +704,26 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         });
       }
 
+      std::vector<uint64_t> part_cells;  // the error stage's levels' cells, while it emits them
       if (so.max_error_px > 0)
         run_stage(&report.stages, "error", [&](StageStats&) {
           error_json = bound_silhouette_error(input, so, options, work, sizes, fine_factors, switch_distances, report,
-                                              [&](const std::vector<double>& s, const std::function<void(size_t, core::LodMesh&)>& sink) {
+                                              [&](const std::vector<double>& s, const std::vector<std::string>& paths) {
                                                 const stream::EmitOptions eo{so.representative, so.crease_degrees, true, false};
-                                                emit_all(s, cluster(s, nullptr), eo, sink);
+                                                std::map<size_t, std::unique_ptr<stream::LevelFiles>> parts;
+                                                auto add = [&](size_t l, const stream::RegionInfo&, stream::RegionPart& part) {
+                                                  std::unique_ptr<stream::LevelFiles>& f = parts[l];
+                                                  if (!f) f = std::make_unique<stream::LevelFiles>(work.scratch(fmt::format("error-level{}", l)), part_cells[l]);
+                                                  f->add(part);
+                                                };
+                                                part_cells = cluster(s, nullptr);
+                                                emit_all(s, part_cells, eo, add, [&](size_t l) {
+                                                  std::unique_ptr<stream::LevelFiles> f = std::move(parts[l]);
+                                                  parts.erase(l);
+                                                  if (!f) fail(Status::internal, fmt::format("emit: level {} has no region", l));
+                                                  f->close();
+                                                  f->write_ply(paths[l], {});
+                                                });
                                               });
         });
 
@@ -680,22 +756,38 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       // outputs' room (stream/disk_space.cpp).
       if (so.write_glb)
         glb = std::make_unique<io::GlbBuilder>(so.output_dir + "/lods.glb", so.output_dir + "/lods.glb.bin.partial", generator);
-      auto write_level = [&](size_t l, core::LodMesh& mesh) {
+      // Each level's parts are welded into its files (stream/level_files.h) as they come; the level's PLY and
+      // OBJ files and its part of the GLB are written after its last part (the three side by side).
+      std::map<size_t, std::unique_ptr<stream::LevelFiles>> open_levels;
+      // The region sink of the 3D Tiles output (stream/emit_regions.h): called for every region of every level;
+      // none is plugged in yet.
+      const stream::RegionSink region_sink;
+      auto add_part = [&](size_t l, const stream::RegionInfo& info, stream::RegionPart& part) {
+        std::unique_ptr<stream::LevelFiles>& files = open_levels[l];
+        if (!files) files = std::make_unique<stream::LevelFiles>(work.scratch(fmt::format("level{}", l)), cells[l]);
+        if (region_sink) region_sink(l, info, part.mesh);
+        files->add(part);
+      };
+      auto write_level = [&](size_t l) {
+        std::unique_ptr<stream::LevelFiles> level = std::move(open_levels[l]);
+        open_levels.erase(l);
+        if (!level) fail(Status::internal, fmt::format("emit: level {} has no region", l));
+        level->close();
         LevelStats& ls = report.levels[l];
-        ls.vertices = mesh.vertex_count();
+        ls.vertices = level->vertices();
         const std::vector<std::string> comments{
             generator, fmt::format("level {} of {}, cell size {}", l, sizes.size(), sizes[l]),
             fmt::format("clustering {} {} {}, representative {}, grading {}", name(so.clustering), name(so.cell),
                         name(so.variant), name(so.representative), name(so.grading))};
         const std::string stem = fmt::format("lod{}", l);
         tbb::task_group files;
-        if (so.write_ply) files.run([&] { io::write_ply(so.output_dir + "/" + stem + ".ply", mesh, comments); });
-        if (so.write_obj) files.run([&] { io::write_obj(so.output_dir + "/" + stem + ".obj", mesh, comments); });
+        if (so.write_ply) files.run([&] { level->write_ply(so.output_dir + "/" + stem + ".ply", comments); });
+        if (so.write_obj) files.run([&] { level->write_obj(so.output_dir + "/" + stem + ".obj", comments); });
         // MSFT_screencoverage: level l is shown while the coverage is at least the coverage at which the next
         // level takes over; the last level down to one pixel.
         if (glb) {
           const double lower = l + 1 < sizes.size() ? report.levels[l + 1].screen_coverage : 1.0 / so.resolution;
-          files.run([&] { glb->add({&mesh, stem, lower}); });
+          files.run([&] { glb->add(level->glb(stem, lower)); });
         }
         files.wait();
         if (so.write_ply) ls.files.push_back(stem + ".ply");
@@ -703,7 +795,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       };
       const stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
       run_stage(&report.stages, "emit", [&](StageStats&) {
-        const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, emit_options, write_level);
+        const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, emit_options, add_part, write_level);
         for (size_t l = 0; l < sizes.size(); ++l) {
           LevelStats& ls = report.levels[l];
           const stream::EmitCounts& c = counts[l];

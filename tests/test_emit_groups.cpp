@@ -1,6 +1,6 @@
-// Emit groups (stream/emit_stage.h): a level gives the same mesh, to the bit, whether it is emitted alone or
-// in one pass with other levels (packed cluster maps, shared corner and quadric work), and groups follow the
-// memory model.
+// Emit groups (stream/emit_stage.h): a level gives the same parts, to the bit, whether it is emitted alone,
+// in one pass with other levels (packed cluster maps, shared corner and quadric work), or in batches of
+// regions with their halos; and groups follow the memory model.
 #include <gtest/gtest.h>
 
 #include <cstdint>
@@ -14,6 +14,7 @@
 #include "core/mesh.h"
 #include "core/status.h"
 #include "lodstream/lodstream.h"
+#include "stream/emit_regions.h"
 #include "stream/emit_stage.h"
 #include "stream/progress.h"
 #include "stream/scene_store.h"
@@ -30,6 +31,30 @@ void expect_same_mesh(const core::LodMesh& a, const core::LodMesh& b, const std:
   EXPECT_EQ(a.edges, b.edges) << what;
   EXPECT_EQ(a.thickness, b.thickness) << what;
   EXPECT_EQ(a.points, b.points) << what;
+}
+
+using Parts = std::vector<stream::RegionPart>;
+
+void expect_same_parts(const Parts& a, const Parts& b, const std::string& what) {
+  ASSERT_EQ(a.size(), b.size()) << what;
+  for (size_t i = 0; i < a.size(); ++i) {
+    const std::string w = what + ", region " + std::to_string(i);
+    EXPECT_EQ(a[i].region, b[i].region) << w;
+    expect_same_mesh(a[i].mesh, b[i].mesh, w);
+    EXPECT_EQ(a[i].vertex_key, b[i].vertex_key) << w;
+    EXPECT_EQ(a[i].owned_key, b[i].owned_key) << w;
+    EXPECT_EQ(a[i].owned_positions, b[i].owned_positions) << w;
+    EXPECT_EQ(a[i].owned_normals, b[i].owned_normals) << w;
+  }
+}
+
+// Each level's parts come to the sink in group order, each level's in region order.
+auto into(std::vector<Parts>& parts, size_t offset) {
+  return [&parts, offset](size_t i, stream::RegionPart& part) {
+    Parts& p = parts[offset + i];
+    EXPECT_EQ(part.region, p.size());
+    p.push_back(std::move(part));
+  };
 }
 
 TEST(EmitGroups, SameMeshesAloneAndGrouped) {
@@ -53,27 +78,28 @@ TEST(EmitGroups, SameMeshesAloneAndGrouped) {
     const std::string weld = o.work_dir + "/weld.map";
     const std::string canonical = std::filesystem::exists(weld) ? weld : std::string();
     const std::string prefix = o.work_dir + "/";
+    std::vector<uint64_t> cells;
+    for (const LevelStats& ls : report.levels) cells.push_back(ls.cells);
+    const core::SceneCube cube = stream::scene_cube_of(meta);
+    const std::vector<stream::LevelCut> cuts = stream::cut_levels(prefix, cells, cube, 500, rep, meta.single_precision);
+    std::vector<std::vector<uint32_t>> region_of;
     std::vector<stream::EmitLevel> levels;
     unsigned bits = 0;  // of levels 1 to 4
     for (size_t l = 0; l < report.levels.size(); ++l) {
-      levels.push_back({l, report.levels[l].cells, report.levels[l].cell_size});
+      region_of.push_back(stream::load_region_of(prefix, l, cells[l], cube, cuts[l], rep, meta.single_precision));
+      levels.push_back({l, cells[l], report.levels[l].cell_size, &cuts[l], region_of[l].data(), 0,
+                        static_cast<uint32_t>(cuts[l].regions.size()), false});
       if (l > 0) bits += stream::emit_bits(report.levels[l].cells);
     }
     ASSERT_EQ(levels.size(), 5u);
     ASSERT_LE(bits, 64u);  // the room's levels 1 to 4 fit in one group
+    ASSERT_GT(cuts[0].regions.size(), 4u);
 
     stream::Progress progress(o);
     stream::EmitScratch scratch;
     const core::ClusterOptions copts;
     const stream::EmitOptions eo{rep, so.crease_degrees, true, false};
-    std::vector<core::LodMesh> alone(levels.size()), four(4), pair(2);
-    // Each mesh comes to the sink once, in group order.
-    auto into = [](std::vector<core::LodMesh>& meshes, size_t offset) {
-      return [&meshes, offset, next = size_t{0}](size_t i, core::LodMesh& mesh) mutable {
-        EXPECT_EQ(i, next++);
-        meshes[offset + i] = std::move(mesh);
-      };
-    };
+    std::vector<Parts> alone(levels.size()), four(4), pair(2), batched(1);
     for (size_t l = 0; l < levels.size(); ++l)
       stream::emit_levels(store_dir, meta, canonical, prefix, std::span(&levels[l], 1), records, copts, eo, progress,
                           scratch, into(alone, l));
@@ -81,11 +107,28 @@ TEST(EmitGroups, SameMeshesAloneAndGrouped) {
                         scratch, into(four, 0));
     const stream::EmitLevel skip[2] = {levels[3], levels[0]};  // any levels, in any order
     stream::emit_levels(store_dir, meta, canonical, prefix, skip, records, copts, eo, progress, scratch, into(pair, 0));
-    for (size_t l = 0; l < levels.size(); ++l) EXPECT_GT(alone[l].triangle_count(), 0u);
+    // The finest level in batches of regions (each with its halo), its representatives written ahead.
+    stream::write_representatives(store_dir, meta, canonical, prefix, 0, cells[0], levels[0].cell_size, records, copts, rep,
+                                  cells[0] / 3 + 1, progress, scratch);
+    const auto batches = stream::region_batches(cuts[0], cells[0] / 4);
+    ASSERT_GE(batches.size(), 3u);
+    for (const auto& [r0, r1] : batches) {
+      stream::EmitLevel b = levels[0];
+      b.first_region = r0, b.end_region = r1, b.batched = true;
+      stream::emit_levels(store_dir, meta, canonical, prefix, std::span(&b, 1), records, copts, eo, progress, scratch,
+                          into(batched, 0));
+    }
+    for (size_t l = 0; l < levels.size(); ++l) {
+      EXPECT_EQ(alone[l].size(), cuts[l].regions.size());
+      uint64_t triangles = 0;
+      for (const stream::RegionPart& p : alone[l]) triangles += p.mesh.triangle_count();
+      EXPECT_GT(triangles, 0u);
+    }
     for (size_t l = 1; l < levels.size(); ++l)
-      expect_same_mesh(alone[l], four[l - 1], "level " + std::to_string(l) + " with levels 1 to 4");
-    expect_same_mesh(alone[3], pair[0], "level 3 with level 0");
-    expect_same_mesh(alone[0], pair[1], "level 0 with level 3");
+      expect_same_parts(alone[l], four[l - 1], "level " + std::to_string(l) + " with levels 1 to 4");
+    expect_same_parts(alone[3], pair[0], "level 3 with level 0");
+    expect_same_parts(alone[0], pair[1], "level 0 with level 3");
+    expect_same_parts(alone[0], batched[0], "level 0 in batches");
   }
 }
 

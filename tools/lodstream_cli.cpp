@@ -337,6 +337,8 @@ int main(int argc, char** argv) {
   simplify_cmd->add_option("--cell-sizes", sizes_text, "Cell sizes a,b,... in scene units, finest first");
   simplify_cmd->add_option("--target-triangles", targets_text, "Triangle counts t1,t2,... to aim at (searched, ±15%)");
   simplify_cmd->add_option("--crease", so.crease_degrees, "Crease angle for normals, degrees (default 30)");
+  simplify_cmd->add_option("--tile-triangles", so.tile_triangles,
+                           "Regions a level is emitted in hold at most N/2 of its cells (default 200000)");
   simplify_cmd->add_option("--fov", so.fov_degrees, "Vertical field of view for switching distances, degrees (default 60)");
   simplify_cmd->add_option("--resolution", so.resolution, "Image height in pixels for switching distances (default 1080)");
   simplify_cmd->add_option("--pixels-per-cell", so.pixels_per_cell, "X of Low & Tan §4: cell width in pixels at the switch (default 5)");

@@ -154,6 +154,10 @@ struct SimplifyOptions {
   double fov_degrees = 60;
   unsigned resolution = 1080;
   double pixels_per_cell = 5;
+  // Regions: a level is emitted, and tiled, in octree regions of at most
+  // tile_triangles / 2 of its cells. The level files' vertex and primitive order follows the regions, so
+  // their bytes depend on it.
+  uint64_t tile_triangles = 200'000;
   bool write_ply = true;
   bool write_obj = false;
   bool write_glb = true;

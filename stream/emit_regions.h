@@ -1,0 +1,85 @@
+// The spatial regions the emit stage works in (core/octree_regions.h, the contract with the 3D Tiles
+// writer): every level's cut, the region of each of its cells, the batches of regions
+// that the memory plan lets one pass hold, and each cell's representative written ahead to the work
+// directory, so that a batch reads the representatives of its neighbours' cells as they will be.
+//
+// Memory: cutting a level holds 8 bytes per cell of that level (the cells' codes, sorted); a level's region
+// table 4 bytes per cell; the representatives pass, with quadric representatives, one quadric (80 bytes)
+// per cell of the range it sums (ranges as large as the budget allows; the result does not depend on them).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/floating_cell.h"
+#include "core/mesh.h"
+#include "core/octree_regions.h"
+#include "core/quadric.h"
+#include "lodstream/lodstream.h"
+#include "stream/progress.h"
+#include "stream/scene_store.h"
+
+namespace lodstream::stream {
+
+struct EmitScratch;
+
+struct LevelCut {
+  std::vector<core::RegionKey> regions;  // in region order
+  std::vector<uint64_t> cells;           // per region: the level's cells in it
+};
+
+// What the region sink (the 3D Tiles output) is told about a region.
+struct RegionInfo {
+  size_t level = 0;
+  core::RegionKey key;
+  double cell_size = 0;
+  uint64_t cells = 0;
+  double box_min[3] = {0, 0, 0}, box_max[3] = {0, 0, 0};  // scene units, the scene's own frame
+};
+// Called, per level, for each region of its cut in region order, once, with the primitives it owns
+// (RegionPart::mesh, stream/emit_stage.h). May not keep `part`.
+using RegionSink = std::function<void(size_t level, const RegionInfo& info, const core::LodMesh& part)>;
+
+core::SceneCube scene_cube_of(const StoreMeta& meta);
+
+// Cuts every level (levels of `cells` cells, finest first; cut coarsest first), from the cells' center
+// positions (their means for the mean representative, whose tables hold no center) in the cluster stage's
+// files under `prefix`, written for `representative` at the store's precision.
+std::vector<LevelCut> cut_levels(const std::string& prefix, std::span<const uint64_t> cells, const core::SceneCube& cube,
+                                 uint64_t max_cells, Representative representative, bool single_precision);
+
+// The index in cut.regions of each cell of level `level`.
+std::vector<uint32_t> load_region_of(const std::string& prefix, size_t level, uint64_t cells, const core::SceneCube& cube,
+                                     const LevelCut& cut, Representative representative, bool single_precision);
+
+// Batches: consecutive regions in region order whose cells together are at most `batch_cells` (a region
+// larger than that is a batch alone), as [first, end) pairs.
+std::vector<std::pair<uint32_t, uint32_t>> region_batches(const LevelCut& cut, uint64_t batch_cells);
+
+// A cell's representative (emit_stage.h): center, mean, or the minimiser of `quadric` (its sum over the
+// triangles touching the cell) around the cell's mean, clamped into its box.
+struct CellInfo;
+void cell_representative(const CellInfo& ci, const core::Quadric* quadric, Representative representative,
+                         const core::ClusterOptions& cluster, double cell_size, double* out);
+
+// Path of level `level`'s representatives (3 doubles per cell, in cell order).
+std::string representatives_path(const std::string& prefix, size_t level);
+// Writes them: center and mean from the cell table; quadric from the area-weighted plane quadrics of every
+// input triangle touching the cell (summed per fixed store block in primitive order, blocks merged in
+// order, as the emit stage does), minimised around the cell's mean and clamped into its box. Quadrics are
+// summed for ranges of cells of at most `range_cells` cells, one pass over the triangles each (emit_levels
+// with EmitOptions::representatives_only, which calls write_representative_range).
+void write_representatives(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
+                           const std::string& prefix, size_t level, uint64_t cells, double cell_size,
+                           uint64_t records, const core::ClusterOptions& cluster, Representative representative,
+                           uint64_t range_cells, Progress& progress, EmitScratch& scratch);
+
+// Writes the representatives of cells [first, first + count) of the level; quadrics: one per cell, or empty.
+void write_representative_range(const std::string& prefix, size_t level, uint64_t cells, uint64_t first, uint64_t count,
+                                std::span<const core::Quadric> quadrics, Representative representative,
+                                const core::ClusterOptions& cluster, double cell_size, bool single_precision);
+
+}  // namespace lodstream::stream

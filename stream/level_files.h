@@ -1,0 +1,50 @@
+// A level's files (lodN.ply, lodN.obj, its part of lods.glb) welded from its region parts without holding
+// the level: each part's owned vertices and its primitives go to scratch files as the part arrives, the
+// primitives with their vertices named by (cell, variant) (stream/emit_stage.h, RegionPart); the files are
+// written when the last part is in, the names resolved through two tables of 4 bytes per cell.
+//
+// The welded mesh: every output vertex of the level once, numbered in region order, then cell order, then
+// variant; triangles in region order, then in the order the emit stage gives a region's triangles; edges
+// and points likewise. The GLB's triangle vertex array is the level's vertices that triangles use (those
+// with a normal), in vertex order.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "io/file_writer.h"
+#include "io/glb_writer.h"
+#include "stream/emit_stage.h"
+
+namespace lodstream::stream {
+
+class LevelFiles {
+ public:
+  // scratch: a path prefix for the scratch files (removed by the destructor); cells: the level's cells.
+  LevelFiles(std::string scratch, uint64_t cells);
+  LevelFiles(const LevelFiles&) = delete;
+  LevelFiles& operator=(const LevelFiles&) = delete;
+  ~LevelFiles();
+  // The parts, in region order.
+  void add(const RegionPart& part);
+  // After the last part.
+  void close();
+  uint64_t vertices() const { return vertices_; }
+  void write_ply(const std::string& path, const std::vector<std::string>& comments) const;
+  void write_obj(const std::string& path, const std::vector<std::string>& comments) const;
+  // The level for io::GlbBuilder; its blocks read the scratch files (valid while this object lives).
+  io::GlbStreamedLevel glb(const std::string& name, double screen_coverage) const;
+
+ private:
+  uint32_t vertex_id(uint64_t key) const;
+  uint32_t triangle_vertex_id(uint64_t key) const;
+  std::string path(const char* what) const { return scratch_ + what; }
+  std::string scratch_;
+  std::vector<uint32_t> first_vertex_, first_triangle_vertex_;  // per cell: the id of its variant 0
+  io::FileWriter vertex_out_, triangle_out_, edge_out_, point_out_;
+  uint64_t vertices_ = 0, triangle_vertices_ = 0, triangles_ = 0, edges_ = 0, points_ = 0;
+  float bounds_[3][2][3];  // triangles, edges, points: min, max
+};
+
+}  // namespace lodstream::stream
