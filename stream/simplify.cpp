@@ -33,6 +33,8 @@
 #include "stream/kill_point.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
+#include "stream/region_standin.h"
+#include "stream/tiles.h"
 #include "stream/work_dir.h"
 
 namespace lodstream {
@@ -85,7 +87,13 @@ void check_options(const SimplifyOptions& s) {
   if (s.resolution == 0) usage("--resolution must be positive");
   if (!(s.pixels_per_cell > 0 && std::isfinite(s.pixels_per_cell))) usage("--pixels-per-cell must be positive");
   if (!(s.crease_degrees >= 0 && s.crease_degrees <= 180)) usage("--crease must be between 0 and 180 degrees");
-  if (!s.write_ply && !s.write_obj && !s.write_glb) usage("nothing to write: enable at least one of PLY, OBJ, GLB");
+  if (!s.write_ply && !s.write_obj && !s.write_glb && !s.write_tiles)
+    usage("nothing to write: enable at least one of PLY, OBJ, GLB, 3D Tiles");
+  if (s.write_tiles && s.tile_triangles < 2) usage("--tile-triangles must be at least 2");
+  if (s.tiles_transform.size() != 0 && s.tiles_transform.size() != 3 && s.tiles_transform.size() != 16)
+    usage("--tiles-transform takes 16 numbers (a column-major 4x4 matrix) or 3 (longitude, latitude, height)");
+  for (double v : s.tiles_transform)
+    if (!std::isfinite(v)) usage("--tiles-transform: numbers must be finite");
 }
 
 core::ClusterOptions cluster_options(const SimplifyOptions& s) {
@@ -241,6 +249,40 @@ bool stamp_matches(const std::string& path, const ordered_json& key, ordered_jso
   } catch (const std::exception&) {
     return false;
   }
+}
+
+// 3D Tiles from the levels, through the STAND-IN region sink (stream/region_standin.h, REGIONS.md): each
+// level, saved whole by the emit sink to `level_files[l]`, is read back coarsest first, cut below the
+// coarser level's cut and handed region by region to the tileset builder. In memory for one level at a
+// time; the lead replaces this with the streamed region sink of h-pemit (issue 13.1).
+TilesStats write_tiles_standin(const SimplifyOptions& so, const stream::Bbox& bbox, const std::vector<double>& sizes,
+                               const std::vector<std::string>& level_files, const std::string& generator) {
+  stream::TilesOptions to;
+  to.dir = so.output_dir + "/tiles";
+  to.levels = static_cast<unsigned>(sizes.size());
+  to.thick = so.tile_lines == SimplifyOptions::TileLines::triangles;
+  to.pixels_per_cell = so.pixels_per_cell;
+  for (int k = 0; k < 3; ++k) to.scene_magnitude = std::max({to.scene_magnitude, std::abs(bbox.min[k]), std::abs(bbox.max[k])});
+  const stream::standin::Cube cube = stream::standin::scene_cube(bbox.min.data(), bbox.max.data());
+  std::copy(cube.min, cube.min + 3, to.cube_min);
+  to.cube_side = cube.side;
+  to.transform = so.tiles_transform.size() == 3
+                     ? stream::enu_transform(so.tiles_transform[0], so.tiles_transform[1], so.tiles_transform[2])
+                     : so.tiles_transform;
+  to.generator = generator;
+  stream::TilesetBuilder builder(std::move(to));
+  const uint64_t max_cells = std::max<uint64_t>(so.tile_triangles / 2, 1);
+  std::vector<stream::standin::Region> cut;
+  for (size_t l = sizes.size(); l-- > 0;) {
+    const core::LodMesh mesh = stream::standin::load_mesh(level_files[l]);
+    cut = stream::standin::cut_level(cube, mesh, cut, max_cells);
+    stream::standin::split_level(cube, mesh, cut, [&](const stream::standin::Region& r, const core::LodMesh& part) {
+      builder.add(l, {r.key.depth, r.key.x, r.key.y, r.key.z, sizes[l], r.cells}, part);
+    });
+    std::filesystem::remove(level_files[l]);
+  }
+  const stream::TilesSummary t = builder.finish();
+  return {t.tiles, t.content_tiles, t.bytes, t.triangles, t.max_triangles};
 }
 
 void write_stamp(const std::string& path, const ordered_json& key, const std::vector<std::string>& files,
@@ -460,6 +502,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       const std::string generator = std::string("lodstream ") + LODSTREAM_VERSION;
       std::unique_ptr<io::GlbBuilder> glb;
       if (so.write_glb) glb = std::make_unique<io::GlbBuilder>(so.output_dir + "/lods.glb", work.scratch("glb"), generator);
+      std::vector<std::string> tile_levels;
+      if (so.write_tiles)
+        for (size_t l = 0; l < sizes.size(); ++l) tile_levels.push_back(work.scratch(fmt::format("tiles-lod{}", l)));
       auto write_level = [&](size_t l, core::LodMesh& mesh) {
         LevelStats& ls = report.levels[l];
         ls.vertices = mesh.vertex_count();
@@ -477,6 +522,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           const double lower = l + 1 < sizes.size() ? report.levels[l + 1].screen_coverage : 1.0 / so.resolution;
           files.run([&] { glb->add({&mesh, stem, lower}); });
         }
+        if (so.write_tiles) files.run([&] { stream::standin::save_mesh(tile_levels[l], mesh); });
         files.wait();
         if (so.write_ply) ls.files.push_back(stem + ".ply");
         if (so.write_obj) ls.files.push_back(stem + ".obj");
@@ -500,6 +546,11 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         glb.reset();
         progress.report("write", 1);
       });
+      if (so.write_tiles)
+        run_stage(&report.stages, "tiles", [&](StageStats&) {
+          report.tiles = write_tiles_standin(so, meta.bbox, sizes, tile_levels, generator);
+          progress.report("tiles", 1);
+        });
     });
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     report.peak_rss_bytes = stream::peak_rss_bytes();
@@ -551,6 +602,15 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     m["levels_made"] = report.levels.size();
     if (!report.notice.empty()) m["notice"] = report.notice;
     if (so.write_glb) m["glb"] = "lods.glb";
+    if (so.write_tiles)
+      m["tiles"] = {{"tileset", "tiles/tileset.json"},
+                    {"tile_triangles", so.tile_triangles},
+                    {"tile_lines", so.tile_lines == SimplifyOptions::TileLines::triangles ? "triangles" : "lines"},
+                    {"tiles", report.tiles.tiles},
+                    {"content_tiles", report.tiles.content_tiles},
+                    {"bytes", report.tiles.bytes},
+                    {"triangles", report.tiles.triangles},
+                    {"max_triangles", report.tiles.max_triangles}};
     if (!so.target_triangles.empty())
       m["search"] = {{"passes", report.search_iterations}, {"seconds", report.search_seconds}};
     ordered_json stages = ordered_json::array();

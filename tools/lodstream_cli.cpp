@@ -183,6 +183,10 @@ void print_simplify(const lodstream::SimplifyReport& r, const std::string& out_d
   }
   if (r.search_iterations)
     std::printf("search       %u clustering passes, %.3f s\n", r.search_iterations, r.search_seconds);
+  if (r.tiles.tiles)
+    std::printf("tiles        %s tiles (%s with content), %s triangles, at most %s a tile, %s; tiles/tileset.json\n",
+                grouped(r.tiles.tiles).c_str(), grouped(r.tiles.content_tiles).c_str(), grouped(r.tiles.triangles).c_str(),
+                grouped(r.tiles.max_triangles).c_str(), human_bytes(r.tiles.bytes).c_str());
   for (const auto& s : r.stages)
     std::printf("stage        %-10s %8.3f s  peak %s%s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str(),
                 s.reused ? "  (reused from work directory)" : "");
@@ -343,6 +347,13 @@ int main(int argc, char** argv) {
   simplify_cmd->add_flag("--no-ply", no_ply, "Do not write lodN.ply");
   simplify_cmd->add_flag("--no-glb", no_glb, "Do not write lods.glb");
   simplify_cmd->add_flag("--json", json, "Print the manifest's summary as one JSON object");
+  std::string tile_lines = "triangles", tiles_transform_text;
+  simplify_cmd->add_flag("--tiles", so.write_tiles, "Also write 3D Tiles 1.1: tiles/tileset.json and one GLB per tile");
+  simplify_cmd->add_option("--tile-triangles", so.tile_triangles, "Triangles a tile holds at most, about (default 200000)");
+  simplify_cmd->add_option("--tile-lines", tile_lines, "Edges and points in tiles: triangles (thick, default) or lines (glTF LINES/POINTS)")
+      ->check(CLI::IsMember({"triangles", "lines"}));
+  simplify_cmd->add_option("--tiles-transform", tiles_transform_text,
+                           "Tileset root transform: 16 numbers (4x4, column-major) or lon,lat,height (degrees, metres)");
   add_common(simplify_cmd);
   add_space_check(simplify_cmd);
 
@@ -453,6 +464,11 @@ int main(int argc, char** argv) {
     so.write_obj = obj;
     so.write_ply = !no_ply;
     so.write_glb = !no_glb;
+    so.tile_lines = tile_lines == "lines" ? lodstream::SimplifyOptions::TileLines::lines : lodstream::SimplifyOptions::TileLines::triangles;
+    if (!tiles_transform_text.empty() && !parse_list(tiles_transform_text, &so.tiles_transform)) {
+      std::fprintf(stderr, "lodstream: --tiles-transform: cannot read '%s' as a list of numbers\n", tiles_transform_text.c_str());
+      return static_cast<int>(lodstream::Status::usage);
+    }
     lodstream::SimplifyReport report;
     const lodstream::Result r = lodstream::simplify(input, so, options, &report);
     const int code = finish(r, progress, json ? so.output_dir + "/manifest.json" : std::string(), [&] { print_simplify(report, so.output_dir); });

@@ -157,6 +157,15 @@ struct SimplifyOptions {
   bool write_ply = true;
   bool write_obj = false;
   bool write_glb = true;
+  // 3D Tiles 1.1 (README "3D Tiles"): tiles/tileset.json and one GLB per tile, a spatial hierarchy per level
+  // whose tiles hold about tile_triangles triangles at most (a region is split while it holds more than
+  // tile_triangles / 2 cells); edges and points as triangles of their thickness (tile_lines = triangles) or
+  // as glTF LINES and POINTS. tiles_transform: empty, the root's 4x4 transform (16 numbers, column-major), or
+  // longitude, latitude (degrees) and height (metres) placing the scene's east-north-up frame on WGS84.
+  bool write_tiles = false;
+  uint64_t tile_triangles = 200000;
+  enum class TileLines { triangles, lines } tile_lines = TileLines::triangles;
+  std::vector<double> tiles_transform;
   // Testing: cap the vertices graded at once (0 = from the memory budget), to force seams. Ranges are
   // at most 256, so the cap is raised to vertices / 256 when it is smaller.
   uint64_t grade_range_vertices = 0;
@@ -175,6 +184,12 @@ struct LevelStats {
   std::vector<std::string> files; // written, relative to the output directory
 };
 
+struct TilesStats {
+  uint64_t tiles = 0, content_tiles = 0;  // in tileset.json; with a GLB
+  uint64_t bytes = 0;                     // GLBs and tileset.json
+  uint64_t triangles = 0, max_triangles = 0;  // over all tiles; in the largest (edges and points expanded)
+};
+
 struct SimplifyReport {
   std::string input;
   SceneInfo scene;                 // ingest statistics (census fields left 0)
@@ -185,6 +200,7 @@ struct SimplifyReport {
   std::vector<LevelStats> levels;
   unsigned levels_asked = 0;       // sizes or targets given, SimplifyOptions::levels, or default_levels
   std::string notice;              // one line when fewer levels were made than asked, saying why; else empty
+  TilesStats tiles;                // SimplifyOptions::write_tiles only
   unsigned search_iterations = 0;  // target search: clustering passes made
   double search_seconds = 0;
   std::vector<StageStats> stages;
