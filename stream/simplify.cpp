@@ -256,7 +256,8 @@ bool stamp_matches(const std::string& path, const ordered_json& key, ordered_jso
 // coarser level's cut and handed region by region to the tileset builder. In memory for one level at a
 // time; the lead replaces this with the streamed region sink of h-pemit (issue 13.1).
 TilesStats write_tiles_standin(const SimplifyOptions& so, const stream::Bbox& bbox, const std::vector<double>& sizes,
-                               const std::vector<std::string>& level_files, const std::string& generator) {
+                               const std::vector<std::string>& level_files, const std::string& generator,
+                               stream::Progress& progress) {
   stream::TilesOptions to;
   to.dir = so.output_dir + "/tiles";
   to.levels = static_cast<unsigned>(sizes.size());
@@ -280,6 +281,7 @@ TilesStats write_tiles_standin(const SimplifyOptions& so, const stream::Bbox& bb
       builder.add(l, {r.key.depth, r.key.x, r.key.y, r.key.z, sizes[l], r.cells}, part);
     });
     std::filesystem::remove(level_files[l]);
+    progress.report("tiles", static_cast<double>(sizes.size() - l) / static_cast<double>(sizes.size() + 1));
   }
   const stream::TilesSummary t = builder.finish();
   return {t.tiles, t.content_tiles, t.bytes, t.triangles, t.max_triangles};
@@ -548,7 +550,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       });
       if (so.write_tiles)
         run_stage(&report.stages, "tiles", [&](StageStats&) {
-          report.tiles = write_tiles_standin(so, meta.bbox, sizes, tile_levels, generator);
+          report.tiles = write_tiles_standin(so, meta.bbox, sizes, tile_levels, generator, progress);
           progress.report("tiles", 1);
         });
     });

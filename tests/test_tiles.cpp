@@ -425,5 +425,32 @@ TEST(Tiles, GeometricErrorBoundsTheReportsHausdorff) {
   }
 }
 
+TEST(Tiles, TransformOptionAndUsageErrors) {
+  TempDir dir;
+  SimplifyOptions so;
+  so.output_dir = dir.file("out");
+  so.write_tiles = true;
+  so.write_ply = so.write_glb = false;  // tiles alone are a valid output
+  so.tiles_transform = {10, 50, 100};   // lon, lat, height: east-north-up on WGS84
+  Options o;
+  o.check_disk_space = false;
+  SimplifyReport r;
+  ASSERT_TRUE(simplify(sample_room(), so, o, &r).ok());
+  const json ts = json::parse(slurp(dir.file("out/tiles/tileset.json")));
+  const std::vector<double> m = ts["root"]["transform"].get<std::vector<double>>();
+  ASSERT_EQ(m.size(), 16u);
+  const std::vector<double> want = stream::enu_transform(10, 50, 100);
+  for (int i = 0; i < 16; ++i) EXPECT_DOUBLE_EQ(m[i], want[i]);
+  // Up (third column) is the ellipsoid normal at 50°N 10°E; the origin lies 100 m above the ellipsoid.
+  EXPECT_NEAR(m[10], std::sin(50 * M_PI / 180), 1e-12);
+  EXPECT_NEAR(std::hypot(m[12], m[13], m[14]), 6365731.5, 0.5);  // geocentric radius at 50°N, 100 m up
+  EXPECT_FALSE(std::filesystem::exists(dir.file("out/lod0.ply")));
+  so.tiles_transform = {1, 2, 3, 4};
+  EXPECT_EQ(simplify(sample_room(), so, o, &r).status, Status::usage);
+  so.tiles_transform = {};
+  so.tile_triangles = 1;
+  EXPECT_EQ(simplify(sample_room(), so, o, &r).status, Status::usage);
+}
+
 }  // namespace
 }  // namespace lodstream::test

@@ -8,7 +8,7 @@
 #
 # Usage: tools/bench_tiles.sh [BUILD_DIR] [N] [SEED]   (default build, 9 1: the 48.6M-triangle city;
 #        N=3 gives about 5M). The scene is built under $BENCH_SCENES (default /work/scenes) with nice and
-#        deleted afterwards unless KEEP_SCENE=1. Prints one line per figure, then a JSON summary.
+#        deleted afterwards unless KEEP_SCENE=1; BENCH_SCENE=FILE uses an existing scene instead. Prints one line per figure.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd); src=$(dirname "$here")
 build=${1:-$src/build}; n=${2:-9}; seed=${3:-1}
@@ -17,9 +17,10 @@ cli=$build/lodstream
 make_scene=$src/../shared/data/tools/make-scene.sh
 [ -x "$make_scene" ] || [ -f "$make_scene" ] || { echo "skipped: $make_scene is absent"; exit 0; }
 scenes=${BENCH_SCENES:-/work/scenes}; mkdir -p "$scenes"
-scene=$scenes/city-$n-$seed.ply
+# BENCH_SCENE: an existing scene file to use instead (never deleted).
+scene=${BENCH_SCENE:-$scenes/city-$n-$seed.ply}; keep=${KEEP_SCENE:-0}; [ -n "${BENCH_SCENE:-}" ] && keep=1
 work=$(mktemp -d "$scenes/bench-tiles.XXXXXX")
-cleanup() { rm -rf "$work"; [ "${KEEP_SCENE:-0}" = 1 ] || rm -f "$scene"; }
+cleanup() { rm -rf "$work"; [ "$keep" = 1 ] || rm -f "$scene"; }
 trap cleanup EXIT
 [ -f "$scene" ] || nice bash "$make_scene" "$n" "$seed" "$scene" >/dev/null
 echo "scene        $scene ($(stat -c %s "$scene") bytes), load $(cut -d' ' -f1-3 /proc/loadavg)"
@@ -27,7 +28,7 @@ echo "scene        $scene ($(stat -c %s "$scene") bytes), load $(cut -d' ' -f1-3
 run() {  # name, extra options
   local name=$1; shift
   /usr/bin/time -f "%e %M" -o "$work/$name.time" nice "$cli" simplify "$scene" -o "$work/$name" --memory 1G \
-    --work-dir "$work/$name.work" --no-space-check "$@" >/dev/null
+    --work "$work/$name.work" --no-space-check "$@" >/dev/null
   rm -rf "$work/$name.work"
   read -r secs kib < "$work/$name.time"
   echo "$name        $secs s, peak $((kib / 1024)) MiB"
