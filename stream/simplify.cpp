@@ -270,6 +270,7 @@ TilesStats write_tiles_standin(const SimplifyOptions& so, const stream::Bbox& bb
   to.transform = so.tiles_transform.size() == 3
                      ? stream::enu_transform(so.tiles_transform[0], so.tiles_transform[1], so.tiles_transform[2])
                      : so.tiles_transform;
+  if (so.tiles_z_up) to.transform = stream::z_up_transform(to.transform);
   to.generator = generator;
   stream::TilesetBuilder builder(std::move(to));
   const uint64_t max_cells = std::max<uint64_t>(so.tile_triangles / 2, 1);
@@ -608,6 +609,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       m["tiles"] = {{"tileset", "tiles/tileset.json"},
                     {"tile_triangles", so.tile_triangles},
                     {"tile_lines", so.tile_lines == SimplifyOptions::TileLines::triangles ? "triangles" : "lines"},
+                    {"up", so.tiles_z_up ? "z" : "y"},
                     {"tiles", report.tiles.tiles},
                     {"content_tiles", report.tiles.content_tiles},
                     {"bytes", report.tiles.bytes},

@@ -243,4 +243,16 @@ std::vector<double> enu_transform(double lon_degrees, double lat_degrees, double
           (nr + height) * cl * co, (nr + height) * cl * so, (nr * (1 - e2) + height) * sl, 1};
 }
 
+std::vector<double> z_up_transform(const std::vector<double>& t) {
+  // Content (x, y, z) arrives in the tileset frame as (x, -z, y); R (a, b, c) = (a, c, -b) takes it back to
+  // (x, y, z). Column-major: R e_x = e_x, R e_y = -e_z, R e_z = e_y.
+  const double r[16] = {1, 0, 0, 0, 0, 0, -1, 0, 0, 1, 0, 0, 0, 0, 0, 1};
+  if (t.empty()) return std::vector<double>(r, r + 16);
+  std::vector<double> m(16, 0);
+  for (int col = 0; col < 4; ++col)
+    for (int row = 0; row < 4; ++row)
+      for (int k = 0; k < 4; ++k) m[4 * col + row] += t[4 * k + row] * r[4 * col + k];
+  return m;
+}
+
 }  // namespace lodstream::stream

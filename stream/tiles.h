@@ -79,4 +79,8 @@ class TilesetBuilder {
 // longitude, latitude (degrees) and ellipsoidal height (metres), as a column-major 4x4 matrix.
 std::vector<double> enu_transform(double lon_degrees, double lat_degrees, double height);
 
+// `transform` (empty: the identity) times the rotation that undoes the runtime's Y-up to Z-up turn for a
+// scene whose own up axis is Z: (x, y, z) -> (x, z, -y) in the tileset frame, so the scene's Z points up.
+std::vector<double> z_up_transform(const std::vector<double>& transform);
+
 }  // namespace lodstream::stream

@@ -445,6 +445,16 @@ TEST(Tiles, TransformOptionAndUsageErrors) {
   EXPECT_NEAR(m[10], std::sin(50 * M_PI / 180), 1e-12);
   EXPECT_NEAR(std::hypot(m[12], m[13], m[14]), 6365731.5, 0.5);  // geocentric radius at 50°N, 100 m up
   EXPECT_FALSE(std::filesystem::exists(dir.file("out/lod0.ply")));
+  // Z-up inputs: the root rotation takes content, turned Y-up to Z-up by the runtime ((x, y, z) -> (x, -z, y)),
+  // back to (x, y, z); composed after a given transform.
+  const std::vector<double> rot = stream::z_up_transform({});
+  const double p[3] = {1, 2, 3}, turned[3] = {p[0], -p[2], p[1]};
+  for (int row = 0; row < 3; ++row)
+    EXPECT_DOUBLE_EQ(rot[row] * turned[0] + rot[4 + row] * turned[1] + rot[8 + row] * turned[2], p[row]);
+  std::vector<double> shift = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 5, 6, 7, 1};
+  const std::vector<double> moved = stream::z_up_transform(shift);
+  for (int i = 0; i < 12; ++i) EXPECT_DOUBLE_EQ(moved[i], rot[i]);
+  EXPECT_EQ(std::vector<double>(moved.begin() + 12, moved.end()), (std::vector<double>{5, 6, 7, 1}));
   so.tiles_transform = {1, 2, 3, 4};
   EXPECT_EQ(simplify(sample_room(), so, o, &r).status, Status::usage);
   so.tiles_transform = {};

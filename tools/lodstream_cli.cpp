@@ -352,6 +352,9 @@ int main(int argc, char** argv) {
   simplify_cmd->add_option("--tile-triangles", so.tile_triangles, "Triangles a tile holds at most, about (default 200000)");
   simplify_cmd->add_option("--tile-lines", tile_lines, "Edges and points in tiles: triangles (thick, default) or lines (glTF LINES/POINTS)")
       ->check(CLI::IsMember({"triangles", "lines"}));
+  std::string tiles_up = "y";
+  simplify_cmd->add_option("--tiles-up", tiles_up, "The input's up axis for tiles: y (glTF's, default) or z (rotated upright)")
+      ->check(CLI::IsMember({"y", "z"}));
   simplify_cmd->add_option("--tiles-transform", tiles_transform_text,
                            "Tileset root transform: 16 numbers (4x4, column-major) or lon,lat,height (degrees, metres)");
   add_common(simplify_cmd);
@@ -464,6 +467,7 @@ int main(int argc, char** argv) {
     so.write_obj = obj;
     so.write_ply = !no_ply;
     so.write_glb = !no_glb;
+    so.tiles_z_up = tiles_up == "z";
     so.tile_lines = tile_lines == "lines" ? lodstream::SimplifyOptions::TileLines::lines : lodstream::SimplifyOptions::TileLines::triangles;
     if (!tiles_transform_text.empty() && !parse_list(tiles_transform_text, &so.tiles_transform)) {
       std::fprintf(stderr, "lodstream: --tiles-transform: cannot read '%s' as a list of numbers\n", tiles_transform_text.c_str());

@@ -166,6 +166,9 @@ struct SimplifyOptions {
   uint64_t tile_triangles = 200000;
   enum class TileLines { triangles, lines } tile_lines = TileLines::triangles;
   std::vector<double> tiles_transform;
+  // The input's up axis for tiles: Y (glTF's, default) or Z (common in CAD, PLY and the sample scenes): a Z-up
+  // input gets a root rotation so that it stands upright in a 3D Tiles viewer (the GLBs are unchanged).
+  bool tiles_z_up = false;
   // Testing: cap the vertices graded at once (0 = from the memory budget), to force seams. Ranges are
   // at most 256, so the cap is raised to vertices / 256 when it is smaller.
   uint64_t grade_range_vertices = 0;
