@@ -1,5 +1,5 @@
 #!/bin/bash
-# CesiumJS loads the sample room's tileset in headless Chromium (tools/cesium_tiles.js): from three
+# CesiumJS loads the sample room's tileset (upright: --tiles-up z) in headless Chromium (tools/cesium_tiles.js): from three
 # distances it reaches tilesLoaded and renders a non-blank image, fetching tiles over the local server;
 # the close view fetches no more than the whole view's tile count times the level count (a sanity bound: the
 # figures are printed). Exit 77 ("skipped:") when cesium, puppeteer-core or Chromium are missing.
@@ -8,7 +8,7 @@ set -uo pipefail
 cli=$1; src=$2
 if ! command -v node >/dev/null 2>&1; then echo "skipped: node is not installed"; exit 77; fi
 work=$(mktemp -d); trap 'rm -rf "$work"' EXIT
-"$cli" simplify "$src/tests/data/sample-room.ply" -o "$work/out" --tiles --tile-triangles 3000 --no-ply --no-glb \
+"$cli" simplify "$src/tests/data/sample-room.ply" -o "$work/out" --tiles --tiles-up z --tile-triangles 3000 --no-ply --no-glb \
   --no-space-check >/dev/null || { echo "FAIL: simplify --tiles"; exit 1; }
 r=$(node "$src/tools/cesium_tiles.js" "$work/out/tiles" "$work/shots"); code=$?
 echo "$r"
