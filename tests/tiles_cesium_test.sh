@@ -1,8 +1,8 @@
 #!/bin/bash
-# CesiumJS loads the sample room's tileset (upright: --tiles-up z) in headless Chromium (tools/cesium_tiles.js): from three
-# distances it reaches tilesLoaded and renders a non-blank image, fetching tiles over the local server;
-# the close view fetches no more than the whole view's tile count times the level count (a sanity bound: the
-# figures are printed). Exit 77 ("skipped:") when cesium, puppeteer-core or Chromium are missing.
+# CesiumJS loads the sample room's tileset (upright: --tiles-up z) in headless Chromium
+# (tools/cesium_tiles.js): from three distances it reaches tilesLoaded, renders a non-blank image (over 1 %
+# of pixels drawn) and fetches at least one tile over the local server; the tiles and bytes fetched are
+# printed. Exit 77 ("skipped:") when cesium, puppeteer-core or Chromium are missing.
 # Usage: tiles_cesium_test.sh LODSTREAM_CLI SOURCE_DIR
 set -uo pipefail
 cli=$1; src=$2
