@@ -200,6 +200,7 @@ void check_level(const std::string& path, const GlbLevel& level) {
 
 struct GlbBuilder::State {
   std::string path, scratch, generator;
+  Sync sync = Sync::durable;
   Plan plan;
   Json nodes = Json::array();
   Json meshes = Json::array();
@@ -208,7 +209,9 @@ struct GlbBuilder::State {
   std::unique_ptr<BinWriter> blocks;
 };
 
-GlbBuilder::GlbBuilder(std::string path, std::string scratch, std::string generator) : state_(std::make_unique<State>()) {
+GlbBuilder::GlbBuilder(std::string path, std::string scratch, std::string generator, Sync sync)
+    : state_(std::make_unique<State>()) {
+  state_->sync = sync;
   state_->path = std::move(path);
   state_->scratch = std::move(scratch);
   state_->generator = std::move(generator);
@@ -390,7 +393,7 @@ void GlbBuilder::finish() {
   if (total > UINT32_MAX) fail(Status::io_error, s.path + ": the levels do not fit in one GLB file (4 GiB at most)");
   if (bin_bytes > 0) s.bin.commit();
 
-  FileWriter out(s.path, 1 << 20, Sync::durable);
+  FileWriter out(s.path, 1 << 20, s.sync);
   write_u32(out, kMagic);
   write_u32(out, 2);
   write_u32(out, total);
@@ -413,10 +416,10 @@ void GlbBuilder::finish() {
   std::filesystem::remove(s.scratch, ec);
 }
 
-void write_glb(const std::string& path, std::span<const GlbLevel> levels, const std::string& generator) {
+void write_glb(const std::string& path, std::span<const GlbLevel> levels, const std::string& generator, Sync sync) {
   if (levels.empty()) fail(Status::internal, path + ": no level to write");
   for (const GlbLevel& level : levels) check_level(path, level);
-  GlbBuilder builder(path, path + ".bin.partial", generator);  // a name that says "not a result" even once committed
+  GlbBuilder builder(path, path + ".bin.partial", generator, sync);  // a name that says "not a result" even once committed
   for (const GlbLevel& level : levels) builder.add(level);
   builder.finish();
 }

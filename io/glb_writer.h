@@ -32,6 +32,7 @@
 #include <string>
 
 #include "core/mesh.h"
+#include "io/file_writer.h"
 
 namespace lodstream::io {
 
@@ -45,7 +46,9 @@ struct GlbLevel {
 // `generator` goes to asset.generator. Throws Failure(io_error) when the file cannot be written,
 // Failure(internal) for no levels, a non-finite screen coverage, or a mesh that breaks the conventions of
 // core/mesh.h (array sizes, indices out of range).
-void write_glb(const std::string& path, std::span<const GlbLevel> levels, const std::string& generator);
+// `sync`: Sync::none leaves flushing to the caller (3D Tiles: one syncfs for all tiles before tileset.json).
+void write_glb(const std::string& path, std::span<const GlbLevel> levels, const std::string& generator,
+               Sync sync = Sync::durable);
 
 // A level given as its blocks rather than as a mesh, so that it need not be held (stream/level_files.h):
 // the triangles' own vertex array (positions and, with `normals`, normals), their indices into it, both
@@ -68,7 +71,7 @@ class GlbBuilder {
  public:
   // `scratch`: where the BIN chunk is gathered (a path of its own, not created yet; removed by finish() and
   // by the destructor).
-  GlbBuilder(std::string path, std::string scratch, std::string generator);
+  GlbBuilder(std::string path, std::string scratch, std::string generator, Sync sync = Sync::durable);
   GlbBuilder(const GlbBuilder&) = delete;
   GlbBuilder& operator=(const GlbBuilder&) = delete;
   ~GlbBuilder();

@@ -38,7 +38,7 @@ void for_cell_infos(const std::string& prefix, size_t level, uint64_t cells, uin
   }
 }
 
-// Where a cell is in the octree: its center vertex's stored position (REGIONS.md), or, for the mean
+// Where a cell is in the octree: its center vertex's stored position (core/octree_regions.h), or, for the mean
 // representative, whose cell table holds no center, the cell's mean.
 const double* cell_anchor(const CellInfo& ci, Representative representative) {
   return representative == Representative::mean ? ci.sum : ci.center;

@@ -37,6 +37,7 @@
 #include "stream/level_files.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
+#include "stream/tiles.h"
 #include "stream/work_dir.h"
 
 namespace lodstream {
@@ -105,7 +106,12 @@ void check_options(const SimplifyOptions& s) {
   if (!(s.pixels_per_cell > 0 && std::isfinite(s.pixels_per_cell))) usage("--pixels-per-cell must be positive");
   if (s.tile_triangles < 2) usage("--tile-triangles must be at least 2");
   if (!(s.crease_degrees >= 0 && s.crease_degrees <= 180)) usage("--crease must be between 0 and 180 degrees");
-  if (!s.write_ply && !s.write_obj && !s.write_glb) usage("nothing to write: enable at least one of PLY, OBJ, GLB");
+  if (!s.write_ply && !s.write_obj && !s.write_glb && !s.write_tiles)
+    usage("nothing to write: enable at least one of PLY, OBJ, GLB, 3D Tiles");
+  if (s.tiles_transform.size() != 0 && s.tiles_transform.size() != 3 && s.tiles_transform.size() != 16)
+    usage("--tiles-transform takes 16 numbers (a column-major 4x4 matrix) or 3 (longitude, latitude, height)");
+  for (double v : s.tiles_transform)
+    if (!std::isfinite(v)) usage("--tiles-transform: numbers must be finite");
   check_silhouette_options(s);
 }
 
@@ -262,6 +268,29 @@ bool stamp_matches(const std::string& path, const ordered_json& key, ordered_jso
   } catch (const std::exception&) {
     return false;
   }
+}
+
+// The 3D Tiles builder (stream/tiles.h) of `--tiles`: fed region by region by the emit stage's region
+// sink, in the scene cube the regions are cut in (stream/emit_regions.h).
+std::unique_ptr<stream::TilesetBuilder> make_tiles_builder(const SimplifyOptions& so, const stream::StoreMeta& meta,
+                                                           size_t levels, const std::string& generator) {
+  stream::TilesOptions to;
+  to.dir = so.output_dir + "/tiles";
+  to.levels = static_cast<unsigned>(levels);
+  to.thick = so.tile_lines == SimplifyOptions::TileLines::triangles;
+  to.pixels_per_cell = so.pixels_per_cell;
+  if (!meta.bbox.empty)
+    for (int k = 0; k < 3; ++k)
+      to.scene_magnitude = std::max({to.scene_magnitude, std::abs(meta.bbox.min[k]), std::abs(meta.bbox.max[k])});
+  const core::SceneCube cube = stream::scene_cube_of(meta);
+  std::copy(cube.min, cube.min + 3, to.cube_min);
+  to.cube_side = cube.side;
+  to.transform = so.tiles_transform.size() == 3
+                     ? stream::enu_transform(so.tiles_transform[0], so.tiles_transform[1], so.tiles_transform[2])
+                     : so.tiles_transform;
+  if (so.tiles_z_up) to.transform = stream::z_up_transform(to.transform);
+  to.generator = generator;
+  return std::make_unique<stream::TilesetBuilder>(std::move(to));
 }
 
 void write_stamp(const std::string& path, const ordered_json& key, const std::vector<std::string>& files,
@@ -759,9 +788,15 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       // Each level's parts are welded into its files (stream/level_files.h) as they come; the level's PLY and
       // OBJ files and its part of the GLB are written after its last part (the three side by side).
       std::map<size_t, std::unique_ptr<stream::LevelFiles>> open_levels;
-      // The region sink of the 3D Tiles output (stream/emit_regions.h): called for every region of every level;
-      // none is plugged in yet.
-      const stream::RegionSink region_sink;
+      // The region sink of the 3D Tiles output (stream/emit_regions.h): every region of every level becomes a
+      // tile as it is emitted (stream/tiles.h); tileset.json is written after the last.
+      std::unique_ptr<stream::TilesetBuilder> tiles;
+      if (so.write_tiles) tiles = make_tiles_builder(so, meta, sizes.size(), generator);
+      stream::RegionSink region_sink;
+      if (tiles)
+        region_sink = [&](size_t l, const stream::RegionInfo& info, const core::LodMesh& part) {
+          tiles->add(l, {info.key.depth, info.key.x, info.key.y, info.key.z, info.cell_size, info.cells}, part);
+        };
       auto add_part = [&](size_t l, const stream::RegionInfo& info, stream::RegionPart& part) {
         std::unique_ptr<stream::LevelFiles>& files = open_levels[l];
         if (!files) files = std::make_unique<stream::LevelFiles>(work.scratch(fmt::format("level{}", l)), cells[l]);
@@ -812,6 +847,13 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         glb.reset();
         progress.report("write", 1);
       });
+      if (so.write_tiles)
+        run_stage(&report.stages, "tiles", [&](StageStats&) {
+          const stream::TilesSummary t = tiles->finish();
+          tiles.reset();
+          report.tiles = {t.tiles, t.content_tiles, t.bytes, t.triangles, t.max_triangles};
+          progress.report("tiles", 1);
+        });
     });
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     report.peak_rss_bytes = stream::peak_rss_bytes();
@@ -870,6 +912,16 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     if (!report.notice.empty()) m["notice"] = report.notice;
     if (so.write_glb) m["glb"] = "lods.glb";
     if (so.max_error_px > 0) m["max_error"] = error_json;
+    if (so.write_tiles)
+      m["tiles"] = {{"tileset", "tiles/tileset.json"},
+                    {"tile_triangles", so.tile_triangles},
+                    {"tile_lines", so.tile_lines == SimplifyOptions::TileLines::triangles ? "triangles" : "lines"},
+                    {"up", so.tiles_z_up ? "z" : "y"},
+                    {"tiles", report.tiles.tiles},
+                    {"content_tiles", report.tiles.content_tiles},
+                    {"bytes", report.tiles.bytes},
+                    {"triangles", report.tiles.triangles},
+                    {"max_triangles", report.tiles.max_triangles}};
     if (!so.target_triangles.empty())
       m["search"] = {{"passes", report.search_iterations}, {"seconds", report.search_seconds}};
     ordered_json stages = ordered_json::array();

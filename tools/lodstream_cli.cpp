@@ -184,6 +184,10 @@ void print_simplify(const lodstream::SimplifyReport& r, const std::string& out_d
   }
   if (r.search_iterations)
     std::printf("search       %u clustering passes, %.3f s\n", r.search_iterations, r.search_seconds);
+  if (r.tiles.tiles)
+    std::printf("tiles        %s tiles (%s with content), %s triangles, at most %s a tile, %s; tiles/tileset.json\n",
+                grouped(r.tiles.tiles).c_str(), grouped(r.tiles.content_tiles).c_str(), grouped(r.tiles.triangles).c_str(),
+                grouped(r.tiles.max_triangles).c_str(), human_bytes(r.tiles.bytes).c_str());
   for (const auto& s : r.stages)
     std::printf("stage        %-10s %8.3f s  peak %s%s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str(),
                 s.reused ? "  (reused from work directory)" : "");
@@ -338,7 +342,7 @@ int main(int argc, char** argv) {
   simplify_cmd->add_option("--target-triangles", targets_text, "Triangle counts t1,t2,... to aim at (searched, ±15%)");
   simplify_cmd->add_option("--crease", so.crease_degrees, "Crease angle for normals, degrees (default 30)");
   simplify_cmd->add_option("--tile-triangles", so.tile_triangles,
-                           "Regions a level is emitted in hold at most N/2 of its cells (default 200000)");
+                           "Regions (and 3D Tiles) of a level hold at most N/2 of its cells, about N triangles (default 200000)");
   simplify_cmd->add_option("--fov", so.fov_degrees, "Vertical field of view for switching distances, degrees (default 60)");
   simplify_cmd->add_option("--resolution", so.resolution, "Image height in pixels for switching distances (default 1080)");
   simplify_cmd->add_option("--pixels-per-cell", so.pixels_per_cell, "X of Low & Tan §4: cell width in pixels at the switch (default 5)");
@@ -355,6 +359,15 @@ int main(int argc, char** argv) {
   simplify_cmd->add_flag("--no-ply", no_ply, "Do not write lodN.ply");
   simplify_cmd->add_flag("--no-glb", no_glb, "Do not write lods.glb");
   simplify_cmd->add_flag("--json", json, "Print the manifest's summary as one JSON object");
+  std::string tile_lines = "triangles", tiles_transform_text;
+  simplify_cmd->add_flag("--tiles", so.write_tiles, "Also write 3D Tiles 1.1: tiles/tileset.json and one GLB per tile");
+  simplify_cmd->add_option("--tile-lines", tile_lines, "Edges and points in tiles: triangles (thick, default) or lines (glTF LINES/POINTS)")
+      ->check(CLI::IsMember({"triangles", "lines"}));
+  std::string tiles_up = "y";
+  simplify_cmd->add_option("--tiles-up", tiles_up, "The input's up axis for tiles: y (glTF's, default) or z (rotated upright)")
+      ->check(CLI::IsMember({"y", "z"}));
+  simplify_cmd->add_option("--tiles-transform", tiles_transform_text,
+                           "Tileset root transform: 16 numbers (4x4, column-major) or lon,lat,height (degrees, metres)");
   add_common(simplify_cmd);
   add_space_check(simplify_cmd);
 
@@ -490,6 +503,12 @@ int main(int argc, char** argv) {
     so.write_obj = obj;
     so.write_ply = !no_ply;
     so.write_glb = !no_glb;
+    so.tiles_z_up = tiles_up == "z";
+    so.tile_lines = tile_lines == "lines" ? lodstream::SimplifyOptions::TileLines::lines : lodstream::SimplifyOptions::TileLines::triangles;
+    if (!tiles_transform_text.empty() && !parse_list(tiles_transform_text, &so.tiles_transform)) {
+      std::fprintf(stderr, "lodstream: --tiles-transform: cannot read '%s' as a list of numbers\n", tiles_transform_text.c_str());
+      return static_cast<int>(lodstream::Status::usage);
+    }
     lodstream::SimplifyReport report;
     const lodstream::Result r = lodstream::simplify(input, so, options, &report);
     const int code = finish(r, progress, json ? so.output_dir + "/manifest.json" : std::string(), [&] { print_simplify(report, so.output_dir); });

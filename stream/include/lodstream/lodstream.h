@@ -161,6 +161,16 @@ struct SimplifyOptions {
   bool write_ply = true;
   bool write_obj = false;
   bool write_glb = true;
+  // 3D Tiles 1.1 (README "3D Tiles"): tiles/tileset.json and one GLB per tile: a tile is a region of a level
+  // (tile_triangles above); edges and points as triangles of their thickness (tile_lines = triangles) or
+  // as glTF LINES and POINTS. tiles_transform: empty, the root's 4x4 transform (16 numbers, column-major), or
+  // longitude, latitude (degrees) and height (metres) placing the scene's east-north-up frame on WGS84.
+  bool write_tiles = false;
+  enum class TileLines { triangles, lines } tile_lines = TileLines::triangles;
+  std::vector<double> tiles_transform;
+  // The input's up axis for tiles: Y (glTF's, default) or Z (common in CAD, PLY and the sample scenes): a Z-up
+  // input gets a root rotation so that it stands upright in a 3D Tiles viewer (the GLBs are unchanged).
+  bool tiles_z_up = false;
   // Testing: cap the vertices graded at once (0 = from the memory budget), to force seams. Ranges are
   // at most 256, so the cap is raised to vertices / 256 when it is smaller.
   uint64_t grade_range_vertices = 0;
@@ -195,6 +205,12 @@ struct LevelStats {
   double measured_p95_px = -1;    // max_error_px: the silhouette p95 of the last pass (-1 = not measured)
 };
 
+struct TilesStats {
+  uint64_t tiles = 0, content_tiles = 0;  // in tileset.json; with a GLB
+  uint64_t bytes = 0;                     // GLBs and tileset.json
+  uint64_t triangles = 0, max_triangles = 0;  // over all tiles; in the largest (edges and points expanded)
+};
+
 struct SimplifyReport {
   std::string input;
   SceneInfo scene;                 // ingest statistics (census fields left 0)
@@ -208,6 +224,7 @@ struct SimplifyReport {
   uint64_t labelled_vertices = 0;  // silhouette labels: index records some view sees
   uint64_t label_chunks = 0, label_view_groups = 0;  // and the chunk scenes and view groups traced (0 when reused)
   unsigned error_passes = 0;       // max_error_px: clustering and measuring passes made
+  TilesStats tiles;                // SimplifyOptions::write_tiles only
   unsigned search_iterations = 0;  // target search: clustering passes made
   double search_seconds = 0;
   std::vector<StageStats> stages;

@@ -1,0 +1,356 @@
+// 3D Tiles output (stream/tiles.h, io/tileset_writer.h, core/thick_primitives.h) fed by the emit stage's
+// region sink (stream/emit_regions.h): the union of a level's tiles is that level's mesh, primitive for
+// primitive and bit for bit; tiles are byte-identical for any --threads, --memory and chunk size; the
+// tileset's boxes hold their content and children and its errors never grow downwards; the error bound
+// holds against report's Hausdorff.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+
+#include <nlohmann/json.hpp>
+
+#include "core/thick_primitives.h"
+#include "io/lod_reader.h"
+#include "io/tileset_writer.h"
+#include "lodstream/lodstream.h"
+#include "stream/tiles.h"
+#include "core/status.h"
+#include "test_util.h"
+
+namespace lodstream::test {
+namespace {
+
+using json = nlohmann::json;
+using P3 = std::array<float, 3>;
+// A primitive as its corner positions, bit patterns (so that -0 and 0 differ), sorted within nothing:
+// the corner order is part of the primitive (winding).
+using Prim = std::vector<uint32_t>;
+
+uint32_t bits(float f) {
+  uint32_t b;
+  std::memcpy(&b, &f, 4);
+  return b;
+}
+
+Prim prim(const core::LodMesh& m, const uint32_t* ids, int n) {
+  Prim p;
+  for (int i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k) p.push_back(bits(m.positions[3 * uint64_t{ids[i]} + k]));
+  return p;
+}
+
+// Every primitive of `m` by kind (0 triangles, 1 edges, 2 points), as a multiset.
+std::array<std::multiset<Prim>, 3> primitives(const core::LodMesh& m) {
+  std::array<std::multiset<Prim>, 3> s;
+  for (uint64_t t = 0; t < m.triangle_count(); ++t) s[0].insert(prim(m, &m.triangles[3 * t], 3));
+  for (uint64_t e = 0; e < m.edge_count(); ++e) s[1].insert(prim(m, &m.edges[2 * e], 2));
+  for (uint32_t p : m.points) s[2].insert(prim(m, &p, 1));
+  return s;
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// A tile GLB read back into a LodMesh (positions, triangles from indices, LINES and POINTS as
+// unindexed vertices); `thickness` from _THICKNESS. Enough for the files io/glb_writer.cpp writes.
+core::LodMesh read_tile(const std::string& path) {
+  const std::string b = slurp(path);
+  EXPECT_GE(b.size(), 20u) << path;
+  uint32_t json_len;
+  std::memcpy(&json_len, b.data() + 12, 4);
+  const json g = json::parse(b.substr(20, json_len));
+  const char* bin = b.data() + 20 + json_len + 8;
+  auto view = [&](int accessor, int* count) {
+    const json& a = g["accessors"][accessor];
+    *count = a["count"].get<int>();
+    const json& v = g["bufferViews"][a["bufferView"].get<int>()];
+    return bin + v["byteOffset"].get<size_t>();
+  };
+  core::LodMesh m;
+  for (const json& p : g["meshes"][0]["primitives"]) {
+    const int mode = p["mode"].get<int>();
+    int n;
+    const float* pos = reinterpret_cast<const float*>(view(p["attributes"]["POSITION"].get<int>(), &n));
+    const uint32_t base = static_cast<uint32_t>(m.vertex_count());
+    m.positions.insert(m.positions.end(), pos, pos + 3 * n);
+    if (mode == 4) {
+      int ni;
+      const uint32_t* idx = reinterpret_cast<const uint32_t*>(view(p["indices"].get<int>(), &ni));
+      for (int i = 0; i < ni; ++i) m.triangles.push_back(base + idx[i]);
+    } else if (mode == 1) {
+      int nt;
+      const float* t = reinterpret_cast<const float*>(view(p["attributes"]["_THICKNESS"].get<int>(), &nt));
+      for (int i = 0; i < n; i += 2) {
+        m.edges.push_back(base + i);
+        m.edges.push_back(base + i + 1);
+        m.thickness.push_back(t[i]);
+      }
+    } else {
+      for (int i = 0; i < n; ++i) m.points.push_back(base + i);
+    }
+  }
+  return m;
+}
+
+TEST(ThickPrimitives, EdgesBecomeCrossedQuadsAndPointsOctahedra) {
+  core::LodMesh m;
+  m.positions = {0, 0, 0, 1, 0, 0, 0, 1, 0, 5, 5, 5};
+  m.normals = {0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 0};
+  m.triangles = {0, 1, 2};
+  m.edges = {1, 3, 0, 3};
+  m.thickness = {0.5f, 0.0f};
+  m.points = {3};
+  double radius = 0;
+  const core::LodMesh r = core::expand_thick(m, {0.1, 0.05}, &radius);
+  EXPECT_EQ(r.triangle_count(), 1u + 2 * 4 + 8);
+  EXPECT_EQ(r.vertex_count(), 4u + 2 * 8 + 6);
+  EXPECT_TRUE(r.edges.empty() && r.points.empty() && r.thickness.empty());
+  EXPECT_EQ(core::convention_violation(r), "");
+  EXPECT_DOUBLE_EQ(radius, 0.25);
+  // The original triangle is kept first, unchanged.
+  EXPECT_EQ(std::vector<uint32_t>(r.triangles.begin(), r.triangles.begin() + 3), (std::vector<uint32_t>{0, 1, 2}));
+  for (uint64_t v = 4; v < r.vertex_count(); ++v) {
+    const double n = std::hypot(r.normals[3 * v], r.normals[3 * v + 1], r.normals[3 * v + 2]);
+    EXPECT_NEAR(n, 1, 1e-6) << v;
+  }
+  // Every new triangle faces its normal (counter-clockwise seen from it) and has area.
+  for (uint64_t t = 1; t < r.triangle_count(); ++t) {
+    const uint32_t* id = &r.triangles[3 * t];
+    double e1[3], e2[3], c[3], n[3] = {0, 0, 0};
+    for (int k = 0; k < 3; ++k) e1[k] = r.positions[3 * id[1] + k] - r.positions[3 * id[0] + k], e2[k] = r.positions[3 * id[2] + k] - r.positions[3 * id[0] + k];
+    c[0] = e1[1] * e2[2] - e1[2] * e2[1], c[1] = e1[2] * e2[0] - e1[0] * e2[2], c[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    for (int i = 0; i < 3; ++i)
+      for (int k = 0; k < 3; ++k) n[k] += r.normals[3 * id[i] + k];
+    EXPECT_GT(c[0] * n[0] + c[1] * n[1] + c[2] * n[2], 0) << "triangle " << t;
+  }
+  // Width: the thick edge's quad corners lie 0.25 from its axis, the wire's 0.05 (half of one pixel, 0.1).
+  auto distance_to_line = [&](uint64_t v, const float* a, const float* b) {
+    double d[3], w[3], len = 0;
+    for (int k = 0; k < 3; ++k) d[k] = b[k] - a[k], w[k] = r.positions[3 * v + k] - a[k], len += d[k] * d[k];
+    const double t = (d[0] * w[0] + d[1] * w[1] + d[2] * w[2]) / len;
+    return std::hypot(w[0] - t * d[0], w[1] - t * d[1], w[2] - t * d[2]);
+  };
+  for (uint64_t v = 4; v < 12; ++v) EXPECT_NEAR(distance_to_line(v, &m.positions[3], &m.positions[9]), 0.25, 1e-6);
+  for (uint64_t v = 12; v < 20; ++v) EXPECT_NEAR(distance_to_line(v, &m.positions[0], &m.positions[9]), 0.05, 1e-6);
+  EXPECT_THROW(core::expand_thick(m, {0.1, 0}, nullptr), Failure);
+}
+
+TEST(TilesetWriter, BoxesAreInTheZUpFrame) {
+  const double lo[3] = {1, 2, 3}, hi[3] = {3, 6, 11};
+  const auto b = io::to_tileset_frame(lo, hi, 0);
+  // glTF (x, y, z) -> tileset (x, -z, y): center (2, 4, 7) -> (2, -7, 4); half extents (1, 2, 4) -> (1, 4, 2).
+  EXPECT_EQ(b, (std::array<double, 12>{2, -7, 4, 1, 0, 0, 0, 4, 0, 0, 0, 2}));
+}
+
+struct Tile {
+  json node;
+  int level = -1;
+  std::string uri;
+};
+
+void collect(const json& node, std::vector<Tile>& out) {
+  Tile t;
+  t.node = node;
+  if (node.contains("content")) t.uri = node["content"]["uri"];
+  if (node.contains("extras")) t.level = node["extras"]["level"].get<int>();
+  out.push_back(t);
+  if (node.contains("children"))
+    for (const json& c : node["children"]) collect(c, out);
+}
+
+// The box's axis-aligned extent in the tileset frame (lo, hi), for the axis-aligned boxes written.
+void box_extent(const json& box, double lo[3], double hi[3]) {
+  for (int k = 0; k < 3; ++k) {
+    const double h = std::abs(box[3 + 3 * 0 + k].get<double>()) + std::abs(box[3 + 3 * 1 + k].get<double>()) + std::abs(box[3 + 3 * 2 + k].get<double>());
+    lo[k] = box[k].get<double>() - h;
+    hi[k] = box[k].get<double>() + h;
+  }
+}
+
+// Checks the tree: errors non-increasing, boxes holding children's boxes and content positions (rotated
+// Y-up to Z-up), REPLACE; returns the tiles.
+std::vector<Tile> check_tree(const std::string& dir) {
+  const json ts = json::parse(slurp(dir + "/tileset.json"));
+  EXPECT_EQ(ts["asset"]["version"], "1.1");
+  EXPECT_EQ(ts["root"]["refine"], "REPLACE");
+  EXPECT_GE(ts["geometricError"].get<double>(), ts["root"]["geometricError"].get<double>());
+  std::vector<Tile> tiles;
+  collect(ts["root"], tiles);
+  auto check = [&](auto&& self, const json& node) -> void {
+    double lo[3], hi[3];
+    box_extent(node["boundingVolume"]["box"], lo, hi);
+    const double slack = 1e-9 * (hi[0] - lo[0] + hi[1] - lo[1] + hi[2] - lo[2]) + 1e-12;
+    if (node.contains("content")) {
+      const core::LodMesh m = read_tile(dir + "/" + node["content"]["uri"].get<std::string>());
+      for (uint64_t v = 0; v < m.vertex_count(); ++v) {
+        const double p[3] = {m.positions[3 * v], -double{m.positions[3 * v + 2]}, m.positions[3 * v + 1]};
+        for (int k = 0; k < 3; ++k) ASSERT_TRUE(p[k] >= lo[k] - slack && p[k] <= hi[k] + slack) << node["content"]["uri"];
+      }
+    }
+    if (!node.contains("children")) return;
+    for (const json& c : node["children"]) {
+      EXPECT_LE(c["geometricError"].get<double>(), node["geometricError"].get<double>());
+      double clo[3], chi[3];
+      box_extent(c["boundingVolume"]["box"], clo, chi);
+      for (int k = 0; k < 3; ++k) EXPECT_TRUE(clo[k] >= lo[k] - slack && chi[k] <= hi[k] + slack);
+      self(self, c);
+    }
+  };
+  check(check, ts["root"]);
+  return tiles;
+}
+
+Result run_simplify(const std::string& input, const std::string& out, SimplifyOptions::TileLines lines, const Options& o,
+                    SimplifyReport* report, uint64_t tile_triangles = 3000) {
+  SimplifyOptions so;
+  so.output_dir = out;
+  so.write_tiles = true;
+  so.tile_triangles = tile_triangles;
+  so.tile_lines = lines;
+  Options opt = o;
+  opt.check_disk_space = false;
+  return simplify(input, so, opt, report);
+}
+
+std::map<std::string, std::string> files_under(const std::string& dir) {
+  std::map<std::string, std::string> f;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir))
+    if (e.is_regular_file()) f[std::filesystem::relative(e.path(), dir).string()] = slurp(e.path().string());
+  return f;
+}
+
+std::string sample_room() { return source_dir() + "/tests/data/sample-room.ply"; }
+
+TEST(Tiles, UnionOfALevelsTilesIsTheLevel) {
+  TempDir dir;
+  SimplifyReport report;
+  const Result r = run_simplify(sample_room(), dir.file("out"), SimplifyOptions::TileLines::lines, Options{}, &report);
+  ASSERT_TRUE(r.ok()) << r.message;
+  const std::vector<Tile> tiles = check_tree(dir.file("out/tiles"));
+  EXPECT_GT(report.tiles.content_tiles, report.levels.size()) << "the small tile size splits some level";
+  EXPECT_EQ(report.tiles.tiles, tiles.size());
+  for (size_t l = 0; l < report.levels.size(); ++l) {
+    SCOPED_TRACE("level " + std::to_string(l));
+    const core::LodMesh level = io::read_lod_mesh(dir.file("out/lod" + std::to_string(l) + ".ply"));
+    std::array<std::multiset<Prim>, 3> got;
+    std::multiset<std::pair<Prim, float>> thick, expected_thick;
+    uint64_t largest = 0;
+    for (const Tile& t : tiles) {
+      if (t.level != static_cast<int>(l) || t.uri.empty()) continue;
+      const core::LodMesh m = read_tile(dir.file("out/tiles/" + t.uri));
+      largest = std::max(largest, m.triangle_count());
+      const auto s = primitives(m);
+      for (int k = 0; k < 3; ++k) got[k].insert(s[k].begin(), s[k].end());
+      for (uint64_t e = 0; e < m.edge_count(); ++e) thick.insert({prim(m, &m.edges[2 * e], 2), m.thickness[e]});
+    }
+    const auto want = primitives(level);
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(got[k], want[k]) << "kind " << k;
+    for (uint64_t e = 0; e < level.edge_count(); ++e) expected_thick.insert({prim(level, &level.edges[2 * e], 2), level.thickness[e]});
+    EXPECT_EQ(thick, expected_thick);
+    // A region holds at most tile_triangles / 2 cells; a surface has about twice as many triangles as vertices.
+    EXPECT_LE(largest, 2 * 3000u) << "tile triangles";
+  }
+}
+
+TEST(Tiles, BytesDoNotDependOnThreadsMemoryOrChunks) {
+  TempDir dir;
+  SimplifyReport a, b;
+  Options o1;
+  o1.threads = 1;
+  Options o2;
+  o2.threads = 3;
+  o2.memory_bytes = 64ull << 20;
+  o2.chunk_bytes = 4096;
+  ASSERT_TRUE(run_simplify(sample_room(), dir.file("a"), SimplifyOptions::TileLines::triangles, o1, &a).ok());
+  ASSERT_TRUE(run_simplify(sample_room(), dir.file("b"), SimplifyOptions::TileLines::triangles, o2, &b).ok());
+  const auto fa = files_under(dir.file("a/tiles")), fb = files_under(dir.file("b/tiles"));
+  EXPECT_GT(fa.size(), 3u);
+  EXPECT_TRUE(fa == fb);
+  // Thick output: triangles only, and as many tiles as with lines.
+  check_tree(dir.file("a/tiles"));
+  for (const auto& [name, bytes] : fa)
+    if (name.ends_with(".glb")) {
+      const core::LodMesh m = read_tile(dir.file("a/tiles/" + name));
+      EXPECT_TRUE(m.edges.empty() && m.points.empty()) << name;
+    }
+}
+
+// The geometric error written (sqrt(3)·c + margins) bounds the Hausdorff distance the report measures.
+TEST(Tiles, GeometricErrorBoundsTheReportsHausdorff) {
+  TempDir dir;
+  SimplifyReport s;
+  ASSERT_TRUE(run_simplify(sample_room(), dir.file("out"), SimplifyOptions::TileLines::lines, Options{}, &s, 200000).ok());
+  ReportOptions ro;
+  ro.output_dir = dir.file("report");
+  ro.runs = {dir.file("out")};
+  ro.views = 4;
+  ro.resolution = 64;
+  ro.samples = 50000;
+  ro.html_views = 0;
+  Options o;
+  o.check_disk_space = false;
+  Report rep;
+  const Result r = report(ro, o, &rep);
+  ASSERT_TRUE(r.ok()) << r.message;
+  const std::vector<Tile> tiles = check_tree(dir.file("out/tiles"));
+  ASSERT_EQ(rep.runs.size(), 1u);
+  for (size_t l = 0; l < rep.runs[0].levels.size(); ++l) {
+    double level_error = INFINITY;  // the smallest error written for a tile of this level
+    for (const Tile& t : tiles)
+      if (t.level == static_cast<int>(l) && !t.uri.empty()) level_error = std::min(level_error, t.node["geometricError"].get<double>());
+    const double h = rep.runs[0].levels[l].hausdorff_max;
+    std::cout << "level " << l << ": cell " << s.levels[l].cell_size << ", Hausdorff max " << h << ", tile error "
+              << level_error << " (ratio " << h / level_error << ")\n";
+    EXPECT_LE(h, level_error) << "level " << l;
+  }
+}
+
+TEST(Tiles, TransformOptionAndUsageErrors) {
+  TempDir dir;
+  SimplifyOptions so;
+  so.output_dir = dir.file("out");
+  so.write_tiles = true;
+  so.write_ply = so.write_glb = false;  // tiles alone are a valid output
+  so.tiles_transform = {10, 50, 100};   // lon, lat, height: east-north-up on WGS84
+  Options o;
+  o.check_disk_space = false;
+  SimplifyReport r;
+  ASSERT_TRUE(simplify(sample_room(), so, o, &r).ok());
+  const json ts = json::parse(slurp(dir.file("out/tiles/tileset.json")));
+  const std::vector<double> m = ts["root"]["transform"].get<std::vector<double>>();
+  ASSERT_EQ(m.size(), 16u);
+  const std::vector<double> want = stream::enu_transform(10, 50, 100);
+  for (int i = 0; i < 16; ++i) EXPECT_DOUBLE_EQ(m[i], want[i]);
+  // Up (third column) is the ellipsoid normal at 50°N 10°E; the origin lies 100 m above the ellipsoid.
+  EXPECT_NEAR(m[10], std::sin(50 * M_PI / 180), 1e-12);
+  EXPECT_NEAR(std::hypot(m[12], m[13], m[14]), 6365731.5, 0.5);  // geocentric radius at 50°N, 100 m up
+  EXPECT_FALSE(std::filesystem::exists(dir.file("out/lod0.ply")));
+  // Z-up inputs: the root rotation takes content, turned Y-up to Z-up by the runtime ((x, y, z) -> (x, -z, y)),
+  // back to (x, y, z); composed after a given transform.
+  const std::vector<double> rot = stream::z_up_transform({});
+  const double p[3] = {1, 2, 3}, turned[3] = {p[0], -p[2], p[1]};
+  for (int row = 0; row < 3; ++row)
+    EXPECT_DOUBLE_EQ(rot[row] * turned[0] + rot[4 + row] * turned[1] + rot[8 + row] * turned[2], p[row]);
+  std::vector<double> shift = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 5, 6, 7, 1};
+  const std::vector<double> moved = stream::z_up_transform(shift);
+  for (int i = 0; i < 12; ++i) EXPECT_DOUBLE_EQ(moved[i], rot[i]);
+  EXPECT_EQ(std::vector<double>(moved.begin() + 12, moved.end()), (std::vector<double>{5, 6, 7, 1}));
+  so.tiles_transform = {1, 2, 3, 4};
+  EXPECT_EQ(simplify(sample_room(), so, o, &r).status, Status::usage);
+  so.tiles_transform = {};
+  so.tile_triangles = 1;
+  EXPECT_EQ(simplify(sample_room(), so, o, &r).status, Status::usage);
+}
+
+}  // namespace
+}  // namespace lodstream::test
