@@ -75,6 +75,9 @@ const std::map<std::string, ojson>& descriptions() {
     si["resolution"] = input("Image height in pixels for switching distances", {{"type", "integer"}, {"minimum", 1}, {"maximum", 65536}, {"default", 1080}});
     si["pixels_per_cell"] = input("Cell width in pixels at the switch (Low & Tan's X)", {{"type", "number"}, {"exclusiveMinimum", 0}, {"default", 5}});
     si["obj"] = input("Also write lodN.obj", {{"type", "boolean"}, {"default", false}});
+    si["tiles"] = input("Also write 3D Tiles 1.1 (tiles/tileset.json), which the job's viewer streams", {{"type", "boolean"}, {"default", false}});
+    si["tiles_up"] = input("The input's up axis for tiles", enum_of({"y", "z"}, "y"));
+    si["tile_triangles"] = input("Triangles a tile (and an emit region) holds, about", {{"type", "integer"}, {"minimum", 2}, {"default", 200000}});
     si["report"] = input("Then measure each level's error in pixels (lodstream report: report.html)", {{"type", "boolean"}, {"default", true}});
     si["views"] = input("Report: view directions per level", {{"type", "integer"}, {"minimum", 1}, {"maximum", 1024}, {"default", 32}});
     si["samples"] = input("Report: Hausdorff samples of each kind per direction", {{"type", "integer"}, {"minimum", 1}, {"maximum", 100000000}});
@@ -320,6 +323,9 @@ bool plan_job(const std::string& process, const nlohmann::json& body, const Plan
     if (inputs.contains("resolution")) a.insert(a.end(), {"--resolution", number_text(inputs["resolution"])});
     if (inputs.contains("pixels_per_cell")) a.insert(a.end(), {"--pixels-per-cell", number_text(inputs["pixels_per_cell"])});
     if (inputs.value("obj", false)) a.push_back("--obj");
+    if (inputs.value("tiles", false)) a.push_back("--tiles");
+    if (inputs.contains("tiles_up")) a.insert(a.end(), {"--tiles-up", inputs["tiles_up"].get<std::string>()});
+    if (inputs.contains("tile_triangles")) a.insert(a.end(), {"--tile-triangles", number_text(inputs["tile_triangles"])});
     plan->steps.push_back(with_common(a, "simplify"));
     plan->step_names.push_back("simplify");
     if (inputs.value("report", true)) {
