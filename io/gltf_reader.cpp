@@ -44,6 +44,7 @@
 #include "core/status.h"
 #include "io/base64.h"
 #include "io/reader.h"
+#include "io/text.h"
 
 namespace lodstream::io {
 namespace {
@@ -295,20 +296,6 @@ void GltfReader::check_extensions() {
     fail(Status::usage, file_.path() + ": /extensionsRequired: unsupported glTF extension(s): " + unsupported);
 }
 
-// "%20" and friends in a relative URI.
-std::string percent_decode(const std::string& s) {
-  std::string out;
-  for (size_t i = 0; i < s.size(); ++i) {
-    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(static_cast<unsigned char>(s[i + 1])) &&
-        std::isxdigit(static_cast<unsigned char>(s[i + 2]))) {
-      out += static_cast<char>(std::stoi(s.substr(i + 1, 2), nullptr, 16));
-      i += 2;
-    } else {
-      out += s[i];
-    }
-  }
-  return out;
-}
 
 void GltfReader::load_buffers() {
   const json& list = member(doc_, "buffers", "");
@@ -351,7 +338,7 @@ void GltfReader::load_buffers() {
         buf.kind = Buffer::memory;
         available = buf.data.size();
       } else {
-        const std::string rel = percent_decode(u);
+        const std::string rel = text::percent_decode(u);
         if (rel.empty() || rel[0] == '/' || rel.find("://") != std::string::npos)
           bad(ptr + "/uri", "'" + printable(u) + "' is not a relative file reference");
         const std::string path =

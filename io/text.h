@@ -4,6 +4,7 @@
 
 #include <locale.h>
 
+#include <cctype>
 #include <charconv>
 #include <cstdint>
 #include <cstdlib>
@@ -84,6 +85,21 @@ inline uint64_t count_newlines(const char* p, const char* end) {
 inline bool finite3(const double* v) {
   // x - x is 0 for finite x and NaN for NaN or infinity.
   return (v[0] - v[0]) == 0 && (v[1] - v[1]) == 0 && (v[2] - v[2]) == 0;
+}
+
+// "%20" and friends decoded (URIs, cookies); a '%' not followed by two hex digits is kept as it is.
+inline std::string percent_decode(std::string_view s) {
+  std::string out;
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(static_cast<unsigned char>(s[i + 1])) &&
+        std::isxdigit(static_cast<unsigned char>(s[i + 2]))) {
+      out += static_cast<char>(std::stoi(std::string(s.substr(i + 1, 2)), nullptr, 16));
+      i += 2;
+    } else {
+      out += s[i];
+    }
+  }
+  return out;
 }
 
 }  // namespace lodstream::io::text

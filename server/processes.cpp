@@ -13,6 +13,8 @@
 
 #include <sys/stat.h>
 
+#include "lodstream/lodstream.h"
+
 namespace lodstream::serve {
 namespace {
 
@@ -205,27 +207,6 @@ const std::vector<std::string>& process_ids() {
   return ids;
 }
 
-bool parse_size(const std::string& text, uint64_t* out) {
-  size_t used = 0;
-  double v = 0;
-  try {
-    v = std::stod(text, &used);
-  } catch (const std::exception&) {
-    return false;
-  }
-  std::string unit = text.substr(used);
-  for (char& c : unit) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  double mult = 1;
-  if (unit.empty() || unit == "b") mult = 1;
-  else if (unit == "k" || unit == "kb" || unit == "kib") mult = 1024.0;
-  else if (unit == "m" || unit == "mb" || unit == "mib") mult = 1024.0 * 1024;
-  else if (unit == "g" || unit == "gb" || unit == "gib") mult = 1024.0 * 1024 * 1024;
-  else if (unit == "t" || unit == "tb" || unit == "tib") mult = 1024.0 * 1024 * 1024 * 1024;
-  else return false;
-  if (!(v >= 0) || v * mult > 1.8e19) return false;
-  *out = static_cast<uint64_t>(v * mult);
-  return true;
-}
 
 std::string resolve_under(const std::string& root, const std::string& path) {
   if (path.empty() || path.find('\0') != std::string::npos) return {};
@@ -281,7 +262,7 @@ bool plan_job(const std::string& process, const nlohmann::json& body, const Plan
 
   // Memory: the job's own cap, or an equal share of the server's.
   uint64_t memory = std::max<uint64_t>(64ull << 20, ctx.server_memory / std::max(1u, ctx.max_jobs));
-  if (inputs.contains("memory") && !parse_size(inputs["memory"].get<std::string>(), &memory)) {
+  if (inputs.contains("memory") && !lodstream::parse_size(inputs["memory"].get<std::string>(), &memory)) {
     *error = {"inputs.memory", "inputs.memory: cannot read '" + inputs["memory"].get<std::string>() + "' as a size (e.g. 512M)"};
     return false;
   }

@@ -45,8 +45,6 @@ struct PlanError {
 bool plan_job(const std::string& process, const nlohmann::json& body, const PlanContext& ctx, JobPlan* plan,
               PlanError* error);
 
-// "1G", "512M", "64k", "1000000" -> bytes (binary multiples); false when unreadable.
-bool parse_size(const std::string& text, uint64_t* out);
 
 // The canonical path of `path` when it names an existing regular file under `root` (both canonical);
 // empty otherwise. Symlinks are followed, so a link under the root that points outside is refused.

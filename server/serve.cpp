@@ -17,6 +17,7 @@
 
 #include <httplib.h>
 
+#include "io/text.h"
 #include "server/jobs.h"
 #include "server/page.h"
 #include "server/processes.h"
@@ -37,19 +38,6 @@ bool same_token(const std::string& given, const std::string& expected) {
   return diff == 0;
 }
 
-std::string percent_decoded(const std::string& s) {
-  std::string out;
-  for (size_t i = 0; i < s.size(); ++i) {
-    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(static_cast<unsigned char>(s[i + 1])) &&
-        std::isxdigit(static_cast<unsigned char>(s[i + 2]))) {
-      out += static_cast<char>(std::stoi(s.substr(i + 1, 2), nullptr, 16));
-      i += 2;
-    } else {
-      out += s[i];
-    }
-  }
-  return out;
-}
 
 // The token the login page keeps in a cookie, so that plain links (report.html, tiles) work in a browser.
 std::string cookie_token(const httplib::Request& req) {
@@ -59,7 +47,7 @@ std::string cookie_token(const httplib::Request& req) {
   while (at < cookies.size()) {
     while (at < cookies.size() && (cookies[at] == ' ' || cookies[at] == ';')) ++at;
     const size_t end = std::min(cookies.find(';', at), cookies.size());
-    if (cookies.compare(at, key.size(), key) == 0) return percent_decoded(cookies.substr(at + key.size(), end - at - key.size()));
+    if (cookies.compare(at, key.size(), key) == 0) return io::text::percent_decode(cookies.substr(at + key.size(), end - at - key.size()));
     at = end;
   }
   return {};

@@ -1,5 +1,6 @@
 // The public entry points: each runs its stages under one task arena and one memory plan, measures
 // time and peak memory per stage, and turns every exception into a Result.
+#include <cctype>
 #include <chrono>
 #include <new>
 
@@ -68,6 +69,28 @@ Result info(const std::string& path, const Options& options, SceneInfo* out) {
     info.work_dir = stream::work_dir_usage(work.path(), info.file_bytes);
     *out = std::move(info);
   });
+}
+
+bool parse_size(const std::string& text, uint64_t* out) {
+  size_t used = 0;
+  double v = 0;
+  try {
+    v = std::stod(text, &used);
+  } catch (const std::exception&) {
+    return false;
+  }
+  std::string unit = text.substr(used);
+  for (char& c : unit) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  double mult = 1;
+  if (unit.empty() || unit == "b") mult = 1;
+  else if (unit == "k" || unit == "kb" || unit == "kib") mult = 1024.0;
+  else if (unit == "m" || unit == "mb" || unit == "mib") mult = 1024.0 * 1024;
+  else if (unit == "g" || unit == "gb" || unit == "gib") mult = 1024.0 * 1024 * 1024;
+  else if (unit == "t" || unit == "tb" || unit == "tib") mult = 1024.0 * 1024 * 1024 * 1024;
+  else return false;
+  if (!(v >= 0) || v * mult > 1.8e19) return false;
+  *out = static_cast<uint64_t>(v * mult);
+  return true;
 }
 
 }  // namespace lodstream

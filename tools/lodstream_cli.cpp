@@ -67,28 +67,6 @@ bool on_progress(void* user, const char* stage, double fraction) {
   return !g_interrupted.load();
 }
 
-// "1G", "512M", "64k", "1.5GiB", "1000000" -> bytes (binary multiples).
-bool parse_size(const std::string& text, uint64_t* out) {
-  size_t used = 0;
-  double v = 0;
-  try {
-    v = std::stod(text, &used);
-  } catch (const std::exception&) {
-    return false;
-  }
-  std::string unit = text.substr(used);
-  for (char& c : unit) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  double mult = 1;
-  if (unit.empty() || unit == "b") mult = 1;
-  else if (unit == "k" || unit == "kb" || unit == "kib") mult = 1024.0;
-  else if (unit == "m" || unit == "mb" || unit == "mib") mult = 1024.0 * 1024;
-  else if (unit == "g" || unit == "gb" || unit == "gib") mult = 1024.0 * 1024 * 1024;
-  else if (unit == "t" || unit == "tb" || unit == "tib") mult = 1024.0 * 1024 * 1024 * 1024;
-  else return false;
-  if (!(v >= 0) || v * mult > 1.8e19) return false;
-  *out = static_cast<uint64_t>(v * mult);
-  return true;
-}
 
 std::string human_bytes(uint64_t b) {
   if (b >= (1ull << 30)) return fmt::format("{:.2f} GiB", static_cast<double>(b) / (1ull << 30));
@@ -453,17 +431,17 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "lodstream: %s (see lodstream --help)\n", e.what());
     return static_cast<int>(lodstream::Status::usage);
   }
-  if (!memory_text.empty() && !parse_size(memory_text, &options.memory_bytes)) {
+  if (!memory_text.empty() && !lodstream::parse_size(memory_text, &options.memory_bytes)) {
     std::fprintf(stderr, "lodstream: --memory: cannot read '%s' as a size (e.g. 1G, 512M)\n", memory_text.c_str());
     return static_cast<int>(lodstream::Status::usage);
   }
-  if (!chunk_text.empty() && (!parse_size(chunk_text, &options.chunk_bytes) || options.chunk_bytes == 0)) {
+  if (!chunk_text.empty() && (!lodstream::parse_size(chunk_text, &options.chunk_bytes) || options.chunk_bytes == 0)) {
     std::fprintf(stderr, "lodstream: --chunk-bytes: cannot read '%s' as a positive size\n", chunk_text.c_str());
     return static_cast<int>(lodstream::Status::usage);
   }
 
   if (serve_cmd->parsed()) {
-    if (!upload_text.empty() && !parse_size(upload_text, &serve.max_upload_bytes)) {
+    if (!upload_text.empty() && !lodstream::parse_size(upload_text, &serve.max_upload_bytes)) {
       std::fprintf(stderr, "lodstream: --max-upload: cannot read '%s' as a size\n", upload_text.c_str());
       return static_cast<int>(lodstream::Status::usage);
     }

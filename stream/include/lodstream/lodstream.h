@@ -404,4 +404,8 @@ Result grid(const std::string& input, const GridOptions& grid, const Options& op
 // Peak resident memory of this process so far (VmHWM), in bytes; 0 if unknown.
 uint64_t peak_rss_bytes();
 
+// A size as the CLI and the job server take it: "1G", "512M", "64k", "1.5GiB", "1000000" -> bytes (binary
+// multiples, case-insensitive). False on anything else.
+bool parse_size(const std::string& text, uint64_t* out);
+
 }  // namespace lodstream
