@@ -207,6 +207,30 @@ struct GlbBuilder::State {
   std::vector<double> coverage;
   FileWriter bin;  // the scratch file, opened with the first block
   std::unique_ptr<BinWriter> blocks;
+
+  // A level's node (with its mesh when it has primitives) and coverage, after its buffer views were planned
+  // from `first_view` on; returns the writer of its blocks, or null when it planned none.
+  BinWriter* add_node(const std::string& name, double screen_coverage, Json primitives, size_t first_view) {
+    // The whole file must stay within 4 GiB (a 32-bit length field); the BIN chunk alone already tells.
+    if (plan.bin_bytes() > UINT32_MAX) fail(Status::io_error, path + ": the levels do not fit in one GLB file (4 GiB at most)");
+    Json node;
+    node["name"] = name;
+    if (!primitives.empty()) {
+      node["mesh"] = meshes.size();
+      Json m;
+      m["name"] = name;
+      m["primitives"] = std::move(primitives);
+      meshes.push_back(std::move(m));
+    }
+    nodes.push_back(std::move(node));
+    coverage.push_back(screen_coverage);
+    if (plan.view_bytes().size() == first_view) return nullptr;
+    if (!blocks) {
+      bin.open(scratch, 1 << 20);
+      blocks = std::make_unique<BinWriter>(bin, plan.view_bytes());
+    }
+    return blocks.get();
+  }
 };
 
 GlbBuilder::GlbBuilder(std::string path, std::string scratch, std::string generator, Sync sync)
@@ -255,26 +279,9 @@ void GlbBuilder::add(const GlbLevel& level) {
     p["mode"] = kPoints;
     primitives.push_back(std::move(p));
   }
-  // The whole file must stay within 4 GiB (a 32-bit length field); the BIN chunk alone already tells.
-  if (plan.bin_bytes() > UINT32_MAX) fail(Status::io_error, s.path + ": the levels do not fit in one GLB file (4 GiB at most)");
-  Json node;
-  node["name"] = level.name;
-  if (!primitives.empty()) {
-    node["mesh"] = s.meshes.size();
-    Json m;
-    m["name"] = level.name;
-    m["primitives"] = std::move(primitives);
-    s.meshes.push_back(std::move(m));
-  }
-  s.nodes.push_back(std::move(node));
-  s.coverage.push_back(level.screen_coverage);
-
-  if (plan.view_bytes().size() == first_view) return;
-  if (!s.blocks) {
-    s.bin.open(s.scratch, 1 << 20);
-    s.blocks = std::make_unique<BinWriter>(s.bin, plan.view_bytes());
-  }
-  BinWriter& bin = *s.blocks;
+  BinWriter* blocks = s.add_node(level.name, level.screen_coverage, std::move(primitives), first_view);
+  if (!blocks) return;
+  BinWriter& bin = *blocks;
   if (!mesh.triangles.empty()) {
     bin.vec3(mesh.positions, c.vertices);
     if (!mesh.normals.empty()) bin.vec3(mesh.normals, c.vertices);
@@ -319,25 +326,9 @@ void GlbBuilder::add(const GlbStreamedLevel& level) {
     p["mode"] = kPoints;
     primitives.push_back(std::move(p));
   }
-  if (plan.bin_bytes() > UINT32_MAX) fail(Status::io_error, s.path + ": the levels do not fit in one GLB file (4 GiB at most)");
-  Json node;
-  node["name"] = level.name;
-  if (!primitives.empty()) {
-    node["mesh"] = s.meshes.size();
-    Json m;
-    m["name"] = level.name;
-    m["primitives"] = std::move(primitives);
-    s.meshes.push_back(std::move(m));
-  }
-  s.nodes.push_back(std::move(node));
-  s.coverage.push_back(level.screen_coverage);
-
-  if (plan.view_bytes().size() == first_view) return;
-  if (!s.blocks) {
-    s.bin.open(s.scratch, 1 << 20);
-    s.blocks = std::make_unique<BinWriter>(s.bin, plan.view_bytes());
-  }
-  BinWriter& bin = *s.blocks;
+  BinWriter* blocks = s.add_node(level.name, level.screen_coverage, std::move(primitives), first_view);
+  if (!blocks) return;
+  BinWriter& bin = *blocks;
   if (level.triangles > 0) {
     bin.stream(12 * level.triangle_vertices, level.triangle_positions);
     if (level.normals) bin.stream(12 * level.triangle_vertices, level.triangle_normals);

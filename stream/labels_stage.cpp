@@ -102,6 +102,8 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
     io::FileWriter out(out_path + (g > 0 ? ".next" : ""));
     std::vector<float> labels;
     std::vector<double> xyz;
+    // Mapped whole, as the cluster stage maps it (records come in weight order, spread over the column);
+    // remapping per block would not bound what is resident: a random fault maps more than its page.
     StorePositions positions(store_dir, meta);
     positions.acquire();
     for (uint64_t b = 0; b < records; b += kBlock) {
@@ -118,9 +120,6 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
         const uint32_t* ids = reinterpret_cast<const uint32_t*>(w.data());
         for (uint64_t i = 0; i < n; ++i) positions.get(ids[i], &xyz[3 * i]);
       }
-      // Mapped pages count as resident: drop the ones this block touched (the page cache keeps them).
-      positions.release();
-      positions.acquire();
       tbb::parallel_for(tbb::blocked_range<uint64_t>(0, n, 4096), [&](const tbb::blocked_range<uint64_t>& r) {
         const std::span<const double> part(xyz.data() + 3 * r.begin(), 3 * (r.end() - r.begin()));
         const std::span<float> part_labels(labels.data() + r.begin(), r.end() - r.begin());
