@@ -233,4 +233,19 @@ io::GlbStreamedLevel LevelFiles::glb(const std::string& name, double screen_cove
   return g;
 }
 
+void OpenLevels::add(size_t level, const RegionPart& part) {
+  std::unique_ptr<LevelFiles>& files = open_[level];
+  if (!files) files = std::make_unique<LevelFiles>(work_.scratch(stem_ + std::to_string(level)), cells_.at(level));
+  files->add(part);
+}
+
+std::unique_ptr<LevelFiles> OpenLevels::take(size_t level) {
+  const auto it = open_.find(level);
+  if (it == open_.end()) fail(Status::internal, "emit: level " + std::to_string(level) + " has no region");
+  std::unique_ptr<LevelFiles> files = std::move(it->second);
+  open_.erase(it);
+  files->close();
+  return files;
+}
+
 }  // namespace lodstream::stream

@@ -10,12 +10,15 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "io/file_writer.h"
 #include "io/glb_writer.h"
 #include "stream/emit_stage.h"
+#include "stream/work_dir.h"
 
 namespace lodstream::stream {
 
@@ -45,6 +48,24 @@ class LevelFiles {
   io::FileWriter vertex_out_, triangle_out_, edge_out_, point_out_;
   uint64_t vertices_ = 0, triangle_vertices_ = 0, triangles_ = 0, edges_ = 0, points_ = 0;
   float bounds_[3][2][3];  // triangles, edges, points: min, max
+};
+
+// The levels being welded while the emit stage hands out their parts (the levels of a group interleave):
+// a level's LevelFiles opens with its first part, on scratch files of `work` named after `stem` and the
+// level, and is taken, closed, after its last.
+class OpenLevels {
+ public:
+  OpenLevels(const WorkDir& work, std::string stem, std::vector<uint64_t> cells)
+      : work_(work), stem_(std::move(stem)), cells_(std::move(cells)) {}
+  void add(size_t level, const RegionPart& part);
+  // Fails (Status::internal) when the level had no part.
+  std::unique_ptr<LevelFiles> take(size_t level);
+
+ private:
+  const WorkDir& work_;
+  std::string stem_;
+  std::vector<uint64_t> cells_;
+  std::map<size_t, std::unique_ptr<LevelFiles>> open_;
 };
 
 }  // namespace lodstream::stream

@@ -733,26 +733,17 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         });
       }
 
-      std::vector<uint64_t> part_cells;  // the error stage's levels' cells, while it emits them
       if (so.max_error_px > 0)
         run_stage(&report.stages, "error", [&](StageStats&) {
           error_json = bound_silhouette_error(input, so, options, work, sizes, fine_factors, switch_distances, report,
                                               [&](const std::vector<double>& s, const std::vector<std::string>& paths) {
                                                 const stream::EmitOptions eo{so.representative, so.crease_degrees, true, false};
-                                                std::map<size_t, std::unique_ptr<stream::LevelFiles>> parts;
-                                                auto add = [&](size_t l, const stream::RegionInfo&, stream::RegionPart& part) {
-                                                  std::unique_ptr<stream::LevelFiles>& f = parts[l];
-                                                  if (!f) f = std::make_unique<stream::LevelFiles>(work.scratch(fmt::format("error-level{}", l)), part_cells[l]);
-                                                  f->add(part);
-                                                };
-                                                part_cells = cluster(s, nullptr);
-                                                emit_all(s, part_cells, eo, add, [&](size_t l) {
-                                                  std::unique_ptr<stream::LevelFiles> f = std::move(parts[l]);
-                                                  parts.erase(l);
-                                                  if (!f) fail(Status::internal, fmt::format("emit: level {} has no region", l));
-                                                  f->close();
-                                                  f->write_ply(paths[l], {});
-                                                });
+                                                const std::vector<uint64_t> cells = cluster(s, nullptr);
+                                                stream::OpenLevels levels(work, "error-level", cells);
+                                                emit_all(
+                                                    s, cells, eo,
+                                                    [&](size_t l, const stream::RegionInfo&, stream::RegionPart& part) { levels.add(l, part); },
+                                                    [&](size_t l) { levels.take(l)->write_ply(paths[l], {}); });
                                               });
         });
 
@@ -787,7 +778,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         glb = std::make_unique<io::GlbBuilder>(so.output_dir + "/lods.glb", so.output_dir + "/lods.glb.bin.partial", generator);
       // Each level's parts are welded into its files (stream/level_files.h) as they come; the level's PLY and
       // OBJ files and its part of the GLB are written after its last part (the three side by side).
-      std::map<size_t, std::unique_ptr<stream::LevelFiles>> open_levels;
+      stream::OpenLevels open_levels(work, "level", cells);
       // The region sink of the 3D Tiles output (stream/emit_regions.h): every region of every level becomes a
       // tile as it is emitted (stream/tiles.h); tileset.json is written after the last.
       std::unique_ptr<stream::TilesetBuilder> tiles;
@@ -798,16 +789,11 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           tiles->add(l, {info.key.depth, info.key.x, info.key.y, info.key.z, info.cell_size, info.cells}, part);
         };
       auto add_part = [&](size_t l, const stream::RegionInfo& info, stream::RegionPart& part) {
-        std::unique_ptr<stream::LevelFiles>& files = open_levels[l];
-        if (!files) files = std::make_unique<stream::LevelFiles>(work.scratch(fmt::format("level{}", l)), cells[l]);
         if (region_sink) region_sink(l, info, part.mesh);
-        files->add(part);
+        open_levels.add(l, part);
       };
       auto write_level = [&](size_t l) {
-        std::unique_ptr<stream::LevelFiles> level = std::move(open_levels[l]);
-        open_levels.erase(l);
-        if (!level) fail(Status::internal, fmt::format("emit: level {} has no region", l));
-        level->close();
+        const std::unique_ptr<stream::LevelFiles> level = open_levels.take(l);
         LevelStats& ls = report.levels[l];
         ls.vertices = level->vertices();
         const std::vector<std::string> comments{
