@@ -18,6 +18,7 @@
 #include <httplib.h>
 
 #include "io/text.h"
+#include "server/guarded_server.h"
 #include "server/jobs.h"
 #include "server/page.h"
 #include "server/processes.h"
@@ -304,11 +305,11 @@ int run(const ServeOptions& o) {
     return 74;
   }
 
-  httplib::Server svr;
-  svr.set_read_timeout(o.timeout_seconds, 0);
-  svr.set_write_timeout(o.timeout_seconds, 0);
-  svr.set_keep_alive_timeout(5);
-  svr.set_keep_alive_max_count(100);
+  ConnectionLimits limits;
+  limits.idle_seconds = o.timeout_seconds;
+  limits.head_seconds = o.request_timeout_seconds;
+  limits.min_rate = o.min_rate;
+  GuardedServer svr(limits);
   svr.set_payload_max_length(std::max<size_t>(o.max_upload_bytes, kMaxJsonBody));
   svr.set_default_headers({{"X-Content-Type-Options", "nosniff"}, {"Referrer-Policy", "no-referrer"}});
 

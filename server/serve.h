@@ -19,7 +19,9 @@ struct ServeOptions {
   uint64_t memory_bytes = 0;            // the running jobs' --memory caps add up to at most this
   unsigned job_threads = 0;             // each job's --threads (0 = all cores)
   uint64_t max_upload_bytes = 1ull << 30;
-  int timeout_seconds = 10;             // read and write timeout of a connection
+  int timeout_seconds = 10;             // longest a client may stay silent while sending or receiving
+  int request_timeout_seconds = 30;     // a request's line and headers must arrive within this, and ...
+  uint64_t min_rate = 1024;             // ... after it, bodies in and out must average this many bytes/s
 };
 
 // Runs until SIGTERM or SIGINT, then drains: nothing new starts, running jobs are stopped at their next

@@ -295,7 +295,7 @@ def run(tmp, ref):
     srv.stop(signal.SIGKILL)
     if pid is not None:
         os.kill(pid, signal.SIGCONT)
-    srv = Server(tmp, "--timeout", "2", "--max-upload", "1M")
+    srv = Server(tmp, "--timeout", "2", "--max-upload", "1M", "--request-timeout", "4")
     s = wait_status(srv, resumed, ("successful", "failed"))
     check(s["status"] == "successful" and s["runs"] == 2, f"after kill -9 and a restart: the job resumed and succeeded ({s})")
     check(same_outputs(os.path.join(jobs_dir, resumed, "out"), ref), "resumed job's levels byte-identical to the CLI's")
@@ -315,6 +315,32 @@ def run(tmp, ref):
         closed = False
     check(closed and time.time() - t0 < 10, f"an idle client is dropped after --timeout ({time.time() - t0:.1f} s)")
     sock.close()
+
+    # A client that trickles just inside --timeout is cut once it falls behind its allowance
+    # (--request-timeout for the head, then --min-rate): a header line a second, a body byte a second.
+    auth = ("Authorization: Bearer " + TOKEN + "\r\n").encode()
+    for what, head, drip in (("head", b"GET /jobs HTTP/1.1\r\nHost: x\r\n" + auth, b"X-Slow: 1\r\n"),
+                             ("body", b"POST /uploads?name=slow.ply HTTP/1.1\r\nHost: x\r\n" + auth +
+                              b"Content-Length: 100000\r\n\r\n", b"p")):
+        sock = socket.create_connection(("127.0.0.1", srv.port))
+        sock.sendall(head)
+        sock.settimeout(0.05)
+        t0 = time.time()
+        cut = False
+        while time.time() - t0 < 30 and not cut:
+            time.sleep(1)
+            try:
+                sock.sendall(drip)
+                cut = sock.recv(1024) == b""
+            except socket.timeout:
+                pass
+            except OSError:
+                cut = True
+        elapsed = time.time() - t0
+        sock.close()
+        check(cut and elapsed < 12, f"a client trickling its {what} is cut ({elapsed:.1f} s; --request-timeout 4)")
+    status, _, _ = srv.request("GET", "/conformance")
+    check(status == 200, f"the server still answers after the trickling clients ({status})")
 
     # SIGTERM drains: the running job is stopped, queued again, and completes after the next start.
     drained = submit(srv, {"input": "room.ply", "report": False})

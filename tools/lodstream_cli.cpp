@@ -420,6 +420,11 @@ int main(int argc, char** argv) {
   serve_cmd->add_option("--max-upload", upload_text, "Largest upload, e.g. 2G (default 1G)");
   serve_cmd->add_option("--timeout", serve.timeout_seconds, "Seconds a client may stay silent while sending or receiving (default 10)")
       ->check(CLI::Range(1, 3600));
+  serve_cmd->add_option("--request-timeout", serve.request_timeout_seconds,
+                        "Seconds a request's line and headers may take; bodies in and out must then keep up --min-rate (default 30)")
+      ->check(CLI::Range(1, 3600));
+  serve_cmd->add_option("--min-rate", serve.min_rate, "Bytes a second a request's body and response must average (default 1024)")
+      ->check(CLI::Range(uint64_t{1}, uint64_t{1} << 40));
 
   try {
     app.parse(argc, argv);
