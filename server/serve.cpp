@@ -30,6 +30,7 @@ namespace fs = std::filesystem;
 
 constexpr size_t kMaxJsonBody = 1 << 20;
 constexpr size_t kMaxHeaders = 64;
+constexpr size_t kConnectionThreads = 64;
 
 // Compares in time that depends on the expected token's length only, never on where the strings differ.
 bool same_token(const std::string& given, const std::string& expected) {
@@ -310,6 +311,9 @@ int run(const ServeOptions& o) {
   limits.head_seconds = o.request_timeout_seconds;
   limits.min_rate = o.min_rate;
   GuardedServer svr(limits);
+  // Connections are served by a pool of threads (cpp-httplib's default is 8): a client holds one until its
+  // allowance runs out, so clients trickling bytes must open this many connections to make others wait.
+  svr.new_task_queue = [] { return new httplib::ThreadPool(kConnectionThreads); };
   svr.set_payload_max_length(std::max<size_t>(o.max_upload_bytes, kMaxJsonBody));
   svr.set_default_headers({{"X-Content-Type-Options", "nosniff"}, {"Referrer-Policy", "no-referrer"}});
 
