@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <functional>
 #include <string>
 
 namespace lodstream::serve {
@@ -134,9 +135,11 @@ bool next_request_arrives(const DeadlineStream& strm, int fd, int seconds, const
 
 // Closes after a lingering read, as web servers do: a client still sending a body the server did not
 // want (an upload over the cap answered 413 early) would otherwise get a reset and lose the answer.
-// The read is bounded in time and bytes, so a client cannot hold the thread with it.
+// The read is bounded in time and bytes, and ends at the first half second without data, so a client
+// cannot hold the thread with it.
 void linger_and_close(int fd) {
   constexpr auto kLinger = std::chrono::seconds(2);
+  constexpr int kQuietMs = 500;
   constexpr size_t kLingerBytes = 64 << 20;
   ::shutdown(fd, SHUT_WR);
   const auto until = Clock::now() + kLinger;
@@ -144,9 +147,9 @@ void linger_and_close(int fd) {
   size_t drained = 0;
   while (drained < kLingerBytes && Clock::now() < until) {
     pollfd p{fd, POLLIN, 0};
-    const int rc = ::poll(&p, 1, 100);
-    if (rc < 0 && errno != EINTR) break;
-    if (rc <= 0) continue;
+    const int rc = ::poll(&p, 1, kQuietMs);
+    if (rc < 0 && errno == EINTR) continue;
+    if (rc <= 0) break;
     const ssize_t n = ::recv(fd, sink, sizeof sink, 0);
     if (n <= 0) break;
     drained += static_cast<size_t>(n);
@@ -154,7 +157,33 @@ void linger_and_close(int fd) {
   ::close(fd);
 }
 
+// cpp-httplib's thread pool, counting the connections that wait for a thread.
+class CountingPool final : public httplib::TaskQueue {
+ public:
+  CountingPool(size_t threads, std::atomic<size_t>& waiting) : pool_(threads), waiting_(waiting) {}
+  void enqueue(std::function<void()> fn) override {
+    ++waiting_;
+    pool_.enqueue([this, fn = std::move(fn)] {
+      --waiting_;
+      fn();
+    });
+  }
+  void shutdown() override { pool_.shutdown(); }
+
+ private:
+  httplib::ThreadPool pool_;
+  std::atomic<size_t>& waiting_;
+};
+
 }  // namespace
+
+GuardedServer::GuardedServer(const ConnectionLimits& limits) : limits_(limits) {
+  new_task_queue = [this] { return new CountingPool(std::max<size_t>(limits_.threads, 1), waiting_); };
+}
+
+void GuardedServer::widen_backlog(int backlog) {
+  if (svr_sock_ != INVALID_SOCKET) ::listen(svr_sock_, backlog);
+}
 
 bool GuardedServer::process_and_close_socket(socket_t sock) {
   DeadlineStream strm(sock, limits_);
@@ -163,8 +192,9 @@ bool GuardedServer::process_and_close_socket(socket_t sock) {
     if (!next_request_arrives(strm, sock, limits_.keep_alive_seconds, svr_sock_)) break;
     strm.start_request();
     bool closed = false;
-    ok = process_request(strm, left == 1, closed, [](httplib::Request&) {});
-    if (!ok || closed) break;
+    const bool last = left == 1 || waiting_ > 0;
+    ok = process_request(strm, last, closed, [](httplib::Request&) {});
+    if (!ok || closed || last) break;
   }
   linger_and_close(sock);
   return ok;

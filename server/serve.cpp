@@ -31,6 +31,7 @@ namespace fs = std::filesystem;
 constexpr size_t kMaxJsonBody = 1 << 20;
 constexpr size_t kMaxHeaders = 64;
 constexpr size_t kConnectionThreads = 64;
+constexpr int kListenBacklog = 1024;
 
 // Compares in time that depends on the expected token's length only, never on where the strings differ.
 bool same_token(const std::string& given, const std::string& expected) {
@@ -310,10 +311,10 @@ int run(const ServeOptions& o) {
   limits.idle_seconds = o.timeout_seconds;
   limits.head_seconds = o.request_timeout_seconds;
   limits.min_rate = o.min_rate;
-  GuardedServer svr(limits);
   // Connections are served by a pool of threads (cpp-httplib's default is 8): a client holds one until its
   // allowance runs out, so clients trickling bytes must open this many connections to make others wait.
-  svr.new_task_queue = [] { return new httplib::ThreadPool(kConnectionThreads); };
+  limits.threads = kConnectionThreads;
+  GuardedServer svr(limits);
   svr.set_payload_max_length(std::max<size_t>(o.max_upload_bytes, kMaxJsonBody));
   svr.set_default_headers({{"X-Content-Type-Options", "nosniff"}, {"Referrer-Policy", "no-referrer"}});
 
@@ -540,6 +541,7 @@ int run(const ServeOptions& o) {
     std::fprintf(stderr, "lodstream serve: cannot listen on %s\n", o.bind.c_str());
     return 74;
   }
+  svr.widen_backlog(kListenBacklog);
   jobs.start();
   std::thread http([&] { svr.listen_after_bind(); });
   const bool v6 = host.find(':') != std::string::npos;
