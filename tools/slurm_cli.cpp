@@ -150,48 +150,42 @@ int submit_chain(Submission& s, bool from_prepare, const std::string& array) {
   return 0;
 }
 
-// Waits until the merge has recorded its status, or a job of the chain failed, or none of them is queued
-// any more; returns the one-machine exit code.
+// Waits until the merge has recorded its status, or none of the chain's jobs is queued any more (a failed
+// task's merge is cancelled by Slurm, --kill-on-invalid-dep; the other tasks are left to finish, so that a
+// resubmission reruns the failed ones only); returns the one-machine exit code: the merge's, else the
+// prepare job's or the first failed task's (a task killed by a signal records 128 + the signal).
 int wait_chain(const Submission& s, const std::vector<unsigned>& tasks) {
   const std::string st = s.slurm_dir + "/status/";
-  const std::string ids = s.prepare.empty() ? s.tasks + "," + s.merge : s.prepare + "," + s.tasks + "," + s.merge;
+  const std::string ids = s.prepare.empty() ? (s.tasks.empty() ? s.merge : s.tasks + "," + s.merge) : s.prepare + "," + s.tasks + "," + s.merge;
   for (;;) {
     const int merge_rc = read_rc(st + "merge.rc");
     if (merge_rc >= 0) return merge_rc;
+    int status = 0;
+    const std::string queued = run("squeue -h -o %i -j " + ids + " 2>/dev/null", &status);
+    if (status != 0 || !queued.empty()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(500));
+      continue;
+    }
+    if (const int rc = read_rc(st + "merge.rc"); rc >= 0) return rc;
     int failed = -1;
     std::string failed_name;
     if (!s.prepare.empty()) {
       const int rc = read_rc(st + "prepare.rc");
-      if (rc > 0) failed = rc, failed_name = "prepare";
+      if (rc != 0) failed = rc, failed_name = "the prepare job";
     }
     for (unsigned t : tasks) {
       if (failed >= 0) break;
       const int rc = read_rc(st + fmt::format("task-{}.rc", t));
       if (rc > 0) failed = rc, failed_name = fmt::format("task {}", t);
     }
-    if (failed >= 0) {
-      int ignored;
-      run("scancel " + ids + " 2>/dev/null", &ignored);
-      std::fprintf(stderr, "lodstream slurm: %s failed with exit %d (log: %s/logs/); `lodstream slurm resubmit %s` reruns what did not finish\n",
+    if (failed > 0) {
+      std::fprintf(stderr, "lodstream slurm: %s failed with exit %d (logs: %s/logs/); `lodstream slurm resubmit %s` reruns what did not finish\n",
                    failed_name.c_str(), failed, s.slurm_dir.c_str(), quote(fs::path(s.slurm_dir).parent_path().string()).c_str());
-      // A task killed by a signal records 128 + the signal; one machine's process would have died of it.
       return failed;
     }
-    int status = 0;
-    const std::string queued = run("squeue -h -o %i -j " + ids + " 2>/dev/null", &status);
-    if (status == 0 && queued.empty()) {
-      // Gone without a status (cancelled, or killed with its script): read once more, then give up.
-      const int rc = read_rc(st + "merge.rc");
-      if (rc >= 0) return rc;
-      std::this_thread::sleep_for(std::chrono::seconds(1));
-      if (read_rc(st + "merge.rc") >= 0) continue;
-      bool task_failed = false;
-      for (unsigned t : tasks) task_failed = task_failed || read_rc(st + fmt::format("task-{}.rc", t)) > 0;
-      if (task_failed) continue;
-      std::fprintf(stderr, "lodstream slurm: the jobs ended without recording a status (cancelled?); see %s/logs/\n", s.slurm_dir.c_str());
-      return kInternal;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    std::fprintf(stderr, "lodstream slurm: the jobs ended without recording a status (cancelled, or killed with their scripts); see %s/logs/\n",
+                 s.slurm_dir.c_str());
+    return kInternal;
   }
 }
 
