@@ -1,5 +1,5 @@
 // `merge`: the outputs of a sharded simplify (stream/shard.h) from its tasks' parts. The parts of a level
-// are read task by task (each task's run of regions follows the previous task's in region order), so
+// are read run by run (each run of regions follows the previous one in region order), so
 // the level files, the GLB and the tiles are given every region's part in the order one machine's emit
 // stage gives them, and are written by the same code: the same bytes. What merge does grows with the
 // output (the levels' parts are read once and written once), not with the input.
@@ -118,7 +118,8 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
         ordered_json& lj = m["levels"][l];
         stream::LevelFiles level(work.scratch("level" + std::to_string(l)), lj.at("cells").get<uint64_t>());
         uint64_t triangles = 0, edges = 0, points = 0, on_triangles = 0, covered = 0;
-        for (unsigned t = 0; t < count; ++t) {
+        for (unsigned run = 0; run < count; ++run) {
+          const unsigned t = stream::shard_task_of_run(run, count, l);
           const ordered_json& tl = tasks[t].at("manifest").at("levels").at(l);
           triangles += tl.at("triangles").get<uint64_t>(), edges += tl.at("edges").get<uint64_t>();
           points += tl.at("points").get<uint64_t>();
@@ -132,7 +133,7 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
                          p.part.mesh);
             level.add(p.part);
           }
-          progress.report("merge", (l * count + t + 1.0) / static_cast<double>(levels * count));
+          progress.report("merge", (l * count + run + 1.0) / static_cast<double>(levels * count));
         }
         level.close();
         const std::vector<std::string> comments = mi.at("comments").at(l);

@@ -84,6 +84,13 @@ std::pair<uint32_t, uint32_t> shard_regions(const LevelCut& cut, unsigned index,
   return {first, end};
 }
 
+unsigned shard_run(unsigned task, unsigned count, size_t level) {
+  return static_cast<unsigned>((task + count - level % count) % count);
+}
+unsigned shard_task_of_run(unsigned run, unsigned count, size_t level) {
+  return static_cast<unsigned>((run + level) % count);
+}
+
 std::string shards_dir(const std::string& output_dir) { return output_dir + "/shards"; }
 std::string shard_parts_path(const std::string& output_dir, unsigned index, size_t level) {
   return fmt::format("{}/task-{}-lod{}.parts", shards_dir(output_dir), index, level);
@@ -173,13 +180,43 @@ bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::order
   if (reused) return true;
   std::filesystem::remove(stamp, ec);
   const StoreMeta& meta = *in.meta;
-  for (size_t l = 0; l < in.cells.size(); ++l) {
-    // As plan_emit_level sizes a batched level's ranges: what its map and tables leave of the budget.
-    const uint64_t held = emit_map_bytes(meta.vertices, emit_bits(in.cells[l])) + kLevelBytesPerCell * in.cells[l] +
-                          emit_level_bytes(0, meta.primitives(), in.options);
-    const uint64_t range = in.budget > held ? (in.budget - held) / (sizeof(core::Quadric) + 8) : 1;
-    write_representatives(in.store_dir, meta, in.canonical, in.prefix, l, in.cells[l], in.sizes[l], in.records, in.cluster,
-                          in.options.representative, range, progress, scratch);
+  const size_t n = in.cells.size();
+  // Quadric representatives: the levels whose quadrics fit together are summed in one pass over the input
+  // (emit_levels with representatives_only, a group's levels each as when alone); a level that does not
+  // fit alone in ranges of cells, as write_representatives does. Either way the same bytes.
+  const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), in.options);
+  constexpr uint64_t kQuadricBytes = sizeof(core::Quadric) + 8;
+  for (size_t first = 0; first < n;) {
+    unsigned bits = emit_bits(in.cells[first]);
+    uint64_t bytes = in_flight + kQuadricBytes * in.cells[first];
+    size_t end = first + 1;
+    if (in.options.representative == Representative::quadric && emit_map_bytes(meta.vertices, bits) + bytes <= in.budget)
+      for (; end < n; ++end) {
+        const unsigned b = bits + emit_bits(in.cells[end]);
+        const uint64_t w = bytes + in_flight + kQuadricBytes * in.cells[end];
+        if (b > 64 || emit_map_bytes(meta.vertices, b) + w > in.budget) break;
+        bits = b, bytes = w;
+      }
+    if (end - first > 1) {
+      std::vector<EmitLevel> group;
+      for (size_t l = first; l < end; ++l) {
+        std::filesystem::remove(representatives_path(in.prefix, l), ec);
+        EmitLevel g;
+        g.level = l, g.cells = in.cells[l], g.cell_size = in.sizes[l], g.first_cell = 0, g.end_cell = in.cells[l];
+        group.push_back(g);
+      }
+      EmitOptions options = in.options;
+      options.representatives_only = true;
+      emit_levels(in.store_dir, meta, in.canonical, in.prefix, group, in.records, in.cluster, options, progress, scratch,
+                  [](size_t, RegionPart&) {});
+    } else {
+      // As plan_emit_level sizes a batched level's ranges: what its map and tables leave of the budget.
+      const uint64_t held = emit_map_bytes(meta.vertices, emit_bits(in.cells[first])) + kLevelBytesPerCell * in.cells[first] + in_flight;
+      const uint64_t range = in.budget > held ? (in.budget - held) / kQuadricBytes : 1;
+      write_representatives(in.store_dir, meta, in.canonical, in.prefix, first, in.cells[first], in.sizes[first], in.records,
+                            in.cluster, in.options.representative, range, progress, scratch);
+    }
+    first = end;
   }
   io::write_file_atomic(stamp, key.dump(1) + "\n");
   return false;
@@ -204,7 +241,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   std::vector<std::pair<uint32_t, uint32_t>> runs(n);
   std::vector<uint64_t> share(n, 0), largest(n, 0);
   for (size_t l = 0; l < n; ++l) {
-    runs[l] = shard_regions(cuts[l], index, count);
+    runs[l] = shard_regions(cuts[l], shard_run(index, count, l), count);
     for (uint32_t r = runs[l].first; r < runs[l].second; ++r)
       share[l] += cuts[l].cells[r], largest[l] = std::max(largest[l], cuts[l].cells[r]);
   }

@@ -9,9 +9,9 @@
 //   live scratch files for a dead process's); the others wait, then find their stamps and reuse them.
 //   `--shard-prepare` runs them alone (a scheduler's first job). They do not scale with N: they are what
 //   one machine runs before its emit stage.
-// - A task's share: in every level, the contiguous run of regions (region order: octree Morton order, so
-//   whole subtrees but at its two ends) whose cells are the I-th N-th of the level's cells
-//   (shard_regions). It emits them as the batched emit does (each batch with its halo, representatives
+// - A task's share: in every level, one contiguous run of regions (region order: octree Morton order, so
+//   whole subtrees but at its two ends) holding an N-th of the level's cells (shard_regions; which run,
+//   shard_run). It emits them as the batched emit does (each batch with its halo, representatives
 //   read from the work directory), which gives every part the bytes it has in one machine's run
 //   (stream/emit_stage.h), and writes the parts, in region order, to OUTDIR/shards/task-I-lod-L.parts;
 //   then OUTDIR/shards/task-I.json (last: its presence means the task is complete) with the manifest as
@@ -60,6 +60,12 @@ class ShardLock {
 // them (in region order) are in [index, index + 1) · total / count. Tasks' runs are disjoint and cover
 // the cut; a run may be empty.
 std::pair<uint32_t, uint32_t> shard_regions(const LevelCut& cut, unsigned index, unsigned count);
+
+// Which run of a level a task emits: run k of level l is task (k + l) mod N's, so that the coarse levels'
+// few regions (each about as costly as the input: every input primitive maps to them) go to different
+// tasks rather than all to task 0. The merge reads a level's runs in run order, so region order.
+unsigned shard_run(unsigned task, unsigned count, size_t level);
+unsigned shard_task_of_run(unsigned run, unsigned count, size_t level);
 
 std::string shards_dir(const std::string& output_dir);
 std::string shard_parts_path(const std::string& output_dir, unsigned index, size_t level);
@@ -113,7 +119,8 @@ struct ShardEmitInput {
 };
 
 // Writes every level's representatives to the work directory (the batched emit reads them), unless a
-// stamp there (shard-reps.json) says they were written for `key`. Returns true when reused.
+// stamp there (shard-reps.json) says they were written for `key`. Quadrics of the levels that fit
+// together are summed in one pass over the input. Returns true when reused.
 bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress,
                                  EmitScratch& scratch);
 

@@ -45,7 +45,13 @@ timed() {
 
 echo "input $input, $shards shards, options: ${opts[*]:-}; $(date -u +%FT%TZ), load $(cut -d' ' -f1-3 /proc/loadavg)" | tee "$out/bench.txt"
 printf "%-12s %9s %9s %9s %5s\n" step wall_s cpu_s peak_MiB exit | tee -a "$out/bench.txt"
-timed one "$bin" simplify "$input" -o "$out/one" --work "$work" --no-space-check "${prep_opts[@]}"
+# An output directory that already holds one machine's run (same work directory) keeps it: only the
+# sharded steps are run again.
+if [ -f "$out/one/manifest.json" ]; then
+  echo "one machine's run reused from $out/one" | tee -a "$out/bench.txt"
+else
+  timed one "$bin" simplify "$input" -o "$out/one" --work "$work" --no-space-check "${prep_opts[@]}"
+fi
 # The one machine's run leaves the shared stages in the work directory: prepare then only adds the
 # representatives. Its stages are in one/manifest.json.
 python3 -c 'import json,sys; m=json.load(open(sys.argv[1])); print("  one machine stages:", ", ".join("%s %.1f s" % (s["name"], s["seconds"]) for s in m["stages"]))' \
