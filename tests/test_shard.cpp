@@ -9,10 +9,12 @@
 #include <fstream>
 #include <map>
 #include <sstream>
+#include <thread>
 
 #include <nlohmann/json.hpp>
 
 #include "lodstream/lodstream.h"
+#include "cli_harness.h"
 #include "stream/shard.h"
 #include "test_util.h"
 
@@ -180,6 +182,52 @@ TEST(Shard, OptionsAndEnvironment) {
   EXPECT_FALSE(shard_from_env(&i, &n, &error));
   unsetenv("JOB_COMPLETION_INDEX");
   unsetenv("LODSTREAM_SHARD_COUNT");
+}
+
+// Through the CLI: three tasks started at once on a fresh work directory (the first to take the lock runs
+// the shared stages, the others wait and reuse them), a task killed with SIGKILL just before its summary,
+// merge refusing, the task rerun alone, merge: one machine's bytes.
+TEST(Shard, ConcurrentTasksAndAKilledTaskThroughTheCli) {
+  TempDir dir, one_out;
+  const std::vector<std::string> common{"--tiles", "--tile-triangles", "6000", "--no-space-check", "--progress", "none"};
+  auto args = [&](std::vector<std::string> a) {
+    a.insert(a.end(), common.begin(), common.end());
+    return a;
+  };
+  test::CliRun one = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("one")}), one_out);
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  setenv("LODSTREAM_TEST_KILL_AT", "task-1.json", 1);
+  std::vector<test::CliRun> runs(3);
+  {
+    std::vector<std::thread> tasks;
+    std::vector<TempDir> logs(3);
+    for (unsigned i = 0; i < 3; ++i)
+      tasks.emplace_back([&, i] {
+        runs[i] = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("out"), "--work", dir.file("work"), "--shard",
+                                      std::to_string(i) + "/3"}),
+                                logs[i]);
+      });
+    for (auto& t : tasks) t.join();
+  }
+  unsetenv("LODSTREAM_TEST_KILL_AT");
+  EXPECT_EQ(runs[0].exit_code, 0) << runs[0].err;
+  EXPECT_EQ(runs[1].exit_code, 128 + SIGKILL);
+  EXPECT_EQ(runs[2].exit_code, 0) << runs[2].err;
+  TempDir log;
+  test::CliRun m = test::run_cli({"merge", dir.file("out")}, log);
+  EXPECT_EQ(m.exit_code, 66);
+  EXPECT_NE(m.err.find("task 1 of 3 has not finished"), std::string::npos) << m.err;
+  test::CliRun again = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("out"), "--work", dir.file("work"), "--shard", "1/3"}), log);
+  ASSERT_EQ(again.exit_code, 0) << again.err;
+  EXPECT_NE(again.out.find("(reused from work directory)"), std::string::npos) << "the shared stages are reused";
+  m = test::run_cli({"merge", dir.file("out")}, log);
+  ASSERT_EQ(m.exit_code, 0) << m.err;
+  EXPECT_EQ(outputs(dir.file("out")), outputs(dir.file("one")));
+
+  for (const char* bad : {"3/3", "1", "x/2", "1/0", "-1/2", "1/2/3"}) {
+    const test::CliRun r = test::run_cli({"simplify", sample_room(), "-o", dir.file("bad"), "--work", dir.file("work"), "--shard", bad}, log);
+    EXPECT_EQ(r.exit_code, 64) << bad;
+  }
 }
 
 }  // namespace

@@ -7,7 +7,9 @@
 # usage: tools/bench_distributed.sh [--bin LODSTREAM] [--input FILE] [--shards N] [--work DIR] [--out DIR]
 #                                   [--prepare-memory SIZE] -- [simplify options, e.g. --memory 1G]
 # Defaults: build/lodstream, /work/scenes/city-18.ply (read only), 8 shards, a fresh work and output
-# directory under $TMPDIR, --prepare-memory = the simplify options' --memory.
+# directory under $TMPDIR, --prepare-memory = the simplify options' --memory. Steps: one (one machine's
+# whole run), one-emit (the same again on its work directory: emit and write only), prepare (the shared
+# stages, reused from one's, plus the representatives), task-I, merge.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 bin=$root/build/lodstream; input=/work/scenes/city-18.ply; shards=8; work=""; out=""; prepare_memory=""
@@ -56,6 +58,9 @@ fi
 # representatives. Its stages are in one/manifest.json.
 python3 -c 'import json,sys; m=json.load(open(sys.argv[1])); print("  one machine stages:", ", ".join("%s %.1f s" % (s["name"], s["seconds"]) for s in m["stages"]))' \
   "$out/one/manifest.json" | tee -a "$out/bench.txt"
+# The same run again on the same work directory: its stages up to cluster are reused, so this is what
+# one machine spends after them (emit and write), to set against the tasks.
+timed one-emit "$bin" simplify "$input" -o "$out/one-emit" --work "$work" --no-space-check "${opts[@]}"
 timed prepare "$bin" simplify "$input" -o "$out/sharded" --work "$work" --shard-prepare --no-space-check "${prep_opts[@]}"
 for ((i = 0; i < shards; i++)); do
   timed "task-$i" "$bin" simplify "$input" -o "$out/sharded" --work "$work" --shard "$i/$shards" --no-space-check "${opts[@]}"
