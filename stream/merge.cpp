@@ -184,7 +184,11 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
     stream::kill_point("manifest.json");
     io::write_file_atomic(output_dir + "/manifest.json", m.dump(2) + "\n", io::Sync::durable);
 
-    report.input = m.at("input").at("path");
+    const ordered_json& in = m.at("input");
+    report.input = in.at("path");
+    report.scene.format = in.at("format");
+    report.scene.triangles = in.at("triangles"), report.scene.lines = in.at("lines"), report.scene.points = in.at("points");
+    report.vertices_graded = in.at("vertices_graded");
     for (const ordered_json& lj : m.at("levels")) {
       LevelStats ls;
       ls.cell_size = lj.at("cell_size"), ls.cells = lj.at("cells"), ls.vertices = lj.at("vertices");
