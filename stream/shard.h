@@ -8,16 +8,19 @@
 //   WORK/shard.lock (flock; taken before the work directory is opened, so that no task takes another's
 //   live scratch files for a dead process's); the others wait, then find their stamps and reuse them.
 //   `--shard-prepare` runs them alone (a scheduler's first job). They do not scale with N: they are what
-//   one machine runs before its emit stage.
+//   one machine runs before its emit stage, plus the representatives (which one machine's emit sums in
+//   its own passes unless a level is batched).
 // - A task's share: in every level, one contiguous run of regions (region order: octree Morton order, so
 //   whole subtrees but at its two ends) holding an N-th of the level's cells (shard_regions; which run,
 //   shard_run). It emits them as the batched emit does (each batch with its halo, representatives
 //   read from the work directory), which gives every part the bytes it has in one machine's run
-//   (stream/emit_stage.h), and writes the parts, in region order, to OUTDIR/shards/task-I-lod-L.parts;
+//   (stream/emit_stage.h), and writes the parts, in region order, to OUTDIR/shards/task-I-lodL.parts;
 //   then OUTDIR/shards/task-I.json (last: its presence means the task is complete) with the manifest as
 //   the task saw it (its own counts), its stages, and the key of what it was made from.
-// - A task whose task-I.json holds the same key is not redone; a killed one is rerun from its start (its
-//   parts files are written under .partial names and renamed).
+// - A task run again (resubmitted, or killed and rerun) removes its task-I.json and redoes its emit from
+//   the start, reusing the shared stages; its parts files are written under .partial names and renamed.
+//   Every task reads the whole input in each of its passes: its cost falls with its share of the output,
+//   not of the input (README "simplify as N tasks").
 #pragma once
 
 #include <cstdint>
