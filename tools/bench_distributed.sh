@@ -26,10 +26,11 @@ while [ $# -gt 0 ]; do
   esac
 done
 opts=("$@")
-tmp=$(mktemp -d)
+if [ -z "$work" ] || [ -z "$out" ]; then tmp=$(mktemp -d); fi
 [ -n "$work" ] || work=$tmp/work
 [ -n "$out" ] || out=$tmp/out
-mkdir -p "$out"
+logs=$out/logs  # each step's output and /usr/bin/time -v report
+mkdir -p "$logs"
 prep_opts=("${opts[@]}")
 [ -n "$prepare_memory" ] && prep_opts+=(--memory "$prepare_memory")
 
@@ -37,12 +38,12 @@ prep_opts=("${opts[@]}")
 timed() {
   local name=$1; shift
   local rc=0
-  /usr/bin/time -v -o "$tmp/$name.time" "$@" >"$tmp/$name.log" 2>&1 || rc=$?
+  /usr/bin/time -v -o "$logs/$name.time" "$@" >"$logs/$name.log" 2>&1 || rc=$?
   awk -v n="$name" -v rc=$rc '
     /Elapsed \(wall clock\)/ { split($NF, t, ":"); w = (length(t) == 3) ? t[1] * 3600 + t[2] * 60 + t[3] : t[1] * 60 + t[2] }
     /User time/ { u = $NF } /System time/ { s = $NF } /Maximum resident/ { m = $NF / 1024 }
-    END { printf "%-12s %9.1f %9.1f %9.0f %5d\n", n, w, u + s, m, rc }' "$tmp/$name.time" | tee -a "$out/bench.txt"
-  [ $rc -eq 0 ] || { tail -5 "$tmp/$name.log" >&2; exit $rc; }
+    END { printf "%-12s %9.1f %9.1f %9.0f %5d\n", n, w, u + s, m, rc }' "$logs/$name.time" | tee -a "$out/bench.txt"
+  [ $rc -eq 0 ] || { tail -5 "$logs/$name.log" >&2; exit $rc; }
 }
 
 echo "input $input, $shards shards, options: ${opts[*]:-}; $(date -u +%FT%TZ), load $(cut -d' ' -f1-3 /proc/loadavg)" | tee "$out/bench.txt"
@@ -67,7 +68,7 @@ for ((i = 0; i < shards; i++)); do
 done
 timed merge "$bin" merge "$out/sharded"
 same=1
-for f in $(cd "$out/one" && find . -type f ! -name manifest.json | sort); do
+for f in $(cd "$out/one" && find . -type f ! -name manifest.json ! -path './logs/*' | sort); do
   cmp -s "$out/one/$f" "$out/sharded/$f" || { echo "DIFFERS: $f" | tee -a "$out/bench.txt"; same=0; }
 done
 [ $same -eq 1 ] && echo "outputs byte-identical (cmp of every file but manifest.json)" | tee -a "$out/bench.txt"
