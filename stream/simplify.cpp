@@ -37,6 +37,7 @@
 #include "stream/level_files.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
+#include "stream/shard.h"
 #include "stream/tiles.h"
 #include "stream/work_dir.h"
 
@@ -272,8 +273,8 @@ bool stamp_matches(const std::string& path, const ordered_json& key, ordered_jso
 
 // The 3D Tiles builder (stream/tiles.h) of `--tiles`: fed region by region by the emit stage's region
 // sink, in the scene cube the regions are cut in (stream/emit_regions.h).
-std::unique_ptr<stream::TilesetBuilder> make_tiles_builder(const SimplifyOptions& so, const stream::StoreMeta& meta,
-                                                           size_t levels, const std::string& generator) {
+stream::TilesOptions tiles_options(const SimplifyOptions& so, const stream::StoreMeta& meta, size_t levels,
+                                  const std::string& generator) {
   stream::TilesOptions to;
   to.dir = so.output_dir + "/tiles";
   to.levels = static_cast<unsigned>(levels);
@@ -290,7 +291,19 @@ std::unique_ptr<stream::TilesetBuilder> make_tiles_builder(const SimplifyOptions
                      : so.tiles_transform;
   if (so.tiles_z_up) to.transform = stream::z_up_transform(to.transform);
   to.generator = generator;
-  return std::make_unique<stream::TilesetBuilder>(std::move(to));
+  return to;
+}
+std::unique_ptr<stream::TilesetBuilder> make_tiles_builder(const SimplifyOptions& so, const stream::StoreMeta& meta,
+                                                           size_t levels, const std::string& generator) {
+  return std::make_unique<stream::TilesetBuilder>(tiles_options(so, meta, levels, generator));
+}
+
+// The comments of level l's files.
+std::vector<std::string> level_comments(const SimplifyOptions& so, const std::string& generator, size_t l, size_t levels,
+                                        double cell_size) {
+  return {generator, fmt::format("level {} of {}, cell size {}", l, levels, cell_size),
+          fmt::format("clustering {} {} {}, representative {}, grading {}", name(so.clustering), name(so.cell),
+                      name(so.variant), name(so.representative), name(so.grading))};
 }
 
 void write_stamp(const std::string& path, const ordered_json& key, const std::vector<std::string>& files,
@@ -435,6 +448,30 @@ ordered_json run_labels_stage(const SimplifyOptions& so, const std::string& stor
   return key;
 }
 
+// A sharded run's options (stream/shard.h).
+void check_shard_options(const SimplifyOptions& so, const Options& options) {
+  if (options.work_dir.empty()) fail(Status::usage, "--shard and --shard-prepare need --work DIR, a directory every task shares");
+  if (so.shard_count > 0 && so.shard_index >= so.shard_count)
+    fail(Status::usage, fmt::format("--shard {}/{}: the index must be below the count", so.shard_index, so.shard_count));
+  if (so.max_error_px > 0) fail(Status::usage, "--max-error-px is not available with --shard");
+}
+
+// A task's summary, OUTDIR/shards/task-I.json (stream/shard.h): its manifest as one machine would write it
+// (the level counts its own), what merge needs to write the outputs, and its key.
+void write_shard_task(const SimplifyOptions& so, const SimplifyReport& report, const ordered_json& manifest,
+                      const ordered_json& tiles) {
+  const std::string generator = manifest.at("generator");
+  ordered_json merge{{"write_ply", so.write_ply}, {"write_obj", so.write_obj}, {"write_glb", so.write_glb},
+                     {"resolution", so.resolution}, {"comments", ordered_json::array()}};
+  for (size_t l = 0; l < report.levels.size(); ++l)
+    merge["comments"].push_back(level_comments(so, generator, l, report.levels.size(), report.levels[l].cell_size));
+  ordered_json key{{"count", so.shard_count}, {"input", manifest.at("input")}, {"options", manifest.at("options")},
+                   {"tile_triangles", so.tile_triangles}, {"merge", merge}};
+  for (const LevelStats& ls : report.levels) key["levels"].push_back({exact(ls.cell_size), ls.cells});
+  key["tiles"] = tiles;
+  stream::write_shard_task(so.output_dir, so.shard_index, key, manifest);
+}
+
 }  // namespace
 
 Result simplify(const std::string& input, const SimplifyOptions& so, const Options& options, SimplifyReport* out) {
@@ -443,13 +480,19 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     check_options(so);
     const stream::MemoryPlan plan = stream::plan_memory(options);
     stream::Progress progress(options);
+    // A task of a sharded run (stream/shard.h) holds the work directory's lock through the shared stages.
+    const bool sharded = so.shard_count > 0 || so.shard_prepare;
+    if (sharded) check_shard_options(so, options);
+    std::unique_ptr<stream::ShardLock> shard_lock;
+    if (sharded) shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
     stream::WorkDir work(options.work_dir);
-    if (options.check_disk_space) stream::check_simplify_space(input, so, work.path());
+    if (options.check_disk_space && !so.shard_prepare) stream::check_simplify_space(input, so, work.path());
     const std::string store_dir = work.subdir("store");
     const core::ClusterOptions copts = cluster_options(so);
     SimplifyReport report;
     report.input = input;
     ordered_json error_json;  // --max-error-px: the passes and figures, for the manifest
+    ordered_json shard_tiles;  // a sharded run's 3D Tiles options, for merge
 
     tbb::task_arena arena(static_cast<int>(plan.threads));
     arena.execute([&] {
@@ -748,6 +791,21 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         });
 
       const std::vector<uint64_t> cells = run_stage(&report.stages, "cluster", [&](StageStats& st) { return cluster(sizes, &st); });
+      stream::ShardEmitInput shard_input;
+      if (sharded) {
+        shard_input = {store_dir, canonical, prefix, &meta, grade.records, copts,
+                       {so.representative, so.crease_degrees, true, false}, plan.stage_bytes, so.tile_triangles, sizes, cells};
+        run_stage(&report.stages, "representatives", [&](StageStats& st) {
+          ordered_json key = cluster_base;
+          key["cells"] = cells;
+          for (double c : sizes) key["cell_sizes"].push_back(exact(c));
+          st.reused = stream::write_shard_representatives(shard_input, key, progress, scratch);
+        });
+        shard_lock.reset();
+        if (so.shard_prepare) return;
+        if (so.write_tiles)
+          shard_tiles = stream::tiles_options_json(tiles_options(so, meta, sizes.size(), std::string("lodstream ") + LODSTREAM_VERSION));
+      }
 
       // Emit and write. Each level's PLY and OBJ files and its part of the GLB are written as soon as the
       // emit stage finishes the level (the three side by side); the write stage then assembles the GLB
@@ -774,7 +832,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       // The GLB's binary data is gathered beside it in the output directory (a .partial name, which a rerun
       // writes again), not in the work directory: it is output, as large as the GLB, and counts against the
       // outputs' room (stream/disk_space.cpp).
-      if (so.write_glb)
+      if (so.write_glb && !sharded)
         glb = std::make_unique<io::GlbBuilder>(so.output_dir + "/lods.glb", so.output_dir + "/lods.glb.bin.partial", generator);
       // Each level's parts are welded into its files (stream/level_files.h) as they come; the level's PLY and
       // OBJ files and its part of the GLB are written after its last part (the three side by side).
@@ -782,7 +840,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       // The region sink of the 3D Tiles output (stream/emit_regions.h): every region of every level becomes a
       // tile as it is emitted (stream/tiles.h); tileset.json is written after the last.
       std::unique_ptr<stream::TilesetBuilder> tiles;
-      if (so.write_tiles) tiles = make_tiles_builder(so, meta, sizes.size(), generator);
+      if (so.write_tiles && !sharded) tiles = make_tiles_builder(so, meta, sizes.size(), generator);
       stream::RegionSink region_sink;
       if (tiles)
         region_sink = [&](size_t l, const stream::RegionInfo& info, const core::LodMesh& part) {
@@ -796,10 +854,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         const std::unique_ptr<stream::LevelFiles> level = open_levels.take(l);
         LevelStats& ls = report.levels[l];
         ls.vertices = level->vertices();
-        const std::vector<std::string> comments{
-            generator, fmt::format("level {} of {}, cell size {}", l, sizes.size(), sizes[l]),
-            fmt::format("clustering {} {} {}, representative {}, grading {}", name(so.clustering), name(so.cell),
-                        name(so.variant), name(so.representative), name(so.grading))};
+        const std::vector<std::string> comments = level_comments(so, generator, l, sizes.size(), sizes[l]);
         const std::string stem = fmt::format("lod{}", l);
         tbb::task_group files;
         if (so.write_ply) files.run([&] { level->write_ply(so.output_dir + "/" + stem + ".ply", comments); });
@@ -816,7 +871,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       };
       const stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
       run_stage(&report.stages, "emit", [&](StageStats&) {
-        const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, emit_options, add_part, write_level);
+        const std::vector<stream::EmitCounts> counts =
+            sharded ? stream::emit_shard(shard_input, so.shard_index, so.shard_count, so.output_dir, progress, scratch)
+                    : emit_all(sizes, cells, emit_options, add_part, write_level);
         for (size_t l = 0; l < sizes.size(); ++l) {
           LevelStats& ls = report.levels[l];
           const stream::EmitCounts& c = counts[l];
@@ -828,12 +885,12 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         }
         scratch = stream::EmitScratch();
       });
-      run_stage(&report.stages, "write", [&](StageStats&) {
+      if (!sharded) run_stage(&report.stages, "write", [&](StageStats&) {
         if (glb) glb->finish();
         glb.reset();
         progress.report("write", 1);
       });
-      if (so.write_tiles)
+      if (so.write_tiles && !sharded)
         run_stage(&report.stages, "tiles", [&](StageStats&) {
           const stream::TilesSummary t = tiles->finish();
           tiles.reset();
@@ -841,6 +898,10 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           progress.report("tiles", 1);
         });
     });
+    if (so.shard_prepare) {
+      *out = std::move(report);
+      return;
+    }
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     report.peak_rss_bytes = stream::peak_rss_bytes();
     report.work_dir = stream::work_dir_usage(work.path(), report.scene.file_bytes);
@@ -917,6 +978,11 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     m["seconds"] = report.seconds;
     m["peak_rss_bytes"] = report.peak_rss_bytes;
     m["work_dir"] = stream::work_dir_json(report.work_dir);
+    if (sharded) {
+      write_shard_task(so, report, m, shard_tiles);
+      *out = std::move(report);
+      return;
+    }
     stream::kill_point("manifest.json");
     io::write_file_atomic(so.output_dir + "/manifest.json", m.dump(2) + "\n", io::Sync::durable);
     *out = std::move(report);

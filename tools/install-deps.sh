@@ -8,6 +8,8 @@ pkgs=(build-essential cmake libembree-dev libtbb-dev libopenmesh-dev libcli11-de
 # xvfb-run, which needs xauth; meshlab's only Recommends, chemical-mime-data, is not needed) and Chromium for
 # the report.html render check (tools/check_html.py).
 if [ "${1:-}" = "--test" ]; then pkgs+=(googletest libgtest-dev python3 meshlab xvfb xauth chromium); fi
+# --test also: Slurm and MUNGE, for the one-node cluster tests/slurm_test.sh starts (`lodstream slurm`).
+if [ "${1:-}" = "--test" ]; then pkgs+=(slurm-wlm munge); fi
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

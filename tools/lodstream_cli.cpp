@@ -18,6 +18,7 @@
 
 #include "lodstream/lodstream.h"
 #include "server/serve.h"
+#include "tools/slurm_cli.h"
 
 namespace {
 
@@ -346,8 +347,25 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"y", "z"}));
   simplify_cmd->add_option("--tiles-transform", tiles_transform_text,
                            "Tileset root transform: 16 numbers (4x4, column-major) or lon,lat,height (degrees, metres)");
+  std::string shard_text;
+  bool shard_from_env = false;
+  simplify_cmd->add_option("--shard", shard_text, "Run task I of N over a shared --work DIR (then `lodstream merge OUTDIR`)");
+  simplify_cmd->add_flag("--shard-from-env", shard_from_env,
+                         "--shard from SLURM_ARRAY_TASK_ID/COUNT, JOB_COMPLETION_INDEX or AWS_BATCH_JOB_ARRAY_INDEX (count: LODSTREAM_SHARD_COUNT)");
+  simplify_cmd->add_flag("--shard-prepare", so.shard_prepare, "Run the stages every task shares (ingest to cluster) over --work DIR, then stop");
   add_common(simplify_cmd);
   add_space_check(simplify_cmd);
+
+  CLI::App* merge_cmd = app.add_subcommand("merge", "Write a sharded simplify's outputs from its tasks' parts (OUTDIR/shards)");
+  std::string merge_dir;
+  merge_cmd->add_option("OUTDIR", merge_dir, "The output directory the tasks wrote to")->required();
+  merge_cmd->add_flag("--json", json, "Print the manifest's summary as one JSON object");
+  merge_cmd->add_option("--threads", options.threads, "Worker threads (0 = all cores)");
+  merge_cmd->add_option("--progress", progress_text, "Progress on stderr: auto (bar on a terminal), bar, json (NDJSON), none")
+      ->check(CLI::IsMember({"auto", "bar", "json", "none"}));
+
+  CLI::App* slurm_cmd = app.add_subcommand("slurm", "Run simplify as Slurm jobs: lodstream slurm simplify IN -o OUT --shards N [--wait] ...");
+  slurm_cmd->prefix_command();
 
   CLI::App* report_cmd = app.add_subcommand(
       "report", "Measure each level's error in pixels at its switching distance (Embree ray casts, Hausdorff)");
@@ -445,6 +463,12 @@ int main(int argc, char** argv) {
     return static_cast<int>(lodstream::Status::usage);
   }
 
+  if (slurm_cmd->parsed()) {
+    char self[4096];
+    const ssize_t n = ::readlink("/proc/self/exe", self, sizeof self - 1);
+    return lodstream::cli::run_slurm(n > 0 ? std::string(self, static_cast<size_t>(n)) : std::string(argv[0]), slurm_cmd->remaining());
+  }
+
   if (serve_cmd->parsed()) {
     if (!upload_text.empty() && !lodstream::parse_size(upload_text, &serve.max_upload_bytes)) {
       std::fprintf(stderr, "lodstream: --max-upload: cannot read '%s' as a size\n", upload_text.c_str());
@@ -492,14 +516,40 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "lodstream: --tiles-transform: cannot read '%s' as a list of numbers\n", tiles_transform_text.c_str());
       return static_cast<int>(lodstream::Status::usage);
     }
+    if (!shard_text.empty() || shard_from_env) {
+      std::string error;
+      unsigned i = 0, n = 0;
+      char slash = 0, extra = 0;
+      if (shard_from_env ? !lodstream::shard_from_env(&i, &n, &error)
+                         : std::sscanf(shard_text.c_str(), "%u%c%u%c", &i, &slash, &n, &extra) != 3 || slash != '/' || n == 0 || i >= n) {
+        std::fprintf(stderr, "lodstream: %s\n", error.empty() ? ("--shard: '" + shard_text + "' is not I/N with 0 <= I < N").c_str() : error.c_str());
+        return static_cast<int>(lodstream::Status::usage);
+      }
+      so.shard_index = i, so.shard_count = n;
+    }
+    const bool sharded = so.shard_count > 0 || so.shard_prepare;
     lodstream::SimplifyReport report;
     const lodstream::Result r = lodstream::simplify(input, so, options, &report);
-    const int code = finish(r, progress, json ? so.output_dir + "/manifest.json" : std::string(), [&] { print_simplify(report, so.output_dir); });
+    const int code = finish(r, progress, json && !sharded ? so.output_dir + "/manifest.json" : std::string(), [&] {
+      if (!sharded) return print_simplify(report, so.output_dir);
+      for (const auto& s : report.stages)
+        std::printf("stage        %-15s %8.3f s  peak %s%s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str(),
+                    s.reused ? "  (reused from work directory)" : "");
+      if (so.shard_prepare) std::printf("prepared     %s for the tasks\n", options.work_dir.c_str());
+      else std::printf("task         %u of %u: parts in %s/shards (then: lodstream merge %s)\n", so.shard_index, so.shard_count,
+                       so.output_dir.c_str(), so.output_dir.c_str());
+    });
     if (code == 0 && !report.notice.empty()) {
       std::fflush(stdout);  // after the table, when both go to one file
       std::fprintf(stderr, "notice: %s\n", report.notice.c_str());
     }
     return code;
+  }
+
+  if (merge_cmd->parsed()) {
+    lodstream::SimplifyReport report;
+    const lodstream::Result r = lodstream::merge(merge_dir, options, &report);
+    return finish(r, progress, json ? merge_dir + "/manifest.json" : std::string(), [&] { print_simplify(report, merge_dir); });
   }
 
   if (grid_cmd->parsed()) {

@@ -187,6 +187,13 @@ struct SimplifyOptions {
   // `report`'s rule on max_error_views views, is at most E (or the passes run out: the manifest says so).
   double max_error_px = 0;
   unsigned max_error_views = 8;
+  // Past one machine (README "Running on a cluster"): with shard_count N > 0 this call is task shard_index
+  // (0 <= I < N) over a shared work directory (Options::work_dir, required): it runs the shared stages
+  // (ingest to cluster) unless another task did, under the work directory's lock, then emits its share
+  // of every level's regions into output_dir/shards/; merge() then writes the outputs. shard_prepare: run
+  // the shared stages only (any N), then stop. Not with max_error_px.
+  unsigned shard_index = 0, shard_count = 0;
+  bool shard_prepare = false;
 };
 
 inline constexpr unsigned default_levels = 5;
@@ -237,6 +244,18 @@ struct SimplifyReport {
 // simplify.output_dir. Output bytes depend only on the input and `simplify`, never on `options`.
 Result simplify(const std::string& input, const SimplifyOptions& simplify, const Options& options,
                 SimplifyReport* out);
+
+// Writes into `output_dir` what simplify writes there (level files, lods.glb, tiles, manifest.json), from
+// the parts its N tasks (SimplifyOptions::shard_count) left in output_dir/shards/, the same bytes as one
+// machine's run (manifest.json's timings aside: it lists every task's stages under "shards"). Fails with
+// Status::no_input naming the tasks whose parts are missing. `out` gets the manifest's figures.
+Result merge(const std::string& output_dir, const Options& options, SimplifyReport* out);
+
+// The task index and count a scheduler gives: SLURM_ARRAY_TASK_ID and SLURM_ARRAY_TASK_COUNT (Slurm job
+// arrays), JOB_COMPLETION_INDEX (Kubernetes Indexed Jobs) or AWS_BATCH_JOB_ARRAY_INDEX (AWS Batch arrays);
+// LODSTREAM_SHARD_COUNT, when set, gives the count (required with the last two, which carry no count).
+// false with `error` set when none is set or they are unusable.
+bool shard_from_env(unsigned* index, unsigned* count, std::string* error);
 
 // ---- report: the LOD error report (../shared/DESIGN.md "Error report") ----
 

@@ -1,0 +1,209 @@
+// `merge`: the outputs of a sharded simplify (stream/shard.h) from its tasks' parts. The parts of a level
+// are read run by run (each run of regions follows the previous one in region order), so
+// the level files, the GLB and the tiles are given every region's part in the order one machine's emit
+// stage gives them, and are written by the same code: the same bytes. What merge does grows with the
+// output (the levels' parts are read once and written once), not with the input.
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <map>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "core/status.h"
+#include "io/file_writer.h"
+#include "io/glb_writer.h"
+#include "lodstream/lodstream.h"
+#include "stream/job.h"
+#include "stream/kill_point.h"
+#include "stream/level_files.h"
+#include "stream/memory.h"
+#include "stream/progress.h"
+#include "stream/shard.h"
+#include "stream/tiles.h"
+#include "stream/work_dir.h"
+
+namespace lodstream {
+
+namespace {
+
+using nlohmann::ordered_json;
+
+// Every task's summary, checked to be one run's: N tasks of count N with the same key. Fails with
+// Status::no_input naming the missing tasks.
+std::vector<ordered_json> read_tasks(const std::string& output_dir) {
+  const std::string dir = stream::shards_dir(output_dir);
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec))
+    fail(Status::no_input, dir + ": no task parts to merge (run `lodstream simplify ... --shard I/N --work DIR` for every task first)");
+  std::map<unsigned, ordered_json> tasks;
+  for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    unsigned i;
+    char tail[8] = {0};
+    if (std::sscanf(name.c_str(), "task-%u.%5s", &i, tail) != 2 || std::string(tail) != "json") continue;
+    try {
+      tasks[i] = ordered_json::parse(io::read_small_file(e.path().string()));
+    } catch (const std::exception&) {
+      fail(Status::io_error, e.path().string() + ": cannot read a task's summary");
+    }
+  }
+  if (tasks.empty())
+    fail(Status::no_input, dir + ": no task has finished (no task-I.json): run every task (`lodstream simplify ... --shard I/N`) first");
+  // The count of the run: the one most tasks name (a task of an older run with another count is stale).
+  std::map<unsigned, unsigned> votes;
+  for (const auto& [i, t] : tasks) ++votes[t.at("key").at("count").get<unsigned>()];
+  const unsigned count = std::max_element(votes.begin(), votes.end(), [](auto& a, auto& b) { return a.second < b.second; })->first;
+  std::vector<unsigned> missing, stale;
+  const ordered_json* key = nullptr;
+  for (unsigned i = 0; i < count; ++i) {
+    const auto it = tasks.find(i);
+    if (it == tasks.end()) {
+      missing.push_back(i);
+      continue;
+    }
+    const ordered_json& k = it->second.at("key");
+    if (k.at("count") != count || (key && k != *key)) stale.push_back(i);
+    else if (!key) key = &k;
+  }
+  if (!missing.empty() || !stale.empty()) {
+    std::string what;
+    if (!missing.empty())
+      what = fmt::format("task{} {} of {} ha{} not finished (no {}/task-I.json)", missing.size() == 1 ? "" : "s", fmt::join(missing, ", "),
+                         count, missing.size() == 1 ? "s" : "ve", dir);
+    if (!stale.empty())
+      what += fmt::format("{}task{} {} of {} belong{} to another run (other input, options or task count)", what.empty() ? "" : "; ",
+                          stale.size() == 1 ? "" : "s", fmt::join(stale, ", "), count, stale.size() == 1 ? "s" : "");
+    fail(Status::no_input, "merge: " + what + ": rerun " + (missing.size() + stale.size() == 1 ? "it" : "them") +
+                               " (`lodstream simplify ... --shard I/" + std::to_string(count) + "` on the same work directory)");
+  }
+  std::vector<ordered_json> out;
+  for (unsigned i = 0; i < count; ++i) out.push_back(std::move(tasks[i]));
+  return out;
+}
+
+}  // namespace
+
+Result merge(const std::string& output_dir, const Options& options, SimplifyReport* out) {
+  return stream::guarded([&] {
+    const auto t0 = std::chrono::steady_clock::now();
+    stream::Progress progress(options);
+    const std::vector<ordered_json> tasks = read_tasks(output_dir);
+    const ordered_json& key = tasks[0].at("key");
+    const ordered_json& mi = key.at("merge");
+    ordered_json m = tasks[0].at("manifest");
+    const size_t levels = m.at("levels").size();
+    const unsigned count = static_cast<unsigned>(tasks.size());
+    SimplifyReport report;
+    stream::remove_summary(output_dir + "/manifest.json");
+
+    const std::string generator = m.at("generator");
+    std::unique_ptr<io::GlbBuilder> glb;
+    if (mi.at("write_glb").get<bool>())
+      glb = std::make_unique<io::GlbBuilder>(output_dir + "/lods.glb", output_dir + "/lods.glb.bin.partial", generator);
+    std::unique_ptr<stream::TilesetBuilder> tiles;
+    if (!key.at("tiles").is_null()) {
+      stream::TilesOptions to = stream::tiles_options_from_json(key.at("tiles"));
+      to.dir = output_dir + "/tiles";
+      tiles = std::make_unique<stream::TilesetBuilder>(std::move(to));
+    }
+    // Scratch of the level files: beside the parts (they are output-sized, as the parts are).
+    stream::WorkDir work(stream::shards_dir(output_dir) + "/merge");
+    const bool ply = mi.at("write_ply"), obj = mi.at("write_obj");
+    const unsigned resolution = mi.at("resolution");
+
+    stream::run_stage(&report.stages, "merge", [&](StageStats&) {
+      for (size_t l = 0; l < levels; ++l) {
+        ordered_json& lj = m["levels"][l];
+        stream::LevelFiles level(work.scratch("level" + std::to_string(l)), lj.at("cells").get<uint64_t>());
+        uint64_t triangles = 0, edges = 0, points = 0, on_triangles = 0, covered = 0;
+        for (unsigned run = 0; run < count; ++run) {
+          const unsigned t = stream::shard_task_of_run(run, count, l);
+          const ordered_json& tl = tasks[t].at("manifest").at("levels").at(l);
+          triangles += tl.at("triangles").get<uint64_t>(), edges += tl.at("edges").get<uint64_t>();
+          points += tl.at("points").get<uint64_t>();
+          on_triangles += tl.at("eliminated").at("edges_on_triangles").get<uint64_t>();
+          covered += tl.at("eliminated").at("points_covered").get<uint64_t>();
+          stream::PartsReader parts(stream::shard_parts_path(output_dir, t, l));
+          stream::StoredPart p;
+          while (parts.next(&p)) {
+            if (tiles)
+              tiles->add(l, {p.info.key.depth, p.info.key.x, p.info.key.y, p.info.key.z, p.info.cell_size, p.info.cells},
+                         p.part.mesh);
+            level.add(p.part);
+          }
+          progress.report("merge", (l * count + run + 1.0) / static_cast<double>(levels * count));
+        }
+        level.close();
+        const std::vector<std::string> comments = mi.at("comments").at(l);
+        const std::string stem = fmt::format("lod{}", l);
+        if (ply) level.write_ply(output_dir + "/" + stem + ".ply", comments);
+        if (obj) level.write_obj(output_dir + "/" + stem + ".obj", comments);
+        if (glb) {
+          const double lower = l + 1 < levels ? m["levels"][l + 1].at("screen_coverage").get<double>() : 1.0 / resolution;
+          glb->add(level.glb(stem, lower));
+        }
+        ordered_json files = ordered_json::array();
+        if (ply) files.push_back(stem + ".ply");
+        if (obj) files.push_back(stem + ".obj");
+        lj["vertices"] = level.vertices();
+        lj["triangles"] = triangles, lj["edges"] = edges, lj["points"] = points;
+        lj["eliminated"] = {{"edges_on_triangles", on_triangles}, {"points_covered", covered}};
+        lj["files"] = files;
+      }
+    });
+    stream::run_stage(&report.stages, "write", [&](StageStats&) {
+      if (glb) glb->finish();
+      glb.reset();
+    });
+    if (tiles)
+      stream::run_stage(&report.stages, "tiles", [&](StageStats&) {
+        const stream::TilesSummary t = tiles->finish();
+        tiles.reset();
+        report.tiles = {t.tiles, t.content_tiles, t.bytes, t.triangles, t.max_triangles};
+        m["tiles"]["tiles"] = t.tiles, m["tiles"]["content_tiles"] = t.content_tiles, m["tiles"]["bytes"] = t.bytes;
+        m["tiles"]["triangles"] = t.triangles, m["tiles"]["max_triangles"] = t.max_triangles;
+      });
+
+    // The manifest: one machine's, with the merge's stages, and every task's under "shards".
+    report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    report.peak_rss_bytes = stream::peak_rss_bytes();
+    ordered_json stages = ordered_json::array();
+    for (const StageStats& s : report.stages)
+      stages.push_back({{"name", s.name}, {"seconds", s.seconds}, {"peak_rss_bytes", s.peak_rss_bytes}, {"reused", s.reused}});
+    ordered_json shards = ordered_json::array();
+    for (unsigned t = 0; t < count; ++t) {
+      const ordered_json& tm = tasks[t].at("manifest");
+      shards.push_back({{"index", t}, {"stages", tm.at("stages")}, {"seconds", tm.at("seconds")}, {"peak_rss_bytes", tm.at("peak_rss_bytes")}});
+    }
+    m["stages"] = stages;
+    m["seconds"] = report.seconds;
+    m["peak_rss_bytes"] = report.peak_rss_bytes;
+    m["shards"] = {{"count", count}, {"tasks", shards}};
+    stream::kill_point("manifest.json");
+    io::write_file_atomic(output_dir + "/manifest.json", m.dump(2) + "\n", io::Sync::durable);
+
+    const ordered_json& in = m.at("input");
+    report.input = in.at("path");
+    report.scene.format = in.at("format");
+    report.scene.triangles = in.at("triangles"), report.scene.lines = in.at("lines"), report.scene.points = in.at("points");
+    report.vertices_graded = in.at("vertices_graded");
+    for (const ordered_json& lj : m.at("levels")) {
+      LevelStats ls;
+      ls.cell_size = lj.at("cell_size"), ls.cells = lj.at("cells"), ls.vertices = lj.at("vertices");
+      ls.triangles = lj.at("triangles"), ls.edges = lj.at("edges"), ls.points = lj.at("points");
+      ls.switch_distance = lj.at("switch_distance"), ls.screen_coverage = lj.at("screen_coverage");
+      ls.files = lj.at("files").get<std::vector<std::string>>();
+      report.levels.push_back(std::move(ls));
+    }
+    report.levels_asked = m.at("levels_asked");
+    if (m.contains("notice")) report.notice = m.at("notice");
+    // The parts have served: the manifest now vouches for the outputs.
+    std::error_code ec;
+    std::filesystem::remove_all(stream::shards_dir(output_dir), ec);
+    *out = std::move(report);
+  });
+}
+
+}  // namespace lodstream

@@ -1,0 +1,406 @@
+// A task's share of simplify's emit stage, and the parts files it hands to the merge (see stream/shard.h).
+#include "stream/shard.h"
+
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+
+#include <fmt/format.h>
+
+#include "core/status.h"
+#include "io/file_writer.h"
+#include "stream/kill_point.h"
+
+namespace lodstream::stream {
+
+namespace {
+
+constexpr char kPartsMagic[8] = {'L', 'O', 'D', 'P', 'A', 'R', 'T', '1'};
+
+template <class T>
+void put(io::FileWriter& out, const T& v) {
+  out.write(&v, sizeof(T));
+}
+template <class T>
+void put_array(io::FileWriter& out, const std::vector<T>& v) {
+  const uint64_t n = v.size();
+  put(out, n);
+  if (n) out.write(v.data(), n * sizeof(T));
+}
+
+}  // namespace
+
+ShardLock::ShardLock(const std::string& work_dir) {
+  std::error_code ec;
+  std::filesystem::create_directories(work_dir, ec);
+  const std::string path = work_dir + "/shard.lock";
+  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd_ < 0) fail(Status::io_error, path + ": cannot open the work directory's lock: " + std::strerror(errno));
+  int r;
+  while ((r = ::flock(fd_, LOCK_EX)) != 0 && errno == EINTR) {
+  }
+  if (r != 0) {
+    const int e = errno;
+    ::close(fd_);
+    fd_ = -1;
+    fail(Status::io_error, path + ": cannot lock the work directory: " + std::strerror(e));
+  }
+}
+
+void ShardLock::release() {
+  if (fd_ < 0) return;
+  ::flock(fd_, LOCK_UN);
+  ::close(fd_);
+  fd_ = -1;
+}
+
+std::pair<uint32_t, uint32_t> shard_regions(const LevelCut& cut, unsigned index, unsigned count) {
+  uint64_t total = 0;
+  for (uint64_t c : cut.cells) total += c;
+  // A region belongs to the task whose share holds the cells before it: task t owns [t, t + 1) · total / count
+  // (cells < 2^40 and count <= 100000: the product fits in 64 bits).
+  auto owner = [&](uint64_t before) {
+    return total == 0 ? 0u : static_cast<unsigned>(before * count / total);
+  };
+  const uint32_t n = static_cast<uint32_t>(cut.regions.size());
+  uint32_t first = n, end = n;
+  uint64_t before = 0;
+  for (uint32_t r = 0; r < n; ++r) {
+    const unsigned t = std::min(owner(before), count - 1);
+    if (t >= index && first == n) first = r;
+    if (t > index) {
+      end = r;
+      break;
+    }
+    before += cut.cells[r];
+  }
+  if (first > end) first = end;
+  return {first, end};
+}
+
+unsigned shard_run(unsigned task, unsigned count, size_t level) {
+  return static_cast<unsigned>((task + count - level % count) % count);
+}
+unsigned shard_task_of_run(unsigned run, unsigned count, size_t level) {
+  return static_cast<unsigned>((run + level) % count);
+}
+
+std::string shards_dir(const std::string& output_dir) { return output_dir + "/shards"; }
+std::string shard_parts_path(const std::string& output_dir, unsigned index, size_t level) {
+  return fmt::format("{}/task-{}-lod{}.parts", shards_dir(output_dir), index, level);
+}
+std::string shard_task_path(const std::string& output_dir, unsigned index) {
+  return fmt::format("{}/task-{}.json", shards_dir(output_dir), index);
+}
+
+PartsWriter::PartsWriter(const std::string& path) : out_(path) { out_.write(kPartsMagic, sizeof kPartsMagic); }
+
+void PartsWriter::add(const RegionInfo& info, const RegionPart& part) {
+  put(out_, uint64_t{info.level});
+  put(out_, info.key.depth);
+  put(out_, info.key.x), put(out_, info.key.y), put(out_, info.key.z);
+  put(out_, info.cell_size);
+  put(out_, info.cells);
+  for (int k = 0; k < 3; ++k) put(out_, info.box_min[k]);
+  for (int k = 0; k < 3; ++k) put(out_, info.box_max[k]);
+  put(out_, part.region);
+  const core::LodMesh& m = part.mesh;
+  put_array(out_, m.positions), put_array(out_, m.normals), put_array(out_, m.triangles);
+  put_array(out_, m.edges), put_array(out_, m.thickness), put_array(out_, m.points);
+  put_array(out_, part.vertex_key), put_array(out_, part.owned_key);
+  put_array(out_, part.owned_positions), put_array(out_, part.owned_normals);
+  ++parts_;
+}
+
+void PartsWriter::commit() { out_.commit(); }
+
+PartsReader::PartsReader(const std::string& path) : path_(path) {
+  f_ = std::fopen(path.c_str(), "rb");
+  if (!f_) fail(Status::io_error, path + ": cannot open a task's parts: " + std::strerror(errno));
+  char magic[sizeof kPartsMagic];
+  read(magic, sizeof magic);
+  if (std::memcmp(magic, kPartsMagic, sizeof magic) != 0) fail(Status::io_error, path + ": not a parts file of this version");
+}
+
+PartsReader::~PartsReader() {
+  if (f_) std::fclose(f_);
+}
+
+void PartsReader::read(void* data, size_t bytes) {
+  if (bytes && std::fread(data, 1, bytes, f_) != bytes) fail(Status::io_error, path_ + ": a task's parts file is cut short");
+}
+
+bool PartsReader::next(StoredPart* out) {
+  uint64_t level;
+  if (std::fread(&level, 1, sizeof level, f_) != sizeof level) {
+    if (std::feof(f_)) return false;
+    fail(Status::io_error, path_ + ": cannot read a task's parts");
+  }
+  RegionInfo& info = out->info;
+  info.level = level;
+  read(&info.key.depth, 1);
+  read(&info.key.x, 4), read(&info.key.y, 4), read(&info.key.z, 4);
+  read(&info.cell_size, 8);
+  read(&info.cells, 8);
+  read(info.box_min, 24), read(info.box_max, 24);
+  RegionPart& part = out->part;
+  read(&part.region, 4);
+  auto array = [&](auto& v) {
+    uint64_t n;
+    read(&n, 8);
+    if (n > (uint64_t{1} << 40)) fail(Status::io_error, path_ + ": a task's parts file is damaged");
+    v.resize(n);
+    read(v.data(), n * sizeof(v[0]));
+  };
+  core::LodMesh& m = part.mesh;
+  array(m.positions), array(m.normals), array(m.triangles), array(m.edges), array(m.thickness), array(m.points);
+  array(part.vertex_key), array(part.owned_key), array(part.owned_positions), array(part.owned_normals);
+  return true;
+}
+
+bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress,
+                                 EmitScratch& scratch) {
+  const std::string stamp = in.prefix + "shard-reps.json";
+  std::error_code ec;
+  bool reused = std::filesystem::exists(stamp, ec);
+  if (reused) {
+    try {
+      reused = nlohmann::ordered_json::parse(io::read_small_file(stamp)) == key;
+    } catch (const std::exception&) {
+      reused = false;
+    }
+  }
+  for (size_t l = 0; reused && l < in.cells.size(); ++l) reused = std::filesystem::exists(representatives_path(in.prefix, l), ec);
+  if (reused) return true;
+  std::filesystem::remove(stamp, ec);
+  const StoreMeta& meta = *in.meta;
+  const size_t n = in.cells.size();
+  // Quadric representatives: the levels whose quadrics fit together are summed in one pass over the input
+  // (emit_levels with representatives_only, a group's levels each as when alone); a level that does not
+  // fit alone in ranges of cells, as write_representatives does. Either way the same bytes.
+  const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), in.options);
+  constexpr uint64_t kQuadricBytes = sizeof(core::Quadric) + 8;
+  for (size_t first = 0; first < n;) {
+    unsigned bits = emit_bits(in.cells[first]);
+    uint64_t bytes = in_flight + kQuadricBytes * in.cells[first];
+    size_t end = first + 1;
+    if (in.options.representative == Representative::quadric && emit_map_bytes(meta.vertices, bits) + bytes <= in.budget)
+      for (; end < n; ++end) {
+        const unsigned b = bits + emit_bits(in.cells[end]);
+        const uint64_t w = bytes + in_flight + kQuadricBytes * in.cells[end];
+        if (b > 64 || emit_map_bytes(meta.vertices, b) + w > in.budget) break;
+        bits = b, bytes = w;
+      }
+    if (end - first > 1) {
+      std::vector<EmitLevel> group;
+      for (size_t l = first; l < end; ++l) {
+        std::filesystem::remove(representatives_path(in.prefix, l), ec);
+        EmitLevel g;
+        g.level = l, g.cells = in.cells[l], g.cell_size = in.sizes[l], g.first_cell = 0, g.end_cell = in.cells[l];
+        group.push_back(g);
+      }
+      EmitOptions options = in.options;
+      options.representatives_only = true;
+      emit_levels(in.store_dir, meta, in.canonical, in.prefix, group, in.records, in.cluster, options, progress, scratch,
+                  [](size_t, RegionPart&) {});
+    } else {
+      // As plan_emit_level sizes a batched level's ranges: what its map and tables leave of the budget.
+      const uint64_t held = emit_map_bytes(meta.vertices, emit_bits(in.cells[first])) + kLevelBytesPerCell * in.cells[first] + in_flight;
+      const uint64_t range = in.budget > held ? (in.budget - held) / kQuadricBytes : 1;
+      write_representatives(in.store_dir, meta, in.canonical, in.prefix, first, in.cells[first], in.sizes[first], in.records,
+                            in.cluster, in.options.representative, range, progress, scratch);
+    }
+    first = end;
+  }
+  io::write_file_atomic(stamp, key.dump(1) + "\n");
+  return false;
+}
+
+std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, unsigned count, const std::string& output_dir,
+                                   Progress& progress, EmitScratch& scratch) {
+  const StoreMeta& meta = *in.meta;
+  const size_t n = in.sizes.size();
+  // This task's older summary no longer vouches for its parts; tasks of a run with more tasks are stale.
+  std::error_code ec;
+  std::filesystem::create_directories(shards_dir(output_dir), ec);
+  if (ec) fail(Status::io_error, shards_dir(output_dir) + ": cannot create: " + ec.message());
+  std::filesystem::remove(shard_task_path(output_dir, index), ec);
+  for (const auto& e : std::filesystem::directory_iterator(shards_dir(output_dir), ec)) {
+    unsigned i;
+    if (std::sscanf(e.path().filename().c_str(), "task-%u", &i) == 1 && i >= count) std::filesystem::remove(e.path(), ec);
+  }
+  const core::SceneCube cube = scene_cube_of(meta);
+  const std::vector<LevelCut> cuts =
+      cut_levels(in.prefix, in.cells, cube, in.tile_triangles / 2, in.options.representative, meta.single_precision);
+  std::vector<std::pair<uint32_t, uint32_t>> runs(n);
+  std::vector<uint64_t> share(n, 0), largest(n, 0);
+  for (size_t l = 0; l < n; ++l) {
+    runs[l] = shard_regions(cuts[l], shard_run(index, count, l), count);
+    for (uint32_t r = runs[l].first; r < runs[l].second; ++r)
+      share[l] += cuts[l].cells[r], largest[l] = std::max(largest[l], cuts[l].cells[r]);
+  }
+  // Memory of a batched level (as plan_emit_level counts it): pass A's tables for the batch's cells and its
+  // halo (half as many again), without quadrics (representatives are read), its per-cell tables and its
+  // share of the blocks in flight.
+  EmitOptions no_quadric = in.options;
+  no_quadric.representative = Representative::center;
+  const uint64_t per_cell = emit_level_bytes(1, 0, no_quadric) * 3 / 2;
+  const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), no_quadric);
+  auto level_bytes = [&](size_t l, uint64_t batch) { return kLevelBytesPerCell * in.cells[l] + in_flight + per_cell * batch; };
+
+  std::vector<EmitCounts> counts(n);
+  std::vector<std::unique_ptr<PartsWriter>> writers(n);
+  for (size_t l = 0; l < n; ++l) writers[l] = std::make_unique<PartsWriter>(shard_parts_path(output_dir, index, l));
+  auto info = [&](size_t l, uint32_t r) {
+    RegionInfo i;
+    i.level = l, i.key = cuts[l].regions[r], i.cell_size = in.sizes[l], i.cells = cuts[l].cells[r];
+    core::region_box(cube, i.key, i.box_min, i.box_max);
+    return i;
+  };
+  auto add = [&](size_t l, const EmitCounts& c) {
+    counts[l].triangles += c.triangles, counts[l].edges += c.edges, counts[l].points += c.points;
+    counts[l].edges_on_triangles += c.edges_on_triangles, counts[l].points_covered += c.points_covered;
+  };
+  // Levels whose share fits one batch share a pass over the input (as one machine's groups do); a level
+  // whose share does not is emitted alone, in batches of consecutive regions. Neither changes a byte.
+  for (size_t first = 0; first < n;) {
+    if (runs[first].first == runs[first].second) {
+      ++first;
+      continue;
+    }
+    const uint64_t alone = emit_map_bytes(meta.vertices, emit_bits(in.cells[first])) + level_bytes(first, largest[first]);
+    if (alone > in.budget)
+      fail(Status::usage, fmt::format("task {} of {}: emitting level {} ({} cells) region by region needs about {} MiB, "
+                                      "more than --memory allows ({} MiB for the stage): raise --memory",
+                                      index, count, first, in.cells[first], alone >> 20, in.budget >> 20));
+    std::vector<size_t> group{first};
+    unsigned bits = emit_bits(in.cells[first]);
+    uint64_t bytes = level_bytes(first, share[first]);
+    size_t end = first + 1;
+    if (emit_map_bytes(meta.vertices, bits) + bytes <= in.budget) {
+      for (; end < n; ++end) {
+        if (runs[end].first == runs[end].second) continue;
+        const unsigned b = bits + emit_bits(in.cells[end]);
+        const uint64_t w = bytes + level_bytes(end, share[end]);
+        if (b > 64 || emit_map_bytes(meta.vertices, b) + w > in.budget) break;
+        group.push_back(end), bits = b, bytes = w;
+      }
+    }
+    std::vector<std::vector<uint32_t>> region_of;
+    for (size_t l : group)
+      region_of.push_back(load_region_of(in.prefix, l, in.cells[l], cube, cuts[l], in.options.representative, meta.single_precision));
+    std::vector<std::pair<uint32_t, uint32_t>> batches;
+    if (group.size() == 1 && emit_map_bytes(meta.vertices, bits) + bytes > in.budget) {
+      // The share alone is too large for one batch: consecutive regions while they fit.
+      const uint64_t room = in.budget - emit_map_bytes(meta.vertices, bits) - level_bytes(first, 0);
+      const uint64_t batch_cells = std::max<uint64_t>(1, room / per_cell);
+      for (uint32_t r = runs[first].first; r < runs[first].second;) {
+        uint64_t held = cuts[first].cells[r];
+        uint32_t e = r + 1;
+        while (e < runs[first].second && held + cuts[first].cells[e] <= batch_cells) held += cuts[first].cells[e++];
+        batches.emplace_back(r, e);
+        r = e;
+      }
+    }
+    if (batches.empty()) {
+      std::vector<EmitLevel> levels;
+      for (size_t i = 0; i < group.size(); ++i) {
+        const size_t l = group[i];
+        levels.push_back({l, in.cells[l], in.sizes[l], &cuts[l], region_of[i].data(), runs[l].first, runs[l].second, true});
+      }
+      const std::vector<EmitCounts> c = emit_levels(in.store_dir, meta, in.canonical, in.prefix, levels, in.records, in.cluster,
+                                                    in.options, progress, scratch, [&](size_t i, RegionPart& part) {
+                                                      const size_t l = group[i];
+                                                      writers[l]->add(info(l, part.region), part);
+                                                    });
+      for (size_t i = 0; i < group.size(); ++i) add(group[i], c[i]);
+    } else {
+      for (const auto& [r0, r1] : batches) {
+        const EmitLevel level{first, in.cells[first], in.sizes[first], &cuts[first], region_of[0].data(), r0, r1, true};
+        const std::vector<EmitCounts> c = emit_levels(in.store_dir, meta, in.canonical, in.prefix, std::span<const EmitLevel>(&level, 1),
+                                                      in.records, in.cluster, in.options, progress, scratch,
+                                                      [&](size_t, RegionPart& part) { writers[first]->add(info(first, part.region), part); });
+        add(first, c[0]);
+      }
+    }
+    first = group.back() + 1;
+  }
+  for (auto& w : writers) w->commit();
+  return counts;
+}
+
+nlohmann::ordered_json tiles_options_json(const TilesOptions& o) {
+  return {{"levels", o.levels},
+          {"thick", o.thick},
+          {"pixels_per_cell", o.pixels_per_cell},
+          {"scene_magnitude", o.scene_magnitude},
+          {"cube_min", {o.cube_min[0], o.cube_min[1], o.cube_min[2]}},
+          {"cube_side", o.cube_side},
+          {"transform", o.transform},
+          {"generator", o.generator}};
+}
+
+TilesOptions tiles_options_from_json(const nlohmann::ordered_json& j) {
+  TilesOptions o;
+  o.levels = j.at("levels");
+  o.thick = j.at("thick");
+  o.pixels_per_cell = j.at("pixels_per_cell");
+  o.scene_magnitude = j.at("scene_magnitude");
+  for (int k = 0; k < 3; ++k) o.cube_min[k] = j.at("cube_min").at(k);
+  o.cube_side = j.at("cube_side");
+  o.transform = j.at("transform").get<std::vector<double>>();
+  o.generator = j.at("generator");
+  return o;
+}
+
+void write_shard_task(const std::string& output_dir, unsigned index, const nlohmann::ordered_json& key,
+                      const nlohmann::ordered_json& manifest) {
+  const nlohmann::ordered_json task{{"index", index}, {"key", key}, {"manifest", manifest}};
+  kill_point(fmt::format("task-{}.json", index));
+  io::write_file_atomic(shard_task_path(output_dir, index), task.dump(1) + "\n", io::Sync::durable);
+}
+
+}  // namespace lodstream::stream
+
+namespace lodstream {
+
+bool shard_from_env(unsigned* index, unsigned* count, std::string* error) {
+  auto number = [](const char* name, unsigned* out) {
+    const char* v = std::getenv(name);
+    if (!v || !*v) return false;
+    char* end = nullptr;
+    errno = 0;
+    const unsigned long n = std::strtoul(v, &end, 10);
+    if (*end || errno || n > 1u << 30) return false;
+    *out = static_cast<unsigned>(n);
+    return true;
+  };
+  const bool given_count = number("LODSTREAM_SHARD_COUNT", count);
+  if (number("SLURM_ARRAY_TASK_ID", index)) {
+    if (!given_count && !number("SLURM_ARRAY_TASK_COUNT", count)) {
+      *error = "--shard-from-env: SLURM_ARRAY_TASK_ID is set but neither SLURM_ARRAY_TASK_COUNT nor LODSTREAM_SHARD_COUNT";
+      return false;
+    }
+  } else if (number("JOB_COMPLETION_INDEX", index) || number("AWS_BATCH_JOB_ARRAY_INDEX", index)) {
+    if (!given_count) {
+      *error = "--shard-from-env: JOB_COMPLETION_INDEX or AWS_BATCH_JOB_ARRAY_INDEX is set: give the task count in LODSTREAM_SHARD_COUNT";
+      return false;
+    }
+  } else {
+    *error = "--shard-from-env: none of SLURM_ARRAY_TASK_ID, JOB_COMPLETION_INDEX, AWS_BATCH_JOB_ARRAY_INDEX is set (a number)";
+    return false;
+  }
+  if (*count == 0 || *index >= *count) {
+    *error = fmt::format("--shard-from-env: task index {} is not below the count {}", *index, *count);
+    return false;
+  }
+  return true;
+}
+
+}  // namespace lodstream

@@ -1,0 +1,143 @@
+// Past one machine (../shared/DESIGN.md): `simplify --shard I/N` runs task I's share of the emit stage
+// over a shared work directory, and `merge` (stream/merge.cpp) welds the tasks' parts into the output
+// directory, the same bytes as one machine's. The contract any engine can drive (Slurm job arrays,
+// Kubernetes Indexed Jobs, AWS Batch arrays): a task is given only I and N.
+//
+// - Shared stages (ingest, grade, labels, cluster, and every level's representatives written ahead,
+//   stream/emit_regions.h): whichever task comes first runs them, holding an exclusive lock on
+//   WORK/shard.lock (flock; taken before the work directory is opened, so that no task takes another's
+//   live scratch files for a dead process's); the others wait, then find their stamps and reuse them.
+//   `--shard-prepare` runs them alone (a scheduler's first job). They do not scale with N: they are what
+//   one machine runs before its emit stage, plus the representatives (which one machine's emit sums in
+//   its own passes unless a level is batched).
+// - A task's share: in every level, one contiguous run of regions (region order: octree Morton order, so
+//   whole subtrees but at its two ends) holding an N-th of the level's cells (shard_regions; which run,
+//   shard_run). It emits them as the batched emit does (each batch with its halo, representatives
+//   read from the work directory), which gives every part the bytes it has in one machine's run
+//   (stream/emit_stage.h), and writes the parts, in region order, to OUTDIR/shards/task-I-lodL.parts;
+//   then OUTDIR/shards/task-I.json (last: its presence means the task is complete) with the manifest as
+//   the task saw it (its own counts), its stages, and the key of what it was made from.
+// - A task run again (resubmitted, or killed and rerun) removes its task-I.json and redoes its emit from
+//   the start, reusing the shared stages; its parts files are written under .partial names and renamed.
+//   Every task reads the whole input in each of its passes: its cost falls with its share of the output,
+//   not of the input (README "simplify as N tasks").
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <memory>
+#include <span>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/mesh.h"
+#include "io/file_writer.h"
+#include "lodstream/lodstream.h"
+#include "stream/emit_regions.h"
+#include "stream/emit_stage.h"
+#include "stream/progress.h"
+#include "stream/scene_store.h"
+#include "stream/tiles.h"
+
+namespace lodstream::stream {
+
+// The exclusive lock on WORK/shard.lock, held while a task runs the shared stages; released by release()
+// or the destructor. A default-constructed lock holds nothing.
+class ShardLock {
+ public:
+  ShardLock() = default;
+  explicit ShardLock(const std::string& work_dir);
+  ShardLock(const ShardLock&) = delete;
+  ShardLock& operator=(const ShardLock&) = delete;
+  ~ShardLock() { release(); }
+  void release();
+
+ private:
+  int fd_ = -1;
+};
+
+// The regions [first, end) of task `index` of `count` in a level's cut: the regions whose cells before
+// them (in region order) are in [index, index + 1) · total / count. Tasks' runs are disjoint and cover
+// the cut; a run may be empty.
+std::pair<uint32_t, uint32_t> shard_regions(const LevelCut& cut, unsigned index, unsigned count);
+
+// Which run of a level a task emits: run k of level l is task (k + l) mod N's, so that the coarse levels'
+// few regions (each about as costly as the input: every input primitive maps to them) go to different
+// tasks rather than all to task 0. The merge reads a level's runs in run order, so region order.
+unsigned shard_run(unsigned task, unsigned count, size_t level);
+unsigned shard_task_of_run(unsigned run, unsigned count, size_t level);
+
+std::string shards_dir(const std::string& output_dir);
+std::string shard_parts_path(const std::string& output_dir, unsigned index, size_t level);
+std::string shard_task_path(const std::string& output_dir, unsigned index);
+
+// A region's part as the task writes it and the merge reads it back: what the region sink and the level
+// files (stream/level_files.h) are given.
+struct StoredPart {
+  RegionInfo info;
+  RegionPart part;
+};
+// Appends parts to a parts file (written under a .partial name, renamed by commit()).
+class PartsWriter {
+ public:
+  explicit PartsWriter(const std::string& path);
+  void add(const RegionInfo& info, const RegionPart& part);
+  void commit();
+  uint64_t parts() const { return parts_; }
+
+ private:
+  io::FileWriter out_;
+  uint64_t parts_ = 0;
+};
+// Reads a parts file part by part; next() returns false after the last. Failure(io_error) naming the file
+// when it is missing or damaged.
+class PartsReader {
+ public:
+  explicit PartsReader(const std::string& path);
+  ~PartsReader();
+  PartsReader(const PartsReader&) = delete;
+  PartsReader& operator=(const PartsReader&) = delete;
+  bool next(StoredPart* out);
+
+ private:
+  void read(void* data, size_t bytes);
+  std::string path_;
+  std::FILE* f_ = nullptr;
+};
+
+// What a task's emit needs from simplify (the shared stages' results).
+struct ShardEmitInput {
+  std::string store_dir, canonical, prefix;
+  const StoreMeta* meta = nullptr;
+  uint64_t records = 0;
+  core::ClusterOptions cluster;
+  EmitOptions options;
+  uint64_t budget = 0;  // the stage's memory budget
+  uint64_t tile_triangles = 0;
+  std::vector<double> sizes;
+  std::vector<uint64_t> cells;
+};
+
+// Writes every level's representatives to the work directory (the batched emit reads them), unless a
+// stamp there (shard-reps.json) says they were written for `key`. Quadrics of the levels that fit
+// together are summed in one pass over the input. Returns true when reused.
+bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress,
+                                 EmitScratch& scratch);
+
+// Emits task `index` of `count`'s regions of every level and writes their parts (see above). Returns the
+// task's counts per level.
+std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, unsigned count, const std::string& output_dir,
+                                   Progress& progress, EmitScratch& scratch);
+
+// TilesOptions (stream/tiles.h) as the task hands them to the merge, and back.
+nlohmann::ordered_json tiles_options_json(const TilesOptions& o);
+TilesOptions tiles_options_from_json(const nlohmann::ordered_json& j);
+
+// Writes OUTDIR/shards/task-I.json: {"index", "key", "manifest"} (durably, last).
+void write_shard_task(const std::string& output_dir, unsigned index, const nlohmann::ordered_json& key,
+                      const nlohmann::ordered_json& manifest);
+
+}  // namespace lodstream::stream

@@ -1,0 +1,116 @@
+#!/bin/bash
+# `lodstream slurm` on a one-node Slurm cluster started here (tools/slurm_local_cluster.sh: munged,
+# slurmctld and slurmd as root, in a temporary directory): the sample room and, with ../shared/data, a
+# 2 M-triangle city from make-scene.sh, simplified as 1, 3 and 4 tasks (prepare job, array job, merge job)
+# must give every output file byte for byte as one machine's run (manifest.json: equal but for timings,
+# peaks and the tasks' list); the tileset passes the 3D Tiles validator when it is installed; a task killed
+# with SIGKILL (LODSTREAM_TEST_KILL_AT, just before its summary) fails the run with 137, `lodstream merge`
+# then refuses naming it (exit 66), and `lodstream slurm resubmit` reruns it alone to the same bytes.
+# Prints "skipped:" and exits 77 when a cluster cannot start here (not root, Slurm or MUNGE missing).
+# Usage: slurm_test.sh LODSTREAM_CLI SOURCE_DIR
+set -uo pipefail
+cli=$1; src=$2
+tmp=$(mktemp -d)
+cluster=$tmp/cluster
+cleanup() { "$src/tools/slurm_local_cluster.sh" stop "$cluster"; rm -rf "$tmp"; }
+trap cleanup EXIT
+if ! conf=$("$src/tools/slurm_local_cluster.sh" start "$cluster" 2>"$tmp/cluster.err"); then
+  echo "skipped: $(cat "$tmp/cluster.err")"
+  exit 77
+fi
+export "$conf"
+echo "cluster up ($conf)"
+status=0
+fail() { echo "FAIL: $*"; status=1; }
+
+# Every file of one machine's output directory $1 is in $2 with the same bytes, and $2 holds no other
+# (but its slurm/ directory); manifest.json equal without timings, peaks, reuse and the tasks' list.
+same_outputs() {
+  local one=$1 out=$2 f n=0
+  diff <(cd "$one" && find . -type f ! -path './slurm/*' | sort) <(cd "$out" && find . -type f ! -path './slurm/*' | sort) \
+    || { fail "$out: not the same files as $one"; return; }
+  while read -r f; do
+    [ "$f" = ./manifest.json ] && continue
+    cmp -s "$one/$f" "$out/$f" || fail "$out/$f differs from one machine's"
+    n=$((n + 1))
+  done < <(cd "$one" && find . -type f | sort)
+  python3 - "$one/manifest.json" "$out/manifest.json" <<'EOF' || fail "$out/manifest.json differs from one machine's"
+import json, sys
+def strip(m):
+    for k in ("stages", "seconds", "peak_rss_bytes", "work_dir", "shards"):
+        m.pop(k, None)
+    return m
+a, b = (strip(json.load(open(p))) for p in sys.argv[1:])
+if a != b:
+    for k in a:
+        if a.get(k) != b.get(k): print("manifest differs in", k, file=sys.stderr)
+    sys.exit(1)
+EOF
+  echo "  $out: $n files byte-identical to one machine's, manifest equal"
+}
+
+run_scene() {
+  local name=$1 scene=$2; shift 2
+  local work=$tmp/$name-work one=$tmp/$name-one t0 t1 rc
+  t0=$(date +%s.%N)
+  "$cli" simplify "$scene" -o "$one" --work "$work" --no-space-check "$@" >/dev/null || { fail "$name: one machine's simplify"; return; }
+  t1=$(date +%s.%N)
+  echo "$name: one machine $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
+  for n in 1 3 4; do
+    local out=$tmp/$name-$n
+    t0=$(date +%s.%N)
+    "$cli" slurm simplify "$scene" -o "$out" --work "$work" --shards "$n" --wait --no-space-check "$@" >"$tmp/$name-$n.log" 2>&1
+    rc=$?
+    t1=$(date +%s.%N)
+    echo "$name: $n task(s) through Slurm: exit $rc, $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
+    [ $rc -eq 0 ] || { fail "$name --shards $n: exit $rc"; cat "$tmp/$name-$n.log" "$out"/slurm/logs/* 2>/dev/null | tail -30; continue; }
+    same_outputs "$one" "$out"
+    python3 -c 'import json,sys; m=json.load(open(sys.argv[1])); assert m["shards"]["count"]==int(sys.argv[2]) and len(m["shards"]["tasks"])==int(sys.argv[2])' \
+      "$out/manifest.json" "$n" || fail "$name --shards $n: the manifest does not list every task"
+  done
+}
+
+room=$src/tests/data/sample-room.ply
+run_scene room "$room" --tiles --tile-triangles 10000 --obj
+
+# A task killed with SIGKILL just before its summary: the run fails with 137, merge names the task, and
+# resubmitting reruns it alone (the finished tasks are not submitted again) to the same bytes.
+out=$tmp/room-kill
+LODSTREAM_TEST_KILL_AT=task-1.json "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work" --shards 3 --wait --no-space-check \
+  --tiles --tile-triangles 10000 --obj >"$tmp/kill.log" 2>&1
+rc=$?
+[ $rc -eq 137 ] || fail "a task killed with SIGKILL: the run exited $rc, not 137"
+grep -q "task 1 failed with exit 137" "$tmp/kill.log" || fail "the run does not name the killed task: $(cat "$tmp/kill.log")"
+[ -e "$out/manifest.json" ] && fail "a manifest after a killed task"
+msg=$("$cli" merge "$out" 2>&1); rc=$?
+[ $rc -eq 66 ] || fail "merge with a task missing: exit $rc, not 66"
+echo "$msg" | grep -q "task 1 of 3 has not finished" || fail "merge does not name the missing task: $msg"
+echo "killed task: run exit 137; merge: $msg"
+"$cli" slurm resubmit "$out" --wait >"$tmp/resubmit.log" 2>&1
+rc=$?
+[ $rc -eq 0 ] || { fail "resubmit: exit $rc"; cat "$tmp/resubmit.log"; }
+grep -q "array 1 of 3" "$tmp/resubmit.log" || fail "resubmit did not submit task 1 alone: $(cat "$tmp/resubmit.log")"
+same_outputs "$tmp/room-one" "$out"
+
+validator=${LODSTREAM_TILES_VALIDATOR:-${TMPDIR:-/tmp}/3d-tiles-validator}
+if command -v node >/dev/null 2>&1 && [ -f "$validator/build/main.js" ] && [ -f "$validator/.installed" ]; then
+  node "$validator/build/main.js" --tilesetFile "$tmp/room-3/tiles/tileset.json" --reportFile "$tmp/validator.json" >/dev/null 2>&1
+  counts=$(node -e 'const r=require(process.argv[1]);console.log(r.numErrors,r.numWarnings)' "$tmp/validator.json" 2>/dev/null)
+  echo "3d-tiles-validator on the 3-task tileset: errors warnings = $counts"
+  [ "$counts" = "0 0" ] || fail "the 3-task tileset does not validate"
+else
+  echo "notice: the 3D Tiles validator is not installed (tools/install_tiles_tools.sh): the tiles are checked byte for byte only"
+fi
+
+make_scene=$src/../shared/data/tools/make-scene.sh
+if [ -x "$make_scene" ] || [ -f "$make_scene" ]; then
+  if bash "$make_scene" 2 1 "$tmp/city.ply" >/dev/null 2>&1; then
+    run_scene city "$tmp/city.ply" --tiles
+  else
+    fail "make-scene.sh 2 1 failed"
+  fi
+else
+  echo "skipped: the 2 M-triangle city (../shared/data absent)"
+fi
+[ $status -eq 0 ] && echo "ok"
+exit $status

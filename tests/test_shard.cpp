@@ -1,0 +1,234 @@
+// Sharded simplify (stream/shard.h) and merge, through the library, without a scheduler: the tasks run one
+// after another on one work directory. Every output file must be one machine's bytes for any task count
+// and any --memory (tasks in several batches), a missing task must stop the merge naming it, and the
+// task ranges must cover every region once. tests/slurm_test.sh runs the same through Slurm.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "lodstream/lodstream.h"
+#include "cli_harness.h"
+#include "stream/shard.h"
+#include "test_util.h"
+
+namespace lodstream {
+namespace {
+
+using test::TempDir;
+
+std::string slurp(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+// Every file under `dir` but manifest.json, by relative path.
+std::map<std::string, std::string> outputs(const std::string& dir) {
+  std::map<std::string, std::string> f;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir))
+    if (e.is_regular_file() && e.path().filename() != "manifest.json")
+      f[std::filesystem::relative(e.path(), dir).string()] = slurp(e.path().string());
+  return f;
+}
+
+nlohmann::json manifest_without_timings(const std::string& dir) {
+  nlohmann::json m = nlohmann::json::parse(slurp(dir + "/manifest.json"));
+  for (const char* k : {"stages", "seconds", "peak_rss_bytes", "work_dir", "shards"}) m.erase(k);
+  return m;
+}
+
+SimplifyOptions room_options(const std::string& out) {
+  SimplifyOptions so;
+  so.output_dir = out;
+  so.tile_triangles = 6000;  // many regions per level, so that tasks split levels
+  so.write_obj = true;
+  so.write_tiles = true;
+  return so;
+}
+
+std::string sample_room() { return test::source_dir() + "/tests/data/sample-room.ply"; }
+
+// Runs tasks `tasks` of `count` (then merge when `merge`) on `work`.
+Result run_tasks(const std::string& out, const std::string& work, unsigned count, const std::vector<unsigned>& tasks,
+                 uint64_t memory, bool merge_after, SimplifyReport* merged) {
+  for (unsigned i : tasks) {
+    SimplifyOptions so = room_options(out);
+    so.shard_index = i, so.shard_count = count;
+    Options o;
+    o.work_dir = work;
+    o.memory_bytes = memory;
+    o.check_disk_space = false;
+    SimplifyReport r;
+    const Result res = simplify(sample_room(), so, o, &r);
+    if (!res.ok()) return res;
+  }
+  if (!merge_after) return {};
+  return merge(out, Options{}, merged);
+}
+
+TEST(Shard, AnyTaskCountGivesOneMachinesBytes) {
+  TempDir dir;
+  Options o;
+  o.work_dir = dir.file("work");
+  o.check_disk_space = false;
+  SimplifyReport one;
+  ASSERT_TRUE(simplify(sample_room(), room_options(dir.file("one")), o, &one).ok());
+  const auto want = outputs(dir.file("one"));
+  for (unsigned n : {1u, 2u, 5u}) {
+    SCOPED_TRACE("tasks " + std::to_string(n));
+    const std::string out = dir.file("sharded-" + std::to_string(n));
+    std::vector<unsigned> all;
+    for (unsigned i = 0; i < n; ++i) all.push_back(i);
+    SimplifyReport merged;
+    const Result r = run_tasks(out, dir.file("work"), n, all, 0, true, &merged);
+    ASSERT_TRUE(r.ok()) << r.message;
+    EXPECT_EQ(outputs(out), want);
+    EXPECT_EQ(manifest_without_timings(out), manifest_without_timings(dir.file("one")));
+    EXPECT_FALSE(std::filesystem::exists(out + "/shards")) << "merge removes the parts";
+    ASSERT_EQ(merged.levels.size(), one.levels.size());
+    for (size_t l = 0; l < one.levels.size(); ++l) EXPECT_EQ(merged.levels[l].triangles, one.levels[l].triangles);
+  }
+}
+
+TEST(Shard, TasksInBatchesUnderASmallBudgetGiveTheSameBytes) {
+  TempDir dir;
+  Options o;
+  o.work_dir = dir.file("work");
+  o.check_disk_space = false;
+  SimplifyReport one;
+  ASSERT_TRUE(simplify(sample_room(), room_options(dir.file("one")), o, &one).ok());
+  // At the minimum budget a task's share of the finest level does not fit one batch (counted by the
+  // model in stream/shard.cpp) and is emitted in several.
+  SimplifyReport merged;
+  const Result r = run_tasks(dir.file("small"), dir.file("work"), 2, {0, 1}, min_memory_bytes, true, &merged);
+  ASSERT_TRUE(r.ok()) << r.message;
+  EXPECT_EQ(outputs(dir.file("small")), outputs(dir.file("one")));
+}
+
+TEST(Shard, MergeNamesTheMissingTasks) {
+  TempDir dir;
+  SimplifyReport merged;
+  Result r = merge(dir.file("nothing"), Options{}, &merged);
+  EXPECT_EQ(r.status, Status::no_input);
+  r = run_tasks(dir.file("out"), dir.file("work"), 4, {0, 2}, 0, true, &merged);
+  EXPECT_EQ(r.status, Status::no_input);
+  EXPECT_NE(r.message.find("tasks 1, 3 of 4 have not finished"), std::string::npos) << r.message;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("out/manifest.json")));
+  // The missing tasks alone, then the merge: complete.
+  r = run_tasks(dir.file("out"), dir.file("work"), 4, {1, 3}, 0, true, &merged);
+  EXPECT_TRUE(r.ok()) << r.message;
+  EXPECT_TRUE(std::filesystem::exists(dir.file("out/manifest.json")));
+}
+
+TEST(Shard, TaskRangesCoverEveryRegionOnce) {
+  stream::LevelCut cut;
+  for (uint64_t c : {5, 0, 7, 1, 1, 30, 0, 2, 9, 0}) cut.regions.push_back({}), cut.cells.push_back(c);
+  for (unsigned n : {1u, 2u, 3u, 7u, 12u}) {
+    uint32_t next = 0;
+    for (unsigned i = 0; i < n; ++i) {
+      const auto [first, end] = stream::shard_regions(cut, i, n);
+      EXPECT_EQ(first, next) << n << " tasks, task " << i;
+      EXPECT_LE(first, end);
+      next = end;
+    }
+    EXPECT_EQ(next, cut.regions.size()) << n << " tasks";
+  }
+  // Balanced by cells: a region goes to the task whose share holds the cells before it (55 cells, 2 tasks:
+  // the 30-cell region has 14 before it, in the first half).
+  EXPECT_EQ(stream::shard_regions(cut, 0, 2), (std::pair<uint32_t, uint32_t>{0, 6}));
+}
+
+TEST(Shard, OptionsAndEnvironment) {
+  TempDir dir;
+  SimplifyOptions so = room_options(dir.file("out"));
+  so.shard_count = 2;
+  SimplifyReport r;
+  EXPECT_EQ(simplify(sample_room(), so, Options{}, &r).status, Status::usage) << "no work directory";
+  Options o;
+  o.work_dir = dir.file("work");
+  so.max_error_px = 2;
+  EXPECT_EQ(simplify(sample_room(), so, o, &r).status, Status::usage) << "--max-error-px";
+
+  unsigned i = 0, n = 0;
+  std::string error;
+  for (const char* v : {"SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT", "JOB_COMPLETION_INDEX", "AWS_BATCH_JOB_ARRAY_INDEX",
+                        "LODSTREAM_SHARD_COUNT"})
+    unsetenv(v);
+  EXPECT_FALSE(shard_from_env(&i, &n, &error));
+  setenv("SLURM_ARRAY_TASK_ID", "3", 1);
+  setenv("SLURM_ARRAY_TASK_COUNT", "8", 1);
+  EXPECT_TRUE(shard_from_env(&i, &n, &error)) << error;
+  EXPECT_EQ(i, 3u);
+  EXPECT_EQ(n, 8u);
+  setenv("SLURM_ARRAY_TASK_COUNT", "1", 1);  // a task resubmitted alone: the count comes from LODSTREAM_SHARD_COUNT
+  EXPECT_FALSE(shard_from_env(&i, &n, &error));
+  setenv("LODSTREAM_SHARD_COUNT", "8", 1);
+  EXPECT_TRUE(shard_from_env(&i, &n, &error)) << error;
+  EXPECT_EQ(n, 8u);
+  unsetenv("SLURM_ARRAY_TASK_ID");
+  unsetenv("SLURM_ARRAY_TASK_COUNT");
+  setenv("JOB_COMPLETION_INDEX", "7", 1);
+  EXPECT_TRUE(shard_from_env(&i, &n, &error)) << error;
+  EXPECT_EQ(i, 7u);
+  setenv("JOB_COMPLETION_INDEX", "x", 1);
+  EXPECT_FALSE(shard_from_env(&i, &n, &error));
+  unsetenv("JOB_COMPLETION_INDEX");
+  unsetenv("LODSTREAM_SHARD_COUNT");
+}
+
+// Through the CLI: three tasks started at once on a fresh work directory (the first to take the lock runs
+// the shared stages, the others wait and reuse them), a task killed with SIGKILL just before its summary,
+// merge refusing, the task rerun alone, merge: one machine's bytes.
+TEST(Shard, ConcurrentTasksAndAKilledTaskThroughTheCli) {
+  TempDir dir, one_out;
+  const std::vector<std::string> common{"--tiles", "--tile-triangles", "6000", "--no-space-check", "--progress", "none"};
+  auto args = [&](std::vector<std::string> a) {
+    a.insert(a.end(), common.begin(), common.end());
+    return a;
+  };
+  test::CliRun one = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("one")}), one_out);
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  setenv("LODSTREAM_TEST_KILL_AT", "task-1.json", 1);
+  std::vector<test::CliRun> runs(3);
+  {
+    std::vector<std::thread> tasks;
+    std::vector<TempDir> logs(3);
+    for (unsigned i = 0; i < 3; ++i)
+      tasks.emplace_back([&, i] {
+        runs[i] = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("out"), "--work", dir.file("work"), "--shard",
+                                      std::to_string(i) + "/3"}),
+                                logs[i]);
+      });
+    for (auto& t : tasks) t.join();
+  }
+  unsetenv("LODSTREAM_TEST_KILL_AT");
+  EXPECT_EQ(runs[0].exit_code, 0) << runs[0].err;
+  EXPECT_EQ(runs[1].exit_code, 128 + SIGKILL);
+  EXPECT_EQ(runs[2].exit_code, 0) << runs[2].err;
+  TempDir log;
+  test::CliRun m = test::run_cli({"merge", dir.file("out")}, log);
+  EXPECT_EQ(m.exit_code, 66);
+  EXPECT_NE(m.err.find("task 1 of 3 has not finished"), std::string::npos) << m.err;
+  test::CliRun again = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("out"), "--work", dir.file("work"), "--shard", "1/3"}), log);
+  ASSERT_EQ(again.exit_code, 0) << again.err;
+  EXPECT_NE(again.out.find("(reused from work directory)"), std::string::npos) << "the shared stages are reused";
+  m = test::run_cli({"merge", dir.file("out")}, log);
+  ASSERT_EQ(m.exit_code, 0) << m.err;
+  EXPECT_EQ(outputs(dir.file("out")), outputs(dir.file("one")));
+
+  for (const char* bad : {"3/3", "1", "x/2", "1/0", "-1/2", "1/2/3"}) {
+    const test::CliRun r = test::run_cli({"simplify", sample_room(), "-o", dir.file("bad"), "--work", dir.file("work"), "--shard", bad}, log);
+    EXPECT_EQ(r.exit_code, 64) << bad;
+  }
+}
+
+}  // namespace
+}  // namespace lodstream

@@ -1,0 +1,365 @@
+// `lodstream slurm`: runs a sharded simplify (stream/shard.h) on a Slurm cluster. It only writes sbatch
+// scripts (readable, resubmittable by hand) under OUT/slurm/ and submits them with sbatch: a prepare job
+// (the shared stages), an array job of N tasks after it (--dependency=afterok), and the merge after the
+// array. The scheduler is Slurm's; lodstream adds none of its own. Each script records its command's exit
+// status in OUT/slurm/status/NAME.rc (and the command's pid in NAME.pid while it runs), which is how
+// --wait tells a failed task's one-machine exit code from the merge's.
+#include "tools/slurm_cli.h"
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+namespace lodstream::cli {
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::ordered_json;
+
+constexpr int kUsage = 64, kNoInput = 66, kInternal = 70, kIoError = 74;
+
+const char* const kUsageText =
+    "usage: lodstream slurm simplify INPUT -o OUTDIR --shards N [--work DIR] [--wait] [--sbatch-arg ARG]... [simplify options]\n"
+    "       lodstream slurm resubmit OUTDIR [--wait]\n"
+    "  simplify  writes OUTDIR/slurm/{prepare,tasks,merge}.sbatch and submits them (afterok dependencies);\n"
+    "            --work: the work directory every task shares (default OUTDIR/slurm/work; on a shared file system)\n"
+    "  resubmit  submits again the tasks that did not finish (and the merge), or the whole chain when the\n"
+    "            prepare job did not (the scripts keep the first submission's sbatch options)\n"
+    "  --wait    wait for the merge and exit with the one-machine exit code (a failed job's, else the merge's)\n"
+    "  --sbatch-arg ARG  an sbatch option for every job (repeat), e.g. --sbatch-arg=--partition=big --sbatch-arg=--mem=2G\n";
+
+std::string quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+std::string absolute(const std::string& p) { return fs::absolute(p).lexically_normal().string(); }
+
+// Runs `command` (sh -c) and returns its stdout; `status` its exit status.
+std::string run(const std::string& command, int* status) {
+  std::string out;
+  FILE* p = ::popen(command.c_str(), "r");
+  if (!p) {
+    *status = -1;
+    return out;
+  }
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+  const int s = ::pclose(p);
+  *status = WIFEXITED(s) ? WEXITSTATUS(s) : 128 + (WIFSIGNALED(s) ? WTERMSIG(s) : 0);
+  while (!out.empty() && (out.back() == '\n' || out.back() == ' ')) out.pop_back();
+  return out;
+}
+
+bool write_text(const std::string& path, const std::string& text, bool executable) {
+  const std::string tmp = path + ".partial";
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    f << text;
+    if (!f.flush()) return false;
+  }
+  if (executable) ::chmod(tmp.c_str(), 0755);
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  return !ec;
+}
+
+// A job script: the #SBATCH lines, then the command, its pid and exit status recorded under `name`
+// (NAME may hold ${SLURM_ARRAY_TASK_ID}).
+std::string script(const std::string& slurm_dir, const std::string& job_name, const std::string& log, const std::string& array,
+                   const std::vector<std::string>& sbatch_args, const std::string& name, const std::string& command) {
+  std::string s = "#!/bin/bash\n";
+  s += "# Written by `lodstream slurm`: submit with sbatch (see README, \"Running on a cluster\").\n";
+  s += "#SBATCH --job-name=" + job_name + "\n";
+  s += "#SBATCH --output=" + slurm_dir + "/logs/" + log + "\n";
+  if (!array.empty()) s += "#SBATCH --array=" + array + "\n";
+  for (const std::string& a : sbatch_args) s += "#SBATCH " + a + "\n";
+  s += "status=" + quote(slurm_dir + "/status") + "/" + name + "\n";
+  s += "rm -f \"$status.rc\"\n";
+  s += command + " &\n";
+  s += "pid=$!\necho $pid > \"$status.pid\"\nwait $pid\nrc=$?\n";
+  s += "echo $rc > \"$status.rc.partial\" && mv \"$status.rc.partial\" \"$status.rc\"\nrm -f \"$status.pid\"\nexit $rc\n";
+  return s;
+}
+
+// sbatch --parsable [args] SCRIPT: the job id, or "" with a message.
+std::string submit(const std::string& args, const std::string& script_path) {
+  int status = 0;
+  const std::string out = run("sbatch --parsable " + args + " " + quote(script_path) + " 2>&1", &status);
+  if (status != 0) {
+    std::fprintf(stderr, "lodstream slurm: sbatch %s failed (exit %d): %s\n", script_path.c_str(), status, out.c_str());
+    return {};
+  }
+  return out.substr(0, out.find(';'));  // "id;cluster" on federated clusters
+}
+
+int read_rc(const std::string& path) {
+  std::ifstream f(path);
+  int rc = -1;
+  if (!(f >> rc)) return -1;
+  return rc;
+}
+
+struct Submission {
+  std::string slurm_dir;
+  unsigned shards = 0;
+  std::vector<std::string> sbatch_args;
+  std::string prepare, tasks, merge;  // job ids
+};
+
+bool save(const Submission& s) {
+  const ordered_json j{{"shards", s.shards}, {"sbatch_args", s.sbatch_args},
+                       {"jobs", {{"prepare", s.prepare}, {"tasks", s.tasks}, {"merge", s.merge}}}};
+  return write_text(s.slurm_dir + "/submit.json", j.dump(2) + "\n", false);
+}
+
+// Submits the chain from `from_prepare` (else the tasks in `array`, then the merge).
+int submit_chain(Submission& s, bool from_prepare, const std::string& array) {
+  const std::string dep_args = "--kill-on-invalid-dep=yes --dependency=afterok:";
+  std::string after;
+  if (from_prepare) {
+    s.prepare = submit("", s.slurm_dir + "/prepare.sbatch");
+    if (s.prepare.empty()) return kIoError;
+    after = s.prepare;
+  }
+  s.tasks = submit((after.empty() ? std::string() : dep_args + after) + " --array=" + array, s.slurm_dir + "/tasks.sbatch");
+  if (s.tasks.empty()) return kIoError;
+  s.merge = submit(dep_args + s.tasks, s.slurm_dir + "/merge.sbatch");
+  if (s.merge.empty()) return kIoError;
+  if (!save(s)) {
+    std::fprintf(stderr, "lodstream slurm: cannot write %s/submit.json\n", s.slurm_dir.c_str());
+    return kIoError;
+  }
+  if (from_prepare) std::printf("prepare job %s\n", s.prepare.c_str());
+  std::printf("tasks   job %s (array %s of %u)\nmerge   job %s\n", s.tasks.c_str(), array.c_str(), s.shards, s.merge.c_str());
+  std::fflush(stdout);
+  return 0;
+}
+
+// Waits until the merge has recorded its status, or none of the chain's jobs is queued any more (a failed
+// task's merge is cancelled by Slurm, --kill-on-invalid-dep; the other tasks are left to finish, so that a
+// resubmission reruns the failed ones only); returns the one-machine exit code: the merge's, else the
+// prepare job's or the first failed task's (a task killed by a signal records 128 + the signal).
+int wait_chain(const Submission& s, const std::vector<unsigned>& tasks) {
+  const std::string st = s.slurm_dir + "/status/";
+  const std::string ids = s.prepare.empty() ? (s.tasks.empty() ? s.merge : s.tasks + "," + s.merge) : s.prepare + "," + s.tasks + "," + s.merge;
+  for (;;) {
+    const int merge_rc = read_rc(st + "merge.rc");
+    if (merge_rc >= 0) return merge_rc;
+    int status = 0;
+    const std::string queued = run("squeue -h -o %i -j " + ids + " 2>/dev/null", &status);
+    if (status != 0 || !queued.empty()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(500));
+      continue;
+    }
+    if (const int rc = read_rc(st + "merge.rc"); rc >= 0) return rc;
+    int failed = -1;
+    std::string failed_name;
+    if (!s.prepare.empty()) {
+      const int rc = read_rc(st + "prepare.rc");
+      if (rc != 0) failed = rc, failed_name = "the prepare job";
+    }
+    for (unsigned t : tasks) {
+      if (failed >= 0) break;
+      const int rc = read_rc(st + fmt::format("task-{}.rc", t));
+      if (rc > 0) failed = rc, failed_name = fmt::format("task {}", t);
+    }
+    if (failed > 0) {
+      std::fprintf(stderr, "lodstream slurm: %s failed with exit %d (logs: %s/logs/); `lodstream slurm resubmit %s` reruns what did not finish\n",
+                   failed_name.c_str(), failed, s.slurm_dir.c_str(), quote(fs::path(s.slurm_dir).parent_path().string()).c_str());
+      return failed;
+    }
+    std::fprintf(stderr, "lodstream slurm: the jobs ended without recording a status (cancelled, or killed with their scripts); see %s/logs/\n",
+                 s.slurm_dir.c_str());
+    return kInternal;
+  }
+}
+
+int simplify(const std::string& self, const std::vector<std::string>& args) {
+  std::string input, out, work;
+  unsigned shards = 0;
+  bool wait = false;
+  std::vector<std::string> sbatch_args, passthrough;
+  if (args.empty() || args[0].empty() || args[0][0] == '-') {
+    std::fputs(kUsageText, stderr);
+    return kUsage;
+  }
+  input = args[0];
+  for (size_t i = 1; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    auto value = [&](const std::string& name, std::string* v) {
+      if (a == name) {
+        if (i + 1 >= args.size()) return false;
+        *v = args[++i];
+        return true;
+      }
+      if (a.rfind(name + "=", 0) == 0) {
+        *v = a.substr(name.size() + 1);
+        return true;
+      }
+      return false;
+    };
+    std::string v;
+    if (value("-o", &v) || value("--output", &v)) out = v;
+    else if (value("--work", &v)) work = v;
+    else if (value("--sbatch-arg", &v)) sbatch_args.push_back(v);
+    else if (value("--shards", &v)) {
+      char* end = nullptr;
+      const unsigned long n = std::strtoul(v.c_str(), &end, 10);
+      if (*end || n == 0 || n > 100000) {
+        std::fprintf(stderr, "lodstream slurm: --shards: '%s' is not a task count (1 to 100000)\n", v.c_str());
+        return kUsage;
+      }
+      shards = static_cast<unsigned>(n);
+    } else if (a == "--wait") wait = true;
+    else if (a == "--shard" || a == "--shard-from-env" || a == "--shard-prepare" || a.rfind("--shard=", 0) == 0) {
+      std::fprintf(stderr, "lodstream slurm: %s is for the tasks; give --shards N\n", a.c_str());
+      return kUsage;
+    } else passthrough.push_back(a);
+  }
+  if (out.empty() || shards == 0) {
+    std::fputs(kUsageText, stderr);
+    return kUsage;
+  }
+  std::error_code ec;
+  if (!fs::is_regular_file(input, ec)) {
+    std::fprintf(stderr, "lodstream slurm: %s: no such input file\n", input.c_str());
+    return kNoInput;
+  }
+  input = absolute(input), out = absolute(out);
+  Submission s;
+  s.slurm_dir = out + "/slurm";
+  s.shards = shards;
+  s.sbatch_args = sbatch_args;
+  work = work.empty() ? s.slurm_dir + "/work" : absolute(work);
+  for (const char* d : {"", "/logs", "/status"}) fs::create_directories(s.slurm_dir + d, ec);
+  if (ec) {
+    std::fprintf(stderr, "lodstream slurm: %s: cannot create: %s\n", s.slurm_dir.c_str(), ec.message().c_str());
+    return kIoError;
+  }
+  for (const auto& e : fs::directory_iterator(s.slurm_dir + "/status", ec)) fs::remove(e.path(), ec);
+  std::string common = quote(self) + " simplify " + quote(input) + " -o " + quote(out) + " --work " + quote(work);
+  for (const std::string& a : passthrough) common += " " + quote(a);
+  const std::string tasks_array = fmt::format("0-{}", shards - 1);
+  const bool ok =
+      write_text(s.slurm_dir + "/prepare.sbatch",
+                 script(s.slurm_dir, "lodstream-prepare", "prepare.out", "", sbatch_args, "prepare", common + " --shard-prepare"), true) &&
+      write_text(s.slurm_dir + "/tasks.sbatch",
+                 script(s.slurm_dir, "lodstream-simplify", "task-%a.out", tasks_array, sbatch_args, "task-${SLURM_ARRAY_TASK_ID}",
+                        common + fmt::format(" --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\"", shards)),
+                 true) &&
+      write_text(s.slurm_dir + "/merge.sbatch",
+                 script(s.slurm_dir, "lodstream-merge", "merge.out", "", sbatch_args, "merge", quote(self) + " merge " + quote(out)), true);
+  if (!ok) {
+    std::fprintf(stderr, "lodstream slurm: cannot write the scripts in %s\n", s.slurm_dir.c_str());
+    return kIoError;
+  }
+  std::printf("scripts %s/{prepare,tasks,merge}.sbatch\n", s.slurm_dir.c_str());
+  if (const int rc = submit_chain(s, true, tasks_array)) return rc;
+  if (!wait) return 0;
+  std::vector<unsigned> all(shards);
+  for (unsigned t = 0; t < shards; ++t) all[t] = t;
+  return wait_chain(s, all);
+}
+
+int resubmit(const std::vector<std::string>& args) {
+  std::string out;
+  bool wait = false;
+  for (size_t i = 0; i < args.size(); ++i) {
+    if (args[i] == "--wait") wait = true;
+    else if (out.empty() && args[i][0] != '-') out = args[i];
+    else {
+      std::fputs(kUsageText, stderr);
+      return kUsage;
+    }
+  }
+  if (out.empty()) {
+    std::fputs(kUsageText, stderr);
+    return kUsage;
+  }
+  Submission s;
+  s.slurm_dir = absolute(out) + "/slurm";
+  ordered_json j;
+  try {
+    std::ifstream f(s.slurm_dir + "/submit.json");
+    j = ordered_json::parse(f);
+    s.shards = j.at("shards");
+    s.sbatch_args = j.at("sbatch_args").get<std::vector<std::string>>();
+  } catch (const std::exception&) {
+    std::fprintf(stderr, "lodstream slurm: %s/submit.json: no submission to resubmit (run `lodstream slurm simplify` first)\n",
+                 s.slurm_dir.c_str());
+    return kNoInput;
+  }
+  const std::string old = fmt::format("{},{},{}", j["jobs"].value("prepare", ""), j["jobs"].value("tasks", ""), j["jobs"].value("merge", ""));
+  int status = 0;
+  const std::string queued = run("squeue -h -o %i -j " + old + " 2>/dev/null", &status);
+  if (status == 0 && !queued.empty()) {
+    std::fprintf(stderr, "lodstream slurm: jobs of the last submission are still queued or running (%s): wait for them or scancel them first\n",
+                 queued.c_str());
+    return kUsage;
+  }
+  const std::string st = s.slurm_dir + "/status/";
+  const bool from_prepare = read_rc(st + "prepare.rc") != 0;
+  std::vector<unsigned> tasks;
+  std::string array;
+  for (unsigned t = 0; t < s.shards; ++t)
+    if (from_prepare || read_rc(st + fmt::format("task-{}.rc", t)) != 0) {
+      tasks.push_back(t);
+      array += (array.empty() ? "" : ",") + std::to_string(t);
+      std::error_code ec;
+      fs::remove(st + fmt::format("task-{}.rc", t), ec);
+    }
+  std::error_code ec;
+  fs::remove(st + "merge.rc", ec);
+  if (from_prepare) fs::remove(st + "prepare.rc", ec);
+  if (tasks.empty()) {
+    std::printf("every task finished; resubmitting the merge\n");
+    s.prepare.clear();
+    s.tasks.clear();
+    s.merge = submit("", s.slurm_dir + "/merge.sbatch");
+    if (s.merge.empty()) return kIoError;
+    save(s);
+    std::printf("merge   job %s\n", s.merge.c_str());
+    std::fflush(stdout);
+    if (!wait) return 0;
+    return wait_chain(s, {});
+  }
+  if (!from_prepare) s.prepare.clear();
+  if (const int rc = submit_chain(s, from_prepare, array)) return rc;
+  if (!wait) return 0;
+  return wait_chain(s, tasks);
+}
+
+}  // namespace
+
+int run_slurm(const std::string& self, const std::vector<std::string>& args) {
+  if (args.empty() || args[0] == "--help" || args[0] == "-h") {
+    std::fputs(kUsageText, args.empty() ? stderr : stdout);
+    return args.empty() ? kUsage : 0;
+  }
+  const std::vector<std::string> rest(args.begin() + 1, args.end());
+  if (args[0] == "simplify") return simplify(self, rest);
+  if (args[0] == "resubmit") return resubmit(rest);
+  if (args[0] == "report") {
+    std::fprintf(stderr, "lodstream slurm report: not available yet (report --shard is not implemented); run `lodstream report` on one machine\n");
+    return kUsage;
+  }
+  std::fputs(kUsageText, stderr);
+  return kUsage;
+}
+
+}  // namespace lodstream::cli
