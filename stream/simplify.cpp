@@ -279,6 +279,12 @@ std::unique_ptr<stream::TilesetBuilder> make_tiles_builder(const SimplifyOptions
   to.levels = static_cast<unsigned>(levels);
   to.thick = so.tile_lines == SimplifyOptions::TileLines::triangles;
   to.pixels_per_cell = so.pixels_per_cell;
+  to.encoding = so.tile_encoding == SimplifyOptions::TileEncoding::plain       ? io::TileEncoding::plain
+                : so.tile_encoding == SimplifyOptions::TileEncoding::quantized ? io::TileEncoding::quantized
+                                                                               : io::TileEncoding::meshopt;
+#ifndef LODSTREAM_HAVE_MESHOPT
+  if (to.encoding == io::TileEncoding::meshopt) to.encoding = io::TileEncoding::quantized;
+#endif
   if (!meta.bbox.empty)
     for (int k = 0; k < 3; ++k)
       to.scene_magnitude = std::max({to.scene_magnitude, std::abs(meta.bbox.min[k]), std::abs(meta.bbox.max[k])});
@@ -902,6 +908,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       m["tiles"] = {{"tileset", "tiles/tileset.json"},
                     {"tile_triangles", so.tile_triangles},
                     {"tile_lines", so.tile_lines == SimplifyOptions::TileLines::triangles ? "triangles" : "lines"},
+                    {"tile_encoding", so.tile_encoding == SimplifyOptions::TileEncoding::plain       ? "plain"
+                                      : so.tile_encoding == SimplifyOptions::TileEncoding::quantized ? "quantized"
+                                                                                                     : "meshopt"},
                     {"up", so.tiles_z_up ? "z" : "y"},
                     {"tiles", report.tiles.tiles},
                     {"content_tiles", report.tiles.content_tiles},
