@@ -9,7 +9,8 @@
 //
 // Crack-free by construction: every tile of a level is a part of the level's one mesh (one global
 // floating-cell pass), each triangle, edge and point in exactly one part (the owner rule of stream/emit_regions.h), and
-// a vertex shared across a border is written bit for bit in every part that uses it.
+// a vertex shared across a border is written in every part that uses it, snapped to the level's one grid
+// (io/glb_compact.h), so that it is the same point in each.
 //
 // Geometric error of a tile of cell size c (scene units): sqrt(3)·c + r + 2^-23·m, where r is the largest
 // expansion radius of its thick edges and points (core/thick_primitives.h; 0 with lines), m the largest
