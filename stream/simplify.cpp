@@ -611,8 +611,11 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           return counts;
         }
         const core::SceneCube cube = stream::scene_cube_of(meta);
+        // With tiles, the side of coarser levels' regions is also bounded (stream/tiles.h tile_side_bounds).
+        const std::vector<core::SideBound> sides =
+            so.write_tiles ? stream::tile_side_bounds(sizes, cells, cube.side) : std::vector<core::SideBound>();
         const std::vector<stream::LevelCut> cuts = stream::cut_levels(prefix, cells, cube, so.tile_triangles / 2, so.representative,
-                                                                                  meta.single_precision);
+                                                                      meta.single_precision, sides);
         // Every level is planned before the first is written, so that a level that cannot fit stops the run
         // before any output file appears.
         std::vector<stream::EmitLevelPlan> plans;

@@ -15,6 +15,7 @@
 #include <fmt/format.h>
 
 #include "core/status.h"
+#include "core/octree_regions.h"
 #include "core/thick_primitives.h"
 #include "io/tileset_writer.h"
 
@@ -49,6 +50,20 @@ double snap_error(const TilesOptions& o, double cell_size) {
 // c/32: snapping then adds at most sqrt(3)/2·c/32 < 0.03·c to the error bound (sqrt(3)·c), and a tile of
 // a level spans at most 65,535 steps (SHORT positions) up to 1,024 cells across, wider than most regions.
 double tile_quantum(double cell_size) { return io::power_of_two_below(cell_size / 32); }
+
+std::vector<core::SideBound> tile_side_bounds(std::span<const double> cell_sizes, std::span<const uint64_t> cells,
+                                              double cube_side) {
+  std::vector<core::SideBound> bounds(cell_sizes.size());
+  for (size_t l = 1; l < cell_sizes.size(); ++l) {
+    const double side = kTileSideCells * cell_sizes[l];
+    unsigned d = 0;
+    while (d < core::kMaxRegionDepth && std::ldexp(cube_side, -static_cast<int>(d)) > side) ++d;
+    bounds[l].min_depth = d;
+    const double per_cell = cells[l] > 0 ? static_cast<double>(cells[l - 1]) / static_cast<double>(cells[l]) : 1;
+    bounds[l].min_cells = static_cast<uint64_t>(static_cast<double>(kTileChildCells) / std::max(per_cell, 1.0));
+  }
+  return bounds;
+}
 
 struct TilesetBuilder::State {
   TilesOptions o;

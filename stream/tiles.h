@@ -28,10 +28,12 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "core/mesh.h"
+#include "core/octree_regions.h"
 #include "io/glb_compact.h"
 
 namespace lodstream::stream {
@@ -64,6 +66,18 @@ struct TilesSummary {
   uint64_t max_triangles = 0;      // largest tile's triangles (after expansion)
   uint64_t triangles = 0;          // over all tiles (after expansion)
 };
+
+// Per level (finest first), how the emit stage's cut bounds the side of regions when tiles are written
+// (core/octree_regions.h SideBound). Refining a tile loads its children (the next finer level) in view;
+// CesiumJS refines a tile of error e ≈ 1.8·c from about 40·e away (800 x 600 pixels,
+// maximumScreenSpaceError 16), so a parent much wider than that loads children far from the camera. A
+// region of level l >= 1 expected to hold more than kTileChildCells cells of level l - 1 (its own cells
+// times the levels' cell count ratio) is split until its side is at most kTileSideCells · c_l; level 0's
+// regions nest in level 1's.
+inline constexpr double kTileSideCells = 128;
+inline constexpr uint64_t kTileChildCells = 25'000;
+std::vector<core::SideBound> tile_side_bounds(std::span<const double> cell_sizes, std::span<const uint64_t> cells,
+                                              double cube_side);
 
 // The grid step positions of a level of cell size `cell_size` snap to in its tiles (a power of two).
 double tile_quantum(double cell_size);

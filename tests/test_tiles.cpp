@@ -17,6 +17,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/octree_regions.h"
 #include "core/polygon_triangulation.h"
 #include "core/ray_scene.h"
 #include "core/thick_primitives.h"
@@ -216,6 +217,35 @@ TEST(ThickPrimitives, EdgesBecomeCrossedQuadsAndPointsOctahedra) {
   for (uint64_t v = 4; v < 12; ++v) EXPECT_NEAR(distance_to_line(v, &m.positions[3], &m.positions[9]), 0.25, 1e-6);
   for (uint64_t v = 12; v < 20; ++v) EXPECT_NEAR(distance_to_line(v, &m.positions[0], &m.positions[9]), 0.05, 1e-6);
   EXPECT_THROW(core::expand_thick(m, {0.1, 0}, nullptr), Failure);
+}
+
+// The side bound of 3D Tiles cuts (core/octree_regions.h SideBound): a node holding more than min_cells is
+// split down to min_depth even when it holds fewer than max_cells; one holding fewer stays whole.
+TEST(OctreeRegions, SideBoundSplitsNodesThatHoldMuch) {
+  const double lo[3] = {0, 0, 0}, hi[3] = {1, 1, 1};
+  const core::SceneCube cube = core::scene_cube(lo, hi);
+  std::vector<uint64_t> codes;
+  for (int i = 0; i < 10; ++i) {
+    const double p[3] = {0.01 + 0.001 * i, 0.02, 0.03};  // ten cells near one corner
+    codes.push_back(core::point_code(cube, p));
+  }
+  const double far[3] = {0.9, 0.9, 0.9};  // and one in the opposite corner
+  codes.push_back(core::point_code(cube, far));
+  std::sort(codes.begin(), codes.end());
+  EXPECT_EQ(core::cut_regions(codes, {}, 100).size(), 1u);
+  const std::vector<core::RegionKey> cut = core::cut_regions(codes, {}, 100, core::SideBound{3, 5});
+  // The root and the corner's octants split down to depth 3; the far octant (one cell) stays at depth 1.
+  EXPECT_EQ(cut.size(), 7u + 7u + 8u);
+  for (const core::RegionKey& k : cut) {
+    const uint64_t n = static_cast<uint64_t>(std::count_if(codes.begin(), codes.end(), [&](uint64_t c) {
+      return c >= core::region_code(k) && c < core::region_code(k) + core::region_span(k);
+    }));
+    if (n > 5) EXPECT_EQ(k.depth, 3u);
+  }
+  EXPECT_NE(std::find(cut.begin(), cut.end(), core::RegionKey{1, 1, 1, 1}), cut.end());
+  // Nested in a coarser cut, as without the bound.
+  const std::vector<core::RegionKey> finer = core::cut_regions(codes, cut, 100, core::SideBound{4, 5});
+  EXPECT_GT(finer.size(), cut.size());
 }
 
 TEST(TilesetWriter, BoxesAreInTheZUpFrame) {
