@@ -30,19 +30,20 @@ uint64_t count_in(std::span<const uint64_t> sorted, uint64_t first, uint64_t spa
   return static_cast<uint64_t>(b - a);
 }
 
-// Appends `key` to `out`, split (depth first, children in Morton order) while it holds more than max_cells.
+// Appends `key` to `out`, split (depth first, children in Morton order) while it holds more than max_cells,
+// or more than side.min_cells above side.min_depth.
 // invariant: the regions appended are disjoint, in region order, and tile `key` (empty children are kept,
 // so that a cut tiles the whole cube and a finer level's cells, wherever they are, fall in the coarser cut).
-void split(std::span<const uint64_t> sorted, const RegionKey& key, uint64_t cells, uint64_t max_cells,
+void split(std::span<const uint64_t> sorted, const RegionKey& key, uint64_t cells, uint64_t max_cells, const SideBound& side,
            std::vector<RegionKey>& out) {
-  if (cells <= max_cells || key.depth >= kMaxRegionDepth) {
+  if ((cells <= max_cells && (cells <= side.min_cells || key.depth >= side.min_depth)) || key.depth >= kMaxRegionDepth) {
     out.push_back(key);
     return;
   }
   for (uint32_t child = 0; child < 8; ++child) {
     const RegionKey c{static_cast<uint8_t>(key.depth + 1), key.x * 2 + (child & 1), key.y * 2 + (child >> 1 & 1),
                       key.z * 2 + (child >> 2 & 1)};
-    split(sorted, c, count_in(sorted, region_code(c), region_span(c)), max_cells, out);
+    split(sorted, c, count_in(sorted, region_code(c), region_span(c)), max_cells, side, out);
   }
 }
 
@@ -97,18 +98,18 @@ void region_box(const SceneCube& cube, const RegionKey& key, double* lo, double*
 }
 
 std::vector<RegionKey> cut_regions(std::span<const uint64_t> sorted_codes, std::span<const RegionKey> coarser,
-                                   uint64_t max_cells) {
+                                   uint64_t max_cells, const SideBound& side) {
   if (max_cells == 0) fail(Status::internal, "cut_regions: max_cells must be positive");
   std::vector<RegionKey> out;
   if (coarser.empty()) {
-    split(sorted_codes, RegionKey{}, sorted_codes.size(), max_cells, out);
+    split(sorted_codes, RegionKey{}, sorted_codes.size(), max_cells, side, out);
     return out;
   }
   uint64_t held = 0;
   for (const RegionKey& r : coarser) {
     const uint64_t n = count_in(sorted_codes, region_code(r), region_span(r));
     held += n;
-    split(sorted_codes, r, n, max_cells, out);
+    split(sorted_codes, r, n, max_cells, side, out);
   }
   if (held != sorted_codes.size()) fail(Status::internal, "cut_regions: the coarser cut does not hold every cell");
   return out;

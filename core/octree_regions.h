@@ -13,7 +13,8 @@
 //   [code(n), code(n) + 8^(kMaxRegionDepth - depth(n))).
 // - The cut of a level (cut_regions): starting from the next coarser level's cut (or the root), a node is
 //   split into its eight children (empty ones included) while it holds more than max_cells of the level's
-//   cells and its depth is below kMaxRegionDepth. So a cut tiles the whole cube, and every region of a level
+//   cells, or more than side.min_cells and is shallower than side.min_depth (bounding the side of regions
+//   that hold much, for 3D Tiles), and its depth is below kMaxRegionDepth. So a cut tiles the whole cube, and every region of a level
 //   is inside exactly one region of the next coarser level. The cut depends on the cells' points and
 //   max_cells only.
 #pragma once
@@ -56,8 +57,12 @@ void region_box(const SceneCube& cube, const RegionKey& key, double* lo, double*
 // The cut described above. sorted_codes: point_code of every cell of the level, sorted ascending.
 // coarser: the next coarser level's cut in region order (empty for the coarsest level: the root).
 // max_cells >= 1. Returns the regions in region order.
+struct SideBound {
+  unsigned min_depth = 0;
+  uint64_t min_cells = 0;
+};
 std::vector<RegionKey> cut_regions(std::span<const uint64_t> sorted_codes, std::span<const RegionKey> coarser,
-                                   uint64_t max_cells);
+                                   uint64_t max_cells, const SideBound& side = {});
 
 // The index in `regions` (a cut in region order) of the region holding `code`; every code of the level
 // the cut was made from is held by one.

@@ -77,9 +77,13 @@ void write_tileset(const std::string& path, const Tileset& ts) {
   write_file_atomic(path, j.dump(1) + "\n", Sync::durable);
 }
 
-uint64_t write_tile_glb(const std::string& path, const core::LodMesh& mesh, const std::string& name, const std::string& generator) {
+uint64_t write_tile_glb(const std::string& path, const core::LodMesh& mesh, const std::string& name, const std::string& generator,
+                        double quantum, TileEncoding encoding) {
   const GlbLevel level{&mesh, name, 0.0};
   write_glb(path, {&level, 1}, generator, Sync::none);
+  // Re-encoded from the file just written (in the page cache), so that the tile holds whatever write_glb
+  // puts in a level (io/glb_compact.h).
+  if (encoding != TileEncoding::plain) write_file_atomic(path, compact_glb(read_small_file(path), quantum, encoding), Sync::none);
   std::error_code ec;
   const uint64_t bytes = std::filesystem::file_size(path, ec);
   if (ec) fail(Status::io_error, path + ": cannot read its size");

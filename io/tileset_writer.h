@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "core/mesh.h"
+#include "io/glb_compact.h"
 
 namespace lodstream::io {
 
@@ -49,8 +50,10 @@ std::array<double, 12> to_tileset_frame(const double min[3], const double max[3]
 // from parent to child; Failure(io_error) when it cannot be written.
 void write_tileset(const std::string& path, const Tileset& tileset);
 
-// One tile's content: `mesh` as a GLB with one node and one mesh (io/glb_writer.h layout), named `name`.
+// One tile's content: `mesh` as a GLB with one node and one mesh (io/glb_writer.h layout), named `name`,
+// re-encoded as `encoding` says with positions on the grid of step `quantum` (io/glb_compact.h).
 // Returns the file's size in bytes.
-uint64_t write_tile_glb(const std::string& path, const core::LodMesh& mesh, const std::string& name, const std::string& generator);
+uint64_t write_tile_glb(const std::string& path, const core::LodMesh& mesh, const std::string& name, const std::string& generator,
+                        double quantum, TileEncoding encoding);
 
 }  // namespace lodstream::io

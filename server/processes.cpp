@@ -304,7 +304,9 @@ bool plan_job(const std::string& process, const nlohmann::json& body, const Plan
     if (inputs.contains("resolution")) a.insert(a.end(), {"--resolution", number_text(inputs["resolution"])});
     if (inputs.contains("pixels_per_cell")) a.insert(a.end(), {"--pixels-per-cell", number_text(inputs["pixels_per_cell"])});
     if (inputs.value("obj", false)) a.push_back("--obj");
-    if (inputs.value("tiles", false)) a.push_back("--tiles");
+    // Float tiles: the job's viewer (server/page.cpp) parses GLBs itself and reads neither
+    // KHR_mesh_quantization nor EXT_meshopt_compression.
+    if (inputs.value("tiles", false)) a.insert(a.end(), {"--tiles", "--tile-encoding", "plain"});
     if (inputs.contains("tiles_up")) a.insert(a.end(), {"--tiles-up", inputs["tiles_up"].get<std::string>()});
     if (inputs.contains("tile_triangles")) a.insert(a.end(), {"--tile-triangles", number_text(inputs["tile_triangles"])});
     plan->steps.push_back(with_common(a, "simplify"));

@@ -52,7 +52,8 @@ core::SceneCube scene_cube_of(const StoreMeta& meta) {
 }
 
 std::vector<LevelCut> cut_levels(const std::string& prefix, std::span<const uint64_t> cells, const core::SceneCube& cube,
-                                 uint64_t max_cells, Representative representative, bool single_precision) {
+                                 uint64_t max_cells, Representative representative, bool single_precision,
+                                 std::span<const core::SideBound> sides) {
   std::vector<LevelCut> cuts(cells.size());
   std::vector<uint64_t> codes;
   for (size_t l = cells.size(); l-- > 0;) {
@@ -65,7 +66,7 @@ std::vector<LevelCut> cut_levels(const std::string& prefix, std::span<const uint
     const std::span<const core::RegionKey> coarser =
         l + 1 < cells.size() ? std::span<const core::RegionKey>(cuts[l + 1].regions) : std::span<const core::RegionKey>();
     LevelCut& cut = cuts[l];
-    cut.regions = core::cut_regions(codes, coarser, max_cells);
+    cut.regions = core::cut_regions(codes, coarser, max_cells, l < sides.size() ? sides[l] : core::SideBound{});
     cut.cells.assign(cut.regions.size(), 0);
     for (uint64_t code : codes) ++cut.cells[core::region_of_code(cut.regions, code)];
   }

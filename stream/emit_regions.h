@@ -48,8 +48,11 @@ core::SceneCube scene_cube_of(const StoreMeta& meta);
 // Cuts every level (levels of `cells` cells, finest first; cut coarsest first), from the cells' center
 // positions (their means for the mean representative, whose tables hold no center) in the cluster stage's
 // files under `prefix`, written for `representative` at the store's precision.
+// sides: empty, or per level the bound on the side of regions that hold much (3D Tiles: stream/tiles.h
+// tile_side_bounds).
 std::vector<LevelCut> cut_levels(const std::string& prefix, std::span<const uint64_t> cells, const core::SceneCube& cube,
-                                 uint64_t max_cells, Representative representative, bool single_precision);
+                                 uint64_t max_cells, Representative representative, bool single_precision,
+                                 std::span<const core::SideBound> sides = {});
 
 // The index in cut.regions of each cell of level `level`.
 std::vector<uint32_t> load_region_of(const std::string& prefix, size_t level, uint64_t cells, const core::SceneCube& cube,

@@ -280,6 +280,12 @@ stream::TilesOptions tiles_options(const SimplifyOptions& so, const stream::Stor
   to.levels = static_cast<unsigned>(levels);
   to.thick = so.tile_lines == SimplifyOptions::TileLines::triangles;
   to.pixels_per_cell = so.pixels_per_cell;
+  to.encoding = so.tile_encoding == SimplifyOptions::TileEncoding::plain       ? io::TileEncoding::plain
+                : so.tile_encoding == SimplifyOptions::TileEncoding::quantized ? io::TileEncoding::quantized
+                                                                               : io::TileEncoding::meshopt;
+#ifndef LODSTREAM_HAVE_MESHOPT
+  if (to.encoding == io::TileEncoding::meshopt) to.encoding = io::TileEncoding::quantized;
+#endif
   if (!meta.bbox.empty)
     for (int k = 0; k < 3; ++k)
       to.scene_magnitude = std::max({to.scene_magnitude, std::abs(meta.bbox.min[k]), std::abs(meta.bbox.max[k])});
@@ -648,8 +654,11 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           return counts;
         }
         const core::SceneCube cube = stream::scene_cube_of(meta);
+        // With tiles, the side of coarser levels' regions is also bounded (stream/tiles.h tile_side_bounds).
+        const std::vector<core::SideBound> sides =
+            so.write_tiles ? stream::tile_side_bounds(sizes, cells, cube.side) : std::vector<core::SideBound>();
         const std::vector<stream::LevelCut> cuts = stream::cut_levels(prefix, cells, cube, so.tile_triangles / 2, so.representative,
-                                                                                  meta.single_precision);
+                                                                      meta.single_precision, sides);
         // Every level is planned before the first is written, so that a level that cannot fit stops the run
         // before any output file appears.
         std::vector<stream::EmitLevelPlan> plans;
@@ -963,6 +972,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       m["tiles"] = {{"tileset", "tiles/tileset.json"},
                     {"tile_triangles", so.tile_triangles},
                     {"tile_lines", so.tile_lines == SimplifyOptions::TileLines::triangles ? "triangles" : "lines"},
+                    {"tile_encoding", so.tile_encoding == SimplifyOptions::TileEncoding::plain       ? "plain"
+                                      : so.tile_encoding == SimplifyOptions::TileEncoding::quantized ? "quantized"
+                                                                                                     : "meshopt"},
                     {"up", so.tiles_z_up ? "z" : "y"},
                     {"tiles", report.tiles.tiles},
                     {"content_tiles", report.tiles.content_tiles},

@@ -15,6 +15,7 @@
 #include <fmt/format.h>
 
 #include "core/status.h"
+#include "core/octree_regions.h"
 #include "core/thick_primitives.h"
 #include "io/tileset_writer.h"
 
@@ -39,7 +40,30 @@ uint64_t morton(uint32_t x, uint32_t y, uint32_t z) {
   return m;
 }
 
+// How far snapping to the level's grid moves a point (0 for plain tiles, which are not snapped).
+double snap_error(const TilesOptions& o, double cell_size) {
+  return o.encoding == io::TileEncoding::plain ? 0 : std::sqrt(3.0) / 2 * tile_quantum(cell_size);
+}
+
 }  // namespace
+
+// c/32: snapping then adds at most sqrt(3)/2·c/32 < 0.03·c to the error bound (sqrt(3)·c), and a tile of
+// a level spans at most 65,535 steps (SHORT positions) up to 1,024 cells across, wider than most regions.
+double tile_quantum(double cell_size) { return io::power_of_two_below(cell_size / 32); }
+
+std::vector<core::SideBound> tile_side_bounds(std::span<const double> cell_sizes, std::span<const uint64_t> cells,
+                                              double cube_side) {
+  std::vector<core::SideBound> bounds(cell_sizes.size());
+  for (size_t l = 1; l < cell_sizes.size(); ++l) {
+    const double side = kTileSideCells * cell_sizes[l];
+    unsigned d = 0;
+    while (d < core::kMaxRegionDepth && std::ldexp(cube_side, -static_cast<int>(d)) > side) ++d;
+    bounds[l].min_depth = d;
+    const double per_cell = cells[l] > 0 ? static_cast<double>(cells[l - 1]) / static_cast<double>(cells[l]) : 1;
+    bounds[l].min_cells = static_cast<uint64_t>(static_cast<double>(kTileChildCells) / std::max(per_cell, 1.0));
+  }
+  return bounds;
+}
 
 struct TilesetBuilder::State {
   TilesOptions o;
@@ -80,20 +104,23 @@ void TilesetBuilder::add(size_t level, const TileRegion& region, const core::Lod
   }
   r.content = true;
   for (int k = 0; k < 3; ++k) r.min[k] = INFINITY, r.max[k] = -INFINITY;
-  // The bounds of what is drawn: the vertices the primitives use (a part holds no other).
+  // The bounds of what is drawn: the vertices the primitives use (a part holds no other), as snapped.
+  const double quantum = tile_quantum(region.cell_size);
   for (uint64_t v = 0; v < content->vertex_count(); ++v)
     for (int k = 0; k < 3; ++k) {
-      const double x = content->positions[3 * v + k];
+      const float f = content->positions[3 * v + k];
+      const double x = s.o.encoding == io::TileEncoding::plain ? f : io::snap_to_grid(f, quantum);
       r.min[k] = std::min(r.min[k], x);
       r.max[k] = std::max(r.max[k], x);
     }
-  r.error = std::sqrt(3.0) * region.cell_size + radius + std::ldexp(s.o.scene_magnitude, -23);
+  r.error = std::sqrt(3.0) * region.cell_size + radius + std::ldexp(s.o.scene_magnitude, -23) + snap_error(s.o, region.cell_size);
   const std::string dir = fmt::format("lod{}", level);
   r.uri = fmt::format("{}/{}_{}_{}_{}.glb", dir, region.depth, region.x, region.y, region.z);
   std::error_code ec;
   std::filesystem::create_directories(s.o.dir + "/" + dir, ec);
   if (ec) fail(Status::io_error, s.o.dir + "/" + dir + ": cannot create: " + ec.message());
-  r.bytes = io::write_tile_glb(s.o.dir + "/" + r.uri, *content, fmt::format("lod{} {}", level, r.uri), s.o.generator);
+  r.bytes = io::write_tile_glb(s.o.dir + "/" + r.uri, *content, fmt::format("lod{} {}", level, r.uri), s.o.generator, quantum,
+                               s.o.encoding);
   r.triangles = content->triangle_count();
   if (s.o.thick) r.edges = r.points = 0;
   s.records.push_back(std::move(r));
@@ -148,7 +175,8 @@ TilesSummary TilesetBuilder::finish() {
   // original there as anywhere in the level).
   const double margin = std::ldexp(s.o.scene_magnitude, -23);
   for (uint32_t i = 0; i < n; ++i)
-    if (!recs[i].content) error[i] = std::max(error[i], std::sqrt(3.0) * recs[i].region.cell_size + margin);
+    if (!recs[i].content)
+      error[i] = std::max(error[i], std::sqrt(3.0) * recs[i].region.cell_size + margin + snap_error(s.o, recs[i].region.cell_size));
 
   io::Tileset ts;
   ts.generator = s.o.generator;
@@ -168,6 +196,7 @@ TilesSummary TilesetBuilder::finish() {
     const Record& r = recs[i];
     t.extras = {{"level", static_cast<double>(r.level)},
                 {"cell_size", r.region.cell_size},
+                {"quantum", s.o.encoding == io::TileEncoding::plain ? 0.0 : tile_quantum(r.region.cell_size)},
                 {"depth", r.region.depth},
                 {"cells", static_cast<double>(r.region.cells)},
                 {"vertices", static_cast<double>(r.vertices)},

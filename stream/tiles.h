@@ -9,12 +9,14 @@
 //
 // Crack-free by construction: every tile of a level is a part of the level's one mesh (one global
 // floating-cell pass), each triangle, edge and point in exactly one part (the owner rule of stream/emit_regions.h), and
-// a vertex shared across a border is written bit for bit in every part that uses it.
+// a vertex shared across a border is written in every part that uses it, snapped to the level's one grid
+// (io/glb_compact.h), so that it is the same point in each.
 //
 // Geometric error of a tile of cell size c (scene units): sqrt(3)·c + r + 2^-23·m, where r is the largest
 // expansion radius of its thick edges and points (core/thick_primitives.h; 0 with lines), m the largest
 // coordinate magnitude of the scene (float rounding of the representatives), raised to the largest of its
-// children's so that errors never increase from parent to child. Why it bounds the two-sided Hausdorff
+// children's so that errors never increase from parent to child; plus sqrt(3)/2·q when positions snap to the
+// level's grid of step q (io/glb_compact.h; q = the largest power of two <= c/32). Why it bounds the two-sided Hausdorff
 // distance between the level and the original within the tile: every representative lies in its cell's box
 // (center vertex, mean of the cell's vertices, or quadric clamped into the box; uniform squares alike),
 // which holds every vertex of the cell, so a vertex moves by at most the box's diagonal sqrt(3)·c; a point
@@ -26,10 +28,13 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "core/mesh.h"
+#include "core/octree_regions.h"
+#include "io/glb_compact.h"
 
 namespace lodstream::stream {
 
@@ -45,6 +50,7 @@ struct TilesOptions {
   std::string dir;                 // OUTDIR/tiles: replaced whole
   unsigned levels = 0;             // level count; level 0 finest
   bool thick = true;               // edges and points as triangles (core/thick_primitives.h), else LINES/POINTS
+  io::TileEncoding encoding = io::TileEncoding::meshopt;  // tile GLBs (io/glb_compact.h)
   double pixels_per_cell = 5;      // thin edges and points are one pixel at their level's switching distance: c / X
   double scene_magnitude = 0;      // largest |coordinate| of the scene (float rounding margin)
   double cube_min[3] = {0, 0, 0};  // the scene cube (core/octree_regions.h)
@@ -60,6 +66,21 @@ struct TilesSummary {
   uint64_t max_triangles = 0;      // largest tile's triangles (after expansion)
   uint64_t triangles = 0;          // over all tiles (after expansion)
 };
+
+// Per level (finest first), how the emit stage's cut bounds the side of regions when tiles are written
+// (core/octree_regions.h SideBound). Refining a tile loads its children (the next finer level) in view;
+// CesiumJS refines a tile of error e ≈ 1.8·c from about 40·e away (800 x 600 pixels,
+// maximumScreenSpaceError 16), so a parent much wider than that loads children far from the camera. A
+// region of level l >= 1 expected to hold more than kTileChildCells cells of level l - 1 (its own cells
+// times the levels' cell count ratio) is split until its side is at most kTileSideCells · c_l; level 0's
+// regions nest in level 1's.
+inline constexpr double kTileSideCells = 128;
+inline constexpr uint64_t kTileChildCells = 25'000;
+std::vector<core::SideBound> tile_side_bounds(std::span<const double> cell_sizes, std::span<const uint64_t> cells,
+                                              double cube_side);
+
+// The grid step positions of a level of cell size `cell_size` snap to in its tiles (a power of two).
+double tile_quantum(double cell_size);
 
 class TilesetBuilder {
  public:

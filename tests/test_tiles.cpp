@@ -17,6 +17,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/octree_regions.h"
+#include "core/polygon_triangulation.h"
+#include "core/ray_scene.h"
 #include "core/thick_primitives.h"
 #include "io/lod_reader.h"
 #include "io/tileset_writer.h"
@@ -24,6 +27,10 @@
 #include "stream/tiles.h"
 #include "core/status.h"
 #include "test_util.h"
+
+#ifdef LODSTREAM_HAVE_MESHOPT
+#include <meshoptimizer.h>
+#endif
 
 namespace lodstream::test {
 namespace {
@@ -50,7 +57,16 @@ Prim prim(const core::LodMesh& m, const uint32_t* ids, int n) {
 // Every primitive of `m` by kind (0 triangles, 1 edges, 2 points), as a multiset.
 std::array<std::multiset<Prim>, 3> primitives(const core::LodMesh& m) {
   std::array<std::multiset<Prim>, 3> s;
-  for (uint64_t t = 0; t < m.triangle_count(); ++t) s[0].insert(prim(m, &m.triangles[3 * t], 3));
+  // A triangle from its smallest corner on: meshopt's index codec may rotate a triangle's corners (the
+  // winding is kept).
+  for (uint64_t t = 0; t < m.triangle_count(); ++t) {
+    Prim p = prim(m, &m.triangles[3 * t], 3);
+    const auto first = std::min({p.begin(), p.begin() + 3, p.begin() + 6}, [](auto a, auto b) {
+      return std::lexicographical_compare(a, a + 3, b, b + 3);
+    });
+    std::rotate(p.begin(), first, p.end());
+    s[0].insert(std::move(p));
+  }
   for (uint64_t e = 0; e < m.edge_count(); ++e) s[1].insert(prim(m, &m.edges[2 * e], 2));
   for (uint32_t p : m.points) s[2].insert(prim(m, &p, 1));
   return s;
@@ -62,7 +78,9 @@ std::string slurp(const std::string& path) {
 }
 
 // A tile GLB read back into a LodMesh (positions, triangles from indices, LINES and POINTS as
-// unindexed vertices); `thickness` from _THICKNESS. Enough for the files io/glb_writer.cpp writes.
+// unindexed vertices); `thickness` from _THICKNESS. Enough for the files stream/tiles.cpp writes: float or
+// KHR_mesh_quantization SHORT positions (dequantized through the node's translation and scale, in double,
+// then rounded to float), uint16 or uint32 indices, views plain or EXT_meshopt_compression.
 core::LodMesh read_tile(const std::string& path) {
   const std::string b = slurp(path);
   EXPECT_GE(b.size(), 20u) << path;
@@ -70,30 +88,83 @@ core::LodMesh read_tile(const std::string& path) {
   std::memcpy(&json_len, b.data() + 12, 4);
   const json g = json::parse(b.substr(20, json_len));
   const char* bin = b.data() + 20 + json_len + 8;
-  auto view = [&](int accessor, int* count) {
+  std::vector<std::vector<char>> decoded;  // keeps meshopt-decoded views alive
+  auto view = [&](int accessor, int* count, int* stride) -> const char* {
     const json& a = g["accessors"][accessor];
     *count = a["count"].get<int>();
     const json& v = g["bufferViews"][a["bufferView"].get<int>()];
-    return bin + v["byteOffset"].get<size_t>();
+    *stride = v.value("byteStride", 0);
+    if (!v.contains("extensions")) return bin + v.value("byteOffset", size_t{0});
+    const json& e = v["extensions"]["EXT_meshopt_compression"];
+#ifdef LODSTREAM_HAVE_MESHOPT
+    const size_t n = e["count"].get<size_t>(), es = e["byteStride"].get<size_t>();
+    std::vector<char> out(n * es);
+    const auto* src = reinterpret_cast<const unsigned char*>(bin + e.value("byteOffset", size_t{0}));
+    const size_t len = e["byteLength"].get<size_t>();
+    const int rc = e["mode"] == "TRIANGLES" ? meshopt_decodeIndexBuffer(out.data(), n, es, src, len)
+                                            : meshopt_decodeVertexBuffer(out.data(), n, es, src, len);
+    EXPECT_EQ(rc, 0) << path;
+    *stride = static_cast<int>(es);
+    decoded.push_back(std::move(out));
+    return decoded.back().data();
+#else
+    ADD_FAILURE() << path << ": EXT_meshopt_compression needs meshoptimizer";
+    (void)e;
+    return nullptr;
+#endif
   };
+  double translation[3] = {0, 0, 0}, scale[3] = {1, 1, 1};
+  const json& node = g["nodes"][0];
+  for (int k = 0; k < 3; ++k) {
+    if (node.contains("translation")) translation[k] = node["translation"][k].get<double>();
+    if (node.contains("scale")) scale[k] = node["scale"][k].get<double>();
+  }
   core::LodMesh m;
   for (const json& p : g["meshes"][0]["primitives"]) {
     const int mode = p["mode"].get<int>();
-    int n;
-    const float* pos = reinterpret_cast<const float*>(view(p["attributes"]["POSITION"].get<int>(), &n));
+    int n, stride;
+    const int pa = p["attributes"]["POSITION"].get<int>();
+    const char* pos = view(pa, &n, &stride);
+    const bool shorts = g["accessors"][pa]["componentType"] == 5122;
+    if (stride == 0) stride = shorts ? 6 : 12;
     const uint32_t base = static_cast<uint32_t>(m.vertex_count());
-    m.positions.insert(m.positions.end(), pos, pos + 3 * n);
+    for (int i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) {
+        if (shorts) {
+          int16_t q;
+          std::memcpy(&q, pos + size_t(i) * stride + 2 * k, 2);
+          m.positions.push_back(static_cast<float>(translation[k] + scale[k] * q));
+        } else {
+          float f;
+          std::memcpy(&f, pos + size_t(i) * stride + 4 * k, 4);
+          m.positions.push_back(static_cast<float>(translation[k] + scale[k] * f));
+        }
+      }
     if (mode == 4) {
-      int ni;
-      const uint32_t* idx = reinterpret_cast<const uint32_t*>(view(p["indices"].get<int>(), &ni));
-      for (int i = 0; i < ni; ++i) m.triangles.push_back(base + idx[i]);
+      int ni, is;
+      const int ia = p["indices"].get<int>();
+      const char* idx = view(ia, &ni, &is);
+      const bool u16 = g["accessors"][ia]["componentType"] == 5123;
+      for (int i = 0; i < ni; ++i) {
+        uint32_t v = 0;
+        if (u16) {
+          uint16_t w;
+          std::memcpy(&w, idx + 2 * size_t(i), 2);
+          v = w;
+        } else {
+          std::memcpy(&v, idx + 4 * size_t(i), 4);
+        }
+        m.triangles.push_back(base + v);
+      }
     } else if (mode == 1) {
-      int nt;
-      const float* t = reinterpret_cast<const float*>(view(p["attributes"]["_THICKNESS"].get<int>(), &nt));
+      int nt, ts;
+      const char* t = view(p["attributes"]["_THICKNESS"].get<int>(), &nt, &ts);
       for (int i = 0; i < n; i += 2) {
         m.edges.push_back(base + i);
         m.edges.push_back(base + i + 1);
-        m.thickness.push_back(t[i]);
+        float f;
+        std::memcpy(&f, t + 4 * size_t(i), 4);
+        m.thickness.push_back(f);
       }
     } else {
       for (int i = 0; i < n; ++i) m.points.push_back(base + i);
@@ -101,6 +172,9 @@ core::LodMesh read_tile(const std::string& path) {
   }
   return m;
 }
+
+// The position `x` snapped as the tiles snap it (io/glb_compact.h): to the nearest multiple of `quantum`.
+float snapped(float x, double quantum) { return quantum > 0 ? io::snap_to_grid(x, quantum) : x; }
 
 TEST(ThickPrimitives, EdgesBecomeCrossedQuadsAndPointsOctahedra) {
   core::LodMesh m;
@@ -143,6 +217,35 @@ TEST(ThickPrimitives, EdgesBecomeCrossedQuadsAndPointsOctahedra) {
   for (uint64_t v = 4; v < 12; ++v) EXPECT_NEAR(distance_to_line(v, &m.positions[3], &m.positions[9]), 0.25, 1e-6);
   for (uint64_t v = 12; v < 20; ++v) EXPECT_NEAR(distance_to_line(v, &m.positions[0], &m.positions[9]), 0.05, 1e-6);
   EXPECT_THROW(core::expand_thick(m, {0.1, 0}, nullptr), Failure);
+}
+
+// The side bound of 3D Tiles cuts (core/octree_regions.h SideBound): a node holding more than min_cells is
+// split down to min_depth even when it holds fewer than max_cells; one holding fewer stays whole.
+TEST(OctreeRegions, SideBoundSplitsNodesThatHoldMuch) {
+  const double lo[3] = {0, 0, 0}, hi[3] = {1, 1, 1};
+  const core::SceneCube cube = core::scene_cube(lo, hi);
+  std::vector<uint64_t> codes;
+  for (int i = 0; i < 10; ++i) {
+    const double p[3] = {0.01 + 0.001 * i, 0.02, 0.03};  // ten cells near one corner
+    codes.push_back(core::point_code(cube, p));
+  }
+  const double far[3] = {0.9, 0.9, 0.9};  // and one in the opposite corner
+  codes.push_back(core::point_code(cube, far));
+  std::sort(codes.begin(), codes.end());
+  EXPECT_EQ(core::cut_regions(codes, {}, 100).size(), 1u);
+  const std::vector<core::RegionKey> cut = core::cut_regions(codes, {}, 100, core::SideBound{3, 5});
+  // The root and the corner's octants split down to depth 3; the far octant (one cell) stays at depth 1.
+  EXPECT_EQ(cut.size(), 7u + 7u + 8u);
+  for (const core::RegionKey& k : cut) {
+    const uint64_t n = static_cast<uint64_t>(std::count_if(codes.begin(), codes.end(), [&](uint64_t c) {
+      return c >= core::region_code(k) && c < core::region_code(k) + core::region_span(k);
+    }));
+    if (n > 5) EXPECT_EQ(k.depth, 3u);
+  }
+  EXPECT_NE(std::find(cut.begin(), cut.end(), core::RegionKey{1, 1, 1, 1}), cut.end());
+  // Nested in a coarser cut, as without the bound.
+  const std::vector<core::RegionKey> finer = core::cut_regions(codes, cut, 100, core::SideBound{4, 5});
+  EXPECT_GT(finer.size(), cut.size());
 }
 
 TEST(TilesetWriter, BoxesAreInTheZUpFrame) {
@@ -229,6 +332,8 @@ std::map<std::string, std::string> files_under(const std::string& dir) {
   return f;
 }
 
+double s_cell_size(const SimplifyReport& r, size_t level) { return r.levels[level].cell_size; }
+
 std::string sample_room() { return source_dir() + "/tests/data/sample-room.ply"; }
 
 TEST(Tiles, UnionOfALevelsTilesIsTheLevel) {
@@ -241,7 +346,18 @@ TEST(Tiles, UnionOfALevelsTilesIsTheLevel) {
   EXPECT_EQ(report.tiles.tiles, tiles.size());
   for (size_t l = 0; l < report.levels.size(); ++l) {
     SCOPED_TRACE("level " + std::to_string(l));
-    const core::LodMesh level = io::read_lod_mesh(dir.file("out/lod" + std::to_string(l) + ".ply"));
+    core::LodMesh level = io::read_lod_mesh(dir.file("out/lod" + std::to_string(l) + ".ply"));
+    // The tiles' positions are the level's snapped to the level's grid (the same step in every tile).
+    double quantum = -1;
+    for (const Tile& t : tiles)
+      if (t.level == static_cast<int>(l) && !t.uri.empty()) {
+        const double q = t.node["extras"]["quantum"].get<double>();
+        if (quantum >= 0) EXPECT_EQ(q, quantum);
+        quantum = q;
+      }
+    EXPECT_GT(quantum, 0);
+    EXPECT_LE(quantum, s_cell_size(report, l) / 32);
+    for (float& x : level.positions) x = snapped(x, quantum);
     std::array<std::multiset<Prim>, 3> got;
     std::multiset<std::pair<Prim, float>> thick, expected_thick;
     uint64_t largest = 0;
@@ -312,6 +428,135 @@ TEST(Tiles, GeometricErrorBoundsTheReportsHausdorff) {
     std::cout << "level " << l << ": cell " << s.levels[l].cell_size << ", Hausdorff max " << h << ", tile error "
               << level_error << " (ratio " << h / level_error << ")\n";
     EXPECT_LE(h, level_error) << "level " << l;
+  }
+}
+
+// The sample room as simplify reads it: its binary PLY's polygons (float x y z; uchar count, int indices)
+// triangulated by core::triangulate_polygon, as ingest does (a fan would cover the outside of concave faces).
+core::LodMesh sample_room_triangulated() {
+  const std::string b = slurp(sample_room());
+  const size_t body = b.find("end_header\n") + 11;
+  const auto count = [&](const std::string& element) {
+    const size_t at = b.find("element " + element + " ");
+    return std::stoull(b.substr(at + 9 + element.size(), 20));
+  };
+  const uint64_t vertices = count("vertex"), faces = count("face");
+  core::LodMesh m;
+  m.positions.resize(3 * vertices);
+  std::memcpy(m.positions.data(), b.data() + body, 12 * vertices);
+  size_t at = body + 12 * vertices;
+  std::vector<int32_t> ids;
+  std::vector<double> xyz;
+  std::vector<uint32_t> local;
+  core::PolygonScratch scratch;
+  for (uint64_t f = 0; f < faces; ++f) {
+    const uint32_t n = static_cast<unsigned char>(b[at]);
+    ids.resize(n);
+    std::memcpy(ids.data(), b.data() + at + 1, 4 * size_t{n});
+    at += 1 + 4 * size_t{n};
+    if (n < 3) continue;
+    xyz.resize(3 * n);
+    for (uint32_t i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) xyz[3 * i + k] = m.positions[3 * size_t(ids[i]) + k];
+    local.resize(3 * (n - 2));
+    core::triangulate_polygon(xyz.data(), n, local.data(), &scratch);
+    for (uint32_t c : local) m.triangles.push_back(static_cast<uint32_t>(ids[c]));
+  }
+  EXPECT_EQ(at, b.size());
+  EXPECT_EQ(m.triangle_count(), 261865u);  // lodstream info: 261,865 triangles from 141,261 polygons
+  return m;
+}
+
+// Each tile's geometricError bounds the distance between its content and the original, measured both ways
+// with closest-point queries (Embree) on the sample room cut into many tiles, default encoding (snapped,
+// meshopt) and thick edges: the corners, centroid and random points (16 a triangle in a tile's first 500
+// triangles, 1 after) of each tile's triangles lie within the tile's error of the original; the corners,
+// centroid and a random point of every fifth triangle of the original lie, from the level (all its tiles),
+// within the largest error of the tiles whose content box grown by their error holds them (the image of a
+// point lies in some tile, within that tile's error). Errors are positive (no content is the original's
+// resolution) and never grow from parent to child (check_tree).
+TEST(Tiles, EachTilesErrorBoundsItsMeasuredDistance) {
+  TempDir dir;
+  SimplifyReport s;
+  ASSERT_TRUE(run_simplify(sample_room(), dir.file("out"), SimplifyOptions::TileLines::triangles, Options{}, &s).ok());
+  const std::vector<Tile> tiles = check_tree(dir.file("out/tiles"));
+  const core::LodMesh original = sample_room_triangulated();
+  ASSERT_GT(original.triangle_count(), 0u);
+  core::RayScene orig;
+  orig.add_triangles(original.positions, original.triangles);
+  orig.commit();
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(0, 1);
+  // Random points on triangle t of m, plus its corners and centroid, appended to `out`.
+  auto sample = [&](const core::LodMesh& m, uint64_t t, int n, std::vector<std::array<float, 3>>& out) {
+    const float* c[3] = {&m.positions[3 * uint64_t{m.triangles[3 * t]}], &m.positions[3 * uint64_t{m.triangles[3 * t + 1]}],
+                         &m.positions[3 * uint64_t{m.triangles[3 * t + 2]}]};
+    for (int i = 0; i < n + 4; ++i) {
+      double w[3];
+      if (i < 3) w[0] = w[1] = w[2] = 0, w[i] = 1;
+      else if (i == 3) w[0] = w[1] = w[2] = 1.0 / 3;
+      else {
+        double a = u(rng), b = u(rng);
+        if (a + b > 1) a = 1 - a, b = 1 - b;
+        w[0] = 1 - a - b, w[1] = a, w[2] = b;
+      }
+      std::array<float, 3> p;
+      for (int k = 0; k < 3; ++k) p[k] = static_cast<float>(w[0] * c[0][k] + w[1] * c[1][k] + w[2] * c[2][k]);
+      out.push_back(p);
+    }
+  };
+  for (size_t l = 0; l < s.levels.size(); ++l) {
+    SCOPED_TRACE("level " + std::to_string(l));
+    struct Content {
+      core::LodMesh mesh;
+      double error, lo[3], hi[3];
+    };
+    std::vector<Content> contents;
+    core::LodMesh level;
+    double worst_ratio = 0;
+    for (const Tile& t : tiles) {
+      if (t.level != static_cast<int>(l)) continue;
+      const double error = t.node["geometricError"].get<double>();
+      EXPECT_GT(error, 0) << t.uri;
+      if (t.uri.empty()) continue;
+      Content c{read_tile(dir.file("out/tiles/" + t.uri)), error, {INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
+      ASSERT_GT(c.mesh.triangle_count(), 0u) << t.uri;
+      for (uint64_t v = 0; v < c.mesh.vertex_count(); ++v)
+        for (int k = 0; k < 3; ++k) c.lo[k] = std::min<double>(c.lo[k], c.mesh.positions[3 * v + k]), c.hi[k] = std::max<double>(c.hi[k], c.mesh.positions[3 * v + k]);
+      // Content to original.
+      std::vector<std::array<float, 3>> pts;
+      for (uint64_t f = 0; f < c.mesh.triangle_count(); ++f) sample(c.mesh, f, f < 500 ? 16 : 1, pts);
+      double worst = 0;
+      for (const auto& p : pts) worst = std::max<double>(worst, orig.closest_distance(p.data()));
+      EXPECT_LE(worst, error) << t.uri;
+      worst_ratio = std::max(worst_ratio, worst / error);
+      const uint32_t base = static_cast<uint32_t>(level.vertex_count());
+      level.positions.insert(level.positions.end(), c.mesh.positions.begin(), c.mesh.positions.end());
+      for (uint32_t id : c.mesh.triangles) level.triangles.push_back(base + id);
+      contents.push_back(std::move(c));
+    }
+    ASSERT_FALSE(contents.empty());
+    // Original to the level, each point against the largest error of a tile that can hold its image.
+    core::RayScene lod;
+    lod.add_triangles(level.positions, level.triangles);
+    lod.commit();
+    std::vector<std::array<float, 3>> pts;
+    for (uint64_t f = 0; f < original.triangle_count(); f += 5) sample(original, f, 1, pts);
+    double worst_back = 0;
+    for (const auto& p : pts) {
+      double bound = -1;
+      for (const Content& c : contents) {
+        bool in = true;
+        for (int k = 0; k < 3; ++k) in = in && p[k] >= c.lo[k] - c.error && p[k] <= c.hi[k] + c.error;
+        if (in) bound = std::max(bound, c.error);
+      }
+      const double d = lod.closest_distance(p.data());
+      ASSERT_GE(bound, 0) << "an original point near no tile of the level";
+      EXPECT_LE(d, bound);
+      worst_back = std::max(worst_back, d / bound);
+    }
+    std::cout << "level " << l << ": " << contents.size() << " tiles; largest measured distance / geometricError: tile to original "
+              << worst_ratio << ", original to tiles " << worst_back << "\n";
   }
 }
 

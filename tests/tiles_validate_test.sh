@@ -3,7 +3,7 @@
 # ../shared/tools/3d-tiles-validator/README.md: no errors and no warnings on the tileset, its contents
 # included) and the Khronos glTF-Validator on every tile (tools/validate_gltf.js: no errors, no warnings),
 # on the sample room cut into several tiles, with thick edges and points (the default) and with
-# LINES/POINTS. Prints "skipped:" and exits 77 (ctest SKIP_RETURN_CODE) when node or the validators are not
+# LINES/POINTS, meshopt tiles (the default), and quantized ones. Prints "skipped:" and exits 77 (ctest SKIP_RETURN_CODE) when node or the validators are not
 # installed; nothing is downloaded here (install with tools/install_tiles_tools.sh).
 # Usage: tiles_validate_test.sh LODSTREAM_CLI SOURCE_DIR [SCENE]   (SCENE: default the sample room)
 set -uo pipefail
@@ -15,15 +15,15 @@ if [ ! -f "$validator/build/main.js" ] || [ ! -f "$validator/.installed" ]; then
 fi
 work=$(mktemp -d); trap 'rm -rf "$work"' EXIT
 status=0; gltf_skipped=0
-for lines in triangles lines; do
-  out=$work/$lines
-  "$cli" simplify "$scene" -o "$out" --tiles --tile-lines "$lines" --tile-triangles 10000 --no-ply --no-glb --no-space-check >/dev/null \
-    || { echo "FAIL: simplify --tiles --tile-lines $lines"; exit 1; }
-  node "$validator/build/main.js" --tilesetFile "$out/tiles/tileset.json" --reportFile "$work/$lines.json" >/dev/null 2>&1
-  report=$(cat "$work/$lines.json" 2>/dev/null)
-  counts=$(node -e 'const r=require(process.argv[1]);console.log(r.numErrors,r.numWarnings)' "$work/$lines.json" 2>/dev/null)
+for run in triangles lines triangles-quantized; do
+  out=$work/$run; lines=${run%%-*}; encoding=meshopt; [ "$run" = triangles-quantized ] && encoding=quantized
+  "$cli" simplify "$scene" -o "$out" --tiles --tile-lines "$lines" --tile-encoding $encoding --tile-triangles 10000 --no-ply --no-glb \
+    --no-space-check >/dev/null || { echo "FAIL: simplify --tiles --tile-lines $lines --tile-encoding $encoding"; exit 1; }
+  node "$validator/build/main.js" --tilesetFile "$out/tiles/tileset.json" --reportFile "$work/$run.json" >/dev/null 2>&1
+  report=$(cat "$work/$run.json" 2>/dev/null)
+  counts=$(node -e 'const r=require(process.argv[1]);console.log(r.numErrors,r.numWarnings)' "$work/$run.json" 2>/dev/null)
   tiles=$(find "$out/tiles" -name '*.glb' | wc -l)
-  echo "3d-tiles-validator ($lines, $tiles tiles): errors warnings = $counts"
+  echo "3d-tiles-validator ($run, $tiles tiles): errors warnings = $counts"
   if [ "$counts" != "0 0" ]; then echo "$report" | head -c 4000; echo; status=1; fi
   r=$(node "$src/tools/validate_gltf.js" $(find "$out/tiles" -name '*.glb' | sort)); code=$?
   if [ $code -eq 77 ]; then gltf_skipped=1; continue; fi
@@ -33,7 +33,7 @@ let s = ""; process.stdin.on("data", (d) => s += d).on("end", () => {
   let e = 0, w = 0; for (const i of all) { e += i.numErrors; w += i.numWarnings; }
   console.log(e, w);
 });')
-  echo "glTF-Validator ($lines, $tiles tiles): errors warnings = $counts"
+  echo "glTF-Validator ($run, $tiles tiles): errors warnings = $counts"
   if [ $code -ne 0 ] || [ "$counts" != "0 0" ]; then echo "$r" | grep -B2 -A12 '"numErrors": [1-9]\|"numWarnings": [1-9]' | head -60; status=1; fi
 done
 [ $gltf_skipped -eq 1 ] && echo "notice: glTF-Validator not installed (tools/install-deps.sh --test): tiles checked by the 3D Tiles validator only"

@@ -5,9 +5,10 @@
 // tilesLoaded, renders, saves a screenshot and counts the pixels that differ from the background; the
 // local HTTP server counts the tile requests and bytes it served for that view.
 //
-// Usage: node tools/cesium_tiles.js TILES_DIR OUT_DIR [NAME:DISTANCE[:TX,TY,TZ] ...]
+// Usage: node tools/cesium_tiles.js TILES_DIR OUT_DIR [NAME:DISTANCE[:TX,TY,TZ|:dense] ...]
 //   DISTANCE in units of the tileset's bounding-sphere radius (default near:0.08 district:0.4 whole:2.5),
-//   T the target offset from the sphere's center, also in radii (tileset frame, Z up; default 0,0,0).
+//   T the target offset from the sphere's center, also in radii (tileset frame, Z up; default 0,0,0);
+//   `dense`: the target is the center of the level-0 tile with the most triangles (tile extras).
 // Prints one JSON object: {"views": [{name, distance, tiles_loaded, tiles, bytes, nonblank, screenshot}]}.
 // Exit status: 0 done (the caller judges the figures), 2 bad usage or failure, 77 cesium, puppeteer-core or
 // Chromium not installed (the output then starts with "skipped:"). Packages are looked up in
@@ -45,7 +46,21 @@ async function view(distance, offset) {
   const tileset = await Cesium.Cesium3DTileset.fromUrl('/tiles/tileset.json');
   viewer.scene.primitives.add(tileset);
   const s = tileset.boundingSphere;
-  const target = Cesium.Cartesian3.add(s.center, new Cesium.Cartesian3(offset[0] * s.radius, offset[1] * s.radius,
+  let center = s.center;
+  if (offset === 'dense') {
+    // The center of the finest level's tile with the most triangles (extras written by lodstream): a
+    // place with buildings, where the sphere's center of a scene with outlying parts may be empty air.
+    let best = null;
+    const visit = (t) => {
+      const e = t.extras;
+      if (e && e.level === 0 && (!best || e.triangles > best.extras.triangles)) best = t;
+      for (const c of t.children) visit(c);
+    };
+    visit(tileset.root);
+    if (best) center = best.boundingSphere.center;
+    offset = [0, 0, 0];
+  }
+  const target = Cesium.Cartesian3.add(center, new Cesium.Cartesian3(offset[0] * s.radius, offset[1] * s.radius,
                                        offset[2] * s.radius), new Cesium.Cartesian3());
   // A local frame at the target with the tileset's axes (Z up), not the globe's east-north-up there
   // (undefined near the Earth's center, where an untransformed tileset lies).
@@ -73,13 +88,13 @@ async function view(distance, offset) {
 async function main() {
   const args = process.argv.slice(2);
   if (args.length < 2) {
-    console.error('usage: node tools/cesium_tiles.js TILES_DIR OUT_DIR [NAME:DISTANCE[:TX,TY,TZ] ...]');
+    console.error('usage: node tools/cesium_tiles.js TILES_DIR OUT_DIR [NAME:DISTANCE[:TX,TY,TZ|:dense] ...]');
     return 2;
   }
   const [tiles, out] = args;
   const views = (args.length > 2 ? args.slice(2) : ['near:0.08', 'district:0.4', 'whole:2.5']).map((v) => {
     const [name, d, t] = v.split(':');
-    return {name, distance: Number(d), offset: t ? t.split(',').map(Number) : [0, 0, 0]};
+    return {name, distance: Number(d), offset: t === 'dense' ? t : t ? t.split(',').map(Number) : [0, 0, 0]};
   });
   const cesium = findModule('cesium'), puppeteerDir = findModule('puppeteer-core');
   const chromium = process.env.CHROMIUM || '/usr/bin/chromium';

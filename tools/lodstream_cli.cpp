@@ -342,6 +342,10 @@ int main(int argc, char** argv) {
   simplify_cmd->add_flag("--tiles", so.write_tiles, "Also write 3D Tiles 1.1: tiles/tileset.json and one GLB per tile");
   simplify_cmd->add_option("--tile-lines", tile_lines, "Edges and points in tiles: triangles (thick, default) or lines (glTF LINES/POINTS)")
       ->check(CLI::IsMember({"triangles", "lines"}));
+  std::string tile_encoding = "meshopt";
+  simplify_cmd->add_option("--tile-encoding", tile_encoding,
+                           "Tile GLBs: meshopt (quantized and EXT_meshopt_compression, default), quantized (KHR_mesh_quantization) or plain (floats)")
+      ->check(CLI::IsMember({"meshopt", "quantized", "plain"}));
   std::string tiles_up = "y";
   simplify_cmd->add_option("--tiles-up", tiles_up, "The input's up axis for tiles: y (glTF's, default) or z (rotated upright)")
       ->check(CLI::IsMember({"y", "z"}));
@@ -511,6 +515,9 @@ int main(int argc, char** argv) {
     so.write_ply = !no_ply;
     so.write_glb = !no_glb;
     so.tiles_z_up = tiles_up == "z";
+    so.tile_encoding = tile_encoding == "plain"       ? lodstream::SimplifyOptions::TileEncoding::plain
+                       : tile_encoding == "quantized" ? lodstream::SimplifyOptions::TileEncoding::quantized
+                                                      : lodstream::SimplifyOptions::TileEncoding::meshopt;
     so.tile_lines = tile_lines == "lines" ? lodstream::SimplifyOptions::TileLines::lines : lodstream::SimplifyOptions::TileLines::triangles;
     if (!tiles_transform_text.empty() && !parse_list(tiles_transform_text, &so.tiles_transform)) {
       std::fprintf(stderr, "lodstream: --tiles-transform: cannot read '%s' as a list of numbers\n", tiles_transform_text.c_str());

@@ -167,6 +167,10 @@ struct SimplifyOptions {
   // longitude, latitude (degrees) and height (metres) placing the scene's east-north-up frame on WGS84.
   bool write_tiles = false;
   enum class TileLines { triangles, lines } tile_lines = TileLines::triangles;
+  // Tile GLBs: float (plain), KHR_mesh_quantization (quantized: positions snapped to a grid of the level's
+  // cell size / 32 or finer, SHORT; normals BYTE; UNSIGNED_SHORT indices where they fit), or quantized and
+  // EXT_meshopt_compression (meshopt, the default; quantized when built without meshoptimizer).
+  enum class TileEncoding { plain, quantized, meshopt } tile_encoding = TileEncoding::meshopt;
   std::vector<double> tiles_transform;
   // The input's up axis for tiles: Y (glTF's, default) or Z (common in CAD, PLY and the sample scenes): a Z-up
   // input gets a root rotation so that it stands upright in a 3D Tiles viewer (the GLBs are unchanged).
