@@ -39,6 +39,12 @@ struct EdgeSums {
 struct Distances {
   double a = 0, b = 0;
 };
+// A corner of a primitive that collapsed to a kept edge: the edge, the corner's canonical vertex (the
+// first stored vertex at its position), and its position.
+struct Corner {
+  uint32_t edge, vertex;
+  double p[3];
+};
 
 struct Block {
   int kind = 0;  // 0 triangles, 1 segments, 2 points
@@ -51,12 +57,10 @@ struct BlockOut {
   std::vector<uint32_t> points;
   std::vector<uint32_t> quadric_cells;
   std::vector<core::Quadric> quadrics;
-  std::vector<uint32_t> kept_edges;  // passes B and C: kept edge ids, and per id its sums (B) or distances (C)
-  std::vector<EdgeSums> sums;
-  std::vector<Distances> distances;
+  std::vector<Corner> corners;  // pass B: the block's distinct corners of kept edges, in primitive order
   void clear() {
-    triangles.clear(), edges.clear(), sums.clear(), points.clear();
-    quadric_cells.clear(), quadrics.clear(), kept_edges.clear(), distances.clear();
+    triangles.clear(), edges.clear(), points.clear();
+    quadric_cells.clear(), quadrics.clear(), corners.clear();
   }
 };
 
@@ -64,12 +68,13 @@ struct Scratch {
   FlatMap<3, false> triangles;
   FlatMap<2> edges;
   FlatMap<1, false> points;
-  FlatMap<1> cells;  // pass A: a cell's quadric slot; passes B and C: a kept edge's slot
+  FlatMap<1> cells;  // pass A: a cell's quadric slot
+  FlatMap<2, false> corners;  // pass B: {kept edge, canonical vertex} pairs seen in the block
   // Pass A: the last point and the last quadric cell of the block. Neighbouring triangles mostly fall in
   // the same cell at coarse levels; these skip the hash table then (same result: the cell is in it).
   uint32_t last_point = UINT32_MAX, last_cell = UINT32_MAX, last_slot = 0;
   void clear() {
-    triangles.clear(), edges.clear(), points.clear(), cells.clear();
+    triangles.clear(), edges.clear(), points.clear(), cells.clear(), corners.clear();
     last_point = last_cell = UINT32_MAX;
   }
 };
@@ -146,6 +151,10 @@ struct LevelState {
   FlatMap<2> k_edges;
   std::vector<uint32_t> kept_points;
   std::vector<EdgeSums> kept_sums;
+  // Pass B: every distinct {kept edge, canonical vertex} pair, in order of first appearance (block order,
+  // then primitive and corner order), found through corner_set.
+  FlatMap<2, false> corner_set;
+  std::vector<std::array<uint32_t, 2>> corners;
   std::vector<std::array<double, 3>> pa, pb;
   std::vector<Distances> distances;
   EmitCounts counts;
@@ -477,102 +486,108 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     any_kept_edges = any_kept_edges || !L.kept_edges.empty();
   }
 
-  // Passes B and C visit the input triangles and segments that collapsed to a kept edge in some level of
-  // the group (an eliminated edge's thickness would go unused), fetching their corners once. For each level
-  // where one did, `visit(level, corner positions, their cells, arity, lower cell, kept edge, slot, o)` gets
-  // the edge's slot in the block's output (o.kept_edges with o.sums or o.distances, in order of first
-  // appearance), so that sums are formed per block in primitive order and merged in block order.
-  // Pass B (`drop` true) also clears the bit of every primitive whose edge was eliminated, so that pass C
-  // visits the kept edges' primitives only (at the finest city level, 3% of those that collapsed).
-  auto for_kept_edges = [&](bool drop, auto&& visit) {
-    return [&, drop, visit](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
-      const size_t arity = static_cast<size_t>(3 - b.kind);
-      const uint64_t first_word = b.first / 64, words = (b.count + 63) / 64;  // b.first is a multiple of 64
-      for (uint64_t w = first_word; w < first_word + words; ++w) {
-        uint64_t any = 0;  // the primitives of this word that collapsed in some level, visited in order
-        for (size_t l = 0; l < nl; ++l) any |= levels[l].collapsed[b.kind][w];
-        for (; any; any &= any - 1) {
-          const uint64_t bit = uint64_t{1} << std::countr_zero(any);
-          const uint32_t* v = &ids[(w * 64 + static_cast<uint64_t>(std::countr_zero(any)) - b.first) * arity];
-          uint64_t r[3];
-          for (size_t k = 0; k < arity; ++k) r[k] = record_of(v[k]);
-          double p[3][3];
-          bool fetched = false;
-          for (size_t l = 0; l < nl; ++l) {
-            LevelState& L = levels[l];
-            uint64_t& word = L.collapsed[b.kind][w];
-            if (!(word & bit)) continue;
-            uint32_t c[3], lo = UINT32_MAX, hi = 0;
-            for (size_t k = 0; k < arity; ++k) c[k] = cell(L, r[k]), lo = std::min(lo, c[k]), hi = std::max(hi, c[k]);
-            const uint32_t e = L.k_edges.find({lo, hi});
-            if (e == FlatMap<2>::empty) {
-              if (drop) word &= ~bit;
-              continue;
-            }
-            if (!fetched)
-              for (size_t k = 0; k < arity; ++k) positions.get(v[k], p[k]);
-            fetched = true;
-            BlockOut& o = outs_l[l];
-            const auto [slot, fresh] = scratch_l[l].cells.insert({e}, static_cast<uint32_t>(o.kept_edges.size()));
-            if (fresh) o.kept_edges.push_back(e), o.sums.emplace_back(), o.distances.emplace_back();
-            visit(L, p, c, arity, lo, e, slot, o);
+  // Pass B visits the input triangles and segments that collapsed to a kept edge in some level of the
+  // group (an eliminated edge's thickness would go unused), fetching their corners once, and collects each
+  // kept edge's distinct corners: a vertex shared by several of its collapsing primitives counts once
+  // (Low & Tan §3.3.1 average over the vertices, not over the triangles), so the thickness does not depend
+  // on how a strip was triangulated. Vertices are told apart by their canonical id (the first stored vertex
+  // at the position), so an input that repeats a position (OBJ seams, STL soups) counts it once too.
+  // A block's corners are deduplicated in the block (Scratch::corners) and then in the level
+  // (LevelState::corner_set) while merging in block order, so that the sums and the corner order do not
+  // depend on the threads. It also clears the bit of every primitive whose edge was eliminated.
+  std::unique_ptr<io::MappedFile> canonical_file;
+  io::Window canonical_window;
+  if (any_kept_edges && !canonical_path.empty() && meta.vertices > 0) {
+    canonical_file = std::make_unique<io::MappedFile>(canonical_path);
+    if (canonical_file->size() != meta.vertices * 4) fail(Status::io_error, canonical_path + ": size does not match store.json");
+    canonical_window = canonical_file->map(0, canonical_file->size());
+  }
+  auto canonical = [&](uint32_t v) {
+    if (!canonical_window.data()) return v;
+    uint32_t c;
+    std::memcpy(&c, canonical_window.data() + 4 * uint64_t{v}, 4);
+    return c;
+  };
+  auto collect_corners = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
+    const size_t arity = static_cast<size_t>(3 - b.kind);
+    const uint64_t first_word = b.first / 64, words = (b.count + 63) / 64;  // b.first is a multiple of 64
+    for (uint64_t w = first_word; w < first_word + words; ++w) {
+      uint64_t any = 0;  // the primitives of this word that collapsed in some level, visited in order
+      for (size_t l = 0; l < nl; ++l) any |= levels[l].collapsed[b.kind][w];
+      for (; any; any &= any - 1) {
+        const uint64_t bit = uint64_t{1} << std::countr_zero(any);
+        const uint32_t* v = &ids[(w * 64 + static_cast<uint64_t>(std::countr_zero(any)) - b.first) * arity];
+        uint64_t r[3];
+        uint32_t cv[3];
+        for (size_t k = 0; k < arity; ++k) r[k] = record_of(v[k]);
+        double p[3][3];
+        bool fetched = false;
+        for (size_t l = 0; l < nl; ++l) {
+          LevelState& L = levels[l];
+          uint64_t& word = L.collapsed[b.kind][w];
+          if (!(word & bit)) continue;
+          uint32_t lo = UINT32_MAX, hi = 0;
+          for (size_t k = 0; k < arity; ++k) lo = std::min(lo, cell(L, r[k])), hi = std::max(hi, cell(L, r[k]));
+          const uint32_t e = L.k_edges.find({lo, hi});
+          if (e == FlatMap<2>::empty) {
+            word &= ~bit;
+            continue;
           }
+          if (!fetched)
+            for (size_t k = 0; k < arity; ++k) cv[k] = canonical(v[k]), positions.get(cv[k], p[k]);
+          fetched = true;
+          for (size_t k = 0; k < arity; ++k)
+            if (scratch_l[l].corners.insert({e, cv[k]}, 0).second)
+              outs_l[l].corners.push_back({e, cv[k], {p[k][0], p[k][1], p[k][2]}});
         }
       }
-    };
+    }
   };
 
-  // Pass B: the corner sums of the kept edges, for P_A and P_B (a corner in the lower cell goes to A).
+  // Pass B: the distinct corners of the kept edges and their sums, for P_A and P_B (a corner in the lower
+  // cell goes to A).
   if (any_kept_edges) {
-    run_blocks("emit", true,
-               for_kept_edges(true, [&](LevelState&, const double (*p)[3], const uint32_t* c, size_t arity, uint32_t lo,
-                                  uint32_t, uint32_t slot, BlockOut& o) {
-                 EdgeSums& e = o.sums[slot];
-                 for (size_t k = 0; k < arity; ++k) {
-                   if (c[k] == lo) add(e.a, p[k]), ++e.na;
-                   else add(e.b, p[k]), ++e.nb;
-                 }
-               }),
-               [&](BlockOut* outs_l) {
-                 for (size_t l = 0; l < nl; ++l) {
-                   const BlockOut& o = outs_l[l];
-                   for (size_t i = 0; i < o.kept_edges.size(); ++i) {
-                     EdgeSums& e = levels[l].kept_sums[o.kept_edges[i]];
-                     add(e.a, o.sums[i].a), add(e.b, o.sums[i].b);
-                     e.na += o.sums[i].na, e.nb += o.sums[i].nb;
-                   }
-                 }
-               });
+    run_blocks("emit", true, collect_corners, [&](BlockOut* outs_l) {
+      for (size_t l = 0; l < nl; ++l) {
+        LevelState& L = levels[l];
+        for (const Corner& c : outs_l[l].corners) {
+          if (!L.corner_set.insert({c.edge, c.vertex}, 0).second) continue;
+          L.corners.push_back({c.edge, c.vertex});
+          EdgeSums& e = L.kept_sums[c.edge];
+          if (cell(L, record_of(c.vertex)) == L.kept_edges[c.edge][0]) add(e.a, c.p), ++e.na;
+          else add(e.b, c.p), ++e.nb;
+        }
+      }
+    });
   }
+  canonical_window.reset();
+  canonical_file.reset();
 
-  // Pass C: mean distances of the collapsed corners to the line through the mean positions.
+  // Pass C: mean distances of the distinct corners to the line through the mean positions, from the corner
+  // list (no pass over the input): distances in parallel, summed per edge in corner order.
   for (LevelState& L : levels) {
+    L.corner_set = FlatMap<2, false>();
     L.pa.resize(L.kept_edges.size()), L.pb.resize(L.kept_edges.size());
     for (size_t i = 0; i < L.kept_edges.size(); ++i)
       for (int k = 0; k < 3; ++k) {
         L.pa[i][k] = L.kept_sums[i].na ? L.kept_sums[i].a[k] / static_cast<double>(L.kept_sums[i].na) : 0;
         L.pb[i][k] = L.kept_sums[i].nb ? L.kept_sums[i].b[k] / static_cast<double>(L.kept_sums[i].nb) : 0;
       }
-  }
-  if (any_kept_edges) {
-    run_blocks("emit", true,
-               for_kept_edges(false, [&](LevelState& L, const double (*p)[3], const uint32_t* c, size_t arity, uint32_t lo,
-                                  uint32_t e, uint32_t slot, BlockOut& o) {
-                 for (size_t k = 0; k < arity; ++k) {
-                   const double d = distance_to_line(p[k], L.pa[e].data(), L.pb[e].data());
-                   if (c[k] == lo) o.distances[slot].a += d;
-                   else o.distances[slot].b += d;
-                 }
-               }),
-               [&](BlockOut* outs_l) {
-                 for (size_t l = 0; l < nl; ++l) {
-                   const BlockOut& o = outs_l[l];
-                   for (size_t i = 0; i < o.kept_edges.size(); ++i) {
-                     levels[l].distances[o.kept_edges[i]].a += o.distances[i].a;
-                     levels[l].distances[o.kept_edges[i]].b += o.distances[i].b;
-                   }
-                 }
-               });
+    std::vector<double> d(L.corners.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, L.corners.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        const auto [e, v] = L.corners[i];
+        double p[3];
+        positions.get(v, p);
+        d[i] = distance_to_line(p, L.pa[e].data(), L.pb[e].data());
+      }
+    });
+    for (size_t i = 0; i < L.corners.size(); ++i) {
+      const auto [e, v] = L.corners[i];
+      if (cell(L, record_of(v)) == L.kept_edges[e][0]) L.distances[e].a += d[i];
+      else L.distances[e].b += d[i];
+    }
+    std::vector<std::array<uint32_t, 2>>().swap(L.corners);
   }
   positions.release();
   for (BlockOut& o : outs[0]) o = BlockOut();

@@ -7,10 +7,11 @@
 // - Elimination: no two triangles on the same three cells (the first in store order is kept, with its
 //   winding), no two edges on the same two cells, no edge that is a side of an output triangle, no point
 //   on a cell an output triangle or edge uses.
-// - Thickness (§3.3.1): for an edge between cells A and B, over the corners (in A or B) of every input
-//   triangle and segment that collapsed to it: P_A, P_B the mean corner positions in A and in B, D_A, D_B
-//   the mean distances of those corners to the line P_A P_B; thickness = D_A + D_B. (A vertex shared by k
-//   collapsing triangles counts k times.)
+// - Thickness (§3.3.1): for an edge between cells A and B, over the distinct corner vertices (in A or B)
+//   of the input triangles and segments that collapsed to it: P_A, P_B the mean positions of those in A and
+//   in B, D_A, D_B their mean distances to the line P_A P_B; thickness = D_A + D_B. A vertex shared by
+//   several collapsing primitives counts once (vertices told apart by position, through the weld's
+//   canonical ids), so a strip of width w has thickness w however it is triangulated.
 // - Representatives: center (the cell's center vertex), mean (grade-weighted mean of the cell's vertices;
 //   the plain mean when every grade is 0), quadric (Lindstrom 2000: area-weighted plane quadrics of every
 //   input triangle touching the cell, minimised around the cell's mean and clamped into the cell's box).
@@ -23,9 +24,9 @@
 // Memory: the group's packed cluster maps (bit_width(cells) bits per stored vertex and level, kept in
 // EmitScratch between groups) and per level one bit per input triangle and segment (collapsed to an edge
 // or not), plus what grows with the output: at the peak (classification), the triangle and edge dedupe
-// tables and the quadrics. Elimination runs before the thickness passes
-// (corner sums, then distances), which visit only the primitives that collapsed to an edge and keep sums
-// for the kept edges only.
+// tables and the quadrics. Elimination runs before the thickness passes: pass B visits only the
+// primitives that collapsed to a kept edge and keeps their distinct corners (a set of {edge, vertex} pairs
+// and a list of them, about 40 bytes a corner); pass C reads that list, not the input.
 #pragma once
 
 #include <cstdint>
