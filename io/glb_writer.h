@@ -15,7 +15,13 @@
 //   LINES (mode 1) with POSITION and _THICKNESS (SCALAR float), two vertices per edge, both carrying the
 //   edge's thickness (a vertex shared by edges of different thickness is thus repeated), no indices;
 //   POINTS (mode 0) with POSITION, one vertex per point, no indices. An empty kind is left out;
-// - one material, {doubleSided: true}, used by every primitive;
+// - without a material table: one material, {doubleSided: true}, used by every primitive;
+// - with one (core/mesh.h; every level must carry the same table): the table as glTF materials (name,
+//   baseColorFactor, metallicFactor, roughnessFactor, alphaMode and alphaCutoff when not opaque,
+//   doubleSided), and per level one TRIANGLES, one LINES and one POINTS primitive per material used (all
+//   triangle primitives first, in material order, then the lines, then the points), each with its own
+//   compacted vertex arrays;
+// - with vertex colours, COLOR_0 (normalized unsigned byte VEC4) on every primitive;
 // - one buffer (the BIN chunk); one bufferView per accessor, 4-byte aligned, with its target.
 // The bytes depend only on the arguments (no time stamps, fixed JSON key order).
 //

@@ -8,6 +8,9 @@
 //   f a//a b//b c//c   per triangle (`f a b c` without normals)
 //   l a b              per edge (OBJ has no place for the thickness; the PLY and GLB files keep it)
 //   p a                per point
+// With a material table (core/mesh.h): `mtllib <stem>.mtl` at the top, the library written next to the OBJ
+// (before it: newmtl m<id>[_<name>], Kd, d, Pm, Pr per material), and `usemtl` before each primitive whose
+// material differs from the previous one's. With vertex colours: `v x y z r g b` (0..1; alpha is dropped).
 #pragma once
 
 #include <string>
@@ -22,5 +25,7 @@ namespace lodstream::io {
 // Throws Failure(io_error) when the file cannot be written, Failure(internal) when the mesh breaks the
 // conventions of core/mesh.h (array sizes, indices out of range).
 void write_obj(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments);
+// The MTL file that goes with the OBJ file `obj_path`: the same path with the extension .mtl.
+std::string mtl_path(const std::string& obj_path);
 
 }  // namespace lodstream::io

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "core/mesh.h"
 #include "io/mapped_file.h"
 
 namespace lodstream::io {
@@ -54,6 +55,9 @@ struct ParsedChunk {
   std::vector<uint32_t> triangle_objects;  // one per triangle (per soup triangle)
   std::vector<uint32_t> line_objects;      // one per segment
   std::vector<uint32_t> point_objects;     // one per point
+  // Material ids into Reader::materials() after resolve(), one per primitive; empty means all 0 (always
+  // so when the reader has no materials).
+  std::vector<uint32_t> triangle_materials, line_materials, point_materials;
   std::vector<std::string> object_names;   // reader-defined: names met in this chunk, for resolve()
   uint64_t polygons = 0;   // input faces in this chunk (OBJ f, PLY face records, STL facets)
   // Faces of m >= 4 distinct vertices, whose triangles need the positions: pairs (index of the face's first
@@ -105,10 +109,13 @@ class Reader {
 
   // Global object names, index = object id. Readers without objects report one unnamed object.
   const std::vector<std::string>& object_names() const { return object_names_; }
+  // The material table, final after finish(); empty when the input has no materials.
+  const std::vector<core::Material>& materials() const { return materials_; }
 
  protected:
   const MappedFile& file_;
   std::vector<std::string> object_names_{std::string()};
+  std::vector<core::Material> materials_;
 };
 
 // Splits one face of n >= 3 corners (references in the reader's encoding, equal exactly when they name

@@ -55,11 +55,14 @@ struct BlockOut {
   std::vector<std::array<uint32_t, 3>> triangles;  // input winding
   std::vector<std::array<uint32_t, 2>> edges;      // lower cell first
   std::vector<uint32_t> points;
+  // With materials: per triangle, edge and point above, the material of the input primitive that made it.
+  std::vector<uint32_t> triangle_materials, edge_materials, point_materials;
   std::vector<uint32_t> quadric_cells;
   std::vector<core::Quadric> quadrics;
   std::vector<Corner> corners;  // pass B: the block's distinct corners of kept edges, in primitive order
   void clear() {
     triangles.clear(), edges.clear(), points.clear();
+    triangle_materials.clear(), edge_materials.clear(), point_materials.clear();
     quadric_cells.clear(), quadrics.clear(), corners.clear();
   }
 };
@@ -91,6 +94,28 @@ double distance_to_line(const double* x, const double* a, const double* b) {
   const double c[3] = {v[1] * d[2] - v[2] * d[1], v[2] * d[0] - v[0] * d[2], v[0] * d[1] - v[1] * d[0]};
   return std::sqrt((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) / len2);
 }
+
+// The material of each primitive of a kind, from the store's object runs (stream/scene_store.h): a cursor
+// that moves forward through the runs as a block's primitives are visited in order. Every kept triangle,
+// edge and point takes the material of the input primitive it was first made from, in store order (the one
+// whose cells the dedupe kept), so the rule is deterministic and needs no vote.
+class MaterialCursor {
+ public:
+  MaterialCursor(std::span<const ObjectRun> runs, uint64_t first) : runs_(runs) {
+    at_ = static_cast<size_t>(std::upper_bound(runs.begin(), runs.end(), first,
+                                               [](uint64_t p, const ObjectRun& r) { return p < r.first; }) -
+                              runs.begin());
+    at_ = at_ > 0 ? at_ - 1 : 0;
+  }
+  uint32_t operator()(uint64_t primitive) {
+    while (at_ + 1 < runs_.size() && runs_[at_ + 1].first <= primitive) ++at_;
+    return runs_.empty() ? 0 : runs_[at_].material;
+  }
+
+ private:
+  std::span<const ObjectRun> runs_;
+  size_t at_ = 0;
+};
 
 // The group's cluster maps, packed: per stored vertex one record of `bits` bits (at most 64), at bit
 // v * bits of a plain word array, holding each level's cell in its own field. A field of b bits holds the
@@ -142,6 +167,7 @@ struct LevelState {
   std::vector<std::array<uint32_t, 3>> triangles;
   std::vector<std::array<uint32_t, 2>> edges;
   std::vector<uint32_t> points;
+  std::vector<uint32_t> triangle_materials, edge_materials, point_materials;  // with materials, as BlockOut's
   std::vector<core::Quadric> quadrics;
   // One bit per input triangle and segment that collapsed to an edge, so that passes B and C visit only
   // those.
@@ -150,6 +176,7 @@ struct LevelState {
   std::vector<std::array<uint32_t, 2>> kept_edges;  // in edge order; k_edges finds them by cells
   FlatMap<2> k_edges;
   std::vector<uint32_t> kept_points;
+  std::vector<uint32_t> kept_edge_materials, kept_point_materials;
   std::vector<EdgeSums> kept_sums;
   // Pass B: every distinct {kept edge, canonical vertex} pair, in order of first appearance (block order,
   // then primitive and corner order), found through corner_set.
@@ -284,6 +311,11 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       blocks.push_back({kind, first, std::min(kEmitBlock, column_count[kind] - first)});
   }
   const bool quadric = options.representative == Representative::quadric && !options.count_only;
+  const bool materials = !meta.materials.empty() && !options.count_only;
+  std::vector<ObjectRun> material_runs[3];
+  if (materials)
+    for (int kind = 0; kind < 3; ++kind)
+      if (column_count[kind]) material_runs[kind] = read_object_runs(store_dir, kind == 0 ? "triangle" : kind == 1 ? "line" : "point");
 
   // A vertex's record; every level's field is all ones exactly when the vertex has no cell, so the first
   // level's field tells.
@@ -349,17 +381,25 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       const uint64_t p = b.first + i;
       L.collapsed[b.kind][p / 64] |= uint64_t{1} << (p % 64);
     };
-    auto edge = [&](BlockOut& o, Scratch& s, uint32_t c0, uint32_t c1) {
+    auto edge = [&](BlockOut& o, Scratch& s, uint32_t c0, uint32_t c1, uint32_t m) {
       const std::array<uint32_t, 2> key{std::min(c0, c1), std::max(c0, c1)};
-      if (s.edges.insert(key, 0).second) o.edges.push_back(key);
+      if (s.edges.insert(key, 0).second) {
+        o.edges.push_back(key);
+        if (materials) o.edge_materials.push_back(m);
+      }
     };
-    auto point = [&](BlockOut& o, Scratch& s, uint32_t c) {
+    auto point = [&](BlockOut& o, Scratch& s, uint32_t c, uint32_t m) {
       if (c == s.last_point) return;
       s.last_point = c;
-      if (s.points.insert({c}, 0).second) o.points.push_back(c);
+      if (s.points.insert({c}, 0).second) {
+        o.points.push_back(c);
+        if (materials) o.point_materials.push_back(m);
+      }
     };
     const size_t arity = static_cast<size_t>(3 - b.kind);
+    MaterialCursor material_of(material_runs[b.kind], b.first);
     for (size_t i = 0; i < ids.size(); i += arity) {
+      const uint32_t m = materials ? material_of(b.first + i / arity) : 0;
       if (arity == 3) {
         const uint32_t v[3] = {ids[i], ids[i + 1], ids[i + 2]};
         const uint64_t r[3] = {record_of(v[0]), record_of(v[1]), record_of(v[2])};
@@ -390,11 +430,14 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
           if (c[0] != c[1] && c[1] != c[2] && c[0] != c[2]) {
             std::array<uint32_t, 3> key{c[0], c[1], c[2]};
             std::sort(key.begin(), key.end());
-            if (s.triangles.insert(key, 0).second) o.triangles.push_back({c[0], c[1], c[2]});
+            if (s.triangles.insert(key, 0).second) {
+              o.triangles.push_back({c[0], c[1], c[2]});
+              if (materials) o.triangle_materials.push_back(m);
+            }
           } else if (c[0] == c[1] && c[1] == c[2]) {
-            point(o, s, c[0]);
+            point(o, s, c[0], m);
           } else {
-            edge(o, s, c[0], c[0] != c[1] ? c[1] : c[2]);
+            edge(o, s, c[0], c[0] != c[1] ? c[1] : c[2], m);
             mark(L, i / 3);
           }
         }
@@ -403,15 +446,15 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
         for (size_t l = 0; l < nl; ++l) {
           const uint32_t c0 = cell(levels[l], r0), c1 = cell(levels[l], r1);
           if (c0 == c1) {
-            point(outs_l[l], scratch_l[l], c0);
+            point(outs_l[l], scratch_l[l], c0, m);
           } else {
-            edge(outs_l[l], scratch_l[l], c0, c1);
+            edge(outs_l[l], scratch_l[l], c0, c1, m);
             mark(levels[l], i / 2);
           }
         }
       } else {
         const uint64_t r0 = record_of(ids[i]);
-        for (size_t l = 0; l < nl; ++l) point(outs_l[l], scratch_l[l], cell(levels[l], r0));
+        for (size_t l = 0; l < nl; ++l) point(outs_l[l], scratch_l[l], cell(levels[l], r0), m);
       }
     }
   };
@@ -419,15 +462,23 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     for (size_t l = 0; l < nl; ++l) {
       LevelState& L = levels[l];
       const BlockOut& o = outs_l[l];
-      for (const auto& t : o.triangles) {
-        std::array<uint32_t, 3> key = t;
+      for (size_t i = 0; i < o.triangles.size(); ++i) {
+        std::array<uint32_t, 3> key = o.triangles[i];
         std::sort(key.begin(), key.end());
-        if (L.g_triangles.insert(key, 0).second) L.triangles.push_back(t);
+        if (!L.g_triangles.insert(key, 0).second) continue;
+        L.triangles.push_back(o.triangles[i]);
+        if (materials) L.triangle_materials.push_back(o.triangle_materials[i]);
       }
-      for (const auto& e : o.edges)
-        if (L.g_edges.insert(e, static_cast<uint32_t>(L.edges.size())).second) L.edges.push_back(e);
-      for (uint32_t c : o.points)
-        if (L.g_points.insert({c}, 0).second) L.points.push_back(c);
+      for (size_t i = 0; i < o.edges.size(); ++i) {
+        if (!L.g_edges.insert(o.edges[i], static_cast<uint32_t>(L.edges.size())).second) continue;
+        L.edges.push_back(o.edges[i]);
+        if (materials) L.edge_materials.push_back(o.edge_materials[i]);
+      }
+      for (size_t i = 0; i < o.points.size(); ++i) {
+        if (!L.g_points.insert({o.points[i]}, 0).second) continue;
+        L.points.push_back(o.points[i]);
+        if (materials) L.point_materials.push_back(o.point_materials[i]);
+      }
       for (size_t i = 0; i < o.quadric_cells.size(); ++i) L.quadrics[o.quadric_cells[i]].add(o.quadrics[i]);
     }
   });
@@ -470,16 +521,21 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       }
       L.k_edges.insert(L.edges[i], static_cast<uint32_t>(L.kept_edges.size()));
       L.kept_edges.push_back(L.edges[i]);
+      if (materials) L.kept_edge_materials.push_back(L.edge_materials[i]);
       used[L.edges[i][0]] = used[L.edges[i][1]] = 1;
     }
     std::vector<std::array<uint32_t, 2>>().swap(L.edges);
-    for (uint32_t c : L.points) {
+    std::vector<uint32_t>().swap(L.edge_materials);
+    for (size_t i = 0; i < L.points.size(); ++i) {
+      const uint32_t c = L.points[i];
       if (used[c]) {
         ++L.counts.points_covered;
         continue;
       }
       L.kept_points.push_back(c);
+      if (materials) L.kept_point_materials.push_back(L.point_materials[i]);
     }
+    std::vector<uint32_t>().swap(L.point_materials);
     std::vector<uint32_t>().swap(L.points);
     L.kept_sums.resize(L.kept_edges.size());
     L.distances.resize(L.kept_edges.size());
@@ -697,6 +753,12 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     }
     mesh.thickness = std::move(thickness);
     for (uint32_t c : L.kept_points) mesh.points.push_back(end_vertex(c));
+    if (materials) {
+      mesh.materials = meta.materials;
+      mesh.triangle_materials = std::move(L.triangle_materials);
+      mesh.edge_materials = std::move(L.kept_edge_materials);
+      mesh.point_materials = std::move(L.kept_point_materials);
+    }
     std::vector<std::array<uint32_t, 2>>().swap(L.kept_edges);
     std::vector<uint32_t>().swap(L.kept_points);
     // The mesh alone goes to the sink: the cell tables (about 36 bytes a used cell) are freed first.
