@@ -112,7 +112,7 @@ struct Primitive {
   uint32_t position = 0;
   int64_t indices = -1;
   int mode = kTriangles;
-  int64_t material = -1;  // kept for a later materials reader
+  int64_t material = -1;  // index into /materials, or -1: the default material
   uint64_t vertices = 0;  // POSITION count
   uint64_t refs = 0;      // index count, or vertices when not indexed
   uint64_t elements = 0;  // triangles, segments or points
@@ -159,6 +159,7 @@ class GltfReader final : public Reader {
                    const std::string& pointer, const char* what);
   void load_meshes();
   void walk_scene();
+  void load_materials();
 
   Bytes bytes(const View& v, uint64_t begin, uint64_t end) const;
   // Reads elements [first, first + n) of accessor `a` as doubles (components per element), dequantized
@@ -174,6 +175,7 @@ class GltfReader final : public Reader {
   std::vector<View> views_;
   std::vector<Accessor> accessors_;
   std::vector<std::vector<Primitive>> meshes_;
+  uint32_t default_material_ = 0;  // materials_ id of primitives without a material
   std::vector<Instance> instances_;
   uint64_t decoded_bytes_ = 0;  // of EXT_meshopt_compression views
 
@@ -781,9 +783,77 @@ void GltfReader::open() {
   accessors_.resize(acc.is_array() ? acc.size() : 0);
   load_meshes();
   walk_scene();
+  load_materials();
   if (object_names_.empty()) object_names_.emplace_back();
   for (const Instance& inst : instances_)
     for (const Primitive& p : meshes_[inst.mesh]) work_total_ += p.vertices + p.elements;
+}
+
+// Materials (glTF 2.0 §3.9): the metallic-roughness factors, alphaMode, alphaCutoff and doubleSided of every
+// entry of /materials, in order; primitives without one get the spec's default material (white, metallic 1,
+// roughness 1, opaque, single-sided), appended after them. A base colour texture is not read (the levels
+// carry no texture coordinates): the factor alone gives the colour. No /materials and no primitive naming
+// one: no materials at all.
+void GltfReader::load_materials() {
+  const json& mats = member(doc_, "materials", "");
+  if (!mats.is_null() && !mats.is_array()) bad("/materials", "expected an array");
+  const size_t count = mats.is_array() ? mats.size() : 0;
+  bool any_default = false, any_named = false;
+  for (const Instance& inst : instances_)
+    for (const Primitive& p : meshes_[inst.mesh]) {
+      if (p.material >= static_cast<int64_t>(count))
+        bad("/meshes/" + std::to_string(inst.mesh), "material " + std::to_string(p.material) + " does not exist");
+      (p.material < 0 ? any_default : any_named) = true;
+    }
+  if (!any_named) return;
+  auto number = [&](const json& obj, const char* key, const std::string& pointer, double fallback) {
+    const json& v = member(obj, key, pointer);
+    if (v.is_null()) return fallback;
+    if (!v.is_number() || !std::isfinite(v.get<double>())) bad(pointer + "/" + key, "expected a number");
+    return std::clamp(v.get<double>(), 0.0, 1.0);
+  };
+  for (size_t i = 0; i < count; ++i) {
+    const std::string mp = "/materials/" + std::to_string(i);
+    const json& m = mats[i];
+    if (!m.is_object()) bad(mp, "expected an object");
+    core::Material out;
+    out.metallic = 1;  // the glTF defaults
+    out.double_sided = false;
+    const json& name = member(m, "name", mp);
+    if (name.is_string()) out.name = name.get<std::string>();
+    const json& pbr = member(m, "pbrMetallicRoughness", mp);
+    if (pbr.is_object()) {
+      const json& c = member(pbr, "baseColorFactor", mp + "/pbrMetallicRoughness");
+      if (!c.is_null()) {
+        if (!c.is_array() || c.size() != 4) bad(mp + "/pbrMetallicRoughness/baseColorFactor", "expected 4 numbers");
+        for (size_t k = 0; k < 4; ++k) {
+          if (!c[k].is_number() || !std::isfinite(c[k].get<double>()))
+            bad(mp + "/pbrMetallicRoughness/baseColorFactor", "expected 4 numbers");
+          out.base_color[k] = static_cast<float>(std::clamp(c[k].get<double>(), 0.0, 1.0));
+        }
+      }
+      out.metallic = static_cast<float>(number(pbr, "metallicFactor", mp + "/pbrMetallicRoughness", 1));
+      out.roughness = static_cast<float>(number(pbr, "roughnessFactor", mp + "/pbrMetallicRoughness", 1));
+    }
+    const json& mode = member(m, "alphaMode", mp);
+    if (mode.is_string()) {
+      const std::string s = mode.get<std::string>();
+      out.alpha = s == "MASK" ? core::Material::Alpha::mask : s == "BLEND" ? core::Material::Alpha::blend : core::Material::Alpha::opaque;
+    }
+    const json& cutoff = member(m, "alphaCutoff", mp);
+    if (cutoff.is_number() && std::isfinite(cutoff.get<double>()) && cutoff.get<double>() >= 0)
+      out.alpha_cutoff = static_cast<float>(cutoff.get<double>());
+    const json& two = member(m, "doubleSided", mp);
+    if (two.is_boolean()) out.double_sided = two.get<bool>();
+    materials_.push_back(std::move(out));
+  }
+  default_material_ = static_cast<uint32_t>(materials_.size());
+  if (any_default) {
+    core::Material d;
+    d.metallic = 1;
+    d.double_sided = false;
+    materials_.push_back(d);
+  }
 }
 
 bool GltfReader::next_chunk(uint64_t target_bytes, Chunk* chunk) {
@@ -983,6 +1053,10 @@ void GltfReader::parse(const Chunk& chunk, ParsedChunk* out) const {
   }
   std::vector<uint32_t>& objects = arity == 3 ? out->triangle_objects : arity == 2 ? out->line_objects : out->point_objects;
   objects.assign(n, object);
+  if (!materials_.empty()) {
+    std::vector<uint32_t>& materials = arity == 3 ? out->triangle_materials : arity == 2 ? out->line_materials : out->point_materials;
+    materials.assign(n, p.material >= 0 ? static_cast<uint32_t>(p.material) : default_material_);
+  }
   if (arity == 3) out->polygons = n;
 }
 

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <filesystem>
 #include <map>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -15,6 +16,7 @@
 
 #include "lodstream/lodstream.h"
 #include "cli_harness.h"
+#include "reader_harness.h"
 #include "test_util.h"
 
 namespace lodstream {
@@ -140,6 +142,22 @@ TEST(Materials, KeptPrimitiveTakesTheMaterialOfTheFirstInputPrimitiveInStoreOrde
   ASSERT_TRUE(c.ok()) << c.message;
   const Level lc = read_ply(tmp.file("coarse/lod0.ply"));
   EXPECT_EQ(lc.edge_materials, (std::vector<uint32_t>{2}));
+}
+
+TEST(Materials, GltfMaterialsAreReadPerPrimitive) {
+  // bench.gltf (tests/data/gltf): mesh 0 has primitives with materials 2 and 1, mesh 1 one with material 3.
+  const std::string path = test::source_dir() + "/tests/data/gltf/bench.gltf";
+  const test::ReadAll r = test::read_all(path, 1 << 20);
+  ASSERT_EQ(r.materials.size(), 4u);  // every primitive names one: no default material appended
+  EXPECT_EQ(r.materials[1].name, "darkGrey");
+  EXPECT_EQ(r.materials[1].base_color[0], 0.3f);
+  EXPECT_EQ(r.materials[1].metallic, 0.0f);
+  EXPECT_EQ(r.materials[1].roughness, 0.99292892f);
+  EXPECT_FALSE(r.materials[1].double_sided);  // the glTF default
+  EXPECT_EQ(r.materials[2].name, "green");
+  EXPECT_EQ(std::set<uint32_t>(r.triangle_materials.begin(), r.triangle_materials.end()), (std::set<uint32_t>{1, 2, 3}));
+  ASSERT_EQ(r.triangle_materials.size(), r.triangles.size() / 3);
+  test::expect_same(r, test::read_all(path, 4096), "small chunks");
 }
 
 TEST(Materials, InputsWithoutMaterialsWriteNoMaterialFields) {
