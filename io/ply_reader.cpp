@@ -3,13 +3,16 @@
 // open() parses the header (io/ply_header.h) into element layouts and rejects counts the file cannot hold.
 // next_chunk() cuts whole records of one element at a time: by arithmetic for fixed-size binary records, by
 // walking the list counts for variable-size binary records, and by lines for ascii. parse() turns vertex records
-// into positions, face records into triangles and segments by io::add_face (PLY indices are absolute, so they are
+// into positions (and, with red, green, blue [alpha] properties, colours: integer values clamped to 0..255,
+// float values as 0..1 scaled by 255 and rounded; no alpha is 255; vertex records of variable size, which
+// hold a list, give no colour and ingest makes them white), face records into triangles and segments by io::add_face (PLY indices are absolute, so they are
 // final after parse), edge records into lines, and only counts the records of any other element.
 //
 // Truncation and broken list counts are never thrown by next_chunk(): it hands parse() a chunk that claims
 // one record more than the bytes hold, so the error is raised by resolve() in file order, after any earlier
 // error, whatever the chunk size.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <limits>
@@ -50,6 +53,7 @@ struct Element : ply::Element {
   Kind kind = Kind::other;
   uint64_t record_size = 0;  // binary, fixed only
   int px = -1, py = -1, pz = -1, pv1 = -1, pv2 = -1;
+  int pc[4] = {-1, -1, -1, -1};  // red, green, blue, alpha of a vertex
   // Fast paths: vertex with x, y, z all float (1) or all double (2) in fixed records; face whose only
   // property is `list (u)char (u)int` (1 = int items, 2 = uint items).
   uint8_t fast_vertex = 0;
@@ -167,6 +171,7 @@ class PlyReader final : public Reader {
 
   void open() override;
   bool single_precision() const override { return single_; }
+  bool has_colors() const override { return colors_; }
   bool next_chunk(uint64_t target_bytes, Chunk* chunk) override;
   void parse(const Chunk& chunk, ParsedChunk* out) const override;
   void resolve(ParsedChunk* chunk) override;
@@ -210,6 +215,10 @@ class PlyReader final : public Reader {
   uint64_t vertex_count_ = 0;
   int vertex_element_ = -1;
   bool single_ = false;  // x, y and z all of a type float holds exactly
+  bool colors_ = false;  // the vertex element has red, green and blue
+  // Appends the colours of `n` fixed-size vertex records at p.
+  template <bool Swap>
+  void fixed_colors(const char* p, uint64_t n, const Element& e, ParsedChunk* out) const;
 
   // Splitter state.
   size_t elem_ = 0;
@@ -267,6 +276,15 @@ void PlyReader::finalize_header(ply::Header&& header) {
         e.props[i].role = roles[c];
         *slots[c] = i;
       }
+      const char* color_names[4] = {"red", "green", "blue", "alpha"};
+      const Role color_roles[4] = {Role::red, Role::green, Role::blue, Role::alpha};
+      for (int c = 0; c < 4; ++c) {
+        const int i = find(color_names[c]);
+        if (i >= 0 && !e.props[i].list) e.pc[c] = i;
+      }
+      colors_ = e.pc[0] >= 0 && e.pc[1] >= 0 && e.pc[2] >= 0;
+      for (int c = 0; c < 4 && colors_; ++c)
+        if (e.pc[c] >= 0) e.props[e.pc[c]].role = color_roles[c];
       single_ = true;
       for (int c = 0; c < 3; ++c) {
         const Type t = e.props[*slots[c]].type;
@@ -582,6 +600,26 @@ bool PlyReader::emit_face(int64_t* idx, uint64_t n, ParsedChunk* out, std::strin
   return true;
 }
 
+// A colour component from a property value: integers clamped to 0..255, floats 0..1 scaled and rounded.
+uint8_t color_byte(double v, Type t) {
+  if (t == Type::f32 || t == Type::f64) v *= 255;
+  if (!(v > 0)) return 0;
+  return v >= 255 ? 255 : static_cast<uint8_t>(std::lround(v));
+}
+
+template <bool Swap>
+void PlyReader::fixed_colors(const char* p, uint64_t n, const Element& e, ParsedChunk* out) const {
+  for (uint64_t i = 0; i < n; ++i, p += e.record_size)
+    for (int c = 0; c < 4; ++c) {
+      if (e.pc[c] < 0) {
+        out->colors.push_back(255);
+        continue;
+      }
+      const Property& pr = e.props[e.pc[c]];
+      out->colors.push_back(color_byte(load_double<Swap>(p + pr.offset, pr.type), pr.type));
+    }
+}
+
 template <typename T, bool Swap>
 void PlyReader::fast_vertices(const char* p, uint64_t n, const Element& e, uint64_t base, ParsedChunk* out) const {
   const uint64_t rs = e.record_size;
@@ -751,6 +789,7 @@ void PlyReader::parse_binary(const Chunk& chunk, const Element& e, ParsedChunk* 
           out->positions.insert(out->positions.end(), v, v + 3);
         }
       }
+      if (colors_) fixed_colors<Swap>(b, (out->positions.size() + out->positions32.size()) / 3, e, out);
       if (out->error.set) return;
     } else if (e.kind == Kind::edge) {
       const Property &p1 = e.props[e.pv1], &p2 = e.props[e.pv2];
@@ -851,6 +890,7 @@ void PlyReader::parse_ascii(const Chunk& chunk, const Element& e, ParsedChunk* o
       };
       double xyz[3] = {0, 0, 0};
       int64_t v12[2] = {0, 0};
+      uint8_t rgba[4] = {255, 255, 255, 255};
       idx.clear();
       for (const Property& pr : e.props) {
         double d = 0;
@@ -888,6 +928,10 @@ void PlyReader::parse_ascii(const Chunk& chunk, const Element& e, ParsedChunk* o
             case Role::z: xyz[2] = d; break;
             case Role::v1: v12[0] = iv; break;
             case Role::v2: v12[1] = iv; break;
+            case Role::red: rgba[0] = color_byte(d, pr.type); break;
+            case Role::green: rgba[1] = color_byte(d, pr.type); break;
+            case Role::blue: rgba[2] = color_byte(d, pr.type); break;
+            case Role::alpha: rgba[3] = color_byte(d, pr.type); break;
             default: break;
           }
         }
@@ -905,6 +949,7 @@ void PlyReader::parse_ascii(const Chunk& chunk, const Element& e, ParsedChunk* o
             return;
           }
           out->positions.insert(out->positions.end(), xyz, xyz + 3);
+          if (colors_) out->colors.insert(out->colors.end(), rgba, rgba + 4);
           break;
         case Kind::face:
           if (!emit_face(idx.data(), idx.size(), out, &message)) {

@@ -18,6 +18,7 @@ void ParsedChunk::clear() {
   points.clear();
   triangle_objects.clear();
   triangle_materials.clear(), line_materials.clear(), point_materials.clear();
+  colors.clear();
   line_objects.clear();
   point_objects.clear();
   object_names.clear();

@@ -58,6 +58,8 @@ struct ParsedChunk {
   // Material ids into Reader::materials() after resolve(), one per primitive; empty means all 0 (always
   // so when the reader has no materials).
   std::vector<uint32_t> triangle_materials, line_materials, point_materials;
+  // With Reader::has_colors(): RGBA (0..255) per vertex record parsed in this chunk.
+  std::vector<uint8_t> colors;
   std::vector<std::string> object_names;   // reader-defined: names met in this chunk, for resolve()
   uint64_t polygons = 0;   // input faces in this chunk (OBJ f, PLY face records, STL facets)
   // Faces of m >= 4 distinct vertices, whose triangles need the positions: pairs (index of the face's first
@@ -88,6 +90,9 @@ class Reader {
   // True when every coordinate the file can hold is a 32-bit float (PLY float x/y/z, STL): the store then
   // keeps positions as float, which is exact and half the bytes. Known after open().
   virtual bool single_precision() const { return false; }
+  // True when vertices carry colours (PLY red/green/blue[/alpha]): every chunk then fills
+  // ParsedChunk::colors. Known after open(). Never for soups.
+  virtual bool has_colors() const { return false; }
   // Reads and checks the header, if any. Throws Failure(bad_data) with a location.
   virtual void open() {}
   // Cuts the next chunk of whole records starting where the previous one ended, of about `target_bytes`

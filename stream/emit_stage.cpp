@@ -117,6 +117,40 @@ class MaterialCursor {
   size_t at_ = 0;
 };
 
+// Vertex colours of the cells (stores with colours only), weighted the way the representative is: center
+// takes its center vertex's colour (the cell's first vertex in weight order), mean the grade-weighted mean
+// of its vertices' colours (the plain mean when every grade is 0), quadric the plain mean. Sums are formed
+// serially in weight order, so they do not depend on the threads.
+struct CellColor {
+  double weighted[4] = {0, 0, 0, 0}, weight = 0;
+  double sum[4] = {0, 0, 0, 0}, count = 0;
+  uint8_t first[4] = {0, 0, 0, 0};
+};
+
+uint8_t color_byte(double v) { return v <= 0 ? 0 : v >= 255 ? 255 : static_cast<uint8_t>(std::lround(v)); }
+
+void cell_rgba(const CellColor& c, Representative r, uint8_t* out) {
+  for (int k = 0; k < 4; ++k) {
+    if (r == Representative::center) out[k] = c.first[k];
+    else if (r == Representative::mean && c.weight > 0) out[k] = color_byte(c.weighted[k] / c.weight);
+    else out[k] = color_byte(c.count > 0 ? c.sum[k] / c.count : 255);
+  }
+}
+
+// The colours of the output vertices: triangle vertices (their slots in `vertex_slot`) first, then the
+// vertices edges and points added (out_vertex: slot -> its first output vertex).
+void triangle_vertex_colors(std::span<const uint32_t> vertex_slot, std::span<const uint8_t> slot_rgba, std::vector<uint8_t>* colors) {
+  colors->resize(4 * vertex_slot.size());
+  for (size_t i = 0; i < vertex_slot.size(); ++i) std::memcpy(&(*colors)[4 * i], &slot_rgba[4 * uint64_t{vertex_slot[i]}], 4);
+}
+void end_vertex_colors(std::span<const uint32_t> out_vertex, std::span<const uint8_t> slot_rgba, core::LodMesh* mesh) {
+  const uint64_t triangle_vertices = mesh->colors.size() / 4;
+  mesh->colors.resize(4 * mesh->vertex_count());
+  for (size_t slot = 0; slot < out_vertex.size(); ++slot)
+    if (out_vertex[slot] != UINT32_MAX && out_vertex[slot] >= triangle_vertices)
+      std::memcpy(&mesh->colors[4 * uint64_t{out_vertex[slot]}], &slot_rgba[4 * slot], 4);
+}
+
 // The group's cluster maps, packed: per stored vertex one record of `bits` bits (at most 64), at bit
 // v * bits of a plain word array, holding each level's cell in its own field. A field of b bits holds the
 // cells 0 .. 2^b - 2 and all ones for "no cell", so a level of C cells needs bit_width(C) bits. Packing
@@ -228,6 +262,50 @@ size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t ve
     bits = b, work = w, ++end;
   }
   return end;
+}
+
+// One serial pass over the weight order (order.u32; with the mean representative, the grades of the weight
+// index too) summing every level's cell colours (see CellColor). Memory: the colour column mapped (4 bytes
+// a vertex) and 96 bytes a cell of each level of the group.
+template <class RecordOf, class CellOf>
+void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const std::string& prefix, uint64_t records,
+                     const EmitOptions& options, const std::vector<LevelState>& levels, RecordOf&& record_of,
+                     CellOf&& cell, std::vector<std::vector<CellColor>>& out) {
+  for (size_t l = 0; l < levels.size(); ++l) out[l].assign(levels[l].in.cells, CellColor{});
+  io::MappedFile colors(store_dir + "/colors.rgba8");
+  if (colors.size() != meta.vertices * 4) fail(Status::io_error, colors.path() + ": size does not match store.json");
+  io::MappedFile order(order_path(prefix));
+  if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
+  const bool grades = options.representative == Representative::mean && !options.weight_index.empty();
+  const uint64_t rb = weight_record_bytes(meta.single_precision);
+  std::unique_ptr<io::MappedFile> index;
+  if (grades) {
+    index = std::make_unique<io::MappedFile>(options.weight_index);
+    if (index->size() != records * rb) fail(Status::io_error, index->path() + ": size does not match the weight index");
+  }
+  if (records == 0) return;
+  const io::Window rgba = colors.map(0, colors.size());
+  for (uint64_t first = 0; first < records; first += 1 << 20) {
+    const uint64_t n = std::min<uint64_t>(1 << 20, records - first);
+    const io::Window ids = order.map(first * 4, (first + n) * 4);
+    io::Window g;
+    if (grades) g = index->map(first * rb, (first + n) * rb);
+    for (uint64_t i = 0; i < n; ++i) {
+      uint32_t id;
+      std::memcpy(&id, ids.data() + 4 * i, 4);
+      const uint8_t* c = reinterpret_cast<const uint8_t*>(rgba.data()) + 4 * uint64_t{id};
+      double grade = 0;
+      if (grades) std::memcpy(&grade, g.data() + i * rb, 8);  // WeightRecord*::grade comes first
+      const uint64_t r = record_of(id);
+      for (size_t l = 0; l < levels.size(); ++l) {
+        CellColor& s = out[l][cell(levels[l], r)];
+        if (s.count == 0) std::memcpy(s.first, c, 4);
+        s.count += 1;
+        for (int k = 0; k < 4; ++k) s.sum[k] += c[k], s.weighted[k] += grade * c[k];
+        s.weight += grade;
+      }
+    }
+  }
 }
 
 std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
@@ -648,6 +726,8 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   positions.release();
   for (BlockOut& o : outs[0]) o = BlockOut();
   for (BlockOut& o : outs[1]) o = BlockOut();
+  std::vector<std::vector<CellColor>> cell_colors(meta.colors ? nl : 0);
+  if (meta.colors) sum_cell_colors(store_dir, meta, prefix, records, options, levels, record_of, cell, cell_colors);
 
   for (size_t l = 0; l < nl; ++l) {
     LevelState& L = levels[l];
@@ -735,6 +815,12 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       for (int k = 0; k < 3; ++k) mesh.positions.push_back(static_cast<float>(rep[3 * v + k]));
     mesh.normals = std::move(normals.normals);
     mesh.triangles = std::move(normals.triangles);
+    std::vector<uint8_t> slot_rgba;
+    if (meta.colors) {
+      slot_rgba.resize(4 * slot_cell.size());
+      for (size_t s = 0; s < slot_cell.size(); ++s) cell_rgba(cell_colors[l][slot_cell[s]], options.representative, &slot_rgba[4 * s]);
+      triangle_vertex_colors(normals.vertex, slot_rgba, &mesh.colors);
+    }
     std::vector<uint32_t> out_vertex(slot_cell.size(), UINT32_MAX);
     for (size_t i = 0; i < normals.vertex.size(); ++i)
       if (out_vertex[normals.vertex[i]] == UINT32_MAX) out_vertex[normals.vertex[i]] = static_cast<uint32_t>(i);
@@ -753,6 +839,10 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     }
     mesh.thickness = std::move(thickness);
     for (uint32_t c : L.kept_points) mesh.points.push_back(end_vertex(c));
+    if (meta.colors) {
+      end_vertex_colors(out_vertex, slot_rgba, &mesh);
+      std::vector<CellColor>().swap(cell_colors[l]);
+    }
     if (materials) {
       mesh.materials = meta.materials;
       mesh.triangle_materials = std::move(L.triangle_materials);

@@ -184,6 +184,16 @@ void prepare(const io::ParsedChunk& c, bool soup, bool single, uint64_t first_ve
   narrow_primitives<1>(c.points, c.point_objects, c.point_materials, &p->points, &p->point_runs, p);
 }
 
+// The chunk's vertex colours to the store, one RGBA per vertex record; a record the reader gave no colour
+// (it has none where the others have, e.g. a PLY vertex record of variable size) is white.
+void add_colors(StoreWriter& store, const io::ParsedChunk& c) {
+  const size_t vertices = (c.positions.size() + c.positions32.size()) / 3;
+  if (c.colors.size() == 4 * vertices) return store.add_colors(c.colors);
+  std::vector<uint8_t> rgba(4 * vertices, 255);
+  std::copy_n(c.colors.begin(), std::min(c.colors.size(), rgba.size()), rgba.begin());
+  store.add_colors(rgba);
+}
+
 // A face to triangulate in its plane: its first triangle in triangles.u32 and its corner count.
 struct PlanarFace {
   uint64_t first_triangle;
@@ -528,6 +538,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   progress.report("ingest", 0);
   const bool soup = reader->soup();
   const bool single = reader->single_precision();
+  const bool colors = reader->has_colors() && !soup;
   auto take_slot = [&]() {
     std::lock_guard lock(free_mutex);
     Slot* s = free_slots.back();
@@ -583,6 +594,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
             if (welder) welder->add(c);
             else if (!c.positions32.empty()) store.add_vertices32(c.positions32, s->prepared.vertex_boxes);
             else store.add_vertices(c.positions, s->prepared.positions32, s->prepared.vertex_boxes);
+            if (colors) add_colors(store, c);
             feeder.add(s->prepared);
             const uint64_t done = s->end_offset;
             give_slot(s);

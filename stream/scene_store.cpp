@@ -106,11 +106,17 @@ void StoreWriter::add_triangles(std::span<const uint32_t> ids, std::span<const L
 void StoreWriter::add_lines(std::span<const uint32_t> ids, std::span<const LocalRun> runs) { lines_.add(ids, 2, runs); }
 void StoreWriter::add_points(std::span<const uint32_t> ids, std::span<const LocalRun> runs) { points_.add(ids, 1, runs); }
 
+void StoreWriter::add_colors(std::span<const uint8_t> rgba) {
+  if (!colors_) colors_.emplace(dir_ + "/colors.rgba8", 1 << 18);
+  colors_->write_array(rgba);
+}
+
 void StoreWriter::commit_columns() {
   if (columns_committed_) return;
   for (io::FileWriter* w : {&positions_, &triangles_.ids, &triangles_.runs, &lines_.ids, &lines_.runs, &points_.ids,
                             &points_.runs})
     w->commit();
+  if (colors_) colors_->commit();
   columns_committed_ = true;
 }
 
@@ -122,6 +128,7 @@ StoreMeta StoreWriter::commit(StoreMeta meta) {
   meta.lines = lines_.count;
   meta.points = points_.count;
   meta.bbox = bbox_;
+  meta.colors = colors_.has_value();
   meta.vertex_chunk_bbox = vertex_chunk_bbox_;
   kill_point("store.json");
   io::write_file_atomic(dir_ + "/store.json", store_meta_json(meta));
@@ -185,6 +192,7 @@ std::string store_meta_json(const StoreMeta& m) {
   j["objects_used"] = m.objects_used;
   j["bbox"] = bbox_json(m.bbox);
   j["object_names"] = m.object_names;
+  if (m.colors) j["colors"] = "rgba8";
   if (!m.materials.empty()) {
     ordered_json mats = ordered_json::array();
     for (const core::Material& x : m.materials) mats.push_back(material_json(x));
@@ -232,6 +240,7 @@ bool read_store_meta(const std::string& dir, StoreMeta* m) {
     m->skipped = j.at("skipped").get<uint64_t>();
     m->objects_used = j.at("objects_used").get<uint64_t>();
     m->object_names = j.at("object_names").get<std::vector<std::string>>();
+    m->colors = j.contains("colors");
     m->materials.clear();
     if (j.contains("materials"))
       for (const auto& x : j.at("materials")) m->materials.push_back(material_from_json(x));

@@ -7,6 +7,7 @@
 //
 //   positions.f32|.f64     x y z per vertex: float when the input's coordinates are all 32-bit floats
 //                          (PLY float, STL), else double, so every input value is kept exactly
+//   colors.rgba8           RGBA per vertex (0..255), only when the input has vertex colours
 //   triangles.u32          3 vertex ids per triangle, input order, degenerate triangles removed
 //   triangle_objects.runs  object and material ids as runs: ObjectRun records, one per change of either
 //   lines.u32 / line_objects.runs, points.u32 / point_objects.runs   likewise
@@ -14,6 +15,7 @@
 #pragma once
 
 #include <array>
+#include <optional>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -92,6 +94,7 @@ struct StoreMeta {
   std::vector<std::string> object_names;
   uint64_t objects_used = 0;
   std::vector<core::Material> materials;  // empty: the input has none
+  bool colors = false;                    // colors.rgba8 holds a colour per vertex
   Bbox bbox;
   // Chunk table: the bounding box of each vertex chunk.
   std::vector<Bbox> vertex_chunk_bbox;
@@ -112,6 +115,9 @@ class StoreWriter {
   void add_triangles(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
   void add_lines(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
   void add_points(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
+  // Appends RGBA colours, one per vertex, in vertex order (stores with colours only: the first call creates
+  // colors.rgba8).
+  void add_colors(std::span<const uint8_t> rgba);
   // Renames every column into place without writing store.json, so that a pass may still rewrite a column
   // in place (ingest's triangulation of planar faces); commit() then only writes store.json.
   void commit_columns();
@@ -132,6 +138,7 @@ class StoreWriter {
   std::string dir_;
   bool single_;
   io::FileWriter positions_;
+  std::optional<io::FileWriter> colors_;
   Column triangles_, lines_, points_;
   uint64_t vertices_ = 0;
   std::vector<float> scratch32_;

@@ -481,7 +481,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         if (so.write_ply) ls.files.push_back(stem + ".ply");
         if (so.write_obj) ls.files.push_back(stem + ".obj");
       };
-      const stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
+      stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
+      emit_options.weight_index = work.file("weights.idx");
       run_stage(&report.stages, "emit", [&](StageStats&) {
         const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, emit_options, write_level);
         for (size_t l = 0; l < sizes.size(); ++l) {

@@ -22,6 +22,7 @@ struct ReadAll {
   std::vector<std::string> object_names;
   std::vector<uint32_t> triangle_materials, line_materials, point_materials;  // empty in a chunk: all 0
   std::vector<core::Material> materials;
+  std::vector<uint8_t> colors;
   uint64_t polygons = 0, skipped = 0, chunks = 0;
   uint64_t degenerate = 0, face_segments = 0, planar_faces = 0;
   uint64_t vertex_count() const { return soup ? 0 : positions.size() / 3; }
@@ -42,6 +43,7 @@ inline void append(ReadAll* r, const io::ParsedChunk& parsed) {
     if (from.empty()) to.insert(to.end(), count, 0u);
     else to.insert(to.end(), from.begin(), from.end());
   };
+  add(r->colors, parsed.colors);
   add_materials(r->triangle_materials, parsed.triangle_materials, parsed.triangle_objects.size());
   add_materials(r->line_materials, parsed.line_materials, parsed.line_objects.size());
   add_materials(r->point_materials, parsed.point_materials, parsed.point_objects.size());
@@ -131,6 +133,7 @@ inline void expect_same(const ReadAll& a, const ReadAll& b, const std::string& c
   EXPECT_EQ(a.line_objects, b.line_objects);
   EXPECT_EQ(a.point_objects, b.point_objects);
   EXPECT_EQ(a.object_names, b.object_names);
+  EXPECT_EQ(a.colors, b.colors);
   EXPECT_EQ(a.triangle_materials, b.triangle_materials);
   EXPECT_EQ(a.line_materials, b.line_materials);
   EXPECT_EQ(a.point_materials, b.point_materials);

@@ -3,6 +3,8 @@
 // table, OBJ usemtl with its MTL file, GLB one primitive per material with the glTF material table.
 #include <gtest/gtest.h>
 
+#include <array>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -158,6 +160,98 @@ TEST(Materials, GltfMaterialsAreReadPerPrimitive) {
   EXPECT_EQ(std::set<uint32_t>(r.triangle_materials.begin(), r.triangle_materials.end()), (std::set<uint32_t>{1, 2, 3}));
   ASSERT_EQ(r.triangle_materials.size(), r.triangles.size() / 3);
   test::expect_same(r, test::read_all(path, 4096), "small chunks");
+}
+
+// Two red vertices and a cyan one at the ends of a thin triangle strip, then a blue one: the PLY ascii and
+// binary forms give the same colours (floats scaled by 255, integers clamped, no alpha = 255).
+TEST(Colors, PlyVertexColoursAsciiAndBinary) {
+  test::TempDir tmp;
+  const std::string ascii = tmp.write("a.ply",
+                                      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                                      "property float z\nproperty uchar red\nproperty float green\nproperty int blue\n"
+                                      "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                                      "0 0 0 255 0 300\n1 0 0 10 0.5 -4\n0 1 0 0 1 7\n3 0 1 2\n");
+  const test::ReadAll a = test::read_all(ascii, 1 << 20);
+  EXPECT_EQ(a.colors, (std::vector<uint8_t>{255, 0, 255, 255, 10, 128, 0, 255, 0, 255, 7, 255}));
+  std::string bin = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                    "property float z\nproperty uchar red\nproperty float green\nproperty int blue\n"
+                    "element face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  const float xyz[3][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  const uint8_t red[3] = {255, 10, 0};
+  const float green[3] = {0, 0.5f, 1};
+  const int32_t blue[3] = {300, -4, 7};
+  for (int v = 0; v < 3; ++v) {
+    bin.append(reinterpret_cast<const char*>(xyz[v]), 12);
+    bin.append(reinterpret_cast<const char*>(&red[v]), 1);
+    bin.append(reinterpret_cast<const char*>(&green[v]), 4);
+    bin.append(reinterpret_cast<const char*>(&blue[v]), 4);
+  }
+  const uint8_t n = 3;
+  const int32_t face[3] = {0, 1, 2};
+  bin.append(reinterpret_cast<const char*>(&n), 1);
+  bin.append(reinterpret_cast<const char*>(face), 12);
+  const std::string binary = tmp.write("b.ply", bin);
+  EXPECT_EQ(test::read_all(binary, 1 << 20).colors, a.colors);
+  EXPECT_EQ(test::read_all(binary, 1).colors, a.colors);
+}
+
+// The vertices of an OBJ level written with colours (`v x y z r g b`): x and the colour as 0..255.
+std::vector<std::pair<double, std::array<int, 3>>> obj_vertices(const std::string& path) {
+  std::vector<std::pair<double, std::array<int, 3>>> out;
+  std::istringstream in(test::read_file(path));
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("v ", 0) != 0) continue;
+    std::istringstream v(line.substr(2));
+    double x, y, z, r, g, b;
+    v >> x >> y >> z >> r >> g >> b;
+    out.push_back({x, {static_cast<int>(std::lround(r * 255)), static_cast<int>(std::lround(g * 255)),
+                       static_cast<int>(std::lround(b * 255))}});
+  }
+  return out;
+}
+
+TEST(Colors, CellColourIsWeightedAsTheRepresentative) {
+  // A red triangle far from a thin one whose close vertices b0 = (5,0,0) blue and b1 = (5.01,0,0) cyan
+  // share a cell at cell size 0.5 (the third, (5,1,0) blue, has a cell of its own). The merged cell's
+  // colour follows its representative: center, the colour of the center vertex (the one at the
+  // representative's position); mean, the grade-weighted mean with the position's weights, so with
+  // t = (x - 5) / 0.01 the weight of b1, green = 255 t; quadric, the plain mean, green 127.5 -> 128.
+  test::TempDir tmp;
+  const std::string input = tmp.write("c.ply",
+                                      "ply\nformat ascii 1.0\nelement vertex 6\nproperty float x\nproperty float y\n"
+                                      "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n"
+                                      "element face 2\nproperty list uchar int vertex_indices\nend_header\n"
+                                      "0 0 0 255 0 0\n1 0 0 255 0 0\n0 1 0 255 0 0\n"
+                                      "5 0 0 0 0 255\n5.01 0 0 0 255 255\n5 1 0 0 0 255\n3 0 1 2\n3 3 4 5\n");
+  for (Representative rep : {Representative::center, Representative::mean, Representative::quadric}) {
+    SCOPED_TRACE(static_cast<int>(rep));
+    SimplifyOptions so;
+    so.output_dir = tmp.file("out" + std::to_string(static_cast<int>(rep)));
+    so.representative = rep;
+    so.cell_sizes = {0.5};
+    so.write_obj = true;
+    Options o;
+    o.threads = 1;
+    SimplifyReport report;
+    const Result r = simplify(input, so, o, &report);
+    ASSERT_TRUE(r.ok()) << r.message;
+    const auto v = obj_vertices(so.output_dir + "/lod0.obj");
+    ASSERT_EQ(v.size(), 5u);  // the red triangle's three vertices, then the edge's two ends
+    for (int i = 0; i < 3; ++i) EXPECT_EQ(v[i].second, (std::array<int, 3>{255, 0, 0}));
+    const auto& merged = v[3].first > 4.999 && v[3].first != 5.0 ? v[3] : v[4];
+    const auto& lone = &merged == &v[3] ? v[4] : v[3];
+    EXPECT_EQ(lone.second, (std::array<int, 3>{0, 0, 255}));
+    if (rep == Representative::center) {
+      EXPECT_TRUE(merged.first == 5.0 || std::abs(merged.first - 5.01) < 1e-6) << merged.first;
+      EXPECT_EQ(merged.second, (std::array<int, 3>{0, merged.first == 5.0 ? 0 : 255, 255}));
+    } else if (rep == Representative::mean) {
+      const double t = (merged.first - 5) / 0.01;
+      EXPECT_NEAR(merged.second[1], 255 * t, 0.5 + 255 * 1e-4) << merged.first;
+      EXPECT_EQ(merged.second[2], 255);
+    } else {
+      EXPECT_EQ(merged.second, (std::array<int, 3>{0, 128, 255}));
+    }
+  }
 }
 
 TEST(Materials, InputsWithoutMaterialsWriteNoMaterialFields) {
