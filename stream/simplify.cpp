@@ -480,6 +480,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         files.wait();
         if (so.write_ply) ls.files.push_back(stem + ".ply");
         if (so.write_obj) ls.files.push_back(stem + ".obj");
+        if (so.write_obj && !meta.materials.empty()) ls.files.push_back(stem + ".mtl");
       };
       stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
       emit_options.weight_index = work.file("weights.idx");

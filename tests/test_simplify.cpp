@@ -178,8 +178,15 @@ Level read_level(const std::string& path) {
       "element face\nproperty list uchar uint vertex_indices\n"
       "element edge\nproperty uint vertex1\nproperty uint vertex2\nproperty float thickness\n"
       "element point\nproperty uint vertex\n";
-  const bool with_normals = layout == "element vertex\n" + xyz + nxyz + rest;
-  if (!with_normals && layout != "element vertex\n" + xyz + rest) {
+  // With materials (io/ply_writer.h), face, edge and point each end with a uint material_index.
+  const std::string m = "property uint material_index\n";
+  const std::string rest_m =
+      "element face\nproperty list uchar uint vertex_indices\n" + m +
+      "element edge\nproperty uint vertex1\nproperty uint vertex2\nproperty float thickness\n" + m +
+      "element point\nproperty uint vertex\n" + m;
+  const bool materials = layout == "element vertex\n" + xyz + nxyz + rest_m || layout == "element vertex\n" + xyz + rest_m;
+  const bool with_normals = layout == "element vertex\n" + xyz + nxyz + (materials ? rest_m : rest);
+  if (!with_normals && layout != "element vertex\n" + xyz + (materials ? rest_m : rest)) {
     ADD_FAILURE() << path << ": unexpected header layout:\n" << layout;
     return level;
   }
@@ -201,19 +208,21 @@ Level read_level(const std::string& path) {
   for (uint64_t t = 0; good && t < count["face"]; ++t) {
     uint8_t n = 0;
     std::array<uint32_t, 3> ids{};
-    good = take(&n, 1) && n == 3 && take(ids.data(), 12);
+    uint32_t material = 0;
+    good = take(&n, 1) && n == 3 && take(ids.data(), 12) && (!materials || take(&material, 4));
     level.triangles.push_back(ids);
   }
   for (uint64_t e = 0; good && e < count["edge"]; ++e) {
     std::array<uint32_t, 2> ids{};
     float th = 0;
-    good = take(ids.data(), 8) && take(&th, 4);
+    uint32_t material = 0;
+    good = take(ids.data(), 8) && take(&th, 4) && (!materials || take(&material, 4));
     level.edges.push_back(ids);
     level.thickness.push_back(th);
   }
   for (uint64_t i = 0; good && i < count["point"]; ++i) {
-    uint32_t id = 0;
-    good = take(&id, 4);
+    uint32_t id = 0, material = 0;
+    good = take(&id, 4) && (!materials || take(&material, 4));
     level.points.push_back(id);
   }
   if (!good || p != stop) {
