@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstring>
 #include <memory>
 #include <string>
 
@@ -13,13 +14,55 @@
 #include "core/status.h"
 #include "io/file_writer.h"
 #include "io/mapped_file.h"
+#include "stream/cell_map_file.h"
 #include "stream/grade_stage.h"
+#include "stream/store_access.h"
 
 namespace lodstream::stream {
 
-std::string cells_path(const std::string& prefix, size_t level) { return prefix + "cells-" + std::to_string(level) + ".u32"; }
+std::string cells_path(const std::string& prefix, size_t level) { return prefix + "cells-" + std::to_string(level) + ".map"; }
 std::string cell_info_path(const std::string& prefix, size_t level) { return prefix + "cells-" + std::to_string(level) + ".info"; }
 std::string order_path(const std::string& prefix) { return prefix + "order.u32"; }
+std::string grades_path(const std::string& prefix) { return prefix + "grades.f64"; }
+
+CellInfoKind cell_info_kind(Representative r) {
+  return r == Representative::center ? CellInfoKind::center : r == Representative::mean ? CellInfoKind::mean : CellInfoKind::quadric;
+}
+
+uint64_t cell_info_bytes(CellInfoKind kind, bool single_precision) {
+  const uint64_t center = single_precision ? 12 : 24, mean = 24;
+  return kind == CellInfoKind::center ? center : kind == CellInfoKind::mean ? mean : center + mean;
+}
+
+CellInfoReader::CellInfoReader(const std::string& path, uint64_t cells, CellInfoKind kind, bool single_precision)
+    : file_(path), kind_(kind), single_(single_precision), bytes_(cell_info_bytes(kind, single_precision)) {
+  if (file_.size() != cells * bytes_) fail(Status::io_error, path + ": size does not match");
+}
+
+io::Window CellInfoReader::map(uint64_t first, uint64_t end) const { return file_.map(first * bytes_, end * bytes_); }
+
+CellInfo CellInfoReader::get(const io::Window& w, uint64_t i) const {
+  CellInfo ci{};
+  ci.vertices = 1;
+  const char* p = w.data() + i * bytes_;
+  if (kind_ != CellInfoKind::mean) {
+    if (single_) {
+      float c[3];
+      std::memcpy(c, p, sizeof c);
+      for (int k = 0; k < 3; ++k) ci.center[k] = c[k];
+      p += sizeof c;
+    } else {
+      std::memcpy(ci.center, p, sizeof ci.center);
+      p += sizeof ci.center;
+    }
+  }
+  if (kind_ != CellInfoKind::center) {
+    std::memcpy(ci.sum, p, sizeof ci.sum);
+    std::copy(ci.sum, ci.sum + 3, ci.weighted);
+    ci.weight = 1;
+  }
+  return ci;
+}
 
 namespace {
 
@@ -30,11 +73,42 @@ size_t thread_groups(size_t levels) {
   return std::clamp<size_t>(static_cast<size_t>(tbb::this_task_arena::max_concurrency()), 1, levels);
 }
 
-// What `memory_bytes` leaves the clusterers: the fixed buffers (the writers', the index windows, the
+uint64_t positions_bytes(uint64_t vertices, bool single_precision) { return vertices * (single_precision ? 12 : 24); }
+
+// What `memory_bytes` leaves the clusterers: the store's positions (mapped whole: the records come in
+// weight order, spread over the whole column) and the fixed buffers (the writers', the index windows, the
 // block's arrays per group) come off first.
-uint64_t cell_budget(size_t levels, uint64_t record_bytes, uint64_t memory_bytes) {
-  const uint64_t fixed = (levels + 1) * kWriterBuffer + thread_groups(levels) * kBlock * (4 + 24 + 4 * levels + record_bytes);
+uint64_t cell_budget(size_t levels, uint64_t vertices, bool single_precision, uint64_t memory_bytes) {
+  const uint64_t fixed = positions_bytes(vertices, single_precision) + (2 * levels + 1) * kWriterBuffer +
+                         thread_groups(levels) * kBlock * (4 + 24 + 4 * levels + 4);
   return memory_bytes > fixed ? memory_bytes - fixed : 0;
+}
+
+// The positions of `ids` into xyz (3 doubles each), fetched ahead: the ids come in weight order, spread
+// over the whole column.
+void fetch_positions(const StorePositions& positions, std::span<const uint32_t> ids, std::vector<double>& xyz) {
+  constexpr size_t kAhead = 16;
+  xyz.resize(3 * ids.size());
+  for (size_t i = 0; i < ids.size(); ++i) {
+    if (i + kAhead < ids.size()) positions.prefetch(ids[i + kAhead]);
+    positions.get(ids[i], &xyz[3 * i]);
+  }
+}
+
+// A center at the store's precision (a stored position: exact), at q; returns the byte after it.
+char* put_center(char* q, const double* p, bool single_precision) {
+  if (single_precision) {
+    const float f[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
+    std::memcpy(q, f, sizeof f);
+    return q + sizeof f;
+  }
+  std::memcpy(q, p, 24);
+  return q + 24;
+}
+
+void write_center(io::FileWriter& out, const double* p, bool single_precision) {
+  char bytes[24];
+  out.write(bytes, static_cast<size_t>(put_center(bytes, p, single_precision) - bytes));
 }
 
 // The coarse levels' dense arrays take at most an eighth of the cells' budget.
@@ -57,10 +131,10 @@ uint64_t estimated_cells(const AreaHistogram& areas, double cell_size, uint64_t 
   return static_cast<uint64_t>(std::min(cells, static_cast<double>(records)));
 }
 
-void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, bool single_precision,
+void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, uint64_t vertices, bool single_precision,
                             std::span<const double> bounds, std::span<const double> cell_sizes,
                             uint64_t memory_bytes) {
-  const uint64_t budget = cell_budget(cell_sizes.size(), weight_record_bytes(single_precision), memory_bytes);
+  const uint64_t budget = cell_budget(cell_sizes.size(), vertices, single_precision, memory_bytes);
   uint64_t dense = 0;  // bytes of the dense arrays, chosen as core::Clusterer chooses them
   for (double c : cell_sizes) {
     uint64_t squares = bounds.empty() ? UINT64_MAX : 1;
@@ -87,14 +161,21 @@ void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, bool s
                           "coarser (--cell-sizes, --target-triangles)");
 }
 
-ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, bool single_precision,
-                              std::span<const double> bounds, std::span<const double> cell_sizes,
-                              const core::ClusterOptions& cluster_options, uint64_t memory_bytes,
-                              const WorkDir& work, Progress& progress, const std::string& prefix) {
+ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double> bounds, std::span<const double> cell_sizes,
+                              const core::ClusterOptions& cluster_options, CellInfoKind info_kind, uint64_t memory_bytes,
+                              const WorkDir&, Progress& progress, const std::string& prefix) {
   const size_t levels = cell_sizes.size();
-  const uint64_t record_bytes = weight_record_bytes(single_precision);
-  io::MappedFile index(index_path);
-  if (index.size() != records * record_bytes) fail(Status::io_error, index_path + ": size does not match");
+  const uint64_t records = weights.records;
+  const bool single_precision = weights.single_precision;
+  io::MappedFile index(weights.order_path);
+  if (index.size() != records * 4) fail(Status::io_error, weights.order_path + ": size does not match");
+  std::unique_ptr<io::MappedFile> grades;
+  if (info_kind == CellInfoKind::mean) {
+    grades = std::make_unique<io::MappedFile>(weights.grades_path);
+    if (grades->size() != records * 8) fail(Status::io_error, weights.grades_path + ": size does not match");
+  }
+  StorePositions positions(weights.positions_path, single_precision, weights.vertices);
+  positions.acquire();
   // A float store's positions are all floats: the clusterer keeps its centers as floats (same ids).
   core::ClusterOptions options = cluster_options;
   options.float_positions = single_precision;
@@ -107,7 +188,9 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
   // split changes no result.
   struct Level {
     std::atomic<uint64_t> count{0};  // cells after the group's last block, for other groups to read
-    io::FileWriter cells;
+    CellMapWriter cells;
+    io::FileWriter centers;  // CellInfoKind::center: the info, one center per new cell
+    uint64_t made = 0;       // cells whose center is written
   };
   struct Group {
     std::vector<size_t> levels;  // increasing
@@ -116,7 +199,10 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
     std::atomic<uint64_t> bytes{0};  // the group's clusterer, after its last block
   };
   std::vector<Level> state(levels);
-  for (size_t l = 0; l < levels; ++l) state[l].cells.open(cells_path(prefix, l), kWriterBuffer);
+  for (size_t l = 0; l < levels; ++l) {
+    state[l].cells.open(cells_path(prefix, l), kWriterBuffer);
+    if (info_kind == CellInfoKind::center) state[l].centers.open(cell_info_path(prefix, l), kWriterBuffer);
+  }
   const size_t n_threads = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
   const size_t n_groups = thread_groups(levels);
   std::vector<Group> groups(n_groups);
@@ -134,18 +220,17 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
   // the block's arrays, the writers' buffers) come off first, and the coarse levels' dense arrays (faster
   // than hashing, but 8 bytes a square of the bounds) take at most an eighth of the rest.
   constexpr uint64_t block = kBlock;
-  const uint64_t cell_budget = stream::cell_budget(levels, record_bytes, memory_bytes);
+  const uint64_t cell_budget = stream::cell_budget(levels, weights.vertices, single_precision, memory_bytes);
   const uint64_t max_dense = max_dense_squares(cell_budget, levels);
   for (Group& grp : groups) {
     std::vector<double> sizes;
     for (size_t l : grp.levels) sizes.push_back(cell_sizes[l]);
     grp.clusterer = std::make_unique<core::Clusterer>(sizes, options, bounds, max_dense);
   }
-  // Each group runs through the whole index on its own task, unpacking the records itself: no barrier per
+  // Each group runs through the whole index on its own task, fetching the positions itself: no barrier per
   // block, so a group held up (its core busy with page-cache writeback, say) does not stall the other.
-  // Group 0 also writes the order file and reports progress; every group checks for cancellation per
-  // block, and stops when another has failed.
-  io::FileWriter order(order_path(prefix), kWriterBuffer);
+  // Group 0 also reports progress; every group checks for cancellation per block, and stops when another
+  // has failed.
   std::atomic<uint64_t> peak{0};  // the most the groups held together
   auto check_memory = [&](Group& grp, uint64_t first, uint64_t n) {
     const uint64_t mine = grp.clusterer->memory_bytes() + grp.clusterer->growth_bytes();
@@ -181,44 +266,48 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
       if (tbb::is_current_task_group_canceling()) return;
       const uint64_t n = std::min(block, records - first);
       {
-        const io::Window w = index.map(first * record_bytes, (first + n) * record_bytes);
-        // The block's records as plain arrays, positions widened to double (exact for float).
+        const io::Window w = index.map(first * 4, (first + n) * 4);
+        // The block's ids and their positions as plain arrays, widened to double (exact for float).
         ids.resize(n);
         xyz.resize(3 * n);
-        auto unpack = [&](const auto* rec) {
-          for (uint64_t i = 0; i < n; ++i) {
-            ids[i] = rec[i].id;
-            for (int k = 0; k < 3; ++k) xyz[3 * i + k] = rec[i].position[k];
-          }
-        };
-        if (single_precision) unpack(reinterpret_cast<const WeightRecord32*>(w.data()));
-        else unpack(reinterpret_cast<const WeightRecord64*>(w.data()));
+        std::memcpy(ids.data(), w.data(), n * 4);
+        fetch_positions(positions, ids, xyz);
       }
-      if (g == 0) order.write_array(std::span<const uint32_t>(ids));
       grp.cells.resize(grp.levels.size() * n);
       grp.clusterer->assign_block(ids, xyz, grp.cells);
-      for (size_t j = 0; j < grp.levels.size(); ++j)
-        state[grp.levels[j]].cells.write_array(std::span<const uint32_t>(grp.cells.data() + j * n, n));
+      for (size_t j = 0; j < grp.levels.size(); ++j) {
+        Level& L = state[grp.levels[j]];
+        const std::span<const uint32_t> cells(grp.cells.data() + j * n, n);
+        L.cells.write(cells);
+        if (info_kind == CellInfoKind::center)
+          for (uint64_t i = 0; i < n; ++i)
+            if (cells[i] == L.made) write_center(L.centers, &xyz[3 * i], single_precision), ++L.made;
+      }
       check_memory(grp, first, n);
       if (g == 0) progress.report("cluster", kClusterShare * static_cast<double>(first + n) / static_cast<double>(records));
     }
     for (size_t j = 0; j < grp.levels.size(); ++j) {
-      state[grp.levels[j]].cells.commit();
+      Level& L = state[grp.levels[j]];
+      L.cells.commit();
+      if (info_kind == CellInfoKind::center) L.centers.commit();
       summary.cells[grp.levels[j]] = grp.clusterer->cell_count(j);
     }
     grp.clusterer.reset();  // its memory goes to the groups still running
     grp.bytes.store(0, std::memory_order_relaxed);
   });
   progress.check();  // a group that saw the cancellation returned early
-  order.commit();
+  if (info_kind == CellInfoKind::center) {
+    progress.report("cluster", 1);
+    return summary;
+  }
 
-  // The sums pass: each level's CellInfo records, from the cluster maps just written and the index, both
-  // read in order, so that every cell adds its vertices in weight order (as a running sum in the pass
-  // above would) and its first vertex, the one that created it, gives its center. The records are made
-  // in ranges of cell ids, packed into one chunk per thread that takes what the clusterers held at their
-  // peak divided among the threads (so the sums never raise the stage's peak), within the budget; a
-  // chunk costs one more sequential read of the index and of its levels' maps, where holding every
-  // record at once would cost 88 bytes a cell.
+  // The sums pass (mean and quadric representatives): each level's CellInfo records, from the cluster maps
+  // just written and the index, both read in order, so that every cell adds its vertices in weight order
+  // (as a running sum in the pass above would) and its first vertex, the one that created it, gives its
+  // center. The records are made in ranges of cell ids, packed into one chunk per thread that takes what
+  // the clusterers held at their peak divided among the threads (so the sums never raise the stage's
+  // peak), within the budget; a chunk costs one more sequential read of the index and of its levels'
+  // maps, where holding every record at once would cost 88 bytes a cell.
   constexpr uint64_t kMinSumBytes = 16 << 20;
   const uint64_t sum_bytes = std::min(std::max(peak.load(), kMinSumBytes), std::max<uint64_t>(cell_budget, 1));
   uint64_t total_cells = 0;
@@ -243,9 +332,8 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
       first = end;
     } while (first < summary.cells[l]);
   }
-  std::vector<std::unique_ptr<io::MappedFile>> maps(levels);
-  for (size_t l = 0; l < levels; ++l) maps[l] = std::make_unique<io::MappedFile>(cells_path(prefix, l));
   std::unique_ptr<io::FileWriter> info;  // the level of the range being written
+  std::vector<char> record(cell_info_bytes(info_kind, single_precision));
   uint64_t done_cells = 0;
   for (size_t round = 0; round < chunks.size(); round += n_threads) {
     const size_t round_end = std::min(chunks.size(), round + n_threads);
@@ -253,57 +341,74 @@ ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, b
     tbb::parallel_for(round, round_end, [&](size_t k) {
       const std::vector<Range>& chunk = chunks[k];
       std::vector<std::vector<CellInfo>>& outs = sums[k - round];
-      for (const Range& range : chunk) outs.emplace_back(range.end - range.first, CellInfo{});
+      std::vector<std::unique_ptr<CellMapReader>> maps;
+      for (const Range& range : chunk) {
+        outs.emplace_back(range.end - range.first, CellInfo{});
+        maps.push_back(std::make_unique<CellMapReader>(cells_path(prefix, range.level)));
+      }
       constexpr uint64_t kAhead = 8;
+      std::vector<uint32_t> cells(block);
+      std::vector<double> xyz(3 * block);
+      std::vector<double> grade(block, 0.0);
       for (uint64_t first = 0; first < records; first += block) {
         progress.check();
         if (tbb::is_current_task_group_canceling()) return;
         const uint64_t n = std::min(block, records - first);
-        const io::Window w = index.map(first * record_bytes, (first + n) * record_bytes);
+        {
+          const io::Window w = index.map(first * 4, (first + n) * 4);
+          fetch_positions(positions, std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), n), xyz);
+        }
+        if (grades) {
+          const io::Window w = grades->map(first * 8, (first + n) * 8);
+          std::memcpy(grade.data(), w.data(), n * 8);
+        }
         for (size_t r = 0; r < chunk.size(); ++r) {
           std::vector<CellInfo>& out = outs[r];
+          maps[r]->read(std::span<uint32_t>(cells.data(), n));
           if (out.empty()) continue;
           const uint64_t base = chunk[r].first;
-          const io::Window cw = maps[chunk[r].level]->map(first * 4, (first + n) * 4);
-          const uint32_t* cells = reinterpret_cast<const uint32_t*>(cw.data());
-          auto add = [&](const auto* rec) {
-            for (uint64_t i = 0; i < n; ++i) {
-              if (i + kAhead < n) {
-                const uint64_t ahead = cells[i + kAhead] - base;  // wraps below the range
-                if (ahead < out.size()) {
-                  __builtin_prefetch(&out[ahead]);
-                  __builtin_prefetch(reinterpret_cast<const char*>(&out[ahead]) + sizeof(CellInfo) - 1);
-                }
+          for (uint64_t i = 0; i < n; ++i) {
+            if (i + kAhead < n) {
+              const uint64_t ahead = cells[i + kAhead] - base;  // wraps below the range
+              if (ahead < out.size()) {
+                __builtin_prefetch(&out[ahead]);
+                __builtin_prefetch(reinterpret_cast<const char*>(&out[ahead]) + sizeof(CellInfo) - 1);
               }
-              const uint64_t cell = cells[i] - base;
-              if (cell >= out.size()) continue;
-              CellInfo& c = out[cell];
-              const double p[3] = {static_cast<double>(rec[i].position[0]), static_cast<double>(rec[i].position[1]),
-                                   static_cast<double>(rec[i].position[2])};
-              const double grade = rec[i].grade;
-              if (c.vertices == 0) {
-                std::copy(p, p + 3, c.center);
-                c.center_vertex = rec[i].id;
-              }
-              for (int a = 0; a < 3; ++a) {
-                c.weighted[a] += grade * p[a];
-                c.sum[a] += p[a];
-              }
-              c.weight += grade;
-              ++c.vertices;
             }
-          };
-          if (single_precision) add(reinterpret_cast<const WeightRecord32*>(w.data()));
-          else add(reinterpret_cast<const WeightRecord64*>(w.data()));
+            const uint64_t cell = cells[i] - base;
+            if (cell >= out.size()) continue;
+            CellInfo& c = out[cell];
+            const double* p = &xyz[3 * i];
+            const double g = grade[i];
+            if (c.vertices == 0) std::copy(p, p + 3, c.center);
+            for (int a = 0; a < 3; ++a) {
+              c.weighted[a] += g * p[a];
+              c.sum[a] += p[a];
+            }
+            c.weight += g;
+            ++c.vertices;
+          }
         }
       }
+      for (size_t r = 0; r < chunk.size(); ++r) maps[r]->finish(records, summary.cells[chunk[r].level]);
     });
     progress.check();
     for (size_t k = round; k < round_end; ++k)
       for (size_t r = 0; r < chunks[k].size(); ++r) {
         const Range& range = chunks[k][r];
         if (range.first == 0) info = std::make_unique<io::FileWriter>(cell_info_path(prefix, range.level), kWriterBuffer);
-        info->write_array(std::span<const CellInfo>(sums[k - round][r]));
+        for (const CellInfo& c : sums[k - round][r]) {
+          // The mean as the emit stage computes it (emit_stage.cpp, representatives), in the same operations.
+          double mean[3];
+          for (int a = 0; a < 3; ++a) mean[a] = c.sum[a] / static_cast<double>(c.vertices);
+          char* q = record.data();
+          if (info_kind == CellInfoKind::quadric) q = put_center(q, c.center, single_precision);
+          for (int a = 0; a < 3; ++a) {
+            const double m = info_kind == CellInfoKind::mean && c.weight > 0 ? c.weighted[a] / c.weight : mean[a];
+            std::memcpy(q + 8 * a, &m, 8);
+          }
+          info->write(record.data(), record.size());
+        }
         std::vector<CellInfo>().swap(sums[k - round][r]);
         if (range.end == summary.cells[range.level]) info->commit();
         done_cells += range.end - range.first;

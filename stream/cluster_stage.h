@@ -2,15 +2,18 @@
 // level (core/floating_cell.h). Levels are independent given the order, so each level runs as its own task
 // over the same blocks of records; the result does not depend on how the levels are spread over threads.
 //
+// Input: the weight index (grade stage: `order.u32`, the canonical ids in weight order, and `grades.f64`
+// when the mean representative needs them) and the store's positions, read by id.
 // Output, in the work directory:
-//   order.u32            the canonical vertex id of each weight-index record, in weight order
-//   cells-L.u32          per level L: the cell id of each record, in weight order
-//   cells-L.info         per level L: one CellInfo per cell, in cell-id order
+//   cells-L.map          per level L: the cell of each record, in weight order, bit-packed (cell_map_file.h)
+//   cells-L.info         per level L: per cell, in cell-id order, what the emit stage's representative reads
+//                        (CellInfoKind): its center's position (written during the pass), its mean, or both
 // Memory: the clusterers' tables and cell records (about 46 bytes a cell: kClusterBytesPerCell; it grows
-// with the cells, not the vertices). The CellInfo records are summed afterwards, from the maps and the
-// index read again, in ranges of cells that fit in what the clusterers held. When the clusterers would
-// outgrow `memory_bytes` (what the process may add to its resident set while the stage runs), the stage
-// stops with Failure(Status::usage) naming the cells so far, rather than pass the budget.
+// with the cells, not the vertices), and the store's positions, mapped whole. The sums for a mean are
+// made afterwards, from the maps and the index read again, in ranges of cells that fit in what the
+// clusterers held. When the clusterers would outgrow `memory_bytes` (what the process may add to its
+// resident set while the stage runs), the stage stops with Failure(Status::usage) naming the cells so far,
+// rather than pass the budget.
 #pragma once
 
 #include <cstdint>
@@ -19,12 +22,15 @@
 #include <vector>
 
 #include "core/floating_cell.h"
+#include "io/mapped_file.h"
+#include "lodstream/lodstream.h"
 #include "stream/grade_stage.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
 
 namespace lodstream::stream {
 
+// A cell's sums, as the sums pass makes them and as CellInfoReader gives them back to the emit stage.
 struct CellInfo {
   double center[3];     // the center vertex's position (uniform: the first vertex that fell in the square)
   double weighted[3];   // Σ grade · position over the cell's vertices
@@ -35,17 +41,50 @@ struct CellInfo {
 };
 static_assert(sizeof(CellInfo) == 88);
 
+// What a level's cells-L.info holds per cell, by representative (lodstream.h): the center's position at
+// the store's precision (center), the mean of the cell's vertices as the emit stage computes it: Σ grade ·
+// position / Σ grade, or the plain mean when Σ grade is 0 (mean), or the center and the plain mean
+// (quadric). 12 to 48 bytes a cell, where every sum took 88.
+enum class CellInfoKind { center, mean, quadric };
+CellInfoKind cell_info_kind(Representative r);
+uint64_t cell_info_bytes(CellInfoKind kind, bool single_precision);
+
+// Reads a level's cells-L.info back as CellInfo records that give the emit stage's arithmetic the same
+// bits as the full sums: the center as stored; a mean m as weighted = m, weight = 1 (m / 1 = m) and as
+// sum = m, vertices = 1. The other fields are 0.
+class CellInfoReader {
+ public:
+  // Throws Failure(io_error) when the file does not hold `cells` records of `kind`.
+  CellInfoReader(const std::string& path, uint64_t cells, CellInfoKind kind, bool single_precision);
+  // The records of cells [first, end); thread-safe.
+  io::Window map(uint64_t first, uint64_t end) const;
+  // Record i of a window from map().
+  CellInfo get(const io::Window& w, uint64_t i) const;
+
+ private:
+  io::MappedFile file_;
+  CellInfoKind kind_;
+  bool single_;
+  uint64_t bytes_;
+};
+
 struct ClusterSummary {
   std::vector<uint64_t> cells;  // per level
 };
 
-// index_path: the weight index of `records` records (WeightRecord32 if single_precision, else
-// WeightRecord64; stream/grade_stage.h). bounds: empty, or the min and max corners (6 values) of a box
-// holding every position in the index, which lets the coarse levels index their squares directly
-// (core::Clusterer); the result is the same either way.
-ClusterSummary cluster_levels(const std::string& index_path, uint64_t records, bool single_precision,
-                              std::span<const double> bounds, std::span<const double> cell_sizes,
-                              const core::ClusterOptions& options, uint64_t memory_bytes,
+// The weight index and where its positions are: `order_path` holds `records` canonical ids (uint32) in
+// weight order, `grades_path` their grades (double; read for CellInfoKind::mean only), and
+// `positions_path` the store's positions of `vertices` vertices (float if single_precision, else double).
+struct WeightIndex {
+  std::string order_path, grades_path, positions_path;
+  uint64_t records = 0, vertices = 0;
+  bool single_precision = true;
+};
+// bounds: empty, or the min and max corners (6 values) of a box holding every position in the index,
+// which lets the coarse levels index their squares directly (core::Clusterer); the result is the same
+// either way.
+ClusterSummary cluster_levels(const WeightIndex& index, std::span<const double> bounds, std::span<const double> cell_sizes,
+                              const core::ClusterOptions& options, CellInfoKind info, uint64_t memory_bytes,
                               const WorkDir& work, Progress& progress, const std::string& prefix);
 
 // The early estimate (before the stage runs, so that a run that cannot fit stops at once rather than
@@ -66,12 +105,15 @@ inline constexpr uint64_t kClusterBytesPerCell[2] = {62, 46};
 // budget, when the estimate, with the coarse levels' dense arrays over `bounds`, does not fit in what
 // `memory_bytes` leaves the cells (the same share the stage's own check uses). Levels with no triangle
 // area (lines, points) estimate 0: the stage's check is then the only one.
-void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, bool single_precision,
+// `vertices`: the store's, whose positions the stage maps.
+void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, uint64_t vertices, bool single_precision,
                             std::span<const double> bounds, std::span<const double> cell_sizes,
                             uint64_t memory_bytes);
 
 std::string cells_path(const std::string& prefix, size_t level);
 std::string cell_info_path(const std::string& prefix, size_t level);
+// The grade stage's files, read by this stage and the emit stage.
 std::string order_path(const std::string& prefix);
+std::string grades_path(const std::string& prefix);
 
 }  // namespace lodstream::stream

@@ -4,6 +4,7 @@
 #include <sys/statvfs.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -14,6 +15,7 @@
 #include "core/status.h"
 #include "io/mapped_file.h"
 #include "io/reader.h"
+#include "stream/cluster_stage.h"
 
 namespace lodstream::stream {
 
@@ -112,23 +114,30 @@ uint64_t info_work_bytes(const SceneCounts& c) { return store_bytes(c) + ingest_
 
 uint64_t report_work_bytes(const SceneCounts& c) { return store_bytes(c) + ingest_transient_bytes(c); }
 
-// Simplify, after ingest, at its largest: at the end of the cluster stage the work directory holds the
-// store, the weld map (4 bytes a stored vertex), the weight index (24 or 40 bytes a vertex; every stored
-// vertex counted, as if none shared a position), the cluster order (4 bytes a vertex), one cell id per
-// vertex and level (4 bytes) and one 88-byte CellInfo per cell (about 12 cells per 100 vertices over all
-// levels on the city scene: 10.6 bytes a vertex). Earlier peaks are smaller: grade holds the store, the
-// weld map, bucket files of at most the store's triangles and the index with its sort runs, which are
-// released as they are merged.
-uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels) {
+// Simplify, after ingest, at its largest (every stored vertex counted as a record of the weight index, as
+// if none shared a position): the store and the weld map (a bit a stored vertex, and 4 bytes for each one
+// welded to another: taken as 3 in 10, as on the city scene) throughout, and then the larger of
+// - the grade stage's sort: 12-byte runs a record, released as they are merged into the order (4 bytes a
+//   record) and, for the mean representative, the grades (8);
+// - the end of the cluster stage: the order (and grades), one bit-packed cell map per level (at most
+//   bit_width(records) bits a record; 22 bits or less on the city scene's levels) and the cell info by
+//   representative (12 to 48 bytes a cell, about 12 cells per 100 vertices over all levels on the city).
+// The GLB's binary data is gathered in the output directory (simplify_output_bytes), not here.
+uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative representative) {
   const uint64_t v = c.vertices;
-  const uint64_t after_ingest = store_bytes(c) + 4 * v + v * (c.single_precision ? 24 : 40) + 4 * v + 4 * v * levels + 11 * v;
+  const uint64_t weld = v / 8 + 4 * v * 3 / 10;
+  const uint64_t index = 4 * v + (representative == Representative::mean ? 8 * v : 0);
+  const uint64_t maps = static_cast<uint64_t>(levels) * ((v * static_cast<uint64_t>(std::bit_width(v)) + 7) / 8);
+  const uint64_t info = v * 12 / 100 * cell_info_bytes(cell_info_kind(representative), c.single_precision);
+  const uint64_t after_ingest = store_bytes(c) + weld + std::max(12 * v, index + maps + info);
   return std::max(store_bytes(c) + ingest_transient_bytes(c), after_ingest);
 }
 
 // Per output triangle: PLY about 40 bytes (half a vertex of position and normal, 24 bytes, and a 13-byte
-// face), the GLB about as much, OBJ text about 60.
+// face), the GLB about as much, twice while its binary data, gathered beside it, is copied in behind its
+// JSON; OBJ text about 60.
 uint64_t simplify_output_bytes(uint64_t output_triangles, const SimplifyOptions& o) {
-  const uint64_t per = (o.write_ply ? 40 : 0) + (o.write_glb ? 40 : 0) + (o.write_obj ? 60 : 0);
+  const uint64_t per = (o.write_ply ? 40 : 0) + (o.write_glb ? 2 * 40 : 0) + (o.write_obj ? 60 : 0);
   return output_triangles * per;
 }
 
@@ -193,7 +202,7 @@ void check_simplify_space(const std::string& input, const SimplifyOptions& o, co
     for (size_t l = 0; l < levels; ++l) out += static_cast<uint64_t>(t0 * std::pow(ratio, static_cast<double>(l + 1)));
   }
   const SpaceNeed needs[2] = {
-      {work_dir, "work directory", beyond(simplify_work_bytes(c, levels), directory_bytes(work_dir))},
+      {work_dir, "work directory", beyond(simplify_work_bytes(c, levels, o.representative), directory_bytes(work_dir))},
       {o.output_dir, "outputs", simplify_output_bytes(out, o)}};
   check_free_space(needs);
 }

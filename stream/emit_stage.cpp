@@ -20,9 +20,11 @@
 #include "core/quadric.h"
 #include "core/status.h"
 #include "io/mapped_file.h"
+#include "stream/cell_map_file.h"
 #include "stream/cluster_stage.h"
 #include "stream/flat_map.h"
 #include "stream/store_access.h"
+#include "stream/weld_file.h"
 
 namespace lodstream::stream {
 
@@ -334,44 +336,37 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   map.reset(emit_scratch.map, meta.vertices, bits);
   {
     io::MappedFile order(order_path(prefix));
-    std::vector<std::unique_ptr<io::MappedFile>> cell_files;
-    for (const LevelState& L : levels) {
-      cell_files.push_back(std::make_unique<io::MappedFile>(cells_path(prefix, L.in.level)));
-      if (order.size() != records * 4 || cell_files.back()->size() != records * 4)
-        fail(Status::io_error, cell_files.back()->path() + ": size does not match the weight index");
-    }
+    if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
     const size_t parts = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
     const uint64_t per_part = ((meta.vertices + parts - 1) / parts + 63) / 64 * 64;  // 64 records: whole words
+    constexpr uint64_t kChunk = 1 << 18;
     tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
       const uint64_t lo = part * per_part, span = std::min(meta.vertices, lo + per_part) - std::min(meta.vertices, lo);
-      std::vector<io::Window> windows(nl);
-      std::vector<const uint32_t*> cs(nl);
-      for (uint64_t first = 0; first < records && span > 0; first += 1 << 20) {
-        const uint64_t n = std::min<uint64_t>(1 << 20, records - first);
+      if (span == 0) return;
+      // The maps are bit streams read from their start (cell_map_file.h): every part decodes them whole.
+      std::vector<std::unique_ptr<CellMapReader>> maps;
+      for (const LevelState& L : levels) maps.push_back(std::make_unique<CellMapReader>(cells_path(prefix, L.in.level)));
+      std::vector<uint32_t> cs(nl * kChunk);
+      for (uint64_t first = 0; first < records; first += kChunk) {
+        const uint64_t n = std::min(kChunk, records - first);
         const io::Window a = order.map(first * 4, (first + n) * 4);
-        for (size_t l = 0; l < nl; ++l) {
-          windows[l] = cell_files[l]->map(first * 4, (first + n) * 4);
-          cs[l] = reinterpret_cast<const uint32_t*>(windows[l].data());
-        }
+        for (size_t l = 0; l < nl; ++l) maps[l]->read(std::span<uint32_t>(cs.data() + l * kChunk, n));
         const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
         for (uint64_t i = 0; i < n; ++i) {
           if (ids[i] - lo >= span) continue;  // another part's vertex (unsigned: below lo wraps around)
           uint64_t record = 0;
           for (size_t l = 0; l < nl; ++l) {
-            const uint64_t c = cs[l][i] == core::kNoCell ? levels[l].mask : cs[l][i];
-            if (c >= levels[l].in.cells && c != levels[l].mask)
-              fail(Status::io_error, cell_files[l]->path() + ": cell id out of range");
+            const uint64_t c = cs[l * kChunk + i];
+            if (c >= levels[l].in.cells) fail(Status::io_error, cells_path(prefix, levels[l].in.level) + ": cell id out of range");
             record |= c << levels[l].shift;
           }
           map.set(ids[i], record);
         }
       }
+      for (size_t l = 0; l < nl; ++l) maps[l]->finish(records, levels[l].in.cells);
     });
     if (!canonical_path.empty())
-      for_column_blocks(canonical_path, meta.vertices, 1, 1 << 20, [&](uint64_t first, std::span<const uint32_t> canon) {
-        for (uint64_t i = 0; i < canon.size(); ++i)
-          if (canon[i] != first + i) map.set(first + i, map.get(canon[i]));
-      });
+      WeldFile(canonical_path, meta.vertices).for_each_welded([&](uint64_t v, uint32_t canon) { map.set(v, map.get(canon)); });
   }
 
   StorePositions positions(store_dir, meta);
@@ -766,8 +761,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     // (each representative depends on its cell alone, so the bytes do not depend on the threads).
     std::vector<double> rep(3 * slot_cell.size());
     {
-      io::MappedFile f(cell_info_path(prefix, L.in.level));
-      if (f.size() != cells * sizeof(CellInfo)) fail(Status::io_error, f.path() + ": size does not match");
+      const CellInfoReader f(cell_info_path(prefix, L.in.level), cells, cell_info_kind(options.representative), meta.single_precision);
       constexpr uint64_t window_cells = 1 << 16;
       tbb::parallel_for(uint64_t{0}, (cells + window_cells - 1) / window_cells, [&](uint64_t window) {
         const uint64_t first = window * window_cells, end = std::min(cells, first + window_cells);
@@ -775,9 +769,8 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
         for (uint64_t c = first; c < end; ++c) {
           const uint32_t slot = slot_of[c];
           if (slot == UINT32_MAX) continue;
-          if (!w.data()) w = f.map(first * sizeof(CellInfo), end * sizeof(CellInfo));
-          CellInfo ci;
-          std::memcpy(&ci, w.data() + (c - first) * sizeof(CellInfo), sizeof ci);
+          if (!w.data()) w = f.map(first, end);
+          const CellInfo ci = f.get(w, c - first);
           double* p = &rep[3 * slot];
           double mean[3];
           for (int k = 0; k < 3; ++k) mean[k] = ci.sum[k] / static_cast<double>(ci.vertices);

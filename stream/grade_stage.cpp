@@ -1,8 +1,9 @@
-// Stages 2 and 3: weld by position, grade per id range (bucket files carry the seams), sort into the
-// weight index. See grade_stage.h for the contract.
+// Stages 2 and 3: weld by position, grade per id range (each range reads the store's blocks that touch
+// it), sort into the weight index. See grade_stage.h for the contract.
 #include "stream/grade_stage.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <memory>
@@ -11,6 +12,7 @@
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
 #include "core/status.h"
@@ -19,6 +21,7 @@
 #include "stream/distinct_count.h"
 #include "stream/external_sort.h"
 #include "stream/store_access.h"
+#include "stream/weld_file.h"
 
 namespace lodstream::stream {
 
@@ -31,21 +34,19 @@ constexpr uint64_t kMaxRanges = 256;
 class Canonical {
  public:
   Canonical(const std::string& path, uint64_t vertices) {
-    if (path.empty()) return;
-    file_ = std::make_unique<io::MappedFile>(path);
-    if (file_->size() != vertices * 4) fail(Status::io_error, path + ": size does not match the store");
+    if (!path.empty()) file_ = std::make_unique<WeldFile>(path, vertices);
   }
   void acquire() {
-    if (file_ && !window_.data()) window_ = file_->map(0, file_->size());
+    if (file_) file_->acquire(), acquired_ = true;
   }
-  void release() { window_.reset(); }
-  uint32_t operator()(uint32_t v) const {
-    return window_.data() ? reinterpret_cast<const uint32_t*>(window_.data())[v] : v;
+  void release() {
+    if (file_) file_->release(), acquired_ = false;
   }
+  uint32_t operator()(uint32_t v) const { return acquired_ ? (*file_)(v) : v; }
 
  private:
-  std::unique_ptr<io::MappedFile> file_;
-  io::Window window_;
+  std::unique_ptr<WeldFile> file_;
+  bool acquired_ = false;
 };
 
 struct Columns {
@@ -54,23 +55,33 @@ struct Columns {
   static constexpr int arity[3] = {3, 2, 1};
 };
 
-// Visits the store's primitives of each kind (0 triangles, 1 segments, 2 points) in blocks, with ids
-// mapped to canonical ids: visit(kind, first primitive, ids).
-template <class Visit>
-void visit_store(const Columns& c, const Canonical& canonical, Visit&& visit) {
+// Visits the store's primitives of each kind (0 triangles, 1 segments, 2 points) in fixed blocks of kBlock
+// primitives, with ids mapped to canonical ids: visit(kind, block number, ids), for the blocks for which
+// want(kind, block number) holds.
+template <class Want, class Visit>
+void visit_store(const Columns& c, const Canonical& canonical, Want&& want, Visit&& visit) {
   std::vector<uint32_t> mapped;
   for (int kind = 0; kind < 3; ++kind) {
-    for_column_blocks(c.path[kind], c.count[kind], Columns::arity[kind], kBlock,
-                      [&](uint64_t first, std::span<const uint32_t> ids) {
-                        mapped.resize(ids.size());
-                        tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size(), 1 << 14),
-                                          [&](const tbb::blocked_range<size_t>& r) {
-                                            for (size_t i = r.begin(); i < r.end(); ++i) mapped[i] = canonical(ids[i]);
-                                          });
-                        visit(kind, first, std::span<const uint32_t>(mapped));
-                      });
+    if (c.count[kind] == 0) continue;
+    io::MappedFile file(c.path[kind]);
+    const uint64_t stride = 4ull * static_cast<uint64_t>(Columns::arity[kind]);
+    if (file.size() != c.count[kind] * stride) fail(Status::io_error, c.path[kind] + ": size does not match store.json");
+    for (uint64_t first = 0, b = 0; first < c.count[kind]; first += kBlock, ++b) {
+      if (!want(kind, b)) continue;
+      const uint64_t n = std::min(kBlock, c.count[kind] - first);
+      const io::Window w = file.map(first * stride, (first + n) * stride);
+      const std::span<const uint32_t> ids(reinterpret_cast<const uint32_t*>(w.data()), n * stride / 4);
+      mapped.resize(ids.size());
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, ids.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) mapped[i] = canonical(ids[i]);
+      });
+      visit(kind, b, std::span<const uint32_t>(mapped));
+    }
   }
 }
+
+// The ranges (of kMaxRanges at most) that the corners of a block fall in, one bit each.
+using RangeMask = std::array<uint64_t, kMaxRanges / 64>;
 
 double triangle_area(const double* a, const double* b, const double* c) {
   const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
@@ -110,8 +121,8 @@ void block_area(std::span<const uint32_t> tris, const StorePositions& pos, AreaH
 
 GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta, core::Grading mode,
                             const MemoryPlan& plan, const WorkDir& work, Progress& progress,
-                            const std::string& canonical_path, const std::string& index_path,
-                            uint64_t max_range_vertices) {
+                            const std::string& canonical_path, const std::string& order_path,
+                            const std::string& grades_path, uint64_t max_range_vertices) {
   GradeSummary summary;
   const uint64_t n_vertices = meta.vertices;
   Columns columns{{store_dir + "/triangles.u32", store_dir + "/lines.u32", store_dir + "/points.u32"},
@@ -135,9 +146,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
         store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), n_vertices, meta.single_precision,
         plan.stage_bytes > held + (16 << 20) ? plan.stage_bytes - held : (16 << 20), progress, canonical);
     if (summary.distinct_positions < n_vertices) {
-      io::FileWriter w(canonical_path, 4 << 20);
-      w.write_array(std::span<const uint32_t>(canonical));
-      w.commit();
+      write_weld_file(canonical_path, canonical);
       welded = true;
     }
   }
@@ -147,7 +156,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
   // Range size from the budget: per vertex its offsets, counters, a record, and its share of incidence
   // entries (two per triangle corner, one per segment end).
   const double incidences = n_vertices ? static_cast<double>(6 * meta.triangles + 2 * meta.lines) / static_cast<double>(n_vertices) : 0;
-  const uint64_t per_vertex = 8 + 4 + 8 + weight_record_bytes(meta.single_precision) + static_cast<uint64_t>(std::ceil(4 * incidences));
+  const uint64_t per_vertex = 8 + 4 + 8 + sizeof(GradeRecord) + static_cast<uint64_t>(std::ceil(4 * incidences));
   const uint64_t range_budget = std::max<uint64_t>(plan.stage_bytes / 3, 16 << 20);
   uint64_t range = std::max<uint64_t>(range_budget / per_vertex, 4096);
   if (max_range_vertices) range = std::min(range, max_range_vertices);
@@ -155,14 +164,14 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
   const uint64_t n_ranges = std::max<uint64_t>((n_vertices + range - 1) / range, 1);
   summary.ranges = n_ranges;
 
-  // Scatter into bucket files when there is more than one range; sum the area on the way.
-  std::vector<std::string> bucket_paths[3];
+  // With more than one range, a first pass notes the ranges each block touches, and sums the area.
+  std::vector<RangeMask> block_ranges[3];
   std::vector<BinnedArea> area_scratch;
   canonical.acquire();
   positions.acquire();
   // Mapped pages count as resident (the memory contract): the columns are remapped after every block of
-  // the routing pass and every range of the grading, which drops the pages they touched from the process
-  // (the page cache keeps them). Without it, routing a 193M-triangle scene held 1.9 GB of them.
+  // the first pass and every range of the grading, which drops the pages they touched from the process
+  // (the page cache keeps them). Without it, a pass over a 193M-triangle scene held 1.9 GB of them.
   auto drop_mapped_pages = [&] {
     positions.release();
     canonical.release();
@@ -170,58 +179,34 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     canonical.acquire();
   };
   if (n_ranges > 1) {
-    const size_t buffer = static_cast<size_t>(std::clamp<uint64_t>(range_budget / (3 * n_ranges), 64 << 10, 1 << 20));
-    std::vector<std::unique_ptr<io::FileWriter>> writers[3];
-    for (int kind = 0; kind < 3; ++kind)
-      for (uint64_t r = 0; r < n_ranges; ++r) {
-        bucket_paths[kind].push_back(work.scratch("grade-bucket"));
-        writers[kind].push_back(std::make_unique<io::FileWriter>(bucket_paths[kind].back(), buffer));
-      }
-    // Routing runs in parallel over kParts fixed slices of each block, each slice into its own lists; the
-    // lists are written slice by slice, so a bucket file holds its primitives in store order as before.
-    constexpr size_t kParts = 8;
-    std::vector<std::vector<uint32_t>> out(kParts * n_ranges);
     uint64_t done = 0;
     const uint64_t total = meta.primitives();
-    visit_store(columns, canonical, [&](int kind, uint64_t, std::span<const uint32_t> ids) {
-      const size_t arity = static_cast<size_t>(Columns::arity[kind]);
+    visit_store(columns, canonical, [](int, uint64_t) { return true; }, [&](int kind, uint64_t b, std::span<const uint32_t> ids) {
       if (kind == 0) block_area(ids, positions, summary.areas, area_scratch);
-      const size_t prims = ids.size() / arity;
-      tbb::parallel_for(size_t{0}, kParts, [&](size_t part) {
-        std::vector<uint32_t>* o = &out[part * n_ranges];
-        for (uint64_t r = 0; r < n_ranges; ++r) o[r].clear();
-        for (size_t t = prims * part / kParts; t < prims * (part + 1) / kParts; ++t) {
-          const uint32_t* p = &ids[t * arity];
-          uint64_t seen[3];
-          int n_seen = 0;
-          for (size_t k = 0; k < arity; ++k) {
-            const uint64_t r = p[k] / range;
-            bool dup = false;
-            for (int j = 0; j < n_seen; ++j) dup |= seen[j] == r;
-            if (dup) continue;
-            seen[n_seen++] = r;
-            o[r].insert(o[r].end(), p, p + arity);
-          }
-        }
-      });
-      // Each range's file on its own task: the copies into the page cache, which cost as much as the
-      // routing, run side by side.
-      tbb::parallel_for(uint64_t{0}, n_ranges, [&](uint64_t r) {
-        for (size_t part = 0; part < kParts; ++part)
-          writers[kind][r]->write_array(std::span<const uint32_t>(out[part * n_ranges + r]));
-      });
-      done += ids.size() / arity;
+      RangeMask mask = tbb::parallel_reduce(
+          tbb::blocked_range<size_t>(0, ids.size(), 1 << 14), RangeMask{},
+          [&](const tbb::blocked_range<size_t>& r, RangeMask m) {
+            for (size_t i = r.begin(); i < r.end(); ++i) {
+              const uint64_t range_of = ids[i] / range;
+              m[range_of / 64] |= uint64_t{1} << (range_of % 64);
+            }
+            return m;
+          },
+          [](RangeMask a, const RangeMask& b2) {
+            for (size_t k = 0; k < a.size(); ++k) a[k] |= b2[k];
+            return a;
+          });
+      block_ranges[kind].resize(b + 1);
+      block_ranges[kind][b] = mask;
+      done += ids.size() / static_cast<size_t>(Columns::arity[kind]);
       drop_mapped_pages();
       progress.report("grade", 0.3 * static_cast<double>(done) / static_cast<double>(std::max<uint64_t>(total, 1)));
     });
-    for (auto& ws : writers)
-      for (auto& w : ws) w->commit();
   }
 
-  // The rest (grading by range, the sort) once per record type: the index keeps the store's precision.
-  auto grade_ranges = [&](auto record_type) {
-    using Record = decltype(record_type);
-    using Real = std::remove_extent_t<decltype(Record::position)>;
+  // The rest: grading by range, the sort.
+  auto grade_ranges = [&] {
+    using Record = GradeRecord;
     ExternalSorter<Record, WeightLess> sorter(work, "weights", std::max<uint64_t>(plan.stage_bytes / 3, 4 << 20));
     sorter.expect(summary.distinct_positions);  // at least the records: one per used canonical vertex
     std::vector<uint32_t> count;
@@ -238,17 +223,12 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     for (uint64_t r = 0; r < n_ranges; ++r) {
       progress.check();
       const uint64_t lo = r * range, hi = std::min(n_vertices, lo + range), n = hi - lo;
-      // The range's primitives: its bucket files, or the whole store.
+      // The range's primitives: the blocks that touch it, or the whole store.
       auto visit = [&](auto&& fn) {
-        if (n_ranges == 1) {
-          visit_store(columns, canonical, [&](int kind, uint64_t, std::span<const uint32_t> ids) { fn(kind, ids); });
-        } else {
-          for (int kind = 0; kind < 3; ++kind) {
-            const uint64_t bytes = std::filesystem::file_size(bucket_paths[kind][r]);
-            for_column_blocks(bucket_paths[kind][r], bytes / (4 * Columns::arity[kind]), Columns::arity[kind], kBlock,
-                              [&](uint64_t, std::span<const uint32_t> ids) { fn(kind, ids); });
-          }
-        }
+        visit_store(
+            columns, canonical,
+            [&](int kind, uint64_t b) { return n_ranges == 1 || (block_ranges[kind][b][r / 64] >> (r % 64) & 1); },
+            [&](int kind, uint64_t, std::span<const uint32_t> ids) { fn(kind, ids); });
       };
       // Calls corner(local id, primitive ids, arity, k) for every corner k in the range. Each task owns a
       // slice of the range's vertices and scans the whole block for their corners: no two tasks touch one
@@ -313,15 +293,10 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
         Record rec{};
         rec.grade = grades[l];
         rec.id = static_cast<uint32_t>(lo + l);
-        double p[3];
-        positions.get(lo + l, p);
-        for (int k = 0; k < 3; ++k) rec.position[k] = static_cast<Real>(p[k]);  // the stored value: exact
         sorter.push(rec);
         ++summary.records;
       }
       drop_mapped_pages();
-      if (n_ranges > 1)
-        for (int kind = 0; kind < 3; ++kind) std::filesystem::remove(bucket_paths[kind][r]);
       progress.report("grade", 0.3 + 0.5 * static_cast<double>(r + 1) / static_cast<double>(n_ranges));
     }
     for (double a : summary.areas.area) summary.surface_area += a;
@@ -334,18 +309,25 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
     std::vector<uint8_t>().swap(used);
     std::vector<double>().swap(grades);
 
-    io::FileWriter out(index_path, 4 << 20);
+    io::FileWriter order(order_path, 4 << 20);
+    std::unique_ptr<io::FileWriter> grade_out;
+    if (!grades_path.empty()) grade_out = std::make_unique<io::FileWriter>(grades_path, 4 << 20);
     uint64_t written = 0;
     sorter.merge([&](const Record& rec) {
-      out.write(&rec, sizeof rec);
+      const uint32_t id = rec.id;
+      order.write(&id, sizeof id);
+      if (grade_out) {
+        const double grade = rec.grade;
+        grade_out->write(&grade, sizeof grade);
+      }
       if ((++written & 0xFFFFF) == 0)
         progress.report("sort", static_cast<double>(written) / static_cast<double>(summary.records));
     });
-    out.commit();
+    order.commit();
+    if (grade_out) grade_out->commit();
     progress.report("sort", 1);
   };
-  if (meta.single_precision) grade_ranges(WeightRecord32{});
-  else grade_ranges(WeightRecord64{});
+  grade_ranges();
   return summary;
 }
 

@@ -6,10 +6,12 @@
 // "canonical" vertex, and graded as one, from the union of their neighbours. Clustering then sees each
 // position once, so duplicates can never be torn into different cells.
 //
-// Grading runs over ranges of canonical ids, as many as the memory budget needs. Every primitive is routed,
-// once per range its corners fall in, to that range's bucket file (with one range, the store is read
-// directly); a range then builds its vertices' complete incidence, so a vertex whose primitives lie in many
-// chunks (a seam vertex) is graded from all of them, with the same bits as in a single-chunk run. The
+// Grading runs over ranges of canonical ids, as many as the memory budget needs. A first pass over the
+// store notes, for every fixed block of primitives, the ranges its corners fall in; a range then reads
+// the blocks that touch it, straight from the store (no copy on disk), and builds its vertices' complete
+// incidence, so a vertex whose primitives lie in many blocks (a seam vertex) is graded from all of them,
+// with the same bits as in a single-range run. Files whose vertex ids are local (as exporters write them)
+// read each block about once; ids scattered over the whole file make every range read most of the store. The
 // grade kernel (core/grade.h) depends only on the set of neighbour positions, never on their order.
 //
 // Grades of vertices no triangle or segment touches: a vertex used only by points has grade 0 (it is
@@ -28,26 +30,15 @@
 
 namespace lodstream::stream {
 
-// One weight-index record. The position is kept at the scene store's precision: 24 bytes for a
-// single-precision store (most inputs: PLY/STL/OBJ floats), 40 for a double one. The index is written
-// and read back in full (about 1.4 GB for 35 M vertices at 40 bytes), so its record size is a large share
-// of the grade and cluster stages' I/O; widening float to double in the cluster pass is exact, so the
-// clustering sees the same values either way.
-struct WeightRecord32 {
+// One record of the sort that makes the weight order: a canonical vertex and its grade, 12 bytes. The
+// positions are not carried (the cluster stage reads them from the store by id), so that the sort's runs
+// and its output stay small: the output is the order alone, 4 bytes a record (`order.u32`), and, when a
+// later stage sums grades (the mean representative), the grades beside it, 8 bytes a record.
+struct __attribute__((packed, aligned(4))) GradeRecord {
   double grade;
   uint32_t id;  // canonical vertex id
-  float position[3];
 };
-struct WeightRecord64 {
-  double grade;
-  uint32_t id;        // canonical vertex id
-  uint32_t reserved;  // 0 (no indeterminate padding bytes in the file)
-  double position[3];
-};
-static_assert(sizeof(WeightRecord32) == 24 && sizeof(WeightRecord64) == 40);
-inline uint64_t weight_record_bytes(bool single_precision) {
-  return single_precision ? sizeof(WeightRecord32) : sizeof(WeightRecord64);
-}
+static_assert(sizeof(GradeRecord) == 12);
 // Non-increasing grade, ties by increasing id: a total order, since ids are unique.
 struct WeightLess {
   template <class Record>
@@ -74,14 +65,14 @@ struct GradeSummary {
   AreaHistogram areas;
 };
 
-// Writes `canonical_path` (uint32 per stored vertex: its canonical id) unless every position is distinct
-// (then it writes nothing and returns distinct == vertices), and `index_path`, the weight index: one
-// record (WeightRecord32 if meta.single_precision, else WeightRecord64) per used canonical vertex in
-// WeightLess order. `max_range_vertices` caps the range size
+// Writes `canonical_path` (the weld map: every stored vertex's canonical id, stream/weld_file.h) unless every position is distinct
+// (then it writes nothing and returns distinct == vertices), and the weight index: the used canonical
+// vertices in WeightLess order, their ids in `order_path` (uint32 each) and, unless `grades_path` is
+// empty, their grades in `grades_path` (double each). `max_range_vertices` caps the range size
 // (0 = from the budget; tests force small ranges to exercise the seams). Throws Failure.
 GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta, core::Grading mode,
                             const MemoryPlan& plan, const WorkDir& work, Progress& progress,
-                            const std::string& canonical_path, const std::string& index_path,
-                            uint64_t max_range_vertices);
+                            const std::string& canonical_path, const std::string& order_path,
+                            const std::string& grades_path, uint64_t max_range_vertices);
 
 }  // namespace lodstream::stream

@@ -44,8 +44,9 @@ using stream::guarded;
 using stream::run_stage;
 
 // Part of every stage stamp; bumped when a work file changes format (2: the weight index keeps the store's
-// precision), so that a work directory from an older build is redone rather than misread.
-constexpr int kStampVersion = 2;
+// precision; 3: the weight index is the order and, for the mean, the grades; bit-packed cluster maps; cell
+// info by representative), so that a work directory from an older build is redone rather than misread.
+constexpr int kStampVersion = 3;
 constexpr uint64_t kCoarsestTarget = 4000;  // "a few thousand" triangles at the coarsest default level
 constexpr unsigned kMaxLevels = 32;
 constexpr unsigned kMaxSearchPasses = 12;
@@ -273,9 +274,16 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         fail(Status::bad_data, input + ": nothing to simplify (no triangles, lines or points)");
 
       // Grade and sort.
-      const std::string canonical_path = work.file("weld.u32");
-      const std::string index_path = work.file("weights.idx");
-      const ordered_json grade_key{{"version", kStampVersion}, {"source", source_json(meta)}, {"grading", name(so.grading)}};
+      const std::string canonical_path = work.file("weld.map");
+      const std::string prefix = work.file("");
+      // The grades are kept on disk only for the mean representative, the one stage that sums them.
+      const bool keep_grades = so.representative == Representative::mean;
+      const std::string order_path = stream::order_path(prefix);
+      const std::string grades_path = keep_grades ? stream::grades_path(prefix) : std::string();
+      const ordered_json grade_key{{"version", kStampVersion},
+                                   {"source", source_json(meta)},
+                                   {"grading", name(so.grading)},
+                                   {"grades", keep_grades}};
       const stream::GradeSummary grade = run_stage(&report.stages, "grade", [&](StageStats& st) {
         ordered_json v;
         if (stamp_matches(work.file("grade.json"), grade_key, &v)) {
@@ -291,10 +299,13 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         }
         std::filesystem::remove(work.file("grade.json"));
         std::filesystem::remove(canonical_path);
+        std::filesystem::remove(stream::grades_path(prefix));
+        for (const char* old : {"weights.idx", "weld.u32"}) std::filesystem::remove(work.file(old));  // an older version's
         const stream::GradeSummary g = stream::grade_and_sort(
             store_dir, meta, so.grading == Grading::lowtan ? core::Grading::lowtan : core::Grading::rossignac, plan,
-            work, progress, canonical_path, index_path, so.grade_range_vertices);
-        std::vector<std::string> files{index_path};
+            work, progress, canonical_path, order_path, grades_path, so.grade_range_vertices);
+        std::vector<std::string> files{order_path};
+        if (keep_grades) files.push_back(grades_path);
         if (g.distinct_positions < meta.vertices) files.push_back(canonical_path);
         write_stamp(work.file("grade.json"), grade_key, files,
                     {{"records", g.records}, {"distinct_positions", g.distinct_positions},
@@ -310,11 +321,12 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
 
       const stream::EmitOptions count_only{so.representative, so.crease_degrees, true, true};
       stream::EmitScratch scratch;
-      const std::string prefix = work.file("");
+      const stream::CellInfoKind info_kind = stream::cell_info_kind(so.representative);
       const ordered_json cluster_base{{"grade", grade_key},
                                       {"clustering", name(so.clustering)},
                                       {"cell", name(so.cell)},
-                                      {"variant", name(so.variant)}};
+                                      {"variant", name(so.variant)},
+                                      {"cell_info", name(so.representative)}};
       // Clusters at `sizes` unless the stamp says it is done; returns cells per level.
       auto cluster = [&](const std::vector<double>& sizes, StageStats* st) {
         ordered_json key = cluster_base;
@@ -333,10 +345,17 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           bounds.assign(meta.bbox.min.begin(), meta.bbox.min.end());
           bounds.insert(bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
         }
-        stream::check_cluster_estimate(grade.areas, grade.records, meta.single_precision, bounds, sizes, plan.stage_bytes);
-        const stream::ClusterSummary cs = stream::cluster_levels(index_path, grade.records, meta.single_precision, bounds, sizes, copts,
-                                                                    plan.stage_bytes, work, progress, prefix);
-        std::vector<std::string> files{stream::order_path(prefix)};
+        stream::check_cluster_estimate(grade.areas, grade.records, meta.vertices, meta.single_precision, bounds, sizes,
+                                       plan.stage_bytes);
+        const stream::WeightIndex index{order_path,
+                                        grades_path,
+                                        store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"),
+                                        grade.records,
+                                        meta.vertices,
+                                        meta.single_precision};
+        const stream::ClusterSummary cs =
+            stream::cluster_levels(index, bounds, sizes, copts, info_kind, plan.stage_bytes, work, progress, prefix);
+        std::vector<std::string> files;
         for (size_t l = 0; l < sizes.size(); ++l) {
           files.push_back(stream::cells_path(prefix, l));
           files.push_back(stream::cell_info_path(prefix, l));
@@ -459,7 +478,11 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       }
       const std::string generator = std::string("lodstream ") + LODSTREAM_VERSION;
       std::unique_ptr<io::GlbBuilder> glb;
-      if (so.write_glb) glb = std::make_unique<io::GlbBuilder>(so.output_dir + "/lods.glb", work.scratch("glb"), generator);
+      // The GLB's binary data is gathered beside it in the output directory (a .partial name, which a rerun
+      // writes again), not in the work directory: it is output, as large as the GLB, and counts against the
+      // outputs' room (stream/disk_space.cpp).
+      if (so.write_glb)
+        glb = std::make_unique<io::GlbBuilder>(so.output_dir + "/lods.glb", so.output_dir + "/lods.glb.bin.partial", generator);
       auto write_level = [&](size_t l, core::LodMesh& mesh) {
         LevelStats& ls = report.levels[l];
         ls.vertices = mesh.vertex_count();

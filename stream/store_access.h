@@ -18,8 +18,11 @@ namespace lodstream::stream {
 class StorePositions {
  public:
   StorePositions(const std::string& store_dir, const StoreMeta& meta)
-      : file_(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64")),
-        single_(meta.single_precision), count_(meta.vertices) {
+      : StorePositions(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), meta.single_precision,
+                       meta.vertices) {}
+  // The column at `path` of `vertices` positions, float or double.
+  StorePositions(const std::string& path, bool single_precision, uint64_t vertices)
+      : file_(path), single_(single_precision), count_(vertices) {
     if (file_.size() != count_ * 3 * (single_ ? 4 : 8))
       fail(Status::io_error, file_.path() + ": size does not match store.json");
   }
@@ -28,6 +31,7 @@ class StorePositions {
     if (!window_.data() && count_ > 0) window_ = file_.map(0, file_.size());
   }
   void release() { window_.reset(); }
+  void prefetch(uint64_t v) const { __builtin_prefetch(window_.data() + (single_ ? 12 : 24) * v); }
   void get(uint64_t v, double* out) const {
     if (single_) {
       const float* p = reinterpret_cast<const float*>(window_.data()) + 3 * v;

@@ -1,9 +1,12 @@
-// The cluster stage (stream/cluster_stage.h): its cell records are the plain sums over each cell's vertices
-// in weight order, to the bit, whether the sums pass makes them in one range of cells or in many; and the
+// The cluster stage (stream/cluster_stage.h): its bit-packed maps read back as written; its cell records
+// give the emit stage the bits of the plain sums over each cell's vertices in weight order, whether the
+// sums pass makes them in one range of cells or in many; and the
 // stage stops with a usage error, naming the cells, when its clusterers outgrow the memory it is given.
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
+#include <filesystem>
 #include <cstdint>
 #include <cstring>
 #include <random>
@@ -16,6 +19,7 @@
 #include "core/status.h"
 #include "io/file_writer.h"
 #include "lodstream/lodstream.h"
+#include "stream/cell_map_file.h"
 #include "stream/cluster_stage.h"
 #include "stream/grade_stage.h"
 #include "stream/progress.h"
@@ -25,86 +29,140 @@
 namespace lodstream {
 namespace {
 
-// A weight index of n float records on a jittered lattice of spacing 1, in decreasing grade.
-std::vector<stream::WeightRecord32> make_index(uint32_t n, const std::string& path) {
-  std::vector<stream::WeightRecord32> records(n);
+// A weight index of n vertices on a jittered lattice of spacing 1, in decreasing grade, in `dir`: the
+// order, the grades and the positions (by vertex id) as the grade stage and the store leave them.
+struct TestIndex {
+  stream::WeightIndex files;
+  std::vector<uint32_t> order;  // vertex id of each record
+  std::vector<double> grade;    // of each record
+  std::vector<float> position;  // by vertex id
+};
+TestIndex make_index(uint32_t n, const std::string& dir) {
+  TestIndex t;
+  t.files = {dir + "/order.u32", dir + "/grades.f64", dir + "/positions.f32", n, n, true};
   std::mt19937_64 rng(4);
   std::uniform_real_distribution<float> jitter(-0.2f, 0.2f);
-  std::vector<uint32_t> order(n);
-  for (uint32_t i = 0; i < n; ++i) order[i] = i;
-  std::shuffle(order.begin(), order.end(), rng);  // weight order is spatially random
+  t.order.resize(n);
+  for (uint32_t i = 0; i < n; ++i) t.order[i] = i;
+  std::shuffle(t.order.begin(), t.order.end(), rng);  // weight order is spatially random
   const uint32_t side = 100;
-  for (uint32_t i = 0; i < n; ++i) {
-    const uint32_t v = order[i];
-    records[i].grade = 1.0 - i * 1e-7;
-    records[i].id = v;
-    records[i].position[0] = static_cast<float>(v % side) + jitter(rng);
-    records[i].position[1] = static_cast<float>(v / side % side) + jitter(rng);
-    records[i].position[2] = static_cast<float>(v / side / side) + jitter(rng);
+  t.position.resize(3 * size_t{n});
+  for (uint32_t v = 0; v < n; ++v) {
+    t.position[3 * v] = static_cast<float>(v % side) + jitter(rng);
+    t.position[3 * v + 1] = static_cast<float>(v / side % side) + jitter(rng);
+    t.position[3 * v + 2] = static_cast<float>(v / side / side) + jitter(rng);
   }
-  io::FileWriter out(path);
-  out.write_array(std::span<const stream::WeightRecord32>(records));
-  out.commit();
-  return records;
+  for (uint32_t i = 0; i < n; ++i) t.grade.push_back(i % 7 == 3 ? 0.0 : 1.0 - i * 1e-7);
+  auto write = [](const std::string& path, const auto& v) {
+    io::FileWriter out(path);
+    out.write(v.data(), v.size() * sizeof(v[0]));
+    out.commit();
+  };
+  write(t.files.order_path, t.order);
+  write(t.files.grades_path, t.grade);
+  write(t.files.positions_path, t.position);
+  return t;
 }
 
-std::vector<stream::CellInfo> read_infos(const std::string& path) {
-  const std::string bytes = io::read_small_file(path);
-  std::vector<stream::CellInfo> infos(bytes.size() / sizeof(stream::CellInfo));
-  std::memcpy(infos.data(), bytes.data(), infos.size() * sizeof(stream::CellInfo));
-  return infos;
+std::vector<uint32_t> read_map(const std::string& path, uint64_t records, uint64_t cells) {
+  std::vector<uint32_t> map(records);
+  stream::CellMapReader reader(path);
+  reader.read(map);
+  reader.finish(records, cells);
+  return map;
 }
 
-TEST(ClusterStage, CellRecordsAreTheSumsInWeightOrderInAnyNumberOfRanges) {
+TEST(ClusterStage, CellMapsRoundTripAtTheWidthOfTheCellsSoFar) {
+  test::TempDir tmp;
+  std::mt19937_64 rng(9);
+  std::vector<uint32_t> cells;
+  uint32_t made = 0;
+  for (int i = 0; i < 200'000; ++i) {
+    const bool fresh = made == 0 || rng() % 5 == 0;
+    cells.push_back(fresh ? made++ : static_cast<uint32_t>(rng() % made));
+  }
+  stream::CellMapWriter w;
+  w.open(tmp.file("m"), 1 << 16);
+  for (size_t i = 0; i < cells.size(); i += 777) w.write(std::span<const uint32_t>(cells).subspan(i, std::min<size_t>(777, cells.size() - i)));
+  w.commit();
+  EXPECT_EQ(w.cells(), made);
+  uint64_t bits = 0;
+  for (uint32_t c = 0, seen = 0; c < cells.size(); ++c) bits += std::bit_width(seen), seen += cells[c] == seen;
+  EXPECT_EQ(std::filesystem::file_size(tmp.file("m")), (bits + 63) / 64 * 8);
+  EXPECT_EQ(read_map(tmp.file("m"), cells.size(), made), cells);
+  // A cell that skips a number is a bug of the caller; a stream read past its end or with other counts is
+  // a damaged file.
+  stream::CellMapWriter bad;
+  bad.open(tmp.file("bad"), 1 << 16);
+  const uint32_t skip[2] = {0, 2};
+  EXPECT_THROW(bad.write(skip), Failure);
+  EXPECT_THROW(read_map(tmp.file("m"), cells.size() + 100, made), Failure);
+  EXPECT_THROW(read_map(tmp.file("m"), cells.size(), made + 1), Failure);
+}
+
+TEST(ClusterStage, CellInfoIsWhatTheRepresentativeReadsInAnyNumberOfRanges) {
   test::TempDir tmp;
   constexpr uint32_t n = 150'000;
-  const std::string index = tmp.file("weights.idx");
-  const std::vector<stream::WeightRecord32> records = make_index(n, index);
+  const TestIndex t = make_index(n, tmp.path().string());
   const std::vector<double> sizes = {0.5, 3};  // level 0: a cell per vertex
   const std::vector<double> bounds = {-1, -1, -1, 101, 101, 41};
   Options options;
   stream::Progress progress(options);
-  std::vector<std::vector<std::vector<stream::CellInfo>>> runs;
-  // The sums pass makes its records in chunks of at most 16 MiB (here: more than the clusterers' peak)
-  // per thread: one thread makes level 0's 150,000 records (13 MB) in one range, two threads in two.
-  for (int threads : {1, 2}) {
-    stream::WorkDir work(tmp.file("work" + std::to_string(threads)));
-    const std::string prefix = work.file("");
-    stream::ClusterSummary s;
-    tbb::task_arena(threads).execute([&] {
-      s = stream::cluster_levels(index, n, true, bounds, sizes, {}, uint64_t{1} << 30, work, progress, prefix);
-    });
-    ASSERT_EQ(s.cells[0], n);
-    std::vector<std::vector<stream::CellInfo>> infos;
-    for (size_t l = 0; l < sizes.size(); ++l) infos.push_back(read_infos(stream::cell_info_path(prefix, l)));
-    runs.push_back(infos);
-    // The plain computation: each record, in order, added to its cell; the first one is the center.
-    const std::string maps = io::read_small_file(stream::cells_path(prefix, 1));
-    std::vector<stream::CellInfo> expected(s.cells[1], stream::CellInfo{});
-    for (uint32_t i = 0; i < n; ++i) {
-      uint32_t cell;
-      std::memcpy(&cell, maps.data() + 4 * size_t{i}, 4);
-      stream::CellInfo& c = expected[cell];
-      const double p[3] = {records[i].position[0], records[i].position[1], records[i].position[2]};
-      if (c.vertices == 0) {
-        std::copy(p, p + 3, c.center);
-        c.center_vertex = records[i].id;
+  for (stream::CellInfoKind kind : {stream::CellInfoKind::center, stream::CellInfoKind::mean, stream::CellInfoKind::quadric}) {
+    std::vector<std::string> runs;
+    // The sums pass makes its records in chunks of at most 16 MiB (here: more than the clusterers' peak)
+    // per thread: one thread makes level 0's 150,000 records (13 MB) in one range, two threads in two.
+    for (int threads : {1, 2}) {
+      stream::WorkDir work(tmp.file("work" + std::to_string(threads) + "-" + std::to_string(static_cast<int>(kind))));
+      const std::string prefix = work.file("");
+      stream::ClusterSummary s;
+      tbb::task_arena(threads).execute([&] {
+        s = stream::cluster_levels(t.files, bounds, sizes, {}, kind, uint64_t{1} << 30, work, progress, prefix);
+      });
+      ASSERT_EQ(s.cells[0], n);
+      // The plain computation: each record, in order, added to its cell; the first one is the center.
+      const std::vector<uint32_t> map = read_map(stream::cells_path(prefix, 1), n, s.cells[1]);
+      std::vector<stream::CellInfo> expected(s.cells[1], stream::CellInfo{});
+      for (uint32_t i = 0; i < n; ++i) {
+        stream::CellInfo& c = expected[map[i]];
+        const float* f = &t.position[3 * size_t{t.order[i]}];
+        const double p[3] = {f[0], f[1], f[2]};
+        if (c.vertices == 0) std::copy(p, p + 3, c.center);
+        for (int k = 0; k < 3; ++k) c.weighted[k] += t.grade[i] * p[k], c.sum[k] += p[k];
+        c.weight += t.grade[i];
+        ++c.vertices;
       }
-      for (int k = 0; k < 3; ++k) c.weighted[k] += records[i].grade * p[k], c.sum[k] += p[k];
-      c.weight += records[i].grade;
-      ++c.vertices;
+      const stream::CellInfoReader reader(stream::cell_info_path(prefix, 1), s.cells[1], kind, true);
+      const io::Window w = reader.map(0, s.cells[1]);
+      for (uint64_t c = 0; c < s.cells[1]; ++c) {
+        const stream::CellInfo got = reader.get(w, c);
+        const stream::CellInfo& e = expected[c];
+        for (int k = 0; k < 3; ++k) {
+          if (kind != stream::CellInfoKind::mean) {
+            ASSERT_EQ(got.center[k], e.center[k]) << c;
+          }
+          // What the emit stage computes from the record, against what it computed from the full sums.
+          const double mean = e.sum[k] / e.vertices;
+          const double want = kind == stream::CellInfoKind::mean && e.weight > 0 ? e.weighted[k] / e.weight : mean;
+          if (kind == stream::CellInfoKind::mean) {
+            ASSERT_EQ(got.weighted[k] / got.weight, want) << c;
+          } else if (kind == stream::CellInfoKind::quadric) {
+            ASSERT_EQ(got.sum[k] / got.vertices, want) << c;
+          }
+        }
+      }
+      for (uint32_t c : {0u, 12345u, n - 1})
+        if (kind != stream::CellInfoKind::mean) {
+          const stream::CellInfoReader r0(stream::cell_info_path(prefix, 0), n, kind, true);
+          const io::Window w0 = r0.map(c, c + 1);
+          EXPECT_EQ(r0.get(w0, 0).center[0], t.position[3 * size_t{t.order[c]}]);
+        }
+      std::string bytes;
+      for (size_t l = 0; l < sizes.size(); ++l)
+        bytes += io::read_small_file(stream::cells_path(prefix, l)) + io::read_small_file(stream::cell_info_path(prefix, l));
+      runs.push_back(bytes);
     }
-    ASSERT_EQ(infos[1].size(), expected.size());
-    EXPECT_EQ(std::memcmp(infos[1].data(), expected.data(), expected.size() * sizeof(stream::CellInfo)), 0);
-    for (uint32_t c : {0u, 12345u, n - 1}) {
-      EXPECT_EQ(infos[0][c].vertices, 1u);
-      EXPECT_EQ(infos[0][c].center_vertex, records[c].id);
-    }
-  }
-  for (size_t l = 0; l < sizes.size(); ++l) {
-    ASSERT_EQ(runs[0][l].size(), runs[1][l].size());
-    EXPECT_EQ(std::memcmp(runs[0][l].data(), runs[1][l].data(), runs[0][l].size() * sizeof(stream::CellInfo)), 0)
-        << "level " << l;
+    EXPECT_EQ(runs[0], runs[1]) << "kind " << static_cast<int>(kind);
   }
 }
 
@@ -113,8 +171,7 @@ TEST(ClusterStage, ClusterersBeyondTheBudgetStopWithTheCells) {
   // check, which stops a pass whose cells outgrow the budget, with the counts so far.
   test::TempDir tmp;
   constexpr uint32_t n = 400'000;
-  const std::string index = tmp.file("weights.idx");
-  make_index(n, index);
+  const TestIndex t = make_index(n, tmp.path().string());
   const std::vector<double> sizes = {0.5};
   Options options;
   stream::Progress progress(options);
@@ -122,7 +179,7 @@ TEST(ClusterStage, ClusterersBeyondTheBudgetStopWithTheCells) {
   Status status = Status::ok;
   std::string message;
   try {
-    stream::cluster_levels(index, n, true, {}, sizes, {}, 4 << 20, work, progress, work.file(""));
+    stream::cluster_levels(t.files, {}, sizes, {}, stream::CellInfoKind::center, 10 << 20, work, progress, work.file(""));
   } catch (const Failure& e) {
     status = e.status();
     message = e.what();

@@ -5,7 +5,10 @@
 #include <random>
 #include <set>
 
+#include "core/status.h"
+#include "io/file_writer.h"
 #include "stream/distinct_count.h"
+#include "stream/weld_file.h"
 #include "test_util.h"
 
 namespace lodstream {
@@ -35,6 +38,32 @@ void check(uint64_t n) {
 
 TEST(DistinctCount, FloatKeysInMemoryAndPartitioned) { check<float>(200000); }
 TEST(DistinctCount, DoubleKeysInMemoryAndPartitioned) { check<double>(200000); }
+
+// The compact weld map (stream/weld_file.h) gives back every canonical id, by lookup and in order, for
+// vertex counts on and off a word boundary, and refuses a file of another store.
+TEST(WeldFile, LookupsAndTheOrderedVisitGiveEveryCanonicalId) {
+  test::TempDir tmp;
+  std::mt19937_64 rng(3);
+  for (uint32_t n : {0u, 1u, 64u, 65u, 200'003u}) {
+    std::vector<uint32_t> canonical(n);
+    for (uint32_t v = 0; v < n; ++v) canonical[v] = v > 0 && rng() % 3 == 0 ? static_cast<uint32_t>(rng() % v) : v;
+    const std::string path = tmp.file("weld" + std::to_string(n));
+    stream::write_weld_file(path, canonical);
+    stream::WeldFile weld(path, n);
+    weld.acquire();
+    for (uint32_t v = 0; v < n; ++v) ASSERT_EQ(weld(v), canonical[v]) << v;
+    std::vector<uint32_t> visited(canonical.size());
+    for (uint32_t v = 0; v < n; ++v) visited[v] = v;
+    uint64_t last = 0, count = 0;
+    weld.for_each_welded([&](uint64_t v, uint32_t c) {
+      EXPECT_TRUE(count == 0 || v > last);
+      last = v, ++count;
+      visited[v] = c;
+    });
+    EXPECT_EQ(visited, canonical);
+    EXPECT_THROW(stream::WeldFile(path, n + 1), Failure);
+  }
+}
 
 }  // namespace
 }  // namespace lodstream

@@ -50,7 +50,7 @@ TEST(EmitGroups, SameMeshesAloneAndGrouped) {
     stream::StoreMeta meta;
     ASSERT_TRUE(stream::read_store_meta(store_dir, &meta));
     const uint64_t records = nlohmann::json::parse(test::read_file(o.work_dir + "/grade.json"))["value"]["records"];
-    const std::string weld = o.work_dir + "/weld.u32";
+    const std::string weld = o.work_dir + "/weld.map";
     const std::string canonical = std::filesystem::exists(weld) ? weld : std::string();
     const std::string prefix = o.work_dir + "/";
     std::vector<stream::EmitLevel> levels;

@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 
 #include "lodstream/lodstream.h"
+#include "server/serve.h"
 
 namespace {
 
@@ -402,6 +403,20 @@ int main(int argc, char** argv) {
   grid_cmd->add_flag("--json", json, "Print summary.json instead of the table");
   add_common(grid_cmd);
 
+  CLI::App* serve_cmd = app.add_subcommand("serve", "Run jobs over HTTP (OGC API - Processes), each in a child process");
+  lodstream::serve::ServeOptions serve;
+  std::string upload_text;
+  serve_cmd->add_option("--bind", serve.bind, "HOST:PORT to listen on (default 127.0.0.1:8080; port 0: any free port)");
+  serve_cmd->add_option("--data-root", serve.data_root, "Directory whose files jobs may read")->required();
+  serve_cmd->add_option("--jobs-dir", serve.jobs_dir, "Directory of job state, work directories and outputs")->required();
+  serve_cmd->add_option("--token-file", serve.token_file, "File holding a token every request must send (Authorization: Bearer)");
+  serve_cmd->add_option("--max-jobs", serve.max_jobs, "Jobs running at once (default 1)")->check(CLI::Range(1u, 256u));
+  serve_cmd->add_option("--memory", memory_text, "The running jobs' --memory caps add up to at most this (default: half of RAM)");
+  serve_cmd->add_option("--job-threads", serve.job_threads, "Each job's --threads (default 0: all cores)");
+  serve_cmd->add_option("--max-upload", upload_text, "Largest upload, e.g. 2G (default 1G)");
+  serve_cmd->add_option("--timeout", serve.timeout_seconds, "Seconds a client may stay silent while sending or receiving (default 10)")
+      ->check(CLI::Range(1, 3600));
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -419,6 +434,15 @@ int main(int argc, char** argv) {
   if (!chunk_text.empty() && (!parse_size(chunk_text, &options.chunk_bytes) || options.chunk_bytes == 0)) {
     std::fprintf(stderr, "lodstream: --chunk-bytes: cannot read '%s' as a positive size\n", chunk_text.c_str());
     return static_cast<int>(lodstream::Status::usage);
+  }
+
+  if (serve_cmd->parsed()) {
+    if (!upload_text.empty() && !parse_size(upload_text, &serve.max_upload_bytes)) {
+      std::fprintf(stderr, "lodstream: --max-upload: cannot read '%s' as a size\n", upload_text.c_str());
+      return static_cast<int>(lodstream::Status::usage);
+    }
+    serve.memory_bytes = options.memory_bytes;
+    return lodstream::serve::run(serve);
   }
 
   options.check_disk_space = !no_space_check;
