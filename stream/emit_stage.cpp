@@ -266,9 +266,9 @@ size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t ve
   return end;
 }
 
-// One serial pass over the weight order (order.u32; with the mean representative, the grades of the weight
-// index too) summing every level's cell colours (see CellColor). Memory: the colour column mapped (4 bytes
-// a vertex) and 96 bytes a cell of each level of the group.
+// One serial pass over the weight order (order.u32; with the mean representative, grades.f64 beside it)
+// summing every level's cell colours (see CellColor). Memory: the colour column mapped (4 bytes a vertex)
+// and 96 bytes a cell of each level of the group.
 template <class RecordOf, class CellOf>
 void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const std::string& prefix, uint64_t records,
                      const EmitOptions& options, const std::vector<LevelState>& levels, RecordOf&& record_of,
@@ -278,11 +278,11 @@ void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const 
   if (colors.size() != meta.vertices * 4) fail(Status::io_error, colors.path() + ": size does not match store.json");
   io::MappedFile order(order_path(prefix));
   if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
-  const bool grades = options.representative == Representative::mean && !options.weight_index.empty();
-  const uint64_t rb = weight_record_bytes(meta.single_precision);
+  const bool grades = options.representative == Representative::mean && !options.grades_path.empty();
+  constexpr uint64_t rb = sizeof(double);
   std::unique_ptr<io::MappedFile> index;
   if (grades) {
-    index = std::make_unique<io::MappedFile>(options.weight_index);
+    index = std::make_unique<io::MappedFile>(options.grades_path);
     if (index->size() != records * rb) fail(Status::io_error, index->path() + ": size does not match the weight index");
   }
   if (records == 0) return;
@@ -297,7 +297,7 @@ void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const 
       std::memcpy(&id, ids.data() + 4 * i, 4);
       const uint8_t* c = reinterpret_cast<const uint8_t*>(rgba.data()) + 4 * uint64_t{id};
       double grade = 0;
-      if (grades) std::memcpy(&grade, g.data() + i * rb, 8);  // WeightRecord*::grade comes first
+      if (grades) std::memcpy(&grade, g.data() + i * rb, 8);
       const uint64_t r = record_of(id);
       for (size_t l = 0; l < levels.size(); ++l) {
         CellColor& s = out[l][cell(levels[l], r)];
@@ -624,19 +624,12 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   // A block's corners are deduplicated in the block (Scratch::corners) and then in the level
   // (LevelState::corner_set) while merging in block order, so that the sums and the corner order do not
   // depend on the threads. It also clears the bit of every primitive whose edge was eliminated.
-  std::unique_ptr<io::MappedFile> canonical_file;
-  io::Window canonical_window;
+  std::unique_ptr<WeldFile> weld;
   if (any_kept_edges && !canonical_path.empty() && meta.vertices > 0) {
-    canonical_file = std::make_unique<io::MappedFile>(canonical_path);
-    if (canonical_file->size() != meta.vertices * 4) fail(Status::io_error, canonical_path + ": size does not match store.json");
-    canonical_window = canonical_file->map(0, canonical_file->size());
+    weld = std::make_unique<WeldFile>(canonical_path, meta.vertices);
+    weld->acquire();
   }
-  auto canonical = [&](uint32_t v) {
-    if (!canonical_window.data()) return v;
-    uint32_t c;
-    std::memcpy(&c, canonical_window.data() + 4 * uint64_t{v}, 4);
-    return c;
-  };
+  auto canonical = [&](uint32_t v) { return weld ? (*weld)(v) : v; };
   auto collect_corners = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
     const size_t arity = static_cast<size_t>(3 - b.kind);
     const uint64_t first_word = b.first / 64, words = (b.count + 63) / 64;  // b.first is a multiple of 64
@@ -689,8 +682,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       }
     });
   }
-  canonical_window.reset();
-  canonical_file.reset();
+  weld.reset();
 
   // Pass C: mean distances of the distinct corners to the line through the mean positions, from the corner
   // list (no pass over the input): distances in parallel, summed per edge in corner order.

@@ -49,9 +49,9 @@ struct EmitOptions {
   double crease_degrees = 30;
   bool normals = true;
   bool count_only = false;  // stop after classification and triangle dedupe (target search)
-  // The weight index (stream/grade_stage.h), for the grade weights of vertex colours under the mean
-  // representative; empty: plain means.
-  std::string weight_index;
+  // grades.f64 of the weight index (stream/grade_stage.h, written for the mean representative only), for
+  // the grade weights of vertex colours under the mean representative; empty: plain means.
+  std::string grades_path;
 };
 
 struct EmitCounts {

@@ -506,7 +506,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         if (so.write_obj && !meta.materials.empty()) ls.files.push_back(stem + ".mtl");
       };
       stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
-      emit_options.weight_index = work.file("weights.idx");
+      emit_options.grades_path = grades_path;
       run_stage(&report.stages, "emit", [&](StageStats&) {
         const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, emit_options, write_level);
         for (size_t l = 0; l < sizes.size(); ++l) {
