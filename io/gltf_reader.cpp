@@ -113,6 +113,7 @@ struct Primitive {
   int64_t indices = -1;
   int mode = kTriangles;
   int64_t material = -1;  // index into /materials, or -1: the default material
+  int64_t color = -1;     // COLOR_0 accessor, or -1: white (the spec's default, a factor of 1)
   uint64_t vertices = 0;  // POSITION count
   uint64_t refs = 0;      // index count, or vertices when not indexed
   uint64_t elements = 0;  // triangles, segments or points
@@ -139,6 +140,7 @@ class GltfReader final : public Reader {
   bool next_chunk(uint64_t target_bytes, Chunk* chunk) override;
   void parse(const Chunk& chunk, ParsedChunk* out) const override;
   void resolve(ParsedChunk* chunk) override;
+  bool has_colors() const override { return colors_; }
 
  private:
   [[noreturn]] void bad(const std::string& pointer, const std::string& message) const {
@@ -176,6 +178,7 @@ class GltfReader final : public Reader {
   std::vector<Accessor> accessors_;
   std::vector<std::vector<Primitive>> meshes_;
   uint32_t default_material_ = 0;  // materials_ id of primitives without a material
+  bool colors_ = false;            // some drawn primitive has COLOR_0
   std::vector<Instance> instances_;
   uint64_t decoded_bytes_ = 0;  // of EXT_meshopt_compression views
 
@@ -614,6 +617,18 @@ void GltfReader::walk_scene() {
         bad("/accessors/" + std::to_string(prim.position), "POSITION must be VEC3 of float or (KHR_mesh_quantization) 8/16-bit integers");
       prim.vertices = pos.count;
       prim.refs = pos.count;
+      if (!member(attributes, "COLOR_0", pp + "/attributes").is_null()) {
+        prim.color = static_cast<int64_t>(get_uint(attributes, "COLOR_0", pp + "/attributes", 0, true, UINT32_MAX));
+        const Accessor& col = accessor(static_cast<uint64_t>(prim.color), pp + "/attributes/COLOR_0");
+        const bool float_type = col.component == 5126 && !col.normalized;
+        const bool unorm = (col.component == 5121 || col.component == 5123) && col.normalized;
+        if ((col.components != 3 && col.components != 4) || !(float_type || unorm))
+          bad("/accessors/" + std::to_string(prim.color), "COLOR_0 must be VEC3 or VEC4 of float, or of normalized unsigned byte or short");
+        if (col.count != pos.count)
+          bad("/accessors/" + std::to_string(prim.color), "COLOR_0 has " + std::to_string(col.count) + " elements, POSITION " +
+                                                              std::to_string(pos.count));
+        colors_ = true;
+      }
       if (!member(prims[p], "indices", pp).is_null()) {
         prim.indices = static_cast<int64_t>(get_uint(prims[p], "indices", pp, 0, true, UINT32_MAX));
         const Accessor& idx = accessor(static_cast<uint64_t>(prim.indices), pp + "/indices");
@@ -999,6 +1014,23 @@ void GltfReader::parse(const Chunk& chunk, ParsedChunk* out) const {
       if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || !std::isfinite(v[2]))
         return error("/nodes/" + std::to_string(inst.node) + ": POSITION element " + std::to_string(first + i) +
                      " of accessor " + std::to_string(p.position) + " overflows under the node's transform");
+    }
+    if (colors_) {
+      // COLOR_0 values as they are (linear, as glTF defines them and the GLB writer writes them back),
+      // clamped to [0, 1] and rounded to bytes; VEC3 is opaque; no COLOR_0 is white (a factor of 1).
+      out->colors.assign(4 * n, 255);
+      if (p.color >= 0) {
+        const Accessor& a = accessors_[static_cast<size_t>(p.color)];
+        std::vector<double> c(n * a.components);
+        read(a, first, n, c.data());
+        for (uint64_t i = 0; i < n; ++i)
+          for (uint32_t k = 0; k < a.components; ++k) {
+            const double x = c[i * a.components + k];
+            if (!std::isfinite(x))
+              return error("/accessors/" + std::to_string(p.color) + ": non-finite COLOR_0 at element " + std::to_string(first + i));
+            out->colors[4 * i + k] = static_cast<uint8_t>(std::lround(std::clamp(x, 0.0, 1.0) * 255));
+          }
+      }
     }
     return;
   }

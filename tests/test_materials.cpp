@@ -16,6 +16,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/status.h"
+#include "io/base64.h"
 #include "lodstream/lodstream.h"
 #include "cli_harness.h"
 #include "reader_harness.h"
@@ -193,6 +195,67 @@ TEST(Colors, PlyVertexColoursAsciiAndBinary) {
   const std::string binary = tmp.write("b.ply", bin);
   EXPECT_EQ(test::read_all(binary, 1 << 20).colors, a.colors);
   EXPECT_EQ(test::read_all(binary, 1).colors, a.colors);
+}
+
+// A glTF with one triangle per primitive: COLOR_0 as normalized unsigned byte VEC4, as float VEC3 (clamped,
+// opaque), as normalized unsigned short VEC4, and a primitive without COLOR_0 (white).
+std::string gltf_with_colors() {
+  std::vector<uint8_t> bin;
+  auto put = [&](const void* p, size_t n) {
+    const auto* b = static_cast<const uint8_t*>(p);
+    bin.insert(bin.end(), b, b + n);
+  };
+  const float xyz[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  put(xyz, sizeof xyz);  // 0: positions, 36 bytes
+  const uint8_t u8[12] = {255, 0, 0, 255, 0, 128, 0, 64, 1, 2, 3, 4};
+  put(u8, sizeof u8);  // 36: 12 bytes
+  const float f[9] = {0.5f, 2.0f, -1.0f, 0, 0, 1, 1, 1, 1};
+  put(f, sizeof f);  // 48: 36 bytes
+  const uint16_t u16[12] = {65535, 0, 32768, 65535, 0, 0, 0, 0, 257, 514, 771, 65535};
+  put(u16, sizeof u16);  // 84: 24 bytes
+  Json j;
+  j["asset"] = {{"version", "2.0"}};
+  j["buffers"] = Json::array({{{"byteLength", bin.size()}, {"uri", "data:application/octet-stream;base64," + io::base64_encode(bin)}}});
+  j["bufferViews"] = Json::array({{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 36}},
+                                  {{"buffer", 0}, {"byteOffset", 36}, {"byteLength", 12}},
+                                  {{"buffer", 0}, {"byteOffset", 48}, {"byteLength", 36}},
+                                  {{"buffer", 0}, {"byteOffset", 84}, {"byteLength", 24}}});
+  j["accessors"] = Json::array({{{"bufferView", 0}, {"componentType", 5126}, {"count", 3}, {"type", "VEC3"},
+                                 {"min", {0, 0, 0}}, {"max", {1, 1, 0}}},
+                                {{"bufferView", 1}, {"componentType", 5121}, {"normalized", true}, {"count", 3}, {"type", "VEC4"}},
+                                {{"bufferView", 2}, {"componentType", 5126}, {"count", 3}, {"type", "VEC3"}},
+                                {{"bufferView", 3}, {"componentType", 5123}, {"normalized", true}, {"count", 3}, {"type", "VEC4"}}});
+  Json prims = Json::array();
+  for (int c : {1, 2, 3, -1}) {
+    Json a = {{"POSITION", 0}};
+    if (c >= 0) a["COLOR_0"] = c;
+    prims.push_back({{"attributes", a}});
+  }
+  j["meshes"] = Json::array({{{"primitives", prims}}});
+  j["nodes"] = Json::array({{{"mesh", 0}}});
+  j["scenes"] = Json::array({{{"nodes", {0}}}});
+  j["scene"] = 0;
+  return j.dump();
+}
+
+TEST(Colors, GltfColor0InEveryAllowedForm) {
+  test::TempDir tmp;
+  const std::string path = tmp.write("c.gltf", gltf_with_colors());
+  const test::ReadAll r = test::read_all(path, 1 << 20);
+  EXPECT_EQ(r.colors, (std::vector<uint8_t>{255, 0, 0, 255, 0, 128, 0, 64, 1, 2, 3, 4,          // ubyte VEC4
+                                            128, 255, 0, 255, 0, 0, 255, 255, 255, 255, 255, 255,  // float VEC3
+                                            255, 0, 128, 255, 0, 0, 0, 0, 1, 2, 3, 255,          // ushort VEC4
+                                            255, 255, 255, 255, 255, 255, 255, 255, 255, 255, 255, 255}));
+  test::expect_same(r, test::read_all(path, 1), "one-element chunks");
+  Json bad = Json::parse(gltf_with_colors());
+  bad["accessors"][1]["normalized"] = false;
+  try {
+    test::read_all(tmp.write("bad.gltf", bad.dump()), 1 << 20);
+    ADD_FAILURE() << "a COLOR_0 of bytes not normalized was accepted";
+  } catch (const Failure& f) {
+    EXPECT_EQ(f.status(), Status::bad_data);
+    EXPECT_NE(std::string(f.what()).find("/accessors/1"), std::string::npos) << f.what();
+  }
 }
 
 // The vertices of an OBJ level written with colours (`v x y z r g b`): x and the colour as 0..255.
