@@ -258,6 +258,51 @@ TEST(Colors, GltfColor0InEveryAllowedForm) {
   }
 }
 
+TEST(Colors, PlyFaceColoursBecomeMaterialsInOrderOfFirstAppearance) {
+  // Faces red, green (a quad: two triangles), red, and a two-index face in blue (a segment); an edge
+  // element's segment takes material 0, the white default.
+  const char* body = "0 0 0\n1 0 0\n0 1 0\n1 1 0\n";
+  test::TempDir tmp;
+  const std::string ascii = tmp.write("a.ply", std::string("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                                                           "property float z\nelement face 4\nproperty list uchar int vertex_indices\n"
+                                                           "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+                                                           "element edge 1\nproperty int vertex1\nproperty int vertex2\nend_header\n") +
+                                                   body + "3 0 1 2 255 0 0\n4 0 1 3 2 0 255 0\n3 1 3 2 255 0 0\n2 0 3 0 0 255\n0 3\n");
+  const test::ReadAll a = test::read_all(ascii, 1 << 20);
+  ASSERT_EQ(a.materials.size(), 4u);
+  EXPECT_EQ(a.materials[0].name, "default");
+  EXPECT_EQ(a.materials[1].name, "rgba_ff0000ff");
+  EXPECT_EQ(a.materials[2].name, "rgba_00ff00ff");
+  EXPECT_EQ(a.materials[3].name, "rgba_0000ffff");
+  EXPECT_EQ(a.materials[2].base_color[1], 1.0f);
+  EXPECT_EQ(a.triangle_materials, (std::vector<uint32_t>{1, 2, 2, 1}));
+  EXPECT_EQ(a.line_materials, (std::vector<uint32_t>{3, 0}));
+  test::expect_same(a, test::read_all(ascii, 1), "one-record chunks");
+  // The same in binary, with float colours and an alpha.
+  std::string bin = "ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                    "property float z\nelement face 2\nproperty float red\nproperty list uchar int vertex_indices\n"
+                    "property float green\nproperty float blue\nproperty uchar alpha\nend_header\n";
+  const float xyz[12] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0};
+  bin.append(reinterpret_cast<const char*>(xyz), sizeof xyz);
+  auto face = [&](std::vector<int32_t> v, float r, float g, float b, uint8_t alpha) {
+    bin.append(reinterpret_cast<const char*>(&r), 4);
+    const uint8_t n = static_cast<uint8_t>(v.size());
+    bin.append(reinterpret_cast<const char*>(&n), 1);
+    bin.append(reinterpret_cast<const char*>(v.data()), 4 * v.size());
+    bin.append(reinterpret_cast<const char*>(&g), 4);
+    bin.append(reinterpret_cast<const char*>(&b), 4);
+    bin.append(reinterpret_cast<const char*>(&alpha), 1);
+  };
+  face({0, 1, 2}, 1, 0.5f, 0, 128);
+  face({1, 3, 2}, 1, 0.5f, 0, 128);
+  const std::string binary = tmp.write("b.ply", bin);
+  const test::ReadAll b = test::read_all(binary, 1);
+  ASSERT_EQ(b.materials.size(), 2u);
+  EXPECT_EQ(b.materials[1].name, "rgba_ff800080");
+  EXPECT_EQ(b.materials[1].alpha, core::Material::Alpha::blend);
+  EXPECT_EQ(b.triangle_materials, (std::vector<uint32_t>{1, 1}));
+}
+
 // The vertices of an OBJ level written with colours (`v x y z r g b`): x and the colour as 0..255.
 std::vector<std::pair<double, std::array<int, 3>>> obj_vertices(const std::string& path) {
   std::vector<std::pair<double, std::array<int, 3>>> out;
