@@ -44,6 +44,7 @@
 #include "core/status.h"
 #include "io/base64.h"
 #include "io/reader.h"
+#include "io/texture_mean.h"
 
 namespace lodstream::io {
 namespace {
@@ -162,6 +163,9 @@ class GltfReader final : public Reader {
   void load_meshes();
   void walk_scene();
   void load_materials();
+  // The mean colour of a pbrMetallicRoughness object's baseColorTexture; false when there is none or it
+  // cannot be read.
+  bool base_color_texture(const json& pbr, float rgba[4]) const;
 
   Bytes bytes(const View& v, uint64_t begin, uint64_t end) const;
   // Reads elements [first, first + n) of accessor `a` as doubles (components per element), dequantized
@@ -806,9 +810,11 @@ void GltfReader::open() {
 
 // Materials (glTF 2.0 §3.9): the metallic-roughness factors, alphaMode, alphaCutoff and doubleSided of every
 // entry of /materials, in order; primitives without one get the spec's default material (white, metallic 1,
-// roughness 1, opaque, single-sided), appended after them. A base colour texture is not read (the levels
-// carry no texture coordinates): the factor alone gives the colour. No /materials and no primitive naming
-// one: no materials at all.
+// roughness 1, opaque, single-sided), appended after them. The levels carry no texture coordinates, so a
+// base colour texture is reduced to its mean colour (io/texture_mean.h), which multiplies the factor: the
+// image of /textures/i/source, from a bufferView (GLB or .bin), a data URI or a file beside the glTF. A
+// texture that cannot be found or decoded leaves the factor alone (the geometry still reads). No
+// /materials and no primitive naming one: no materials at all.
 void GltfReader::load_materials() {
   const json& mats = member(doc_, "materials", "");
   if (!mats.is_null() && !mats.is_array()) bad("/materials", "expected an array");
@@ -847,6 +853,9 @@ void GltfReader::load_materials() {
           out.base_color[k] = static_cast<float>(std::clamp(c[k].get<double>(), 0.0, 1.0));
         }
       }
+      float texel[4];
+      if (base_color_texture(pbr, texel))
+        for (int k = 0; k < 4; ++k) out.base_color[k] *= texel[k];
       out.metallic = static_cast<float>(number(pbr, "metallicFactor", mp + "/pbrMetallicRoughness", 1));
       out.roughness = static_cast<float>(number(pbr, "roughnessFactor", mp + "/pbrMetallicRoughness", 1));
     }
@@ -913,6 +922,44 @@ bool GltfReader::next_chunk(uint64_t target_bytes, Chunk* chunk) {
     return true;
   }
   return false;
+}
+
+bool GltfReader::base_color_texture(const json& pbr, float rgba[4]) const {
+  auto index = [](const json& obj, const char* key, int64_t* out) {
+    if (!obj.is_object() || !obj.contains(key) || !obj[key].is_number_unsigned()) return false;
+    *out = obj[key].get<int64_t>();
+    return true;
+  };
+  auto element = [&](const char* key, int64_t i) -> const json* {
+    if (!doc_.contains(key) || !doc_[key].is_array() || i < 0 || static_cast<size_t>(i) >= doc_[key].size()) return nullptr;
+    return &doc_[key][static_cast<size_t>(i)];
+  };
+  int64_t t = 0, source = 0, view = 0;
+  if (!pbr.contains("baseColorTexture") || !index(pbr["baseColorTexture"], "index", &t)) return false;
+  const json* texture = element("textures", t);
+  if (!texture || !index(*texture, "source", &source)) return false;
+  const json* image = element("images", source);
+  if (!image || !image->is_object()) return false;
+  std::string error;
+  if (index(*image, "bufferView", &view)) {
+    if (static_cast<size_t>(view) >= views_.size()) return false;
+    const View& v = views_[static_cast<size_t>(view)];
+    const Bytes b = bytes(v, 0, v.length);
+    return texture_mean_color(std::span<const uint8_t>(b.p, v.length), rgba, &error);
+  }
+  if (!image->contains("uri") || !(*image)["uri"].is_string()) return false;
+  const std::string u = (*image)["uri"].get<std::string>();
+  if (u.rfind("data:", 0) == 0) {
+    const size_t comma = u.find(',');
+    std::vector<uint8_t> data;
+    if (comma == std::string::npos || u.substr(0, comma).find(";base64") == std::string::npos ||
+        !base64_decode(std::string_view(u).substr(comma + 1), &data))
+      return false;
+    return texture_mean_color(data, rgba, &error);
+  }
+  const std::string rel = percent_decode(u);
+  if (rel.empty() || rel[0] == '/' || rel.find("://") != std::string::npos) return false;
+  return texture_file_mean_color((std::filesystem::path(file_.path()).parent_path() / rel).string(), rgba, &error);
 }
 
 Bytes GltfReader::bytes(const View& v, uint64_t begin, uint64_t end) const {

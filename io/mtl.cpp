@@ -1,11 +1,17 @@
 // MTL material libraries: see io/mtl.h.
 #include "io/mtl.h"
 
+#include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <utility>
+#include <vector>
+
+#include "io/texture_mean.h"
 
 namespace lodstream::io {
 
@@ -39,9 +45,10 @@ float unit(float v) { return v < 0 ? 0 : v > 1 ? 1 : v; }
 
 }  // namespace
 
-void MtlLibraries::parse(std::string_view text) {
+void MtlLibraries::parse(std::string_view text, const std::string& dir) {
   core::Material* m = nullptr;
   core::Material ignored;
+  std::vector<std::pair<core::Material*, std::string>> textures;  // map_Kd, applied once Kd is known
   while (!text.empty()) {
     const size_t eol = text.find('\n');
     std::string_view line = trim(text.substr(0, eol));
@@ -71,7 +78,25 @@ void MtlLibraries::parse(std::string_view text) {
       m->metallic = unit(v[0]);
     } else if (key == "Pr" && numbers(rest, v, 1) == 1) {
       m->roughness = unit(v[0]);
+    } else if (key == "map_Kd" && !dir.empty() && m != &ignored && !rest.empty()) {
+      // Options (-s u v w, -bm b, ...) come first: the file is the last word.
+      const size_t last = rest.find_last_of(" \t");
+      textures.emplace_back(m, std::string(last == std::string_view::npos ? rest : rest.substr(last + 1)));
     }
+  }
+  std::unordered_map<std::string, std::array<float, 4>> means;  // a library often reuses one image
+  for (auto& [material, file] : textures) {
+    std::string f = file;
+    std::replace(f.begin(), f.end(), '\\', '/');  // libraries written on Windows
+    const std::string path = (std::filesystem::path(dir) / f).string();
+    auto it = means.find(path);
+    if (it == means.end()) {
+      std::array<float, 4> rgba{};
+      std::string error;
+      if (!texture_file_mean_color(path, rgba.data(), &error)) rgba = {1, 1, 1, 1};
+      it = means.emplace(path, rgba).first;
+    }
+    for (int k = 0; k < 3; ++k) material->base_color[k] *= it->second[k];
   }
 }
 
@@ -90,7 +115,7 @@ void MtlLibraries::read(const std::string& obj_path, const std::string& names) {
     if (!in) continue;
     std::ostringstream text;
     text << in.rdbuf();
-    parse(text.str());
+    parse(text.str(), std::filesystem::path(path).parent_path().string());
   }
 }
 

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <set>
 #include <sstream>
@@ -18,6 +19,8 @@
 
 #include "core/status.h"
 #include "io/base64.h"
+#include "io/png_writer.h"
+#include "io/texture_mean.h"
 #include "lodstream/lodstream.h"
 #include "cli_harness.h"
 #include "reader_harness.h"
@@ -301,6 +304,75 @@ TEST(Colors, PlyFaceColoursBecomeMaterialsInOrderOfFirstAppearance) {
   EXPECT_EQ(b.materials[1].name, "rgba_ff800080");
   EXPECT_EQ(b.materials[1].alpha, core::Material::Alpha::blend);
   EXPECT_EQ(b.triangle_materials, (std::vector<uint32_t>{1, 1}));
+}
+
+TEST(Materials, BaseColourTexturesBecomeTheirMeanColour) {
+  // PNG: a red and a half-transparent blue texel; sRGB 255 is linear 1, 0 is 0, so the mean is
+  // (0.5, 0, 0.5) and alpha (1 + 128/255) / 2.
+  const std::vector<uint8_t> texels{255, 0, 0, 255, 0, 0, 255, 128};
+  const std::vector<uint8_t> png = io::encode_png(texels, 2, 1, 4);
+  float rgba[4];
+  std::string error;
+  ASSERT_TRUE(io::texture_mean_color(png, rgba, &error)) << error;
+  EXPECT_NEAR(rgba[0], 0.5, 1e-6);
+  EXPECT_NEAR(rgba[1], 0.0, 1e-6);
+  EXPECT_NEAR(rgba[2], 0.5, 1e-6);
+  EXPECT_NEAR(rgba[3], (1 + 128 / 255.0) / 2, 1e-6);
+  // JPEG (tests/data/textures/orange-8x8.jpg, sRGB 255 128 0 at quality 100): linear (1, 0.2159, 0).
+  const std::string jpeg_path = test::source_dir() + "/tests/data/textures/orange-8x8.jpg";
+  const std::string jpeg = test::read_file(jpeg_path);
+  ASSERT_TRUE(io::texture_file_mean_color(jpeg_path, rgba, &error)) << error;
+  EXPECT_NEAR(rgba[0], 1.0, 0.01);
+  EXPECT_NEAR(rgba[1], 0.2159, 0.01);
+  EXPECT_NEAR(rgba[2], 0.0, 0.01);
+  EXPECT_EQ(rgba[3], 1.0f);
+  EXPECT_FALSE(io::texture_mean_color(std::vector<uint8_t>{1, 2, 3, 4}, rgba, &error));
+  std::vector<uint8_t> broken = png;
+  broken.resize(broken.size() / 2);
+  EXPECT_FALSE(io::texture_mean_color(broken, rgba, &error));
+
+  // glTF: material 0's texture is a PNG data URI, material 1's a JPEG in a bufferView, material 2's a file
+  // that does not exist (factor alone).
+  test::TempDir tmp;
+  Json j = Json::parse(gltf_with_colors());
+  std::vector<uint8_t> bin;
+  ASSERT_TRUE(io::base64_decode(j["buffers"][0]["uri"].get<std::string>().substr(37), &bin));
+  const uint64_t at = bin.size();
+  bin.insert(bin.end(), jpeg.begin(), jpeg.end());
+  j["buffers"][0] = {{"byteLength", bin.size()}, {"uri", "data:application/octet-stream;base64," + io::base64_encode(bin)}};
+  j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at}, {"byteLength", jpeg.size()}});
+  j["images"] = Json::array({{{"uri", "data:image/png;base64," + io::base64_encode(png)}},
+                             {{"bufferView", 4}, {"mimeType", "image/jpeg"}},
+                             {{"uri", "missing.png"}}});
+  j["textures"] = Json::array({{{"source", 0}}, {{"source", 1}}, {{"source", 2}}});
+  j["materials"] = Json::array();
+  for (int t = 0; t < 3; ++t)
+    j["materials"].push_back({{"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 1, 1, 1}}, {"baseColorTexture", {{"index", t}}}}}});
+  for (int p = 0; p < 3; ++p) j["meshes"][0]["primitives"][p]["material"] = p;
+  const test::ReadAll r = test::read_all(tmp.write("t.gltf", j.dump()), 1 << 20);
+  ASSERT_EQ(r.materials.size(), 4u);  // and the default, for the fourth primitive
+  EXPECT_NEAR(r.materials[0].base_color[0], 0.25, 1e-6);
+  EXPECT_NEAR(r.materials[0].base_color[3], (1 + 128 / 255.0) / 2, 1e-6);
+  EXPECT_NEAR(r.materials[1].base_color[0], 0.5, 0.01);
+  EXPECT_NEAR(r.materials[1].base_color[1], 0.2159, 0.01);
+  EXPECT_EQ(r.materials[2].base_color[0], 0.5f);
+  EXPECT_EQ(r.materials[2].base_color[1], 1.0f);
+
+  // MTL: map_Kd with an option before the file name multiplies Kd; a missing file counts as white.
+  std::filesystem::create_directories(tmp.path() / "tex");
+  {
+    std::ofstream f(tmp.path() / "tex" / "a.png", std::ios::binary);
+    f.write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
+  }
+  tmp.write("m.mtl", "newmtl a\nmap_Kd -s 1 1 1 tex/a.png\nKd 0.5 0.5 0.5\nnewmtl b\nKd 0.5 0.5 0.5\nmap_Kd none.jpg\n");
+  const test::ReadAll o = test::read_all(
+      tmp.write("m.obj", "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\nusemtl b\nf 1 3 2\n"), 1 << 20);
+  ASSERT_EQ(o.materials.size(), 3u);
+  EXPECT_EQ(o.materials[1].name, "a");
+  EXPECT_NEAR(o.materials[1].base_color[0], 0.25, 1e-6);
+  EXPECT_NEAR(o.materials[1].base_color[1], 0.0, 1e-6);
+  EXPECT_EQ(o.materials[1].base_color[3], 1.0f);  // d gives the opacity, not the texture
+  EXPECT_EQ(o.materials[2].base_color[0], 0.5f);
 }
 
 // The vertices of an OBJ level written with colours (`v x y z r g b`): x and the colour as 0..255.
