@@ -3,6 +3,7 @@
 // table, OBJ usemtl with its MTL file, GLB one primitive per material with the glTF material table.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -373,6 +374,33 @@ TEST(Materials, BaseColourTexturesBecomeTheirMeanColour) {
   EXPECT_NEAR(o.materials[1].base_color[1], 0.0, 1e-6);
   EXPECT_EQ(o.materials[1].base_color[3], 1.0f);  // d gives the opacity, not the texture
   EXPECT_EQ(o.materials[2].base_color[0], 0.5f);
+}
+
+TEST(Materials, KicadBoardKeepsItsVrmlColoursThroughSimplify) {
+  // tests/data/gltf/kicad-board.glb (tools/make_kicad_board.py): 6 KiCad components instanced 26 times on
+  // a board, one primitive per VRML material, the VRML diffuse colours as base colours.
+  const std::string path = test::source_dir() + "/tests/data/gltf/kicad-board.glb";
+  const test::ReadAll r = test::read_all(path, 1 << 20);
+  EXPECT_EQ(r.triangles.size() / 3, 12432u);
+  ASSERT_EQ(r.materials.size(), 9u);
+  EXPECT_EQ(r.materials[3].name, "RES-SMD-01");
+  EXPECT_EQ(r.materials[3].base_color[0], 0.082f);
+  EXPECT_EQ(std::set<uint32_t>(r.triangle_materials.begin(), r.triangle_materials.end()).size(), 9u);
+  test::expect_same(r, test::read_all(path, 4096), "small chunks");
+  // The finest level (cells of 0.05 mm, below the models' detail) keeps every material; the coarsest
+  // (5 mm: the board and a few blobs) keeps the board's green on most of its triangles.
+  test::TempDir tmp;
+  const Result res = run(path, tmp.file("out"), {0.05, 5}, false);
+  ASSERT_TRUE(res.ok()) << res.message;
+  const Level fine = read_ply(tmp.file("out/lod0.ply"));
+  EXPECT_EQ(std::set<uint32_t>(fine.triangle_materials.begin(), fine.triangle_materials.end()).size(), 9u);
+  const Level coarse = read_ply(tmp.file("out/lod1.ply"));
+  ASSERT_FALSE(coarse.triangle_materials.empty());
+  const size_t green = static_cast<size_t>(std::count(coarse.triangle_materials.begin(), coarse.triangle_materials.end(), 0u));
+  EXPECT_GT(green, 0u);
+  const Json g = glb_json(tmp.file("out/lods.glb"));
+  ASSERT_EQ(g["materials"].size(), 9u);
+  EXPECT_EQ(g["materials"][0]["name"], "FR4");
 }
 
 // The vertices of an OBJ level written with colours (`v x y z r g b`): x and the colour as 0..255.
