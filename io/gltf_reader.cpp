@@ -142,6 +142,7 @@ class GltfReader final : public Reader {
   void parse(const Chunk& chunk, ParsedChunk* out) const override;
   void resolve(ParsedChunk* chunk) override;
   bool has_colors() const override { return colors_; }
+  bool single_precision() const override { return single_; }
 
  private:
   [[noreturn]] void bad(const std::string& pointer, const std::string& message) const {
@@ -183,6 +184,9 @@ class GltfReader final : public Reader {
   std::vector<std::vector<Primitive>> meshes_;
   uint32_t default_material_ = 0;  // materials_ id of primitives without a material
   bool colors_ = false;            // some drawn primitive has COLOR_0
+  // Every drawn POSITION is float (or 8/16-bit integers, not normalized) and every instance's world matrix
+  // is the identity: positions are then exact floats and the store keeps them as such (half the bytes).
+  bool single_ = false;
   std::vector<Instance> instances_;
   uint64_t decoded_bytes_ = 0;  // of EXT_meshopt_compression views
 
@@ -802,6 +806,17 @@ void GltfReader::open() {
   accessors_.resize(acc.is_array() ? acc.size() : 0);
   load_meshes();
   walk_scene();
+  single_ = true;
+  static const double identity[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+  for (const Instance& inst : instances_) {
+    if (!std::equal(inst.m, inst.m + 12, identity)) single_ = false;
+    for (const Primitive& p : meshes_[inst.mesh]) {
+      if (p.vertices == 0) continue;
+      const Accessor& a = accessors_[p.position];
+      if (!(a.component == 5126 || ((a.component == 5120 || a.component == 5121 || a.component == 5122 || a.component == 5123) && !a.normalized)))
+        single_ = false;
+    }
+  }
   load_materials();
   if (object_names_.empty()) object_names_.emplace_back();
   for (const Instance& inst : instances_)
@@ -1000,9 +1015,18 @@ void GltfReader::read(const Accessor& a, uint64_t first, uint64_t n, double* out
   if (a.view >= 0) {
     const Bytes span = bytes(views_[static_cast<size_t>(a.view)], a.offset + first * a.stride,
                              a.offset + (first + n - 1) * a.stride + uint64_t{comps} * a.component_bytes);
-    for (uint64_t i = 0; i < n; ++i)
-      for (uint32_t c = 0; c < comps; ++c)
-        out[i * comps + c] = component(span.p + i * a.stride + c * a.component_bytes, a.component, a.normalized);
+    // Float and uint32 (POSITION and indices, nearly always) without the per-component type switch.
+    if (a.component == 5126) {
+      for (uint64_t i = 0; i < n; ++i)
+        for (uint32_t c = 0; c < comps; ++c) out[i * comps + c] = load<float>(span.p + i * a.stride + 4 * c);
+    } else if (a.component == 5125) {
+      for (uint64_t i = 0; i < n; ++i)
+        for (uint32_t c = 0; c < comps; ++c) out[i * comps + c] = load<uint32_t>(span.p + i * a.stride + 4 * c);
+    } else {
+      for (uint64_t i = 0; i < n; ++i)
+        for (uint32_t c = 0; c < comps; ++c)
+          out[i * comps + c] = component(span.p + i * a.stride + c * a.component_bytes, a.component, a.normalized);
+    }
   } else {
     std::fill(out, out + n * comps, 0.0);
   }
