@@ -266,13 +266,15 @@ size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t ve
   return end;
 }
 
-// One serial pass over the weight order (order.u32; with the mean representative, grades.f64 beside it)
-// summing every level's cell colours (see CellColor). Memory: the colour column mapped (4 bytes a vertex)
-// and 96 bytes a cell of each level of the group.
-template <class RecordOf, class CellOf>
+// Every level's cell colours (see CellColor), one level per task: each reads the weight order (order.u32;
+// with the mean representative, grades.f64 beside it) and its level's cluster map (cells-L.map, the cell
+// of each record in weight order) front to back, and sums its cells serially in that order, so the sums do
+// not depend on the threads. Streaming the cluster map spares the random lookups of the group's packed map.
+// Memory: the colour column mapped (4 bytes a vertex), 96 bytes a cell of each level of the group, and
+// per task a window of each file.
 void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const std::string& prefix, uint64_t records,
-                     const EmitOptions& options, const std::vector<LevelState>& levels, RecordOf&& record_of,
-                     CellOf&& cell, std::vector<std::vector<CellColor>>& out) {
+                     const EmitOptions& options, const std::vector<LevelState>& levels,
+                     std::vector<std::vector<CellColor>>& out) {
   for (size_t l = 0; l < levels.size(); ++l) out[l].assign(levels[l].in.cells, CellColor{});
   io::MappedFile colors(store_dir + "/colors.rgba8");
   if (colors.size() != meta.vertices * 4) fail(Status::io_error, colors.path() + ": size does not match store.json");
@@ -287,27 +289,32 @@ void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const 
   }
   if (records == 0) return;
   const io::Window rgba = colors.map(0, colors.size());
-  for (uint64_t first = 0; first < records; first += 1 << 20) {
-    const uint64_t n = std::min<uint64_t>(1 << 20, records - first);
-    const io::Window ids = order.map(first * 4, (first + n) * 4);
-    io::Window g;
-    if (grades) g = index->map(first * rb, (first + n) * rb);
-    for (uint64_t i = 0; i < n; ++i) {
-      uint32_t id;
-      std::memcpy(&id, ids.data() + 4 * i, 4);
-      const uint8_t* c = reinterpret_cast<const uint8_t*>(rgba.data()) + 4 * uint64_t{id};
-      double grade = 0;
-      if (grades) std::memcpy(&grade, g.data() + i * rb, 8);
-      const uint64_t r = record_of(id);
-      for (size_t l = 0; l < levels.size(); ++l) {
-        CellColor& s = out[l][cell(levels[l], r)];
+  constexpr uint64_t kChunk = 1 << 18;
+  tbb::parallel_for(size_t{0}, levels.size(), [&](size_t l) {
+    CellMapReader map(cells_path(prefix, levels[l].in.level));
+    std::vector<uint32_t> cells(kChunk);
+    std::vector<CellColor>& sums = out[l];
+    for (uint64_t first = 0; first < records; first += kChunk) {
+      const uint64_t n = std::min<uint64_t>(kChunk, records - first);
+      const io::Window ids = order.map(first * 4, (first + n) * 4);
+      map.read(std::span<uint32_t>(cells.data(), n));
+      io::Window g;
+      if (grades) g = index->map(first * rb, (first + n) * rb);
+      for (uint64_t i = 0; i < n; ++i) {
+        uint32_t id;
+        std::memcpy(&id, ids.data() + 4 * i, 4);
+        if (cells[i] >= sums.size()) fail(Status::io_error, cells_path(prefix, levels[l].in.level) + ": cell id out of range");
+        const uint8_t* c = reinterpret_cast<const uint8_t*>(rgba.data()) + 4 * uint64_t{id};
+        double grade = 0;
+        if (grades) std::memcpy(&grade, g.data() + i * rb, 8);
+        CellColor& s = sums[cells[i]];
         if (s.count == 0) std::memcpy(s.first, c, 4);
         s.count += 1;
         for (int k = 0; k < 4; ++k) s.sum[k] += c[k], s.weighted[k] += grade * c[k];
         s.weight += grade;
       }
     }
-  }
+  });
 }
 
 std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
@@ -714,7 +721,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   for (BlockOut& o : outs[0]) o = BlockOut();
   for (BlockOut& o : outs[1]) o = BlockOut();
   std::vector<std::vector<CellColor>> cell_colors(meta.colors ? nl : 0);
-  if (meta.colors) sum_cell_colors(store_dir, meta, prefix, records, options, levels, record_of, cell, cell_colors);
+  if (meta.colors) sum_cell_colors(store_dir, meta, prefix, records, options, levels, cell_colors);
 
   for (size_t l = 0; l < nl; ++l) {
     LevelState& L = levels[l];
