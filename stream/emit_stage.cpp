@@ -234,8 +234,11 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
   // on the 193M-triangle city with three coarse levels in one group (60K cells): each level also holds
   // about 25 MB whatever its cells, its share of the block outputs and per-thread tables of the blocks in
   // flight (two sets of 4 per thread, 16 here): 24 bytes per primitive in flight.
+  // With vertex colours, each cell's CellColor sums (held from the colour pass to the level's output).
   const bool quadric = options.representative == Representative::quadric && !options.count_only;
-  return cells * (240 + (quadric ? sizeof(core::Quadric) : 0)) + 24 * std::min(primitives, 16 * kEmitBlock);
+  const bool colors = options.colors && !options.count_only;
+  return cells * (240 + (quadric ? sizeof(core::Quadric) : 0) + (colors ? sizeof(CellColor) : 0)) +
+         24 * std::min(primitives, 16 * kEmitBlock);
 }
 
 uint64_t emit_map_bytes(uint64_t vertices, unsigned bits) { return (vertices * bits + 63) / 64 * 8 + 8; }

@@ -52,6 +52,7 @@ struct EmitOptions {
   // grades.f64 of the weight index (stream/grade_stage.h, written for the mean representative only), for
   // the grade weights of vertex colours under the mean representative; empty: plain means.
   std::string grades_path;
+  bool colors = false;  // the store has vertex colours: counted in emit_level_bytes
 };
 
 struct EmitCounts {

@@ -507,6 +507,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       };
       stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
       emit_options.grades_path = grades_path;
+      emit_options.colors = meta.colors;
       run_stage(&report.stages, "emit", [&](StageStats&) {
         const std::vector<stream::EmitCounts> counts = emit_all(sizes, cells, emit_options, write_level);
         for (size_t l = 0; l < sizes.size(); ++l) {
