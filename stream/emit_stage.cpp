@@ -269,16 +269,17 @@ size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t ve
   return end;
 }
 
-// Every level's cell colours (see CellColor), one level per task: each reads the weight order (order.u32;
-// with the mean representative, grades.f64 beside it) and its level's cluster map (cells-L.map, the cell
-// of each record in weight order) front to back, and sums its cells serially in that order, so the sums do
-// not depend on the threads. Streaming the cluster map spares the random lookups of the group's packed map.
-// Memory: the colour column mapped (4 bytes a vertex), 96 bytes a cell of each level of the group, and
-// per task a window of each file.
+// Every level's cell colours (see CellColor). The weight order (order.u32; with the mean representative,
+// grades.f64 beside it) is read in chunks; each chunk's colours are gathered once, then every level sums
+// them in a task of its own, streaming its cluster map (cells-L.map, the cell of each record in weight
+// order: no random lookups in the group's packed map). Each level's cells are summed serially in weight
+// order, so the sums do not depend on the threads. Memory: the colour column mapped (4 bytes a vertex), 96
+// bytes a cell of each level of the group, and per chunk 4 bytes a record and level.
 void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const std::string& prefix, uint64_t records,
                      const EmitOptions& options, const std::vector<LevelState>& levels,
                      std::vector<std::vector<CellColor>>& out) {
-  for (size_t l = 0; l < levels.size(); ++l) out[l].assign(levels[l].in.cells, CellColor{});
+  const size_t nl = levels.size();
+  for (size_t l = 0; l < nl; ++l) out[l].assign(levels[l].in.cells, CellColor{});
   io::MappedFile colors(store_dir + "/colors.rgba8");
   if (colors.size() != meta.vertices * 4) fail(Status::io_error, colors.path() + ": size does not match store.json");
   io::MappedFile order(order_path(prefix));
@@ -293,31 +294,39 @@ void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const 
   if (records == 0) return;
   const io::Window rgba = colors.map(0, colors.size());
   constexpr uint64_t kChunk = 1 << 18;
-  tbb::parallel_for(size_t{0}, levels.size(), [&](size_t l) {
-    CellMapReader map(cells_path(prefix, levels[l].in.level));
-    std::vector<uint32_t> cells(kChunk);
-    std::vector<CellColor>& sums = out[l];
-    for (uint64_t first = 0; first < records; first += kChunk) {
-      const uint64_t n = std::min<uint64_t>(kChunk, records - first);
-      const io::Window ids = order.map(first * 4, (first + n) * 4);
-      map.read(std::span<uint32_t>(cells.data(), n));
-      io::Window g;
-      if (grades) g = index->map(first * rb, (first + n) * rb);
+  std::vector<std::unique_ptr<CellMapReader>> maps;
+  for (const LevelState& L : levels) maps.push_back(std::make_unique<CellMapReader>(cells_path(prefix, L.in.level)));
+  std::vector<uint32_t> cells(nl * kChunk), chunk_rgba(kChunk);
+  for (uint64_t first = 0; first < records; first += kChunk) {
+    const uint64_t n = std::min<uint64_t>(kChunk, records - first);
+    const io::Window ids = order.map(first * 4, (first + n) * 4);
+    for (uint64_t i = 0; i < n; ++i) {
+      uint32_t id;
+      std::memcpy(&id, ids.data() + 4 * i, 4);
+      std::memcpy(&chunk_rgba[i], rgba.data() + 4 * uint64_t{id}, 4);
+    }
+    io::Window g;
+    if (grades) g = index->map(first * rb, (first + n) * rb);
+    tbb::parallel_for(size_t{0}, nl, [&](size_t l) {
+      uint32_t* cs = cells.data() + l * kChunk;
+      maps[l]->read(std::span<uint32_t>(cs, n));
+      std::vector<CellColor>& sums = out[l];
       for (uint64_t i = 0; i < n; ++i) {
-        uint32_t id;
-        std::memcpy(&id, ids.data() + 4 * i, 4);
-        if (cells[i] >= sums.size()) fail(Status::io_error, cells_path(prefix, levels[l].in.level) + ": cell id out of range");
-        const uint8_t* c = reinterpret_cast<const uint8_t*>(rgba.data()) + 4 * uint64_t{id};
-        double grade = 0;
-        if (grades) std::memcpy(&grade, g.data() + i * rb, 8);
-        CellColor& s = sums[cells[i]];
+        if (cs[i] >= sums.size()) fail(Status::io_error, cells_path(prefix, levels[l].in.level) + ": cell id out of range");
+        const uint8_t* c = reinterpret_cast<const uint8_t*>(&chunk_rgba[i]);
+        CellColor& s = sums[cs[i]];
         if (s.count == 0) std::memcpy(s.first, c, 4);
         s.count += 1;
-        for (int k = 0; k < 4; ++k) s.sum[k] += c[k], s.weighted[k] += grade * c[k];
-        s.weight += grade;
+        for (int k = 0; k < 4; ++k) s.sum[k] += c[k];
+        if (grades) {
+          double grade;
+          std::memcpy(&grade, g.data() + i * rb, 8);
+          for (int k = 0; k < 4; ++k) s.weighted[k] += grade * c[k];
+          s.weight += grade;
+        }
       }
-    }
-  });
+    });
+  }
 }
 
 std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
