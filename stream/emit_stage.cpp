@@ -123,19 +123,24 @@ class MaterialCursor {
 // takes its center vertex's colour (the cell's first vertex in weight order), mean the grade-weighted mean
 // of its vertices' colours (the plain mean when every grade is 0), quadric the plain mean. Sums are formed
 // serially in weight order, so they do not depend on the threads.
+// The integer sums are exact (a cell has fewer than 2^32 vertices); the grade-weighted sums, for the mean
+// representative only, are kept apart (CellWeighted) so that the other representatives hold 40 bytes a cell.
 struct CellColor {
-  double weighted[4] = {0, 0, 0, 0}, weight = 0;
-  double sum[4] = {0, 0, 0, 0}, count = 0;
+  uint64_t sum[4] = {0, 0, 0, 0};
+  uint32_t count = 0;
   uint8_t first[4] = {0, 0, 0, 0};
+};
+struct CellWeighted {
+  double weighted[4] = {0, 0, 0, 0}, weight = 0;
 };
 
 uint8_t color_byte(double v) { return v <= 0 ? 0 : v >= 255 ? 255 : static_cast<uint8_t>(std::lround(v)); }
 
-void cell_rgba(const CellColor& c, Representative r, uint8_t* out) {
+void cell_rgba(const CellColor& c, const CellWeighted* w, Representative r, uint8_t* out) {
   for (int k = 0; k < 4; ++k) {
     if (r == Representative::center) out[k] = c.first[k];
-    else if (r == Representative::mean && c.weight > 0) out[k] = color_byte(c.weighted[k] / c.weight);
-    else out[k] = color_byte(c.count > 0 ? c.sum[k] / c.count : 255);
+    else if (r == Representative::mean && w && w->weight > 0) out[k] = color_byte(w->weighted[k] / w->weight);
+    else out[k] = color_byte(c.count > 0 ? static_cast<double>(c.sum[k]) / c.count : 255);
   }
 }
 
@@ -237,7 +242,9 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
   // With vertex colours, each cell's CellColor sums (held from the colour pass to the level's output).
   const bool quadric = options.representative == Representative::quadric && !options.count_only;
   const bool colors = options.colors && !options.count_only;
-  return cells * (240 + (quadric ? sizeof(core::Quadric) : 0) + (colors ? sizeof(CellColor) : 0)) +
+  const bool mean = options.representative == Representative::mean;
+  return cells * (240 + (quadric ? sizeof(core::Quadric) : 0) +
+                  (colors ? sizeof(CellColor) + (mean ? sizeof(CellWeighted) : 0) : 0)) +
          24 * std::min(primitives, 16 * kEmitBlock);
 }
 
@@ -273,18 +280,21 @@ size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t ve
 // grades.f64 beside it) is read in chunks; each chunk's colours are gathered once, then every level sums
 // them in a task of its own, streaming its cluster map (cells-L.map, the cell of each record in weight
 // order: no random lookups in the group's packed map). Each level's cells are summed serially in weight
-// order, so the sums do not depend on the threads. Memory: the colour column mapped (4 bytes a vertex), 96
-// bytes a cell of each level of the group, and per chunk 4 bytes a record and level.
+// order, so the sums do not depend on the threads. Memory: the colour column mapped (4 bytes a vertex), 40
+// bytes a cell of each level of the group (80 with the mean), and per chunk 4 bytes a record and level.
 void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const std::string& prefix, uint64_t records,
                      const EmitOptions& options, const std::vector<LevelState>& levels,
-                     std::vector<std::vector<CellColor>>& out) {
+                     std::vector<std::vector<CellColor>>& out, std::vector<std::vector<CellWeighted>>& weighted_out) {
   const size_t nl = levels.size();
-  for (size_t l = 0; l < nl; ++l) out[l].assign(levels[l].in.cells, CellColor{});
+  const bool grades = options.representative == Representative::mean && !options.grades_path.empty();
+  for (size_t l = 0; l < nl; ++l) {
+    out[l].assign(levels[l].in.cells, CellColor{});
+    if (grades) weighted_out[l].assign(levels[l].in.cells, CellWeighted{});
+  }
   io::MappedFile colors(store_dir + "/colors.rgba8");
   if (colors.size() != meta.vertices * 4) fail(Status::io_error, colors.path() + ": size does not match store.json");
   io::MappedFile order(order_path(prefix));
   if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
-  const bool grades = options.representative == Representative::mean && !options.grades_path.empty();
   constexpr uint64_t rb = sizeof(double);
   std::unique_ptr<io::MappedFile> index;
   if (grades) {
@@ -321,8 +331,9 @@ void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const 
         if (grades) {
           double grade;
           std::memcpy(&grade, g.data() + i * rb, 8);
-          for (int k = 0; k < 4; ++k) s.weighted[k] += grade * c[k];
-          s.weight += grade;
+          CellWeighted& w = weighted_out[l][cs[i]];
+          for (int k = 0; k < 4; ++k) w.weighted[k] += grade * c[k];
+          w.weight += grade;
         }
       }
     });
@@ -733,7 +744,8 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   for (BlockOut& o : outs[0]) o = BlockOut();
   for (BlockOut& o : outs[1]) o = BlockOut();
   std::vector<std::vector<CellColor>> cell_colors(meta.colors ? nl : 0);
-  if (meta.colors) sum_cell_colors(store_dir, meta, prefix, records, options, levels, cell_colors);
+  std::vector<std::vector<CellWeighted>> cell_weighted(meta.colors ? nl : 0);
+  if (meta.colors) sum_cell_colors(store_dir, meta, prefix, records, options, levels, cell_colors, cell_weighted);
 
   for (size_t l = 0; l < nl; ++l) {
     LevelState& L = levels[l];
@@ -822,7 +834,9 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     std::vector<uint8_t> slot_rgba;
     if (meta.colors) {
       slot_rgba.resize(4 * slot_cell.size());
-      for (size_t s = 0; s < slot_cell.size(); ++s) cell_rgba(cell_colors[l][slot_cell[s]], options.representative, &slot_rgba[4 * s]);
+      for (size_t s = 0; s < slot_cell.size(); ++s) cell_rgba(cell_colors[l][slot_cell[s]],
+                                                     cell_weighted[l].empty() ? nullptr : &cell_weighted[l][slot_cell[s]],
+                                                     options.representative, &slot_rgba[4 * s]);
       triangle_vertex_colors(normals.vertex, slot_rgba, &mesh.colors);
     }
     std::vector<uint32_t> out_vertex(slot_cell.size(), UINT32_MAX);
@@ -846,6 +860,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     if (meta.colors) {
       end_vertex_colors(out_vertex, slot_rgba, &mesh);
       std::vector<CellColor>().swap(cell_colors[l]);
+      std::vector<CellWeighted>().swap(cell_weighted[l]);
     }
     if (materials) {
       mesh.materials = meta.materials;
