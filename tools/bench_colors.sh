@@ -4,17 +4,18 @@
 #      with one colour per object (OUT-colors.ply) and the same scene as a GLB (OUT.glb);
 #   2. bench_ingest (build/bench_ingest) runs `cat` and `lodstream info` on the PLY and the GLB,
 #      alternately, --runs times each: medians and throughputs;
-#   3. `lodstream simplify --memory 1G` on the plain and the coloured PLY, alternately (plain first), --runs
+#   3. `lodstream simplify --memory M` (default 1G) on the plain and the coloured PLY, alternately (plain first), --runs
 #      times each, under nice: wall and CPU seconds (user + system of the child) of the whole run and the
 #      emit stage's seconds from manifest.json; medians and the coloured / plain ratios of each pair.
 # The machine is shared: the ratios of runs made back to back are the figure to quote, not the times.
 #
-# usage: tools/bench_colors.sh [--runs N] [--scene /work/scenes/city-9.ply] [--build build] [--work DIR]
-#                              [--skip-ingest] [--skip-simplify]
+# usage: tools/bench_colors.sh [--runs N] [--memory 1G] [--scene /work/scenes/city-9.ply] [--build build]
+#                              [--work DIR] [--skip-ingest] [--skip-simplify]
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
 runs=3
+memory=1G
 scene=/work/scenes/city-9.ply
 build=build
 work=""
@@ -23,6 +24,7 @@ skip_simplify=0
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --runs) runs=$2; shift 2 ;;
+    --memory) memory=$2; shift 2 ;;
     --scene) scene=$2; shift 2 ;;
     --build) build=$2; shift 2 ;;
     --work) work=$2; shift 2 ;;
@@ -48,15 +50,15 @@ fi
 
 if [[ $skip_simplify = 0 ]]; then
   echo "== simplify: plain and coloured PLY, alternately"
-  python3 - "$build/lodstream" "$scene" "$stem-colors.ply" "$work" "$runs" <<'EOF'
+  python3 - "$build/lodstream" "$scene" "$stem-colors.ply" "$work" "$runs" "$memory" <<'EOF'
 import json, os, resource, statistics, subprocess, sys, time
-lod, plain, colored, work, runs = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4], int(sys.argv[5])
+lod, plain, colored, work, runs, memory = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4], int(sys.argv[5]), sys.argv[6]
 def run(inp, tag, i):
     out = os.path.join(work, f"out-{tag}")
     subprocess.run(["rm", "-rf", out], check=True)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.monotonic()
-    subprocess.run(["nice", lod, "simplify", inp, "-o", out, "--memory", "1G", "--progress", "none"], check=True,
+    subprocess.run(["nice", lod, "simplify", inp, "-o", out, "--memory", memory, "--progress", "none"], check=True,
                    stdout=subprocess.DEVNULL)
     wall = time.monotonic() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
