@@ -325,8 +325,8 @@ void PlyReader::finalize_header(ply::Header&& header) {
       const char* color_names[4] = {"red", "green", "blue", "alpha"};
       const Role color_roles[4] = {Role::red, Role::green, Role::blue, Role::alpha};
       for (int c = 0; c < 4; ++c) {
-        const int k = find(color_names[c]);
-        if (k >= 0 && !e.props[k].list) e.pc[c] = k;
+        const int at = find(color_names[c]);
+        if (at >= 0 && !e.props[at].list) e.pc[c] = at;
       }
       face_colors_ = e.pc[0] >= 0 && e.pc[1] >= 0 && e.pc[2] >= 0;
       for (int c = 0; c < 4 && face_colors_; ++c)

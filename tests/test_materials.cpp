@@ -18,8 +18,13 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/primitive_color.h"
+#include "core/ray_scene.h"
 #include "core/status.h"
+#include "core/view_cast.h"
 #include "io/base64.h"
+#include "io/lod_reader.h"
+#include "io/ply_writer.h"
 #include "io/png_writer.h"
 #include "io/texture_mean.h"
 #include "lodstream/lodstream.h"
@@ -469,6 +474,71 @@ TEST(Colors, CellColourIsWeightedAsTheRepresentative) {
       EXPECT_EQ(merged.second, (std::array<int, 3>{0, 128, 255}));
     }
   }
+}
+
+TEST(Colors, LevelPlyReadsBackWithItsColoursAndMaterials) {
+  // What the report reads: a level PLY as io/ply_writer.cpp writes it, colours and materials included.
+  core::LodMesh m;
+  m.positions = {0, 0, 0, 1, 0, 0, 0, 1, 0, 2, 2, 2};
+  m.triangles = {0, 1, 2};
+  m.edges = {1, 3};
+  m.thickness = {0.25f};
+  m.points = {3};
+  m.colors = {255, 0, 0, 255, 0, 255, 0, 255, 0, 0, 255, 255, 10, 20, 30, 40};
+  m.materials.resize(3);
+  m.materials[1].name = "red paint";
+  m.materials[1].base_color[1] = 0.5f;
+  m.materials[2].alpha = core::Material::Alpha::blend;
+  m.materials[2].base_color[3] = 0.25f;
+  m.triangle_materials = {2}, m.edge_materials = {1}, m.point_materials = {0};
+  test::TempDir tmp;
+  io::write_ply(tmp.file("l.ply"), m, {"test"});
+  const core::LodMesh r = io::read_lod_mesh(tmp.file("l.ply"));
+  EXPECT_EQ(r.colors, m.colors);
+  EXPECT_EQ(r.materials, m.materials);
+  EXPECT_EQ(r.triangle_materials, m.triangle_materials);
+  EXPECT_EQ(r.edge_materials, m.edge_materials);
+  EXPECT_EQ(r.point_materials, m.point_materials);
+  EXPECT_EQ(core::convention_violation(r), "");
+  // One colour per primitive: the material's base colour times the mean of the vertex colours.
+  const uint8_t* v[3] = {&m.colors[0], &m.colors[4], &m.colors[8]};
+  uint8_t rgb[3];
+  core::primitive_rgb(v, 3, &m.materials[1], rgb);
+  EXPECT_EQ(rgb[0], 85);   // (255 + 0 + 0) / 3
+  EXPECT_EQ(rgb[1], 43);   // 255 / 3 * 0.5 = 42.5, rounded up
+  EXPECT_EQ(rgb[2], 85);
+  core::primitive_rgb(nullptr, 3, nullptr, rgb);
+  EXPECT_EQ(rgb[0], 255);
+}
+
+TEST(Colors, RenderedPixelsTakeTheColourOfThePrimitiveHit) {
+  // A unit square of two triangles, red and blue, seen from above: the report's ViewImage::color.
+  core::RayScene scene;
+  const std::vector<float> xyz = {-1, -1, 0, 1, -1, 0, 1, 1, 0, -1, 1, 0};
+  const std::vector<uint32_t> tris = {0, 1, 2, 0, 2, 3};
+  scene.add_triangles(xyz, tris);
+  scene.set_colors({255, 0, 0, 0, 0, 255});
+  scene.commit();
+  const double eye[3] = {0, 0, 5}, target[3] = {0, 0, 0};
+  const core::Camera cam = core::look_at(eye, target, 30, 64);
+  core::ViewImage v;
+  const core::RayScene* scenes[] = {&scene};
+  core::cast_view(scenes, cam, &v);
+  ASSERT_EQ(v.color.size(), 3u * 64 * 64);
+  std::set<std::array<uint8_t, 3>> seen;
+  for (uint64_t p = 0; p < 64 * 64; ++p) {
+    const std::array<uint8_t, 3> c{v.color[3 * p], v.color[3 * p + 1], v.color[3 * p + 2]};
+    if (v.covered(p)) seen.insert(c);
+    else EXPECT_EQ(c, (std::array<uint8_t, 3>{255, 255, 255}));
+  }
+  EXPECT_EQ(seen, (std::set<std::array<uint8_t, 3>>{{255, 0, 0}, {0, 0, 255}}));
+  // A scene without colours leaves the image without them.
+  core::RayScene plain;
+  plain.add_triangles(xyz, tris);
+  plain.commit();
+  const core::RayScene* plain_scenes[] = {&plain};
+  core::cast_view(plain_scenes, cam, &v);
+  EXPECT_TRUE(v.color.empty());
 }
 
 TEST(Materials, InputsWithoutMaterialsWriteNoMaterialFields) {
