@@ -482,14 +482,13 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
   // on the 193M-triangle city with three coarse levels in one group (60K cells): each level also holds
   // about 25 MB whatever its cells, its share of the block outputs and per-thread tables of the blocks in
   // flight (two sets of 4 per thread, 16 here): 24 bytes per primitive in flight.
-  // With vertex colours, each cell's index and RGBA and, while they are summed, its CellColor (and
-  // CellWeighted) sums; with materials, a material id per output primitive (about 3 a cell, 4 bytes each).
+  // With materials, a material id per output primitive during pass A (about 3 a cell, 4 bytes each).
+  // Vertex colours add nothing at the peak: their pass (sum_cell_colors: 4 bytes a cell, 44 a used cell,
+  // 84 with the mean) runs after elimination has freed pass A's dedupe tables, and what it keeps (8 bytes a
+  // used cell) goes with the level's parts. Measured: the 48.6 M city with colours at --memory 1G emits
+  // its finest level whole, as without, within the cap (README, "Materials and colours").
   const bool quadric = options.representative == Representative::quadric && !options.count_only;
-  const bool colors = options.colors && !options.count_only;
-  const bool mean = options.representative == Representative::mean;
-  return cells * (240 + (quadric ? sizeof(core::Quadric) : 0) +
-                  (colors ? 8 + sizeof(CellColor) + (mean ? sizeof(CellWeighted) : 0) : 0) +
-                  (options.materials && !options.count_only ? 12 : 0)) +
+  return cells * (240 + (quadric ? sizeof(core::Quadric) : 0) + (options.materials && !options.count_only ? 12 : 0)) +
          24 * std::min(primitives, 16 * kEmitBlock);
 }
 
@@ -525,8 +524,7 @@ EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_reg
                               uint64_t primitives, uint64_t budget, const EmitOptions& options) {
   EmitLevelPlan plan;
   const uint64_t map = emit_map_bytes(vertices, emit_bits(cells));
-  // With colours, the level's cell index (sum_cell_colors) is held beside its batches too.
-  const uint64_t tables = (kLevelBytesPerCell + (options.colors ? 4 : 0)) * cells;
+  const uint64_t tables = kLevelBytesPerCell * cells;
   if (map + tables + emit_level_bytes(cells, primitives, options) <= budget) {
     plan.batch_cells = cells;
     return plan;

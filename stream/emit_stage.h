@@ -64,8 +64,8 @@ struct EmitOptions {
   // grades.f64 of the weight index (stream/grade_stage.h, written for the mean representative only), for
   // the grade weights of vertex colours under the mean representative; empty: plain means.
   std::string grades_path = {};
-  bool colors = false;     // the store has vertex colours: counted in emit_level_bytes
-  bool materials = false;  // the store has a material table: likewise
+  bool colors = false;     // the store has vertex colours (emit_level_bytes: nothing at the peak)
+  bool materials = false;  // the store has a material table: counted in emit_level_bytes
 };
 
 struct EmitCounts {
