@@ -8,6 +8,10 @@
 // - edges: 2 vertex ids each (distinct), with thickness[i] >= 0 in scene units (D_A + D_B, §3.3.1).
 // - points: 1 vertex id each.
 // - Every id is < vertex_count().
+// - materials: the scene's material table (the same for every level), empty when the input has none; then
+//   triangle_materials, edge_materials and point_materials hold one id < materials.size() per primitive,
+//   else they are empty.
+// - colors: empty, or RGBA (0..255) per vertex, when the input has vertex colours.
 #pragma once
 
 #include <cstdint>
@@ -16,6 +20,20 @@
 
 namespace lodstream::core {
 
+// A material as every output format can carry it (glTF metallic-roughness, MTL Kd/d, PLY colours): a base
+// colour (RGBA, 0..1, with a base colour texture already reduced to its mean), metallic and roughness
+// factors, glTF's alpha mode and double-sidedness.
+struct Material {
+  enum class Alpha : uint8_t { opaque, mask, blend };
+  std::string name;
+  float base_color[4] = {1, 1, 1, 1};
+  float metallic = 0, roughness = 1;
+  Alpha alpha = Alpha::opaque;
+  float alpha_cutoff = 0.5f;
+  bool double_sided = true;
+  bool operator==(const Material&) const = default;
+};
+
 struct LodMesh {
   std::vector<float> positions;
   std::vector<float> normals;
@@ -23,6 +41,9 @@ struct LodMesh {
   std::vector<uint32_t> edges;
   std::vector<float> thickness;
   std::vector<uint32_t> points;
+  std::vector<Material> materials;
+  std::vector<uint32_t> triangle_materials, edge_materials, point_materials;
+  std::vector<uint8_t> colors;
 
   uint64_t vertex_count() const { return positions.size() / 3; }
   uint64_t triangle_count() const { return triangles.size() / 3; }
@@ -40,6 +61,15 @@ inline std::string convention_violation(const LodMesh& mesh) {
   if (mesh.edges.size() % 2 != 0) return "edges are not index pairs";
   if (mesh.thickness.size() != mesh.edge_count()) return "one thickness per edge expected";
   if (n > UINT32_MAX) return "more vertices than 32-bit indices can address";
+  if (!mesh.colors.empty() && mesh.colors.size() != 4 * n) return "colors do not match positions";
+  const bool materials = !mesh.materials.empty();
+  if ((materials ? mesh.triangle_count() : 0) != mesh.triangle_materials.size() ||
+      (materials ? mesh.edge_count() : 0) != mesh.edge_materials.size() ||
+      (materials ? mesh.point_count() : 0) != mesh.point_materials.size())
+    return "one material per primitive expected (none without a material table)";
+  for (const auto* ids : {&mesh.triangle_materials, &mesh.edge_materials, &mesh.point_materials})
+    for (uint32_t id : *ids)
+      if (id >= mesh.materials.size()) return "material " + std::to_string(id) + " out of range";
   for (const auto* ids : {&mesh.triangles, &mesh.edges, &mesh.points})
     for (uint32_t id : *ids)
       if (id >= n) return "vertex index " + std::to_string(id) + " out of range";

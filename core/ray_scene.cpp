@@ -80,6 +80,7 @@ struct Geom {
   PrimitiveKind kind = PrimitiveKind::none;
   const float* vertices = nullptr;    // triangles: xyz stride 3; segments and points: xyzr stride 4
   const uint32_t* indices = nullptr;  // triangles: 3 per primitive; segments: first vertex per primitive
+  std::vector<uint8_t> colors;        // RGB per primitive, or empty
 };
 
 // A new geometry's reference, released unless attach() hands it to a scene first: a check that throws
@@ -413,6 +414,23 @@ bool RayScene::only_triangles() const {
   for (const Geom& g : impl_->geoms)
     if (g.kind != PrimitiveKind::triangle) return false;
   return true;
+}
+
+void RayScene::set_colors(std::vector<uint8_t> rgb) {
+  if (impl_->geoms.empty()) return;
+  impl_->geoms.back().colors = std::move(rgb);
+}
+
+const uint8_t* RayScene::color(unsigned geom, unsigned prim) const {
+  if (geom >= impl_->geoms.size()) return nullptr;
+  const std::vector<uint8_t>& c = impl_->geoms[geom].colors;
+  return 3 * uint64_t{prim} + 3 <= c.size() ? &c[3 * uint64_t{prim}] : nullptr;
+}
+
+bool RayScene::has_colors() const {
+  for (const Geom& g : impl_->geoms)
+    if (!g.colors.empty()) return true;
+  return false;
 }
 
 PrimitiveKind RayScene::kind_of(unsigned geom_id) const {

@@ -31,6 +31,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 namespace lodstream::core {
 
@@ -57,6 +58,12 @@ class RayScene {
   void add_segments(std::span<const float> xyz, std::span<const uint32_t> edges, std::span<const float> radius);
   // Discs at xyz[ids[i]], of the given radius (> 0).
   void add_points(std::span<const float> xyz, std::span<const uint32_t> ids, float radius);
+  // Colours of the primitives of the geometry added last (RGB per primitive, in its order), for the
+  // coloured renders of the report (core/view_cast.h ViewImage::color). A geometry without them has none.
+  void set_colors(std::vector<uint8_t> rgb);
+  // The colour of primitive `prim` of geometry `geom`, or null.
+  const uint8_t* color(unsigned geom, unsigned prim) const;
+  bool has_colors() const;
   // Builds the BVH. Throws Failure(usage) when the memory limit is exceeded, Failure(internal) on any
   // other Embree error.
   void commit();

@@ -24,6 +24,8 @@ V3 position(const LodMesh& m, uint32_t id) {
   return {p[0], p[1], p[2]};
 }
 
+// New vertices take the colour `rgba` (when the mesh has colours), new triangles the material `material`
+// (when it has materials): the primitive's, set before it is expanded.
 class Out {
  public:
   Out(LodMesh& mesh, bool normals) : mesh_(mesh), normals_(normals) {}
@@ -32,9 +34,15 @@ class Out {
     mesh_.positions.insert(mesh_.positions.end(), {static_cast<float>(p.x), static_cast<float>(p.y), static_cast<float>(p.z)});
     if (normals_)
       mesh_.normals.insert(mesh_.normals.end(), {static_cast<float>(n.x), static_cast<float>(n.y), static_cast<float>(n.z)});
+    if (rgba) mesh_.colors.insert(mesh_.colors.end(), rgba, rgba + 4);
     return id;
   }
-  void triangle(uint32_t a, uint32_t b, uint32_t c) { mesh_.triangles.insert(mesh_.triangles.end(), {a, b, c}); }
+  void triangle(uint32_t a, uint32_t b, uint32_t c) {
+    mesh_.triangles.insert(mesh_.triangles.end(), {a, b, c});
+    if (!mesh_.materials.empty()) mesh_.triangle_materials.push_back(material);
+  }
+  const uint8_t* rgba = nullptr;
+  uint32_t material = 0;
 
  private:
   LodMesh& mesh_;
@@ -58,8 +66,11 @@ void octahedron(Out& out, V3 p, double r) {
 }
 
 // The quad a ± h·side, b ± h·side, facing `normal` (= d × side up to sign); counter-clockwise seen from it.
-void quad(Out& out, V3 a, V3 b, V3 side, double h, V3 normal) {
+// Its vertices at a take colour `ca`, at b `cb` (null without colours).
+void quad(Out& out, V3 a, V3 b, V3 side, double h, V3 normal, const uint8_t* ca, const uint8_t* cb) {
+  out.rgba = ca;
   const uint32_t a0 = out.vertex(a - h * side, normal), a1 = out.vertex(a + h * side, normal);
+  out.rgba = cb;
   const uint32_t b0 = out.vertex(b - h * side, normal), b1 = out.vertex(b + h * side, normal);
   out.triangle(a0, b0, b1);
   out.triangle(a0, b1, a1);
@@ -74,14 +85,21 @@ LodMesh expand_thick(const LodMesh& mesh, const ThickOptions& options, double* m
   r.positions = mesh.positions;
   r.normals = mesh.normals;
   r.triangles = mesh.triangles;
+  r.colors = mesh.colors;
+  r.materials = mesh.materials;
+  r.triangle_materials = mesh.triangle_materials;
   const bool normals = !mesh.normals.empty();
   r.positions.reserve(r.positions.size() + 3 * (8 * mesh.edge_count() + 6 * mesh.point_count()));
   if (normals) r.normals.reserve(r.positions.capacity());
   r.triangles.reserve(r.triangles.size() + 3 * (4 * mesh.edge_count() + 8 * mesh.point_count()));
   Out out(r, normals);
   double radius = 0;
+  const bool colors = !mesh.colors.empty(), materials = !mesh.materials.empty();
+  auto rgba = [&](uint32_t v) { return colors ? &mesh.colors[4 * uint64_t{v}] : nullptr; };
   for (uint64_t e = 0; e < mesh.edge_count(); ++e) {
     const V3 a = position(mesh, mesh.edges[2 * e]), b = position(mesh, mesh.edges[2 * e + 1]);
+    out.rgba = rgba(mesh.edges[2 * e]);
+    if (materials) out.material = mesh.edge_materials[e];
     const double h = std::max(static_cast<double>(mesh.thickness[e]), options.min_width) / 2;
     const V3 ab = b - a;
     const double length = norm(ab);
@@ -100,11 +118,14 @@ LodMesh expand_thick(const LodMesh& mesh, const ThickOptions& options, double* m
     u = (1 / norm(u)) * u;
     const V3 v = cross(d, u);  // unit: d and u are orthonormal
     // Quad along u lies in the plane (d, u), whose normal is d × u = v; the other's is d × v = -u.
-    quad(out, a, b, u, h, v);
-    quad(out, a, b, v, h, -1.0 * u);
+    quad(out, a, b, u, h, v, rgba(mesh.edges[2 * e]), rgba(mesh.edges[2 * e + 1]));
+    quad(out, a, b, v, h, -1.0 * u, rgba(mesh.edges[2 * e]), rgba(mesh.edges[2 * e + 1]));
     radius = std::max(radius, h);
   }
-  for (uint32_t p : mesh.points) {
+  for (uint64_t i = 0; i < mesh.point_count(); ++i) {
+    const uint32_t p = mesh.points[i];
+    out.rgba = rgba(p);
+    if (materials) out.material = mesh.point_materials[i];
     octahedron(out, position(mesh, p), options.point_radius);
     radius = std::max(radius, options.point_radius);
   }

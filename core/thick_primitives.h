@@ -11,6 +11,8 @@
 //   unit normals.
 // - An edge whose ends coincide in float (never emitted: its cells differ, but their representatives may
 //   round together) is drawn as a point of radius max(w/2, point_radius).
+// - Colours and materials: a new vertex takes the colour of the edge end or point it stands for, a new
+//   triangle the material of its edge or point.
 // The triangles of the input keep their vertices and ids; the new vertices follow, edges first then points,
 // in input order. So the result depends on the input only, and a triangle's bytes do not depend on which
 // other primitives share its part.

@@ -118,6 +118,7 @@ struct Hit {
   PrimitiveKind kind = PrimitiveKind::none;
   double normal[3] = {0, 0, 0};  // raw: canonical for a triangle, Embree's Ng otherwise
   double dir[3] = {0, 0, 0};
+  const uint8_t* color = nullptr;  // the primitive's (RayScene::color), or null
   bool operator<(const Hit& o) const {
     return t < o.t || (t == o.t && (key < o.key || (key == o.key && sub < o.sub)));
   }
@@ -131,6 +132,7 @@ bool lane_hit(const Batch& b, unsigned i, std::span<const RayScene* const> scene
   out->key = b.context.best_key[i];
   const unsigned geom = static_cast<unsigned>(out->key >> 32) & 0xFFu, prim = static_cast<unsigned>(out->key);
   out->kind = scene->kind_of(geom);
+  out->color = scene->color(geom, prim);
   const float org[3] = {b.packet.ray.org_x[i], b.packet.ray.org_y[i], b.packet.ray.org_z[i]};
   const float dir[3] = {b.packet.ray.dir_x[i], b.packet.ray.dir_y[i], b.packet.ray.dir_z[i]};
   for (int k = 0; k < 3; ++k) out->dir[k] = dir[k], out->normal[k] = b.ng[i][k];
@@ -144,6 +146,8 @@ void store(const Hit& h, bool centre, uint64_t p, ViewImage* out) {
   out->depth[p] = h.t;
   out->kind[p] = static_cast<uint8_t>(h.kind);
   out->centre[p] = centre ? 1 : 0;
+  if (!out->color.empty())
+    for (int k = 0; k < 3; ++k) out->color[3 * p + k] = h.color ? h.color[k] : 255;
   double n[3] = {h.normal[0], h.normal[1], h.normal[2]};
   const double* dir = h.dir;
   normalize(n);
@@ -211,7 +215,11 @@ uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera
     out->normal.assign(3 * pixels, 0.0f);
     out->kind.assign(pixels, 0);
     out->centre.assign(pixels, 0);
+    out->color.clear();
   }
+  bool colors = false;
+  for (const RayScene* scene : scenes) colors = colors || scene->has_colors();
+  if (colors && out->color.size() != 3 * pixels) out->color.assign(3 * pixels, 255);
   if (h == 0) return 0;
   const float eye[3] = {static_cast<float>(camera.eye[0]), static_cast<float>(camera.eye[1]), static_cast<float>(camera.eye[2])};
   // The unit ray through (u, v) of the image, in pixels from its top left corner.

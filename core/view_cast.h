@@ -56,6 +56,9 @@ struct ViewImage {
   std::vector<float> normal;       // xyz per pixel, unit, facing the camera; 0 where nothing was hit
   std::vector<uint8_t> kind;       // PrimitiveKind per pixel (none = background)
   std::vector<uint8_t> centre;     // 1 where the pixel's hit is its centre ray's (else one of its k × k rays')
+  // RGB per pixel, the colour of the primitive hit (RayScene::set_colors; white for one without), when a
+  // scene cast into the image has colours; else empty.
+  std::vector<uint8_t> color;
   bool covered(uint64_t pixel) const { return kind[pixel] != 0; }
 };
 

@@ -34,7 +34,7 @@ using Json = nlohmann::ordered_json;
 constexpr uint32_t kMagic = 0x46546C67;      // "glTF"
 constexpr uint32_t kChunkJson = 0x4E4F534A;  // "JSON"
 constexpr uint32_t kChunkBin = 0x004E4942;   // "BIN\0"
-constexpr int kFloat = 5126, kUnsignedInt = 5125;
+constexpr int kFloat = 5126, kUnsignedInt = 5125, kUnsignedByte = 5121;
 constexpr int kArrayBuffer = 34962, kElementArrayBuffer = 34963;
 constexpr int kPoints = 0, kLines = 1, kTriangles = 4;
 
@@ -47,13 +47,13 @@ struct CompactTriangles {
   std::vector<uint32_t> indices;
 };
 
-CompactTriangles compact_triangles(const core::LodMesh& mesh) {
+CompactTriangles compact_triangles(const core::LodMesh& mesh, const std::vector<uint32_t>& triangles) {
   CompactTriangles c;
-  if (mesh.triangles.empty()) return c;
+  if (triangles.empty()) return c;
   constexpr uint32_t kUnset = std::numeric_limits<uint32_t>::max();
   std::vector<uint32_t> slot(mesh.vertex_count(), kUnset);
-  c.indices.reserve(mesh.triangles.size());
-  for (uint32_t id : mesh.triangles) {
+  c.indices.reserve(triangles.size());
+  for (uint32_t id : triangles) {
     if (slot[id] == kUnset) {
       slot[id] = static_cast<uint32_t>(c.vertices.size());
       c.vertices.push_back(id);
@@ -61,6 +61,57 @@ CompactTriangles compact_triangles(const core::LodMesh& mesh) {
     c.indices.push_back(slot[id]);
   }
   return c;
+}
+
+// The primitives of one material: a mesh without materials is one part (the mesh's own arrays, no copy);
+// with materials, one part per material used, its triangles, edges (with their thickness) and points in
+// mesh order.
+struct Part {
+  const std::vector<uint32_t>* triangles;
+  const std::vector<uint32_t>* edges;
+  const std::vector<float>* thickness;
+  const std::vector<uint32_t>* points;
+  uint32_t material;
+};
+struct Parts {
+  std::vector<Part> parts;
+  std::vector<std::vector<uint32_t>> triangles, edges, points;  // per material, when split
+  std::vector<std::vector<float>> thickness;
+};
+
+void split_by_material(const core::LodMesh& mesh, Parts* out) {
+  if (mesh.materials.empty()) {
+    out->parts.push_back({&mesh.triangles, &mesh.edges, &mesh.thickness, &mesh.points, 0});
+    return;
+  }
+  const size_t n = mesh.materials.size();
+  out->triangles.resize(n), out->edges.resize(n), out->points.resize(n), out->thickness.resize(n);
+  for (uint64_t t = 0; t < mesh.triangle_count(); ++t)
+    out->triangles[mesh.triangle_materials[t]].insert(out->triangles[mesh.triangle_materials[t]].end(),
+                                                      &mesh.triangles[3 * t], &mesh.triangles[3 * t] + 3);
+  for (uint64_t e = 0; e < mesh.edge_count(); ++e) {
+    const uint32_t m = mesh.edge_materials[e];
+    out->edges[m].insert(out->edges[m].end(), &mesh.edges[2 * e], &mesh.edges[2 * e] + 2);
+    out->thickness[m].push_back(mesh.thickness[e]);
+  }
+  for (uint64_t i = 0; i < mesh.point_count(); ++i) out->points[mesh.point_materials[i]].push_back(mesh.points[i]);
+  for (size_t m = 0; m < n; ++m)
+    if (!out->triangles[m].empty() || !out->edges[m].empty() || !out->points[m].empty())
+      out->parts.push_back({&out->triangles[m], &out->edges[m], &out->thickness[m], &out->points[m], static_cast<uint32_t>(m)});
+}
+
+Json material_json(const core::Material& m) {
+  Json j;
+  if (!m.name.empty()) j["name"] = m.name;
+  Json& pbr = j["pbrMetallicRoughness"];
+  pbr["baseColorFactor"] = Json::array();
+  for (float c : m.base_color) pbr["baseColorFactor"].push_back(static_cast<double>(c));
+  pbr["metallicFactor"] = static_cast<double>(m.metallic);
+  pbr["roughnessFactor"] = static_cast<double>(m.roughness);
+  if (m.alpha == core::Material::Alpha::mask) j["alphaMode"] = "MASK", j["alphaCutoff"] = static_cast<double>(m.alpha_cutoff);
+  if (m.alpha == core::Material::Alpha::blend) j["alphaMode"] = "BLEND";
+  j["doubleSided"] = m.double_sided;
+  return j;
 }
 
 // Bounding box of the positions of `ids` (each id a vertex of `mesh`), as JSON min and max arrays.
@@ -90,7 +141,7 @@ class Plan {
  public:
   // A buffer view of `count` elements of `components` 4-byte values, and its accessor; returns the accessor.
   int add(uint64_t count, int components, int component_type, const char* type, int target) {
-    const uint64_t bytes = count * components * 4;
+    const uint64_t bytes = count * components * 4;  // 4 bytes: one float or uint32, or one RGBA8 colour
     const int view = static_cast<int>(views_.size());
     Json v;
     v["buffer"] = 0;
@@ -125,6 +176,12 @@ class Plan {
     bounds(mesh, ids, &accessor["min"], &accessor["max"]);
     return a;
   }
+  // Vertex colours: normalized unsigned bytes, RGBA (glTF COLOR_0).
+  int add_colors(uint64_t count) {
+    const int a = add(count, 1, kUnsignedByte, "VEC4", kArrayBuffer);
+    accessors_[static_cast<size_t>(a)]["normalized"] = true;
+    return a;
+  }
   Json& accessors() { return accessors_; }
   Json& views() { return views_; }
   const std::vector<uint64_t>& view_bytes() const { return view_bytes_; }
@@ -145,6 +202,11 @@ class BinWriter {
   void vec3(const std::vector<float>& from, const std::vector<uint32_t>& ids) {
     for (uint32_t id : ids) out_.write(&from[3 * uint64_t{id}], 12);
     end_block(ids.size() * 12);
+  }
+  // RGBA colours of the vertices `ids`.
+  void rgba(const std::vector<uint8_t>& from, const std::vector<uint32_t>& ids) {
+    for (uint32_t id : ids) out_.write(&from[4 * uint64_t{id}], 4);
+    end_block(ids.size() * 4);
   }
   void u32(const std::vector<uint32_t>& values) {
     out_.write(values.data(), values.size() * 4);
@@ -204,6 +266,7 @@ struct GlbBuilder::State {
   Plan plan;
   Json nodes = Json::array();
   Json meshes = Json::array();
+  std::vector<core::Material> materials;  // the table of the first level that has one
   std::vector<double> coverage;
   FileWriter bin;  // the scratch file, opened with the first block
   std::unique_ptr<BinWriter> blocks;
@@ -252,46 +315,68 @@ void GlbBuilder::add(const GlbLevel& level) {
   const core::LodMesh& mesh = *level.mesh;
   Plan& plan = s.plan;
   const size_t first_view = plan.view_bytes().size();
+  if (!mesh.materials.empty()) {
+    if (s.materials.empty()) s.materials = mesh.materials;
+    else if (s.materials != mesh.materials) fail(Status::internal, s.path + ": levels with different material tables");
+  }
+  Parts parts;
+  split_by_material(mesh, &parts);
+  const bool colors = !mesh.colors.empty();
   Json primitives = Json::array();
-  CompactTriangles c;
-  if (!mesh.triangles.empty()) {
-    c = compact_triangles(mesh);
+  std::vector<CompactTriangles> c(parts.parts.size());
+  for (size_t i = 0; i < parts.parts.size(); ++i) {
+    const Part& part = parts.parts[i];
+    if (part.triangles->empty()) continue;
+    c[i] = compact_triangles(mesh, *part.triangles);
     Json p;
-    p["attributes"]["POSITION"] = plan.add_positions(mesh, c.vertices);
-    if (!mesh.normals.empty()) p["attributes"]["NORMAL"] = plan.add(c.vertices.size(), 3, kFloat, "VEC3", kArrayBuffer);
-    p["indices"] = plan.add(c.indices.size(), 1, kUnsignedInt, "SCALAR", kElementArrayBuffer);
-    p["material"] = 0;
+    p["attributes"]["POSITION"] = plan.add_positions(mesh, c[i].vertices);
+    if (!mesh.normals.empty()) p["attributes"]["NORMAL"] = plan.add(c[i].vertices.size(), 3, kFloat, "VEC3", kArrayBuffer);
+    if (colors) p["attributes"]["COLOR_0"] = plan.add_colors(c[i].vertices.size());
+    p["indices"] = plan.add(c[i].indices.size(), 1, kUnsignedInt, "SCALAR", kElementArrayBuffer);
+    p["material"] = part.material;
     p["mode"] = kTriangles;
     primitives.push_back(std::move(p));
   }
-  if (!mesh.edges.empty()) {
+  for (const Part& part : parts.parts) {
+    if (part.edges->empty()) continue;
     Json p;
-    p["attributes"]["POSITION"] = plan.add_positions(mesh, mesh.edges);  // both ends of every edge
-    p["attributes"]["_THICKNESS"] = plan.add(mesh.edges.size(), 1, kFloat, "SCALAR", kArrayBuffer);
-    p["material"] = 0;
+    p["attributes"]["POSITION"] = plan.add_positions(mesh, *part.edges);  // both ends of every edge
+    p["attributes"]["_THICKNESS"] = plan.add(part.edges->size(), 1, kFloat, "SCALAR", kArrayBuffer);
+    if (colors) p["attributes"]["COLOR_0"] = plan.add_colors(part.edges->size());
+    p["material"] = part.material;
     p["mode"] = kLines;
     primitives.push_back(std::move(p));
   }
-  if (!mesh.points.empty()) {
+  for (const Part& part : parts.parts) {
+    if (part.points->empty()) continue;
     Json p;
-    p["attributes"]["POSITION"] = plan.add_positions(mesh, mesh.points);
-    p["material"] = 0;
+    p["attributes"]["POSITION"] = plan.add_positions(mesh, *part.points);
+    if (colors) p["attributes"]["COLOR_0"] = plan.add_colors(part.points->size());
+    p["material"] = part.material;
     p["mode"] = kPoints;
     primitives.push_back(std::move(p));
   }
   BinWriter* blocks = s.add_node(level.name, level.screen_coverage, std::move(primitives), first_view);
   if (!blocks) return;
   BinWriter& bin = *blocks;
-  if (!mesh.triangles.empty()) {
-    bin.vec3(mesh.positions, c.vertices);
-    if (!mesh.normals.empty()) bin.vec3(mesh.normals, c.vertices);
-    bin.u32(c.indices);
+  for (size_t i = 0; i < parts.parts.size(); ++i) {
+    if (parts.parts[i].triangles->empty()) continue;
+    bin.vec3(mesh.positions, c[i].vertices);
+    if (!mesh.normals.empty()) bin.vec3(mesh.normals, c[i].vertices);
+    if (colors) bin.rgba(mesh.colors, c[i].vertices);
+    bin.u32(c[i].indices);
   }
-  if (!mesh.edges.empty()) {
-    bin.vec3(mesh.positions, mesh.edges);
-    bin.f32_twice(mesh.thickness);
+  for (const Part& part : parts.parts) {
+    if (part.edges->empty()) continue;
+    bin.vec3(mesh.positions, *part.edges);
+    bin.f32_twice(*part.thickness);
+    if (colors) bin.rgba(mesh.colors, *part.edges);
   }
-  if (!mesh.points.empty()) bin.vec3(mesh.positions, mesh.points);
+  for (const Part& part : parts.parts) {
+    if (part.points->empty()) continue;
+    bin.vec3(mesh.positions, *part.points);
+    if (colors) bin.rgba(mesh.colors, *part.points);
+  }
   if (bin.blocks() != plan.view_bytes().size()) fail(Status::internal, s.path + ": GLB data does not match its plan");
 }
 
@@ -299,46 +384,97 @@ void GlbBuilder::add(const GlbStreamedLevel& level) {
   State& s = *state_;
   if (!std::isfinite(level.screen_coverage))
     fail(Status::internal, s.path + ": level '" + level.name + "' has a non-finite screen coverage");
+  const size_t nm = level.materials.size();
+  if (nm > 0) {
+    if (level.material_triangles.size() != nm || level.material_edges.size() != nm || level.material_points.size() != nm ||
+        level.material_edge_bounds.size() != 6 * nm || level.material_point_bounds.size() != 6 * nm)
+      fail(Status::internal, s.path + ": level '" + level.name + "': per-material counts do not match its material table");
+    if (s.materials.empty()) s.materials = level.materials;
+    else if (s.materials != level.materials) fail(Status::internal, s.path + ": levels with different material tables");
+  }
+  // Per material (one "material" 0 without a table): its counts and bounds.
+  const std::vector<uint64_t> one_t{level.triangles}, one_e{level.edges}, one_p{level.points};
+  const std::vector<uint64_t>& tri = nm ? level.material_triangles : one_t;
+  const std::vector<uint64_t>& edg = nm ? level.material_edges : one_e;
+  const std::vector<uint64_t>& pts = nm ? level.material_points : one_p;
+  auto bounds = [&](const std::vector<float>& per_material, const float* lo, const float* hi, size_t m, bool max) {
+    return nm ? &per_material[6 * m + (max ? 3 : 0)] : max ? hi : lo;
+  };
   Plan& plan = s.plan;
   const size_t first_view = plan.view_bytes().size();
   Json primitives = Json::array();
+  // Accessors are planned one block kind at a time (so the BIN holds each kind's blocks in material order).
   if (level.triangles > 0) {
-    Json p;
-    p["attributes"]["POSITION"] = plan.add_positions(level.triangle_vertices, level.triangle_min, level.triangle_max);
-    if (level.normals) p["attributes"]["NORMAL"] = plan.add(level.triangle_vertices, 3, kFloat, "VEC3", kArrayBuffer);
-    p["indices"] = plan.add(3 * level.triangles, 1, kUnsignedInt, "SCALAR", kElementArrayBuffer);
-    p["material"] = 0;
-    p["mode"] = kTriangles;
-    primitives.push_back(std::move(p));
+    const int position = plan.add_positions(level.triangle_vertices, level.triangle_min, level.triangle_max);
+    const int normal = level.normals ? plan.add(level.triangle_vertices, 3, kFloat, "VEC3", kArrayBuffer) : -1;
+    const int color = level.colors ? plan.add_colors(level.triangle_vertices) : -1;
+    for (size_t m = 0; m < tri.size(); ++m) {
+      if (tri[m] == 0) continue;
+      Json p;
+      p["attributes"]["POSITION"] = position;
+      if (normal >= 0) p["attributes"]["NORMAL"] = normal;
+      if (color >= 0) p["attributes"]["COLOR_0"] = color;
+      p["indices"] = plan.add(3 * tri[m], 1, kUnsignedInt, "SCALAR", kElementArrayBuffer);
+      p["material"] = m;
+      p["mode"] = kTriangles;
+      primitives.push_back(std::move(p));
+    }
   }
   if (level.edges > 0) {
-    Json p;
-    p["attributes"]["POSITION"] = plan.add_positions(2 * level.edges, level.edge_min, level.edge_max);
-    p["attributes"]["_THICKNESS"] = plan.add(2 * level.edges, 1, kFloat, "SCALAR", kArrayBuffer);
-    p["material"] = 0;
-    p["mode"] = kLines;
-    primitives.push_back(std::move(p));
+    const size_t first = primitives.size();
+    for (size_t m = 0; m < edg.size(); ++m) {
+      if (edg[m] == 0) continue;
+      Json p;
+      p["attributes"]["POSITION"] = plan.add_positions(2 * edg[m], bounds(level.material_edge_bounds, level.edge_min, level.edge_max, m, false),
+                                                       bounds(level.material_edge_bounds, level.edge_min, level.edge_max, m, true));
+      primitives.push_back(std::move(p));
+    }
+    for (size_t m = 0, i = first; m < edg.size(); ++m)
+      if (edg[m] > 0) primitives[i++]["attributes"]["_THICKNESS"] = plan.add(2 * edg[m], 1, kFloat, "SCALAR", kArrayBuffer);
+    if (level.colors)
+      for (size_t m = 0, i = first; m < edg.size(); ++m)
+        if (edg[m] > 0) primitives[i++]["attributes"]["COLOR_0"] = plan.add_colors(2 * edg[m]);
+    for (size_t m = 0, i = first; m < edg.size(); ++m)
+      if (edg[m] > 0) primitives[i]["material"] = m, primitives[i++]["mode"] = kLines;
   }
   if (level.points > 0) {
-    Json p;
-    p["attributes"]["POSITION"] = plan.add_positions(level.points, level.point_min, level.point_max);
-    p["material"] = 0;
-    p["mode"] = kPoints;
-    primitives.push_back(std::move(p));
+    const size_t first = primitives.size();
+    for (size_t m = 0; m < pts.size(); ++m) {
+      if (pts[m] == 0) continue;
+      Json p;
+      p["attributes"]["POSITION"] = plan.add_positions(pts[m], bounds(level.material_point_bounds, level.point_min, level.point_max, m, false),
+                                                       bounds(level.material_point_bounds, level.point_min, level.point_max, m, true));
+      primitives.push_back(std::move(p));
+    }
+    if (level.colors)
+      for (size_t m = 0, i = first; m < pts.size(); ++m)
+        if (pts[m] > 0) primitives[i++]["attributes"]["COLOR_0"] = plan.add_colors(pts[m]);
+    for (size_t m = 0, i = first; m < pts.size(); ++m)
+      if (pts[m] > 0) primitives[i]["material"] = m, primitives[i++]["mode"] = kPoints;
   }
   BinWriter* blocks = s.add_node(level.name, level.screen_coverage, std::move(primitives), first_view);
   if (!blocks) return;
   BinWriter& bin = *blocks;
+  auto per_material = [&](const std::vector<uint64_t>& counts, uint64_t bytes_each, const GlbStreamedLevel::MaterialBlock& block) {
+    for (size_t m = 0; m < counts.size(); ++m)
+      if (counts[m] > 0)
+        bin.stream(bytes_each * counts[m], [&](const GlbStreamedLevel::Write& write) { block(static_cast<uint32_t>(m), write); });
+  };
   if (level.triangles > 0) {
     bin.stream(12 * level.triangle_vertices, level.triangle_positions);
     if (level.normals) bin.stream(12 * level.triangle_vertices, level.triangle_normals);
-    bin.stream(12 * level.triangles, level.triangle_indices);
+    if (level.colors) bin.stream(4 * level.triangle_vertices, level.triangle_colors);
+    per_material(tri, 12, level.triangle_indices);
   }
   if (level.edges > 0) {
-    bin.stream(24 * level.edges, level.edge_positions);
-    bin.stream(8 * level.edges, level.edge_thickness);
+    per_material(edg, 24, level.edge_positions);
+    per_material(edg, 8, level.edge_thickness);
+    if (level.colors) per_material(edg, 8, level.edge_colors);
   }
-  if (level.points > 0) bin.stream(12 * level.points, level.point_positions);
+  if (level.points > 0) {
+    per_material(pts, 12, level.point_positions);
+    if (level.colors) per_material(pts, 4, level.point_colors);
+  }
   if (bin.blocks() != plan.view_bytes().size()) fail(Status::internal, s.path + ": GLB data does not match its plan");
 }
 
@@ -366,10 +502,15 @@ void GlbBuilder::finish() {
   gltf["nodes"] = std::move(s.nodes);
   if (!s.meshes.empty()) {
     gltf["meshes"] = std::move(s.meshes);
-    Json material;
-    material["pbrMetallicRoughness"]["metallicFactor"] = 0.0;  // a plain diffuse surface, not a metal
-    material["doubleSided"] = true;
-    gltf["materials"] = Json::array({std::move(material)});
+    if (s.materials.empty()) {
+      Json material;
+      material["pbrMetallicRoughness"]["metallicFactor"] = 0.0;  // a plain diffuse surface, not a metal
+      material["doubleSided"] = true;
+      gltf["materials"] = Json::array({std::move(material)});
+    } else {
+      gltf["materials"] = Json::array();
+      for (const core::Material& m : s.materials) gltf["materials"].push_back(material_json(m));
+    }
     gltf["accessors"] = std::move(s.plan.accessors());
     gltf["bufferViews"] = std::move(s.plan.views());
     gltf["buffers"] = Json::array({Json{{"byteLength", s.plan.bin_bytes()}}});

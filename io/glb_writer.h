@@ -15,7 +15,13 @@
 //   LINES (mode 1) with POSITION and _THICKNESS (SCALAR float), two vertices per edge, both carrying the
 //   edge's thickness (a vertex shared by edges of different thickness is thus repeated), no indices;
 //   POINTS (mode 0) with POSITION, one vertex per point, no indices. An empty kind is left out;
-// - one material, {doubleSided: true}, used by every primitive;
+// - without a material table: one material, {doubleSided: true}, used by every primitive;
+// - with one (core/mesh.h; every level must carry the same table): the table as glTF materials (name,
+//   baseColorFactor, metallicFactor, roughnessFactor, alphaMode and alphaCutoff when not opaque,
+//   doubleSided), and per level one TRIANGLES, one LINES and one POINTS primitive per material used (all
+//   triangle primitives first, in material order, then the lines, then the points), each with its own
+//   compacted vertex arrays;
+// - with vertex colours, COLOR_0 (normalized unsigned byte VEC4) on every primitive;
 // - one buffer (the BIN chunk); one bufferView per accessor, 4-byte aligned, with its target.
 // The bytes depend only on the arguments (no time stamps, fixed JSON key order).
 //
@@ -30,6 +36,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "core/mesh.h"
 #include "io/file_writer.h"
@@ -51,20 +58,34 @@ void write_glb(const std::string& path, std::span<const GlbLevel> levels, const 
                Sync sync = Sync::durable);
 
 // A level given as its blocks rather than as a mesh, so that it need not be held (stream/level_files.h):
-// the triangles' own vertex array (positions and, with `normals`, normals), their indices into it, both
-// ends of every edge with its thickness, and the points. Each block function writes exactly its block's
-// bytes (count · 12 for vec3 blocks, indices 12 per triangle, positions 24 and thickness 8 per edge) through
+// the triangles' own vertex array (positions and, with `normals`, normals; with `colors`, RGBA), their
+// indices into it, both ends of every edge with its thickness (and their colours), and the points (and
+// theirs). Each block function writes exactly its block's bytes (count · 12 for vec3 blocks, indices 12 per
+// triangle, positions 24, thickness 8 and colours 8 per edge, colours 4 per vertex or point) through
 // `write`, in one or more calls; the builder checks the lengths. Bounds: the min and max of each kind's
 // positions (unused for a kind with none).
+// Without a material table, the per-material blocks are asked once, with material 0, for all their
+// primitives. With one (core/mesh.h; every level of a file the same), each kind has one primitive per
+// material that has primitives of it (material_triangles, material_edges, material_points: counts per
+// material; material_edge_bounds, material_point_bounds: min xyz then max xyz per material), and the
+// per-material blocks are asked for each such material in material order, one block kind after the other
+// (all triangle indices, then all edge positions, all edge thicknesses, all edge colours, all point
+// positions, all point colours). The triangle primitives of a level share its triangle vertex array.
 struct GlbStreamedLevel {
   using Write = std::function<void(const void*, size_t)>;
   using Block = std::function<void(const Write&)>;
+  using MaterialBlock = std::function<void(uint32_t material, const Write&)>;
   std::string name;
   double screen_coverage = 0;
   uint64_t triangle_vertices = 0, triangles = 0, edges = 0, points = 0;
   bool normals = true;
+  bool colors = false;
   float triangle_min[3], triangle_max[3], edge_min[3], edge_max[3], point_min[3], point_max[3];
-  Block triangle_positions, triangle_normals, triangle_indices, edge_positions, edge_thickness, point_positions;
+  std::vector<core::Material> materials;
+  std::vector<uint64_t> material_triangles, material_edges, material_points;
+  std::vector<float> material_edge_bounds, material_point_bounds;
+  Block triangle_positions, triangle_normals, triangle_colors;
+  MaterialBlock triangle_indices, edge_positions, edge_thickness, edge_colors, point_positions, point_colors;
 };
 
 class GlbBuilder {

@@ -45,6 +45,7 @@
 #include "io/base64.h"
 #include "io/reader.h"
 #include "io/text.h"
+#include "io/texture_mean.h"
 
 namespace lodstream::io {
 namespace {
@@ -113,7 +114,8 @@ struct Primitive {
   uint32_t position = 0;
   int64_t indices = -1;
   int mode = kTriangles;
-  int64_t material = -1;  // kept for a later materials reader
+  int64_t material = -1;  // index into /materials, or -1: the default material
+  int64_t color = -1;     // COLOR_0 accessor, or -1: white (the spec's default, a factor of 1)
   uint64_t vertices = 0;  // POSITION count
   uint64_t refs = 0;      // index count, or vertices when not indexed
   uint64_t elements = 0;  // triangles, segments or points
@@ -140,6 +142,8 @@ class GltfReader final : public Reader {
   bool next_chunk(uint64_t target_bytes, Chunk* chunk) override;
   void parse(const Chunk& chunk, ParsedChunk* out) const override;
   void resolve(ParsedChunk* chunk) override;
+  bool has_colors() const override { return colors_; }
+  bool single_precision() const override { return single_; }
 
  private:
   [[noreturn]] void bad(const std::string& pointer, const std::string& message) const {
@@ -160,6 +164,10 @@ class GltfReader final : public Reader {
                    const std::string& pointer, const char* what);
   void load_meshes();
   void walk_scene();
+  void load_materials();
+  // The mean colour of a pbrMetallicRoughness object's baseColorTexture; false when there is none or it
+  // cannot be read.
+  bool base_color_texture(const json& pbr, float rgba[4]) const;
 
   Bytes bytes(const View& v, uint64_t begin, uint64_t end) const;
   // Reads elements [first, first + n) of accessor `a` as doubles (components per element), dequantized
@@ -175,6 +183,11 @@ class GltfReader final : public Reader {
   std::vector<View> views_;
   std::vector<Accessor> accessors_;
   std::vector<std::vector<Primitive>> meshes_;
+  uint32_t default_material_ = 0;  // materials_ id of primitives without a material
+  bool colors_ = false;            // some drawn primitive has COLOR_0
+  // Every drawn POSITION is float (or 8/16-bit integers, not normalized) and every instance's world matrix
+  // is the identity: positions are then exact floats and the store keeps them as such (half the bytes).
+  bool single_ = false;
   std::vector<Instance> instances_;
   uint64_t decoded_bytes_ = 0;  // of EXT_meshopt_compression views
 
@@ -599,6 +612,18 @@ void GltfReader::walk_scene() {
         bad("/accessors/" + std::to_string(prim.position), "POSITION must be VEC3 of float or (KHR_mesh_quantization) 8/16-bit integers");
       prim.vertices = pos.count;
       prim.refs = pos.count;
+      if (!member(attributes, "COLOR_0", pp + "/attributes").is_null()) {
+        prim.color = static_cast<int64_t>(get_uint(attributes, "COLOR_0", pp + "/attributes", 0, true, UINT32_MAX));
+        const Accessor& col = accessor(static_cast<uint64_t>(prim.color), pp + "/attributes/COLOR_0");
+        const bool float_type = col.component == 5126 && !col.normalized;
+        const bool unorm = (col.component == 5121 || col.component == 5123) && col.normalized;
+        if ((col.components != 3 && col.components != 4) || !(float_type || unorm))
+          bad("/accessors/" + std::to_string(prim.color), "COLOR_0 must be VEC3 or VEC4 of float, or of normalized unsigned byte or short");
+        if (col.count != pos.count)
+          bad("/accessors/" + std::to_string(prim.color), "COLOR_0 has " + std::to_string(col.count) + " elements, POSITION " +
+                                                              std::to_string(pos.count));
+        colors_ = true;
+      }
       if (!member(prims[p], "indices", pp).is_null()) {
         prim.indices = static_cast<int64_t>(get_uint(prims[p], "indices", pp, 0, true, UINT32_MAX));
         const Accessor& idx = accessor(static_cast<uint64_t>(prim.indices), pp + "/indices");
@@ -768,9 +793,93 @@ void GltfReader::open() {
   accessors_.resize(acc.is_array() ? acc.size() : 0);
   load_meshes();
   walk_scene();
+  single_ = true;
+  static const double identity[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+  for (const Instance& inst : instances_) {
+    if (!std::equal(inst.m, inst.m + 12, identity)) single_ = false;
+    for (const Primitive& p : meshes_[inst.mesh]) {
+      if (p.vertices == 0) continue;
+      const Accessor& a = accessors_[p.position];
+      if (!(a.component == 5126 || ((a.component == 5120 || a.component == 5121 || a.component == 5122 || a.component == 5123) && !a.normalized)))
+        single_ = false;
+    }
+  }
+  load_materials();
   if (object_names_.empty()) object_names_.emplace_back();
   for (const Instance& inst : instances_)
     for (const Primitive& p : meshes_[inst.mesh]) work_total_ += p.vertices + p.elements;
+}
+
+// Materials (glTF 2.0 §3.9): the metallic-roughness factors, alphaMode, alphaCutoff and doubleSided of every
+// entry of /materials, in order; primitives without one get the spec's default material (white, metallic 1,
+// roughness 1, opaque, single-sided), appended after them. The levels carry no texture coordinates, so a
+// base colour texture is reduced to its mean colour (io/texture_mean.h), which multiplies the factor: the
+// image of /textures/i/source, from a bufferView (GLB or .bin), a data URI or a file beside the glTF. A
+// texture that cannot be found or decoded leaves the factor alone (the geometry still reads). No
+// /materials and no primitive naming one: no materials at all.
+void GltfReader::load_materials() {
+  const json& mats = member(doc_, "materials", "");
+  if (!mats.is_null() && !mats.is_array()) bad("/materials", "expected an array");
+  const size_t count = mats.is_array() ? mats.size() : 0;
+  bool any_default = false, any_named = false;
+  for (const Instance& inst : instances_)
+    for (const Primitive& p : meshes_[inst.mesh]) {
+      if (p.material >= static_cast<int64_t>(count))
+        bad("/meshes/" + std::to_string(inst.mesh), "material " + std::to_string(p.material) + " does not exist");
+      (p.material < 0 ? any_default : any_named) = true;
+    }
+  if (!any_named) return;
+  auto number = [&](const json& obj, const char* key, const std::string& pointer, double fallback) {
+    const json& v = member(obj, key, pointer);
+    if (v.is_null()) return fallback;
+    if (!v.is_number() || !std::isfinite(v.get<double>())) bad(pointer + "/" + key, "expected a number");
+    return std::clamp(v.get<double>(), 0.0, 1.0);
+  };
+  for (size_t i = 0; i < count; ++i) {
+    const std::string mp = "/materials/" + std::to_string(i);
+    const json& m = mats[i];
+    if (!m.is_object()) bad(mp, "expected an object");
+    core::Material out;
+    out.metallic = 1;  // the glTF defaults
+    out.double_sided = false;
+    const json& name = member(m, "name", mp);
+    if (name.is_string()) out.name = name.get<std::string>();
+    const json& pbr = member(m, "pbrMetallicRoughness", mp);
+    if (pbr.is_object()) {
+      const json& c = member(pbr, "baseColorFactor", mp + "/pbrMetallicRoughness");
+      if (!c.is_null()) {
+        if (!c.is_array() || c.size() != 4) bad(mp + "/pbrMetallicRoughness/baseColorFactor", "expected 4 numbers");
+        for (size_t k = 0; k < 4; ++k) {
+          if (!c[k].is_number() || !std::isfinite(c[k].get<double>()))
+            bad(mp + "/pbrMetallicRoughness/baseColorFactor", "expected 4 numbers");
+          out.base_color[k] = static_cast<float>(std::clamp(c[k].get<double>(), 0.0, 1.0));
+        }
+      }
+      float texel[4];
+      if (base_color_texture(pbr, texel))
+        for (int k = 0; k < 4; ++k) out.base_color[k] *= texel[k];
+      out.metallic = static_cast<float>(number(pbr, "metallicFactor", mp + "/pbrMetallicRoughness", 1));
+      out.roughness = static_cast<float>(number(pbr, "roughnessFactor", mp + "/pbrMetallicRoughness", 1));
+    }
+    const json& mode = member(m, "alphaMode", mp);
+    if (mode.is_string()) {
+      const std::string s = mode.get<std::string>();
+      out.alpha = s == "MASK" ? core::Material::Alpha::mask : s == "BLEND" ? core::Material::Alpha::blend : core::Material::Alpha::opaque;
+    }
+    const json& cutoff = member(m, "alphaCutoff", mp);
+    if (cutoff.is_number() && std::isfinite(cutoff.get<double>()) && cutoff.get<double>() >= 0)
+      out.alpha_cutoff = static_cast<float>(cutoff.get<double>());
+    const json& two = member(m, "doubleSided", mp);
+    if (two.is_boolean()) out.double_sided = two.get<bool>();
+    materials_.push_back(std::move(out));
+  }
+  default_material_ = static_cast<uint32_t>(materials_.size());
+  if (any_default) {
+    core::Material d;
+    d.metallic = 1;
+    d.double_sided = false;
+    materials_.push_back(d);
+  }
 }
 
 bool GltfReader::next_chunk(uint64_t target_bytes, Chunk* chunk) {
@@ -817,6 +926,44 @@ bool GltfReader::next_chunk(uint64_t target_bytes, Chunk* chunk) {
   return false;
 }
 
+bool GltfReader::base_color_texture(const json& pbr, float rgba[4]) const {
+  auto index = [](const json& obj, const char* key, int64_t* out) {
+    if (!obj.is_object() || !obj.contains(key) || !obj[key].is_number_unsigned()) return false;
+    *out = obj[key].get<int64_t>();
+    return true;
+  };
+  auto element = [&](const char* key, int64_t i) -> const json* {
+    if (!doc_.contains(key) || !doc_[key].is_array() || i < 0 || static_cast<size_t>(i) >= doc_[key].size()) return nullptr;
+    return &doc_[key][static_cast<size_t>(i)];
+  };
+  int64_t t = 0, source = 0, view = 0;
+  if (!pbr.contains("baseColorTexture") || !index(pbr["baseColorTexture"], "index", &t)) return false;
+  const json* texture = element("textures", t);
+  if (!texture || !index(*texture, "source", &source)) return false;
+  const json* image = element("images", source);
+  if (!image || !image->is_object()) return false;
+  std::string error;
+  if (index(*image, "bufferView", &view)) {
+    if (static_cast<size_t>(view) >= views_.size()) return false;
+    const View& v = views_[static_cast<size_t>(view)];
+    const Bytes b = bytes(v, 0, v.length);
+    return texture_mean_color(std::span<const uint8_t>(b.p, v.length), rgba, &error);
+  }
+  if (!image->contains("uri") || !(*image)["uri"].is_string()) return false;
+  const std::string u = (*image)["uri"].get<std::string>();
+  if (u.rfind("data:", 0) == 0) {
+    const size_t comma = u.find(',');
+    std::vector<uint8_t> data;
+    if (comma == std::string::npos || u.substr(0, comma).find(";base64") == std::string::npos ||
+        !base64_decode(std::string_view(u).substr(comma + 1), &data))
+      return false;
+    return texture_mean_color(data, rgba, &error);
+  }
+  const std::string rel = text::percent_decode(u);
+  if (rel.empty() || rel[0] == '/' || rel.find("://") != std::string::npos) return false;
+  return texture_file_mean_color((std::filesystem::path(file_.path()).parent_path() / rel).string(), rgba, &error);
+}
+
 Bytes GltfReader::bytes(const View& v, uint64_t begin, uint64_t end) const {
   const Buffer& b = buffers_[v.buffer];
   Bytes out;
@@ -855,9 +1002,18 @@ void GltfReader::read(const Accessor& a, uint64_t first, uint64_t n, double* out
   if (a.view >= 0) {
     const Bytes span = bytes(views_[static_cast<size_t>(a.view)], a.offset + first * a.stride,
                              a.offset + (first + n - 1) * a.stride + uint64_t{comps} * a.component_bytes);
-    for (uint64_t i = 0; i < n; ++i)
-      for (uint32_t c = 0; c < comps; ++c)
-        out[i * comps + c] = component(span.p + i * a.stride + c * a.component_bytes, a.component, a.normalized);
+    // Float and uint32 (POSITION and indices, nearly always) without the per-component type switch.
+    if (a.component == 5126) {
+      for (uint64_t i = 0; i < n; ++i)
+        for (uint32_t c = 0; c < comps; ++c) out[i * comps + c] = load<float>(span.p + i * a.stride + 4 * c);
+    } else if (a.component == 5125) {
+      for (uint64_t i = 0; i < n; ++i)
+        for (uint32_t c = 0; c < comps; ++c) out[i * comps + c] = load<uint32_t>(span.p + i * a.stride + 4 * c);
+    } else {
+      for (uint64_t i = 0; i < n; ++i)
+        for (uint32_t c = 0; c < comps; ++c)
+          out[i * comps + c] = component(span.p + i * a.stride + c * a.component_bytes, a.component, a.normalized);
+    }
   } else {
     std::fill(out, out + n * comps, 0.0);
   }
@@ -917,6 +1073,23 @@ void GltfReader::parse(const Chunk& chunk, ParsedChunk* out) const {
         return error("/nodes/" + std::to_string(inst.node) + ": POSITION element " + std::to_string(first + i) +
                      " of accessor " + std::to_string(p.position) + " overflows under the node's transform");
     }
+    if (colors_) {
+      // COLOR_0 values as they are (linear, as glTF defines them and the GLB writer writes them back),
+      // clamped to [0, 1] and rounded to bytes; VEC3 is opaque; no COLOR_0 is white (a factor of 1).
+      out->colors.assign(4 * n, 255);
+      if (p.color >= 0) {
+        const Accessor& a = accessors_[static_cast<size_t>(p.color)];
+        std::vector<double> c(n * a.components);
+        read(a, first, n, c.data());
+        for (uint64_t i = 0; i < n; ++i)
+          for (uint32_t k = 0; k < a.components; ++k) {
+            const double x = c[i * a.components + k];
+            if (!std::isfinite(x))
+              return error("/accessors/" + std::to_string(p.color) + ": non-finite COLOR_0 at element " + std::to_string(first + i));
+            out->colors[4 * i + k] = static_cast<uint8_t>(std::lround(std::clamp(x, 0.0, 1.0) * 255));
+          }
+      }
+    }
     return;
   }
 
@@ -970,6 +1143,10 @@ void GltfReader::parse(const Chunk& chunk, ParsedChunk* out) const {
   }
   std::vector<uint32_t>& objects = arity == 3 ? out->triangle_objects : arity == 2 ? out->line_objects : out->point_objects;
   objects.assign(n, object);
+  if (!materials_.empty()) {
+    std::vector<uint32_t>& materials = arity == 3 ? out->triangle_materials : arity == 2 ? out->line_materials : out->point_materials;
+    materials.assign(n, p.material >= 0 ? static_cast<uint32_t>(p.material) : default_material_);
+  }
   if (arity == 3) out->polygons = n;
 }
 

@@ -13,6 +13,7 @@
 // converted once, and a value a float cannot hold is an error, not an infinity.
 #include "io/lod_reader.h"
 
+#include <algorithm>
 #include <bit>
 #include <charconv>
 #include <cmath>
@@ -115,12 +116,45 @@ class PlyParser {
     if (fmt_ == Fmt::ascii) parse_ascii();
     else if ((fmt_ == Fmt::le) == little) parse_binary<false>();
     else parse_binary<true>();
+    if (materials_) material_table();
   }
 
  private:
   using Fmt = ply::Format;
 
   void check_header(ply::Header&& header);
+  // The material table of io/ply_writer.h's comment lines ("comment material I r g b a metallic roughness
+  // OPAQUE|MASK|BLEND double-sided name"), extended by default materials to every id a primitive names;
+  // primitives of elements without material_index take material 0.
+  void material_table() {
+    std::string_view head(data_, data_start_);
+    for (size_t at = 0; at < head.size();) {
+      size_t e = head.find('\n', at);
+      if (e == std::string_view::npos) e = head.size();
+      const std::string line(head.substr(at, e - at));
+      at = e + 1;
+      if (line.rfind("comment material ", 0) != 0) continue;
+      unsigned long id = 0;
+      float f[6];
+      char mode[16] = {0};
+      int ds = 1, used = 0;
+      if (std::sscanf(line.c_str() + 17, "%lu %f %f %f %f %f %f %15s %d %n", &id, &f[0], &f[1], &f[2], &f[3], &f[4], &f[5], mode, &ds,
+                      &used) < 9 || id != mesh_.materials.size())
+        continue;
+      core::Material m;
+      for (int k = 0; k < 4; ++k) m.base_color[k] = f[k];
+      m.metallic = f[4], m.roughness = f[5];
+      m.alpha = std::string_view(mode) == "MASK" ? core::Material::Alpha::mask
+                : std::string_view(mode) == "BLEND" ? core::Material::Alpha::blend : core::Material::Alpha::opaque;
+      m.double_sided = ds != 0;
+      m.name = line.substr(17 + static_cast<size_t>(used));
+      mesh_.materials.push_back(std::move(m));
+    }
+    if (mesh_.materials.size() <= max_material_) mesh_.materials.resize(uint64_t{max_material_} + 1);
+    mesh_.triangle_materials.resize(mesh_.triangle_count());
+    mesh_.edge_materials.resize(mesh_.edge_count());
+    mesh_.point_materials.resize(mesh_.point_count());
+  }
   void reserve();
   template <bool Swap>
   void parse_binary();
@@ -165,6 +199,21 @@ class PlyParser {
     mesh_.thickness.push_back(t);
   }
   // What a record's roles collected, once the whole record is read.
+  void finish_record(const double* xyz, const int64_t* v, double thickness, const Fan& fan, const double* rgba,
+                     int64_t material) {
+    finish_record(xyz, v, thickness, fan);
+    if (element_->kind == Kind::vertex && colors_) {
+      for (int k = 0; k < 4; ++k) mesh_.colors.push_back(static_cast<uint8_t>(std::clamp(rgba[k], 0.0, 255.0) + 0.5));
+      return;
+    }
+    if (!materials_) return;
+    if (material < 0 || material > UINT32_MAX) data_error("material_index " + std::to_string(material) + " out of range in " + record_text());
+    const uint32_t m = static_cast<uint32_t>(material);
+    max_material_ = std::max(max_material_, m);
+    while (mesh_.triangle_materials.size() < mesh_.triangle_count()) mesh_.triangle_materials.push_back(m);
+    while (mesh_.edge_materials.size() < mesh_.edge_count()) mesh_.edge_materials.push_back(m);
+    while (mesh_.point_materials.size() < mesh_.point_count()) mesh_.point_materials.push_back(m);
+  }
   void finish_record(const double* xyz, const int64_t* v, double thickness, const Fan& fan) {
     switch (element_->kind) {
       case Kind::vertex: {
@@ -202,6 +251,8 @@ class PlyParser {
   uint64_t data_line_ = 0;
   uint64_t header_lines_ = 0;
   uint64_t vertex_count_ = 0;
+  bool colors_ = false, materials_ = false;  // vertex red, green, blue; material_index on some primitive
+  uint32_t max_material_ = 0;
 
   // The record being read, for error messages.
   const Element* element_ = nullptr;
@@ -245,6 +296,10 @@ void PlyParser::check_header(ply::Header&& header) {
         scalar(pr, false);
         pr->role = role;
       }
+      const std::pair<const char*, Role> channels[4] = {{"red", Role::red}, {"green", Role::green}, {"blue", Role::blue}, {"alpha", Role::alpha}};
+      colors_ = find("red") && find("green") && find("blue");
+      for (const auto& [name, role] : channels)
+        if (Property* pr = find(name); pr && colors_) scalar(pr, false), pr->role = role;
     } else if (e.name == "face") {
       e.kind = Kind::face;
       Property* pr = find("vertex_indices");
@@ -276,6 +331,16 @@ void PlyParser::check_header(ply::Header&& header) {
         v->role = Role::v1;
       }
     }
+  }
+  for (Element& e : elements_) {
+    if (e.kind != Kind::face && e.kind != Kind::edge && e.kind != Kind::point) continue;
+    for (Property& pr : e.props)
+      if (pr.name == "material_index") {
+        if (pr.list || !is_integer(pr.type))
+          header_error(e.header_line, "property 'material_index' of element " + quoted(e.name) + " must be a scalar integer");
+        pr.role = Role::material_index;
+        materials_ = true;
+      }
   }
   if (!have_vertex) header_error(header_lines_, "the PLY header declares no element 'vertex'");
   // Counts the data cannot hold, rejected before anything is allocated.
@@ -327,6 +392,8 @@ void PlyParser::parse_binary() {
       double xyz[3] = {0, 0, 0};
       int64_t v[2] = {0, 0};
       double thickness = 0;
+      double rgba[4] = {255, 255, 255, 255};
+      int64_t material = 0;
       Fan fan;
       for (const Property& pr : e.props) {
         if (pr.list) {
@@ -351,12 +418,17 @@ void PlyParser::parse_binary() {
             case Role::v1: v[0] = load_int<Swap>(p, pr.type); break;
             case Role::v2: v[1] = load_int<Swap>(p, pr.type); break;
             case Role::thickness: thickness = load_double<Swap>(p, pr.type); break;
+            case Role::red: case Role::green: case Role::blue: case Role::alpha:
+              rgba[static_cast<int>(pr.role) - static_cast<int>(Role::red)] =
+                  load_double<Swap>(p, pr.type) * (is_integer(pr.type) ? 1 : 255);
+              break;
+            case Role::material_index: material = load_int<Swap>(p, pr.type); break;
             default: break;
           }
           p += s;
         }
       }
-      finish_record(xyz, v, thickness, fan);
+      finish_record(xyz, v, thickness, fan, rgba, material);
     }
   }
   if (p < end)
@@ -413,6 +485,8 @@ void PlyParser::parse_ascii() {
       double xyz[3] = {0, 0, 0};
       int64_t v[2] = {0, 0};
       double thickness = 0;
+      double rgba[4] = {255, 255, 255, 255};
+      int64_t material = 0;
       Fan fan;
       for (const Property& pr : e.props) {
         double d = 0;
@@ -446,6 +520,10 @@ void PlyParser::parse_ascii() {
             case Role::v1: v[0] = iv; break;
             case Role::v2: v[1] = iv; break;
             case Role::thickness: thickness = d; break;
+            case Role::red: case Role::green: case Role::blue: case Role::alpha:
+              rgba[static_cast<int>(pr.role) - static_cast<int>(Role::red)] = d * (is_integer(pr.type) ? 1 : 255);
+              break;
+            case Role::material_index: material = iv; break;
             default: break;
           }
         }
@@ -454,7 +532,7 @@ void PlyParser::parse_ascii() {
       if (q != le)
         data_error("extra values after the last property in " + record_text() + ": " +
                    quoted(std::string_view(q, static_cast<size_t>(le - q))));
-      finish_record(xyz, v, thickness, fan);
+      finish_record(xyz, v, thickness, fan, rgba, material);
       p = le < end ? le + 1 : end;
       ++line;
     }

@@ -5,7 +5,10 @@
 // Formats, chosen by content ("ply\n" or "ply\r\n" magic), else by the .obj extension:
 //   PLY (Greg Turk, "The PLY Polygon File Format"): ascii, binary_little_endian, binary_big_endian; elements
 //     in any order; any numeric type for every property.
-//       vertex   x, y, z (other properties skipped)
+//       vertex   x, y, z; red, green, blue (and alpha) as colours when all three are there (integers as
+//                0..255, floats as 0..1); other properties skipped
+//       face, edge, point: `material_index` when present, with the material table of io/ply_writer.h's
+//                `comment material` lines (what io/ply_writer.cpp writes reads back with its materials)
 //       face     list vertex_indices (or vertex_index), fan-triangulated; a two-index face is an edge
 //       edge     vertex1, vertex2, optional thickness (0 when absent); without vertex1/vertex2, skipped
 //       point    vertex: this project's own element (see io/ply_writer.h); without it, skipped

@@ -9,7 +9,9 @@
 //   l a b [...]            polyline, split into segments
 //   p a [...]              points
 //   o name / g name...     current object = the rest of the line, trimmed, comment removed
-//   anything else          counted in `skipped` (vt, vn, usemtl, ... and unknown exporter keywords)
+//   usemtl name            current material (io/mtl.h): every later f, l, p carries it
+//   mtllib file...         material library, read in file order when resolve() meets it (io/mtl.h)
+//   anything else          counted in `skipped` (vt, vn, ... and unknown exporter keywords)
 // A '#' starts a comment (whole line or after a statement); a backslash right before a line break joins
 // the next line to the statement (not to a whole-line comment); bytes below 0x20 other than tab, CR, LF,
 // FF and VT are an error.
@@ -25,7 +27,12 @@
 //
 // Object ids: parse() numbers the objects of a chunk locally: 0 = the object current when the chunk
 // starts, i >= 1 = the object of the i-th o/g statement of the chunk, named in out->object_names[i - 1].
-// resolve() maps names to global ids in order of first appearance.
+// resolve() maps names to global ids in order of first appearance. usemtl and mtllib statements take a
+// local id too (as if they were objects), their name marked by a first byte that no name can hold (control
+// bytes are an error): kMaterialMark, kLibraryMark; resolve() keeps per local id the pair (object,
+// material), so that add_face and the statements' object ids need not know about materials.
+// Materials: id 0 is the material of what comes before any usemtl (core::Material's defaults); names get
+// ids in order of first use. When the file has no usemtl, materials() is empty and nothing changes.
 //
 // Repeated corners are recognised by their encoded references, so a face naming one vertex once by an
 // absolute and once by a relative index is not seen as repeating it; ingest then finds the repeat in the
@@ -48,6 +55,7 @@
 #endif
 
 #include "core/status.h"
+#include "io/mtl.h"
 #include "io/reader.h"
 #include "io/text.h"
 
@@ -58,6 +66,7 @@ constexpr int64_t kRelBias = std::numeric_limits<int64_t>::min() / 2;  // -2^62
 constexpr int kMaxIndexDigits = 18;                                    // |index| < 10^18 < 2^60
 constexpr int64_t kEndMask = (int64_t(1) << 56) - 1;                   // reader_state: chunk end offset
 constexpr int64_t kHasRelative = int64_t(1) << 60;                     // reader_state: relative refs seen
+constexpr char kMaterialMark = '\x01', kLibraryMark = '\x02';
 
 inline bool is_blank(char c) { return text::is_blank(c); }
 inline bool is_digit(char c) { return static_cast<unsigned char>(c - '0') < 10; }
@@ -171,6 +180,12 @@ class Parser {
           default: p = skip(p); break;
         }
         if (!p) return false;
+      } else if (keyword(p, "usemtl")) {
+        p = object(p + 6, kMaterialMark);
+        if (!p) return false;
+      } else if (keyword(p, "mtllib")) {
+        p = object(p + 6, kLibraryMark);
+        if (!p) return false;
       } else {
         p = skip(p);
         if (!p) return false;
@@ -193,6 +208,10 @@ class Parser {
     if (p >= end_) return true;
     const char c = *p;
     return is_blank(c) || c == '\n' || c == '#' || (c == '\\' && continuation(p, end_));
+  }
+
+  bool keyword(const char* p, const char (&word)[7]) const {
+    return end_ - p > 6 && std::memcmp(p, word, 6) == 0 && is_sep(p + 6);
   }
 
   // Skips blanks and line continuations.
@@ -436,8 +455,9 @@ class Parser {
   }
 
   // o / g: the object is named by the rest of the logical line, trimmed, without its comment.
-  const char* object(const char* p) {
+  const char* object(const char* p, char mark = 0) {
     std::string name;
+    if (mark) name += mark;
     while (p < end_ && *p != '\n') {
       const char c = *p;
       if (c == '#') {
@@ -457,10 +477,10 @@ class Parser {
       name += c;
       ++p;
     }
-    size_t b = 0, e = name.size();
+    size_t b = mark ? 1 : 0, e = name.size();
     while (b < e && is_blank(name[b])) ++b;
     while (e > b && is_blank(name[e - 1])) --e;
-    out_->object_names.emplace_back(name, b, e - b);
+    out_->object_names.emplace_back(mark ? std::string(1, mark) + name.substr(b, e - b) : name.substr(b, e - b));
     object_ = static_cast<uint32_t>(out_->object_names.size());
     return p;
   }
@@ -563,20 +583,30 @@ class ObjReader final : public Reader {
       forward_max_ = max_ref;
     }
 
-    // Objects: local 0 = the object current at the chunk start, i = the i-th o/g statement.
+    // Objects and materials: local 0 = the state at the chunk start, i = after the i-th o/g/usemtl/mtllib.
     if (chunk->object_names.empty()) {
       fill(chunk, current_object_);
+      if (!materials_.empty()) fill_materials(chunk, {current_material_});
     } else {
       local_.assign(1, current_object_);
+      local_materials_.assign(1, current_material_);
       for (std::string& name : chunk->object_names) {
-        auto [it, inserted] = ids_.try_emplace(name, static_cast<uint32_t>(object_names_.size()));
-        if (inserted) object_names_.push_back(name);
-        local_.push_back(it->second);
+        if (!name.empty() && name[0] == kMaterialMark) {
+          use_material(name.substr(1));
+        } else if (!name.empty() && name[0] == kLibraryMark) {
+          libraries_.read(file_.path(), name.substr(1));
+        } else {
+          auto [it, inserted] = ids_.try_emplace(name, static_cast<uint32_t>(object_names_.size()));
+          if (inserted) object_names_.push_back(name);
+          current_object_ = it->second;
+        }
+        local_.push_back(current_object_);
+        local_materials_.push_back(current_material_);
       }
+      if (!materials_.empty()) fill_materials(chunk, local_materials_);
       for (auto* ids : {&chunk->triangle_objects, &chunk->line_objects, &chunk->point_objects}) {
         for (uint32_t& id : *ids) id = local_[id];
       }
-      current_object_ = local_.back();
     }
 
     vertices_before_ += vertices;
@@ -585,6 +615,8 @@ class ObjReader final : public Reader {
   }
 
   void finish(uint64_t vertex_records) override {
+    // Libraries may come after the usemtl statements that name their materials: look names up at the end.
+    for (size_t i = 1; i < materials_.size(); ++i) libraries_.find(materials_[i].name, &materials_[i]);
     const int64_t count = static_cast<int64_t>(vertex_records);
     for (const ForwardChunk& f : forward_) {
       if (f.max_ref < count) continue;
@@ -603,6 +635,29 @@ class ObjReader final : public Reader {
     --n;
     if (n >= 2 && d[n - 1] == '\r') --n;
     return d[n - 1] == '\\';
+  }
+
+  // The first usemtl creates material 0 (what came before it) and gives every earlier chunk's primitives
+  // material 0 after the fact: ingest reads an empty material vector as all 0.
+  void use_material(const std::string& name) {
+    if (materials_.empty()) materials_.emplace_back();
+    auto [it, inserted] = material_ids_.try_emplace(name, static_cast<uint32_t>(materials_.size()));
+    if (inserted) {
+      materials_.emplace_back();
+      materials_.back().name = name;
+    }
+    current_material_ = it->second;
+  }
+
+  // Per primitive, its material from its chunk-local id (the primitives' object ids are still local here).
+  static void fill_materials(ParsedChunk* chunk, const std::vector<uint32_t>& local) {
+    auto fill_kind = [&](const std::vector<uint32_t>& objects, std::vector<uint32_t>& materials) {
+      materials.resize(objects.size());
+      for (size_t i = 0; i < objects.size(); ++i) materials[i] = local.size() == 1 ? local[0] : local[objects[i]];
+    };
+    fill_kind(chunk->triangle_objects, chunk->triangle_materials);
+    fill_kind(chunk->line_objects, chunk->line_materials);
+    fill_kind(chunk->point_objects, chunk->point_materials);
   }
 
   static void fill(ParsedChunk* chunk, uint32_t id) {
@@ -627,8 +682,10 @@ class ObjReader final : public Reader {
   uint64_t resolved_bytes_ = 0;
   uint64_t lines_before_ = 0;
   int64_t vertices_before_ = 0;
-  uint32_t current_object_ = 0;
-  std::unordered_map<std::string, uint32_t> ids_;
+  uint32_t current_object_ = 0, current_material_ = 0;
+  std::unordered_map<std::string, uint32_t> ids_, material_ids_;
+  std::vector<uint32_t> local_materials_;
+  MtlLibraries libraries_;
   std::vector<uint32_t> local_;
   std::vector<ForwardChunk> forward_;  // increasing max_ref
   int64_t forward_max_ = -1;

@@ -5,6 +5,8 @@
 
 #include <charconv>
 #include <cstdint>
+#include <cstdio>
+#include <filesystem>
 
 #include "core/status.h"
 #include "io/file_writer.h"
@@ -33,13 +35,41 @@ class Line {
   char* end_ = buf_;
 };
 
+// A material's name in the MTL file: unique (its id first) and one token (blanks and controls become '_').
+std::string mtl_name(size_t i, const core::Material& m) {
+  std::string name = "m" + std::to_string(i);
+  if (!m.name.empty()) name += '_';
+  for (char c : m.name) name += static_cast<unsigned char>(c) <= 0x20 || c == 0x7f || c == '#' ? '_' : c;
+  return name;
+}
+
+std::string mtl_text(const std::vector<core::Material>& materials) {
+  std::string text = "# materials of the level of detail next to this file (Kd base colour, d opacity, Pm/Pr PBR)\n";
+  for (size_t i = 0; i < materials.size(); ++i) {
+    const core::Material& m = materials[i];
+    char line[200];
+    std::snprintf(line, sizeof line, "Kd %.9g %.9g %.9g\nd %.9g\nPm %.9g\nPr %.9g\n", m.base_color[0], m.base_color[1],
+                  m.base_color[2], m.base_color[3], m.metallic, m.roughness);
+    text += "newmtl " + mtl_name(i, m) + "\n" + line;
+  }
+  return text;
+}
+
 }  // namespace
+
+std::string mtl_path(const std::string& obj_path) {
+  const std::filesystem::path p(obj_path);
+  return (p.parent_path() / p.stem()).string() + ".mtl";
+}
 
 void write_obj(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments) {
   if (const std::string v = core::convention_violation(mesh); !v.empty())
     fail(Status::internal, path + ": cannot write level: " + v);
   const bool normals = !mesh.normals.empty();
 
+  const bool materials = !mesh.materials.empty(), colors = !mesh.colors.empty();
+  // The library first, so that an OBJ under its final name always has its MTL.
+  if (materials) write_file_atomic(mtl_path(path), mtl_text(mesh.materials), Sync::durable);
   FileWriter out(path, 1 << 20, Sync::durable);
   for (const std::string& c : comments) {
     std::string line = "# ";
@@ -47,6 +77,13 @@ void write_obj(const std::string& path, const core::LodMesh& mesh, const std::ve
     line += '\n';
     out.write(line);
   }
+  if (materials) out.write("mtllib " + std::filesystem::path(mtl_path(path)).filename().string() + "\n");
+  uint32_t current = UINT32_MAX;
+  auto use = [&](uint32_t m) {
+    if (m == current) return;
+    out.write("usemtl " + mtl_name(m, mesh.materials[m]) + "\n");
+    current = m;
+  };
 
   Line line;
   auto xyz = [&](const char* tag, const std::vector<float>& a, uint64_t v) {
@@ -57,11 +94,22 @@ void write_obj(const std::string& path, const core::LodMesh& mesh, const std::ve
     }
     line.finish(out);
   };
-  for (uint64_t v = 0; v < mesh.vertex_count(); ++v) xyz("v", mesh.positions, v);
+  for (uint64_t v = 0; v < mesh.vertex_count(); ++v) {
+    if (!colors) {
+      xyz("v", mesh.positions, v);
+      continue;
+    }
+    // The common `v x y z r g b` extension (colours 0..1); alpha has no place in it.
+    line.text("v");
+    for (int c = 0; c < 3; ++c) line.text(" "), line.number(mesh.positions[3 * v + c]);
+    for (int c = 0; c < 3; ++c) line.text(" "), line.number(static_cast<float>(mesh.colors[4 * v + c]) / 255.0f);
+    line.finish(out);
+  }
   if (normals)
     for (uint64_t v = 0; v < mesh.vertex_count(); ++v) xyz("vn", mesh.normals, v);
 
   for (uint64_t t = 0; t < mesh.triangle_count(); ++t) {
+    if (materials) use(mesh.triangle_materials[t]);
     line.text("f");
     for (int c = 0; c < 3; ++c) {
       const uint64_t id = uint64_t{mesh.triangles[3 * t + c]} + 1;
@@ -75,15 +123,17 @@ void write_obj(const std::string& path, const core::LodMesh& mesh, const std::ve
     line.finish(out);
   }
   for (uint64_t e = 0; e < mesh.edge_count(); ++e) {
+    if (materials) use(mesh.edge_materials[e]);
     line.text("l ");
     line.number(uint64_t{mesh.edges[2 * e]} + 1);
     line.text(" ");
     line.number(uint64_t{mesh.edges[2 * e + 1]} + 1);
     line.finish(out);
   }
-  for (uint32_t p : mesh.points) {
+  for (uint64_t i = 0; i < mesh.point_count(); ++i) {
+    if (materials) use(mesh.point_materials[i]);
     line.text("p ");
-    line.number(uint64_t{p} + 1);
+    line.number(uint64_t{mesh.points[i]} + 1);
     line.finish(out);
   }
   out.commit();
@@ -92,9 +142,16 @@ void write_obj(const std::string& path, const core::LodMesh& mesh, const std::ve
 struct ObjStream::State {
   FileWriter out;
   Line line;
+  std::vector<core::Material> materials;
+  uint32_t current = UINT32_MAX;  // the material of the last `usemtl`
 };
 
-ObjStream::ObjStream(const std::string& path, const std::vector<std::string>& comments) : state_(std::make_unique<State>()) {
+ObjStream::ObjStream(const std::string& path, const std::vector<std::string>& comments,
+                     const std::vector<core::Material>& materials)
+    : state_(std::make_unique<State>()) {
+  // The library first, so that an OBJ under its final name always has its MTL.
+  if (!materials.empty()) write_file_atomic(mtl_path(path), mtl_text(materials), Sync::durable);
+  state_->materials = materials;
   state_->out.open(path, 1 << 20, Sync::durable);
   for (const std::string& c : comments) {
     std::string line = "# ";
@@ -102,6 +159,22 @@ ObjStream::ObjStream(const std::string& path, const std::vector<std::string>& co
     line += '\n';
     state_->out.write(line);
   }
+  if (!materials.empty()) state_->out.write("mtllib " + std::filesystem::path(mtl_path(path)).filename().string() + "\n");
+}
+
+void ObjStream::vertex(const float* xyz, const uint8_t* rgba) {
+  Line& line = state_->line;
+  line.text("v");
+  for (int c = 0; c < 3; ++c) line.text(" "), line.number(xyz[c]);
+  for (int c = 0; c < 3; ++c) line.text(" "), line.number(static_cast<float>(rgba[c]) / 255.0f);
+  line.finish(state_->out);
+}
+
+void ObjStream::use(uint32_t material) {
+  if (material == state_->current) return;
+  if (material >= state_->materials.size()) fail(Status::internal, "OBJ: material " + std::to_string(material) + " out of range");
+  state_->out.write("usemtl " + mtl_name(material, state_->materials[material]) + "\n");
+  state_->current = material;
 }
 
 ObjStream::~ObjStream() = default;

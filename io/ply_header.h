@@ -20,7 +20,7 @@ enum class Format : uint8_t { ascii, le, be };
 const char* format_name(Format f);
 
 // What a property means to a reader: set by the reader from the property's name, after the header is parsed.
-enum class Role : uint8_t { none, x, y, z, indices, v1, v2, thickness };
+enum class Role : uint8_t { none, x, y, z, indices, v1, v2, thickness, red, green, blue, alpha, material_index };
 
 struct Property {
   std::string name;

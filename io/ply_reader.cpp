@@ -3,18 +3,22 @@
 // open() parses the header (io/ply_header.h) into element layouts and rejects counts the file cannot hold.
 // next_chunk() cuts whole records of one element at a time: by arithmetic for fixed-size binary records, by
 // walking the list counts for variable-size binary records, and by lines for ascii. parse() turns vertex records
-// into positions, face records into triangles and segments by io::add_face (PLY indices are absolute, so they are
+// into positions (and, with red, green, blue [alpha] properties, colours: integer values clamped to 0..255,
+// float values as 0..1 scaled by 255 and rounded; no alpha is 255; vertex records of variable size, which
+// hold a list, give no colour and ingest makes them white), face records into triangles and segments by io::add_face (PLY indices are absolute, so they are
 // final after parse), edge records into lines, and only counts the records of any other element.
 //
 // Truncation and broken list counts are never thrown by next_chunk(): it hands parse() a chunk that claims
 // one record more than the bytes hold, so the error is raised by resolve() in file order, after any earlier
 // error, whatever the chunk size.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <limits>
 #include <string>
 #include <string_view>
+#include <unordered_map>
 #include <type_traits>
 #include <vector>
 
@@ -50,6 +54,7 @@ struct Element : ply::Element {
   Kind kind = Kind::other;
   uint64_t record_size = 0;  // binary, fixed only
   int px = -1, py = -1, pz = -1, pv1 = -1, pv2 = -1;
+  int pc[4] = {-1, -1, -1, -1};  // red, green, blue, alpha of a vertex or a face
   // Fast paths: vertex with x, y, z all float (1) or all double (2) in fixed records; face whose only
   // property is `list (u)char (u)int` (1 = int items, 2 = uint items).
   uint8_t fast_vertex = 0;
@@ -91,11 +96,22 @@ std::string small_face_message(uint64_t n) {
 
 enum class Rec : uint8_t { ok, truncated, negative_count };
 
+// Face colours become materials; a file with more distinct ones is refused rather than written as that
+// many primitives per level.
+constexpr size_t kMaxFaceColors = 65536;
+
+// A colour component from a property value: integers clamped to 0..255, floats 0..1 scaled and rounded.
+uint8_t color_byte(double v, Type t) {
+  if (t == Type::f32 || t == Type::f64) v *= 255;
+  if (!(v > 0)) return 0;
+  return v >= 255 ? 255 : static_cast<uint8_t>(std::lround(v));
+}
+
 // Walks one binary record at p (never past end), extracting what the element's roles ask for when
 // Extract. On negative_count, p is left just past the offending count.
 template <bool Swap, bool Extract>
 inline Rec read_binary_record(const char*& p, const char* end, const Element& e, double* xyz, int64_t* v12,
-                              std::vector<int64_t>* idx) {
+                              std::vector<int64_t>* idx, uint8_t* rgba = nullptr) {
   for (const Property& pr : e.props) {
     if (pr.list) {
       const unsigned cs = type_size(pr.count_type);
@@ -122,6 +138,9 @@ inline Rec read_binary_record(const char*& p, const char* end, const Element& e,
           case Role::z: xyz[2] = load_double<Swap>(p, pr.type); break;
           case Role::v1: v12[0] = load_int<Swap>(p, pr.type); break;
           case Role::v2: v12[1] = load_int<Swap>(p, pr.type); break;
+          case Role::red: case Role::green: case Role::blue: case Role::alpha:
+            if (rgba) rgba[static_cast<int>(pr.role) - static_cast<int>(Role::red)] = color_byte(load_double<Swap>(p, pr.type), pr.type);
+            break;
           default: break;
         }
       }
@@ -167,6 +186,7 @@ class PlyReader final : public Reader {
 
   void open() override;
   bool single_precision() const override { return single_; }
+  bool has_colors() const override { return colors_; }
   bool next_chunk(uint64_t target_bytes, Chunk* chunk) override;
   void parse(const Chunk& chunk, ParsedChunk* out) const override;
   void resolve(ParsedChunk* chunk) override;
@@ -210,6 +230,17 @@ class PlyReader final : public Reader {
   uint64_t vertex_count_ = 0;
   int vertex_element_ = -1;
   bool single_ = false;  // x, y and z all of a type float holds exactly
+  bool colors_ = false;  // the vertex element has red, green and blue
+  // The face element has red, green and blue: each distinct face colour becomes a material (resolve()).
+  // parse() puts the packed RGBA (r | g << 8 | b << 16 | a << 24) in the materials vectors.
+  bool face_colors_ = false;
+  std::unordered_map<uint32_t, uint32_t> color_material_;  // packed RGBA -> material id
+  // Records `rgba` as the colour of the triangles and segments of `out` from index `triangles` / `lines`
+  // (counts before the face was added) on.
+  void face_color(const uint8_t* rgba, size_t triangles, size_t lines, ParsedChunk* out) const;
+  // Appends the colours of `n` fixed-size vertex records at p.
+  template <bool Swap>
+  void fixed_colors(const char* p, uint64_t n, const Element& e, ParsedChunk* out) const;
 
   // Splitter state.
   size_t elem_ = 0;
@@ -267,6 +298,15 @@ void PlyReader::finalize_header(ply::Header&& header) {
         e.props[i].role = roles[c];
         *slots[c] = i;
       }
+      const char* color_names[4] = {"red", "green", "blue", "alpha"};
+      const Role color_roles[4] = {Role::red, Role::green, Role::blue, Role::alpha};
+      for (int c = 0; c < 4; ++c) {
+        const int i = find(color_names[c]);
+        if (i >= 0 && !e.props[i].list) e.pc[c] = i;
+      }
+      colors_ = e.pc[0] >= 0 && e.pc[1] >= 0 && e.pc[2] >= 0;
+      for (int c = 0; c < 4 && colors_; ++c)
+        if (e.pc[c] >= 0) e.props[e.pc[c]].role = color_roles[c];
       single_ = true;
       for (int c = 0; c < 3; ++c) {
         const Type t = e.props[*slots[c]].type;
@@ -282,6 +322,21 @@ void PlyReader::finalize_header(ply::Header&& header) {
       if (!is_integer(pr.type))
         header_error(e.header_line, "face indices must have an integer type, not " + std::string(type_name(pr.type)));
       pr.role = Role::indices;
+      const char* color_names[4] = {"red", "green", "blue", "alpha"};
+      const Role color_roles[4] = {Role::red, Role::green, Role::blue, Role::alpha};
+      for (int c = 0; c < 4; ++c) {
+        const int at = find(color_names[c]);
+        if (at >= 0 && !e.props[at].list) e.pc[c] = at;
+      }
+      face_colors_ = e.pc[0] >= 0 && e.pc[1] >= 0 && e.pc[2] >= 0;
+      for (int c = 0; c < 4 && face_colors_; ++c)
+        if (e.pc[c] >= 0) e.props[e.pc[c]].role = color_roles[c];
+      if (face_colors_ && materials_.empty()) {
+        // Material 0: edge elements and anything without a face colour (see resolve()).
+        core::Material white;
+        white.name = "default";
+        materials_.push_back(white);
+      }
     } else if (e.name == "edge") {
       const int a = find("vertex1"), b = find("vertex2");
       if (a >= 0 && b >= 0) {
@@ -582,6 +637,20 @@ bool PlyReader::emit_face(int64_t* idx, uint64_t n, ParsedChunk* out, std::strin
   return true;
 }
 
+
+template <bool Swap>
+void PlyReader::fixed_colors(const char* p, uint64_t n, const Element& e, ParsedChunk* out) const {
+  for (uint64_t i = 0; i < n; ++i, p += e.record_size)
+    for (int c = 0; c < 4; ++c) {
+      if (e.pc[c] < 0) {
+        out->colors.push_back(255);
+        continue;
+      }
+      const Property& pr = e.props[e.pc[c]];
+      out->colors.push_back(color_byte(load_double<Swap>(p + pr.offset, pr.type), pr.type));
+    }
+}
+
 template <typename T, bool Swap>
 void PlyReader::fast_vertices(const char* p, uint64_t n, const Element& e, uint64_t base, ParsedChunk* out) const {
   const uint64_t rs = e.record_size;
@@ -751,6 +820,7 @@ void PlyReader::parse_binary(const Chunk& chunk, const Element& e, ParsedChunk* 
           out->positions.insert(out->positions.end(), v, v + 3);
         }
       }
+      if (colors_) fixed_colors<Swap>(b, (out->positions.size() + out->positions32.size()) / 3, e, out);
       if (out->error.set) return;
     } else if (e.kind == Kind::edge) {
       const Property &p1 = e.props[e.pv1], &p2 = e.props[e.pv2];
@@ -788,7 +858,8 @@ void PlyReader::parse_binary(const Chunk& chunk, const Element& e, ParsedChunk* 
   for (uint64_t i = 0; i < rc; ++i) {
     const char* r = p;
     const uint64_t offset = base + static_cast<uint64_t>(r - b);
-    const Rec st = read_binary_record<Swap, true>(p, end, e, xyz, v12, &idx);
+    uint8_t rgba[4] = {255, 255, 255, 255};
+    const Rec st = read_binary_record<Swap, true>(p, end, e, xyz, v12, &idx, rgba);
     if (st == Rec::truncated) {
       set_error(out, offset, 0, truncation_message(e, chunk.first_record + i + 1, offset));
       return;
@@ -804,13 +875,17 @@ void PlyReader::parse_binary(const Chunk& chunk, const Element& e, ParsedChunk* 
           return;
         }
         out->positions.insert(out->positions.end(), xyz, xyz + 3);
+        if (colors_) out->colors.insert(out->colors.end(), rgba, rgba + 4);
         break;
-      case Kind::face:
+      case Kind::face: {
+        const size_t t = out->triangles.size() / 3, l = out->lines.size() / 2;
         if (!emit_face(idx.data(), idx.size(), out, &message)) {
           set_error(out, offset, 0, message);
           return;
         }
+        if (face_colors_) face_color(rgba, t, l, out);
         break;
+      }
       case Kind::edge:
         for (int64_t x : v12) {
           if (static_cast<uint64_t>(x) >= vertex_count_) {
@@ -851,6 +926,7 @@ void PlyReader::parse_ascii(const Chunk& chunk, const Element& e, ParsedChunk* o
       };
       double xyz[3] = {0, 0, 0};
       int64_t v12[2] = {0, 0};
+      uint8_t rgba[4] = {255, 255, 255, 255};
       idx.clear();
       for (const Property& pr : e.props) {
         double d = 0;
@@ -888,6 +964,10 @@ void PlyReader::parse_ascii(const Chunk& chunk, const Element& e, ParsedChunk* o
             case Role::z: xyz[2] = d; break;
             case Role::v1: v12[0] = iv; break;
             case Role::v2: v12[1] = iv; break;
+            case Role::red: rgba[0] = color_byte(d, pr.type); break;
+            case Role::green: rgba[1] = color_byte(d, pr.type); break;
+            case Role::blue: rgba[2] = color_byte(d, pr.type); break;
+            case Role::alpha: rgba[3] = color_byte(d, pr.type); break;
             default: break;
           }
         }
@@ -905,13 +985,17 @@ void PlyReader::parse_ascii(const Chunk& chunk, const Element& e, ParsedChunk* o
             return;
           }
           out->positions.insert(out->positions.end(), xyz, xyz + 3);
+          if (colors_) out->colors.insert(out->colors.end(), rgba, rgba + 4);
           break;
-        case Kind::face:
+        case Kind::face: {
+          const size_t t = out->triangles.size() / 3, l = out->lines.size() / 2;
           if (!emit_face(idx.data(), idx.size(), out, &message)) {
             set_error(out, offset, line, message);
             return;
           }
+          if (face_colors_) face_color(rgba, t, l, out);
           break;
+        }
         case Kind::edge:
           for (int64_t x : v12) {
             if (static_cast<uint64_t>(x) >= vertex_count_) {
@@ -940,7 +1024,39 @@ void PlyReader::parse_ascii(const Chunk& chunk, const Element& e, ParsedChunk* o
 
 // ---------------------------------------------------------------------------------- resolve, finish
 
+void PlyReader::face_color(const uint8_t* rgba, size_t triangles, size_t lines, ParsedChunk* out) const {
+  const uint32_t packed = rgba[0] | uint32_t{rgba[1]} << 8 | uint32_t{rgba[2]} << 16 | uint32_t{rgba[3]} << 24;
+  // Every earlier primitive of a face chunk came from an earlier face, which filled its entries (edge
+  // elements come in chunks of their own, whose empty line_materials mean material 0).
+  out->triangle_materials.resize(triangles, 0);
+  out->line_materials.resize(lines, 0);
+  out->triangle_materials.resize(out->triangles.size() / 3, packed);
+  out->line_materials.resize(out->lines.size() / 2, packed);
+}
+
+// Face colours become materials in order of first appearance in the file (resolve() runs in file order),
+// so the table does not depend on the chunking. Segments of edge elements take material 0.
 void PlyReader::resolve(ParsedChunk* chunk) {
+  if (face_colors_ && !chunk->error.set) {
+    for (std::vector<uint32_t>* v : {&chunk->triangle_materials, &chunk->line_materials}) {
+      for (uint32_t& m : *v) {
+        const auto [it, fresh] = color_material_.try_emplace(m, static_cast<uint32_t>(materials_.size()));
+        if (fresh) {
+          if (materials_.size() > kMaxFaceColors)
+            fail(Status::bad_data, file_.path() + ": more than " + std::to_string(kMaxFaceColors) +
+                                       " distinct face colours (each becomes a material)");
+          core::Material c;
+          char name[16];
+          std::snprintf(name, sizeof name, "rgba_%02x%02x%02x%02x", m & 255, m >> 8 & 255, m >> 16 & 255, m >> 24);
+          c.name = name;
+          for (int k = 0; k < 4; ++k) c.base_color[k] = static_cast<float>((m >> (8 * k) & 255) / 255.0);
+          if ((m >> 24) < 255) c.alpha = core::Material::Alpha::blend;
+          materials_.push_back(c);
+        }
+        m = it->second;
+      }
+    }
+  }
   const ParseError& err = chunk->error;
   if (!err.set) return;
   if (err.line != 0) fail_at_line(file_, static_cast<uint64_t>(chunk->reader_state) + err.line - 1, err.message);

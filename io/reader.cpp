@@ -17,6 +17,8 @@ void ParsedChunk::clear() {
   lines.clear();
   points.clear();
   triangle_objects.clear();
+  triangle_materials.clear(), line_materials.clear(), point_materials.clear();
+  colors.clear();
   line_objects.clear();
   point_objects.clear();
   object_names.clear();

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "core/mesh.h"
 #include "io/mapped_file.h"
 
 namespace lodstream::io {
@@ -54,6 +55,11 @@ struct ParsedChunk {
   std::vector<uint32_t> triangle_objects;  // one per triangle (per soup triangle)
   std::vector<uint32_t> line_objects;      // one per segment
   std::vector<uint32_t> point_objects;     // one per point
+  // Material ids into Reader::materials() after resolve(), one per primitive; empty means all 0 (always
+  // so when the reader has no materials).
+  std::vector<uint32_t> triangle_materials, line_materials, point_materials;
+  // With Reader::has_colors(): RGBA (0..255) per vertex record parsed in this chunk.
+  std::vector<uint8_t> colors;
   std::vector<std::string> object_names;   // reader-defined: names met in this chunk, for resolve()
   uint64_t polygons = 0;   // input faces in this chunk (OBJ f, PLY face records, STL facets)
   // Faces of m >= 4 distinct vertices, whose triangles need the positions: pairs (index of the face's first
@@ -84,6 +90,9 @@ class Reader {
   // True when every coordinate the file can hold is a 32-bit float (PLY float x/y/z, STL): the store then
   // keeps positions as float, which is exact and half the bytes. Known after open().
   virtual bool single_precision() const { return false; }
+  // True when vertices carry colours (PLY red/green/blue[/alpha]): every chunk then fills
+  // ParsedChunk::colors. Known after open(). Never for soups.
+  virtual bool has_colors() const { return false; }
   // Reads and checks the header, if any. Throws Failure(bad_data) with a location.
   virtual void open() {}
   // Cuts the next chunk of whole records starting where the previous one ended, of about `target_bytes`
@@ -105,10 +114,13 @@ class Reader {
 
   // Global object names, index = object id. Readers without objects report one unnamed object.
   const std::vector<std::string>& object_names() const { return object_names_; }
+  // The material table, final after finish(); empty when the input has no materials.
+  const std::vector<core::Material>& materials() const { return materials_; }
 
  protected:
   const MappedFile& file_;
   std::vector<std::string> object_names_{std::string()};
+  std::vector<core::Material> materials_;
 };
 
 // Splits one face of n >= 3 corners (references in the reader's encoding, equal exactly when they name

@@ -26,8 +26,9 @@ struct ChunkScene {
   bool has_wire() const { return !geometry.lines.empty() || !geometry.points.empty(); }
 };
 
-// Reads chunk `index` and builds its triangle scene within `embree_limit` bytes.
-std::unique_ptr<ChunkScene> load_chunk_scene(StoreChunks& chunks, size_t index, uint64_t embree_limit);
+// Reads chunk `index` and builds its triangle scene within `embree_limit` bytes; with `colors`, its
+// primitives carry their colours (core::RayScene::set_colors, for the report's renders).
+std::unique_ptr<ChunkScene> load_chunk_scene(StoreChunks& chunks, size_t index, uint64_t embree_limit, bool colors = false);
 
 // The chunk's lines and points as segments and discs of the given radii (what a renderer draws one pixel
 // wide, at the radii of the caller's pixel rule).

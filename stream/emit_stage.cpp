@@ -42,6 +42,12 @@ struct EdgeSums {
 struct Distances {
   double a = 0, b = 0;
 };
+// A corner of a primitive that collapsed to a kept edge: the edge, the corner's canonical vertex (the
+// first stored vertex at its position), and its position.
+struct Corner {
+  uint32_t edge, vertex;
+  double p[3];
+};
 
 struct Block {
   int kind = 0;  // 0 triangles, 1 segments, 2 points
@@ -52,14 +58,15 @@ struct BlockOut {
   std::vector<std::array<uint32_t, 3>> triangles;  // input winding
   std::vector<std::array<uint32_t, 2>> edges;      // lower cell first
   std::vector<uint32_t> points;
+  // With materials: per triangle, edge and point above, the material of the input primitive that made it.
+  std::vector<uint32_t> triangle_materials, edge_materials, point_materials;
   std::vector<uint32_t> quadric_cells;
   std::vector<core::Quadric> quadrics;
-  std::vector<uint32_t> kept_edges;  // passes B and C: kept edge ids, and per id its sums (B) or distances (C)
-  std::vector<EdgeSums> sums;
-  std::vector<Distances> distances;
+  std::vector<Corner> corners;  // pass B: the block's distinct corners of kept edges, in primitive order
   void clear() {
-    triangles.clear(), edges.clear(), sums.clear(), points.clear();
-    quadric_cells.clear(), quadrics.clear(), kept_edges.clear(), distances.clear();
+    triangles.clear(), edges.clear(), points.clear();
+    triangle_materials.clear(), edge_materials.clear(), point_materials.clear();
+    quadric_cells.clear(), quadrics.clear(), corners.clear();
   }
 };
 
@@ -67,12 +74,13 @@ struct Scratch {
   FlatMap<3, false> triangles;
   FlatMap<2> edges;
   FlatMap<1, false> points;
-  FlatMap<1> cells;  // pass A: a cell's quadric slot; passes B and C: a kept edge's slot
+  FlatMap<1> cells;  // pass A: a cell's quadric slot
+  FlatMap<2, false> corners;  // pass B: {kept edge, canonical vertex} pairs seen in the block
   // Pass A: the last point and the last quadric cell of the block. Neighbouring triangles mostly fall in
   // the same cell at coarse levels; these skip the hash table then (same result: the cell is in it).
   uint32_t last_point = UINT32_MAX, last_cell = UINT32_MAX, last_slot = 0;
   void clear() {
-    triangles.clear(), edges.clear(), points.clear(), cells.clear();
+    triangles.clear(), edges.clear(), points.clear(), cells.clear(), corners.clear();
     last_point = last_cell = UINT32_MAX;
   }
 };
@@ -89,6 +97,61 @@ double distance_to_line(const double* x, const double* a, const double* b) {
   const double c[3] = {v[1] * d[2] - v[2] * d[1], v[2] * d[0] - v[0] * d[2], v[0] * d[1] - v[1] * d[0]};
   return std::sqrt((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) / len2);
 }
+
+// The material of each primitive of a kind, from the store's object runs (stream/scene_store.h): a cursor
+// that moves forward through the runs as a block's primitives are visited in order. Every kept triangle,
+// edge and point takes the material of the input primitive it was first made from, in store order (the one
+// whose cells the dedupe kept), so the rule is deterministic and needs no vote.
+class MaterialCursor {
+ public:
+  MaterialCursor(std::span<const ObjectRun> runs, uint64_t first) : runs_(runs) {
+    at_ = static_cast<size_t>(std::upper_bound(runs.begin(), runs.end(), first,
+                                               [](uint64_t p, const ObjectRun& r) { return p < r.first; }) -
+                              runs.begin());
+    at_ = at_ > 0 ? at_ - 1 : 0;
+  }
+  uint32_t operator()(uint64_t primitive) {
+    while (at_ + 1 < runs_.size() && runs_[at_ + 1].first <= primitive) ++at_;
+    return runs_.empty() ? 0 : runs_[at_].material;
+  }
+
+ private:
+  std::span<const ObjectRun> runs_;
+  size_t at_ = 0;
+};
+
+// Vertex colours of the cells (stores with colours only), weighted the way the representative is: center
+// takes its center vertex's colour (the cell's first vertex in weight order), mean the grade-weighted mean
+// of its vertices' colours (the plain mean when every grade is 0), quadric the plain mean. Sums are formed
+// serially in weight order, so they do not depend on the threads.
+// The integer sums are exact (a cell has fewer than 2^32 vertices); the grade-weighted sums, for the mean
+// representative only, are kept apart (CellWeighted) so that the other representatives hold 40 bytes a cell.
+struct CellColor {
+  uint64_t sum[4] = {0, 0, 0, 0};
+  uint32_t count = 0;
+  uint8_t first[4] = {0, 0, 0, 0};
+};
+struct CellWeighted {
+  double weighted[4] = {0, 0, 0, 0}, weight = 0;
+};
+
+uint8_t color_byte(double v) { return v <= 0 ? 0 : v >= 255 ? 255 : static_cast<uint8_t>(std::lround(v)); }
+
+void cell_rgba(const CellColor& c, const CellWeighted* w, Representative r, uint8_t* out) {
+  for (int k = 0; k < 4; ++k) {
+    if (r == Representative::center) out[k] = c.first[k];
+    else if (r == Representative::mean && w && w->weight > 0) out[k] = color_byte(w->weighted[k] / w->weight);
+    else out[k] = color_byte(c.count > 0 ? static_cast<double>(c.sum[k]) / c.count : 255);
+  }
+}
+
+// A level's cell colours: per cell an index into `rgba` (UINT32_MAX for a cell that no output vertex of
+// the level, or of the batch, can use), and RGBA per indexed cell.
+struct LevelColors {
+  std::vector<uint32_t> index;
+  std::vector<uint8_t> rgba;
+  const uint8_t* of(uint32_t cell) const { return &rgba[4 * uint64_t{index[cell]}]; }
+};
 
 // The group's cluster maps, packed: per stored vertex one record of `bits` bits (at most 64), at bit
 // v * bits of a plain word array, holding each level's cell in its own field. A field of b bits holds the
@@ -143,6 +206,7 @@ struct LevelState {
   std::vector<std::array<uint32_t, 3>> triangles;
   std::vector<std::array<uint32_t, 2>> edges;
   std::vector<uint32_t> points;
+  std::vector<uint32_t> triangle_materials, edge_materials, point_materials;  // with materials, as BlockOut's
   std::vector<core::Quadric> quadrics;
   std::vector<uint8_t> used;  // per cell: kByTriangle | kByKeptEdge
   // One bit per input triangle and segment that collapsed to an edge, so that passes B and C visit only
@@ -152,7 +216,12 @@ struct LevelState {
   std::vector<std::array<uint32_t, 2>> kept_edges;  // in edge order; k_edges finds them by cells
   FlatMap<2> k_edges;
   std::vector<uint32_t> kept_points;
+  std::vector<uint32_t> kept_edge_materials, kept_point_materials;
   std::vector<EdgeSums> kept_sums;
+  // Pass B: every distinct {kept edge, canonical vertex} pair, in order of first appearance (block order,
+  // then primitive and corner order), found through corner_set.
+  FlatMap<2, false> corner_set;
+  std::vector<std::array<uint32_t, 2>> corners;
   std::vector<std::array<double, 3>> pa, pb;
   std::vector<Distances> distances;
   EmitCounts counts;
@@ -324,8 +393,11 @@ Buckets bucket(size_t n, uint32_t regions, Region&& region) {
 // Classify .. thickness done: the batch's regions' parts, each handed to `sink` in region order. A triangle
 // is owned with its lowest cell, an edge with its lower one; only the batch's own edges and
 // points were kept.
+// With `colors`, every vertex takes its cell's colour; with `materials` (the store's table), every
+// primitive its material (LevelState's *_materials).
 template <class Sink>
-void build_parts(LevelState& L, const std::vector<float>& thickness, const std::string& prefix,
+void build_parts(LevelState& L, const std::vector<float>& thickness, const LevelColors* colors,
+                 const std::vector<core::Material>* materials, const std::string& prefix,
                  const core::ClusterOptions& cluster, const EmitOptions& options, bool single_precision, Sink&& sink) {
   CellSlots s;
   number_cells(L, s);
@@ -363,20 +435,29 @@ void build_parts(LevelState& L, const std::vector<float>& thickness, const std::
         part.vertex_key.push_back(key(i));
         position(i, mesh.positions);
         mesh.normals.insert(mesh.normals.end(), &v.normals[3 * uint64_t{i}], &v.normals[3 * uint64_t{i}] + 3);
+        if (colors) mesh.colors.insert(mesh.colors.end(), colors->of(s.cell[v.slot[i]]), colors->of(s.cell[v.slot[i]]) + 4);
       }
       return local[i];
     };
-    for (uint32_t t : triangles.of(r))
+    for (uint32_t t : triangles.of(r)) {
       for (int k = 0; k < 3; ++k) mesh.triangles.push_back(add(v.triangles[3 * uint64_t{t} + k]));
+      if (materials) mesh.triangle_materials.push_back(L.triangle_materials[t]);
+    }
     for (uint32_t e : edges.of(r)) {
       for (uint32_t c : L.kept_edges[e]) mesh.edges.push_back(add(v.end_vertex[s.slot_of[c]]));
       mesh.thickness.push_back(thickness[e]);
+      if (materials) mesh.edge_materials.push_back(L.kept_edge_materials[e]);
     }
-    for (uint32_t p : points.of(r)) mesh.points.push_back(add(v.end_vertex[s.slot_of[L.kept_points[p]]]));
+    for (uint32_t p : points.of(r)) {
+      mesh.points.push_back(add(v.end_vertex[s.slot_of[L.kept_points[p]]]));
+      if (materials) mesh.point_materials.push_back(L.kept_point_materials[p]);
+    }
+    if (materials) mesh.materials = *materials;
     for (uint32_t i : own.of(r)) {
       part.owned_key.push_back(key(i));
       position(i, part.owned_positions);
       part.owned_normals.insert(part.owned_normals.end(), &v.normals[3 * uint64_t{i}], &v.normals[3 * uint64_t{i}] + 3);
+      if (colors) part.owned_colors.insert(part.owned_colors.end(), colors->of(s.cell[v.slot[i]]), colors->of(s.cell[v.slot[i]]) + 4);
     }
     L.counts.triangles += mesh.triangle_count();
     L.counts.edges += mesh.edge_count();
@@ -401,8 +482,14 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
   // on the 193M-triangle city with three coarse levels in one group (60K cells): each level also holds
   // about 25 MB whatever its cells, its share of the block outputs and per-thread tables of the blocks in
   // flight (two sets of 4 per thread, 16 here): 24 bytes per primitive in flight.
+  // With materials, a material id per output primitive during pass A (about 3 a cell, 4 bytes each).
+  // Vertex colours add nothing at the peak: their pass (sum_cell_colors: 4 bytes a cell, 44 a used cell,
+  // 84 with the mean) runs after elimination has freed pass A's dedupe tables, and what it keeps (8 bytes a
+  // used cell) goes with the level's parts. Measured: the 48.6 M city with colours at --memory 1G emits
+  // its finest level whole, as without, within the cap (README, "Materials and colours").
   const bool quadric = options.representative == Representative::quadric && !options.count_only;
-  return cells * (240 + (quadric ? sizeof(core::Quadric) : 0)) + 24 * std::min(primitives, 16 * kEmitBlock);
+  return cells * (240 + (quadric ? sizeof(core::Quadric) : 0) + (options.materials && !options.count_only ? 12 : 0)) +
+         24 * std::min(primitives, 16 * kEmitBlock);
 }
 
 uint64_t emit_map_bytes(uint64_t vertices, unsigned bits) { return (vertices * bits + 63) / 64 * 8 + 8; }
@@ -462,6 +549,89 @@ EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_reg
   const uint64_t quadric_bytes = sizeof(core::Quadric) + 8;
   plan.reps_range_cells = std::max<uint64_t>(1, (budget - map - tables - in_flight) / quadric_bytes);
   return plan;
+}
+
+// Every level's cell colours (see CellColor), for the cells its output can use: those a kept triangle or
+// edge uses or a kept point is on, and of a batch only its own and its halo's. The weight order (order.u32;
+// with the mean representative, grades.f64 beside it) is read in chunks; each chunk's colours are gathered
+// once, then every level sums them in a task of its own, streaming its cluster map (cells-L.map, the cell of
+// each record in weight order: no random lookups in the group's packed map). Each cell's sums are formed
+// serially in weight order, so they depend neither on the threads nor on the batches. Memory: the colour
+// column mapped (4 bytes a vertex), per level 4 bytes a cell and 44 a used cell (84 with the mean), and per
+// chunk 4 bytes a record and level.
+void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const std::string& prefix, uint64_t records,
+                     const EmitOptions& options, const std::vector<LevelState>& levels, std::vector<LevelColors>& out) {
+  const size_t nl = levels.size();
+  const bool grades = options.representative == Representative::mean && !options.grades_path.empty();
+  std::vector<std::vector<CellColor>> sums(nl);
+  std::vector<std::vector<CellWeighted>> weighted(nl);
+  for (size_t l = 0; l < nl; ++l) {
+    const LevelState& L = levels[l];
+    std::vector<uint32_t>& index = out[l].index;
+    index.assign(L.in.cells, UINT32_MAX);
+    for (uint32_t c : L.kept_points) index[c] = 0;
+    uint32_t n = 0;
+    for (uint64_t c = 0; c < L.in.cells; ++c)
+      if ((L.used[c] || index[c] == 0) && (!L.in.batched || L.role[c])) index[c] = n++;
+      else index[c] = UINT32_MAX;
+    sums[l].assign(n, CellColor{});
+    if (grades) weighted[l].assign(n, CellWeighted{});
+  }
+  io::MappedFile colors(store_dir + "/colors.rgba8");
+  if (colors.size() != meta.vertices * 4) fail(Status::io_error, colors.path() + ": size does not match store.json");
+  io::MappedFile order(order_path(prefix));
+  if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
+  constexpr uint64_t rb = sizeof(double);
+  std::unique_ptr<io::MappedFile> index_file;
+  if (grades) {
+    index_file = std::make_unique<io::MappedFile>(options.grades_path);
+    if (index_file->size() != records * rb) fail(Status::io_error, index_file->path() + ": size does not match the weight index");
+  }
+  if (records > 0) {
+    const io::Window rgba = colors.map(0, colors.size());
+    constexpr uint64_t kChunk = 1 << 18;
+    std::vector<std::unique_ptr<CellMapReader>> maps;
+    for (const LevelState& L : levels) maps.push_back(std::make_unique<CellMapReader>(cells_path(prefix, L.in.level)));
+    std::vector<uint32_t> cells(nl * kChunk), chunk_rgba(kChunk);
+    for (uint64_t first = 0; first < records; first += kChunk) {
+      const uint64_t n = std::min<uint64_t>(kChunk, records - first);
+      const io::Window ids = order.map(first * 4, (first + n) * 4);
+      for (uint64_t i = 0; i < n; ++i) {
+        uint32_t id;
+        std::memcpy(&id, ids.data() + 4 * i, 4);
+        std::memcpy(&chunk_rgba[i], rgba.data() + 4 * uint64_t{id}, 4);
+      }
+      io::Window g;
+      if (grades) g = index_file->map(first * rb, (first + n) * rb);
+      tbb::parallel_for(size_t{0}, nl, [&](size_t l) {
+        uint32_t* cs = cells.data() + l * kChunk;
+        maps[l]->read(std::span<uint32_t>(cs, n));
+        const std::vector<uint32_t>& index = out[l].index;
+        for (uint64_t i = 0; i < n; ++i) {
+          if (cs[i] >= index.size()) fail(Status::io_error, cells_path(prefix, levels[l].in.level) + ": cell id out of range");
+          const uint32_t j = index[cs[i]];
+          if (j == UINT32_MAX) continue;
+          const uint8_t* c = reinterpret_cast<const uint8_t*>(&chunk_rgba[i]);
+          CellColor& s = sums[l][j];
+          if (s.count == 0) std::memcpy(s.first, c, 4);
+          s.count += 1;
+          for (int k = 0; k < 4; ++k) s.sum[k] += c[k];
+          if (grades) {
+            double grade;
+            std::memcpy(&grade, g.data() + i * rb, 8);
+            CellWeighted& w = weighted[l][j];
+            for (int k = 0; k < 4; ++k) w.weighted[k] += grade * c[k];
+            w.weight += grade;
+          }
+        }
+      });
+    }
+  }
+  for (size_t l = 0; l < nl; ++l) {
+    out[l].rgba.resize(4 * sums[l].size());
+    for (size_t j = 0; j < sums[l].size(); ++j)
+      cell_rgba(sums[l][j], grades ? &weighted[l][j] : nullptr, options.representative, &out[l].rgba[4 * j]);
+  }
 }
 
 std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
@@ -538,6 +708,11 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       blocks.push_back({kind, first, std::min(kEmitBlock, column_count[kind] - first)});
   }
   const bool quadric = options.representative == Representative::quadric && !options.count_only;
+  const bool materials = !meta.materials.empty() && !options.count_only && !options.representatives_only;
+  std::vector<ObjectRun> material_runs[3];
+  if (materials)
+    for (int kind = 0; kind < 3; ++kind)
+      if (column_count[kind]) material_runs[kind] = read_object_runs(store_dir, kind == 0 ? "triangle" : kind == 1 ? "line" : "point");
 
   // A vertex's record; every level's field is all ones exactly when the vertex has no cell, so the first
   // level's field tells.
@@ -607,18 +782,26 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       const uint64_t p = b.first + i;
       L.collapsed[b.kind][p / 64] |= uint64_t{1} << (p % 64);
     };
-    auto edge = [&](BlockOut& o, Scratch& s, uint32_t c0, uint32_t c1) {
+    auto edge = [&](BlockOut& o, Scratch& s, uint32_t c0, uint32_t c1, uint32_t m) {
       const std::array<uint32_t, 2> key{std::min(c0, c1), std::max(c0, c1)};
-      if (s.edges.insert(key, 0).second) o.edges.push_back(key);
+      if (s.edges.insert(key, 0).second) {
+        o.edges.push_back(key);
+        if (materials) o.edge_materials.push_back(m);
+      }
     };
-    auto point = [&](BlockOut& o, Scratch& s, uint32_t c) {
+    auto point = [&](BlockOut& o, Scratch& s, uint32_t c, uint32_t m) {
       if (c == s.last_point) return;
       s.last_point = c;
-      if (s.points.insert({c}, 0).second) o.points.push_back(c);
+      if (s.points.insert({c}, 0).second) {
+        o.points.push_back(c);
+        if (materials) o.point_materials.push_back(m);
+      }
     };
     const size_t arity = static_cast<size_t>(3 - b.kind);
     if (options.representatives_only && arity != 3) return;
+    MaterialCursor material_of(material_runs[b.kind], b.first);
     for (size_t i = 0; i < ids.size(); i += arity) {
+      const uint32_t m = materials ? material_of(b.first + i / arity) : 0;
       if (arity == 3) {
         const uint32_t v[3] = {ids[i], ids[i + 1], ids[i + 2]};
         const uint64_t r[3] = {record_of(v[0]), record_of(v[1]), record_of(v[2])};
@@ -652,11 +835,14 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
           if (c[0] != c[1] && c[1] != c[2] && c[0] != c[2]) {
             std::array<uint32_t, 3> key{c[0], c[1], c[2]};
             std::sort(key.begin(), key.end());
-            if (s.triangles.insert(key, 0).second) o.triangles.push_back({c[0], c[1], c[2]});
+            if (s.triangles.insert(key, 0).second) {
+              o.triangles.push_back({c[0], c[1], c[2]});
+              if (materials) o.triangle_materials.push_back(m);
+            }
           } else if (c[0] == c[1] && c[1] == c[2]) {
-            point(o, s, c[0]);
+            point(o, s, c[0], m);
           } else {
-            edge(o, s, c[0], c[0] != c[1] ? c[1] : c[2]);
+            edge(o, s, c[0], c[0] != c[1] ? c[1] : c[2], m);
             mark(L, i / 3);
           }
         }
@@ -667,9 +853,9 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
           const uint32_t c[2] = {c0, c1};
           if (!visited(levels[l], c, 2)) continue;
           if (c0 == c1) {
-            point(outs_l[l], scratch_l[l], c0);
+            point(outs_l[l], scratch_l[l], c0, m);
           } else {
-            edge(outs_l[l], scratch_l[l], c0, c1);
+            edge(outs_l[l], scratch_l[l], c0, c1, m);
             mark(levels[l], i / 2);
           }
         }
@@ -677,7 +863,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
         const uint64_t r0 = record_of(ids[i]);
         for (size_t l = 0; l < nl; ++l) {
           const uint32_t c = cell(levels[l], r0);
-          if (visited(levels[l], &c, 1)) point(outs_l[l], scratch_l[l], c);
+          if (visited(levels[l], &c, 1)) point(outs_l[l], scratch_l[l], c, m);
         }
       }
     }
@@ -686,15 +872,23 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     for (size_t l = 0; l < nl; ++l) {
       LevelState& L = levels[l];
       const BlockOut& o = outs_l[l];
-      for (const auto& t : o.triangles) {
-        std::array<uint32_t, 3> key = t;
+      for (size_t i = 0; i < o.triangles.size(); ++i) {
+        std::array<uint32_t, 3> key = o.triangles[i];
         std::sort(key.begin(), key.end());
-        if (L.g_triangles.insert(key, 0).second) L.triangles.push_back(t);
+        if (!L.g_triangles.insert(key, 0).second) continue;
+        L.triangles.push_back(o.triangles[i]);
+        if (materials) L.triangle_materials.push_back(o.triangle_materials[i]);
       }
-      for (const auto& e : o.edges)
-        if (L.g_edges.insert(e, static_cast<uint32_t>(L.edges.size())).second) L.edges.push_back(e);
-      for (uint32_t c : o.points)
-        if (L.g_points.insert({c}, 0).second) L.points.push_back(c);
+      for (size_t i = 0; i < o.edges.size(); ++i) {
+        if (!L.g_edges.insert(o.edges[i], static_cast<uint32_t>(L.edges.size())).second) continue;
+        L.edges.push_back(o.edges[i]);
+        if (materials) L.edge_materials.push_back(o.edge_materials[i]);
+      }
+      for (size_t i = 0; i < o.points.size(); ++i) {
+        if (!L.g_points.insert({o.points[i]}, 0).second) continue;
+        L.points.push_back(o.points[i]);
+        if (materials) L.point_materials.push_back(o.point_materials[i]);
+      }
       for (size_t i = 0; i < o.quadric_cells.size(); ++i) L.quadrics[o.quadric_cells[i] - L.quadric_base].add(o.quadrics[i]);
     }
   });
@@ -749,122 +943,127 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       if (!own) continue;
       L.k_edges.insert(L.edges[i], static_cast<uint32_t>(L.kept_edges.size()));
       L.kept_edges.push_back(L.edges[i]);
+      if (materials) L.kept_edge_materials.push_back(L.edge_materials[i]);
     }
     std::vector<std::array<uint32_t, 2>>().swap(L.edges);
-    for (uint32_t c : L.points) {
+    std::vector<uint32_t>().swap(L.edge_materials);
+    for (size_t i = 0; i < L.points.size(); ++i) {
+      const uint32_t c = L.points[i];
       if (!owned(L, c)) continue;
       if (used[c]) {
         ++L.counts.points_covered;
         continue;
       }
       L.kept_points.push_back(c);
+      if (materials) L.kept_point_materials.push_back(L.point_materials[i]);
     }
+    std::vector<uint32_t>().swap(L.point_materials);
     std::vector<uint32_t>().swap(L.points);
     L.kept_sums.resize(L.kept_edges.size());
     L.distances.resize(L.kept_edges.size());
     any_kept_edges = any_kept_edges || !L.kept_edges.empty();
   }
 
-  // Passes B and C visit the input triangles and segments that collapsed to a kept edge in some level of
-  // the group (an eliminated edge's thickness would go unused), fetching their corners once. For each level
-  // where one did, `visit(level, corner positions, their cells, arity, lower cell, kept edge, slot, o)` gets
-  // the edge's slot in the block's output (o.kept_edges with o.sums or o.distances, in order of first
-  // appearance), so that sums are formed per block in primitive order and merged in block order.
-  // Pass B (`drop` true) also clears the bit of every primitive whose edge was eliminated, so that pass C
-  // visits the kept edges' primitives only (at the finest city level, 3% of those that collapsed).
-  auto for_kept_edges = [&](bool drop, auto&& visit) {
-    return [&, drop, visit](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
-      const size_t arity = static_cast<size_t>(3 - b.kind);
-      const uint64_t first_word = b.first / 64, words = (b.count + 63) / 64;  // b.first is a multiple of 64
-      for (uint64_t w = first_word; w < first_word + words; ++w) {
-        uint64_t any = 0;  // the primitives of this word that collapsed in some level, visited in order
-        for (size_t l = 0; l < nl; ++l) any |= levels[l].collapsed[b.kind][w];
-        for (; any; any &= any - 1) {
-          const uint64_t bit = uint64_t{1} << std::countr_zero(any);
-          const uint32_t* v = &ids[(w * 64 + static_cast<uint64_t>(std::countr_zero(any)) - b.first) * arity];
-          uint64_t r[3];
-          for (size_t k = 0; k < arity; ++k) r[k] = record_of(v[k]);
-          double p[3][3];
-          bool fetched = false;
-          for (size_t l = 0; l < nl; ++l) {
-            LevelState& L = levels[l];
-            uint64_t& word = L.collapsed[b.kind][w];
-            if (!(word & bit)) continue;
-            uint32_t c[3], lo = UINT32_MAX, hi = 0;
-            for (size_t k = 0; k < arity; ++k) c[k] = cell(L, r[k]), lo = std::min(lo, c[k]), hi = std::max(hi, c[k]);
-            const uint32_t e = L.k_edges.find({lo, hi});
-            if (e == FlatMap<2>::empty) {
-              if (drop) word &= ~bit;
-              continue;
-            }
-            if (!fetched)
-              for (size_t k = 0; k < arity; ++k) positions.get(v[k], p[k]);
-            fetched = true;
-            BlockOut& o = outs_l[l];
-            const auto [slot, fresh] = scratch_l[l].cells.insert({e}, static_cast<uint32_t>(o.kept_edges.size()));
-            if (fresh) o.kept_edges.push_back(e), o.sums.emplace_back(), o.distances.emplace_back();
-            visit(L, p, c, arity, lo, e, slot, o);
+  // Pass B visits the input triangles and segments that collapsed to a kept edge in some level of the
+  // group (an eliminated edge's thickness would go unused), fetching their corners once, and collects each
+  // kept edge's distinct corners: a vertex shared by several of its collapsing primitives counts once
+  // (Low & Tan §3.3.1 average over the vertices, not over the triangles), so the thickness does not depend
+  // on how a strip was triangulated. Vertices are told apart by their canonical id (the first stored vertex
+  // at the position), so an input that repeats a position (OBJ seams, STL soups) counts it once too.
+  // A block's corners are deduplicated in the block (Scratch::corners) and then in the level
+  // (LevelState::corner_set) while merging in block order, so that the sums and the corner order do not
+  // depend on the threads. It also clears the bit of every primitive whose edge was eliminated.
+  std::unique_ptr<WeldFile> weld;
+  if (any_kept_edges && !canonical_path.empty() && meta.vertices > 0) {
+    weld = std::make_unique<WeldFile>(canonical_path, meta.vertices);
+    weld->acquire();
+  }
+  auto canonical = [&](uint32_t v) { return weld ? (*weld)(v) : v; };
+  auto collect_corners = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
+    const size_t arity = static_cast<size_t>(3 - b.kind);
+    const uint64_t first_word = b.first / 64, words = (b.count + 63) / 64;  // b.first is a multiple of 64
+    for (uint64_t w = first_word; w < first_word + words; ++w) {
+      uint64_t any = 0;  // the primitives of this word that collapsed in some level, visited in order
+      for (size_t l = 0; l < nl; ++l) any |= levels[l].collapsed[b.kind][w];
+      for (; any; any &= any - 1) {
+        const uint64_t bit = uint64_t{1} << std::countr_zero(any);
+        const uint32_t* v = &ids[(w * 64 + static_cast<uint64_t>(std::countr_zero(any)) - b.first) * arity];
+        uint64_t r[3];
+        uint32_t cv[3];
+        for (size_t k = 0; k < arity; ++k) r[k] = record_of(v[k]);
+        double p[3][3];
+        bool fetched = false;
+        for (size_t l = 0; l < nl; ++l) {
+          LevelState& L = levels[l];
+          uint64_t& word = L.collapsed[b.kind][w];
+          if (!(word & bit)) continue;
+          uint32_t lo = UINT32_MAX, hi = 0;
+          for (size_t k = 0; k < arity; ++k) lo = std::min(lo, cell(L, r[k])), hi = std::max(hi, cell(L, r[k]));
+          const uint32_t e = L.k_edges.find({lo, hi});
+          if (e == FlatMap<2>::empty) {
+            word &= ~bit;
+            continue;
           }
+          if (!fetched)
+            for (size_t k = 0; k < arity; ++k) cv[k] = canonical(v[k]), positions.get(cv[k], p[k]);
+          fetched = true;
+          for (size_t k = 0; k < arity; ++k)
+            if (scratch_l[l].corners.insert({e, cv[k]}, 0).second)
+              outs_l[l].corners.push_back({e, cv[k], {p[k][0], p[k][1], p[k][2]}});
         }
       }
-    };
+    }
   };
 
-  // Pass B: the corner sums of the kept edges, for P_A and P_B (a corner in the lower cell goes to A).
+  // Pass B: the distinct corners of the kept edges and their sums, for P_A and P_B (a corner in the lower
+  // cell goes to A).
   if (any_kept_edges) {
-    run_blocks("emit", true,
-               for_kept_edges(true, [&](LevelState&, const double (*p)[3], const uint32_t* c, size_t arity, uint32_t lo,
-                                  uint32_t, uint32_t slot, BlockOut& o) {
-                 EdgeSums& e = o.sums[slot];
-                 for (size_t k = 0; k < arity; ++k) {
-                   if (c[k] == lo) add(e.a, p[k]), ++e.na;
-                   else add(e.b, p[k]), ++e.nb;
-                 }
-               }),
-               [&](BlockOut* outs_l) {
-                 for (size_t l = 0; l < nl; ++l) {
-                   const BlockOut& o = outs_l[l];
-                   for (size_t i = 0; i < o.kept_edges.size(); ++i) {
-                     EdgeSums& e = levels[l].kept_sums[o.kept_edges[i]];
-                     add(e.a, o.sums[i].a), add(e.b, o.sums[i].b);
-                     e.na += o.sums[i].na, e.nb += o.sums[i].nb;
-                   }
-                 }
-               });
+    run_blocks("emit", true, collect_corners, [&](BlockOut* outs_l) {
+      for (size_t l = 0; l < nl; ++l) {
+        LevelState& L = levels[l];
+        for (const Corner& c : outs_l[l].corners) {
+          if (!L.corner_set.insert({c.edge, c.vertex}, 0).second) continue;
+          L.corners.push_back({c.edge, c.vertex});
+          EdgeSums& e = L.kept_sums[c.edge];
+          if (cell(L, record_of(c.vertex)) == L.kept_edges[c.edge][0]) add(e.a, c.p), ++e.na;
+          else add(e.b, c.p), ++e.nb;
+        }
+      }
+    });
   }
+  weld.reset();
 
-  // Pass C: mean distances of the collapsed corners to the line through the mean positions.
+  // Pass C: mean distances of the distinct corners to the line through the mean positions, from the corner
+  // list (no pass over the input): distances in parallel, summed per edge in corner order.
   for (LevelState& L : levels) {
+    L.corner_set = FlatMap<2, false>();
     L.pa.resize(L.kept_edges.size()), L.pb.resize(L.kept_edges.size());
     for (size_t i = 0; i < L.kept_edges.size(); ++i)
       for (int k = 0; k < 3; ++k) {
         L.pa[i][k] = L.kept_sums[i].na ? L.kept_sums[i].a[k] / static_cast<double>(L.kept_sums[i].na) : 0;
         L.pb[i][k] = L.kept_sums[i].nb ? L.kept_sums[i].b[k] / static_cast<double>(L.kept_sums[i].nb) : 0;
       }
-  }
-  if (any_kept_edges) {
-    run_blocks("emit", true,
-               for_kept_edges(false, [&](LevelState& L, const double (*p)[3], const uint32_t* c, size_t arity, uint32_t lo,
-                                  uint32_t e, uint32_t slot, BlockOut& o) {
-                 for (size_t k = 0; k < arity; ++k) {
-                   const double d = distance_to_line(p[k], L.pa[e].data(), L.pb[e].data());
-                   if (c[k] == lo) o.distances[slot].a += d;
-                   else o.distances[slot].b += d;
-                 }
-               }),
-               [&](BlockOut* outs_l) {
-                 for (size_t l = 0; l < nl; ++l) {
-                   const BlockOut& o = outs_l[l];
-                   for (size_t i = 0; i < o.kept_edges.size(); ++i) {
-                     levels[l].distances[o.kept_edges[i]].a += o.distances[i].a;
-                     levels[l].distances[o.kept_edges[i]].b += o.distances[i].b;
-                   }
-                 }
-               });
+    std::vector<double> d(L.corners.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, L.corners.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        const auto [e, v] = L.corners[i];
+        double p[3];
+        positions.get(v, p);
+        d[i] = distance_to_line(p, L.pa[e].data(), L.pb[e].data());
+      }
+    });
+    for (size_t i = 0; i < L.corners.size(); ++i) {
+      const auto [e, v] = L.corners[i];
+      if (cell(L, record_of(v)) == L.kept_edges[e][0]) L.distances[e].a += d[i];
+      else L.distances[e].b += d[i];
+    }
+    std::vector<std::array<uint32_t, 2>>().swap(L.corners);
   }
   positions.release();
   for (BlockOut& o : outs[0]) o = BlockOut();
   for (BlockOut& o : outs[1]) o = BlockOut();
+  std::vector<LevelColors> colors(nl);
+  if (meta.colors) sum_cell_colors(store_dir, meta, prefix, records, options, levels, colors);
 
   for (size_t l = 0; l < nl; ++l) {
     LevelState& L = levels[l];
@@ -880,7 +1079,9 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     std::vector<Distances>().swap(L.distances);
     std::vector<std::array<double, 3>>().swap(L.pa);
     std::vector<std::array<double, 3>>().swap(L.pb);
-    build_parts(L, thickness, prefix, cluster, options, meta.single_precision, [&](RegionPart& part) { sink(l, part); });
+    build_parts(L, thickness, meta.colors ? &colors[l] : nullptr, materials ? &meta.materials : nullptr, prefix, cluster,
+                options, meta.single_precision, [&](RegionPart& part) { sink(l, part); });
+    colors[l] = LevelColors();
     counts[l] = L.counts;
   }
   return counts;

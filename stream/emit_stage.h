@@ -7,14 +7,21 @@
 // - Elimination: no two triangles on the same three cells (the first in store order is kept, with its
 //   winding), no two edges on the same two cells, no edge that is a side of an output triangle, no point
 //   on a cell an output triangle or edge uses.
-// - Thickness (§3.3.1): for an edge between cells A and B, over the corners (in A or B) of every input
-//   triangle and segment that collapsed to it: P_A, P_B the mean corner positions in A and in B, D_A, D_B
-//   the mean distances of those corners to the line P_A P_B; thickness = D_A + D_B. (A vertex shared by k
-//   collapsing triangles counts k times.)
+// - Thickness (§3.3.1): for an edge between cells A and B, over the distinct corner vertices (in A or B)
+//   of the input triangles and segments that collapsed to it: P_A, P_B the mean positions of those in A and
+//   in B, D_A, D_B their mean distances to the line P_A P_B; thickness = D_A + D_B. A vertex shared by
+//   several collapsing primitives counts once (vertices told apart by position, through the weld's
+//   canonical ids), so a strip of width w has thickness w however it is triangulated.
 // - Representatives: center (the cell's center vertex), mean (grade-weighted mean of the cell's vertices;
 //   the plain mean when every grade is 0), quadric (Lindstrom 2000: area-weighted plane quadrics of every
 //   input triangle touching the cell, minimised around the cell's mean and clamped into the cell's box).
 // - Normals: per vertex with a crease angle (core/normals.h).
+// - Materials (a store with a material table): every kept triangle, edge and point takes the material of
+//   the input primitive it was first made from, in store order (the one whose cells the dedupe kept).
+// - Colours (a store with vertex colours): every output vertex takes its cell's colour, weighted as the
+//   representative is: center the center vertex's (the cell's first vertex in weight order), mean the
+//   grade-weighted mean of its vertices' colours (the plain mean when every grade is 0), quadric the plain
+//   mean; rounded to the nearest byte. So edge and point ends take the colour of the vertices they stand for.
 //
 // Determinism: primitives are processed in fixed blocks of the store (not of the parse or memory plan),
 // each block's sums are formed in store order and merged in block order; output primitives and vertices
@@ -26,9 +33,9 @@
 // Memory: the group's packed cluster maps (bit_width(cells) bits per stored vertex and level, kept in
 // EmitScratch between groups) and per level one bit per input triangle and segment (collapsed to an edge
 // or not), plus what grows with the output: at the peak (classification), the triangle and edge dedupe
-// tables and the quadrics. Elimination runs before the thickness passes
-// (corner sums, then distances), which visit only the primitives that collapsed to an edge and keep sums
-// for the kept edges only.
+// tables and the quadrics. Elimination runs before the thickness passes: pass B visits only the
+// primitives that collapsed to a kept edge and keeps their distinct corners (a set of {edge, vertex} pairs
+// and a list of them, about 40 bytes a corner); pass C reads that list, not the input.
 #pragma once
 
 #include <cstdint>
@@ -54,6 +61,11 @@ struct EmitOptions {
   bool count_only = false;  // stop after classification and triangle dedupe (target search)
   // Only sum the quadrics of the levels' cell ranges and write their representatives (emit_regions.h).
   bool representatives_only = false;
+  // grades.f64 of the weight index (stream/grade_stage.h, written for the mean representative only), for
+  // the grade weights of vertex colours under the mean representative; empty: plain means.
+  std::string grades_path = {};
+  bool colors = false;     // the store has vertex colours (emit_level_bytes: nothing at the peak)
+  bool materials = false;  // the store has a material table: counted in emit_level_bytes
 };
 
 struct EmitCounts {
@@ -101,6 +113,7 @@ struct RegionPart {
   // The vertices the region owns (those of its cells used by the level), in cell order, then variant.
   std::vector<uint64_t> owned_key;
   std::vector<float> owned_positions, owned_normals;
+  std::vector<uint8_t> owned_colors;  // RGBA per owned vertex when the store has vertex colours, else empty
 };
 
 // Emits the levels of `group` (cells of all of them together fit in 64 bits per vertex: the sum over the

@@ -79,13 +79,15 @@ struct Prepared {
 // Object ids become runs (one per change of object, `first` counted among the kept primitives).
 template <int arity, class Ref>
 uint64_t narrow_primitives(const std::vector<Ref>& refs, const std::vector<uint32_t>& objects,
-                           std::vector<uint32_t>* ids, std::vector<LocalRun>* runs, Prepared* p) {
+                           const std::vector<uint32_t>& materials, std::vector<uint32_t>* ids,
+                           std::vector<LocalRun>* runs, Prepared* p) {
   const size_t n = objects.size();
   ids->resize(arity * n);
   uint32_t* out = ids->data();
   uint64_t dropped = 0, kept = 0;
   int64_t hi = p->max_ref, lo = 0;
-  uint32_t last_object = UINT32_MAX;
+  uint32_t last_object = UINT32_MAX, last_material = UINT32_MAX;
+  const bool with_materials = !materials.empty();
   for (size_t i = 0; i < n; ++i) {
     const Ref* r = &refs[arity * i];
     bool degenerate = false;
@@ -101,8 +103,9 @@ uint64_t narrow_primitives(const std::vector<Ref>& refs, const std::vector<uint3
       lo = std::min(lo, id);
       *out++ = static_cast<uint32_t>(id);
     }
-    const uint32_t object = objects[i];
-    if (object != last_object) runs->push_back({kept, last_object = object});
+    const uint32_t object = objects[i], material = with_materials ? materials[i] : 0;
+    if (object != last_object || material != last_material)
+      runs->push_back({kept, last_object = object, last_material = material});
     ++kept;
   }
   ids->resize(static_cast<size_t>(out - ids->data()));
@@ -168,8 +171,8 @@ void prepare(const io::ParsedChunk& c, bool soup, bool single, uint64_t first_ve
       }
     }
     p->degenerate = c.triangles32.empty()
-                        ? narrow_primitives<3>(c.triangles, c.triangle_objects, &p->triangles, &p->triangle_runs, p)
-                        : narrow_primitives<3>(c.triangles32, c.triangle_objects, &p->triangles, &p->triangle_runs, p);
+                        ? narrow_primitives<3>(c.triangles, c.triangle_objects, c.triangle_materials, &p->triangles, &p->triangle_runs, p)
+                        : narrow_primitives<3>(c.triangles32, c.triangle_objects, c.triangle_materials, &p->triangles, &p->triangle_runs, p);
     if (!c.planar_faces.empty()) {
       if (c.triangles32.empty()) select_planar_faces(c.triangles, c.planar_faces, p->degenerate != 0, p);
       else select_planar_faces(c.triangles32, c.planar_faces, p->degenerate != 0, p);
@@ -177,8 +180,18 @@ void prepare(const io::ParsedChunk& c, bool soup, bool single, uint64_t first_ve
     p->degenerate += c.degenerate;
     p->face_segments = c.face_segments;
   }
-  p->degenerate_segments = narrow_primitives<2>(c.lines, c.line_objects, &p->lines, &p->line_runs, p);
-  narrow_primitives<1>(c.points, c.point_objects, &p->points, &p->point_runs, p);
+  p->degenerate_segments = narrow_primitives<2>(c.lines, c.line_objects, c.line_materials, &p->lines, &p->line_runs, p);
+  narrow_primitives<1>(c.points, c.point_objects, c.point_materials, &p->points, &p->point_runs, p);
+}
+
+// The chunk's vertex colours to the store, one RGBA per vertex record; a record the reader gave no colour
+// (it has none where the others have, e.g. a PLY vertex record of variable size) is white.
+void add_colors(StoreWriter& store, const io::ParsedChunk& c) {
+  const size_t vertices = (c.positions.size() + c.positions32.size()) / 3;
+  if (c.colors.size() == 4 * vertices) return store.add_colors(c.colors);
+  std::vector<uint8_t> rgba(4 * vertices, 255);
+  std::copy_n(c.colors.begin(), std::min(c.colors.size(), rgba.size()), rgba.begin());
+  store.add_colors(rgba);
 }
 
 // A face to triangulate in its plane: its first triangle in triangles.u32 and its corner count.
@@ -440,7 +453,7 @@ class SoupWelder {
       const io::Window w = objects_file.map((triangle - objs.size()) * 4, triangle * 4);
       std::memcpy(objs.data(), w.data(), objs.size() * 4);
       prepared.clear();
-      prepared.degenerate = narrow_primitives<3>(refs, objs, &prepared.triangles, &prepared.triangle_runs, &prepared);
+      prepared.degenerate = narrow_primitives<3>(refs, objs, {}, &prepared.triangles, &prepared.triangle_runs, &prepared);
       feeder.add(prepared);
       refs.clear();
       objs.clear();
@@ -525,6 +538,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   progress.report("ingest", 0);
   const bool soup = reader->soup();
   const bool single = reader->single_precision();
+  const bool colors = reader->has_colors() && !soup;
   auto take_slot = [&]() {
     std::lock_guard lock(free_mutex);
     Slot* s = free_slots.back();
@@ -580,6 +594,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
             if (welder) welder->add(c);
             else if (!c.positions32.empty()) store.add_vertices32(c.positions32, s->prepared.vertex_boxes);
             else store.add_vertices(c.positions, s->prepared.positions32, s->prepared.vertex_boxes);
+            if (colors) add_colors(store, c);
             feeder.add(s->prepared);
             const uint64_t done = s->end_offset;
             give_slot(s);
@@ -593,6 +608,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   }
   meta.vertex_records = vertex_records;
   meta.object_names = reader->object_names();
+  meta.materials = reader->materials();
   feeder.finish(&meta);
   const uint64_t planar_faces = feeder.commit_planar_faces();
   if (planar_faces) {

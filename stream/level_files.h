@@ -7,6 +7,11 @@
 // variant; triangles in region order, then in the order the emit stage gives a region's triangles; edges
 // and points likewise. The GLB's triangle vertex array is the level's vertices that triangles use (those
 // with a normal), in vertex order.
+// With a material table, every primitive carries its material id (PLY material_index, OBJ usemtl with the
+// MTL file, GLB one primitive per material and kind, io/glb_writer.h); the GLB's per-material blocks are
+// gathered from the scratch files material by material, in passes that each hold at most kSweepBytes of
+// output (materials grouped into runs that fit; a material larger than that streams straight through).
+// With vertex colours, every vertex (and both ends of every edge, every point) carries its RGBA.
 #pragma once
 
 #include <cstdint>
@@ -24,8 +29,9 @@ namespace lodstream::stream {
 
 class LevelFiles {
  public:
-  // scratch: a path prefix for the scratch files (removed by the destructor); cells: the level's cells.
-  LevelFiles(std::string scratch, uint64_t cells);
+  // scratch: a path prefix for the scratch files (removed by the destructor); cells: the level's cells;
+  // materials: the store's table (empty: none); colors: the parts carry vertex colours.
+  LevelFiles(std::string scratch, uint64_t cells, std::vector<core::Material> materials = {}, bool colors = false);
   LevelFiles(const LevelFiles&) = delete;
   LevelFiles& operator=(const LevelFiles&) = delete;
   ~LevelFiles();
@@ -45,9 +51,15 @@ class LevelFiles {
   std::string path(const char* what) const { return scratch_ + what; }
   std::string scratch_;
   std::vector<uint32_t> first_vertex_, first_triangle_vertex_;  // per cell: the id of its variant 0
+  std::vector<core::Material> materials_;
+  bool colors_ = false;
+  size_t vertex_bytes_, triangle_bytes_, edge_bytes_, point_bytes_;  // scratch record sizes
   io::FileWriter vertex_out_, triangle_out_, edge_out_, point_out_;
   uint64_t vertices_ = 0, triangle_vertices_ = 0, triangles_ = 0, edges_ = 0, points_ = 0;
   float bounds_[3][2][3];  // triangles, edges, points: min, max
+  // With materials: per material its triangles, edges and points, and its edges' and points' bounds.
+  std::vector<uint64_t> material_triangles_, material_edges_, material_points_;
+  std::vector<float> material_edge_bounds_, material_point_bounds_;
 };
 
 // The levels being welded while the emit stage hands out their parts (the levels of a group interleave):
@@ -55,8 +67,9 @@ class LevelFiles {
 // level, and is taken, closed, after its last.
 class OpenLevels {
  public:
-  OpenLevels(const WorkDir& work, std::string stem, std::vector<uint64_t> cells)
-      : work_(work), stem_(std::move(stem)), cells_(std::move(cells)) {}
+  OpenLevels(const WorkDir& work, std::string stem, std::vector<uint64_t> cells,
+             std::vector<core::Material> materials = {}, bool colors = false)
+      : work_(work), stem_(std::move(stem)), cells_(std::move(cells)), materials_(std::move(materials)), colors_(colors) {}
   void add(size_t level, const RegionPart& part);
   // Fails (Status::internal) when the level had no part.
   std::unique_ptr<LevelFiles> take(size_t level);
@@ -65,6 +78,8 @@ class OpenLevels {
   const WorkDir& work_;
   std::string stem_;
   std::vector<uint64_t> cells_;
+  std::vector<core::Material> materials_;
+  bool colors_ = false;
   std::map<size_t, std::unique_ptr<LevelFiles>> open_;
 };
 

@@ -46,6 +46,7 @@
 
 #include "core/ray_scene.h"
 #include "core/silhouette_error.h"
+#include "core/primitive_color.h"
 #include "core/status.h"
 #include "core/surface_sampling.h"
 #include "core/view_cast.h"
@@ -374,7 +375,8 @@ void lower_closest_distances(const std::vector<float>& samples, std::span<const 
 
 // ------------------------------------------------------------------------------------------- images
 
-// Shaded render: grey by the cosine between normal and view axis; thick edges orange, points red.
+// Shaded render: grey by the cosine between normal and view axis; thick edges orange, points red. With
+// colours (ViewImage::color), every primitive in its own colour, triangles shaded by the same cosine.
 std::vector<uint8_t> shade(const core::ViewImage& v, const core::Camera& cam) {
   const uint64_t n = uint64_t{v.resolution} * v.resolution;
   std::vector<uint8_t> rgb(3 * n, 255);
@@ -384,6 +386,12 @@ std::vector<uint8_t> shade(const core::ViewImage& v, const core::Camera& cam) {
     const double c = std::fabs(nn[0] * cam.forward[0] + nn[1] * cam.forward[1] + nn[2] * cam.forward[2]);
     const double g = 50 + 180 * c;
     double r = g, gg = g, b = g;
+    if (!v.color.empty()) {
+      const double f = v.kind[p] == uint8_t(core::PrimitiveKind::triangle) ? (50 + 205 * c) / 255 : 1.0;
+      r = f * v.color[3 * p], gg = f * v.color[3 * p + 1], b = f * v.color[3 * p + 2];
+      rgb[3 * p] = uint8_t(r), rgb[3 * p + 1] = uint8_t(gg), rgb[3 * p + 2] = uint8_t(b);
+      continue;
+    }
     if (v.kind[p] == uint8_t(core::PrimitiveKind::edge)) r = 235, gg = 140, b = 30;
     if (v.kind[p] == uint8_t(core::PrimitiveKind::point)) r = 220, gg = 30, b = 30;
     rgb[3 * p] = uint8_t(r), rgb[3 * p + 1] = uint8_t(gg), rgb[3 * p + 2] = uint8_t(b);
@@ -474,19 +482,54 @@ struct LevelScene {
   std::vector<const core::RayScene*> list() const { return {triangles.get(), wire.get()}; }
 };
 
+// The colours a level's primitives are rendered in (RGB per triangle, edge, point), for a level with
+// vertex colours or materials (else empty): its material's base colour times the mean of its vertices'
+// colours.
+struct PrimitiveColors {
+  std::vector<uint8_t> triangles, edges, points;
+};
+
+PrimitiveColors primitive_colors(const core::LodMesh& m) {
+  PrimitiveColors out;
+  const bool colors = !m.colors.empty(), materials = !m.materials.empty();
+  if (!colors && !materials) return out;
+  auto fill = [&](const std::vector<uint32_t>& ids, int arity, const std::vector<uint32_t>& material, std::vector<uint8_t>& rgb) {
+    const uint64_t n = ids.size() / static_cast<uint64_t>(arity);
+    rgb.resize(3 * n);
+    for (uint64_t i = 0; i < n; ++i) {
+      const uint8_t* v[3];
+      for (int j = 0; j < arity; ++j) v[j] = colors ? &m.colors[4 * uint64_t{ids[static_cast<uint64_t>(arity) * i + j]}] : nullptr;
+      core::primitive_rgb(colors ? v : nullptr, arity, materials ? &m.materials[material[i]] : nullptr, &rgb[3 * i]);
+    }
+  };
+  fill(m.triangles, 3, m.triangle_materials, out.triangles);
+  fill(m.edges, 2, m.edge_materials, out.edges);
+  fill(m.points, 1, m.point_materials, out.points);
+  return out;
+}
+
 // Thick edges at their true width (radius T / 2), with no floor: a part of the original thinner than the
 // rays can resolve is missed on both sides alike. An edge of thickness 0 (an original line kept as it is)
-// and a point are drawn one pixel wide, as the original's are.
-LevelScene build_level_scene(const core::LodMesh& mesh, const WireRadii& wire, uint64_t embree_limit) {
+// and a point are drawn one pixel wide, as the original's are. `colors`: the primitives' colours, or
+// empty spans.
+struct PrimitiveColorSpans {
+  std::span<const uint8_t> triangles, edges, points;
+};
+LevelScene build_level_scene(const core::LodMesh& mesh, const WireRadii& wire, uint64_t embree_limit,
+                             const PrimitiveColorSpans& colors = {}) {
+  auto vec = [](std::span<const uint8_t> s) { return std::vector<uint8_t>(s.begin(), s.end()); };
   LevelScene scene;
   scene.triangles = std::make_unique<core::RayScene>(embree_limit);
   scene.triangles->add_triangles(mesh.positions, mesh.triangles);
+  if (!colors.triangles.empty()) scene.triangles->set_colors(vec(colors.triangles));
   scene.triangles->commit();
   scene.wire = std::make_unique<core::RayScene>(embree_limit);
   std::vector<float> radius(mesh.edge_count());
   for (size_t e = 0; e < radius.size(); ++e) radius[e] = mesh.thickness[e] > 0 ? mesh.thickness[e] / 2 : wire.line;
   scene.wire->add_segments(mesh.positions, mesh.edges, radius);
+  if (!colors.edges.empty() && !mesh.edges.empty()) scene.wire->set_colors(vec(colors.edges));
   scene.wire->add_points(mesh.positions, mesh.points, wire.point);
+  if (!colors.points.empty() && !mesh.points.empty()) scene.wire->set_colors(vec(colors.points));
   scene.wire->commit();
   return scene;
 }
@@ -496,7 +539,7 @@ LevelScene build_level_scene(const core::LodMesh& mesh, const WireRadii& wire, u
 // tie rule picks the same hit), each with its own vertices.
 class LevelChunks {
  public:
-  LevelChunks(const core::LodMesh& m, uint64_t bytes) : m_(m) {
+  LevelChunks(const core::LodMesh& m, uint64_t bytes) : m_(m), colors_(primitive_colors(m)) {
     const uint64_t prims = m.triangle_count() + m.edge_count() + m.point_count();
     const double per_vertex = prims ? kChunkCosts.vertex * double(m.vertex_count()) / double(prims) : 0;
     const double cost[3] = {kChunkCosts.triangle + per_vertex, kChunkCosts.line + per_vertex, kChunkCosts.point + per_vertex};
@@ -519,7 +562,13 @@ class LevelChunks {
   size_t size() const { return ranges_.size(); }
   // The scene of chunk c; the whole level's for a level in one chunk.
   LevelScene scene(size_t c, const WireRadii& wire, uint64_t embree_limit) {
-    if (ranges_.size() == 1) return build_level_scene(m_, wire, embree_limit);
+    auto slice = [](const std::vector<uint8_t>& rgb, uint64_t from, uint64_t n) {
+      return rgb.empty() ? std::span<const uint8_t>() : std::span<const uint8_t>(rgb.data() + 3 * from, 3 * n);
+    };
+    if (ranges_.size() == 1)
+      return build_level_scene(m_, wire, embree_limit,
+                               {slice(colors_.triangles, 0, m_.triangle_count()), slice(colors_.edges, 0, m_.edge_count()),
+                                slice(colors_.points, 0, m_.point_count())});
     const auto [first, end] = ranges_[c];
     core::LodMesh part;
     if (local_.empty()) local_.assign(m_.vertex_count(), UINT32_MAX);
@@ -541,19 +590,28 @@ class LevelChunks {
       return lo;
     };
     const uint64_t t = m_.triangle_count(), e = m_.edge_count();
-    if (first < t) take(m_.triangles, 3, 0, part.triangles);
+    PrimitiveColorSpans colors;
+    if (first < t) {
+      const uint64_t from = take(m_.triangles, 3, 0, part.triangles);
+      colors.triangles = slice(colors_.triangles, from, part.triangles.size() / 3);
+    }
     if (first < t + e && end > t) {
       const uint64_t from = take(m_.edges, 2, t, part.edges);
       part.thickness.assign(m_.thickness.begin() + static_cast<std::ptrdiff_t>(from),
                             m_.thickness.begin() + static_cast<std::ptrdiff_t>(from + part.edges.size() / 2));
+      colors.edges = slice(colors_.edges, from, part.edges.size() / 2);
     }
-    if (end > t + e) take(m_.points, 1, t + e, part.points);
+    if (end > t + e) {
+      const uint64_t from = take(m_.points, 1, t + e, part.points);
+      colors.points = slice(colors_.points, from, part.points.size());
+    }
     for (uint32_t v : touched) local_[v] = UINT32_MAX;
-    return build_level_scene(part, wire, embree_limit);
+    return build_level_scene(part, wire, embree_limit, colors);
   }
 
  private:
   const core::LodMesh& m_;
+  PrimitiveColors colors_;
   std::vector<std::pair<uint64_t, uint64_t>> ranges_;
   std::vector<uint32_t> local_;  // store vertex -> chunk vertex, UINT32_MAX outside the chunk being made
 };
@@ -674,7 +732,7 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
   for (size_t c = 0; c < n; ++c) {
     std::unique_ptr<ChunkScene> chunk = std::move(cache);
     if (!chunk) {
-      chunk = stream::load_chunk_scene(*o.chunks, c, embree_limit);
+      chunk = stream::load_chunk_scene(*o.chunks, c, embree_limit, true);
       ++totals.chunks;
       if (chunk->triangles->peak_embree_bytes() > totals.embree_peak_bytes)
         totals.embree_peak_bytes = chunk->triangles->peak_embree_bytes(), totals.chunk_triangles = chunk->triangle_count;

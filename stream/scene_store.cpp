@@ -1,6 +1,7 @@
 #include "stream/scene_store.h"
 
 #include <algorithm>
+#include <cstring>
 #include <filesystem>
 
 #include <nlohmann/json.hpp>
@@ -26,10 +27,10 @@ StoreWriter::StoreWriter(const std::string& dir, bool single_precision) : dir_(d
 void StoreWriter::Column::add(std::span<const uint32_t> values, int arity, std::span<const LocalRun> local_runs) {
   ids.write_array(values);
   for (const LocalRun& r : local_runs) {
-    if (r.object == last_object) continue;  // continues the previous batch's run
-    const ObjectRun run{count + r.first, r.object, 0};
+    if (r.object == last_object && r.material == last_material) continue;  // continues the previous batch's run
+    const ObjectRun run{count + r.first, r.object, r.material};
     runs.write(&run, sizeof run);
-    last_object = r.object;
+    last_object = r.object, last_material = r.material;
   }
   count += values.size() / static_cast<size_t>(arity);
 }
@@ -105,11 +106,17 @@ void StoreWriter::add_triangles(std::span<const uint32_t> ids, std::span<const L
 void StoreWriter::add_lines(std::span<const uint32_t> ids, std::span<const LocalRun> runs) { lines_.add(ids, 2, runs); }
 void StoreWriter::add_points(std::span<const uint32_t> ids, std::span<const LocalRun> runs) { points_.add(ids, 1, runs); }
 
+void StoreWriter::add_colors(std::span<const uint8_t> rgba) {
+  if (!colors_) colors_.emplace(dir_ + "/colors.rgba8", 1 << 18);
+  colors_->write_array(rgba);
+}
+
 void StoreWriter::commit_columns() {
   if (columns_committed_) return;
   for (io::FileWriter* w : {&positions_, &triangles_.ids, &triangles_.runs, &lines_.ids, &lines_.runs, &points_.ids,
                             &points_.runs})
     w->commit();
+  if (colors_) colors_->commit();
   columns_committed_ = true;
 }
 
@@ -121,6 +128,7 @@ StoreMeta StoreWriter::commit(StoreMeta meta) {
   meta.lines = lines_.count;
   meta.points = points_.count;
   meta.bbox = bbox_;
+  meta.colors = colors_.has_value();
   meta.vertex_chunk_bbox = vertex_chunk_bbox_;
   kill_point("store.json");
   io::write_file_atomic(dir_ + "/store.json", store_meta_json(meta));
@@ -128,6 +136,34 @@ StoreMeta StoreWriter::commit(StoreMeta meta) {
 }
 
 namespace {
+const char* const kAlphaModes[] = {"OPAQUE", "MASK", "BLEND"};
+
+ordered_json material_json(const core::Material& m) {
+  ordered_json j;
+  j["name"] = m.name;
+  j["base_color"] = std::vector<float>(m.base_color, m.base_color + 4);
+  j["metallic"] = m.metallic;
+  j["roughness"] = m.roughness;
+  j["alpha_mode"] = kAlphaModes[static_cast<int>(m.alpha)];
+  j["alpha_cutoff"] = m.alpha_cutoff;
+  j["double_sided"] = m.double_sided;
+  return j;
+}
+
+core::Material material_from_json(const ordered_json& j) {
+  core::Material m;
+  m.name = j.at("name").get<std::string>();
+  const auto c = j.at("base_color").get<std::array<float, 4>>();
+  std::copy(c.begin(), c.end(), m.base_color);
+  m.metallic = j.at("metallic").get<float>();
+  m.roughness = j.at("roughness").get<float>();
+  const std::string mode = j.at("alpha_mode").get<std::string>();
+  m.alpha = mode == "MASK" ? core::Material::Alpha::mask : mode == "BLEND" ? core::Material::Alpha::blend : core::Material::Alpha::opaque;
+  m.alpha_cutoff = j.at("alpha_cutoff").get<float>();
+  m.double_sided = j.at("double_sided").get<bool>();
+  return m;
+}
+
 ordered_json bbox_json(const Bbox& b) {
   return ordered_json{{"min", b.empty ? std::array<double, 3>{0, 0, 0} : b.min},
                       {"max", b.empty ? std::array<double, 3>{0, 0, 0} : b.max}};
@@ -156,10 +192,25 @@ std::string store_meta_json(const StoreMeta& m) {
   j["objects_used"] = m.objects_used;
   j["bbox"] = bbox_json(m.bbox);
   j["object_names"] = m.object_names;
+  if (m.colors) j["colors"] = "rgba8";
+  if (!m.materials.empty()) {
+    ordered_json mats = ordered_json::array();
+    for (const core::Material& x : m.materials) mats.push_back(material_json(x));
+    j["materials"] = mats;
+  }
   ordered_json vc = ordered_json::array();
   for (const Bbox& b : m.vertex_chunk_bbox) vc.push_back(bbox_json(b));
   j["vertex_chunks"] = vc;
   return j.dump(1) + "\n";
+}
+
+std::vector<ObjectRun> read_object_runs(const std::string& dir, const std::string& kind) {
+  const std::string path = dir + "/" + kind + "_objects.runs";
+  const std::string bytes = io::read_small_file(path);
+  if (bytes.size() % sizeof(ObjectRun) != 0) fail(Status::io_error, path + ": not a whole number of runs");
+  std::vector<ObjectRun> runs(bytes.size() / sizeof(ObjectRun));
+  std::memcpy(runs.data(), bytes.data(), bytes.size());
+  return runs;
 }
 
 bool read_store_meta(const std::string& dir, StoreMeta* m) {
@@ -189,6 +240,10 @@ bool read_store_meta(const std::string& dir, StoreMeta* m) {
     m->skipped = j.at("skipped").get<uint64_t>();
     m->objects_used = j.at("objects_used").get<uint64_t>();
     m->object_names = j.at("object_names").get<std::vector<std::string>>();
+    m->colors = j.contains("colors");
+    m->materials.clear();
+    if (j.contains("materials"))
+      for (const auto& x : j.at("materials")) m->materials.push_back(material_from_json(x));
     auto read_bbox = [](const ordered_json& b) {
       Bbox r;
       r.min = b.at("min").get<std::array<double, 3>>();

@@ -7,37 +7,44 @@
 //
 //   positions.f32|.f64     x y z per vertex: float when the input's coordinates are all 32-bit floats
 //                          (PLY float, STL), else double, so every input value is kept exactly
+//   colors.rgba8           RGBA per vertex (0..255), only when the input has vertex colours
 //   triangles.u32          3 vertex ids per triangle, input order, degenerate triangles removed
-//   triangle_objects.runs  object ids as runs: ObjectRun records, one per change of object
+//   triangle_objects.runs  object and material ids as runs: ObjectRun records, one per change of either
 //   lines.u32 / line_objects.runs, points.u32 / point_objects.runs   likewise
 //   store.json             written last: its presence means the store is complete
 #pragma once
 
 #include <array>
+#include <optional>
 #include <cstdint>
 #include <span>
 #include <string>
 #include <vector>
 
+#include "core/mesh.h"
 #include "io/file_writer.h"
 
 namespace lodstream::stream {
 
 inline constexpr uint64_t store_chunk_elements = 1 << 20;
 // 3: n-gons triangulated in their plane, faces naming two vertices kept as segments (was: fan).
-inline constexpr int store_version = 3;
+// 4: material ids in the object runs, the material table in store.json.
+inline constexpr int store_version = 4;
 
 // Elements first, first + 1, ... up to the next run's `first` belong to `object`.
+// `material` indexes StoreMeta::materials; it is 0 when the store has no materials, so that a store
+// without them has the bytes it had before materials existed.
 struct ObjectRun {
   uint64_t first;
   uint32_t object;
-  uint32_t reserved;  // 0
+  uint32_t material;
 };
 
 // A run of objects within a batch of primitives: `first` counts from the batch's first primitive.
 struct LocalRun {
   uint64_t first;
   uint32_t object;
+  uint32_t material = 0;
 };
 
 struct Bbox {
@@ -86,6 +93,8 @@ struct StoreMeta {
   uint64_t polygons_fallback = 0;  // faces with no plane or not simple: the fan of the file's order kept
   std::vector<std::string> object_names;
   uint64_t objects_used = 0;
+  std::vector<core::Material> materials;  // empty: the input has none
+  bool colors = false;                    // colors.rgba8 holds a colour per vertex
   Bbox bbox;
   // Chunk table: the bounding box of each vertex chunk.
   std::vector<Bbox> vertex_chunk_bbox;
@@ -106,6 +115,9 @@ class StoreWriter {
   void add_triangles(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
   void add_lines(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
   void add_points(std::span<const uint32_t> ids, std::span<const LocalRun> runs);
+  // Appends RGBA colours, one per vertex, in vertex order (stores with colours only: the first call creates
+  // colors.rgba8).
+  void add_colors(std::span<const uint8_t> rgba);
   // Renames every column into place without writing store.json, so that a pass may still rewrite a column
   // in place (ingest's triangulation of planar faces); commit() then only writes store.json.
   void commit_columns();
@@ -120,12 +132,13 @@ class StoreWriter {
   struct Column {
     io::FileWriter ids, runs;
     uint64_t count = 0;
-    uint32_t last_object = UINT32_MAX;
+    uint32_t last_object = UINT32_MAX, last_material = UINT32_MAX;
     void add(std::span<const uint32_t> values, int arity, std::span<const LocalRun> local_runs);
   };
   std::string dir_;
   bool single_;
   io::FileWriter positions_;
+  std::optional<io::FileWriter> colors_;
   Column triangles_, lines_, points_;
   uint64_t vertices_ = 0;
   std::vector<float> scratch32_;
@@ -137,6 +150,10 @@ class StoreWriter {
 // Bounding boxes of the parts of `xyz` (vertices first_vertex, first_vertex + 1, ...) in each store chunk.
 std::vector<std::pair<uint64_t, Bbox>> vertex_chunk_boxes(std::span<const double> xyz, uint64_t first_vertex);
 std::vector<std::pair<uint64_t, Bbox>> vertex_chunk_boxes(std::span<const float> xyz, uint64_t first_vertex);
+
+// The object runs of a primitive column ("triangle", "line" or "point"), whole (they are few: one per
+// change of object or material).
+std::vector<ObjectRun> read_object_runs(const std::string& dir, const std::string& kind);
 
 // Reads store.json of a complete store; returns false when there is none (or it is unreadable or of
 // another format version), so that the caller rebuilds it.

@@ -845,7 +845,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         glb = std::make_unique<io::GlbBuilder>(so.output_dir + "/lods.glb", so.output_dir + "/lods.glb.bin.partial", generator);
       // Each level's parts are welded into its files (stream/level_files.h) as they come; the level's PLY and
       // OBJ files and its part of the GLB are written after its last part (the three side by side).
-      stream::OpenLevels open_levels(work, "level", cells);
+      stream::OpenLevels open_levels(work, "level", cells, meta.materials, meta.colors);
       // The region sink of the 3D Tiles output (stream/emit_regions.h): every region of every level becomes a
       // tile as it is emitted (stream/tiles.h); tileset.json is written after the last.
       std::unique_ptr<stream::TilesetBuilder> tiles;
@@ -877,8 +877,12 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         files.wait();
         if (so.write_ply) ls.files.push_back(stem + ".ply");
         if (so.write_obj) ls.files.push_back(stem + ".obj");
+        if (so.write_obj && !meta.materials.empty()) ls.files.push_back(stem + ".mtl");
       };
-      const stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
+      stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
+      emit_options.grades_path = grades_path;
+      emit_options.colors = meta.colors;
+      emit_options.materials = !meta.materials.empty();
       run_stage(&report.stages, "emit", [&](StageStats&) {
         const std::vector<stream::EmitCounts> counts =
             sharded ? stream::emit_shard(shard_input, so.shard_index, so.shard_count, so.output_dir, progress, scratch)

@@ -5,6 +5,7 @@
 #include <bit>
 #include <cstring>
 
+#include "core/primitive_color.h"
 #include "core/status.h"
 #include "io/mapped_file.h"
 
@@ -117,7 +118,7 @@ void StoreChunks::read_positions(std::span<const uint64_t> bits, uint64_t word0,
   }
 }
 
-void StoreChunks::read(size_t index, ChunkGeometry* out) {
+void StoreChunks::read(size_t index, ChunkGeometry* out, bool colors) {
   const StoreChunk& c = chunks_.at(index);
   const uint64_t words = (meta_.vertices + 63) / 64;
   std::vector<uint64_t> bits(words, 0);
@@ -142,6 +143,52 @@ void StoreChunks::read(size_t index, ChunkGeometry* out) {
       dst[at + i] = rank[v >> 6] + static_cast<uint32_t>(std::popcount(below));
     }
   });
+  out->triangle_rgb.clear(), out->line_rgb.clear(), out->point_rgb.clear();
+  if (colors) read_colors(c, bits, count, out);
+}
+
+void StoreChunks::read_colors(const StoreChunk& c, std::span<const uint64_t> bits, uint64_t count, ChunkGeometry* out) const {
+  if (!meta_.colors && meta_.materials.empty()) return;
+  std::vector<uint8_t> rgba;
+  if (meta_.colors) {
+    rgba.resize(4 * count);
+    io::MappedFile file(dir_ + "/colors.rgba8");
+    if (file.size() != meta_.vertices * 4) fail(Status::io_error, file.path() + ": size does not match store.json");
+    io::Window w;
+    uint64_t n = 0;
+    for (uint64_t word = 0; word < bits.size(); ++word)
+      for (uint64_t b = bits[word]; b != 0; b &= b - 1) {
+        const uint64_t at = (word * 64 + static_cast<uint64_t>(std::countr_zero(b))) * 4;
+        if (at < w.begin() || at + 4 > w.end()) w = file.map(at, std::min(file.size(), at + kPositionWindow));
+        std::memcpy(&rgba[4 * n++], w.data() + (at - w.begin()), 4);
+      }
+  }
+  const char* kinds[3] = {"triangle", "line", "point"};
+  const std::vector<uint32_t>* ids[3] = {&out->triangles, &out->lines, &out->points};
+  std::vector<uint8_t>* rgb[3] = {&out->triangle_rgb, &out->line_rgb, &out->point_rgb};
+  uint64_t base = 0;  // the kind's first global primitive id
+  const uint64_t counts[3] = {meta_.triangles, meta_.lines, meta_.points};
+  for (int kind = 0; kind < 3; ++kind) {
+    const int arity = 3 - kind;
+    const uint64_t n = ids[kind]->size() / static_cast<uint64_t>(arity);
+    const uint64_t first = std::max(c.first, base) - base;  // the kind's first primitive in the chunk
+    base += counts[kind];
+    if (n == 0) continue;
+    std::vector<ObjectRun> runs;
+    if (!meta_.materials.empty()) runs = read_object_runs(dir_, kinds[kind]);
+    size_t r = 0;
+    rgb[kind]->resize(3 * n);
+    for (uint64_t i = 0; i < n; ++i) {
+      const core::Material* material = nullptr;
+      if (!runs.empty()) {
+        while (r + 1 < runs.size() && runs[r + 1].first <= first + i) ++r;
+        if (runs[r].material < meta_.materials.size()) material = &meta_.materials[runs[r].material];
+      }
+      const uint8_t* v[3];
+      for (int j = 0; j < arity; ++j) v[j] = meta_.colors ? &rgba[4 * uint64_t{(*ids[kind])[static_cast<uint64_t>(arity) * i + j]}] : nullptr;
+      core::primitive_rgb(meta_.colors ? v : nullptr, arity, material, &(*rgb[kind])[3 * i]);
+    }
+  }
 }
 
 void StoreChunks::for_used_vertices(const std::function<void(std::span<const float>)>& visit_block) const {

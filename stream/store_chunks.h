@@ -33,6 +33,9 @@ struct ChunkGeometry {
   uint64_t first = 0;                              // global id of the chunk's first primitive
   std::vector<float> xyz;                          // its vertices (store positions as float)
   std::vector<uint32_t> triangles, lines, points;  // local vertex ids
+  // With a store that has vertex colours or materials: RGB per triangle, line and point, as
+  // core::primitive_rgb draws it; else empty.
+  std::vector<uint8_t> triangle_rgb, line_rgb, point_rgb;
 };
 
 class StoreChunks {
@@ -43,8 +46,8 @@ class StoreChunks {
   // every vertex any primitive uses (used()).
   void plan(const ChunkCosts& costs, uint64_t bytes);
   const std::vector<StoreChunk>& chunks() const { return chunks_; }
-  // Reads chunk `index` into `out`.
-  void read(size_t index, ChunkGeometry* out);
+  // Reads chunk `index` into `out`; with `colors`, its primitives' colours too (ChunkGeometry::*_rgb).
+  void read(size_t index, ChunkGeometry* out, bool colors = false);
 
   // Vertices used by any primitive, after plan(): the count, and their positions in store order.
   uint64_t used_vertices() const { return used_count_; }
@@ -58,6 +61,8 @@ class StoreChunks {
                const std::function<void(uint64_t, int, std::span<const uint32_t>)>& visit) const;
   // Positions of the vertices whose bits are set, bits[0] being store word word0, in increasing order.
   void read_positions(std::span<const uint64_t> bits, uint64_t word0, uint64_t count, std::vector<float>& xyz) const;
+  // The chunk's primitive colours (ChunkGeometry::*_rgb), its `count` vertices those whose bits are set.
+  void read_colors(const StoreChunk& c, std::span<const uint64_t> bits, uint64_t count, ChunkGeometry* out) const;
 
   std::string dir_;
   StoreMeta meta_;

@@ -20,6 +20,9 @@ struct ReadAll {
   std::vector<int64_t> triangles, lines, points;
   std::vector<uint32_t> triangle_objects, line_objects, point_objects;
   std::vector<std::string> object_names;
+  std::vector<uint32_t> triangle_materials, line_materials, point_materials;  // empty in a chunk: all 0
+  std::vector<core::Material> materials;
+  std::vector<uint8_t> colors;
   uint64_t polygons = 0, skipped = 0, chunks = 0;
   uint64_t degenerate = 0, face_segments = 0, planar_faces = 0;
   uint64_t vertex_count() const { return soup ? 0 : positions.size() / 3; }
@@ -36,6 +39,14 @@ inline void append(ReadAll* r, const io::ParsedChunk& parsed) {
   add(r->triangle_objects, parsed.triangle_objects);
   add(r->line_objects, parsed.line_objects);
   add(r->point_objects, parsed.point_objects);
+  auto add_materials = [](std::vector<uint32_t>& to, const std::vector<uint32_t>& from, size_t count) {
+    if (from.empty()) to.insert(to.end(), count, 0u);
+    else to.insert(to.end(), from.begin(), from.end());
+  };
+  add(r->colors, parsed.colors);
+  add_materials(r->triangle_materials, parsed.triangle_materials, parsed.triangle_objects.size());
+  add_materials(r->line_materials, parsed.line_materials, parsed.line_objects.size());
+  add_materials(r->point_materials, parsed.point_materials, parsed.point_objects.size());
   r->polygons += parsed.polygons;
   r->degenerate += parsed.degenerate;
   r->face_segments += parsed.face_segments;
@@ -67,6 +78,7 @@ inline ReadAll read_all(const std::string& path, uint64_t target_bytes) {
   r.chunks = seq;
   reader->finish(r.soup ? 0 : r.positions.size() / 3);
   r.object_names = reader->object_names();
+  r.materials = reader->materials();
   return r;
 }
 
@@ -105,6 +117,7 @@ inline ReadAll read_parallel(const std::string& path, uint64_t target_bytes, int
   }
   reader->finish(r.soup ? 0 : r.positions.size() / 3);
   r.object_names = reader->object_names();
+  r.materials = reader->materials();
   return r;
 }
 
@@ -120,6 +133,11 @@ inline void expect_same(const ReadAll& a, const ReadAll& b, const std::string& c
   EXPECT_EQ(a.line_objects, b.line_objects);
   EXPECT_EQ(a.point_objects, b.point_objects);
   EXPECT_EQ(a.object_names, b.object_names);
+  EXPECT_EQ(a.colors, b.colors);
+  EXPECT_EQ(a.triangle_materials, b.triangle_materials);
+  EXPECT_EQ(a.line_materials, b.line_materials);
+  EXPECT_EQ(a.point_materials, b.point_materials);
+  EXPECT_TRUE(a.materials == b.materials);
   EXPECT_EQ(a.polygons, b.polygons);
   EXPECT_EQ(a.degenerate, b.degenerate);
   EXPECT_EQ(a.face_segments, b.face_segments);

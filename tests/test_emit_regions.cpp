@@ -123,7 +123,9 @@ TEST(EmitRegions, TheLargeCityIsPlannedInBatchesAt1G) {
 }
 
 // A bumpy n × n grid of quads as a binary PLY (2 n² triangles), with a few needle triangles that collapse.
-std::string bumpy_grid(const test::TempDir& tmp, int n) {
+// `colored`: every vertex with its own colour (uchar red, green, blue) and every face with one of four
+// colours by quadrant (four materials), plus a row of thin strips across it that collapse to thick edges.
+std::string bumpy_grid(const test::TempDir& tmp, int n, bool colored = false) {
   std::vector<float> v;
   for (int j = 0; j <= n; ++j)
     for (int i = 0; i <= n; ++i) {
@@ -131,22 +133,39 @@ std::string bumpy_grid(const test::TempDir& tmp, int n) {
       v.insert(v.end(), {static_cast<float>(x), static_cast<float>(y),
                          static_cast<float>(0.05 * std::sin(9 * x) * std::cos(7 * y) + (x > 0.5 ? 0.02 : 0.0))});
     }
-  std::string body;
-  auto u32 = [&](uint32_t x) { body.append(reinterpret_cast<const char*>(&x), 4); };
-  uint64_t faces = 0;
+  const uint32_t grid_vertices = static_cast<uint32_t>(v.size() / 3);
+  std::vector<std::array<uint32_t, 3>> triangles;
   for (int j = 0; j < n; ++j)
     for (int i = 0; i < n; ++i) {
       const uint32_t a = static_cast<uint32_t>(j * (n + 1) + i), b = a + 1, c = a + static_cast<uint32_t>(n) + 1, d = c + 1;
-      for (const std::array<uint32_t, 3>& t : {std::array<uint32_t, 3>{a, b, d}, std::array<uint32_t, 3>{a, d, c}}) {
-        body += static_cast<char>(3);
-        for (uint32_t id : t) u32(id);
-        ++faces;
-      }
+      triangles.push_back({a, b, d}), triangles.push_back({a, d, c});
     }
+  if (colored)
+    for (int k = 0; k < 40; ++k) {  // strips 0.3 long and 0.002 wide, above the grid
+      const float x = 0.025f * static_cast<float>(k), y = 0.3f + 0.01f * static_cast<float>(k % 7);
+      const uint32_t a = static_cast<uint32_t>(v.size() / 3);
+      v.insert(v.end(), {x, y, 0.2f, x + 0.3f, y, 0.2f, x + 0.3f, y + 0.002f, 0.2f, x, y + 0.002f, 0.2f});
+      triangles.push_back({a, a + 1, a + 2}), triangles.push_back({a, a + 2, a + 3});
+    }
+  std::string body;
+  auto u32 = [&](uint32_t x) { body.append(reinterpret_cast<const char*>(&x), 4); };
+  for (size_t i = 0; i < v.size() / 3; ++i) {
+    body.append(reinterpret_cast<const char*>(&v[3 * i]), 12);
+    if (colored) body += {static_cast<char>(i * 7 % 251), static_cast<char>(i * 13 % 256), static_cast<char>(i < grid_vertices ? 40 : 250)};
+  }
+  for (const auto& t : triangles) {
+    body += static_cast<char>(3);
+    for (uint32_t id : t) u32(id);
+    if (colored) {
+      const float* p = &v[3 * uint64_t{t[0]}];
+      const int quadrant = (p[0] > 0.5f ? 1 : 0) + (p[1] > 0.5f ? 2 : 0);
+      body += {static_cast<char>(quadrant & 1 ? 200 : 10), static_cast<char>(quadrant & 2 ? 200 : 10), static_cast<char>(90)};
+    }
+  }
+  const std::string colors = colored ? "property uchar red\nproperty uchar green\nproperty uchar blue\n" : "";
   std::string head = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(v.size() / 3) +
-                     "\nproperty float x\nproperty float y\nproperty float z\nelement face " + std::to_string(faces) +
-                     "\nproperty list uchar uint vertex_indices\nend_header\n";
-  head.append(reinterpret_cast<const char*>(v.data()), v.size() * 4);
+                     "\nproperty float x\nproperty float y\nproperty float z\n" + colors + "element face " +
+                     std::to_string(triangles.size()) + "\nproperty list uchar uint vertex_indices\n" + colors + "end_header\n";
   return tmp.write("grid.ply", head + body);
 }
 
@@ -155,9 +174,11 @@ std::string read_bytes(const std::string& path) {
   return std::string(std::istreambuf_iterator<char>(f), {});
 }
 
-TEST(EmitRegions, SameBytesInOneBatchAndInSeveral) {
+// Every output file (with `tiles`, the 3D Tiles too) of runs that emit the finest level whole and in
+// batches, at 1 and 2 threads and tiny chunks: the same bytes.
+void expect_same_bytes_in_one_batch_and_in_several(bool colored) {
   test::TempDir tmp;
-  const std::string input = bumpy_grid(tmp, 400);  // 320,000 triangles
+  const std::string input = bumpy_grid(tmp, 400, colored);  // 320,000 triangles
   struct Run {
     uint64_t memory;
     unsigned threads;
@@ -176,13 +197,17 @@ TEST(EmitRegions, SameBytesInOneBatchAndInSeveral) {
     so.output_dir = tmp.file("out" + std::to_string(i));
     so.write_obj = true;
     so.tile_triangles = 4000;
+    so.write_tiles = colored;
     SimplifyReport report;
     const Result r = simplify(input, so, o, &report);
     ASSERT_TRUE(r.ok()) << r.message;
     // Whether the finest level is emitted whole or in batches, by the stage's own plan.
     stream::StoreMeta meta;
     ASSERT_TRUE(stream::read_store_meta(o.work_dir + "/store", &meta));
-    const stream::EmitOptions eo{so.representative, so.crease_degrees, true, false};
+    stream::EmitOptions eo{so.representative, so.crease_degrees, true, false};
+    eo.colors = meta.colors, eo.materials = !meta.materials.empty();
+    EXPECT_EQ(meta.colors, colored);
+    EXPECT_EQ(meta.materials.size(), colored ? 5u : 0u);  // the white default and the four quadrants'
     const uint64_t stage = o.memory_bytes - std::min<uint64_t>(o.memory_bytes / 2, 40ull << 20);
     const stream::EmitLevelPlan plan = stream::plan_emit_level(0, report.levels[0].cells, so.tile_triangles / 2, meta.vertices,
                                                                meta.primitives(), stage, eo);
@@ -192,6 +217,14 @@ TEST(EmitRegions, SameBytesInOneBatchAndInSeveral) {
     for (size_t l = 0; l < report.levels.size(); ++l)
       for (const char* ext : {".ply", ".obj"}) bytes.push_back(read_bytes(so.output_dir + "/lod" + std::to_string(l) + ext));
     bytes.push_back(read_bytes(so.output_dir + "/lods.glb"));
+    if (colored) {
+      bytes.push_back(read_bytes(so.output_dir + "/lod0.mtl"));
+      bytes.push_back(read_bytes(so.output_dir + "/tiles/tileset.json"));
+      for (const auto& e : std::filesystem::recursive_directory_iterator(so.output_dir + "/tiles"))
+        if (e.path().extension() == ".glb") bytes.push_back(e.path().lexically_relative(so.output_dir).string() + read_bytes(e.path()));
+      std::sort(bytes.end() - static_cast<ptrdiff_t>(bytes.size() - 2 * report.levels.size() - 3), bytes.end());
+      EXPECT_GT(report.levels[0].edges, 0u);
+    }
     files.push_back(bytes);
     triangles.push_back(report.levels[0].triangles);
   }
@@ -200,6 +233,12 @@ TEST(EmitRegions, SameBytesInOneBatchAndInSeveral) {
     ASSERT_EQ(files[i].size(), files[0].size());
     for (size_t f = 0; f < files[0].size(); ++f) EXPECT_TRUE(files[i][f] == files[0][f]) << "run " << i << ", file " << f;
   }
+}
+
+TEST(EmitRegions, SameBytesInOneBatchAndInSeveral) { expect_same_bytes_in_one_batch_and_in_several(false); }
+
+TEST(EmitRegions, SameBytesInOneBatchAndInSeveralWithColoursAndMaterials) {
+  expect_same_bytes_in_one_batch_and_in_several(true);
 }
 
 // A level's triangles as position triples, each rotated to start at its least corner (winding kept), sorted.

@@ -16,7 +16,7 @@ namespace {
 constexpr uint64_t kOneChunk = uint64_t(1) << 40;
 
 void expect_same(const ReadAll& a, const ReadAll& b, uint64_t target) {
-  test::expect_same(a, b, "target_bytes " + std::to_string(target));
+  expect_same(a, b, "target_bytes " + std::to_string(target));
 }
 
 // Reads `contents` in one chunk and checks that every chunk size from 1 byte up gives the same result.
@@ -242,9 +242,46 @@ TEST(ObjReader, SkippedStatements) {
       "v1 1 2 3\n"
       "\xc3\xa9t\xc3\xa9 utf8\n"
       "f 1 2 3\n");
-  EXPECT_EQ(r.skipped, 32u + 4u);  // 31 keywords, "s" twice, 4 unknown
+  EXPECT_EQ(r.skipped, 30u + 4u);  // 29 keywords (mtllib and usemtl are read), "s" twice, 4 unknown
   EXPECT_EQ(r.vertex_count(), 3u);
   EXPECT_EQ(r.triangles, (std::vector<int64_t>{0, 1, 2}));
+}
+
+TEST(ObjReader, MaterialsFromUsemtlAndMtllib) {
+  // Materials get ids in order of first use after material 0 (what comes before any usemtl); their
+  // properties come from the libraries, whether mtllib comes before or after the usemtl; a name no
+  // library defines keeps the defaults; a missing library is skipped.
+  TempDir tmp;
+  tmp.write("a.mtl", "# comment\nnewmtl red\nKd 1 0 0\nPm 0.25\nPr 0.5\nnewmtl glass pane\nKd 0.5\nd 0.25\n");
+  tmp.write("b.mtl", "newmtl late\nKd 0 1 0\nTr 0.75\nnewmtl red\nKd 0 0 1\n");  // second red ignored
+  std::string text = "mtllib a.mtl missing.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\n"
+                     "usemtl red\nf 1 2 3 4\nl 1 3\nusemtl glass pane  # a comment\np 2\nf 2 3 4\n"
+                     "usemtl late\nf 1 3 4\nusemtl nowhere\nf 1 2 4\nusemtl red\nf 4 3 2\nmtllib b.mtl\n";
+  const std::string path = tmp.write("m.obj", text);
+  const ReadAll r = read_all(path, 1 << 20);
+  EXPECT_EQ(r.triangle_materials, (std::vector<uint32_t>{0, 1, 1, 2, 3, 4, 1}));
+  EXPECT_EQ(r.line_materials, (std::vector<uint32_t>{1}));
+  EXPECT_EQ(r.point_materials, (std::vector<uint32_t>{2}));
+  ASSERT_EQ(r.materials.size(), 5u);
+  EXPECT_EQ(r.materials[0].name, "");
+  EXPECT_EQ(r.materials[0].base_color[0], 1.0f);
+  EXPECT_EQ(r.materials[1].name, "red");
+  EXPECT_EQ(std::vector<float>(r.materials[1].base_color, r.materials[1].base_color + 4), (std::vector<float>{1, 0, 0, 1}));
+  EXPECT_EQ(r.materials[1].metallic, 0.25f);
+  EXPECT_EQ(r.materials[1].roughness, 0.5f);
+  EXPECT_EQ(r.materials[2].name, "glass pane");
+  EXPECT_EQ(std::vector<float>(r.materials[2].base_color, r.materials[2].base_color + 4), (std::vector<float>{0.5f, 0.5f, 0.5f, 0.25f}));
+  EXPECT_EQ(r.materials[2].alpha, core::Material::Alpha::blend);
+  EXPECT_EQ(r.materials[3].name, "late");
+  EXPECT_EQ(r.materials[3].base_color[1], 1.0f);
+  EXPECT_EQ(r.materials[3].base_color[3], 0.25f);
+  EXPECT_EQ(r.materials[4].name, "nowhere");
+  EXPECT_EQ(r.materials[4].base_color[2], 1.0f);
+  EXPECT_EQ(r.skipped, 0u);
+  for (uint64_t bytes : {1, 7, 40}) expect_same(r, read_all(path, bytes), "chunk " + std::to_string(bytes));
+  expect_same(r, read_parallel(path, 16, 3), "parallel");
+  // No usemtl: no materials at all (mtllib alone changes nothing).
+  EXPECT_TRUE(read_all(tmp.write("n.obj", "mtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n"), 1 << 20).materials.empty());
 }
 
 TEST(ObjReader, LineContinuation) {
@@ -305,7 +342,7 @@ TEST(ObjReader, EveryChunkSizeGivesTheSameResult) {
   EXPECT_EQ(r.lines.size(), 2u * 2 * 4);
   EXPECT_EQ(r.points.size(), 5u);
   EXPECT_EQ(r.object_names, (std::vector<std::string>{"", "group 0", "obj1", "group 2", "obj3"}));
-  EXPECT_EQ(r.skipped, 1u + 4 * 7);
+  EXPECT_EQ(r.skipped, 4u * 6);  // vn (mtllib and usemtl are read)
   EXPECT_EQ(r.point_objects.back(), 2u);
 }
 

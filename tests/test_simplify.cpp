@@ -178,8 +178,15 @@ Level read_level(const std::string& path) {
       "element face\nproperty list uchar uint vertex_indices\n"
       "element edge\nproperty uint vertex1\nproperty uint vertex2\nproperty float thickness\n"
       "element point\nproperty uint vertex\n";
-  const bool with_normals = layout == "element vertex\n" + xyz + nxyz + rest;
-  if (!with_normals && layout != "element vertex\n" + xyz + rest) {
+  // With materials (io/ply_writer.h), face, edge and point each end with a uint material_index.
+  const std::string m = "property uint material_index\n";
+  const std::string rest_m =
+      "element face\nproperty list uchar uint vertex_indices\n" + m +
+      "element edge\nproperty uint vertex1\nproperty uint vertex2\nproperty float thickness\n" + m +
+      "element point\nproperty uint vertex\n" + m;
+  const bool materials = layout == "element vertex\n" + xyz + nxyz + rest_m || layout == "element vertex\n" + xyz + rest_m;
+  const bool with_normals = layout == "element vertex\n" + xyz + nxyz + (materials ? rest_m : rest);
+  if (!with_normals && layout != "element vertex\n" + xyz + (materials ? rest_m : rest)) {
     ADD_FAILURE() << path << ": unexpected header layout:\n" << layout;
     return level;
   }
@@ -201,19 +208,21 @@ Level read_level(const std::string& path) {
   for (uint64_t t = 0; good && t < count["face"]; ++t) {
     uint8_t n = 0;
     std::array<uint32_t, 3> ids{};
-    good = take(&n, 1) && n == 3 && take(ids.data(), 12);
+    uint32_t material = 0;
+    good = take(&n, 1) && n == 3 && take(ids.data(), 12) && (!materials || take(&material, 4));
     level.triangles.push_back(ids);
   }
   for (uint64_t e = 0; good && e < count["edge"]; ++e) {
     std::array<uint32_t, 2> ids{};
     float th = 0;
-    good = take(ids.data(), 8) && take(&th, 4);
+    uint32_t material = 0;
+    good = take(ids.data(), 8) && take(&th, 4) && (!materials || take(&material, 4));
     level.edges.push_back(ids);
     level.thickness.push_back(th);
   }
   for (uint64_t i = 0; good && i < count["point"]; ++i) {
-    uint32_t id = 0;
-    good = take(&id, 4);
+    uint32_t id = 0, material = 0;
+    good = take(&id, 4) && (!materials || take(&material, 4));
     level.points.push_back(id);
   }
   if (!good || p != stop) {
@@ -1328,32 +1337,54 @@ TEST(SimplifyLinesAndPoints, SegmentsBecomeEdgesOrPointsAndCoveredOnesAreElimina
 
 // ---- 9: thick edges ----
 
-TEST(SimplifyThickEdge, ThinQuadCollapsesToAnEdgeOfHandDerivedThickness) {
-  // A quad 4 long (x) and w = 0.25 wide (y), as triangles T1 = (a0, b0, b1), T2 = (a0, b1, a1), with
-  // a0 = (0,0), b0 = (4,0), b1 = (4,w), a1 = (0,w). Cell size 2: the ends fall in two cells A ∋ a0, a1 and
-  // B ∋ b0, b1 (the centers are a0 and b1, grade cos 45°·|a0 b1|; a1 and b0 have grade cos 45°·4).
-  // Corners counted per collapsing triangle (emit_stage.h):
-  //   A: a0 (T1), a0 (T2), a1 (T2)  → P_A = (0, w/3);   B: b0, b1 (T1), b1 (T2) → P_B = (L, 2w/3).
-  // Distance of (x, y) to the line P_A P_B, direction (L, w/3): |x·w/3 − (y − w/3)·L| / √(L² + w²/9):
-  //   a0: wL/3, a1: 2wL/3  → D_A = (wL/3 + wL/3 + 2wL/3) / 3 / √(…) = 4wL / (9 √(L² + w²/9));
-  //   b0: 2wL/3, b1: wL/3  → D_B = the same.
-  // Thickness = D_A + D_B = 8wL / (9 √(L² + w²/9)) ≈ 8w/9.
+// The thickness of the single edge that `obj` (one thin strip between x = 0 and x = 4) collapses to at
+// cell size 2.
+float strip_thickness(const std::string& obj) {
   test::TempDir tmp;
-  const std::string input = tmp.write("quad.obj", "v 0 0 0\nv 4 0 0\nv 4 0.25 0\nv 0 0.25 0\nf 1 2 3\nf 1 3 4\n");
+  const std::string input = tmp.write("strip.obj", obj);
   SimplifyOptions so = make_simplify(tmp.file("out"));
   so.cell_sizes = {2};
-  ASSERT_TRUE(simplify_ok(input, so, make_options(1)));
+  EXPECT_TRUE(simplify_ok(input, so, make_options(1)));
   const Level l = read_level(tmp.file("out/lod0.ply"));
-  check_level(l, "quad");
+  check_level(l, "strip");
   EXPECT_TRUE(l.triangles.empty());
   EXPECT_TRUE(l.points.empty());
-  ASSERT_EQ(l.edges.size(), 1u);
-  const auto edges = edges_of(l);
-  ASSERT_TRUE(edges.count(edge_key({0, 0, 0}, {4, 0.25f, 0}))) << str(edges.begin()->first[0]) << str(edges.begin()->first[1]);
-  const long double L = 4, w = 0.25;
-  const double expected = static_cast<double>(8 * w * L / (9 * std::sqrt(L * L + w * w / 9)));
-  EXPECT_NEAR(l.thickness[0], expected, 1e-6 * expected);
-  EXPECT_NEAR(expected, 0.22217401, 1e-8);  // the value, for the record
+  EXPECT_EQ(l.edges.size(), 1u);
+  return l.thickness.empty() ? -1.0f : l.thickness[0];
+}
+
+TEST(SimplifyThickEdge, TwoTriangleStripHasExactlyItsWidthEitherDiagonal) {
+  // A quad 4 long (x) and w = 0.25 wide (y): a0 = (0,0), b0 = (4,0), b1 = (4,w), a1 = (0,w). Cell size 2:
+  // the ends fall in two cells A ∋ a0, a1 and B ∋ b0, b1. Over the distinct corners (Low & Tan §3.3.1):
+  // P_A = (0, w/2), P_B = (4, w/2); every corner is w/2 from that line: D_A = D_B = w/2, thickness w.
+  // Counting a corner once per collapsing triangle would weigh the diagonal's ends twice and give 8w/9
+  // (0.2222) with the diagonal a0 b1; the other diagonal, a1 b0, must give the same w.
+  const std::string v = "v 0 0 0\nv 4 0 0\nv 4 0.25 0\nv 0 0.25 0\n";
+  EXPECT_EQ(strip_thickness(v + "f 1 2 3\nf 1 3 4\n"), 0.25f);  // diagonal a0 b1
+  EXPECT_EQ(strip_thickness(v + "f 1 2 4\nf 2 3 4\n"), 0.25f);  // diagonal b0 a1
+  // The same quad as one polygon (ingest triangulates it), and as both pairs of triangles overlapping.
+  EXPECT_EQ(strip_thickness(v + "f 1 2 3 4\n"), 0.25f);
+  EXPECT_EQ(strip_thickness(v + "f 1 2 3\nf 1 3 4\nf 2 3 4\nf 1 2 4\n"), 0.25f);  // both diagonals, overlapping
+}
+
+TEST(SimplifyThickEdge, ThreeCornerEndHasHandDerivedThicknessForAnyTriangulation) {
+  // End A: a0 = (0,0), a1 = (0,w); end B: b0 = (4,0), bm = (4,w/2), b1 = (4,w); w = 0.25, cell size 2.
+  // Distinct corners: P_A = (0, w/2), P_B = (4, w/2), so the line is y = w/2: D_A = (w/2 + w/2)/2 = w/2,
+  // D_B = (w/2 + 0 + w/2)/3 = w/3; thickness 5w/6. Three triangles fanned from a0 use a0 three times, fanned
+  // from a1 a1 three times; a count per triangle would tilt the line one way or the other.
+  const std::string v = "v 0 0 0\nv 0 0.25 0\nv 4 0 0\nv 4 0.125 0\nv 4 0.25 0\n";  // a0 a1 b0 bm b1
+  const float want = static_cast<float>(5.0 * 0.25 / 6.0);
+  EXPECT_FLOAT_EQ(strip_thickness(v + "f 1 3 4\nf 1 4 5\nf 1 5 2\n"), want);  // fan from a0
+  EXPECT_FLOAT_EQ(strip_thickness(v + "f 2 1 3\nf 2 3 4\nf 2 4 5\n"), want);  // fan from a1
+  EXPECT_FLOAT_EQ(strip_thickness(v + "f 1 3 4\nf 1 4 2\nf 2 4 5\n"), want);  // mixed
+}
+
+TEST(SimplifyThickEdge, RepeatedPositionsCountOnce) {
+  // The two-triangle strip with every corner written anew per triangle (as STL or an OBJ with split
+  // seams stores it): the welded corners are the same four vertices, so the thickness is still w.
+  EXPECT_EQ(strip_thickness("v 0 0 0\nv 4 0 0\nv 4 0.25 0\nv 0 0 0\nv 4 0.25 0\nv 0 0.25 0\n"
+                            "f 1 2 3\nf 4 5 6\n"),
+            0.25f);
 }
 
 TEST(SimplifyThickEdge, SymmetricStripHasExactlyItsWidth) {

@@ -3,7 +3,7 @@
 # Usage: tools/install-deps.sh [--test]   (--test adds what the test suite needs)
 set -euo pipefail
 pkgs=(build-essential cmake libembree-dev libtbb-dev libopenmesh-dev libcli11-dev nlohmann-json3-dev libfmt-dev
-      libpng-dev libmeshoptimizer-dev libcpp-httplib-dev)
+      libpng-dev libjpeg-dev libmeshoptimizer-dev libcpp-httplib-dev)
 # --test also: MeshLab for the Hausdorff agreement test (tools/meshlab_hausdorff.py runs meshlabserver under
 # xvfb-run, which needs xauth; meshlab's only Recommends, chemical-mime-data, is not needed) and Chromium for
 # the report.html render check (tools/check_html.py).
