@@ -20,6 +20,7 @@
 #include "stream/level_files.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
+#include "stream/scene_store.h"
 #include "stream/shard.h"
 #include "stream/tiles.h"
 #include "stream/work_dir.h"
@@ -113,10 +114,15 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
     const bool ply = mi.at("write_ply"), obj = mi.at("write_obj");
     const unsigned resolution = mi.at("resolution");
 
+    // The store's material table and colour flag: every part's mesh carries the table (as emit gives it).
+    std::vector<core::Material> materials;
+    for (const ordered_json& j : mi.at("store").at("materials")) materials.push_back(stream::material_from_json(j));
+    const bool colors = mi.at("store").at("colors").get<bool>();
+
     stream::run_stage(&report.stages, "merge", [&](StageStats&) {
       for (size_t l = 0; l < levels; ++l) {
         ordered_json& lj = m["levels"][l];
-        stream::LevelFiles level(work.scratch("level" + std::to_string(l)), lj.at("cells").get<uint64_t>());
+        stream::LevelFiles level(work.scratch("level" + std::to_string(l)), lj.at("cells").get<uint64_t>(), materials, colors);
         uint64_t triangles = 0, edges = 0, points = 0, on_triangles = 0, covered = 0;
         for (unsigned run = 0; run < count; ++run) {
           const unsigned t = stream::shard_task_of_run(run, count, l);
@@ -128,6 +134,7 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
           stream::PartsReader parts(stream::shard_parts_path(output_dir, t, l));
           stream::StoredPart p;
           while (parts.next(&p)) {
+            p.part.mesh.materials = materials;
             if (tiles)
               tiles->add(l, {p.info.key.depth, p.info.key.x, p.info.key.y, p.info.key.z, p.info.cell_size, p.info.cells},
                          p.part.mesh);

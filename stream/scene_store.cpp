@@ -138,6 +138,12 @@ StoreMeta StoreWriter::commit(StoreMeta meta) {
 namespace {
 const char* const kAlphaModes[] = {"OPAQUE", "MASK", "BLEND"};
 
+ordered_json bbox_json(const Bbox& b) {
+  return ordered_json{{"min", b.empty ? std::array<double, 3>{0, 0, 0} : b.min},
+                      {"max", b.empty ? std::array<double, 3>{0, 0, 0} : b.max}};
+}
+}  // namespace
+
 ordered_json material_json(const core::Material& m) {
   ordered_json j;
   j["name"] = m.name;
@@ -164,11 +170,6 @@ core::Material material_from_json(const ordered_json& j) {
   return m;
 }
 
-ordered_json bbox_json(const Bbox& b) {
-  return ordered_json{{"min", b.empty ? std::array<double, 3>{0, 0, 0} : b.min},
-                      {"max", b.empty ? std::array<double, 3>{0, 0, 0} : b.max}};
-}
-}  // namespace
 
 std::string store_meta_json(const StoreMeta& m) {
   ordered_json j;

@@ -21,6 +21,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json_fwd.hpp>
+
 #include "core/mesh.h"
 #include "io/file_writer.h"
 
@@ -99,6 +101,10 @@ struct StoreMeta {
   // Chunk table: the bounding box of each vertex chunk.
   std::vector<Bbox> vertex_chunk_bbox;
 };
+
+// A material as store.json (and a sharded run's task summary, stream/shard.h) records it.
+nlohmann::ordered_json material_json(const core::Material& m);
+core::Material material_from_json(const nlohmann::ordered_json& j);
 
 class StoreWriter {
  public:

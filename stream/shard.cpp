@@ -21,7 +21,7 @@ namespace lodstream::stream {
 
 namespace {
 
-constexpr char kPartsMagic[8] = {'L', 'O', 'D', 'P', 'A', 'R', 'T', '1'};
+constexpr char kPartsMagic[8] = {'L', 'O', 'D', 'P', 'A', 'R', 'T', '2'};
 
 template <class T>
 void put(io::FileWriter& out, const T& v) {
@@ -115,6 +115,9 @@ void PartsWriter::add(const RegionInfo& info, const RegionPart& part) {
   put_array(out_, m.edges), put_array(out_, m.thickness), put_array(out_, m.points);
   put_array(out_, part.vertex_key), put_array(out_, part.owned_key);
   put_array(out_, part.owned_positions), put_array(out_, part.owned_normals);
+  // Materials and colours (empty without them); the material table itself is the task summary's.
+  put_array(out_, m.triangle_materials), put_array(out_, m.edge_materials), put_array(out_, m.point_materials);
+  put_array(out_, m.colors), put_array(out_, part.owned_colors);
   ++parts_;
 }
 
@@ -161,6 +164,7 @@ bool PartsReader::next(StoredPart* out) {
   core::LodMesh& m = part.mesh;
   array(m.positions), array(m.normals), array(m.triangles), array(m.edges), array(m.thickness), array(m.points);
   array(part.vertex_key), array(part.owned_key), array(part.owned_positions), array(part.owned_normals);
+  array(m.triangle_materials), array(m.edge_materials), array(m.point_materials), array(m.colors), array(part.owned_colors);
   return true;
 }
 

@@ -465,10 +465,10 @@ void check_shard_options(const SimplifyOptions& so, const Options& options) {
 // A task's summary, OUTDIR/shards/task-I.json (stream/shard.h): its manifest as one machine would write it
 // (the level counts its own), what merge needs to write the outputs, and its key.
 void write_shard_task(const SimplifyOptions& so, const SimplifyReport& report, const ordered_json& manifest,
-                      const ordered_json& tiles) {
+                      const ordered_json& tiles, const ordered_json& store) {
   const std::string generator = manifest.at("generator");
   ordered_json merge{{"write_ply", so.write_ply}, {"write_obj", so.write_obj}, {"write_glb", so.write_glb},
-                     {"resolution", so.resolution}, {"comments", ordered_json::array()}};
+                     {"resolution", so.resolution}, {"comments", ordered_json::array()}, {"store", store}};
   for (size_t l = 0; l < report.levels.size(); ++l)
     merge["comments"].push_back(level_comments(so, generator, l, report.levels.size(), report.levels[l].cell_size));
   ordered_json key{{"count", so.shard_count}, {"input", manifest.at("input")}, {"options", manifest.at("options")},
@@ -499,6 +499,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     report.input = input;
     ordered_json error_json;  // --max-error-px: the passes and figures, for the manifest
     ordered_json shard_tiles;  // a sharded run's 3D Tiles options, for merge
+    ordered_json shard_store;  // a sharded run's material table and colour flag, for merge's level files
 
     tbb::task_arena arena(static_cast<int>(plan.threads));
     arena.execute([&] {
@@ -507,6 +508,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           stream::run_ingest_stage(input, store_dir, plan, work, progress, &report.stages, &report.scene, &reused);
       if (meta.primitives() == 0)
         fail(Status::bad_data, input + ": nothing to simplify (no triangles, lines or points)");
+      shard_store = {{"materials", ordered_json::array()}, {"colors", meta.colors}};
+      for (const core::Material& mat : meta.materials) shard_store["materials"].push_back(stream::material_json(mat));
 
       // Grade and sort.
       const std::string canonical_path = work.file("weld.map");
@@ -995,7 +998,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     m["peak_rss_bytes"] = report.peak_rss_bytes;
     m["work_dir"] = stream::work_dir_json(report.work_dir);
     if (sharded) {
-      write_shard_task(so, report, m, shard_tiles);
+      write_shard_task(so, report, m, shard_tiles, shard_store);
       *out = std::move(report);
       return;
     }
