@@ -16,7 +16,7 @@
 #include "io/mapped_file.h"
 #include "stream/cell_map_file.h"
 #include "stream/grade_stage.h"
-#include "stream/store_access.h"
+#include "stream/position_gather.h"
 
 namespace lodstream::stream {
 
@@ -75,24 +75,33 @@ size_t thread_groups(size_t levels) {
 
 uint64_t positions_bytes(uint64_t vertices, bool single_precision) { return vertices * (single_precision ? 12 : 24); }
 
-// What `memory_bytes` leaves the clusterers: the store's positions (mapped whole: the records come in
-// weight order, spread over the whole column) and the fixed buffers (the writers', the index windows, the
-// block's arrays per group) come off first.
-uint64_t cell_budget(size_t levels, uint64_t vertices, bool single_precision, uint64_t memory_bytes) {
-  const uint64_t fixed = positions_bytes(vertices, single_precision) + (2 * levels + 1) * kWriterBuffer +
-                         thread_groups(levels) * kBlock * (4 + 24 + 4 * levels + 4);
-  return memory_bytes > fixed ? memory_bytes - fixed : 0;
+size_t gathering_threads() { return static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency())); }
+
+// Records whose ids and positions a thread holds at once (a multiple of kBlock). The mapped column: one
+// block, fetched ahead record by record. Read through the page cache (position_gather.h): a batch takes
+// an eighth of the budget per thread (capped by --chunk-bytes), since each batch costs a pass over the
+// column's segments that hold its ids: 12 batches a pass on the 48.6 M city at 512M, 25 on the 193 M one
+// at 1G.
+uint64_t gather_batch(uint64_t memory_bytes, uint64_t chunk_cap, bool mapped) {
+  if (mapped) return kBlock;
+  constexpr uint64_t per_record = 4 + 24 + kGatherBytesPerId;  // id, position as doubles, slot
+  uint64_t bytes = memory_bytes / 8 / gathering_threads();
+  if (chunk_cap) bytes = std::min(bytes, chunk_cap);
+  return std::max<uint64_t>(bytes / per_record / kBlock, 1) * kBlock;
 }
 
-// The positions of `ids` into xyz (3 doubles each), fetched ahead: the ids come in weight order, spread
-// over the whole column.
-void fetch_positions(const StorePositions& positions, std::span<const uint32_t> ids, std::vector<double>& xyz) {
-  constexpr size_t kAhead = 16;
-  xyz.resize(3 * ids.size());
-  for (size_t i = 0; i < ids.size(); ++i) {
-    if (i + kAhead < ids.size()) positions.prefetch(ids[i + kAhead]);
-    positions.get(ids[i], &xyz[3 * i]);
-  }
+// What `memory_bytes` leaves the clusterers: the positions' share (the column mapped whole, where it fits
+// comfortably: the records come in weight order, spread over the whole column; else each thread's batch
+// and read buffer) and the fixed buffers (the writers', the index windows, the block's arrays per group)
+// come off first.
+uint64_t cell_budget(size_t levels, uint64_t vertices, bool single_precision, uint64_t memory_bytes, uint64_t chunk_cap) {
+  const uint64_t column = positions_bytes(vertices, single_precision);
+  const bool mapped = map_positions_whole(column, memory_bytes, chunk_cap);
+  const uint64_t positions =
+      mapped ? column
+             : gathering_threads() * (gather_batch(memory_bytes, chunk_cap, false) * (4 + 24 + kGatherBytesPerId) + kGatherSegmentBytes);
+  const uint64_t fixed = positions + (2 * levels + 1) * kWriterBuffer + thread_groups(levels) * kBlock * (4 + 24 + 4 * levels + 4);
+  return memory_bytes > fixed ? memory_bytes - fixed : 0;
 }
 
 // A center at the store's precision (a stored position: exact), at q; returns the byte after it.
@@ -146,8 +155,8 @@ uint64_t estimated_cells(const AreaHistogram& areas, double cell_size, uint64_t 
 
 void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, uint64_t vertices, bool single_precision,
                             std::span<const double> bounds, std::span<const double> cell_sizes,
-                            uint64_t memory_bytes) {
-  const uint64_t budget = cell_budget(cell_sizes.size(), vertices, single_precision, memory_bytes);
+                            uint64_t memory_bytes, uint64_t chunk_cap) {
+  const uint64_t budget = cell_budget(cell_sizes.size(), vertices, single_precision, memory_bytes, chunk_cap);
   uint64_t dense = 0;  // bytes of the dense arrays, chosen as core::Clusterer chooses them
   for (double c : cell_sizes) {
     uint64_t squares = bounds.empty() ? UINT64_MAX : 1;
@@ -177,7 +186,7 @@ void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, uint64
 ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double> bounds, std::span<const double> cell_sizes,
                               const core::ClusterOptions& cluster_options, CellInfoKind info_kind, uint64_t memory_bytes,
                               const WorkDir&, Progress& progress, const std::string& prefix,
-                              const FineCells* fine) {
+                              const FineCells* fine, uint64_t chunk_cap) {
   const size_t levels = cell_sizes.size();
   const uint64_t records = weights.records;
   const bool single_precision = weights.single_precision;
@@ -188,8 +197,9 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
     grades = std::make_unique<io::MappedFile>(weights.grades_path);
     if (grades->size() != records * 8) fail(Status::io_error, weights.grades_path + ": size does not match");
   }
-  StorePositions positions(weights.positions_path, single_precision, weights.vertices);
-  positions.acquire();
+  const bool mapped = map_positions_whole(positions_bytes(weights.vertices, single_precision), memory_bytes, chunk_cap);
+  const PositionGather positions(weights.positions_path, single_precision, weights.vertices, mapped);
+  const uint64_t batch = gather_batch(memory_bytes, chunk_cap, mapped);
   // A float store's positions are all floats: the clusterer keeps its centers as floats (same ids).
   core::ClusterOptions options = cluster_options;
   options.float_positions = single_precision;
@@ -234,7 +244,7 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   // the block's arrays, the writers' buffers) come off first, and the coarse levels' dense arrays (faster
   // than hashing, but 8 bytes a square of the bounds) take at most an eighth of the rest.
   constexpr uint64_t block = kBlock;
-  const uint64_t cell_budget = stream::cell_budget(levels, weights.vertices, single_precision, memory_bytes);
+  const uint64_t cell_budget = stream::cell_budget(levels, weights.vertices, single_precision, memory_bytes, chunk_cap);
   // Fine grids count as levels here: the dense arrays keep their eighth of the budget in all.
   size_t grids = levels;
   if (fine)
@@ -284,20 +294,25 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   summary.cells.resize(levels);
   tbb::parallel_for(size_t{0}, n_groups, [&](size_t g) {
     Group& grp = groups[g];
-    std::vector<uint32_t> ids, masks;
-    std::vector<double> xyz;
-    for (uint64_t first = 0; first < records; first += block) {
+    std::vector<uint32_t> batch_ids, masks;
+    std::vector<double> batch_xyz;
+    PositionGather::Scratch scratch;
+    for (uint64_t first = 0, at = 0; first < records; first += block) {
       progress.check();
       if (tbb::is_current_task_group_canceling()) return;
       const uint64_t n = std::min(block, records - first);
-      {
-        const io::Window w = index.map(first * 4, (first + n) * 4);
-        // The block's ids and their positions as plain arrays, widened to double (exact for float).
-        ids.resize(n);
-        xyz.resize(3 * n);
-        std::memcpy(ids.data(), w.data(), n * 4);
-        fetch_positions(positions, ids, xyz);
+      if (first == at + batch_ids.size()) {
+        // The next batch's ids and their positions as plain arrays, widened to double (exact for float).
+        at = first;
+        const uint64_t nb = std::min(batch, records - at);
+        const io::Window w = index.map(at * 4, (at + nb) * 4);
+        batch_ids.resize(nb);
+        batch_xyz.resize(3 * nb);
+        std::memcpy(batch_ids.data(), w.data(), nb * 4);
+        positions.gather(batch_ids, batch_xyz.data(), scratch);
       }
+      const std::span<const uint32_t> ids(batch_ids.data() + (first - at), n);
+      const std::span<const double> xyz(batch_xyz.data() + 3 * (first - at), 3 * n);
       grp.cells.resize(grp.levels.size() * n);
       if (labels) fine_masks(*labels, *fine, grp.levels, first, n, masks);
       grp.clusterer->assign_block(ids, xyz, grp.cells, labels ? std::span<const uint32_t>(masks) : std::span<const uint32_t>());
@@ -373,17 +388,24 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
         maps.push_back(std::make_unique<CellMapReader>(cells_path(prefix, range.level)));
       }
       constexpr uint64_t kAhead = 8;
-      std::vector<uint32_t> cells(block);
-      std::vector<double> xyz(3 * block);
+      std::vector<uint32_t> cells(block), batch_ids;
+      std::vector<double> batch_xyz;
       std::vector<double> grade(block, 0.0);
-      for (uint64_t first = 0; first < records; first += block) {
+      PositionGather::Scratch scratch;
+      for (uint64_t first = 0, at = 0; first < records; first += block) {
         progress.check();
         if (tbb::is_current_task_group_canceling()) return;
         const uint64_t n = std::min(block, records - first);
-        {
-          const io::Window w = index.map(first * 4, (first + n) * 4);
-          fetch_positions(positions, std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), n), xyz);
+        if (first == at + batch_ids.size()) {
+          at = first;
+          const uint64_t nb = std::min(batch, records - at);
+          const io::Window w = index.map(at * 4, (at + nb) * 4);
+          batch_ids.resize(nb);
+          batch_xyz.resize(3 * nb);
+          std::memcpy(batch_ids.data(), w.data(), nb * 4);
+          positions.gather(batch_ids, batch_xyz.data(), scratch);
         }
+        const double* xyz = batch_xyz.data() + 3 * (first - at);
         if (grades) {
           const io::Window w = grades->map(first * 8, (first + n) * 8);
           std::memcpy(grade.data(), w.data(), n * 8);
