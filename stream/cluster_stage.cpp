@@ -78,14 +78,14 @@ uint64_t positions_bytes(uint64_t vertices, bool single_precision) { return vert
 size_t gathering_threads() { return static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency())); }
 
 // Records whose ids and positions a thread holds at once (a multiple of kBlock). The mapped column: one
-// block, fetched ahead record by record. Read through the page cache (position_gather.h): a batch takes
-// an eighth of the budget per thread (capped by --chunk-bytes), since each batch costs a pass over the
-// column's segments that hold its ids: 12 batches a pass on the 48.6 M city at 512M, 25 on the 193 M one
-// at 1G.
+// block, fetched ahead record by record. Read through the page cache (position_gather.h): the threads'
+// batches take a quarter of the budget (a thread's capped by --chunk-bytes), since each batch costs a
+// copy of the column's segments that hold its ids (all of them, at these sizes): 7 batches a pass on the
+// 48.6 M city at 512M, 27 on the 193 M one at 1G.
 uint64_t gather_batch(uint64_t memory_bytes, uint64_t chunk_cap, bool mapped) {
   if (mapped) return kBlock;
   constexpr uint64_t per_record = 4 + 24 + kGatherBytesPerId;  // id, position as doubles, slot
-  uint64_t bytes = memory_bytes / 8 / gathering_threads();
+  uint64_t bytes = memory_bytes / 4 / gathering_threads();
   if (chunk_cap) bytes = std::min(bytes, chunk_cap);
   return std::max<uint64_t>(bytes / per_record / kBlock, 1) * kBlock;
 }
