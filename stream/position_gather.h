@@ -49,10 +49,9 @@ class PositionGather {
     std::vector<uint32_t> slot;    // ids' indices, grouped by segment
     std::vector<uint32_t> start;   // per segment, its first entry in slot (then its end)
     std::vector<uint32_t> lo, hi;  // per segment, its lowest and highest id in the batch
-    std::vector<char> buffer;      // one segment's span
   };
   // xyz[3i .. 3i + 2] = the position of ids[i], widened to double (exact for a float store). Thread-safe
-  // with one Scratch per thread. Throws Failure(io_error) on a read error, Failure(internal) for an id
+  // with one Scratch per thread. The read way runs its segments as TBB tasks (a segment's buffer each). Throws Failure(io_error) on a read error, Failure(internal) for an id
   // past the column.
   void gather(std::span<const uint32_t> ids, double* xyz, Scratch& scratch) const;
 
