@@ -102,12 +102,13 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
     io::FileWriter out(out_path + (g > 0 ? ".next" : ""));
     std::vector<float> labels;
     std::vector<double> xyz;
-    // Records come in weight order, spread over the column: mapped whole where it takes at most half the
-    // budget, else read by id through the page cache (position_gather.h), a block taking a sixteenth of the
+    // Records come in weight order, spread over the column: mapped whole where it takes at most an eighth
+    // of the budget (a chunk's scene, kept for the next group, may hold three quarters of what the views
+    // leave), else read by id through the page cache (position_gather.h), a block taking a sixteenth of the
     // budget (its labels, positions, slots and index window: 36 bytes a record), since each block costs a
     // pass over the column's segments that hold its ids.
     const uint64_t column = meta.vertices * (meta.single_precision ? 12 : 24);
-    const bool mapped = map_positions_whole(column, memory_bytes, chunk_cap);
+    const bool mapped = map_positions_whole(column, memory_bytes / 4, chunk_cap);
     const PositionGather positions(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"),
                                    meta.single_precision, meta.vertices, mapped);
     PositionGather::Scratch scratch;
