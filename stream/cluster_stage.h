@@ -10,8 +10,8 @@
 //                        (CellInfoKind): its center's position (written during the pass), its mean, or both
 // Memory: the clusterers' tables and cell records (about 46 bytes a cell: kClusterBytesPerCell; it grows
 // with the cells, not the vertices), and the store's positions: mapped whole where the column takes at most
-// half the budget, else read by id through the page cache in batches of records of a fixed size per thread
-// (position_gather.h; the same bytes either way). The sums for a mean are
+// half the budget, else read by id through the page cache, one batch of records (a quarter of the budget)
+// at a time for every clusterer (position_gather.h; the same bytes either way). The sums for a mean are
 // made afterwards, from the maps and the index read again, in ranges of cells that fit in what the
 // clusterers held. When the clusterers would outgrow `memory_bytes` (what the process may add to its
 // resident set while the stage runs), the stage stops with Failure(Status::usage) naming the cells so far,

@@ -6,8 +6,8 @@
 // - read: the ids of a batch go through the column's segments in file order, each segment with one pread
 //   of the span its ids need where they are dense, one pread per id where they are sparse (a read costs
 //   about as much as copying a few KiB, kGatherGapBytes). The bytes come through the OS page cache, which
-//   is not the process's: the process holds the batch's arrays and one segment buffer, whatever the
-//   column's size. Remapping the column to drop its pages does not bound it instead: a fault maps pages
+//   is not the process's: the process holds the batch's arrays and a segment buffer per thread, whatever
+//   the column's size. Remapping the column to drop its pages does not bound it instead: a fault maps pages
 //   around the one it needs (fault-around), so a block of random ids maps far more than its bytes.
 // A batch of b ids costs about min(b, segments) reads and min(b · kGatherGapBytes, column) bytes copied:
 // larger batches read the column fewer times.
