@@ -81,7 +81,7 @@ size_t gathering_threads() { return static_cast<size_t>(std::max(1, tbb::this_ta
 // per thread, fetched ahead record by record. Read through the page cache (position_gather.h): one batch,
 // gathered once for every clusterer (or sums chunk) and by all threads, taking a quarter of the budget
 // (capped by --chunk-bytes), since each batch costs a copy of the column's segments that hold its ids (all
-// of them, at these sizes): 4 batches a pass on the 48.6 M city at 512M, 14 on the 193 M one at 1G.
+// of them, at these sizes): 7 batches a pass on the 48.6 M city at 512M, 14 on the 193 M one at 1G.
 uint64_t gather_batch(uint64_t memory_bytes, uint64_t chunk_cap, bool mapped) {
   if (mapped) return kBlock;
   constexpr uint64_t per_record = 4 + 24 + kGatherBytesPerId;  // id, position as doubles, slot
@@ -91,8 +91,8 @@ uint64_t gather_batch(uint64_t memory_bytes, uint64_t chunk_cap, bool mapped) {
 }
 
 // What `memory_bytes` leaves the clusterers: the positions' share (the column mapped whole, where it fits
-// comfortably: the records come in weight order, spread over the whole column; else each thread's batch
-// and read buffer) and the fixed buffers (the writers', the index windows, the block's arrays per group)
+// comfortably: the records come in weight order, spread over the whole column; else the one batch and a
+// segment buffer per thread) and the fixed buffers (the writers', the index windows, the block's arrays per group)
 // come off first.
 uint64_t cell_budget(size_t levels, uint64_t vertices, bool single_precision, uint64_t memory_bytes, uint64_t chunk_cap) {
   const uint64_t column = positions_bytes(vertices, single_precision);
