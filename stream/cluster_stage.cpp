@@ -16,7 +16,7 @@
 #include "io/mapped_file.h"
 #include "stream/cell_map_file.h"
 #include "stream/grade_stage.h"
-#include "stream/store_access.h"
+#include "stream/position_gather.h"
 
 namespace lodstream::stream {
 
@@ -75,24 +75,33 @@ size_t thread_groups(size_t levels) {
 
 uint64_t positions_bytes(uint64_t vertices, bool single_precision) { return vertices * (single_precision ? 12 : 24); }
 
-// What `memory_bytes` leaves the clusterers: the store's positions (mapped whole: the records come in
-// weight order, spread over the whole column) and the fixed buffers (the writers', the index windows, the
-// block's arrays per group) come off first.
-uint64_t cell_budget(size_t levels, uint64_t vertices, bool single_precision, uint64_t memory_bytes) {
-  const uint64_t fixed = positions_bytes(vertices, single_precision) + (2 * levels + 1) * kWriterBuffer +
-                         thread_groups(levels) * kBlock * (4 + 24 + 4 * levels + 4);
-  return memory_bytes > fixed ? memory_bytes - fixed : 0;
+size_t gathering_threads() { return static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency())); }
+
+// Records whose ids and positions are held at once (a multiple of kBlock). The mapped column: one block
+// per thread, fetched ahead record by record. Read through the page cache (position_gather.h): one batch,
+// gathered once for every clusterer (or sums chunk) and by all threads, taking a quarter of the budget
+// (capped by --chunk-bytes), since each batch costs a copy of the column's segments that hold its ids (all
+// of them, at these sizes): 7 batches a pass on the 48.6 M city at 512M, 14 on the 193 M one at 1G.
+uint64_t gather_batch(uint64_t memory_bytes, uint64_t chunk_cap, bool mapped) {
+  if (mapped) return kBlock;
+  constexpr uint64_t per_record = 4 + 24 + kGatherBytesPerId;  // id, position as doubles, slot
+  uint64_t bytes = memory_bytes / 4;
+  if (chunk_cap) bytes = std::min(bytes, chunk_cap);
+  return std::max<uint64_t>(bytes / per_record / kBlock, 1) * kBlock;
 }
 
-// The positions of `ids` into xyz (3 doubles each), fetched ahead: the ids come in weight order, spread
-// over the whole column.
-void fetch_positions(const StorePositions& positions, std::span<const uint32_t> ids, std::vector<double>& xyz) {
-  constexpr size_t kAhead = 16;
-  xyz.resize(3 * ids.size());
-  for (size_t i = 0; i < ids.size(); ++i) {
-    if (i + kAhead < ids.size()) positions.prefetch(ids[i + kAhead]);
-    positions.get(ids[i], &xyz[3 * i]);
-  }
+// What `memory_bytes` leaves the clusterers: the positions' share (the column mapped whole, where it fits
+// comfortably: the records come in weight order, spread over the whole column; else the one batch and a
+// segment buffer per thread) and the fixed buffers (the writers', the index windows, the block's arrays per group)
+// come off first.
+uint64_t cell_budget(size_t levels, uint64_t vertices, bool single_precision, uint64_t memory_bytes, uint64_t chunk_cap) {
+  const uint64_t column = positions_bytes(vertices, single_precision);
+  const bool mapped = map_positions_whole(column, memory_bytes, chunk_cap);
+  const uint64_t positions = mapped ? column
+                                    : gather_batch(memory_bytes, chunk_cap, false) * (4 + 24 + kGatherBytesPerId) +
+                                          gathering_threads() * kGatherSegmentBytes;
+  const uint64_t fixed = positions + (2 * levels + 1) * kWriterBuffer + thread_groups(levels) * kBlock * (4 + 24 + 4 * levels + 4);
+  return memory_bytes > fixed ? memory_bytes - fixed : 0;
 }
 
 // A center at the store's precision (a stored position: exact), at q; returns the byte after it.
@@ -146,8 +155,8 @@ uint64_t estimated_cells(const AreaHistogram& areas, double cell_size, uint64_t 
 
 void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, uint64_t vertices, bool single_precision,
                             std::span<const double> bounds, std::span<const double> cell_sizes,
-                            uint64_t memory_bytes) {
-  const uint64_t budget = cell_budget(cell_sizes.size(), vertices, single_precision, memory_bytes);
+                            uint64_t memory_bytes, uint64_t chunk_cap) {
+  const uint64_t budget = cell_budget(cell_sizes.size(), vertices, single_precision, memory_bytes, chunk_cap);
   uint64_t dense = 0;  // bytes of the dense arrays, chosen as core::Clusterer chooses them
   for (double c : cell_sizes) {
     uint64_t squares = bounds.empty() ? UINT64_MAX : 1;
@@ -177,7 +186,7 @@ void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, uint64
 ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double> bounds, std::span<const double> cell_sizes,
                               const core::ClusterOptions& cluster_options, CellInfoKind info_kind, uint64_t memory_bytes,
                               const WorkDir&, Progress& progress, const std::string& prefix,
-                              const FineCells* fine) {
+                              const FineCells* fine, uint64_t chunk_cap) {
   const size_t levels = cell_sizes.size();
   const uint64_t records = weights.records;
   const bool single_precision = weights.single_precision;
@@ -188,8 +197,9 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
     grades = std::make_unique<io::MappedFile>(weights.grades_path);
     if (grades->size() != records * 8) fail(Status::io_error, weights.grades_path + ": size does not match");
   }
-  StorePositions positions(weights.positions_path, single_precision, weights.vertices);
-  positions.acquire();
+  const bool mapped = map_positions_whole(positions_bytes(weights.vertices, single_precision), memory_bytes, chunk_cap);
+  const PositionGather positions(weights.positions_path, single_precision, weights.vertices, mapped);
+  const uint64_t batch = gather_batch(memory_bytes, chunk_cap, mapped);
   // A float store's positions are all floats: the clusterer keeps its centers as floats (same ids).
   core::ClusterOptions options = cluster_options;
   options.float_positions = single_precision;
@@ -234,7 +244,7 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   // the block's arrays, the writers' buffers) come off first, and the coarse levels' dense arrays (faster
   // than hashing, but 8 bytes a square of the bounds) take at most an eighth of the rest.
   constexpr uint64_t block = kBlock;
-  const uint64_t cell_budget = stream::cell_budget(levels, weights.vertices, single_precision, memory_bytes);
+  const uint64_t cell_budget = stream::cell_budget(levels, weights.vertices, single_precision, memory_bytes, chunk_cap);
   // Fine grids count as levels here: the dense arrays keep their eighth of the budget in all.
   size_t grids = levels;
   if (fine)
@@ -282,22 +292,36 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   constexpr double kClusterShare = 0.75;
   ClusterSummary summary;
   summary.cells.resize(levels);
-  tbb::parallel_for(size_t{0}, n_groups, [&](size_t g) {
-    Group& grp = groups[g];
-    std::vector<uint32_t> ids, masks;
+  // The ids of records [at, at + size) and their positions as plain arrays, widened to double (exact for
+  // float): the read way's shared batch, or a group's own block (mapped).
+  struct Batch {
+    uint64_t at = 0;
+    std::vector<uint32_t> ids;
     std::vector<double> xyz;
-    for (uint64_t first = 0; first < records; first += block) {
+    PositionGather::Scratch scratch;
+    void load(const io::MappedFile& order, const PositionGather& positions, uint64_t first, uint64_t n) {
+      at = first;
+      const io::Window w = order.map(first * 4, (first + n) * 4);
+      ids.resize(n);
+      xyz.resize(3 * n);
+      std::memcpy(ids.data(), w.data(), n * 4);
+      positions.gather(ids, xyz.data(), scratch);
+    }
+  };
+  // Runs records [lo, hi) through group g's clusterer, block by block: positions from `shared` (the read
+  // way), else fetched by the group itself.
+  auto run_group = [&](size_t g, uint64_t lo, uint64_t hi, const Batch* shared) {
+    Group& grp = groups[g];
+    std::vector<uint32_t> masks;
+    Batch own;
+    for (uint64_t first = lo; first < hi; first += block) {
       progress.check();
       if (tbb::is_current_task_group_canceling()) return;
-      const uint64_t n = std::min(block, records - first);
-      {
-        const io::Window w = index.map(first * 4, (first + n) * 4);
-        // The block's ids and their positions as plain arrays, widened to double (exact for float).
-        ids.resize(n);
-        xyz.resize(3 * n);
-        std::memcpy(ids.data(), w.data(), n * 4);
-        fetch_positions(positions, ids, xyz);
-      }
+      const uint64_t n = std::min(block, hi - first);
+      if (!shared) own.load(index, positions, first, n);
+      const Batch& b = shared ? *shared : own;
+      const std::span<const uint32_t> ids(b.ids.data() + (first - b.at), n);
+      const std::span<const double> xyz(b.xyz.data() + 3 * (first - b.at), 3 * n);
       grp.cells.resize(grp.levels.size() * n);
       if (labels) fine_masks(*labels, *fine, grp.levels, first, n, masks);
       grp.clusterer->assign_block(ids, xyz, grp.cells, labels ? std::span<const uint32_t>(masks) : std::span<const uint32_t>());
@@ -312,6 +336,9 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
       check_memory(grp, first, n);
       if (g == 0) progress.report("cluster", kClusterShare * static_cast<double>(first + n) / static_cast<double>(records));
     }
+  };
+  auto finish_group = [&](size_t g) {
+    Group& grp = groups[g];
     for (size_t j = 0; j < grp.levels.size(); ++j) {
       Level& L = state[grp.levels[j]];
       L.cells.commit();
@@ -320,7 +347,24 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
     }
     grp.clusterer.reset();  // its memory goes to the groups still running
     grp.bytes.store(0, std::memory_order_relaxed);
-  });
+  };
+  if (positions.mapped()) {
+    tbb::parallel_for(size_t{0}, n_groups, [&](size_t g) {
+      run_group(g, 0, records, nullptr);
+      if (!tbb::is_current_task_group_canceling()) finish_group(g);
+    });
+  } else {
+    // One batch at a time, gathered once (by all threads) for every group: a barrier per batch of
+    // millions of records, where each group gathering its own would copy the column once per group.
+    Batch shared;
+    for (uint64_t at = 0; at < records; at += batch) {
+      progress.check();
+      shared.load(index, positions, at, std::min(batch, records - at));
+      tbb::parallel_for(size_t{0}, n_groups, [&](size_t g) { run_group(g, at, shared.at + shared.ids.size(), &shared); });
+    }
+    progress.check();
+    for (size_t g = 0; g < n_groups; ++g) finish_group(g);
+  }
   progress.check();  // a group that saw the cancellation returned early
   if (info_kind == CellInfoKind::center) {
     progress.report("cluster", 1);
@@ -364,26 +408,28 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   for (size_t round = 0; round < chunks.size(); round += n_threads) {
     const size_t round_end = std::min(chunks.size(), round + n_threads);
     std::vector<std::vector<std::vector<CellInfo>>> sums(round_end - round);
-    tbb::parallel_for(round, round_end, [&](size_t k) {
+    std::vector<std::vector<std::unique_ptr<CellMapReader>>> chunk_maps(round_end - round);
+    for (size_t k = round; k < round_end; ++k)
+      for (const Range& range : chunks[k]) {
+        sums[k - round].emplace_back(range.end - range.first, CellInfo{});
+        chunk_maps[k - round].push_back(std::make_unique<CellMapReader>(cells_path(prefix, range.level)));
+      }
+    // Chunk k's sums over records [lo, hi): positions from `shared` (the read way), else fetched per block.
+    auto sum_records = [&](size_t k, uint64_t lo, uint64_t hi, const Batch* shared) {
       const std::vector<Range>& chunk = chunks[k];
       std::vector<std::vector<CellInfo>>& outs = sums[k - round];
-      std::vector<std::unique_ptr<CellMapReader>> maps;
-      for (const Range& range : chunk) {
-        outs.emplace_back(range.end - range.first, CellInfo{});
-        maps.push_back(std::make_unique<CellMapReader>(cells_path(prefix, range.level)));
-      }
+      std::vector<std::unique_ptr<CellMapReader>>& maps = chunk_maps[k - round];
       constexpr uint64_t kAhead = 8;
       std::vector<uint32_t> cells(block);
-      std::vector<double> xyz(3 * block);
       std::vector<double> grade(block, 0.0);
-      for (uint64_t first = 0; first < records; first += block) {
+      Batch own;
+      for (uint64_t first = lo; first < hi; first += block) {
         progress.check();
         if (tbb::is_current_task_group_canceling()) return;
-        const uint64_t n = std::min(block, records - first);
-        {
-          const io::Window w = index.map(first * 4, (first + n) * 4);
-          fetch_positions(positions, std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), n), xyz);
-        }
+        const uint64_t n = std::min(block, hi - first);
+        if (!shared) own.load(index, positions, first, n);
+        const Batch& b = shared ? *shared : own;
+        const double* xyz = b.xyz.data() + 3 * (first - b.at);
         if (grades) {
           const io::Window w = grades->map(first * 8, (first + n) * 8);
           std::memcpy(grade.data(), w.data(), n * 8);
@@ -416,9 +462,20 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
           }
         }
       }
-      for (size_t r = 0; r < chunk.size(); ++r) maps[r]->finish(records, summary.cells[chunk[r].level]);
-    });
+    };
+    if (positions.mapped()) {
+      tbb::parallel_for(round, round_end, [&](size_t k) { sum_records(k, 0, records, nullptr); });
+    } else {
+      Batch shared;
+      for (uint64_t at = 0; at < records; at += batch) {
+        progress.check();
+        shared.load(index, positions, at, std::min(batch, records - at));
+        tbb::parallel_for(round, round_end, [&](size_t k) { sum_records(k, at, shared.at + shared.ids.size(), &shared); });
+      }
+    }
     progress.check();
+    for (size_t k = round; k < round_end; ++k)
+      for (size_t r = 0; r < chunks[k].size(); ++r) chunk_maps[k - round][r]->finish(records, summary.cells[chunks[k][r].level]);
     for (size_t k = round; k < round_end; ++k)
       for (size_t r = 0; r < chunks[k].size(); ++r) {
         const Range& range = chunks[k][r];

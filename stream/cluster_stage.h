@@ -9,7 +9,9 @@
 //   cells-L.info         per level L: per cell, in cell-id order, what the emit stage's representative reads
 //                        (CellInfoKind): its center's position (written during the pass), its mean, or both
 // Memory: the clusterers' tables and cell records (about 46 bytes a cell: kClusterBytesPerCell; it grows
-// with the cells, not the vertices), and the store's positions, mapped whole. The sums for a mean are
+// with the cells, not the vertices), and the store's positions: mapped whole where the column takes at most
+// half the budget, else read by id through the page cache, one batch of records (a quarter of the budget)
+// at a time for every clusterer (position_gather.h; the same bytes either way). The sums for a mean are
 // made afterwards, from the maps and the index read again, in ranges of cells that fit in what the
 // clusterers held. When the clusterers would outgrow `memory_bytes` (what the process may add to its
 // resident set while the stage runs), the stage stops with Failure(Status::usage) naming the cells so far,
@@ -96,7 +98,7 @@ struct WeightIndex {
 ClusterSummary cluster_levels(const WeightIndex& index, std::span<const double> bounds, std::span<const double> cell_sizes,
                               const core::ClusterOptions& options, CellInfoKind info, uint64_t memory_bytes,
                               const WorkDir& work, Progress& progress, const std::string& prefix,
-                              const FineCells* fine = nullptr);
+                              const FineCells* fine = nullptr, uint64_t chunk_cap = 0);
 
 // The early estimate (before the stage runs, so that a run that cannot fit stops at once rather than
 // after minutes of clustering). Cells of a level of size c: a surface of area A cut into cells of side c
@@ -116,10 +118,11 @@ inline constexpr uint64_t kClusterBytesPerCell[2] = {62, 46};
 // budget, when the estimate, with the coarse levels' dense arrays over `bounds`, does not fit in what
 // `memory_bytes` leaves the cells (the same share the stage's own check uses). Levels with no triangle
 // area (lines, points) estimate 0: the stage's check is then the only one.
-// `vertices`: the store's, whose positions the stage maps.
+// `vertices`: the store's, whose positions the stage maps or reads (`chunk_cap`: --chunk-bytes, as
+// cluster_levels takes it).
 void check_cluster_estimate(const AreaHistogram& areas, uint64_t records, uint64_t vertices, bool single_precision,
                             std::span<const double> bounds, std::span<const double> cell_sizes,
-                            uint64_t memory_bytes);
+                            uint64_t memory_bytes, uint64_t chunk_cap = 0);
 
 std::string cells_path(const std::string& prefix, size_t level);
 std::string cell_info_path(const std::string& prefix, size_t level);

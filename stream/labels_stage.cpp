@@ -17,14 +17,14 @@
 #include "io/mapped_file.h"
 #include "stream/chunk_scene.h"
 #include "stream/grade_stage.h"
-#include "stream/store_access.h"
+#include "stream/position_gather.h"
 #include "stream/store_chunks.h"
 
 namespace lodstream::stream {
 
 namespace {
 
-constexpr uint64_t kBlock = 1 << 16;           // index records per block of the vertex pass
+constexpr uint64_t kBlock = 1 << 16;           // index records per block of the vertex pass (at least)
 constexpr uint64_t kViewPixelBytes = 17 + 4;   // cast image (depth, normal, kind) and distance image
 constexpr uint64_t kMinSceneBytes = 16 << 20;  // the chunk scene's share is at least this
 
@@ -102,13 +102,20 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
     io::FileWriter out(out_path + (g > 0 ? ".next" : ""));
     std::vector<float> labels;
     std::vector<double> xyz;
-    // Mapped whole, as the cluster stage maps it (records come in weight order, spread over the column);
-    // remapping per block would not bound what is resident: a random fault maps more than its page.
-    StorePositions positions(store_dir, meta);
-    positions.acquire();
-    for (uint64_t b = 0; b < records; b += kBlock) {
+    // Records come in weight order, spread over the column: mapped whole where it takes at most an eighth
+    // of the budget (a chunk's scene, kept for the next group, may hold three quarters of what the views
+    // leave), else read by id through the page cache (position_gather.h), a block taking a sixteenth of the
+    // budget (its labels, positions, slots and index window: 36 bytes a record), since each block costs a
+    // pass over the column's segments that hold its ids.
+    const uint64_t column = meta.vertices * (meta.single_precision ? 12 : 24);
+    const bool mapped = map_positions_whole(column, memory_bytes / 4, chunk_cap);
+    const PositionGather positions(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"),
+                                   meta.single_precision, meta.vertices, mapped);
+    PositionGather::Scratch scratch;
+    const uint64_t block = mapped ? kBlock : std::max<uint64_t>(std::min(memory_bytes / 16, chunk_cap ? chunk_cap : UINT64_MAX) / 36 / kBlock, 1) * kBlock;
+    for (uint64_t b = 0; b < records; b += block) {
       progress.check();
-      const uint64_t n = std::min(kBlock, records - b);
+      const uint64_t n = std::min(block, records - b);
       labels.assign(n, core::kNoLabel);
       if (previous) {
         const io::Window w = previous->map(b * 4, (b + n) * 4);
@@ -117,8 +124,7 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
       xyz.resize(3 * n);
       {
         const io::Window w = order.map(b * 4, (b + n) * 4);
-        const uint32_t* ids = reinterpret_cast<const uint32_t*>(w.data());
-        for (uint64_t i = 0; i < n; ++i) positions.get(ids[i], &xyz[3 * i]);
+        positions.gather(std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), n), xyz.data(), scratch);
       }
       tbb::parallel_for(tbb::blocked_range<uint64_t>(0, n, 4096), [&](const tbb::blocked_range<uint64_t>& r) {
         const std::span<const double> part(xyz.data() + 3 * r.begin(), 3 * (r.end() - r.begin()));

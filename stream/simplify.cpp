@@ -613,7 +613,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           bounds.insert(bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
         }
         stream::check_cluster_estimate(grade.areas, grade.records, meta.vertices, meta.single_precision, bounds, sizes,
-                                       plan.stage_bytes);
+                                       plan.stage_bytes, options.chunk_bytes);
         const stream::WeightIndex index{order_path,
                                         grades_path,
                                         store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"),
@@ -622,7 +622,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                         meta.single_precision};
         const stream::ClusterSummary cs =
             stream::cluster_levels(index, bounds, sizes, copts, info_kind, plan.stage_bytes, work, progress, prefix,
-                                  fine.get());
+                                  fine.get(), options.chunk_bytes);
         std::vector<std::string> files;
         for (size_t l = 0; l < sizes.size(); ++l) {
           files.push_back(stream::cells_path(prefix, l));

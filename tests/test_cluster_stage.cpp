@@ -22,6 +22,7 @@
 #include "stream/cell_map_file.h"
 #include "stream/cluster_stage.h"
 #include "stream/grade_stage.h"
+#include "stream/position_gather.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
 #include "test_util.h"
@@ -163,6 +164,78 @@ TEST(ClusterStage, CellInfoIsWhatTheRepresentativeReadsInAnyNumberOfRanges) {
       runs.push_back(bytes);
     }
     EXPECT_EQ(runs[0], runs[1]) << "kind " << static_cast<int>(kind);
+  }
+}
+
+TEST(PositionGather, ReadByIdGivesTheMappedValuesForSparseAndDenseBatches) {
+  // Segments of 1 KiB (85 float or 42 double positions): a batch of 40 ids over 100,000 vertices reads
+  // them one by one, a batch of 300,000 (repeats included) reads every segment's span once.
+  test::TempDir tmp;
+  constexpr uint32_t n = 100'000;
+  std::mt19937_64 rng(3);
+  std::vector<float> f(3 * size_t{n});
+  std::vector<double> d(3 * size_t{n});
+  for (size_t i = 0; i < f.size(); ++i) f[i] = static_cast<float>(static_cast<int64_t>(rng() % 2000001) - 1000000) / 7.0f, d[i] = f[i] / 3.0;
+  for (bool single : {true, false}) {
+    const std::string path = tmp.file(single ? "p.f32" : "p.f64");
+    io::FileWriter out(path);
+    if (single) out.write(f.data(), f.size() * 4);
+    else out.write(d.data(), d.size() * 8);
+    out.commit();
+    const stream::PositionGather mapped(path, single, n, true), read(path, single, n, false, 1024);
+    EXPECT_TRUE(mapped.mapped());
+    EXPECT_FALSE(read.mapped());
+    for (size_t count : {size_t{1}, size_t{40}, size_t{300'000}}) {
+      std::vector<uint32_t> ids(count);
+      for (uint32_t& v : ids) v = static_cast<uint32_t>(rng() % n);
+      ids[0] = n - 1;
+      std::vector<double> a(3 * count, -1), b(3 * count, -2);
+      stream::PositionGather::Scratch sa, sb;
+      mapped.gather(ids, a.data(), sa);
+      read.gather(ids, b.data(), sb);
+      for (size_t i = 0; i < count; ++i)
+        for (int k = 0; k < 3; ++k) {
+          const double want = single ? double(f[3 * size_t{ids[i]} + k]) : d[3 * size_t{ids[i]} + k];
+          ASSERT_EQ(a[3 * i + k], want) << count << " " << i;
+          ASSERT_EQ(b[3 * i + k], want) << count << " " << i;
+        }
+    }
+    std::vector<double> xyz(3);
+    stream::PositionGather::Scratch s;
+    const uint32_t past = n;
+    EXPECT_THROW(read.gather(std::span<const uint32_t>(&past, 1), xyz.data(), s), Failure);
+  }
+  EXPECT_THROW(stream::PositionGather(tmp.file("p.f32"), true, n + 1, false), Failure);
+}
+
+TEST(ClusterStage, PositionsReadByIdGiveTheMappedBytes) {
+  // 150,000 float positions (1.8 MB): mapped under a 1 GiB budget; read by id through the page cache when
+  // --chunk-bytes is below the column (batches of one block of 16,384 records here), or when the budget is
+  // less than twice the column.
+  EXPECT_TRUE(stream::map_positions_whole(1'800'000, uint64_t{1} << 30, 0));
+  EXPECT_FALSE(stream::map_positions_whole(1'800'000, uint64_t{1} << 30, 64 << 10));
+  EXPECT_FALSE(stream::map_positions_whole(1'800'000, 3'000'000, 0));
+  test::TempDir tmp;
+  constexpr uint32_t n = 150'000;
+  const TestIndex t = make_index(n, tmp.path().string());
+  const std::vector<double> sizes = {0.5, 3, 9};
+  const std::vector<double> bounds = {-1, -1, -1, 101, 101, 41};
+  Options options;
+  stream::Progress progress(options);
+  for (stream::CellInfoKind kind : {stream::CellInfoKind::center, stream::CellInfoKind::mean, stream::CellInfoKind::quadric}) {
+    std::string runs[2];
+    for (int r = 0; r < 2; ++r) {
+      stream::WorkDir work(tmp.file("work" + std::to_string(r) + "-" + std::to_string(static_cast<int>(kind))));
+      const std::string prefix = work.file("");
+      tbb::task_arena(2).execute([&] {
+        stream::cluster_levels(t.files, bounds, sizes, {}, kind, uint64_t{1} << 30, work, progress, prefix, nullptr,
+                               r == 0 ? 0 : 64 << 10);
+      });
+      for (size_t l = 0; l < sizes.size(); ++l)
+        runs[r] += io::read_small_file(stream::cells_path(prefix, l)) + io::read_small_file(stream::cell_info_path(prefix, l));
+    }
+    EXPECT_FALSE(runs[0].empty());
+    EXPECT_TRUE(runs[0] == runs[1]) << "kind " << static_cast<int>(kind);
   }
 }
 

@@ -454,6 +454,13 @@ TEST_F(SimplifyRoom, SameBytesAtTheMinimumMemoryBudget) {
 
 TEST_F(SimplifyRoom, SameBytesWithOneByteChunks) { expect_same_as_base("chunk1", make_options(2, 4ull << 30, 1)); }
 
+// The cluster stage maps the store's positions whole only where the column takes at most half the budget
+// and --chunk-bytes is not below its size (stream/position_gather.h): the room's column (about 1.6 MB) under
+// 64 KiB chunks is read through the page cache, by id, in batches of 16,384 records.
+TEST_F(SimplifyRoom, SameBytesWithPositionsReadByIdInsteadOfMapped) {
+  expect_same_as_base("read64k", make_options(2, 4ull << 30, 64 << 10));
+}
+
 TEST_F(SimplifyRoom, SameBytesWithSevenVertexGradingRanges) {
   SimplifyReport report;
   expect_same_as_base("range7", make_options(1, 4ull << 30), 7, &report);

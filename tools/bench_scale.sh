@@ -4,21 +4,24 @@
 # --memory cap, optionally followed by `lodstream report` of the levels. Per run it records what an
 # operator sees from outside: wall time and peak resident memory as /usr/bin/time -v reports them (the
 # process never resets its high-water mark), the work directory's size (its largest, sampled every 5 s,
-# and at the end), the input's size, and the time per input triangle, with its ratio to the first scene's.
+# and at the end), the input's size, and the time per input triangle, with its ratio to the first scene's;
+# the stages' wall times and peaks from manifest.json, and the load average at the start and the end.
 #
 # usage: tools/bench_scale.sh [--scenes 9:1G,18:1G,41:4G] [--report 18:2G] [--build build]
-#                             [--dir /work/scenes] [--delete] [--work DIR]
-#   --scenes N:CAP,...  make-scene.sh size N (9: 48.6 M, 18: 193 M, 41: 998 M triangles) and the cap
+#                             [--dir /work/scenes] [--delete] [--keep] [--work DIR]
+#   --scenes N:CAP,...  make-scene.sh size N (9: 48.6 M, 18: 193 M, 41: 998 M triangles) and the cap (a
+#                       scene may come twice with two caps)
 #   --report N:CAP,...  also run `lodstream report` of scene N's levels under CAP (default: none)
 #   --dir DIR           where scenes are built (city-N.ply; reused when present)
 #   --delete            delete each scene after its runs (the N = 41 scene is 21 GB)
+#   --keep              keep each run's work directory (e.g. for tools/bench_cluster.sh)
 #   --work DIR          outputs, work directories and logs (default: a new directory under ${TMPDIR:-/tmp})
 # Prints one line per run and a Markdown table; writes runs.jsonl into the work directory. Exit 1 when a
 # run failed or went past its cap.
-usage() { sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; }
 set -euo pipefail
 
-scenes="9:1G,18:1G,41:4G" reports="" build="build" dir="/work/scenes" delete=0 work=""
+scenes="9:1G,18:1G,41:4G" reports="" build="build" dir="/work/scenes" delete=0 keep=0 work=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --scenes) scenes="$2"; shift 2 ;;
@@ -26,6 +29,7 @@ while [ $# -gt 0 ]; do
     --build) build="$2"; shift 2 ;;
     --dir) dir="$2"; shift 2 ;;
     --delete) delete=1; shift ;;
+    --keep) keep=1; shift ;;
     --work) work="$2"; shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "bench_scale: unknown option $1" >&2; usage >&2; exit 64 ;;
@@ -68,6 +72,7 @@ def du(path):
             except OSError: pass
     return total
 t0 = time.time()
+load0 = open('/proc/loadavg').read().split()[0]
 with open(log, 'w') as f:
     p = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT)
     biggest = 0
@@ -83,7 +88,8 @@ rss = int(re.search(r'Maximum resident set size \(kbytes\): (\d+)', tv).group(1)
 el = re.search(r'Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): ([\d:.]+)', tv).group(1).split(':')
 wall_time = sum(float(x) * 60 ** i for i, x in enumerate(reversed(el)))
 rec = {'label': label, 'cap': cap, 'exit': p.returncode, 'wall_s': round(wall_time, 1), 'peak_rss': rss,
-       'work_bytes_max': biggest, 'work_bytes_end': end, 'input_bytes': os.path.getsize(scene)}
+       'work_bytes_max': biggest, 'work_bytes_end': end, 'input_bytes': os.path.getsize(scene),
+       'load': [float(load0), float(open('/proc/loadavg').read().split()[0])]}
 out = [a for a in sys.argv[8:]]
 if '-o' in out:
     o = out[out.index('-o') + 1]
@@ -116,30 +122,32 @@ for s in "${list[@]}"; do
     "$make_scene" "$n" 1 "$scene" >/dev/null
   fi
   cat "$scene" > /dev/null  # page cache, as for every peer in bench_simplify.sh (when it fits)
-  wdir="$work/work-$n" out="$work/out-$n"
+  wdir="$work/work-$n-$cap" out="$work/out-$n-$cap"
   rm -rf "$wdir" "$out"
-  run "simplify-$n" "$cap" "$wdir" "$scene" -- "$bin" simplify "$scene" -o "$out" --memory "$cap" \
+  run "simplify-$n-$cap" "$cap" "$wdir" "$scene" -- "$bin" simplify "$scene" -o "$out" --memory "$cap" \
       --work "$wdir" --progress none || status=1
   if [ -n "${report_cap[$n]:-}" ] && [ -f "$out/manifest.json" ]; then
-    run "report-$n" "${report_cap[$n]}" "$wdir" "$scene" -- "$bin" report "$out" -o "$out/report" \
+    run "report-$n-${report_cap[$n]}" "${report_cap[$n]}" "$wdir" "$scene" -- "$bin" report "$out" -o "$out/report" \
         --memory "${report_cap[$n]}" --work "$wdir" --progress none || status=1
+    unset "report_cap[$n]"
   fi
-  rm -rf "$wdir"
-  [ "$delete" = 1 ] && rm -f "$scene"
+  [ "$keep" = 1 ] || rm -rf "$wdir"
+  if [ "$delete" = 1 ]; then rm -f "$scene"; fi
 done
 
 python3 - "$work/runs.jsonl" <<'EOF'
 import json, sys
 runs = [json.loads(l) for l in open(sys.argv[1])]
 base = next((r for r in runs if r['label'].startswith('simplify') and r.get('triangles') and r['exit'] == 0), None)
-print('\n| run | cap | exit | wall | peak (time -v) | work dir max / input | ns per input triangle | vs first |')
-print('|---|---|---|---|---|---|---|---|')
+print('\n| run | cap | exit | wall | peak (time -v) | work dir max / input | ns per input triangle | vs first | load (start, end) | stages: wall s / peak MiB |')
+print('|---|---|---|---|---|---|---|---|---|---|')
 for r in runs:
     tri = r.get('triangles')
     ns = r['wall_s'] / tri * 1e9 if tri else None
     ratio = ns / (base['wall_s'] / base['triangles'] * 1e9) if ns and base else None
     print(f"| {r['label']} | {r['cap'] / 2**30:.2f} GiB | {r['exit']} | {r['wall_s']} s | {r['peak_rss'] / 2**30:.2f} GiB | "
           f"{r['work_bytes_max'] / 2**30:.2f} / {r['input_bytes'] / 2**30:.2f} GiB = {r['work_bytes_max'] / r['input_bytes']:.2f}x | "
-          f"{f'{ns:.0f}' if ns else '-'} | {f'{ratio:.2f}x' if ratio else '-'} |")
+          f"{f'{ns:.0f}' if ns else '-'} | {f'{ratio:.2f}x' if ratio else '-'} | {r['load'][0]:.1f}, {r['load'][1]:.1f} | "
+          + ', '.join(f"{k} {v[0]} / {v[1] >> 20}" for k, v in r.get('stages', {}).items()) + ' |')
 EOF
 exit $status

@@ -22,7 +22,9 @@ done
 rm -rf "$work" "$out" "$out.samples"
 mkdir -p "$work"
 input_bytes=$(stat -c %s "$input")
-entries() { (cd "$1" && du -s --block-size=1 -- * 2>/dev/null | sort -k2) | awk '{printf "%s=%.0f ", $2, $1}'; }
+# (An empty directory, as at the run's start, gives nothing: du of a bare `*` fails, which under pipefail
+# would end the script.)
+entries() { { (cd "$1" && du -s --block-size=1 -- * 2>/dev/null | sort -k2) || true; } | awk '{printf "%s=%.0f ", $2, $1}'; }
 echo "load at start: $(cut -d' ' -f1-3 /proc/loadavg)"
 start=$(date +%s.%N)
 "$bin" simplify "$input" -o "$out" --work "$work" "$@" > "$out.log" 2>&1 &

@@ -1,0 +1,73 @@
+// Positions of vertex ids that come in an order spread over the whole column (the weight index's order):
+// the cluster and labels stages read them by id. Two ways, the same values either way:
+// - mapped: the column mapped whole. Fastest, but every page it touches counts in the process's resident
+//   set (the memory contract counts mapped file pages), and in weight order it touches them all: 12 bytes
+//   a stored vertex for a float store, 1.64 GB on a 193 M-triangle scene.
+// - read: the ids of a batch go through the column's segments in file order, each segment with one pread
+//   of the span its ids need where they are dense, one pread per id where they are sparse (a read costs
+//   about as much as copying a few KiB, kGatherGapBytes). The bytes come through the OS page cache, which
+//   is not the process's: the process holds the batch's arrays and a segment buffer per thread, whatever
+//   the column's size. Remapping the column to drop its pages does not bound it instead: a fault maps pages
+//   around the one it needs (fault-around), so a block of random ids maps far more than its bytes.
+// A batch of b ids costs about min(b, segments) reads and min(b · kGatherGapBytes, column) bytes copied:
+// larger batches read the column fewer times.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "io/mapped_file.h"
+#include "stream/scene_store.h"
+
+namespace lodstream::stream {
+
+inline constexpr uint64_t kGatherSegmentBytes = 256 << 10;  // the read buffer: one segment of the column
+inline constexpr uint64_t kGatherGapBytes = 4096;           // a segment's ids closer than this on average: one read
+// What a batch of ids costs the read way beside its positions: a 4-byte slot per id, plus the buffer and the
+// per-segment counts (fixed).
+inline constexpr uint64_t kGatherBytesPerId = 4;
+
+// Whether a stage maps the column of `column_bytes` whole: where it takes at most half of the stage's
+// `memory_bytes` and no `chunk_cap` (--chunk-bytes, 0: none) below its size asks for small reads (which
+// tests use to force the read way on small scenes). Nothing else decides it, and neither way changes a byte.
+bool map_positions_whole(uint64_t column_bytes, uint64_t memory_bytes, uint64_t chunk_cap);
+
+class PositionGather {
+ public:
+  // The store's column of `vertices` positions at `path` (float if single_precision, else double).
+  // Throws Failure(io_error) when its size does not match.
+  PositionGather(const std::string& path, bool single_precision, uint64_t vertices, bool mapped,
+                 uint64_t segment_bytes = kGatherSegmentBytes);
+  ~PositionGather();
+  PositionGather(const PositionGather&) = delete;
+  PositionGather& operator=(const PositionGather&) = delete;
+
+  // One per thread that gathers.
+  struct Scratch {
+    std::vector<uint32_t> slot;    // ids' indices, grouped by segment
+    std::vector<uint32_t> start;   // per segment, its first entry in slot (then its end)
+    std::vector<uint32_t> lo, hi;  // per segment, its lowest and highest id in the batch
+  };
+  // xyz[3i .. 3i + 2] = the position of ids[i], widened to double (exact for a float store). Thread-safe
+  // with one Scratch per thread. The read way runs its segments as TBB tasks (a segment's buffer each). Throws Failure(io_error) on a read error, Failure(internal) for an id
+  // past the column.
+  void gather(std::span<const uint32_t> ids, double* xyz, Scratch& scratch) const;
+
+  bool mapped() const { return mapped_; }
+  uint64_t column_bytes() const { return vertices_ * stride_; }
+
+ private:
+  void gather_read(std::span<const uint32_t> ids, double* xyz, Scratch& s) const;
+  void read_exact(char* out, uint64_t bytes, uint64_t offset) const;
+  void put(const char* p, double* out) const;
+
+  io::MappedFile file_;
+  bool single_, mapped_;
+  uint64_t vertices_, stride_, segment_vertices_;
+  io::Window window_;  // mapped: the whole column
+  int fd_ = -1;        // read: the column, opened for pread
+};
+
+}  // namespace lodstream::stream
