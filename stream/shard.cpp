@@ -16,6 +16,7 @@
 #include "core/status.h"
 #include "io/file_writer.h"
 #include "stream/kill_point.h"
+#include "stream/tiles.h"
 
 namespace lodstream::stream {
 
@@ -240,8 +241,9 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     if (std::sscanf(e.path().filename().c_str(), "task-%u", &i) == 1 && i >= count) std::filesystem::remove(e.path(), ec);
   }
   const core::SceneCube cube = scene_cube_of(meta);
+  const std::vector<core::SideBound> sides = in.tiles ? tile_side_bounds(in.sizes, in.cells, cube.side) : std::vector<core::SideBound>();
   const std::vector<LevelCut> cuts =
-      cut_levels(in.prefix, in.cells, cube, in.tile_triangles / 2, in.options.representative, meta.single_precision);
+      cut_levels(in.prefix, in.cells, cube, in.tile_triangles / 2, in.options.representative, meta.single_precision, sides);
   std::vector<std::pair<uint32_t, uint32_t>> runs(n);
   std::vector<uint64_t> share(n, 0), largest(n, 0);
   for (size_t l = 0; l < n; ++l) {

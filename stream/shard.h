@@ -119,6 +119,7 @@ struct ShardEmitInput {
   uint64_t tile_triangles = 0;
   std::vector<double> sizes;
   std::vector<uint64_t> cells;
+  bool tiles = false;  // the run writes 3D Tiles: regions are cut with the tiles' side bounds, as one machine cuts them
 };
 
 // Writes every level's representatives to the work directory (the batched emit reads them), unless a

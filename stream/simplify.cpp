@@ -806,7 +806,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       stream::ShardEmitInput shard_input;
       if (sharded) {
         shard_input = {store_dir, canonical, prefix, &meta, grade.records, copts,
-                       {so.representative, so.crease_degrees, true, false}, plan.stage_bytes, so.tile_triangles, sizes, cells};
+                       {so.representative, so.crease_degrees, true, false}, plan.stage_bytes, so.tile_triangles, sizes, cells, so.write_tiles};
         run_stage(&report.stages, "representatives", [&](StageStats& st) {
           ordered_json key = cluster_base;
           key["cells"] = cells;

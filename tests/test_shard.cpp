@@ -58,7 +58,7 @@ std::string sample_room() { return test::source_dir() + "/tests/data/sample-room
 
 // Runs tasks `tasks` of `count` (then merge when `merge`) on `work`.
 Result run_tasks(const std::string& out, const std::string& work, unsigned count, const std::vector<unsigned>& tasks,
-                 uint64_t memory, bool merge_after, SimplifyReport* merged) {
+                 uint64_t memory, bool merge_after, SimplifyReport* merged, const std::string& input = sample_room()) {
   for (unsigned i : tasks) {
     SimplifyOptions so = room_options(out);
     so.shard_index = i, so.shard_count = count;
@@ -67,7 +67,7 @@ Result run_tasks(const std::string& out, const std::string& work, unsigned count
     o.memory_bytes = memory;
     o.check_disk_space = false;
     SimplifyReport r;
-    const Result res = simplify(sample_room(), so, o, &r);
+    const Result res = simplify(input, so, o, &r);
     if (!res.ok()) return res;
   }
   if (!merge_after) return {};
@@ -111,6 +111,25 @@ TEST(Shard, TasksInBatchesUnderASmallBudgetGiveTheSameBytes) {
   const Result r = run_tasks(dir.file("small"), dir.file("work"), 2, {0, 1}, min_memory_bytes, true, &merged);
   ASSERT_TRUE(r.ok()) << r.message;
   EXPECT_EQ(outputs(dir.file("small")), outputs(dir.file("one")));
+}
+
+// Materials and colours travel through the tasks' parts and the merge: the KiCad board (a glTF scene of
+// instanced components, one material each) as 3 tasks gives one machine's bytes, tiles included.
+TEST(Shard, MaterialsGiveOneMachinesBytes) {
+  TempDir dir;
+  const std::string board = test::source_dir() + "/tests/data/gltf/kicad-board.glb";
+  Options o;
+  o.work_dir = dir.file("work");
+  o.check_disk_space = false;
+  SimplifyOptions so = room_options(dir.file("one"));
+  SimplifyReport one;
+  ASSERT_TRUE(simplify(board, so, o, &one).ok());
+  const auto want = outputs(dir.file("one"));
+  ASSERT_NE(slurp(dir.file("one") + "/lod0.ply").find("property uint material_index"), std::string::npos) << "the board has materials";
+  SimplifyReport merged;
+  const Result r = run_tasks(dir.file("sharded"), dir.file("work"), 3, {0, 1, 2}, 0, true, &merged, board);
+  ASSERT_TRUE(r.ok()) << r.message;
+  EXPECT_EQ(outputs(dir.file("sharded")), want);
 }
 
 TEST(Shard, MergeNamesTheMissingTasks) {
