@@ -281,6 +281,19 @@ void PlyReader::finalize_header(ply::Header&& header) {
         if (e.props[i].name == name) return static_cast<int>(i);
       return -1;
     };
+    // Scalar red, green, blue (and alpha) of a vertex or face: true, with their roles set, when all three are.
+    auto find_colors = [&]() -> bool {
+      const char* names[4] = {"red", "green", "blue", "alpha"};
+      const Role roles[4] = {Role::red, Role::green, Role::blue, Role::alpha};
+      for (int c = 0; c < 4; ++c) {
+        const int i = find(names[c]);
+        if (i >= 0 && !e.props[i].list) e.pc[c] = i;
+      }
+      const bool rgb = e.pc[0] >= 0 && e.pc[1] >= 0 && e.pc[2] >= 0;
+      for (int c = 0; c < 4 && rgb; ++c)
+        if (e.pc[c] >= 0) e.props[e.pc[c]].role = roles[c];
+      return rgb;
+    };
     if (e.count > 0 && e.props.empty())
       header_error(e.header_line, "element " + quoted(e.name) + " has records but no properties");
     if (e.name == "vertex") {
@@ -298,15 +311,7 @@ void PlyReader::finalize_header(ply::Header&& header) {
         e.props[i].role = roles[c];
         *slots[c] = i;
       }
-      const char* color_names[4] = {"red", "green", "blue", "alpha"};
-      const Role color_roles[4] = {Role::red, Role::green, Role::blue, Role::alpha};
-      for (int c = 0; c < 4; ++c) {
-        const int i = find(color_names[c]);
-        if (i >= 0 && !e.props[i].list) e.pc[c] = i;
-      }
-      colors_ = e.pc[0] >= 0 && e.pc[1] >= 0 && e.pc[2] >= 0;
-      for (int c = 0; c < 4 && colors_; ++c)
-        if (e.pc[c] >= 0) e.props[e.pc[c]].role = color_roles[c];
+      colors_ = find_colors();
       single_ = true;
       for (int c = 0; c < 3; ++c) {
         const Type t = e.props[*slots[c]].type;
@@ -322,15 +327,7 @@ void PlyReader::finalize_header(ply::Header&& header) {
       if (!is_integer(pr.type))
         header_error(e.header_line, "face indices must have an integer type, not " + std::string(type_name(pr.type)));
       pr.role = Role::indices;
-      const char* color_names[4] = {"red", "green", "blue", "alpha"};
-      const Role color_roles[4] = {Role::red, Role::green, Role::blue, Role::alpha};
-      for (int c = 0; c < 4; ++c) {
-        const int at = find(color_names[c]);
-        if (at >= 0 && !e.props[at].list) e.pc[c] = at;
-      }
-      face_colors_ = e.pc[0] >= 0 && e.pc[1] >= 0 && e.pc[2] >= 0;
-      for (int c = 0; c < 4 && face_colors_; ++c)
-        if (e.pc[c] >= 0) e.props[e.pc[c]].role = color_roles[c];
+      face_colors_ = find_colors();
       if (face_colors_ && materials_.empty()) {
         // Material 0: edge elements and anything without a face colour (see resolve()).
         core::Material white;

@@ -54,6 +54,14 @@ SimplifyOptions room_options(const std::string& out) {
   return so;
 }
 
+// One machine's run on the work directory the tasks will share.
+Options shared_work(const TempDir& dir) {
+  Options o;
+  o.work_dir = dir.file("work");
+  o.check_disk_space = false;
+  return o;
+}
+
 std::string sample_room() { return test::source_dir() + "/tests/data/sample-room.ply"; }
 
 // Runs tasks `tasks` of `count` (then merge when `merge`) on `work`.
@@ -76,9 +84,7 @@ Result run_tasks(const std::string& out, const std::string& work, unsigned count
 
 TEST(Shard, AnyTaskCountGivesOneMachinesBytes) {
   TempDir dir;
-  Options o;
-  o.work_dir = dir.file("work");
-  o.check_disk_space = false;
+  const Options o = shared_work(dir);
   SimplifyReport one;
   ASSERT_TRUE(simplify(sample_room(), room_options(dir.file("one")), o, &one).ok());
   const auto want = outputs(dir.file("one"));
@@ -100,9 +106,7 @@ TEST(Shard, AnyTaskCountGivesOneMachinesBytes) {
 
 TEST(Shard, TasksInBatchesUnderASmallBudgetGiveTheSameBytes) {
   TempDir dir;
-  Options o;
-  o.work_dir = dir.file("work");
-  o.check_disk_space = false;
+  const Options o = shared_work(dir);
   SimplifyReport one;
   ASSERT_TRUE(simplify(sample_room(), room_options(dir.file("one")), o, &one).ok());
   // At the minimum budget a task's share of the finest level does not fit one batch (counted by the
@@ -118,9 +122,7 @@ TEST(Shard, TasksInBatchesUnderASmallBudgetGiveTheSameBytes) {
 TEST(Shard, MaterialsGiveOneMachinesBytes) {
   TempDir dir;
   const std::string board = test::source_dir() + "/tests/data/gltf/kicad-board.glb";
-  Options o;
-  o.work_dir = dir.file("work");
-  o.check_disk_space = false;
+  const Options o = shared_work(dir);
   SimplifyOptions so = room_options(dir.file("one"));
   SimplifyReport one;
   ASSERT_TRUE(simplify(board, so, o, &one).ok());
