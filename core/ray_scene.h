@@ -57,6 +57,8 @@ class RayScene {
   void add_segments(std::span<const float> xyz, std::span<const uint32_t> edges, std::span<const float> radius);
   // Discs at xyz[ids[i]], of the given radius (> 0).
   void add_points(std::span<const float> xyz, std::span<const uint32_t> ids, float radius);
+  // Discs at xyz[ids[i]], of radius radius[i] (> 0).
+  void add_points(std::span<const float> xyz, std::span<const uint32_t> ids, std::span<const float> radius);
   // Builds the BVH. Throws Failure(usage) when the memory limit is exceeded, Failure(internal) on any
   // other Embree error.
   void commit();
@@ -83,6 +85,8 @@ class RayScene {
   bool empty() const;
 
  private:
+  template <class Radius>
+  void add_discs(std::span<const float> xyz, std::span<const uint32_t> ids, Radius&& radius);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -150,6 +150,10 @@ class BinWriter {
     out_.write(values.data(), values.size() * 4);
     end_block(values.size() * 4);
   }
+  void f32(const std::vector<float>& values) {
+    out_.write(values.data(), values.size() * 4);
+    end_block(values.size() * 4);
+  }
   // Each value twice (a thickness for both ends of its edge).
   void f32_twice(const std::vector<float>& values) {
     for (float t : values) {
@@ -275,6 +279,7 @@ void GlbBuilder::add(const GlbLevel& level) {
   if (!mesh.points.empty()) {
     Json p;
     p["attributes"]["POSITION"] = plan.add_positions(mesh, mesh.points);
+    if (!mesh.point_size.empty()) p["attributes"]["_SIZE"] = plan.add(mesh.points.size(), 1, kFloat, "SCALAR", kArrayBuffer);
     p["material"] = 0;
     p["mode"] = kPoints;
     primitives.push_back(std::move(p));
@@ -291,7 +296,10 @@ void GlbBuilder::add(const GlbLevel& level) {
     bin.vec3(mesh.positions, mesh.edges);
     bin.f32_twice(mesh.thickness);
   }
-  if (!mesh.points.empty()) bin.vec3(mesh.positions, mesh.points);
+  if (!mesh.points.empty()) {
+    bin.vec3(mesh.positions, mesh.points);
+    if (!mesh.point_size.empty()) bin.f32(mesh.point_size);
+  }
   if (bin.blocks() != plan.view_bytes().size()) fail(Status::internal, s.path + ": GLB data does not match its plan");
 }
 
@@ -322,6 +330,7 @@ void GlbBuilder::add(const GlbStreamedLevel& level) {
   if (level.points > 0) {
     Json p;
     p["attributes"]["POSITION"] = plan.add_positions(level.points, level.point_min, level.point_max);
+    if (level.point_size) p["attributes"]["_SIZE"] = plan.add(level.points, 1, kFloat, "SCALAR", kArrayBuffer);
     p["material"] = 0;
     p["mode"] = kPoints;
     primitives.push_back(std::move(p));
@@ -338,7 +347,10 @@ void GlbBuilder::add(const GlbStreamedLevel& level) {
     bin.stream(24 * level.edges, level.edge_positions);
     bin.stream(8 * level.edges, level.edge_thickness);
   }
-  if (level.points > 0) bin.stream(12 * level.points, level.point_positions);
+  if (level.points > 0) {
+    bin.stream(12 * level.points, level.point_positions);
+    if (level.point_size) bin.stream(4 * level.points, level.point_size);
+  }
   if (bin.blocks() != plan.view_bytes().size()) fail(Status::internal, s.path + ": GLB data does not match its plan");
 }
 

@@ -14,7 +14,9 @@
 //   TRIANGLES (mode 4) with POSITION, NORMAL (when the mesh has normals) and uint32 indices;
 //   LINES (mode 1) with POSITION and _THICKNESS (SCALAR float), two vertices per edge, both carrying the
 //   edge's thickness (a vertex shared by edges of different thickness is thus repeated), no indices;
-//   POINTS (mode 0) with POSITION, one vertex per point, no indices. An empty kind is left out;
+//   POINTS (mode 0) with POSITION and, when the level has point sizes, _SIZE (SCALAR float: the diameter
+//   in scene units of what collapsed into the point, core/mesh.h; 0 = one pixel), one vertex per point, no
+//   indices. An empty kind is left out;
 // - one material, {doubleSided: true}, used by every primitive;
 // - one buffer (the BIN chunk); one bufferView per accessor, 4-byte aligned, with its target.
 // The bytes depend only on the arguments (no time stamps, fixed JSON key order).
@@ -65,6 +67,7 @@ struct GlbStreamedLevel {
   bool normals = true;
   float triangle_min[3], triangle_max[3], edge_min[3], edge_max[3], point_min[3], point_max[3];
   Block triangle_positions, triangle_normals, triangle_indices, edge_positions, edge_thickness, point_positions;
+  Block point_size;  // 4 bytes per point; none (empty function): no _SIZE attribute
 };
 
 class GlbBuilder {

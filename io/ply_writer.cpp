@@ -40,20 +40,31 @@ std::string comment_line(const std::string& text) {
   return line;
 }
 
+// point: vertex (uint) size (float, 0 when the mesh has no sizes): 8 bytes
+void write_ply_points(FileWriter& out, const core::LodMesh& mesh) {
+  for (uint64_t p = 0; p < mesh.point_count(); ++p) {
+    char record[8];
+    const float size = mesh.point_size.empty() ? 0.0f : mesh.point_size[p];
+    std::memcpy(record, &mesh.points[p], 4);
+    std::memcpy(record + 4, &size, 4);
+    out.write(record, sizeof record);
+  }
+}
+
 }  // namespace
 
 std::string ply_level_header(const std::vector<std::string>& comments, uint64_t vertices, bool normals, uint64_t triangles,
                              uint64_t edges, uint64_t points) {
   std::string header = "ply\nformat binary_little_endian 1.0\n";
   for (const std::string& c : comments) header += comment_line(c);
-  header += "comment element point: one vertex index per point primitive\n";
+  header += "comment element point: one vertex index per point primitive, and its size (diameter, 0 = one pixel)\n";
   header += ply_vertex_header(vertices, normals);
   header += "element face " + std::to_string(triangles) + "\n";
   header += "property list uchar uint vertex_indices\n";
   header += "element edge " + std::to_string(edges) + "\n";
   header += "property uint vertex1\nproperty uint vertex2\nproperty float thickness\n";
   header += "element point " + std::to_string(points) + "\n";
-  header += "property uint vertex\n";
+  header += "property uint vertex\nproperty float size\n";
   header += "end_header\n";
   return header;
 }
@@ -85,8 +96,7 @@ void write_ply(const std::string& path, const core::LodMesh& mesh, const std::ve
     std::memcpy(record + 8, &mesh.thickness[e], 4);
     out.write(record, sizeof record);
   }
-  // point: vertex (uint): 4 bytes
-  out.write(mesh.points.data(), mesh.points.size() * sizeof(uint32_t));
+  write_ply_points(out, mesh);
   out.commit();
 }
 

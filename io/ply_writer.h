@@ -6,9 +6,10 @@
 //   element vertex N   property float x, y, z (and float nx, ny, nz when the mesh has normals)
 //   element face F     property list uchar uint vertex_indices          (triangles, 3 indices each)
 //   element edge E     property uint vertex1, uint vertex2, float thickness
-//   element point P    property uint vertex
+//   element point P    property uint vertex, float size
 // PLY has no standard element for points: `point` is this project's own element, one vertex index per point
-// primitive (readers that do not know it skip it; the file also says so in a comment line).
+// primitive and its size, the diameter in scene units of what collapsed into it (core/mesh.h; 0: drawn one
+// pixel wide) (readers that do not know it skip it; the file also says so in a comment line).
 #pragma once
 
 #include <cstdint>
@@ -32,7 +33,7 @@ void write_ply_vertices(FileWriter& out, std::span<const float> positions, std::
 // Throws Failure(io_error) when the file cannot be written, Failure(internal) when the mesh breaks the
 // conventions of core/mesh.h (array sizes, indices out of range).
 // The header write_ply writes (vertex records 24 bytes with normals, else 12; faces 13 bytes: uchar 3 and
-// three uint ids; edges 12: two uint ids and a float thickness; points 4), for a level written record by
+// three uint ids; edges 12: two uint ids and a float thickness; points 8: a uint id and a float size), for a level written record by
 // record elsewhere (stream/level_files.cpp).
 std::string ply_level_header(const std::vector<std::string>& comments, uint64_t vertices, bool normals, uint64_t triangles,
                              uint64_t edges, uint64_t points);

@@ -145,8 +145,8 @@ struct LevelState {
   std::vector<uint32_t> points;
   std::vector<core::Quadric> quadrics;
   std::vector<uint8_t> used;  // per cell: kByTriangle | kByKeptEdge
-  // One bit per input triangle and segment that collapsed to an edge, so that passes B and C visit only
-  // those.
+  // One bit per input triangle and segment that collapsed to an edge or a point, so that passes B and C
+  // visit only those.
   std::vector<uint64_t> collapsed[2];
   // Elimination, passes B and C.
   std::vector<std::array<uint32_t, 2>> kept_edges;  // in edge order; k_edges finds them by cells
@@ -163,6 +163,28 @@ constexpr uint8_t kOwned = 1, kHalo = 2;
 constexpr uint8_t kByTriangle = 1, kByKeptEdge = 2;
 
 bool owned(const LevelState& L, uint32_t c) { return !L.in.batched || L.role[c] == kOwned; }
+
+// A point's size (core/mesh.h) is measured as an edge's thickness is: kept point p joins passes B and C as
+// the edge {c, c} with id E + p, after the E kept edges. Every corner of a primitive that collapsed to it
+// falls in its cell, hence in A; pass C measures their distances to P_A (P_B is set to P_A), and the size is
+// 2·D_A, the diameter of what the point replaces. A cell reached only by input points has no corners
+// (size 0: drawn one pixel wide). A kept point's cell is used by no kept edge or triangle, so every
+// primitive with a corner in it collapsed to it, and a batch owning the cell visits them all.
+void index_kept_points(LevelState& L) {
+  const uint32_t first = static_cast<uint32_t>(L.kept_edges.size());
+  for (size_t p = 0; p < L.kept_points.size(); ++p)
+    L.k_edges.insert({L.kept_points[p], L.kept_points[p]}, first + static_cast<uint32_t>(p));
+}
+
+std::vector<float> kept_point_sizes(const LevelState& L) {
+  const size_t first = L.kept_edges.size();
+  std::vector<float> size(L.kept_points.size());
+  for (size_t p = 0; p < size.size(); ++p) {
+    const EdgeSums& s = L.kept_sums[first + p];
+    size[p] = s.na ? static_cast<float>(2 * L.distances[first + p].a / static_cast<double>(s.na)) : 0.0f;
+  }
+  return size;
+}
 bool visited(const LevelState& L, const uint32_t* c, size_t arity) {
   if (!L.in.batched) return true;
   for (size_t k = 0; k < arity; ++k)
@@ -325,7 +347,7 @@ Buckets bucket(size_t n, uint32_t regions, Region&& region) {
 // is owned with its lowest cell, an edge with its lower one; only the batch's own edges and
 // points were kept.
 template <class Sink>
-void build_parts(LevelState& L, const std::vector<float>& thickness, const std::string& prefix,
+void build_parts(LevelState& L, const std::vector<float>& thickness, const std::vector<float>& point_size, const std::string& prefix,
                  const core::ClusterOptions& cluster, const EmitOptions& options, bool single_precision, Sink&& sink) {
   CellSlots s;
   number_cells(L, s);
@@ -372,7 +394,10 @@ void build_parts(LevelState& L, const std::vector<float>& thickness, const std::
       for (uint32_t c : L.kept_edges[e]) mesh.edges.push_back(add(v.end_vertex[s.slot_of[c]]));
       mesh.thickness.push_back(thickness[e]);
     }
-    for (uint32_t p : points.of(r)) mesh.points.push_back(add(v.end_vertex[s.slot_of[L.kept_points[p]]]));
+    for (uint32_t p : points.of(r)) {
+      mesh.points.push_back(add(v.end_vertex[s.slot_of[L.kept_points[p]]]));
+      mesh.point_size.push_back(point_size[p]);
+    }
     for (uint32_t i : own.of(r)) {
       part.owned_key.push_back(key(i));
       position(i, part.owned_positions);
@@ -655,6 +680,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
             if (s.triangles.insert(key, 0).second) o.triangles.push_back({c[0], c[1], c[2]});
           } else if (c[0] == c[1] && c[1] == c[2]) {
             point(o, s, c[0]);
+            mark(L, i / 3);
           } else {
             edge(o, s, c[0], c[0] != c[1] ? c[1] : c[2]);
             mark(L, i / 3);
@@ -668,6 +694,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
           if (!visited(levels[l], c, 2)) continue;
           if (c0 == c1) {
             point(outs_l[l], scratch_l[l], c0);
+            mark(levels[l], i / 2);
           } else {
             edge(outs_l[l], scratch_l[l], c0, c1);
             mark(levels[l], i / 2);
@@ -760,13 +787,15 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       L.kept_points.push_back(c);
     }
     std::vector<uint32_t>().swap(L.points);
-    L.kept_sums.resize(L.kept_edges.size());
-    L.distances.resize(L.kept_edges.size());
-    any_kept_edges = any_kept_edges || !L.kept_edges.empty();
+    index_kept_points(L);
+    L.kept_sums.resize(L.kept_edges.size() + L.kept_points.size());
+    L.distances.resize(L.kept_sums.size());
+    any_kept_edges = any_kept_edges || !L.kept_sums.empty();
   }
 
-  // Passes B and C visit the input triangles and segments that collapsed to a kept edge in some level of
-  // the group (an eliminated edge's thickness would go unused), fetching their corners once. For each level
+  // Passes B and C visit the input triangles and segments that collapsed to a kept edge (or a kept point:
+  // index_kept_points) in some level of the group (an eliminated edge's thickness would go unused),
+  // fetching their corners once. For each level
   // where one did, `visit(level, corner positions, their cells, arity, lower cell, kept edge, slot, o)` gets
   // the edge's slot in the block's output (o.kept_edges with o.sums or o.distances, in order of first
   // appearance), so that sums are formed per block in primitive order and merged in block order.
@@ -835,12 +864,13 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
 
   // Pass C: mean distances of the collapsed corners to the line through the mean positions.
   for (LevelState& L : levels) {
-    L.pa.resize(L.kept_edges.size()), L.pb.resize(L.kept_edges.size());
-    for (size_t i = 0; i < L.kept_edges.size(); ++i)
+    L.pa.resize(L.kept_sums.size()), L.pb.resize(L.kept_sums.size());
+    for (size_t i = 0; i < L.kept_sums.size(); ++i)
       for (int k = 0; k < 3; ++k) {
         L.pa[i][k] = L.kept_sums[i].na ? L.kept_sums[i].a[k] / static_cast<double>(L.kept_sums[i].na) : 0;
         L.pb[i][k] = L.kept_sums[i].nb ? L.kept_sums[i].b[k] / static_cast<double>(L.kept_sums[i].nb) : 0;
       }
+    for (size_t i = L.kept_edges.size(); i < L.kept_sums.size(); ++i) L.pb[i] = L.pa[i];  // a point: distances to P_A
   }
   if (any_kept_edges) {
     run_blocks("emit", true,
@@ -876,11 +906,13 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       const double db = L.kept_sums[i].nb ? L.distances[i].b / static_cast<double>(L.kept_sums[i].nb) : 0;
       thickness[i] = static_cast<float>(da + db);
     }
+    const std::vector<float> point_size = kept_point_sizes(L);
     std::vector<EdgeSums>().swap(L.kept_sums);
     std::vector<Distances>().swap(L.distances);
     std::vector<std::array<double, 3>>().swap(L.pa);
     std::vector<std::array<double, 3>>().swap(L.pb);
-    build_parts(L, thickness, prefix, cluster, options, meta.single_precision, [&](RegionPart& part) { sink(l, part); });
+    build_parts(L, thickness, point_size, prefix, cluster, options, meta.single_precision,
+                [&](RegionPart& part) { sink(l, part); });
     counts[l] = L.counts;
   }
   return counts;

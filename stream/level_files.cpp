@@ -19,7 +19,7 @@ namespace {
 constexpr size_t kVertexBytes = 24;    // position, normal
 constexpr size_t kTriangleBytes = 24;  // 3 vertex keys
 constexpr size_t kEdgeBytes = 44;      // 2 vertex keys, thickness, 2 positions
-constexpr size_t kPointBytes = 20;     // vertex key, position
+constexpr size_t kPointBytes = 24;     // vertex key, position, size
 constexpr uint64_t kChunkRecords = 1 << 16;
 
 // Calls visit(records, n) over the `count` records of `bytes` bytes of `path`, in windows.
@@ -91,9 +91,12 @@ void LevelFiles::add(const RegionPart& part) {
       grow(bounds_[1], p);
     }
   }
-  for (uint32_t v : m.points) {
+  for (uint64_t p = 0; p < m.point_count(); ++p) {
+    const uint32_t v = m.points[p];
+    const float size = m.point_size.empty() ? 0.0f : m.point_size[p];
     point_out_.write(&part.vertex_key[v], 8);
     point_out_.write(&m.positions[3 * uint64_t{v}], 12);
+    point_out_.write(&size, 4);
     grow(bounds_[2], &m.positions[3 * uint64_t{v}]);
   }
   triangles_ += m.triangle_count(), edges_ += m.edge_count(), points_ += m.point_count();
@@ -145,6 +148,7 @@ void LevelFiles::write_ply(const std::string& out_path, const std::vector<std::s
     for (uint64_t i = 0; i < n; ++i) {
       const uint32_t id = vertex_id(key_at(r + i * kPointBytes));
       out.write(&id, 4);
+      out.write(r + i * kPointBytes + 20, 4);
     }
   });
   out.commit();
@@ -228,6 +232,11 @@ io::GlbStreamedLevel LevelFiles::glb(const std::string& name, double screen_cove
   g.point_positions = [this](const io::GlbStreamedLevel::Write& write) {
     for_records(path("points"), points_, kPointBytes, [&](const char* r, uint64_t n) {
       for (uint64_t i = 0; i < n; ++i) write(r + i * kPointBytes + 8, 12);
+    });
+  };
+  g.point_size = [this](const io::GlbStreamedLevel::Write& write) {
+    for_records(path("points"), points_, kPointBytes, [&](const char* r, uint64_t n) {
+      for (uint64_t i = 0; i < n; ++i) write(r + i * kPointBytes + 20, 4);
     });
   };
   return g;

@@ -141,6 +141,7 @@ struct Level {
   std::vector<std::array<uint32_t, 2>> edges;
   std::vector<float> thickness;
   std::vector<uint32_t> points;
+  std::vector<float> point_size;
   bool ok = false;
 
   F3 at(uint32_t v) const { return positions.at(v); }
@@ -177,7 +178,7 @@ Level read_level(const std::string& path) {
   const std::string rest =
       "element face\nproperty list uchar uint vertex_indices\n"
       "element edge\nproperty uint vertex1\nproperty uint vertex2\nproperty float thickness\n"
-      "element point\nproperty uint vertex\n";
+      "element point\nproperty uint vertex\nproperty float size\n";
   const bool with_normals = layout == "element vertex\n" + xyz + nxyz + rest;
   if (!with_normals && layout != "element vertex\n" + xyz + rest) {
     ADD_FAILURE() << path << ": unexpected header layout:\n" << layout;
@@ -213,8 +214,10 @@ Level read_level(const std::string& path) {
   }
   for (uint64_t i = 0; good && i < count["point"]; ++i) {
     uint32_t id = 0;
-    good = take(&id, 4);
+    float size = 0;
+    good = take(&id, 4) && take(&size, 4);
     level.points.push_back(id);
+    level.point_size.push_back(size);
   }
   if (!good || p != stop) {
     ADD_FAILURE() << path << ": body does not match the header (" << (stop - p) << " bytes left)";
@@ -726,6 +729,12 @@ TEST(SimplifyDefaults, ExplicitLevelsAndSizesAreHonoured) {
     ASSERT_EQ(report.levels.size(), 3u);
     EXPECT_EQ(report.levels[2].points, 4u);
     EXPECT_TRUE(report.notice.empty()) << report.notice;
+    // Each point replaces one regular tetrahedron whose corners are sqrt(3) from their mean: its size (the
+    // diameter of what it replaces, twice the mean corner distance) is 2 sqrt(3).
+    const Level l2 = read_level(so.output_dir + "/lod2.ply");
+    ASSERT_TRUE(l2.ok);
+    ASSERT_EQ(l2.point_size.size(), 4u);
+    for (float size : l2.point_size) EXPECT_NEAR(size, 2 * std::sqrt(3.0), 1e-5);
   }
   // --cell-sizes: exactly those, even a level collapsed to one point.
   {
