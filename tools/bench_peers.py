@@ -4,6 +4,7 @@
 usage: tools/bench_peers.py [--build DIR] [--work DIR] [--views K] [--resolution H] [--samples N]
                             [--threads T] [--silhouette-interval D] [--silhouette-factor F] [--tolerance P]
                             [--no-meshlab] [--out FILE.md] MODEL...
+       tools/bench_peers.py --from-json WORK/peers.json [...]   (the tables again, e.g. of several runs)
 
 For each MODEL, the reference is `lodstream simplify` with its defaults (floating cells, nearest, quadric
 representative) at --resolution H; its levels' triangle counts are every other method's targets and its
@@ -274,7 +275,7 @@ class Bench:
         return rows
 
 
-def summarize(rows, tol):
+def summarize(rows):
     out = []
     key = {(r["model"], r["level"], r["method"]): r for r in rows}
     levels = sorted({(r["model"], r["level"]) for r in rows})
@@ -287,35 +288,48 @@ def summarize(rows, tol):
                 got.append((a, b))
         return got
 
-    for m in ("labels", "lodstream", "uniform"):
-        for p in ("sloppy", "simplify", "ml-clust", "ml-qec"):
-            ab = pair(m, p)
-            if not ab:
-                continue
-            n = len(ab)
-            sil = sum(a["sil_p95"] <= b["sil_p95"] for a, b in ab)
-            mis = sum(a["mismatch"] <= b["mismatch"] for a, b in ab)
-            both = sum(a["sil_p95"] <= b["sil_p95"] and a["mismatch"] <= b["mismatch"] for a, b in ab)
-            hd = [a["hd_mean"] / b["hd_mean"] for a, b in ab if b["hd_mean"] > 0]
-            hdw = sum(a["hd_mean"] < b["hd_mean"] for a, b in ab)
-            thin = [(a, b) for a, b in ab if a["thin_pixels"] > 0]
-            thw = sum(a["thin_kept"] > b["thin_kept"] for a, b in thin)
-            tht = sum(a["thin_kept"] == b["thin_kept"] for a, b in thin)
-            out.append(f"| {m} vs {p} | {n} | {sil} ({100 * sil / n:.0f} %) | {mis} ({100 * mis / n:.0f} %) | "
-                       f"{both} ({100 * both / n:.0f} %) | {hdw} ({100 * hdw / n:.0f} %) | "
-                       f"{statistics.median(hd) if hd else float('nan'):.2f} | "
-                       f"{thw} / {tht} / {len(thin) - thw - tht} of {len(thin)} | "
-                       f"{statistics.mean(a['thin_kept'] for a, _ in thin) if thin else float('nan'):.3f} / "
-                       f"{statistics.mean(b['thin_kept'] for _, b in thin) if thin else float('nan'):.3f} |")
+    pairs = [(m, p) for m in ("labels", "lodstream", "uniform") for p in ("sloppy", "simplify", "ml-clust", "ml-qec")]
+    for m, p in pairs + [("labels", "lodstream")]:
+        ab = pair(m, p)
+        if not ab:
+            continue
+        n = len(ab)
+        sil = sum(a["sil_p95"] <= b["sil_p95"] for a, b in ab)
+        mis = sum(a["mismatch"] <= b["mismatch"] for a, b in ab)
+        both = sum(a["sil_p95"] <= b["sil_p95"] and a["mismatch"] <= b["mismatch"] for a, b in ab)
+        hd = [a["hd_mean"] / b["hd_mean"] for a, b in ab if b["hd_mean"] > 0]
+        hdw = sum(a["hd_mean"] < b["hd_mean"] for a, b in ab)
+        thin = [(a, b) for a, b in ab if a["thin_pixels"] > 0]
+        thw = sum(a["thin_kept"] > b["thin_kept"] for a, b in thin)
+        tht = sum(a["thin_kept"] == b["thin_kept"] for a, b in thin)
+        out.append(f"| {m} vs {p} | {n} | {sil} ({100 * sil / n:.0f} %) | {mis} ({100 * mis / n:.0f} %) | "
+                   f"{both} ({100 * both / n:.0f} %) | {hdw} ({100 * hdw / n:.0f} %) | "
+                   f"{statistics.median(hd) if hd else float('nan'):.2f} | "
+                   f"{thw} / {tht} / {len(thin) - thw - tht} of {len(thin)} | "
+                   f"{statistics.mean(a['thin_kept'] for a, _ in thin) if thin else float('nan'):.3f} / "
+                   f"{statistics.mean(b['thin_kept'] for _, b in thin) if thin else float('nan'):.3f} |")
     head = ["| pair (A vs B) | levels both matched | sil p95 A ≤ B | mismatch A ≤ B | both | Hd mean A < B | "
             "Hd mean A/B median | thin kept A > / = / < B (levels with thin pixels) | thin kept mean A / B |",
             "|---|---:|---:|---:|---:|---:|---:|---|---|"]
     return head + out
 
 
+def markdown(rows, head):
+    md = [head, ""] + summarize(rows) + [""]
+    md += ["| model | lvl | method | tris | sil p95 px | sil mean px | mismatch % | thin kept % | Hd mean % | Hd max % |",
+           "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        tris = str(r["triangles"]) + ("" if r["matched"] else " (unmatched)")
+        thin = "—" if r["thin_pixels"] == 0 else f"{100 * r['thin_kept']:.3g}"
+        md.append(f"| {r['model'][:28]} | {r['level']} | {r['method']} | {tris} | {r['sil_p95']:.3g} | "
+                  f"{r['sil_mean']:.3g} | {100 * r['mismatch']:.3g} | {thin} | {r['hd_mean']:.3g} | {r['hd_max']:.3g} |")
+    return "\n".join(md) + "\n"
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("models", nargs="+")
+    ap.add_argument("models", nargs="*")
+    ap.add_argument("--from-json", nargs="+", help="only the tables, from the peers.json of earlier runs")
     ap.add_argument("--build", default=os.path.join(ROOT, "build"))
     ap.add_argument("--work")
     ap.add_argument("--views", type=int, default=16)
@@ -328,6 +342,13 @@ def main():
     ap.add_argument("--no-meshlab", action="store_true")
     ap.add_argument("--out")
     a = ap.parse_args()
+    if a.from_json:
+        rows = [r for f in a.from_json for r in json.load(open(f))]
+        print(markdown(rows, f"From {', '.join(a.from_json)}: {len({(r['model'], r['level']) for r in rows})} levels "
+                             f"of {len({r['model'] for r in rows})} models."))
+        return
+    if not a.models:
+        ap.error("give models, or --from-json")
     a.build = os.path.abspath(a.build)
     if not a.no_meshlab and not (shutil.which("meshlabserver") and shutil.which("xvfb-run")):
         sys.exit("bench_peers: meshlabserver or xvfb-run not found (use --no-meshlab)")
@@ -343,20 +364,12 @@ def main():
         json.dump(rows, open(os.path.join(a.work, "peers.json"), "w"), indent=1)
     elapsed = time.time() - start
     load = open("/proc/loadavg").read().split()[:3]
-    md = [f"Run {datetime.datetime.utcnow():%Y-%m-%d %H:%M} UTC: `tools/bench_peers.py` ({b.lodstream}), report --views "
-          f"{a.views} --resolution {a.resolution} --samples {a.samples}; simplify --resolution {a.resolution}; labels "
-          f"D = {a.silhouette_interval:g} px, f = {a.silhouette_factor:g}; tolerance {100 * a.tolerance:g} %; "
-          f"{len({(r['model'], r['level']) for r in rows})} levels of {len({r['model'] for r in rows})} models, "
-          f"{elapsed:.0f} s, load average at the end {' '.join(load)}.", ""]
-    md += summarize(rows, a.tolerance) + [""]
-    md += ["| model | lvl | method | tris | sil p95 px | sil mean px | mismatch % | thin kept % | Hd mean % | Hd max % |",
-           "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
-    for r in rows:
-        tris = str(r["triangles"]) + ("" if r["matched"] else " (unmatched)")
-        thin = "—" if r["thin_pixels"] == 0 else f"{100 * r['thin_kept']:.3g}"
-        md.append(f"| {r['model'][:28]} | {r['level']} | {r['method']} | {tris} | {r['sil_p95']:.3g} | "
-                  f"{r['sil_mean']:.3g} | {100 * r['mismatch']:.3g} | {thin} | {r['hd_mean']:.3g} | {r['hd_max']:.3g} |")
-    text = "\n".join(md) + "\n"
+    text = markdown(rows, f"Run {datetime.datetime.utcnow():%Y-%m-%d %H:%M} UTC: `tools/bench_peers.py` ({b.lodstream}), "
+                          f"report --views {a.views} --resolution {a.resolution} --samples {a.samples}; simplify "
+                          f"--resolution {a.resolution}; labels D = {a.silhouette_interval:g} px, f = "
+                          f"{a.silhouette_factor:g}; tolerance {100 * a.tolerance:g} %; "
+                          f"{len({(r['model'], r['level']) for r in rows})} levels of {len({r['model'] for r in rows})} "
+                          f"models, {elapsed:.0f} s, load average at the end {' '.join(load)}.")
     open(os.path.join(a.work, "peers.md"), "w").write(text)
     if a.out:
         shutil.copy(os.path.join(a.work, "peers.md"), a.out)
