@@ -172,7 +172,7 @@ class Bench:
         shutil.move(keep, out)
         return {"triangles": best[1], "param": best[0]}
 
-    def meshlab(self, src, filt, x, out):
+    def meshlab(self, src, filt, x, out, clean=False):
         if filt == "clust":
             body = (f'<filter name="Simplification: Clustering Decimation">'
                     f'<Param type="RichAbsPerc" value="{x!r}" min="0" max="1e30" name="Threshold"/>'
@@ -185,7 +185,11 @@ class Bench:
                       ("RichBool", "PlanarQuadric", "false"), ("RichFloat", "PlanarWeight", "0.001"),
                       ("RichBool", "QualityWeight", "false"), ("RichBool", "AutoClean", "true"),
                       ("RichBool", "Selected", "false")]
-            body = ('<filter name="Simplification: Quadric Edge Collapse Decimation">' +
+            # MeshLab 2020.09's edge collapse aborts on some inputs (assertion in vcg VFDetach, seen on the city):
+            # retried once after MeshLab's own cleaning filters.
+            cleaning = ["Remove Duplicate Faces", "Remove Zero Area Faces", "Repair non Manifold Edges by splitting vertices"]
+            body = ("".join(f'<filter name="{c}"/>' for c in cleaning) if clean else "") + (
+                    '<filter name="Simplification: Quadric Edge Collapse Decimation">' +
                     "".join(f'<Param type="{t}" value="{v}" name="{n}"/>' for t, n, v in params) + "</filter>")
         mlx = tempfile.mktemp(suffix=".mlx", dir=self.tmpdir)
         with open(mlx, "w") as f:
@@ -209,8 +213,15 @@ class Bench:
         return {"triangles": best[1], "param": best[0]}
 
     def ml_qec(self, src, want, out):
-        got = self.meshlab(src, "qec", want, out)
-        return {"triangles": got, "param": want}
+        try:
+            return {"triangles": self.meshlab(src, "qec", want, out), "param": want}
+        except RuntimeError as e:
+            print(f"bench_peers: {e}; retrying after cleaning", file=sys.stderr)
+        try:
+            return {"triangles": self.meshlab(src, "qec", want, out, clean=True), "param": "cleaned"}
+        except RuntimeError as e:
+            print(f"bench_peers: {e}; level left out", file=sys.stderr)
+            return None
 
     def report(self, model, lods, dists, out):
         cmd = [self.lodstream, "report", "--original", model]
@@ -224,23 +235,37 @@ class Bench:
         a = self.a
         name = os.path.splitext(os.path.basename(model))[0]
         d = os.path.join(a.work, name)
-        shutil.rmtree(d, ignore_errors=True)
-        os.makedirs(d)
+        if not a.reuse:
+            shutil.rmtree(d, ignore_errors=True)
+        os.makedirs(d, exist_ok=True)
         self.tmpdir = d
         t0 = time.time()
-        ref = self.simplify(model, os.path.join(d, "lodstream"), [])
+        if a.reuse and os.path.exists(os.path.join(d, "lodstream", "manifest.json")):
+            ref = json.load(open(os.path.join(d, "lodstream", "manifest.json")))["levels"]
+        else:
+            ref = self.simplify(model, os.path.join(d, "lodstream"), [])
         want = [L["triangles"] for L in ref]
         dists = [L["switch_distance"] for L in ref]
         res = {"lodstream": [{"triangles": w, "param": L["cell_size"]} for w, L in zip(want, ref)]}
         labels = ["--silhouette-interval", str(a.silhouette_interval), "--silhouette-factor", str(a.silhouette_factor)]
-        res["labels"] = self.match_lodstream(model, d, "labels", labels, ref)
-        res["uniform"] = self.match_lodstream(model, d, "uniform", ["--clustering", "uniform"], ref)
+        def reused(m):  # --reuse: a method whose levels a killed run left complete
+            files = [os.path.join(d, m, f"lod{i}.ply") for i in range(len(want))]
+            if not a.reuse or not all(os.path.exists(f) for f in files):
+                return None
+            print(f"bench_peers: {name}: {m} reused", file=sys.stderr)
+            return [{"triangles": ply_face_count(f), "param": None} for f in files]
+        res["labels"] = reused("labels") or self.match_lodstream(model, d, "labels", labels, ref)
+        res["uniform"] = reused("uniform") or self.match_lodstream(model, d, "uniform", ["--clustering", "uniform"], ref)
         src = os.path.join(d, "original.ply")  # also for a PLY: lodstream's edge and point elements dropped
-        to_ply(model, src)
+        if not (a.reuse and os.path.exists(src)):
+            to_ply(model, src)
         for m in ("sloppy", "simplify", "ml-clust", "ml-qec"):
             if m.startswith("ml-") and a.no_meshlab:
                 continue
             os.makedirs(os.path.join(d, m), exist_ok=True)
+            if m != "ml-qec" and (r := reused(m)):
+                res[m] = r
+                continue
             res[m] = []
             for i, w in enumerate(want):
                 out = os.path.join(d, m, f"lod{i}.ply")
@@ -340,6 +365,7 @@ def main():
     ap.add_argument("--silhouette-factor", type=float, default=0.5)
     ap.add_argument("--tolerance", type=float, default=0.05)
     ap.add_argument("--no-meshlab", action="store_true")
+    ap.add_argument("--reuse", action="store_true", help="keep what a killed run in --work left complete")
     ap.add_argument("--out")
     a = ap.parse_args()
     if a.from_json:
