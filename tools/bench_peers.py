@@ -3,7 +3,7 @@
 
 usage: tools/bench_peers.py [--build DIR] [--work DIR] [--views K] [--resolution H] [--samples N]
                             [--threads T] [--silhouette-interval D] [--silhouette-factor F] [--tolerance P]
-                            [--no-meshlab] [--out FILE.md] MODEL...
+                            [--no-meshlab] [--no-qec] [--reuse] [--out FILE.md] MODEL...
        tools/bench_peers.py --from-json WORK/peers.json [...]   (the tables again, e.g. of several runs)
 
 For each MODEL, the reference is `lodstream simplify` with its defaults (floating cells, nearest, quadric
@@ -260,7 +260,7 @@ class Bench:
         if not (a.reuse and os.path.exists(src)):
             to_ply(model, src)
         for m in ("sloppy", "simplify", "ml-clust", "ml-qec"):
-            if m.startswith("ml-") and a.no_meshlab:
+            if (m.startswith("ml-") and a.no_meshlab) or (m == "ml-qec" and a.no_qec):
                 continue
             os.makedirs(os.path.join(d, m), exist_ok=True)
             if m != "ml-qec" and (r := reused(m)):
@@ -365,6 +365,7 @@ def main():
     ap.add_argument("--silhouette-factor", type=float, default=0.5)
     ap.add_argument("--tolerance", type=float, default=0.05)
     ap.add_argument("--no-meshlab", action="store_true")
+    ap.add_argument("--no-qec", action="store_true", help="leave MeshLab's edge collapse out (slow on large scenes)")
     ap.add_argument("--reuse", action="store_true", help="keep what a killed run in --work left complete")
     ap.add_argument("--out")
     a = ap.parse_args()
