@@ -74,7 +74,7 @@ Level read_ply(const std::string& path) {
     l.triangle_materials.push_back(u32());
   }
   for (uint64_t e = 0; e < edges; ++e) p += 12, l.edge_materials.push_back(u32());
-  for (uint64_t i = 0; i < points; ++i) p += 4, l.point_materials.push_back(u32());
+  for (uint64_t i = 0; i < points; ++i) p += 8, l.point_materials.push_back(u32());  // vertex, size, material
   EXPECT_EQ(p, bytes.data() + bytes.size());
   return l;
 }
