@@ -6,7 +6,10 @@
 //   edges or points have (0, 0, 0) (their normal is dynamic: it depends on the camera, Low & Tan §3.3.2).
 // - triangles: 3 vertex ids each, counter-clockwise seen from the front; no id repeated within a triangle.
 // - edges: 2 vertex ids each (distinct), with thickness[i] >= 0 in scene units (D_A + D_B, §3.3.1).
-// - points: 1 vertex id each.
+// - points: 1 vertex id each; point_size empty (sizes unknown) or one per point, >= 0 in scene units: the
+//   diameter of what collapsed into the point (twice the mean distance of the collapsed primitives' corners
+//   to their mean, the point's analogue of an edge's D_A + D_B); 0 for a point that replaces nothing wider
+//   (an input point), which a renderer draws one pixel wide.
 // - Every id is < vertex_count().
 // - materials: the scene's material table (the same for every level), empty when the input has none; then
 //   triangle_materials, edge_materials and point_materials hold one id < materials.size() per primitive,
@@ -44,6 +47,7 @@ struct LodMesh {
   std::vector<Material> materials;
   std::vector<uint32_t> triangle_materials, edge_materials, point_materials;
   std::vector<uint8_t> colors;
+  std::vector<float> point_size;
 
   uint64_t vertex_count() const { return positions.size() / 3; }
   uint64_t triangle_count() const { return triangles.size() / 3; }
@@ -60,6 +64,7 @@ inline std::string convention_violation(const LodMesh& mesh) {
   if (mesh.triangles.size() % 3 != 0) return "triangles are not index triples";
   if (mesh.edges.size() % 2 != 0) return "edges are not index pairs";
   if (mesh.thickness.size() != mesh.edge_count()) return "one thickness per edge expected";
+  if (!mesh.point_size.empty() && mesh.point_size.size() != mesh.point_count()) return "one size per point expected";
   if (n > UINT32_MAX) return "more vertices than 32-bit indices can address";
   if (!mesh.colors.empty() && mesh.colors.size() != 4 * n) return "colors do not match positions";
   const bool materials = !mesh.materials.empty();

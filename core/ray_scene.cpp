@@ -267,6 +267,15 @@ void RayScene::add_segments(std::span<const float> xyz, std::span<const uint32_t
 }
 
 void RayScene::add_points(std::span<const float> xyz, std::span<const uint32_t> ids, float radius) {
+  add_discs(xyz, ids, [radius](uint64_t) { return radius; });
+}
+
+void RayScene::add_points(std::span<const float> xyz, std::span<const uint32_t> ids, std::span<const float> radius) {
+  add_discs(xyz, ids, [radius](uint64_t k) { return radius[k]; });
+}
+
+template <class Radius>
+void RayScene::add_discs(std::span<const float> xyz, std::span<const uint32_t> ids, Radius&& radius) {
   const uint64_t n = ids.size();
   if (n == 0) return;
   if (n > UINT32_MAX) fail(Status::usage, "more than 2^32 points in one ray-casting scene");
@@ -278,7 +287,7 @@ void RayScene::add_points(std::span<const float> xyz, std::span<const uint32_t> 
   for (uint64_t k = 0; k < n; ++k) {
     const float* p = xyz.data() + 3 * static_cast<uint64_t>(ids[k]);
     float* o = v + 4 * k;
-    o[0] = p[0], o[1] = p[1], o[2] = p[2], o[3] = radius;
+    o[0] = p[0], o[1] = p[1], o[2] = p[2], o[3] = radius(k);
   }
   s.geoms.back().vertices = v;
   s.finish(std::move(g));

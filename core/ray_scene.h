@@ -58,6 +58,8 @@ class RayScene {
   void add_segments(std::span<const float> xyz, std::span<const uint32_t> edges, std::span<const float> radius);
   // Discs at xyz[ids[i]], of the given radius (> 0).
   void add_points(std::span<const float> xyz, std::span<const uint32_t> ids, float radius);
+  // Discs at xyz[ids[i]], of radius radius[i] (> 0).
+  void add_points(std::span<const float> xyz, std::span<const uint32_t> ids, std::span<const float> radius);
   // Colours of the primitives of the geometry added last (RGB per primitive, in its order), for the
   // coloured renders of the report (core/view_cast.h ViewImage::color). A geometry without them has none.
   void set_colors(std::vector<uint8_t> rgb);
@@ -90,6 +92,8 @@ class RayScene {
   bool empty() const;
 
  private:
+  template <class Radius>
+  void add_discs(std::span<const float> xyz, std::span<const uint32_t> ids, Radius&& radius);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

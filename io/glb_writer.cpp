@@ -71,21 +71,22 @@ struct Part {
   const std::vector<uint32_t>* edges;
   const std::vector<float>* thickness;
   const std::vector<uint32_t>* points;
+  const std::vector<float>* point_size;  // empty: the level has no point sizes
   uint32_t material;
 };
 struct Parts {
   std::vector<Part> parts;
   std::vector<std::vector<uint32_t>> triangles, edges, points;  // per material, when split
-  std::vector<std::vector<float>> thickness;
+  std::vector<std::vector<float>> thickness, point_size;
 };
 
 void split_by_material(const core::LodMesh& mesh, Parts* out) {
   if (mesh.materials.empty()) {
-    out->parts.push_back({&mesh.triangles, &mesh.edges, &mesh.thickness, &mesh.points, 0});
+    out->parts.push_back({&mesh.triangles, &mesh.edges, &mesh.thickness, &mesh.points, &mesh.point_size, 0});
     return;
   }
   const size_t n = mesh.materials.size();
-  out->triangles.resize(n), out->edges.resize(n), out->points.resize(n), out->thickness.resize(n);
+  out->triangles.resize(n), out->edges.resize(n), out->points.resize(n), out->thickness.resize(n), out->point_size.resize(n);
   for (uint64_t t = 0; t < mesh.triangle_count(); ++t)
     out->triangles[mesh.triangle_materials[t]].insert(out->triangles[mesh.triangle_materials[t]].end(),
                                                       &mesh.triangles[3 * t], &mesh.triangles[3 * t] + 3);
@@ -94,10 +95,16 @@ void split_by_material(const core::LodMesh& mesh, Parts* out) {
     out->edges[m].insert(out->edges[m].end(), &mesh.edges[2 * e], &mesh.edges[2 * e] + 2);
     out->thickness[m].push_back(mesh.thickness[e]);
   }
-  for (uint64_t i = 0; i < mesh.point_count(); ++i) out->points[mesh.point_materials[i]].push_back(mesh.points[i]);
+  const bool sizes = !mesh.point_size.empty();
+  for (uint64_t i = 0; i < mesh.point_count(); ++i) {
+    const uint32_t m = mesh.point_materials[i];
+    out->points[m].push_back(mesh.points[i]);
+    if (sizes) out->point_size[m].push_back(mesh.point_size[i]);
+  }
   for (size_t m = 0; m < n; ++m)
     if (!out->triangles[m].empty() || !out->edges[m].empty() || !out->points[m].empty())
-      out->parts.push_back({&out->triangles[m], &out->edges[m], &out->thickness[m], &out->points[m], static_cast<uint32_t>(m)});
+      out->parts.push_back({&out->triangles[m], &out->edges[m], &out->thickness[m], &out->points[m], &out->point_size[m],
+                            static_cast<uint32_t>(m)});
 }
 
 Json material_json(const core::Material& m) {
@@ -209,6 +216,10 @@ class BinWriter {
     end_block(ids.size() * 4);
   }
   void u32(const std::vector<uint32_t>& values) {
+    out_.write(values.data(), values.size() * 4);
+    end_block(values.size() * 4);
+  }
+  void f32(const std::vector<float>& values) {
     out_.write(values.data(), values.size() * 4);
     end_block(values.size() * 4);
   }
@@ -351,6 +362,7 @@ void GlbBuilder::add(const GlbLevel& level) {
     if (part.points->empty()) continue;
     Json p;
     p["attributes"]["POSITION"] = plan.add_positions(mesh, *part.points);
+    if (!part.point_size->empty()) p["attributes"]["_SIZE"] = plan.add(part.points->size(), 1, kFloat, "SCALAR", kArrayBuffer);
     if (colors) p["attributes"]["COLOR_0"] = plan.add_colors(part.points->size());
     p["material"] = part.material;
     p["mode"] = kPoints;
@@ -375,6 +387,7 @@ void GlbBuilder::add(const GlbLevel& level) {
   for (const Part& part : parts.parts) {
     if (part.points->empty()) continue;
     bin.vec3(mesh.positions, *part.points);
+    if (!part.point_size->empty()) bin.f32(*part.point_size);
     if (colors) bin.rgba(mesh.colors, *part.points);
   }
   if (bin.blocks() != plan.view_bytes().size()) fail(Status::internal, s.path + ": GLB data does not match its plan");
@@ -446,6 +459,9 @@ void GlbBuilder::add(const GlbStreamedLevel& level) {
                                                        bounds(level.material_point_bounds, level.point_min, level.point_max, m, true));
       primitives.push_back(std::move(p));
     }
+    if (level.point_size)
+      for (size_t m = 0, i = first; m < pts.size(); ++m)
+        if (pts[m] > 0) primitives[i++]["attributes"]["_SIZE"] = plan.add(pts[m], 1, kFloat, "SCALAR", kArrayBuffer);
     if (level.colors)
       for (size_t m = 0, i = first; m < pts.size(); ++m)
         if (pts[m] > 0) primitives[i++]["attributes"]["COLOR_0"] = plan.add_colors(pts[m]);
@@ -473,6 +489,7 @@ void GlbBuilder::add(const GlbStreamedLevel& level) {
   }
   if (level.points > 0) {
     per_material(pts, 12, level.point_positions);
+    if (level.point_size) per_material(pts, 4, level.point_size);
     if (level.colors) per_material(pts, 4, level.point_colors);
   }
   if (bin.blocks() != plan.view_bytes().size()) fail(Status::internal, s.path + ": GLB data does not match its plan");

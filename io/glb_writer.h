@@ -14,13 +14,15 @@
 //   TRIANGLES (mode 4) with POSITION, NORMAL (when the mesh has normals) and uint32 indices;
 //   LINES (mode 1) with POSITION and _THICKNESS (SCALAR float), two vertices per edge, both carrying the
 //   edge's thickness (a vertex shared by edges of different thickness is thus repeated), no indices;
-//   POINTS (mode 0) with POSITION, one vertex per point, no indices. An empty kind is left out;
+//   POINTS (mode 0) with POSITION and, when the level has point sizes, _SIZE (SCALAR float: the diameter
+//   in scene units of what collapsed into the point, core/mesh.h; 0 = one pixel), one vertex per point, no
+//   indices. An empty kind is left out;
 // - without a material table: one material, {doubleSided: true}, used by every primitive;
 // - with one (core/mesh.h; every level must carry the same table): the table as glTF materials (name,
 //   baseColorFactor, metallicFactor, roughnessFactor, alphaMode and alphaCutoff when not opaque,
 //   doubleSided), and per level one TRIANGLES, one LINES and one POINTS primitive per material used (all
 //   triangle primitives first, in material order, then the lines, then the points), each with its own
-//   compacted vertex arrays;
+//   compacted vertex arrays (and its own _SIZE accessor);
 // - with vertex colours, COLOR_0 (normalized unsigned byte VEC4) on every primitive;
 // - one buffer (the BIN chunk); one bufferView per accessor, 4-byte aligned, with its target.
 // The bytes depend only on the arguments (no time stamps, fixed JSON key order).
@@ -61,7 +63,7 @@ void write_glb(const std::string& path, std::span<const GlbLevel> levels, const 
 // the triangles' own vertex array (positions and, with `normals`, normals; with `colors`, RGBA), their
 // indices into it, both ends of every edge with its thickness (and their colours), and the points (and
 // theirs). Each block function writes exactly its block's bytes (count · 12 for vec3 blocks, indices 12 per
-// triangle, positions 24, thickness 8 and colours 8 per edge, colours 4 per vertex or point) through
+// triangle, positions 24, thickness 8 and colours 8 per edge, colours 4 per vertex or point, sizes 4 per point) through
 // `write`, in one or more calls; the builder checks the lengths. Bounds: the min and max of each kind's
 // positions (unused for a kind with none).
 // Without a material table, the per-material blocks are asked once, with material 0, for all their
@@ -70,7 +72,7 @@ void write_glb(const std::string& path, std::span<const GlbLevel> levels, const 
 // material; material_edge_bounds, material_point_bounds: min xyz then max xyz per material), and the
 // per-material blocks are asked for each such material in material order, one block kind after the other
 // (all triangle indices, then all edge positions, all edge thicknesses, all edge colours, all point
-// positions, all point colours). The triangle primitives of a level share its triangle vertex array.
+// positions, all point sizes, all point colours). The triangle primitives of a level share its triangle vertex array.
 struct GlbStreamedLevel {
   using Write = std::function<void(const void*, size_t)>;
   using Block = std::function<void(const Write&)>;
@@ -86,6 +88,7 @@ struct GlbStreamedLevel {
   std::vector<float> material_edge_bounds, material_point_bounds;
   Block triangle_positions, triangle_normals, triangle_colors;
   MaterialBlock triangle_indices, edge_positions, edge_thickness, edge_colors, point_positions, point_colors;
+  MaterialBlock point_size;  // 4 bytes per point; none (empty function): no _SIZE attribute
 };
 
 class GlbBuilder {

@@ -75,6 +75,7 @@ enum class Kind : uint8_t { vertex, face, edge, point, other };
 struct Element : ply::Element {
   Kind kind = Kind::other;
   unsigned index_size = 0;  // face: bytes of one index
+  bool sized = false;       // point: has a size property (read through Role::thickness)
 };
 
 // A polygon being fan-triangulated as its indices arrive: (first, previous, current) per index after the
@@ -116,6 +117,7 @@ class PlyParser {
     if (fmt_ == Fmt::ascii) parse_ascii();
     else if ((fmt_ == Fmt::le) == little) parse_binary<false>();
     else parse_binary<true>();
+    if (mesh_.point_size.size() != mesh_.points.size()) mesh_.point_size.clear();  // some point element unsized
     if (materials_) material_table();
   }
 
@@ -198,6 +200,17 @@ class PlyParser {
     mesh_.edges.push_back(b);
     mesh_.thickness.push_back(t);
   }
+  // A point, with its size when the element has one (sizes are kept only when every point has one).
+  void add_point(uint32_t v, double size) {
+    const float s = static_cast<float>(size);
+    if (!(s >= 0) || !std::isfinite(s)) {
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%g", size);
+      data_error(std::string("point size ") + buf + " is negative or not finite in " + record_text());
+    }
+    mesh_.points.push_back(v);
+    if (element_->sized) mesh_.point_size.push_back(s);
+  }
   // What a record's roles collected, once the whole record is read.
   void finish_record(const double* xyz, const int64_t* v, double thickness, const Fan& fan, const double* rgba,
                      int64_t material) {
@@ -234,7 +247,7 @@ class PlyParser {
         if (fan.n == 2) add_edge(fan.first, fan.prev, 0);  // a loose edge, as the ingest readers keep it
         break;
       case Kind::edge: add_edge(index(v[0]), index(v[1]), thickness); break;
-      case Kind::point: mesh_.points.push_back(index(v[0])); break;
+      case Kind::point: add_point(index(v[0]), thickness); break;
       case Kind::other: ++stats_.skipped; break;
     }
   }
@@ -329,6 +342,11 @@ void PlyParser::check_header(ply::Header&& header) {
         e.kind = Kind::point;
         scalar(v, true);
         v->role = Role::v1;
+        if (Property* t = find("size")) {
+          scalar(t, false);
+          t->role = Role::thickness;
+          e.sized = true;
+        }
       }
     }
   }

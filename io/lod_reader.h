@@ -11,7 +11,8 @@
 //                `comment material` lines (what io/ply_writer.cpp writes reads back with its materials)
 //       face     list vertex_indices (or vertex_index), fan-triangulated; a two-index face is an edge
 //       edge     vertex1, vertex2, optional thickness (0 when absent); without vertex1/vertex2, skipped
-//       point    vertex: this project's own element (see io/ply_writer.h); without it, skipped
+//       point    vertex, optional size (kept only when every point has one): this project's own element
+//                (see io/ply_writer.h); without vertex, skipped
 //     Any other element is skipped. The files io/ply_writer.cpp writes read back bit for bit.
 //   OBJ (Wavefront): `v x y z` (w or colour ignored); `f` with v, v/vt, v//vn, v/vt/vn corners, negative
 //     (relative) indices, fan-triangulated (two corners: an edge); `l` polylines as segments of thickness 0;
@@ -19,7 +20,7 @@
 //
 // The result satisfies core::convention_violation(mesh) == "": coordinates finite as float, every index in
 // range, no index repeated within a triangle or an edge (such primitives are dropped and counted in
-// LodFileStats), thickness finite and >= 0. Normals are left empty (the report recomputes what it needs).
+// LodFileStats), thickness and point sizes finite and >= 0. Normals are left empty (the report recomputes what it needs).
 #pragma once
 
 #include <cstdint>

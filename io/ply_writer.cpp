@@ -62,7 +62,7 @@ std::string ply_level_header(const std::vector<std::string>& comments, uint64_t 
   const bool with_materials = !materials.empty();
   std::string header = "ply\nformat binary_little_endian 1.0\n";
   for (const std::string& c : comments) header += comment_line(c);
-  header += "comment element point: one vertex index per point primitive\n";
+  header += "comment element point: one vertex index per point primitive, and its size (diameter, 0 = one pixel)\n";
   for (size_t i = 0; i < materials.size(); ++i) header += comment_line(material_comment(i, materials[i]));
   header += ply_vertex_header(vertices, normals, colors);
   header += "element face " + std::to_string(triangles) + "\n";
@@ -72,7 +72,7 @@ std::string ply_level_header(const std::vector<std::string>& comments, uint64_t 
   header += "property uint vertex1\nproperty uint vertex2\nproperty float thickness\n";
   if (with_materials) header += "property uint material_index\n";
   header += "element point " + std::to_string(points) + "\n";
-  header += "property uint vertex\n";
+  header += "property uint vertex\nproperty float size\n";
   if (with_materials) header += "property uint material_index\n";
   header += "end_header\n";
   return header;
@@ -107,11 +107,14 @@ void write_ply(const std::string& path, const core::LodMesh& mesh, const std::ve
     if (materials) std::memcpy(record + 12, &mesh.edge_materials[e], 4);
     out.write(record, materials ? 16 : 12);
   }
-  // point: vertex (uint): 4 bytes [+ uint material_index]
-  if (!materials) out.write(mesh.points.data(), mesh.points.size() * sizeof(uint32_t));
-  for (uint64_t i = 0; materials && i < mesh.point_count(); ++i) {
-    const uint32_t record[2] = {mesh.points[i], mesh.point_materials[i]};
-    out.write(record, sizeof record);
+  // point: vertex (uint) size (float, 0 when the mesh has no sizes): 8 bytes [+ uint material_index]
+  for (uint64_t p = 0; p < mesh.point_count(); ++p) {
+    char record[12];
+    const float size = mesh.point_size.empty() ? 0.0f : mesh.point_size[p];
+    std::memcpy(record, &mesh.points[p], 4);
+    std::memcpy(record + 4, &size, 4);
+    if (materials) std::memcpy(record + 8, &mesh.point_materials[p], 4);
+    out.write(record, materials ? 12 : 8);
   }
   out.commit();
 }

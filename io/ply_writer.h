@@ -7,12 +7,13 @@
 //                      green, blue, alpha when it has vertex colours)
 //   element face F     property list uchar uint vertex_indices          (triangles, 3 indices each)
 //   element edge E     property uint vertex1, uint vertex2, float thickness
-//   element point P    property uint vertex
+//   element point P    property uint vertex, float size
 // With a material table, face, edge and point end with `property uint material_index`, and the table is
 // written as comment lines, one per material in id order:
 //   comment material I r g b a metallic roughness OPAQUE|MASK|BLEND double-sided(0|1) name
 // PLY has no standard element for points: `point` is this project's own element, one vertex index per point
-// primitive (readers that do not know it skip it; the file also says so in a comment line).
+// primitive and its size, the diameter in scene units of what collapsed into it (core/mesh.h; 0: drawn one
+// pixel wide) (readers that do not know it skip it; the file also says so in a comment line).
 #pragma once
 
 #include <cstdint>
@@ -37,9 +38,9 @@ void write_ply_vertices(FileWriter& out, std::span<const float> positions, std::
 // Throws Failure(io_error) when the file cannot be written, Failure(internal) when the mesh breaks the
 // conventions of core/mesh.h (array sizes, indices out of range).
 // The header write_ply writes (vertex records 24 bytes with normals, else 12, and 4 more with colours;
-// faces 13 bytes: uchar 3 and three uint ids; edges 12: two uint ids and a float thickness; points 4; each
-// 4 more with a material table, the uint material_index), for a level written record by record elsewhere
-// (stream/level_files.cpp).
+// faces 13 bytes: uchar 3 and three uint ids; edges 12: two uint ids and a float thickness; points 8: a uint
+// id and a float size; each 4 more with a material table, the uint material_index), for a level written
+// record by record elsewhere (stream/level_files.cpp).
 std::string ply_level_header(const std::vector<std::string>& comments, uint64_t vertices, bool normals, uint64_t triangles,
                              uint64_t edges, uint64_t points, const std::vector<core::Material>& materials = {},
                              bool colors = false);

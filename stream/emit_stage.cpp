@@ -209,8 +209,8 @@ struct LevelState {
   std::vector<uint32_t> triangle_materials, edge_materials, point_materials;  // with materials, as BlockOut's
   std::vector<core::Quadric> quadrics;
   std::vector<uint8_t> used;  // per cell: kByTriangle | kByKeptEdge
-  // One bit per input triangle and segment that collapsed to an edge, so that passes B and C visit only
-  // those.
+  // One bit per input triangle and segment that collapsed to an edge or a point, so that passes B and C
+  // visit only those.
   std::vector<uint64_t> collapsed[2];
   // Elimination, passes B and C.
   std::vector<std::array<uint32_t, 2>> kept_edges;  // in edge order; k_edges finds them by cells
@@ -232,6 +232,34 @@ constexpr uint8_t kOwned = 1, kHalo = 2;
 constexpr uint8_t kByTriangle = 1, kByKeptEdge = 2;
 
 bool owned(const LevelState& L, uint32_t c) { return !L.in.batched || L.role[c] == kOwned; }
+
+// A point's size (core/mesh.h) is measured as an edge's thickness is: kept point p joins passes B and C as
+// the edge {c, c} with id E + p, after the E kept edges. Every corner of a primitive that collapsed to it
+// falls in its cell, hence in A; pass B collects its distinct corners (by canonical id, as an edge's), pass C
+// measures their distances to their mean P_A (P_B is set to P_A), and the size is 2·D_A, the diameter of what
+// the point replaces. A cell reached only by input points has no corners
+// (size 0: drawn one pixel wide). A kept point's cell is used by no kept edge or triangle, so every
+// primitive with a corner in it collapsed to it, and a batch owning the cell visits them all.
+void index_kept_points(LevelState& L) {
+  const uint32_t first = static_cast<uint32_t>(L.kept_edges.size());
+  for (size_t p = 0; p < L.kept_points.size(); ++p)
+    L.k_edges.insert({L.kept_points[p], L.kept_points[p]}, first + static_cast<uint32_t>(p));
+}
+
+// The cell whose corners go to A: a kept edge's lower cell, a kept point's cell.
+uint32_t lower_cell(const LevelState& L, uint32_t e) {
+  return e < L.kept_edges.size() ? L.kept_edges[e][0] : L.kept_points[e - L.kept_edges.size()];
+}
+
+std::vector<float> kept_point_sizes(const LevelState& L) {
+  const size_t first = L.kept_edges.size();
+  std::vector<float> size(L.kept_points.size());
+  for (size_t p = 0; p < size.size(); ++p) {
+    const EdgeSums& s = L.kept_sums[first + p];
+    size[p] = s.na ? static_cast<float>(2 * L.distances[first + p].a / static_cast<double>(s.na)) : 0.0f;
+  }
+  return size;
+}
 bool visited(const LevelState& L, const uint32_t* c, size_t arity) {
   if (!L.in.batched) return true;
   for (size_t k = 0; k < arity; ++k)
@@ -396,8 +424,8 @@ Buckets bucket(size_t n, uint32_t regions, Region&& region) {
 // With `colors`, every vertex takes its cell's colour; with `materials` (the store's table), every
 // primitive its material (LevelState's *_materials).
 template <class Sink>
-void build_parts(LevelState& L, const std::vector<float>& thickness, const LevelColors* colors,
-                 const std::vector<core::Material>* materials, const std::string& prefix,
+void build_parts(LevelState& L, const std::vector<float>& thickness, const std::vector<float>& point_size,
+                 const LevelColors* colors, const std::vector<core::Material>* materials, const std::string& prefix,
                  const core::ClusterOptions& cluster, const EmitOptions& options, bool single_precision, Sink&& sink) {
   CellSlots s;
   number_cells(L, s);
@@ -450,6 +478,7 @@ void build_parts(LevelState& L, const std::vector<float>& thickness, const Level
     }
     for (uint32_t p : points.of(r)) {
       mesh.points.push_back(add(v.end_vertex[s.slot_of[L.kept_points[p]]]));
+      mesh.point_size.push_back(point_size[p]);
       if (materials) mesh.point_materials.push_back(L.kept_point_materials[p]);
     }
     if (materials) mesh.materials = *materials;
@@ -841,6 +870,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
             }
           } else if (c[0] == c[1] && c[1] == c[2]) {
             point(o, s, c[0], m);
+            mark(L, i / 3);
           } else {
             edge(o, s, c[0], c[0] != c[1] ? c[1] : c[2], m);
             mark(L, i / 3);
@@ -854,6 +884,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
           if (!visited(levels[l], c, 2)) continue;
           if (c0 == c1) {
             point(outs_l[l], scratch_l[l], c0, m);
+            mark(levels[l], i / 2);
           } else {
             edge(outs_l[l], scratch_l[l], c0, c1, m);
             mark(levels[l], i / 2);
@@ -959,14 +990,15 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     }
     std::vector<uint32_t>().swap(L.point_materials);
     std::vector<uint32_t>().swap(L.points);
-    L.kept_sums.resize(L.kept_edges.size());
-    L.distances.resize(L.kept_edges.size());
-    any_kept_edges = any_kept_edges || !L.kept_edges.empty();
+    index_kept_points(L);
+    L.kept_sums.resize(L.kept_edges.size() + L.kept_points.size());
+    L.distances.resize(L.kept_sums.size());
+    any_kept_edges = any_kept_edges || !L.kept_sums.empty();
   }
 
-  // Pass B visits the input triangles and segments that collapsed to a kept edge in some level of the
-  // group (an eliminated edge's thickness would go unused), fetching their corners once, and collects each
-  // kept edge's distinct corners: a vertex shared by several of its collapsing primitives counts once
+  // Pass B visits the input triangles and segments that collapsed to a kept edge (or a kept point:
+  // index_kept_points) in some level of the group (an eliminated edge's thickness would go unused), fetching
+  // their corners once, and collects each kept edge's distinct corners: a vertex shared by several of its collapsing primitives counts once
   // (Low & Tan §3.3.1 average over the vertices, not over the triangles), so the thickness does not depend
   // on how a strip was triangulated. Vertices are told apart by their canonical id (the first stored vertex
   // at the position), so an input that repeats a position (OBJ seams, STL soups) counts it once too.
@@ -1025,7 +1057,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
           if (!L.corner_set.insert({c.edge, c.vertex}, 0).second) continue;
           L.corners.push_back({c.edge, c.vertex});
           EdgeSums& e = L.kept_sums[c.edge];
-          if (cell(L, record_of(c.vertex)) == L.kept_edges[c.edge][0]) add(e.a, c.p), ++e.na;
+          if (cell(L, record_of(c.vertex)) == lower_cell(L, c.edge)) add(e.a, c.p), ++e.na;
           else add(e.b, c.p), ++e.nb;
         }
       }
@@ -1037,12 +1069,13 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   // list (no pass over the input): distances in parallel, summed per edge in corner order.
   for (LevelState& L : levels) {
     L.corner_set = FlatMap<2, false>();
-    L.pa.resize(L.kept_edges.size()), L.pb.resize(L.kept_edges.size());
-    for (size_t i = 0; i < L.kept_edges.size(); ++i)
+    L.pa.resize(L.kept_sums.size()), L.pb.resize(L.kept_sums.size());
+    for (size_t i = 0; i < L.kept_sums.size(); ++i)
       for (int k = 0; k < 3; ++k) {
         L.pa[i][k] = L.kept_sums[i].na ? L.kept_sums[i].a[k] / static_cast<double>(L.kept_sums[i].na) : 0;
         L.pb[i][k] = L.kept_sums[i].nb ? L.kept_sums[i].b[k] / static_cast<double>(L.kept_sums[i].nb) : 0;
       }
+    for (size_t i = L.kept_edges.size(); i < L.kept_sums.size(); ++i) L.pb[i] = L.pa[i];  // a point: distances to P_A
     std::vector<double> d(L.corners.size());
     tbb::parallel_for(tbb::blocked_range<size_t>(0, L.corners.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t i = r.begin(); i < r.end(); ++i) {
@@ -1054,7 +1087,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     });
     for (size_t i = 0; i < L.corners.size(); ++i) {
       const auto [e, v] = L.corners[i];
-      if (cell(L, record_of(v)) == L.kept_edges[e][0]) L.distances[e].a += d[i];
+      if (cell(L, record_of(v)) == lower_cell(L, e)) L.distances[e].a += d[i];
       else L.distances[e].b += d[i];
     }
     std::vector<std::array<uint32_t, 2>>().swap(L.corners);
@@ -1075,12 +1108,13 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       const double db = L.kept_sums[i].nb ? L.distances[i].b / static_cast<double>(L.kept_sums[i].nb) : 0;
       thickness[i] = static_cast<float>(da + db);
     }
+    const std::vector<float> point_size = kept_point_sizes(L);
     std::vector<EdgeSums>().swap(L.kept_sums);
     std::vector<Distances>().swap(L.distances);
     std::vector<std::array<double, 3>>().swap(L.pa);
     std::vector<std::array<double, 3>>().swap(L.pb);
-    build_parts(L, thickness, meta.colors ? &colors[l] : nullptr, materials ? &meta.materials : nullptr, prefix, cluster,
-                options, meta.single_precision, [&](RegionPart& part) { sink(l, part); });
+    build_parts(L, thickness, point_size, meta.colors ? &colors[l] : nullptr, materials ? &meta.materials : nullptr, prefix,
+                cluster, options, meta.single_precision, [&](RegionPart& part) { sink(l, part); });
     colors[l] = LevelColors();
     counts[l] = L.counts;
   }

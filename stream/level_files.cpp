@@ -19,9 +19,9 @@ namespace {
 
 // Scratch records: a vertex is its position and normal (24 bytes), then its RGBA with colours; a triangle
 // its 3 vertex keys (24), then its material with materials; an edge its 2 vertex keys, thickness and 2
-// positions (44), then its material, then the RGBA of both ends; a point its vertex key and position (20),
-// then its material, then its RGBA.
-constexpr size_t kVertexBytes = 24, kTriangleBytes = 24, kEdgeBytes = 44, kPointBytes = 20;
+// positions (44), then its material, then the RGBA of both ends; a point its vertex key, position and size
+// (24), then its material, then its RGBA.
+constexpr size_t kVertexBytes = 24, kTriangleBytes = 24, kEdgeBytes = 44, kPointBytes = 24;
 constexpr uint64_t kChunkRecords = 1 << 16;
 // The output one pass of a per-material GLB block holds (see level_files.h).
 constexpr uint64_t kSweepBytes = 16 << 20;
@@ -197,8 +197,10 @@ void LevelFiles::add(const RegionPart& part) {
   }
   for (uint64_t i = 0; i < m.point_count(); ++i) {
     const uint32_t v = m.points[i];
+    const float size = m.point_size.empty() ? 0.0f : m.point_size[i];
     point_out_.write(&part.vertex_key[v], 8);
     point_out_.write(&m.positions[3 * uint64_t{v}], 12);
+    point_out_.write(&size, 4);
     grow(bounds_[2], &m.positions[3 * uint64_t{v}]);
     if (materials) {
       point_out_.write(&m.point_materials[i], 4), ++material_points_[m.point_materials[i]];
@@ -259,6 +261,7 @@ void LevelFiles::write_ply(const std::string& out_path, const std::vector<std::s
     for (uint64_t i = 0; i < n; ++i) {
       const uint32_t id = vertex_id(key_at(r + i * point_bytes_));
       out.write(&id, 4);
+      out.write(r + i * point_bytes_ + 20, 4);
       if (materials) out.write(r + i * point_bytes_ + kPointBytes, 4);
     }
   });
@@ -363,6 +366,8 @@ io::GlbStreamedLevel LevelFiles::glb(const std::string& name, double screen_cove
   if (colors_)
     g.point_colors = sweep("points", points_, point_bytes_, kPointBytes, material_points_, points_, 4,
                            [point_colors_at](const char* r, char* out) { std::memcpy(out, r + point_colors_at, 4); });
+  g.point_size = sweep("points", points_, point_bytes_, kPointBytes, material_points_, points_, 4,
+                        [](const char* r, char* out) { std::memcpy(out, r + 20, 4); });
   return g;
 }
 

@@ -508,10 +508,11 @@ PrimitiveColors primitive_colors(const core::LodMesh& m) {
   return out;
 }
 
-// Thick edges at their true width (radius T / 2), with no floor: a part of the original thinner than the
-// rays can resolve is missed on both sides alike. An edge of thickness 0 (an original line kept as it is)
-// and a point are drawn one pixel wide, as the original's are. `colors`: the primitives' colours, or
-// empty spans.
+// Thick edges at their true width (radius T / 2), and points at the size of what they replace (radius
+// size / 2, core/mesh.h), with no floor: a part of the original thinner than the rays can resolve is missed
+// on both sides alike. An edge of thickness 0 (an original line kept as it is) and a point of size 0 or of
+// no size (an input point, a level file without sizes) are drawn one pixel wide, as the original's are.
+// `colors`: the primitives' colours, or empty spans.
 struct PrimitiveColorSpans {
   std::span<const uint8_t> triangles, edges, points;
 };
@@ -528,7 +529,10 @@ LevelScene build_level_scene(const core::LodMesh& mesh, const WireRadii& wire, u
   for (size_t e = 0; e < radius.size(); ++e) radius[e] = mesh.thickness[e] > 0 ? mesh.thickness[e] / 2 : wire.line;
   scene.wire->add_segments(mesh.positions, mesh.edges, radius);
   if (!colors.edges.empty() && !mesh.edges.empty()) scene.wire->set_colors(vec(colors.edges));
-  scene.wire->add_points(mesh.positions, mesh.points, wire.point);
+  std::vector<float> point_radius(mesh.point_count(), wire.point);
+  for (size_t p = 0; p < mesh.point_size.size(); ++p)
+    if (mesh.point_size[p] > 0) point_radius[p] = mesh.point_size[p] / 2;
+  scene.wire->add_points(mesh.positions, mesh.points, point_radius);
   if (!colors.points.empty() && !mesh.points.empty()) scene.wire->set_colors(vec(colors.points));
   scene.wire->commit();
   return scene;
@@ -604,6 +608,9 @@ class LevelChunks {
     if (end > t + e) {
       const uint64_t from = take(m_.points, 1, t + e, part.points);
       colors.points = slice(colors_.points, from, part.points.size());
+      if (!m_.point_size.empty())
+        part.point_size.assign(m_.point_size.begin() + static_cast<std::ptrdiff_t>(from),
+                               m_.point_size.begin() + static_cast<std::ptrdiff_t>(from + part.points.size()));
     }
     for (uint32_t v : touched) local_[v] = UINT32_MAX;
     return build_level_scene(part, wire, embree_limit, colors);
@@ -618,7 +625,7 @@ class LevelChunks {
 
 // Bytes of a level in memory (its arrays), for the share of the budget its chunks get.
 uint64_t mesh_bytes(const core::LodMesh& m) {
-  return 4 * (m.positions.size() + m.normals.size() + m.triangles.size() + m.edges.size() + m.thickness.size() + m.points.size());
+  return 4 * (m.positions.size() + m.normals.size() + m.triangles.size() + m.edges.size() + m.thickness.size() + m.points.size() + m.point_size.size());
 }
 
 // What is left of `bytes` once `held` is taken, at least 16 MiB (the memory monitor stays the guard).

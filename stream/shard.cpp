@@ -22,7 +22,7 @@ namespace lodstream::stream {
 
 namespace {
 
-constexpr char kPartsMagic[8] = {'L', 'O', 'D', 'P', 'A', 'R', 'T', '2'};
+constexpr char kPartsMagic[8] = {'L', 'O', 'D', 'P', 'A', 'R', 'T', '3'};
 
 template <class T>
 void put(io::FileWriter& out, const T& v) {
@@ -119,6 +119,7 @@ void PartsWriter::add(const RegionInfo& info, const RegionPart& part) {
   // Materials and colours (empty without them); the material table itself is the task summary's.
   put_array(out_, m.triangle_materials), put_array(out_, m.edge_materials), put_array(out_, m.point_materials);
   put_array(out_, m.colors), put_array(out_, part.owned_colors);
+  put_array(out_, m.point_size);  // empty when the level has no point sizes
   ++parts_;
 }
 
@@ -166,6 +167,7 @@ bool PartsReader::next(StoredPart* out) {
   array(m.positions), array(m.normals), array(m.triangles), array(m.edges), array(m.thickness), array(m.points);
   array(part.vertex_key), array(part.owned_key), array(part.owned_positions), array(part.owned_normals);
   array(m.triangle_materials), array(m.edge_materials), array(m.point_materials), array(m.colors), array(part.owned_colors);
+  array(m.point_size);
   return true;
 }
 

@@ -45,6 +45,7 @@ LodMesh small_level() {
   m.edges = {3, 4, 4, 1};
   m.thickness = {0.25f, 1.0f / 3.0f};
   m.points = {5, 0};
+  m.point_size = {0.75f, 0.0f};
   return m;
 }
 
@@ -56,6 +57,8 @@ void expect_same(const LodMesh& want, const LodMesh& got, bool thickness = true)
   if (thickness) EXPECT_EQ(bits(want.thickness), bits(got.thickness));
   else EXPECT_EQ(std::vector<float>(want.edge_count(), 0.0f), got.thickness);
   EXPECT_EQ(want.points, got.points);
+  if (thickness) EXPECT_EQ(bits(want.point_size), bits(got.point_size));
+  else EXPECT_TRUE(got.point_size.empty());  // OBJ's p has no size
   EXPECT_EQ("", core::convention_violation(got));
 }
 
@@ -294,12 +297,12 @@ TEST(LodReaderErrors, TruncatedBinaryBody) {
     return io::read_small_file(dir.file("full.ply"));
   }();
   const size_t header = full.find("end_header\n") + 11;
-  // Vertices 6 x 12, faces 2 x 13, edges 2 x 12, points 2 x 4 bytes.
+  // Vertices 6 x 12, faces 2 x 13, edges 2 x 12, points 2 x 8 bytes.
   const size_t faces = header + 72, last_face = faces + 13, edges = faces + 26, points = edges + 24;
-  ASSERT_EQ(points + 8, full.size());
+  ASSERT_EQ(points + 16, full.size());
   // The last point loses its last byte: found while reading, at the record's first byte.
   expect_failure(dir.write("t1.ply", full.substr(0, full.size() - 1)), Status::bad_data,
-                 {"byte " + std::to_string(points + 4), "truncated", "inside record 2 of 2 of element 'point'"});
+                 {"byte " + std::to_string(points + 8), "truncated", "inside record 2 of 2 of element 'point'"});
   // Cut inside the second face (its list is longer than what is left): the header counts no longer fit
   // the bytes, caught before anything is read.
   expect_failure(dir.write("t2.ply", full.substr(0, last_face + 5)), Status::bad_data,

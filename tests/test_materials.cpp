@@ -74,7 +74,7 @@ Level read_ply(const std::string& path) {
     l.triangle_materials.push_back(u32());
   }
   for (uint64_t e = 0; e < edges; ++e) p += 12, l.edge_materials.push_back(u32());
-  for (uint64_t i = 0; i < points; ++i) p += 4, l.point_materials.push_back(u32());
+  for (uint64_t i = 0; i < points; ++i) p += 8, l.point_materials.push_back(u32());  // vertex, size, material
   EXPECT_EQ(p, bytes.data() + bytes.size());
   return l;
 }
@@ -135,6 +135,45 @@ TEST(Materials, FineLevelKeepsEveryTrianglesMaterialInEveryFormat) {
   ASSERT_TRUE(again.ok()) << again.message;
   const Json g2 = glb_json(tmp.file("again/lods.glb"));
   EXPECT_EQ(g2["materials"][2]["pbrMetallicRoughness"]["baseColorFactor"], Json::array({0.0, 0.0, 1.0, 0.5}));
+}
+
+TEST(Materials, CollapsedPointsKeepTheirMaterialAndSizeInPlyAndGlb) {
+  // A red square of side 0.5 (two triangles) and a blue unit square fanned from its centre, far apart: at
+  // cell size 2 each collapses to one point, sized over its distinct corners (core/mesh.h): red 2·r with r
+  // = 0.25·sqrt(2), blue 2·(4·0.5·sqrt(2))/5 (the centre is a corner at distance 0).
+  test::TempDir tmp;
+  tmp.write("a.mtl", kMtl);
+  const std::string input = tmp.write("a.obj",
+                                      "mtllib a.mtl\nv 0 0 0\nv 0.5 0 0\nv 0.5 0.5 0\nv 0 0.5 0\n"
+                                      "v 4 4 0\nv 5 4 0\nv 5 5 0\nv 4 5 0\nv 4.5 4.5 0\n"
+                                      "usemtl red\nf 1 2 3\nf 1 3 4\n"
+                                      "usemtl blue glass\nf 9 5 6\nf 9 6 7\nf 9 7 8\nf 9 8 5\n");
+  const Result r = run(input, tmp.file("out"), {2}, false);
+  ASSERT_TRUE(r.ok()) << r.message;
+  const std::map<uint32_t, double> want{{1, 0.5 * std::sqrt(2.0)}, {2, 0.8 * std::sqrt(2.0)}};
+  const core::LodMesh l = io::read_lod_mesh(tmp.file("out/lod0.ply"));
+  ASSERT_EQ(l.point_count(), 2u);
+  ASSERT_EQ(l.point_size.size(), 2u);
+  ASSERT_EQ(l.point_materials.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) EXPECT_NEAR(l.point_size[i], want.at(l.point_materials[i]), 1e-6) << i;
+  // GLB: one POINTS primitive per material, each with its own _SIZE accessor holding its point's size.
+  const std::string bytes = test::read_file(tmp.file("out/lods.glb"));
+  uint32_t n;
+  std::memcpy(&n, bytes.data() + 12, 4);
+  const Json g = Json::parse(bytes.substr(20, n));
+  const char* bin = bytes.data() + 20 + n + 8;
+  const Json& prims = g["meshes"][0]["primitives"];
+  ASSERT_EQ(prims.size(), 2u);
+  for (const Json& p : prims) {
+    EXPECT_EQ(p["mode"], 0);
+    ASSERT_TRUE(p["attributes"].contains("_SIZE"));
+    const Json& acc = g["accessors"][p["attributes"]["_SIZE"].get<int>()];
+    ASSERT_EQ(acc["count"], 1);
+    const Json& view = g["bufferViews"][acc["bufferView"].get<int>()];
+    float size;
+    std::memcpy(&size, bin + view["byteOffset"].get<size_t>() + acc.value("byteOffset", size_t{0}), 4);
+    EXPECT_NEAR(size, want.at(p["material"].get<uint32_t>()), 1e-6);
+  }
 }
 
 TEST(Materials, KeptPrimitiveTakesTheMaterialOfTheFirstInputPrimitiveInStoreOrder) {
@@ -491,9 +530,11 @@ TEST(Colors, LevelPlyReadsBackWithItsColoursAndMaterials) {
   m.materials[2].alpha = core::Material::Alpha::blend;
   m.materials[2].base_color[3] = 0.25f;
   m.triangle_materials = {2}, m.edge_materials = {1}, m.point_materials = {0};
+  m.point_size = {0.5f};
   test::TempDir tmp;
   io::write_ply(tmp.file("l.ply"), m, {"test"});
   const core::LodMesh r = io::read_lod_mesh(tmp.file("l.ply"));
+  EXPECT_EQ(r.point_size, m.point_size);
   EXPECT_EQ(r.colors, m.colors);
   EXPECT_EQ(r.materials, m.materials);
   EXPECT_EQ(r.triangle_materials, m.triangle_materials);

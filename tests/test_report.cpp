@@ -218,6 +218,34 @@ TEST(ReportExact, ALevelMovedByAnOffsetIsThatFarOff) {
   EXPECT_NEAR(v["hausdorff"]["max_percent_diagonal"].get<double>(), 100 * 0.01 / std::sqrt(2.0), 1e-4);
 }
 
+// A point is drawn at the size of what it replaces: a unit cube (4 to 7 pixels across at distance 14 in
+// 64 pixels) collapsed to one point at its centre is mostly covered by a point of size 1.2, and mostly
+// missed by the same point without a size (drawn one pixel wide, as before point sizes).
+TEST(ReportExact, APointIsDrawnAtItsSize) {
+  TempDir tmp;
+  std::string cube;
+  for (int i = 0; i < 8; ++i)
+    cube += std::string("v ") + (i & 1 ? "0.5" : "-0.5") + (i & 2 ? " 0.5" : " -0.5") + (i & 4 ? " 0.5\n" : " -0.5\n");
+  cube += "f 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n";
+  const std::string original = tmp.write("cube.obj", cube);
+  const std::string head = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n";
+  const std::string sized = tmp.write("sized.ply", head + "element point 1\nproperty uint vertex\nproperty float size\nend_header\n0 0 0\n0 1.2\n");
+  const std::string unsized = tmp.write("unsized.ply", head + "element point 1\nproperty uint vertex\nend_header\n0 0 0\n0\n");
+  auto mismatched = [&](const std::string& lod, const std::string& out) {
+    const CliRun r = run_cli(cat({"report", "--original", original, "--lod", lod, "--switch-distances", "14", "-o", tmp.file(out)}, kQuick), tmp);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    const json s = json::parse(read_file(tmp.file(out + "/report.json")))["runs"][0]["levels"][0]["silhouette"];
+    return std::pair(s["mismatched_pixels"].get<uint64_t>(), s["covered_pixels"].get<uint64_t>());
+  };
+  // covered: pixels covered by the original or the level (the unsized point lies inside the cube's).
+  const auto [with_size, covered_either] = mismatched(sized, "sized");
+  const auto [without, covered] = mismatched(unsized, "unsized");
+  EXPECT_GE(covered, 4u * 16u);  // 4 views, at least 4 x 4 pixels each
+  EXPECT_GT(without, covered * 3 / 4);
+  EXPECT_LT(with_size, covered / 3);
+  EXPECT_GE(covered_either, covered);
+}
+
 // A larger real scene (a building of ../shared/data, given as --lod files of its simplify output, so that
 // the distances come from the Hausdorff pass over the chunks too): the same bytes in one chunk and in many.
 TEST(ReportChunks, ABuildingInOneChunkAndInManyGivesTheSameBytes) {

@@ -141,6 +141,7 @@ struct Level {
   std::vector<std::array<uint32_t, 2>> edges;
   std::vector<float> thickness;
   std::vector<uint32_t> points;
+  std::vector<float> point_size;
   bool ok = false;
 
   F3 at(uint32_t v) const { return positions.at(v); }
@@ -177,13 +178,13 @@ Level read_level(const std::string& path) {
   const std::string rest =
       "element face\nproperty list uchar uint vertex_indices\n"
       "element edge\nproperty uint vertex1\nproperty uint vertex2\nproperty float thickness\n"
-      "element point\nproperty uint vertex\n";
+      "element point\nproperty uint vertex\nproperty float size\n";
   // With materials (io/ply_writer.h), face, edge and point each end with a uint material_index.
   const std::string m = "property uint material_index\n";
   const std::string rest_m =
       "element face\nproperty list uchar uint vertex_indices\n" + m +
       "element edge\nproperty uint vertex1\nproperty uint vertex2\nproperty float thickness\n" + m +
-      "element point\nproperty uint vertex\n" + m;
+      "element point\nproperty uint vertex\nproperty float size\n" + m;
   const bool materials = layout == "element vertex\n" + xyz + nxyz + rest_m || layout == "element vertex\n" + xyz + rest_m;
   const bool with_normals = layout == "element vertex\n" + xyz + nxyz + (materials ? rest_m : rest);
   if (!with_normals && layout != "element vertex\n" + xyz + (materials ? rest_m : rest)) {
@@ -222,8 +223,10 @@ Level read_level(const std::string& path) {
   }
   for (uint64_t i = 0; good && i < count["point"]; ++i) {
     uint32_t id = 0, material = 0;
-    good = take(&id, 4) && (!materials || take(&material, 4));
+    float size = 0;
+    good = take(&id, 4) && take(&size, 4) && (!materials || take(&material, 4));
     level.points.push_back(id);
+    level.point_size.push_back(size);
   }
   if (!good || p != stop) {
     ADD_FAILURE() << path << ": body does not match the header (" << (stop - p) << " bytes left)";
@@ -742,6 +745,12 @@ TEST(SimplifyDefaults, ExplicitLevelsAndSizesAreHonoured) {
     ASSERT_EQ(report.levels.size(), 3u);
     EXPECT_EQ(report.levels[2].points, 4u);
     EXPECT_TRUE(report.notice.empty()) << report.notice;
+    // Each point replaces one regular tetrahedron whose corners are sqrt(3) from their mean: its size (the
+    // diameter of what it replaces, twice the mean corner distance) is 2 sqrt(3).
+    const Level l2 = read_level(so.output_dir + "/lod2.ply");
+    ASSERT_TRUE(l2.ok);
+    ASSERT_EQ(l2.point_size.size(), 4u);
+    for (float size : l2.point_size) EXPECT_NEAR(size, 2 * std::sqrt(3.0), 1e-5);
   }
   // --cell-sizes: exactly those, even a level collapsed to one point.
   {
@@ -1414,6 +1423,38 @@ TEST(SimplifyThickEdge, SymmetricStripHasExactlyItsWidth) {
   EXPECT_EQ(std::max(e0[0], e1[0]), 4.0f);
   EXPECT_EQ(std::abs(e0[1]), 0.125f);
   EXPECT_EQ(std::abs(e1[1]), 0.125f);
+}
+
+// ---- points at their size (issue 14) over distinct corners ----
+
+// The size of the single point that `obj` (inside [0, 0.5]²) collapses to at cell size 2.
+float collapsed_point_size(const std::string& obj) {
+  test::TempDir tmp;
+  const std::string input = tmp.write("square.obj", obj);
+  SimplifyOptions so = make_simplify(tmp.file("out"));
+  so.cell_sizes = {2};
+  EXPECT_TRUE(simplify_ok(input, so, make_options(1)));
+  const Level l = read_level(tmp.file("out/lod0.ply"));
+  check_level(l, "square");
+  EXPECT_TRUE(l.triangles.empty());
+  EXPECT_TRUE(l.edges.empty());
+  EXPECT_EQ(l.point_size.size(), 1u);
+  return l.point_size.empty() ? -1.0f : l.point_size[0];
+}
+
+TEST(SimplifyPointSize, DistinctCornersCountOnceAsForAnEdge) {
+  // A square of side 0.5 fanned from its centre m = (0.25, 0.25): four triangles that use m four times and
+  // each corner twice. Over the distinct corners (as an edge's thickness, Low & Tan §3.3.1) the mean is m,
+  // the distances 0 and four times r = 0.25·sqrt(2): size 2·4r/5 = 0.4·sqrt(2). Counting a corner once per
+  // triangle would give 2·8r/12 = sqrt(2)/6 instead.
+  const double want = 0.4 * std::sqrt(2.0);
+  const std::string v = "v 0 0 0\nv 0.5 0 0\nv 0.5 0.5 0\nv 0 0.5 0\nv 0.25 0.25 0\n";
+  EXPECT_NEAR(collapsed_point_size(v + "f 5 1 2\nf 5 2 3\nf 5 3 4\nf 5 4 1\n"), want, 1e-6);
+  // The same fan with every corner written anew per triangle: the welded corners are the same five.
+  EXPECT_NEAR(collapsed_point_size("v 0.25 0.25 0\nv 0 0 0\nv 0.5 0 0\nv 0.25 0.25 0\nv 0.5 0 0\nv 0.5 0.5 0\n"
+                                   "v 0.25 0.25 0\nv 0.5 0.5 0\nv 0 0.5 0\nv 0.25 0.25 0\nv 0 0.5 0\nv 0 0 0\n"
+                                   "f 1 2 3\nf 4 5 6\nf 7 8 9\nf 10 11 12\n"),
+              want, 1e-6);
 }
 
 // ---- every model of ../shared/data ----

@@ -47,6 +47,7 @@ LodMesh small_level(bool with_normals) {
   m.edges = {3, 4, 4, 1};
   m.thickness = {0.25f, 1.0f / 3.0f};
   m.points = {5};
+  m.point_size = {0.125f};
   return m;
 }
 
@@ -83,15 +84,15 @@ TEST(WriterPly, ReadsBackThroughPlyReader) {
             "ply\nformat binary_little_endian 1.0\n"
             "comment lodstream test\n"
             "comment two lines \n"
-            "comment element point: one vertex index per point primitive\n"
+            "comment element point: one vertex index per point primitive, and its size (diameter, 0 = one pixel)\n"
             "element vertex 6\n"
             "property float x\nproperty float y\nproperty float z\n"
             "property float nx\nproperty float ny\nproperty float nz\n"
             "element face 2\nproperty list uchar uint vertex_indices\n"
             "element edge 2\nproperty uint vertex1\nproperty uint vertex2\nproperty float thickness\n"
-            "element point 1\nproperty uint vertex\n"
+            "element point 1\nproperty uint vertex\nproperty float size\n"
             "end_header\n");
-  ASSERT_EQ(bytes.size(), header.size() + 6 * 24 + 2 * 13 + 2 * 12 + 1 * 4);
+  ASSERT_EQ(bytes.size(), header.size() + 6 * 24 + 2 * 13 + 2 * 12 + 1 * 8);
 
   // Body, field by field.
   const char* p = bytes.data() + header.size();
@@ -115,8 +116,11 @@ TEST(WriterPly, ReadsBackThroughPlyReader) {
   EXPECT_EQ(thick, 1.0f / 3.0f);
   p += 2 * 12;
   uint32_t point;
+  float size;
   std::memcpy(&point, p, 4);
+  std::memcpy(&size, p + 4, 4);
   EXPECT_EQ(point, 5u);
+  EXPECT_EQ(size, 0.125f);
 }
 
 TEST(WriterPly, WithoutNormalsAndEmpty) {
@@ -334,11 +338,13 @@ TEST(WriterGlb, ContainerLodChainAndAccessors) {
   EXPECT_EQ(j["accessors"][line_pos]["min"], json::array({1.0, 0.0, -0.5}));
   EXPECT_EQ(j["accessors"][line_pos]["max"], json::array({2.0, 1.0, static_cast<double>(0.1f)}));
 
-  // POINTS: one vertex per point.
+  // POINTS: one vertex per point, with its size.
   const json& pts = prims[2];
   EXPECT_EQ(pts["mode"], 0);
-  const int pt_pos = pts["attributes"]["POSITION"];
+  const int pt_pos = pts["attributes"]["POSITION"], pt_size = pts["attributes"]["_SIZE"];
   EXPECT_EQ(j["accessors"][pt_pos]["count"], 1);
+  EXPECT_EQ(j["accessors"][pt_size]["type"], "SCALAR");
+  EXPECT_EQ(g.values<float>(pt_size), (std::vector<float>{0.125f}));
   EXPECT_EQ(g.values<float>(pt_pos), (std::vector<float>{-1e-7f, 3.14159274f, 1.5e10f}));
   EXPECT_EQ(j["accessors"][pt_pos]["min"], j["accessors"][pt_pos]["max"]);
   EXPECT_EQ(j["accessors"][pt_pos]["min"][2].get<double>(), static_cast<double>(1.5e10f));

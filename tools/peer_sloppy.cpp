@@ -2,7 +2,11 @@
 // core), run on a binary little-endian PLY file, to compare with `lodstream simplify`.
 // Standalone on purpose: it does not use the lodstream library, only libmeshoptimizer.
 //
-// usage: peer_sloppy FILE TARGET_TRIANGLES [--out OUT.ply] [--target-error E]
+// usage: peer_sloppy FILE TARGET_TRIANGLES [--out OUT.ply] [--target-error E] [--simplify]
+//
+// --simplify runs meshopt_simplify instead (Garland-Heckbert quadric edge collapse, topology kept): it
+// stops short of the target where no collapse is left within the error (separate parts are never merged),
+// so the triangle count it reaches is part of the result.
 //
 // Loads FILE (mmap; float x y z vertices, other vertex properties skipped by size; faces as
 // `list uchar|ushort|uint8|... int|uint vertex_indices`, fan-triangulated; other elements and other
@@ -374,7 +378,7 @@ Mesh load_ply(const char* path) {
 }
 
 // Writes the triangles `idx` with only the vertices they use, as binary little-endian PLY.
-void write_ply(const char* path, const std::vector<float>& pos, const uint32_t* idx, size_t index_count) {
+void write_ply(const char* path, const std::vector<float>& pos, const uint32_t* idx, size_t index_count, bool full) {
   const size_t nv = pos.size() / 3;
   std::vector<uint32_t> remap(nv);
   const size_t unique = meshopt_optimizeVertexFetchRemap(remap.data(), idx, index_count, nv);
@@ -384,10 +388,10 @@ void write_ply(const char* path, const std::vector<float>& pos, const uint32_t* 
   FILE* f = std::fopen(path, "wb");
   if (!f) die(std::string("cannot write ") + path);
   std::fprintf(f,
-               "ply\nformat binary_little_endian 1.0\ncomment meshopt_simplifySloppy (peer_sloppy)\n"
+               "ply\nformat binary_little_endian 1.0\ncomment %s (peer_sloppy)\n"
                "element vertex %zu\nproperty float x\nproperty float y\nproperty float z\n"
                "element face %zu\nproperty list uchar int vertex_indices\nend_header\n",
-               unique, index_count / 3);
+               full ? "meshopt_simplify" : "meshopt_simplifySloppy", unique, index_count / 3);
   std::fwrite(out_pos.data(), 4, out_pos.size(), f);
   std::vector<unsigned char> buf;
   buf.reserve(size_t(13) << 16);
@@ -413,17 +417,19 @@ int main(int argc, char** argv) {
   const char* out = nullptr;
   long long target = -1;
   float target_error = 1.0f;
+  bool full = false;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     if (a == "--out" && i + 1 < argc) out = argv[++i];
     else if (a == "--target-error" && i + 1 < argc) target_error = std::strtof(argv[++i], nullptr);
+    else if (a == "--simplify") full = true;
     else if (a == "-h" || a == "--help") { file = nullptr; break; }
     else if (!file) file = argv[i];
     else if (target < 0) target = std::atoll(argv[i]);
     else die("unexpected argument " + a);
   }
   if (!file || target < 0) {
-    std::fprintf(stderr, "usage: peer_sloppy FILE TARGET_TRIANGLES [--out OUT.ply] [--target-error E]\n");
+    std::fprintf(stderr, "usage: peer_sloppy FILE TARGET_TRIANGLES [--out OUT.ply] [--target-error E] [--simplify]\n");
     return 2;
   }
 
@@ -435,14 +441,16 @@ int main(int argc, char** argv) {
   float result_error = 0;
   const size_t target_indices = std::min<size_t>(index_count, size_t(target) * 3);
   const size_t out_count =
-      meshopt_simplifySloppy(dst.data(), mesh.indices.data(), index_count, mesh.positions.data(),
-                             mesh.positions.size() / 3, sizeof(float) * 3, target_indices, target_error, &result_error);
+      full ? meshopt_simplify(dst.data(), mesh.indices.data(), index_count, mesh.positions.data(), mesh.positions.size() / 3,
+                              sizeof(float) * 3, target_indices, target_error, 0, &result_error)
+           : meshopt_simplifySloppy(dst.data(), mesh.indices.data(), index_count, mesh.positions.data(),
+                                    mesh.positions.size() / 3, sizeof(float) * 3, target_indices, target_error, &result_error);
   const double t2 = now_s();
 
   size_t vertices_out = 0;
   double write_s = 0;
   if (out) {
-    write_ply(out, mesh.positions, dst.data(), out_count);
+    write_ply(out, mesh.positions, dst.data(), out_count, full);
     write_s = now_s() - t2;
   }
   {
@@ -451,10 +459,10 @@ int main(int argc, char** argv) {
     for (unsigned char s : seen) vertices_out += s;
   }
   std::printf(
-      "{\"tool\":\"meshopt_simplifySloppy\",\"load_s\":%.3f,\"simplify_s\":%.3f,\"write_s\":%.3f,"
+      "{\"tool\":\"%s\",\"load_s\":%.3f,\"simplify_s\":%.3f,\"write_s\":%.3f,"
       "\"total_s\":%.3f,\"triangles_in\":%zu,\"triangles_out\":%zu,\"vertices_in\":%zu,\"vertices_out\":%zu,"
       "\"target_triangles\":%lld,\"result_error\":%.6g,\"peak_rss_bytes\":%llu}\n",
-      t1 - t0, t2 - t1, write_s, (t2 - t0) + write_s, index_count / 3, out_count / 3,
+      full ? "meshopt_simplify" : "meshopt_simplifySloppy", t1 - t0, t2 - t1, write_s, (t2 - t0) + write_s, index_count / 3, out_count / 3,
       mesh.positions.size() / 3, vertices_out, target, result_error,
       static_cast<unsigned long long>(peak_rss_bytes()));
   return 0;
