@@ -79,12 +79,19 @@ Level read_ply(const std::string& path) {
   return l;
 }
 
-Json glb_json(const std::string& path) {
+// A GLB's JSON chunk, and its BIN chunk's bytes.
+struct GlbFile {
+  Json json;
+  std::string bin;
+};
+GlbFile read_glb(const std::string& path) {
   const std::string bytes = test::read_file(path);
   uint32_t n;
   std::memcpy(&n, bytes.data() + 12, 4);
-  return Json::parse(bytes.substr(20, n));
+  return {Json::parse(bytes.substr(20, n)), bytes.substr(20 + n + 8)};
 }
+
+Json glb_json(const std::string& path) { return read_glb(path).json; }
 
 Result run(const std::string& input, const std::string& out, std::vector<double> sizes, bool obj = true) {
   SimplifyOptions so;
@@ -157,11 +164,9 @@ TEST(Materials, CollapsedPointsKeepTheirMaterialAndSizeInPlyAndGlb) {
   ASSERT_EQ(l.point_materials.size(), 2u);
   for (size_t i = 0; i < 2; ++i) EXPECT_NEAR(l.point_size[i], want.at(l.point_materials[i]), 1e-6) << i;
   // GLB: one POINTS primitive per material, each with its own _SIZE accessor holding its point's size.
-  const std::string bytes = test::read_file(tmp.file("out/lods.glb"));
-  uint32_t n;
-  std::memcpy(&n, bytes.data() + 12, 4);
-  const Json g = Json::parse(bytes.substr(20, n));
-  const char* bin = bytes.data() + 20 + n + 8;
+  const GlbFile glb = read_glb(tmp.file("out/lods.glb"));
+  const Json& g = glb.json;
+  const char* bin = glb.bin.data();
   const Json& prims = g["meshes"][0]["primitives"];
   ASSERT_EQ(prims.size(), 2u);
   for (const Json& p : prims) {

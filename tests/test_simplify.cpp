@@ -1353,16 +1353,22 @@ TEST(SimplifyLinesAndPoints, SegmentsBecomeEdgesOrPointsAndCoveredOnesAreElimina
 
 // ---- 9: thick edges ----
 
-// The thickness of the single edge that `obj` (one thin strip between x = 0 and x = 4) collapses to at
-// cell size 2.
-float strip_thickness(const std::string& obj) {
+// The one level of `obj` simplified at cell size 2 (one thread), checked as a level.
+Level level_at_cell_size_2(const std::string& name, const std::string& obj) {
   test::TempDir tmp;
-  const std::string input = tmp.write("strip.obj", obj);
+  const std::string input = tmp.write(name + ".obj", obj);
   SimplifyOptions so = make_simplify(tmp.file("out"));
   so.cell_sizes = {2};
   EXPECT_TRUE(simplify_ok(input, so, make_options(1)));
   const Level l = read_level(tmp.file("out/lod0.ply"));
-  check_level(l, "strip");
+  check_level(l, name);
+  return l;
+}
+
+// The thickness of the single edge that `obj` (one thin strip between x = 0 and x = 4) collapses to at
+// cell size 2.
+float strip_thickness(const std::string& obj) {
+  const Level l = level_at_cell_size_2("strip", obj);
   EXPECT_TRUE(l.triangles.empty());
   EXPECT_TRUE(l.points.empty());
   EXPECT_EQ(l.edges.size(), 1u);
@@ -1406,15 +1412,8 @@ TEST(SimplifyThickEdge, RepeatedPositionsCountOnce) {
 TEST(SimplifyThickEdge, SymmetricStripHasExactlyItsWidth) {
   // The same strip, ±h = ±0.125 about the x axis, as four triangles that use each end vertex three times:
   // P_A = (0,0,0), P_B = (4,0,0), every corner exactly h from the x axis: thickness = 2h = 0.25 exactly.
-  test::TempDir tmp;
-  const std::string input = tmp.write("strip.obj",
-                                      "v 0 -0.125 0\nv 0 0.125 0\nv 4 -0.125 0\nv 4 0.125 0\n"  // a0 a1 b0 b1
-                                      "f 1 3 4\nf 1 4 2\nf 2 1 3\nf 2 3 4\n");
-  SimplifyOptions so = make_simplify(tmp.file("out"));
-  so.cell_sizes = {2};
-  ASSERT_TRUE(simplify_ok(input, so, make_options(1)));
-  const Level l = read_level(tmp.file("out/lod0.ply"));
-  check_level(l, "strip");
+  const Level l = level_at_cell_size_2("strip", "v 0 -0.125 0\nv 0 0.125 0\nv 4 -0.125 0\nv 4 0.125 0\n"  // a0 a1 b0 b1
+                                                "f 1 3 4\nf 1 4 2\nf 2 1 3\nf 2 3 4\n");
   EXPECT_TRUE(l.triangles.empty());
   ASSERT_EQ(l.edges.size(), 1u);
   EXPECT_EQ(l.thickness[0], 0.25f);
@@ -1429,13 +1428,7 @@ TEST(SimplifyThickEdge, SymmetricStripHasExactlyItsWidth) {
 
 // The size of the single point that `obj` (inside [0, 0.5]²) collapses to at cell size 2.
 float collapsed_point_size(const std::string& obj) {
-  test::TempDir tmp;
-  const std::string input = tmp.write("square.obj", obj);
-  SimplifyOptions so = make_simplify(tmp.file("out"));
-  so.cell_sizes = {2};
-  EXPECT_TRUE(simplify_ok(input, so, make_options(1)));
-  const Level l = read_level(tmp.file("out/lod0.ply"));
-  check_level(l, "square");
+  const Level l = level_at_cell_size_2("square", obj);
   EXPECT_TRUE(l.triangles.empty());
   EXPECT_TRUE(l.edges.empty());
   EXPECT_EQ(l.point_size.size(), 1u);
