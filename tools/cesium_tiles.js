@@ -19,13 +19,7 @@ const fs = require('fs');
 const http = require('http');
 const path = require('path');
 
-function findModule(name) {
-  const dirs = [];
-  if (process.env.LODSTREAM_NPM_PREFIX) dirs.push(path.join(process.env.LODSTREAM_NPM_PREFIX, 'node_modules'));
-  if (process.env.HOME) dirs.push(path.join(process.env.HOME, '.cache', 'lodstream-npm', 'node_modules'));
-  for (const dir of dirs) if (fs.existsSync(path.join(dir, name, 'package.json'))) return path.join(dir, name);
-  return null;
-}
+const { findModule } = require('./npm_modules');
 
 const types = {'.js': 'text/javascript', '.css': 'text/css', '.json': 'application/json', '.glb': 'model/gltf-binary',
                '.html': 'text/html', '.png': 'image/png', '.wasm': 'application/wasm'};

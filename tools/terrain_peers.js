@@ -29,20 +29,11 @@ const fs = require('fs');
 const path = require('path');
 const { pathToFileURL } = require('url');
 
-function moduleDir(name) {
-  const dirs = [];
-  if (process.env.LODSTREAM_NPM_PREFIX) dirs.push(path.join(process.env.LODSTREAM_NPM_PREFIX, 'node_modules'));
-  if (process.env.HOME) dirs.push(path.join(process.env.HOME, '.cache', 'lodstream-npm', 'node_modules'));
-  for (const dir of dirs) {
-    const m = path.join(dir, name);
-    if (fs.existsSync(path.join(m, 'package.json'))) return m;
-  }
-  return null;
-}
+const { findModule } = require('./npm_modules');
 
 // delatin is an ES module only; Martini and pngjs are CommonJS.
 async function load(name) {
-  const dir = moduleDir(name);
+  const dir = findModule(name);
   if (!dir) return null;
   const pkg = JSON.parse(fs.readFileSync(path.join(dir, 'package.json'), 'utf8'));
   if (pkg.type === 'module') {

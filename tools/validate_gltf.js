@@ -15,15 +15,11 @@
 const fs = require('fs');
 const path = require('path');
 
+const { findModule } = require('./npm_modules');
+
 function loadValidator() {
-  const dirs = [];
-  if (process.env.LODSTREAM_NPM_PREFIX) dirs.push(path.join(process.env.LODSTREAM_NPM_PREFIX, 'node_modules'));
-  if (process.env.HOME) dirs.push(path.join(process.env.HOME, '.cache', 'lodstream-npm', 'node_modules'));
-  for (const dir of dirs) {
-    const module = path.join(dir, 'gltf-validator');
-    if (fs.existsSync(path.join(module, 'package.json'))) return require(module);
-  }
-  return null;
+  const module = findModule('gltf-validator');
+  return module ? require(module) : null;
 }
 
 async function main() {
