@@ -508,8 +508,6 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           stream::run_ingest_stage(input, store_dir, plan, work, progress, &report.stages, &report.scene, &reused);
       if (meta.primitives() == 0)
         fail(Status::bad_data, input + ": nothing to simplify (no triangles, lines or points)");
-      shard_store = {{"materials", ordered_json::array()}, {"colors", meta.colors}};
-      for (const core::Material& mat : meta.materials) shard_store["materials"].push_back(stream::material_json(mat));
 
       // Grade and sort.
       const std::string canonical_path = work.file("weld.map");
@@ -817,6 +815,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         if (so.shard_prepare) return;
         if (so.write_tiles)
           shard_tiles = stream::tiles_options_json(tiles_options(so, meta, sizes.size(), std::string("lodstream ") + LODSTREAM_VERSION));
+        shard_store = {{"materials", ordered_json::array()}, {"colors", meta.colors}};
+        for (const core::Material& mat : meta.materials) shard_store["materials"].push_back(stream::material_json(mat));
       }
 
       // Emit and write. Each level's PLY and OBJ files and its part of the GLB are written as soon as the
