@@ -309,7 +309,6 @@ void GltfReader::check_extensions() {
     fail(Status::usage, file_.path() + ": /extensionsRequired: unsupported glTF extension(s): " + unsupported);
 }
 
-
 void GltfReader::load_buffers() {
   const json& list = member(doc_, "buffers", "");
   if (list.is_null()) return;

@@ -6,11 +6,12 @@
 #include <charconv>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 #include <utility>
 #include <vector>
 
+#include "core/status.h"
+#include "io/file_writer.h"
 #include "io/texture_mean.h"
 
 namespace lodstream::io {
@@ -111,11 +112,13 @@ void MtlLibraries::read(const std::string& obj_path, const std::string& names) {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(path, ec) || std::filesystem::file_size(path, ec) > kMaxLibraryBytes || ec)
       continue;
-    std::ifstream in(path, std::ios::binary);
-    if (!in) continue;
-    std::ostringstream text;
-    text << in.rdbuf();
-    parse(text.str(), std::filesystem::path(path).parent_path().string());
+    std::string text;
+    try {
+      text = read_small_file(path);
+    } catch (const Failure&) {
+      continue;  // an unreadable library leaves its materials at the defaults, like a missing one
+    }
+    parse(text, std::filesystem::path(path).parent_path().string());
   }
 }
 

@@ -585,8 +585,8 @@ class ObjReader final : public Reader {
 
     // Objects and materials: local 0 = the state at the chunk start, i = after the i-th o/g/usemtl/mtllib.
     if (chunk->object_names.empty()) {
-      fill(chunk, current_object_);
       if (!materials_.empty()) fill_materials(chunk, {current_material_});
+      fill(chunk, current_object_);
     } else {
       local_.assign(1, current_object_);
       local_materials_.assign(1, current_material_);
@@ -649,11 +649,12 @@ class ObjReader final : public Reader {
     current_material_ = it->second;
   }
 
-  // Per primitive, its material from its chunk-local id (the primitives' object ids are still local here).
+  // Per primitive, its material from its chunk-local id (the primitives' object ids are still local here:
+  // all 0 when the chunk names no object or material).
   static void fill_materials(ParsedChunk* chunk, const std::vector<uint32_t>& local) {
     auto fill_kind = [&](const std::vector<uint32_t>& objects, std::vector<uint32_t>& materials) {
       materials.resize(objects.size());
-      for (size_t i = 0; i < objects.size(); ++i) materials[i] = local.size() == 1 ? local[0] : local[objects[i]];
+      for (size_t i = 0; i < objects.size(); ++i) materials[i] = local[objects[i]];
     };
     fill_kind(chunk->triangle_objects, chunk->triangle_materials);
     fill_kind(chunk->line_objects, chunk->line_materials);

@@ -634,18 +634,17 @@ bool PlyReader::emit_face(int64_t* idx, uint64_t n, ParsedChunk* out, std::strin
   return true;
 }
 
-
 template <bool Swap>
 void PlyReader::fixed_colors(const char* p, uint64_t n, const Element& e, ParsedChunk* out) const {
-  for (uint64_t i = 0; i < n; ++i, p += e.record_size)
-    for (int c = 0; c < 4; ++c) {
-      if (e.pc[c] < 0) {
-        out->colors.push_back(255);
-        continue;
+  const size_t at = out->colors.size();
+  out->colors.resize(at + 4 * n, 255);  // no alpha property: 255
+  uint8_t* rgba = out->colors.data() + at;
+  for (uint64_t i = 0; i < n; ++i, p += e.record_size, rgba += 4)
+    for (int c = 0; c < 4; ++c)
+      if (e.pc[c] >= 0) {
+        const Property& pr = e.props[e.pc[c]];
+        rgba[c] = color_byte(load_double<Swap>(p + pr.offset, pr.type), pr.type);
       }
-      const Property& pr = e.props[e.pc[c]];
-      out->colors.push_back(color_byte(load_double<Swap>(p + pr.offset, pr.type), pr.type));
-    }
 }
 
 template <typename T, bool Swap>

@@ -19,6 +19,9 @@
 #include <fstream>
 #include <sstream>
 
+#include "core/status.h"
+#include "io/file_writer.h"
+
 namespace lodstream::serve {
 namespace {
 
@@ -64,27 +67,6 @@ double step_fraction(const std::string& step, const std::string& stage, double f
 const char* signal_text(int sig) {
   const char* s = ::sigdescr_np(sig);
   return s ? s : "unknown signal";
-}
-
-bool write_file_atomically(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) return false;
-  size_t done = 0;
-  while (done < text.size()) {
-    const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      ::close(fd);
-      return false;
-    }
-    done += static_cast<size_t>(n);
-  }
-  // The rename must not reach the disk before the bytes do: a server killed now (or the machine) must
-  // find either the old state or the new one.
-  const bool ok = ::fsync(fd) == 0;
-  ::close(fd);
-  return ok && ::rename(tmp.c_str(), path.c_str()) == 0;
 }
 
 }  // namespace
@@ -219,8 +201,12 @@ void JobManager::save(const Job& job) {
                             {"progress", job.progress}, {"step", job.step},             {"runs", job.runs},
                             {"created", job.created},   {"started", job.started},       {"finished", job.finished},
                             {"updated", job.updated}};
-  if (!write_file_atomically(job_dir(job.id) + "/job.json", j.dump()))
-    std::fprintf(stderr, "lodstream serve: cannot write %s/job.json: %s\n", job_dir(job.id).c_str(), std::strerror(errno));
+  // Durable: a server killed now (or the machine) finds either the old state or the new one.
+  try {
+    io::write_file_atomic(job_dir(job.id) + "/job.json", j.dump(), io::Sync::durable);
+  } catch (const Failure& e) {
+    std::fprintf(stderr, "lodstream serve: %s\n", e.what());
+  }
 }
 
 ojson JobManager::status_info(const Job& job) const {

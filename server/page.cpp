@@ -187,10 +187,6 @@ document.getElementById("f").addEventListener("submit", ev => {
   return page;
 }
 
-}  // namespace lodstream::serve
-
-namespace lodstream::serve {
-
 // 3D Tiles 1.1 (OGC 22-025r4): a tile is refined while its screen-space error, geometricError x viewport
 // height / (distance x 2 tan(fov / 2)), exceeds 16 pixels; REPLACE draws the children instead of the tile
 // once all of them are loaded (the tile meanwhile), ADD draws both. glTF content is y-up and turned z-up

@@ -5,10 +5,12 @@
 // validator would ignore.
 #include "server/processes.h"
 
+#include <algorithm>
 #include <climits>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <initializer_list>
 #include <map>
 
 #include <sys/stat.h>
@@ -173,6 +175,8 @@ bool check(const nlohmann::json& value, const ojson& schema, const std::string& 
   return true;
 }
 
+std::string string_text(const nlohmann::json& v) { return v.get<std::string>(); }
+
 std::string number_text(const nlohmann::json& v) {
   // A JSON number's own shortest text, so that the child reads back exactly the value sent.
   return v.dump();
@@ -185,13 +189,6 @@ std::string list_text(const nlohmann::json& a) {
     s += number_text(v);
   }
   return s;
-}
-
-bool is_hex_id(const std::string& s) {
-  if (s.size() != 32) return false;
-  for (char c : s)
-    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) return false;
-  return true;
 }
 
 }  // namespace
@@ -207,14 +204,25 @@ const std::vector<std::string>& process_ids() {
   return ids;
 }
 
+bool is_job_id(const std::string& s) {
+  if (s.size() != 32) return false;
+  for (char c : s)
+    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) return false;
+  return true;
+}
+
+std::string canonical(const std::string& path) {
+  char* r = ::realpath(path.c_str(), nullptr);
+  if (!r) return {};
+  std::string s(r);
+  std::free(r);
+  return s;
+}
 
 std::string resolve_under(const std::string& root, const std::string& path) {
   if (path.empty() || path.find('\0') != std::string::npos) return {};
   const fs::path joined = fs::path(path).is_absolute() ? fs::path(path) : fs::path(root) / path;
-  char* real = ::realpath(joined.c_str(), nullptr);
-  if (!real) return {};
-  std::string r(real);
-  std::free(real);
+  const std::string r = canonical(joined.string());
   if (r.size() <= root.size() || r.compare(0, root.size(), root) != 0 || r[root.size()] != '/') return {};
   struct stat st {};
   if (::stat(r.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) return {};
@@ -284,70 +292,66 @@ bool plan_job(const std::string& process, const nlohmann::json& body, const Plan
   const std::string out_dir = ctx.job_dir + "/out", work = ctx.job_dir + "/work";
   std::vector<std::string> common = {"--memory", std::to_string(memory), "--threads", std::to_string(ctx.job_threads),
                                      "--progress", "json"};
-  auto with_common = [&](std::vector<std::string> argv, const std::string& step) {
+  auto add_step = [&](std::vector<std::string> argv, const std::string& step) {
     argv.insert(argv.end(), common.begin(), common.end());
     argv.push_back("--work");
     argv.push_back(work + "/" + step);
-    return argv;
+    plan->steps.push_back(std::move(argv));
+    plan->step_names.push_back(step);
+  };
+  // Each given input as "--<name with '-' for '_'> <text>", in the order listed.
+  auto pass = [&](std::vector<std::string>& argv, std::initializer_list<const char*> names,
+                  std::string (*text)(const nlohmann::json&)) {
+    for (const char* name : names)
+      if (inputs.contains(name)) {
+        std::string flag = std::string("--") + name;
+        std::replace(flag.begin(), flag.end(), '_', '-');
+        argv.insert(argv.end(), {flag, text(inputs[name])});
+      }
   };
 
   if (process == "simplify") {
     std::string path;
     if (!scene_path(&path)) return false;
     std::vector<std::string> a = {"simplify", path, "-o", out_dir};
-    for (const char* opt : {"grading", "clustering", "cell", "variant", "representative"})
-      if (inputs.contains(opt)) a.insert(a.end(), {std::string("--") + opt, inputs[opt].get<std::string>()});
-    if (inputs.contains("levels")) a.insert(a.end(), {"--levels", number_text(inputs["levels"])});
-    if (inputs.contains("cell_sizes")) a.insert(a.end(), {"--cell-sizes", list_text(inputs["cell_sizes"])});
-    if (inputs.contains("target_triangles")) a.insert(a.end(), {"--target-triangles", list_text(inputs["target_triangles"])});
-    if (inputs.contains("fov")) a.insert(a.end(), {"--fov", number_text(inputs["fov"])});
-    if (inputs.contains("resolution")) a.insert(a.end(), {"--resolution", number_text(inputs["resolution"])});
-    if (inputs.contains("pixels_per_cell")) a.insert(a.end(), {"--pixels-per-cell", number_text(inputs["pixels_per_cell"])});
+    pass(a, {"grading", "clustering", "cell", "variant", "representative"}, string_text);
+    pass(a, {"levels"}, number_text);
+    pass(a, {"cell_sizes", "target_triangles"}, list_text);
+    pass(a, {"fov", "resolution", "pixels_per_cell"}, number_text);
     if (inputs.value("obj", false)) a.push_back("--obj");
     // Float tiles: the job's viewer (server/page.cpp) parses GLBs itself and reads neither
     // KHR_mesh_quantization nor EXT_meshopt_compression.
     if (inputs.value("tiles", false)) a.insert(a.end(), {"--tiles", "--tile-encoding", "plain"});
-    if (inputs.contains("tiles_up")) a.insert(a.end(), {"--tiles-up", inputs["tiles_up"].get<std::string>()});
-    if (inputs.contains("tile_triangles")) a.insert(a.end(), {"--tile-triangles", number_text(inputs["tile_triangles"])});
-    plan->steps.push_back(with_common(a, "simplify"));
-    plan->step_names.push_back("simplify");
+    pass(a, {"tiles_up"}, string_text);
+    pass(a, {"tile_triangles"}, number_text);
+    add_step(a, "simplify");
     if (inputs.value("report", true)) {
       std::vector<std::string> r = {"report", out_dir};
-      for (const char* opt : {"views", "samples"})
-        if (inputs.contains(opt)) r.insert(r.end(), {std::string("--") + opt, number_text(inputs[opt])});
-      plan->steps.push_back(with_common(r, "report"));
-      plan->step_names.push_back("report");
+      pass(r, {"views", "samples"}, number_text);
+      add_step(r, "report");
     }
     return true;
   }
   if (process == "report") {
     const std::string job = inputs["job"].get<std::string>();
-    const std::string manifest = is_hex_id(job) ? resolve_under(ctx.jobs_dir, job + "/out/manifest.json") : std::string();
+    const std::string manifest = is_job_id(job) ? resolve_under(ctx.jobs_dir, job + "/out/manifest.json") : std::string();
     if (manifest.empty()) {
       *error = {"inputs.job", "inputs.job: no successful simplify job '" + job + "'"};
       return false;
     }
     std::vector<std::string> r = {"report", ctx.jobs_dir + "/" + job + "/out", "-o", out_dir};
-    for (const char* opt : {"views", "resolution", "samples", "seed"})
-      if (inputs.contains(opt)) r.insert(r.end(), {std::string("--") + opt, number_text(inputs[opt])});
-    plan->steps.push_back(with_common(r, "report"));
-    plan->step_names.push_back("report");
+    pass(r, {"views", "resolution", "samples", "seed"}, number_text);
+    add_step(r, "report");
     return true;
   }
   std::string path;
   if (!scene_path(&path)) return false;
   std::vector<std::string> g = {"grid", path, "-o", out_dir};
-  for (const char* opt : {"split", "gaps", "method"})
-    if (inputs.contains(opt)) g.insert(g.end(), {std::string("--") + opt, inputs[opt].get<std::string>()});
-  if (inputs.contains("tolerance")) g.insert(g.end(), {"--tolerance", number_text(inputs["tolerance"])});
-  if (inputs.contains("divide")) g.insert(g.end(), {"--divide", number_text(inputs["divide"])});
-  if (inputs.contains("target_polygons")) g.insert(g.end(), {"--target-polygons", number_text(inputs["target_polygons"])});
-  if (inputs.contains("z_scale")) g.insert(g.end(), {"--z-scale", number_text(inputs["z_scale"])});
-  if (inputs.contains("spacing")) g.insert(g.end(), {"--spacing", number_text(inputs["spacing"])});
+  pass(g, {"split", "gaps", "method"}, string_text);
+  pass(g, {"tolerance", "divide", "target_polygons", "z_scale", "spacing"}, number_text);
   if (inputs.value("merge", false)) g.push_back("--merge");
   if (inputs.value("cylindrical", false)) g.push_back("--cylindrical");
-  plan->steps.push_back(with_common(g, "grid"));
-  plan->step_names.push_back("grid");
+  add_step(g, "grid");
   return true;
 }
 

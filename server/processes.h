@@ -45,6 +45,11 @@ struct PlanError {
 bool plan_job(const std::string& process, const nlohmann::json& body, const PlanContext& ctx, JobPlan* plan,
               PlanError* error);
 
+// A job or upload id as the server makes them: 32 lowercase hex digits.
+bool is_job_id(const std::string& s);
+
+// realpath(3) of `path`; empty when it does not resolve.
+std::string canonical(const std::string& path);
 
 // The canonical path of `path` when it names an existing regular file under `root` (both canonical);
 // empty otherwise. Symlinks are followed, so a link under the root that points outside is refused.

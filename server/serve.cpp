@@ -133,27 +133,12 @@ bool nesting_within(const std::string& text, int max_depth) {
   return true;
 }
 
-bool is_job_id(const std::string& s) {
-  if (s.size() != 32) return false;
-  for (char c : s)
-    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) return false;
-  return true;
-}
-
 // A file name for an upload: letters, digits, '.', '_', '-', not starting with '.', with an extension.
 bool safe_name(const std::string& s) {
   if (s.empty() || s.size() > 128 || s[0] == '.' || s.find('.') == std::string::npos) return false;
   for (char c : s)
     if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-')) return false;
   return true;
-}
-
-std::string canonical(const std::string& path) {
-  char* r = ::realpath(path.c_str(), nullptr);
-  if (!r) return {};
-  std::string s(r);
-  std::free(r);
-  return s;
 }
 
 uint64_t half_of_ram() {

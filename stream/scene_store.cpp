@@ -170,7 +170,6 @@ core::Material material_from_json(const ordered_json& j) {
   return m;
 }
 
-
 std::string store_meta_json(const StoreMeta& m) {
   ordered_json j;
   j["version"] = store_version;
