@@ -495,6 +495,10 @@ int run(const ServeOptions& o) {
       return send_problem(res, write_failed || !closed ? 507 : 400, "upload-failed", "the upload did not complete");
     }
     fs::rename(tmp, dir + "/" + name, mk);
+    if (mk) {
+      fs::remove_all(dir, mk);
+      return send_problem(res, 507, "insufficient-storage", "cannot keep the upload's file");
+    }
     send_json(res, 201, {{"input", "upload:" + id + "/" + name}, {"bytes", bytes}});
   });
 
