@@ -180,6 +180,11 @@ class Plan {
   int add_positions(const core::LodMesh& mesh, const std::vector<uint32_t>& ids) {
     const int a = add(ids.size(), 3, kFloat, "VEC3", kArrayBuffer);
     Json& accessor = accessors_[static_cast<size_t>(a)];
+    // Both keys first, so that neither pointer below is taken before the other key's insertion (which may
+    // move an ordered_json's members), and so that their order does not rest on the unspecified order of
+    // argument evaluation: "max" before "min", as GCC's right-to-left order wrote them all along.
+    accessor["max"] = Json::array();
+    accessor["min"] = Json::array();
     bounds(mesh, ids, &accessor["min"], &accessor["max"]);
     return a;
   }

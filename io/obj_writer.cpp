@@ -62,83 +62,6 @@ std::string mtl_path(const std::string& obj_path) {
   return (p.parent_path() / p.stem()).string() + ".mtl";
 }
 
-void write_obj(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments) {
-  if (const std::string v = core::convention_violation(mesh); !v.empty())
-    fail(Status::internal, path + ": cannot write level: " + v);
-  const bool normals = !mesh.normals.empty();
-
-  const bool materials = !mesh.materials.empty(), colors = !mesh.colors.empty();
-  // The library first, so that an OBJ under its final name always has its MTL.
-  if (materials) write_file_atomic(mtl_path(path), mtl_text(mesh.materials), Sync::durable);
-  FileWriter out(path, 1 << 20, Sync::durable);
-  for (const std::string& c : comments) {
-    std::string line = "# ";
-    for (char ch : c) line += static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f ? ' ' : ch;
-    line += '\n';
-    out.write(line);
-  }
-  if (materials) out.write("mtllib " + std::filesystem::path(mtl_path(path)).filename().string() + "\n");
-  uint32_t current = UINT32_MAX;
-  auto use = [&](uint32_t m) {
-    if (m == current) return;
-    out.write("usemtl " + mtl_name(m, mesh.materials[m]) + "\n");
-    current = m;
-  };
-
-  Line line;
-  auto xyz = [&](const char* tag, const std::vector<float>& a, uint64_t v) {
-    line.text(tag);
-    for (int c = 0; c < 3; ++c) {
-      line.text(" ");
-      line.number(a[3 * v + c]);
-    }
-    line.finish(out);
-  };
-  for (uint64_t v = 0; v < mesh.vertex_count(); ++v) {
-    if (!colors) {
-      xyz("v", mesh.positions, v);
-      continue;
-    }
-    // The common `v x y z r g b` extension (colours 0..1); alpha has no place in it.
-    line.text("v");
-    for (int c = 0; c < 3; ++c) line.text(" "), line.number(mesh.positions[3 * v + c]);
-    for (int c = 0; c < 3; ++c) line.text(" "), line.number(static_cast<float>(mesh.colors[4 * v + c]) / 255.0f);
-    line.finish(out);
-  }
-  if (normals)
-    for (uint64_t v = 0; v < mesh.vertex_count(); ++v) xyz("vn", mesh.normals, v);
-
-  for (uint64_t t = 0; t < mesh.triangle_count(); ++t) {
-    if (materials) use(mesh.triangle_materials[t]);
-    line.text("f");
-    for (int c = 0; c < 3; ++c) {
-      const uint64_t id = uint64_t{mesh.triangles[3 * t + c]} + 1;
-      line.text(" ");
-      line.number(id);
-      if (normals) {
-        line.text("//");
-        line.number(id);
-      }
-    }
-    line.finish(out);
-  }
-  for (uint64_t e = 0; e < mesh.edge_count(); ++e) {
-    if (materials) use(mesh.edge_materials[e]);
-    line.text("l ");
-    line.number(uint64_t{mesh.edges[2 * e]} + 1);
-    line.text(" ");
-    line.number(uint64_t{mesh.edges[2 * e + 1]} + 1);
-    line.finish(out);
-  }
-  for (uint64_t i = 0; i < mesh.point_count(); ++i) {
-    if (materials) use(mesh.point_materials[i]);
-    line.text("p ");
-    line.number(uint64_t{mesh.points[i]} + 1);
-    line.finish(out);
-  }
-  out.commit();
-}
-
 struct ObjStream::State {
   FileWriter out;
   Line line;
@@ -164,6 +87,7 @@ ObjStream::ObjStream(const std::string& path, const std::vector<std::string>& co
 
 void ObjStream::vertex(const float* xyz, const uint8_t* rgba) {
   Line& line = state_->line;
+  // The common `v x y z r g b` extension (colours 0..1); alpha has no place in it.
   line.text("v");
   for (int c = 0; c < 3; ++c) line.text(" "), line.number(xyz[c]);
   for (int c = 0; c < 3; ++c) line.text(" "), line.number(static_cast<float>(rgba[c]) / 255.0f);
@@ -220,5 +144,32 @@ void ObjStream::point(uint64_t p) {
 }
 
 void ObjStream::commit() { state_->out.commit(); }
+
+void write_obj(const std::string& path, const core::LodMesh& mesh, const std::vector<std::string>& comments) {
+  if (const std::string v = core::convention_violation(mesh); !v.empty())
+    fail(Status::internal, path + ": cannot write level: " + v);
+  const bool normals = !mesh.normals.empty(), materials = !mesh.materials.empty(), colors = !mesh.colors.empty();
+  ObjStream out(path, comments, mesh.materials);
+  for (uint64_t v = 0; v < mesh.vertex_count(); ++v) {
+    if (colors) out.vertex(&mesh.positions[3 * v], &mesh.colors[4 * v]);
+    else out.vec3("v", &mesh.positions[3 * v]);
+  }
+  if (normals)
+    for (uint64_t v = 0; v < mesh.vertex_count(); ++v) out.vec3("vn", &mesh.normals[3 * v]);
+  for (uint64_t t = 0; t < mesh.triangle_count(); ++t) {
+    if (materials) out.use(mesh.triangle_materials[t]);
+    const uint64_t ids[3] = {mesh.triangles[3 * t], mesh.triangles[3 * t + 1], mesh.triangles[3 * t + 2]};
+    out.face(ids, normals);
+  }
+  for (uint64_t e = 0; e < mesh.edge_count(); ++e) {
+    if (materials) out.use(mesh.edge_materials[e]);
+    out.line(mesh.edges[2 * e], mesh.edges[2 * e + 1]);
+  }
+  for (uint64_t i = 0; i < mesh.point_count(); ++i) {
+    if (materials) out.use(mesh.point_materials[i]);
+    out.point(mesh.points[i]);
+  }
+  out.commit();
+}
 
 }  // namespace lodstream::io

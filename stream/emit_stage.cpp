@@ -450,6 +450,7 @@ void build_parts(LevelState& L, const std::vector<float>& thickness, const std::
               [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
 
   std::vector<uint32_t> local(v.slot.size(), UINT32_MAX);
+  std::vector<uint32_t> numbered;  // the vertices `local` numbers for the current part
   for (uint32_t r = 0; r < regions; ++r) {
     RegionPart part;
     part.region = first + r;
@@ -460,6 +461,7 @@ void build_parts(LevelState& L, const std::vector<float>& thickness, const std::
     auto add = [&](uint32_t i) {
       if (local[i] == UINT32_MAX) {
         local[i] = static_cast<uint32_t>(part.vertex_key.size());
+        numbered.push_back(i);
         part.vertex_key.push_back(key(i));
         position(i, mesh.positions);
         mesh.normals.insert(mesh.normals.end(), &v.normals[3 * uint64_t{i}], &v.normals[3 * uint64_t{i}] + 3);
@@ -491,13 +493,8 @@ void build_parts(LevelState& L, const std::vector<float>& thickness, const std::
     L.counts.triangles += mesh.triangle_count();
     L.counts.edges += mesh.edge_count();
     L.counts.points += mesh.point_count();
-    // Reset the numbering for the next region: the vertices this part used are those of its triangles,
-    // edges and points.
-    for (uint32_t t : triangles.of(r))
-      for (int k = 0; k < 3; ++k) local[v.triangles[3 * uint64_t{t} + k]] = UINT32_MAX;
-    for (uint32_t e : edges.of(r))
-      for (uint32_t c : L.kept_edges[e]) local[v.end_vertex[s.slot_of[c]]] = UINT32_MAX;
-    for (uint32_t p : points.of(r)) local[v.end_vertex[s.slot_of[L.kept_points[p]]]] = UINT32_MAX;
+    for (uint32_t i : numbered) local[i] = UINT32_MAX;
+    numbered.clear();
     sink(part);
   }
 }

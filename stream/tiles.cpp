@@ -33,16 +33,17 @@ struct Record {
   std::string uri;
 };
 
-uint64_t morton(uint32_t x, uint32_t y, uint32_t z) {
-  uint64_t m = 0;
-  for (int b = 0; b < 21; ++b)
-    m |= (uint64_t{x} >> b & 1) << (3 * b) | (uint64_t{y} >> b & 1) << (3 * b + 1) | (uint64_t{z} >> b & 1) << (3 * b + 2);
-  return m;
-}
+core::RegionKey node_of(const TileRegion& g) { return core::RegionKey{g.depth, g.x, g.y, g.z}; }
 
 // How far snapping to the level's grid moves a point (0 for plain tiles, which are not snapped).
 double snap_error(const TilesOptions& o, double cell_size) {
   return o.encoding == io::TileEncoding::plain ? 0 : std::sqrt(3.0) / 2 * tile_quantum(cell_size);
+}
+
+// A tile's own error bound (tiles.h): the cell diagonal, the thick primitives' radius, the float rounding of
+// the scene's magnitude and the snapping (summed in this order, which the tileset's bytes depend on).
+double own_error(const TilesOptions& o, double cell_size, double radius) {
+  return std::sqrt(3.0) * cell_size + radius + std::ldexp(o.scene_magnitude, -23) + snap_error(o, cell_size);
 }
 
 }  // namespace
@@ -113,7 +114,7 @@ void TilesetBuilder::add(size_t level, const TileRegion& region, const core::Lod
       r.min[k] = std::min(r.min[k], x);
       r.max[k] = std::max(r.max[k], x);
     }
-  r.error = std::sqrt(3.0) * region.cell_size + radius + std::ldexp(s.o.scene_magnitude, -23) + snap_error(s.o, region.cell_size);
+  r.error = own_error(s.o, region.cell_size, radius);
   const std::string dir = fmt::format("lod{}", level);
   r.uri = fmt::format("{}/{}_{}_{}_{}.glb", dir, region.depth, region.x, region.y, region.z);
   std::error_code ec;
@@ -130,12 +131,12 @@ TilesSummary TilesetBuilder::finish() {
   State& s = *state_;
   std::vector<Record>& recs = s.records;
   const size_t n = recs.size();
-  // (level, depth, Morton) -> record, to find each region's parent: the coarser level's region that is its
-  // ancestor or itself.
+  // (level, depth, region code) -> record, to find each region's parent: the coarser level's region that is
+  // its ancestor or itself.
   std::map<std::tuple<size_t, int, uint64_t>, uint32_t> index;
   for (uint32_t i = 0; i < n; ++i) {
     const TileRegion& g = recs[i].region;
-    if (!index.emplace(std::make_tuple(recs[i].level, int{g.depth}, morton(g.x, g.y, g.z)), i).second)
+    if (!index.emplace(std::make_tuple(recs[i].level, int{g.depth}, core::region_code(node_of(g))), i).second)
       fail(Status::internal, "tiles: a region was reported twice");
   }
   const size_t coarsest = s.o.levels - 1;
@@ -143,11 +144,13 @@ TilesSummary TilesetBuilder::finish() {
   std::vector<uint32_t> parent(n, kNone);
   for (uint32_t i = 0; i < n; ++i) {
     if (recs[i].level == coarsest) continue;
-    const TileRegion& g = recs[i].region;
-    for (int d = g.depth; d >= 0 && parent[i] == kNone; --d) {
-      const int up = g.depth - d;
-      auto it = index.find(std::make_tuple(recs[i].level + 1, d, morton(g.x >> up, g.y >> up, g.z >> up)));
-      if (it != index.end()) parent[i] = it->second;
+    for (core::RegionKey k = node_of(recs[i].region);; k = core::region_parent(k)) {
+      const auto it = index.find(std::make_tuple(recs[i].level + 1, int{k.depth}, core::region_code(k)));
+      if (it != index.end()) {
+        parent[i] = it->second;
+        break;
+      }
+      if (k.depth == 0) break;
     }
     if (parent[i] == kNone) fail(Status::internal, "tiles: a region lies in no region of the coarser level (the cuts do not nest)");
   }
@@ -173,10 +176,8 @@ TilesSummary TilesetBuilder::finish() {
   }
   // A tile without content takes its level's bound (its region's primitives, none, lie within it of the
   // original there as anywhere in the level).
-  const double margin = std::ldexp(s.o.scene_magnitude, -23);
   for (uint32_t i = 0; i < n; ++i)
-    if (!recs[i].content)
-      error[i] = std::max(error[i], std::sqrt(3.0) * recs[i].region.cell_size + margin + snap_error(s.o, recs[i].region.cell_size));
+    if (!recs[i].content) error[i] = std::max(error[i], own_error(s.o, recs[i].region.cell_size, 0));
 
   io::Tileset ts;
   ts.generator = s.o.generator;
