@@ -146,7 +146,7 @@ struct RayScene::Impl {
   GeometryHandle attach(RTCGeometryType type, PrimitiveKind kind) {
     GeometryHandle g(rtcNewGeometry(device, type));
     check("new geometry");
-    geoms.push_back({kind, nullptr, nullptr});
+    geoms.emplace_back().kind = kind;
     return g;
   }
   // Commits `g`, attaches it to `s` (which then holds the only reference) and checks that it got the id

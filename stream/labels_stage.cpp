@@ -72,16 +72,22 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
         chunk = load_chunk_scene(chunks, c, scene_bytes);
         ++summary.chunks;
       }
+      // The chunk's lines and points, built again only for a view whose radius differs: the views all
+      // stand at one distance, so this is mostly one build a chunk, not one a view.
+      std::unique_ptr<core::RayScene> wire;
+      float wire_radius = 0;
       for (size_t v = 0; v < cameras.size(); ++v) {
         const core::Camera& cam = cameras[v];
         // Lines and points one pixel wide at the object's center.
         const double eye_to_center = std::sqrt((cam.eye[0] - center[0]) * (cam.eye[0] - center[0]) +
                                                (cam.eye[1] - center[1]) * (cam.eye[1] - center[1]) +
                                                (cam.eye[2] - center[2]) * (cam.eye[2] - center[2]));
-        std::unique_ptr<core::RayScene> wire =
-            chunk->has_wire() ? build_wire(chunk->geometry, static_cast<float>(cam.pixel_size(eye_to_center) / 2),
-                                           static_cast<float>(cam.pixel_size(eye_to_center) / 2), scene_bytes)
-                              : nullptr;
+        const float line_radius = static_cast<float>(cam.pixel_size(eye_to_center) / 2);
+        if (chunk->has_wire() && (!wire || line_radius != wire_radius)) {
+          wire.reset();  // one wire scene at a time
+          wire = build_wire(chunk->geometry, line_radius, line_radius, scene_bytes);
+          wire_radius = line_radius;
+        }
         const core::RayScene* scenes[] = {chunk->triangles.get(), wire.get()};
         core::cast_view(std::span<const core::RayScene* const>(scenes, wire ? 2 : 1), cam, &images[v], true);
       }

@@ -147,7 +147,7 @@ void StoreChunks::read(size_t index, ChunkGeometry* out, bool colors) {
   if (colors) read_colors(c, bits, count, out);
 }
 
-void StoreChunks::read_colors(const StoreChunk& c, std::span<const uint64_t> bits, uint64_t count, ChunkGeometry* out) const {
+void StoreChunks::read_colors(const StoreChunk& c, std::span<const uint64_t> bits, uint64_t count, ChunkGeometry* out) {
   if (!meta_.colors && meta_.materials.empty()) return;
   std::vector<uint8_t> rgba;
   if (meta_.colors) {
@@ -174,9 +174,15 @@ void StoreChunks::read_colors(const StoreChunk& c, std::span<const uint64_t> bit
     const uint64_t first = std::max(c.first, base) - base;  // the kind's first primitive in the chunk
     base += counts[kind];
     if (n == 0) continue;
-    std::vector<ObjectRun> runs;
-    if (!meta_.materials.empty()) runs = read_object_runs(dir_, kinds[kind]);
+    if (!meta_.materials.empty() && !runs_read_[kind]) runs_[kind] = read_object_runs(dir_, kinds[kind]), runs_read_[kind] = true;
+    const std::vector<ObjectRun>& runs = runs_[kind];
+    // The run holding the chunk's first primitive of the kind (runs are in primitive order), or the first.
     size_t r = 0;
+    if (!runs.empty()) {
+      const auto after = std::upper_bound(runs.begin(), runs.end(), first,
+                                          [](uint64_t at, const ObjectRun& run) { return at < run.first; });
+      r = after == runs.begin() ? 0 : static_cast<size_t>(after - runs.begin() - 1);
+    }
     rgb[kind]->resize(3 * n);
     for (uint64_t i = 0; i < n; ++i) {
       const core::Material* material = nullptr;

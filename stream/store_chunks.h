@@ -62,13 +62,17 @@ class StoreChunks {
   // Positions of the vertices whose bits are set, bits[0] being store word word0, in increasing order.
   void read_positions(std::span<const uint64_t> bits, uint64_t word0, uint64_t count, std::vector<float>& xyz) const;
   // The chunk's primitive colours (ChunkGeometry::*_rgb), its `count` vertices those whose bits are set.
-  void read_colors(const StoreChunk& c, std::span<const uint64_t> bits, uint64_t count, ChunkGeometry* out) const;
+  void read_colors(const StoreChunk& c, std::span<const uint64_t> bits, uint64_t count, ChunkGeometry* out);
 
   std::string dir_;
   StoreMeta meta_;
   std::vector<StoreChunk> chunks_;
   std::vector<uint64_t> used_;  // bit per vertex
   uint64_t used_count_ = 0;
+  // Per kind (triangle, line, point), the store's object runs, read by the first chunk that needs them
+  // (read_colors with materials) and kept for the others.
+  std::vector<ObjectRun> runs_[3];
+  bool runs_read_[3] = {false, false, false};
 };
 
 }  // namespace lodstream::stream
