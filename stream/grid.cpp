@@ -458,7 +458,7 @@ Result grid(const std::string& input, const GridOptions& go, const Options& opti
     j["files"] = report.files;
     ordered_json stages = ordered_json::array();
     for (const StageStats& s : report.stages)
-      stages.push_back({{"name", s.name}, {"seconds", s.seconds}, {"peak_rss_bytes", s.peak_rss_bytes}});
+      stages.push_back(stream::stage_json(s));
     j["stages"] = stages;
     j["seconds"] = report.seconds;
     j["peak_rss_bytes"] = report.peak_rss_bytes;

@@ -178,7 +178,7 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
     report.peak_rss_bytes = stream::peak_rss_bytes();
     ordered_json stages = ordered_json::array();
     for (const StageStats& s : report.stages)
-      stages.push_back({{"name", s.name}, {"seconds", s.seconds}, {"peak_rss_bytes", s.peak_rss_bytes}, {"reused", s.reused}});
+      stages.push_back(stream::stage_json(s));
     ordered_json shards = ordered_json::array();
     for (unsigned t = 0; t < count; ++t) {
       const ordered_json& tm = tasks[t].at("manifest");

@@ -922,7 +922,7 @@ nlohmann::ordered_json report_json(const Report& rep, const ReportOptions& ro) {
                       {"level_chunks", rep.level_chunks}};
   auto& stages = j["stages"] = nlohmann::ordered_json::array();
   for (const StageStats& s : rep.stages)
-    stages.push_back({{"name", s.name}, {"seconds", s.seconds}, {"peak_rss_bytes", s.peak_rss_bytes}, {"reused", s.reused}});
+    stages.push_back(stream::stage_json(s));
   j["seconds"] = rep.seconds;
   j["peak_rss_bytes"] = rep.peak_rss_bytes;
   j["work_dir"] = stream::work_dir_json(rep.work_dir);

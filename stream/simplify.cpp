@@ -992,7 +992,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       m["search"] = {{"passes", report.search_iterations}, {"seconds", report.search_seconds}};
     ordered_json stages = ordered_json::array();
     for (const StageStats& s : report.stages)
-      stages.push_back({{"name", s.name}, {"seconds", s.seconds}, {"peak_rss_bytes", s.peak_rss_bytes}, {"reused", s.reused}});
+      stages.push_back(stream::stage_json(s));
     m["stages"] = stages;
     m["seconds"] = report.seconds;
     m["peak_rss_bytes"] = report.peak_rss_bytes;

@@ -151,7 +151,7 @@ std::set<std::string> files_under(const std::string& dir) {
 // manifest.json / report.json without what differs between any two runs: times, peaks, rates, reuse, and
 // the work directory (its path).
 Json without_timings(Json j) {
-  static const std::set<std::string> volatile_keys{"seconds", "peak_rss_bytes", "reused", "ray_seconds",
+  static const std::set<std::string> volatile_keys{"seconds", "cpu_seconds", "peak_rss_bytes", "reused", "ray_seconds",
                                                    "query_seconds", "rays_per_second", "queries_per_second",
                                                    "work_dir"};
   if (j.is_object()) {

@@ -87,7 +87,8 @@ tv = open(timelog).read()
 rss = int(re.search(r'Maximum resident set size \(kbytes\): (\d+)', tv).group(1)) * 1024
 el = re.search(r'Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): ([\d:.]+)', tv).group(1).split(':')
 wall_time = sum(float(x) * 60 ** i for i, x in enumerate(reversed(el)))
-rec = {'label': label, 'cap': cap, 'exit': p.returncode, 'wall_s': round(wall_time, 1), 'peak_rss': rss,
+cpu = sum(float(re.search(rf'{k} time \(seconds\): ([\d.]+)', tv).group(1)) for k in ('User', 'System'))
+rec = {'label': label, 'cap': cap, 'exit': p.returncode, 'wall_s': round(wall_time, 1), 'cpu_s': round(cpu, 1), 'peak_rss': rss,
        'work_bytes_max': biggest, 'work_bytes_end': end, 'input_bytes': os.path.getsize(scene),
        'load': [float(load0), float(open('/proc/loadavg').read().split()[0])]}
 out = [a for a in sys.argv[8:]]
@@ -99,12 +100,13 @@ if '-o' in out:
             j = json.load(open(path))
             if name == 'manifest.json':
                 rec['triangles'] = j.get('input', {}).get('triangles') or j.get('scene', {}).get('triangles')
-                rec['stages'] = {s['name']: [round(s['seconds'], 1), s['peak_rss_bytes']] for s in j.get('stages', [])}
+            rec['stages'] = {s['name']: [round(s['seconds'], 1), round(s.get('cpu_seconds', 0), 1), s['peak_rss_bytes']]
+                             for s in j.get('stages', [])}
 with open(jsonl, 'a') as f:
     f.write(json.dumps(rec) + '\n')
 g = lambda b: f'{b / 2**30:.2f} GiB'
 over = rss > cap
-print(f"{label}: exit {p.returncode}, {rec['wall_s']} s, peak {g(rss)} (cap {cap_s}){'  OVER THE CAP' if over else ''}, "
+print(f"{label}: exit {p.returncode}, {rec['wall_s']} s ({rec['cpu_s']} CPU-s), peak {g(rss)} (cap {cap_s}){'  OVER THE CAP' if over else ''}, "
       f"work dir max {g(biggest)} = {biggest / rec['input_bytes']:.2f}x input")
 if p.returncode != 0:
     print('  ' + (open(log).read().strip().splitlines() or [''])[-1])
@@ -139,15 +141,17 @@ python3 - "$work/runs.jsonl" <<'EOF'
 import json, sys
 runs = [json.loads(l) for l in open(sys.argv[1])]
 base = next((r for r in runs if r['label'].startswith('simplify') and r.get('triangles') and r['exit'] == 0), None)
-print('\n| run | cap | exit | wall | peak (time -v) | work dir max / input | ns per input triangle | vs first | load (start, end) | stages: wall s / peak MiB |')
-print('|---|---|---|---|---|---|---|---|---|---|')
+print('\n| run | cap | exit | wall | CPU s | peak (time -v) | work dir max / input | ns per input triangle: wall, CPU | vs first: wall, CPU | load (start, end) | stages: wall s / CPU s / peak MiB |')
+print('|---|---|---|---|---|---|---|---|---|---|---|')
 for r in runs:
     tri = r.get('triangles')
     ns = r['wall_s'] / tri * 1e9 if tri else None
+    cns = r['cpu_s'] / tri * 1e9 if tri else None
     ratio = ns / (base['wall_s'] / base['triangles'] * 1e9) if ns and base else None
-    print(f"| {r['label']} | {r['cap'] / 2**30:.2f} GiB | {r['exit']} | {r['wall_s']} s | {r['peak_rss'] / 2**30:.2f} GiB | "
+    cratio = cns / (base['cpu_s'] / base['triangles'] * 1e9) if cns and base else None
+    print(f"| {r['label']} | {r['cap'] / 2**30:.2f} GiB | {r['exit']} | {r['wall_s']} s | {r['cpu_s']} | {r['peak_rss'] / 2**30:.2f} GiB | "
           f"{r['work_bytes_max'] / 2**30:.2f} / {r['input_bytes'] / 2**30:.2f} GiB = {r['work_bytes_max'] / r['input_bytes']:.2f}x | "
-          f"{f'{ns:.0f}' if ns else '-'} | {f'{ratio:.2f}x' if ratio else '-'} | {r['load'][0]:.1f}, {r['load'][1]:.1f} | "
-          + ', '.join(f"{k} {v[0]} / {v[1] >> 20}" for k, v in r.get('stages', {}).items()) + ' |')
+          f"{f'{ns:.0f}, {cns:.0f}' if ns else '-'} | {f'{ratio:.2f}x, {cratio:.2f}x' if ratio else '-'} | {r['load'][0]:.1f}, {r['load'][1]:.1f} | "
+          + ', '.join(f"{k} {v[0]} / {v[1]} / {v[2] >> 20}" for k, v in r.get('stages', {}).items()) + ' |')
 EOF
 exit $status

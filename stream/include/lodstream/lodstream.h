@@ -73,6 +73,9 @@ struct Result {
 struct StageStats {
   std::string name;
   double seconds = 0;
+  // User and system CPU time of the whole process while the stage ran, all threads: on a shared machine a
+  // stage's wall time follows the load, its CPU time much less.
+  double cpu_seconds = 0;
   uint64_t peak_rss_bytes = 0;  // highest resident set sampled during the stage
   bool reused = false;          // the stage's output was already in the work directory
 };
