@@ -23,7 +23,9 @@
 #include "stream/cell_map_file.h"
 #include "stream/cluster_stage.h"
 #include "stream/emit_regions.h"
+#include "stream/external_sort.h"
 #include "stream/flat_map.h"
+#include "stream/position_gather.h"
 #include "stream/store_access.h"
 #include "stream/weld_file.h"
 
@@ -42,12 +44,6 @@ struct EdgeSums {
 struct Distances {
   double a = 0, b = 0;
 };
-// A corner of a primitive that collapsed to a kept edge: the edge, the corner's canonical vertex (the
-// first stored vertex at its position), and its position.
-struct Corner {
-  uint32_t edge, vertex;
-  double p[3];
-};
 
 struct Block {
   int kind = 0;  // 0 triangles, 1 segments, 2 points
@@ -62,7 +58,8 @@ struct BlockOut {
   std::vector<uint32_t> triangle_materials, edge_materials, point_materials;
   std::vector<uint32_t> quadric_cells;
   std::vector<core::Quadric> quadrics;
-  std::vector<Corner> corners;  // pass B: the block's distinct corners of kept edges, in primitive order
+  // Pass B: the block's distinct corners of kept edges (and points), as corner_key()s.
+  std::vector<uint64_t> corners;
   void clear() {
     triangles.clear(), edges.clear(), points.clear();
     triangle_materials.clear(), edge_materials.clear(), point_materials.clear();
@@ -218,10 +215,7 @@ struct LevelState {
   std::vector<uint32_t> kept_points;
   std::vector<uint32_t> kept_edge_materials, kept_point_materials;
   std::vector<EdgeSums> kept_sums;
-  // Pass B: every distinct {kept edge, canonical vertex} pair, in order of first appearance (block order,
-  // then primitive and corner order), found through corner_set.
-  FlatMap<2, false> corner_set;
-  std::vector<std::array<uint32_t, 2>> corners;
+  uint64_t first_target = 0;  // the group's id of its first kept edge (corner_key)
   std::vector<std::array<double, 3>> pa, pb;
   std::vector<Distances> distances;
   EmitCounts counts;
@@ -517,6 +511,10 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
   return cells * (240 + (quadric ? sizeof(core::Quadric) : 0) + (options.materials && !options.count_only ? 12 : 0)) +
          24 * std::min(primitives, 16 * kEmitBlock);
 }
+
+// A quarter of what pass A held, within [8 MiB, 128 MiB]: the sorts run in memory on most scenes and
+// spill in runs of at least 4 MiB on the largest.
+uint64_t emit_corner_bytes(uint64_t level_bytes) { return std::clamp<uint64_t>(level_bytes / 4, 8 << 20, 128 << 20); }
 
 uint64_t emit_map_bytes(uint64_t vertices, unsigned bits) { return (vertices * bits + 63) / 64 * 8 + 8; }
 
@@ -994,20 +992,30 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   }
 
   // Pass B visits the input triangles and segments that collapsed to a kept edge (or a kept point:
-  // index_kept_points) in some level of the group (an eliminated edge's thickness would go unused), fetching
-  // their corners once, and collects each kept edge's distinct corners: a vertex shared by several of its collapsing primitives counts once
-  // (Low & Tan §3.3.1 average over the vertices, not over the triangles), so the thickness does not depend
-  // on how a strip was triangulated. Vertices are told apart by their canonical id (the first stored vertex
-  // at the position), so an input that repeats a position (OBJ seams, STL soups) counts it once too.
-  // A block's corners are deduplicated in the block (Scratch::corners) and then in the level
-  // (LevelState::corner_set) while merging in block order, so that the sums and the corner order do not
-  // depend on the threads. It also clears the bit of every primitive whose edge was eliminated.
+  // index_kept_points) in some level of the group (an eliminated edge's thickness would go unused), and
+  // gives each of their corners as a pair {kept edge, canonical vertex} (corner_key): a vertex shared by
+  // several of an edge's collapsing primitives counts once (Low & Tan §3.3.1 average over the vertices, not
+  // over the triangles), so the thickness does not depend on how a strip was triangulated. Vertices are told
+  // apart by their canonical id (the first stored vertex at the position), so an input that repeats a
+  // position (OBJ seams, STL soups) counts it once too. A block's pairs are deduplicated in the block
+  // (Scratch::corners); all of them go through one external sort (stream/external_sort.h), which puts each
+  // kept edge's distinct corners together in vertex order, whatever the blocks, threads or memory.
+  // The pairs grow with the scene (on a 48.6 M-triangle city's four coarse levels, 15 M distinct corners):
+  // they are held in memory up to emit_corner_bytes and spilled in sorted runs beyond, never hashed.
+  // It also clears the bit of every primitive whose edge was eliminated.
   std::unique_ptr<WeldFile> weld;
   if (any_kept_edges && !canonical_path.empty() && meta.vertices > 0) {
     weld = std::make_unique<WeldFile>(canonical_path, meta.vertices);
     weld->acquire();
   }
   auto canonical = [&](uint32_t v) { return weld ? (*weld)(v) : v; };
+  uint64_t targets = 0, level_bytes = 0;
+  for (LevelState& L : levels) {
+    L.first_target = targets, targets += L.kept_sums.size();
+    level_bytes += emit_level_bytes(L.in.cells, meta.primitives(), options);
+  }
+  if (targets > UINT32_MAX) fail(Status::internal, "emit: more than 2^32 kept edges and points in one group");
+  auto corner_key = [](uint64_t target, uint32_t vertex) { return target << 32 | vertex; };
   auto collect_corners = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
     const size_t arity = static_cast<size_t>(3 - b.kind);
     const uint64_t first_word = b.first / 64, words = (b.count + 63) / 64;  // b.first is a multiple of 64
@@ -1020,7 +1028,6 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
         uint64_t r[3];
         uint32_t cv[3];
         for (size_t k = 0; k < arity; ++k) r[k] = record_of(v[k]);
-        double p[3][3];
         bool fetched = false;
         for (size_t l = 0; l < nl; ++l) {
           LevelState& L = levels[l];
@@ -1034,61 +1041,92 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
             continue;
           }
           if (!fetched)
-            for (size_t k = 0; k < arity; ++k) cv[k] = canonical(v[k]), positions.get(cv[k], p[k]);
+            for (size_t k = 0; k < arity; ++k) cv[k] = canonical(v[k]);
           fetched = true;
           for (size_t k = 0; k < arity; ++k)
-            if (scratch_l[l].corners.insert({e, cv[k]}, 0).second)
-              outs_l[l].corners.push_back({e, cv[k], {p[k][0], p[k][1], p[k][2]}});
+            if (scratch_l[l].corners.insert({e, cv[k]}, 0).second) outs_l[l].corners.push_back(corner_key(L.first_target + e, cv[k]));
         }
       }
     }
   };
 
-  // Pass B: the distinct corners of the kept edges and their sums, for P_A and P_B (a corner in the lower
-  // cell goes to A).
+  // Pass B, then pass C in two streams over the distinct pairs in (edge, vertex) order, their positions read
+  // in batches through the page cache (stream/position_gather.h, the read way: a kept edge's corners are
+  // spread over the whole column): C1 sums each edge's corners in A and in B, for P_A and P_B (a corner in
+  // the lower cell goes to A); C2 sums their distances to the line P_A P_B. The sums run in that order,
+  // serially, so they depend on the input and options only. The distinct pairs of C1 are pushed, already in
+  // order, into a second sorter that keeps them (in memory, or in runs) for C2.
   if (any_kept_edges) {
+    uint64_t sort_bytes = emit_corner_bytes(level_bytes) / 2;  // each of the two sorters
+    if (options.chunk_bytes) sort_bytes = std::min(sort_bytes, options.chunk_bytes);
+    std::unique_ptr<WorkDir> own_dir;  // a temporary directory for the runs, should they spill
+    if (!options.work) own_dir = std::make_unique<WorkDir>("");
+    const WorkDir& dir = options.work ? *options.work : *own_dir;
+    ExternalSorter<uint64_t, std::less<uint64_t>> pairs(dir, "corners", sort_bytes);
     run_blocks("emit", true, collect_corners, [&](BlockOut* outs_l) {
-      for (size_t l = 0; l < nl; ++l) {
-        LevelState& L = levels[l];
-        for (const Corner& c : outs_l[l].corners) {
-          if (!L.corner_set.insert({c.edge, c.vertex}, 0).second) continue;
-          L.corners.push_back({c.edge, c.vertex});
-          EdgeSums& e = L.kept_sums[c.edge];
-          if (cell(L, record_of(c.vertex)) == lower_cell(L, c.edge)) add(e.a, c.p), ++e.na;
-          else add(e.b, c.p), ++e.nb;
-        }
-      }
+      for (size_t l = 0; l < nl; ++l) pairs.push(std::span<const uint64_t>(outs_l[l].corners));
     });
+    weld.reset();
+    positions.release();
+    const std::string column = store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64");
+    const PositionGather gather(column, meta.single_precision, meta.vertices, false);
+    PositionGather::Scratch gs;
+    std::vector<uint64_t> batch;
+    std::vector<uint32_t> ids;
+    std::vector<double> xyz;
+    // Calls visit(level, edge, vertex, position) for the pairs of `batch`, in order.
+    auto visit_batch = [&](auto&& visit) {
+      ids.resize(batch.size());
+      for (size_t i = 0; i < batch.size(); ++i) ids[i] = static_cast<uint32_t>(batch[i]);
+      xyz.resize(3 * batch.size());
+      gather.gather(ids, xyz.data(), gs);
+      size_t l = 0;
+      for (size_t i = 0; i < batch.size(); ++i) {
+        const uint64_t t = batch[i] >> 32;
+        while (l + 1 < nl && t >= levels[l + 1].first_target) ++l;
+        LevelState& L = levels[l];
+        const uint32_t e = static_cast<uint32_t>(t - L.first_target);
+        visit(L, e, cell(L, record_of(ids[i])) == lower_cell(L, e), &xyz[3 * i]);
+      }
+      batch.clear();
+    };
+    const size_t batch_size = static_cast<size_t>(std::clamp<uint64_t>(sort_bytes / 40, 1 << 12, 1 << 20));
+    ExternalSorter<uint64_t, std::less<uint64_t>> distinct(dir, "corners-distinct", sort_bytes);
+    auto sum_positions = [&](LevelState& L, uint32_t e, bool in_a, const double* p) {
+      EdgeSums& s = L.kept_sums[e];
+      if (in_a) add(s.a, p), ++s.na;
+      else add(s.b, p), ++s.nb;
+    };
+    uint64_t last = UINT64_MAX;
+    pairs.merge([&](uint64_t key) {
+      if (key == last) return;
+      last = key;
+      distinct.push(key);
+      batch.push_back(key);
+      if (batch.size() == batch_size) visit_batch(sum_positions);
+    });
+    visit_batch(sum_positions);
+    for (LevelState& L : levels) {
+      L.pa.resize(L.kept_sums.size()), L.pb.resize(L.kept_sums.size());
+      for (size_t i = 0; i < L.kept_sums.size(); ++i)
+        for (int k = 0; k < 3; ++k) {
+          L.pa[i][k] = L.kept_sums[i].na ? L.kept_sums[i].a[k] / static_cast<double>(L.kept_sums[i].na) : 0;
+          L.pb[i][k] = L.kept_sums[i].nb ? L.kept_sums[i].b[k] / static_cast<double>(L.kept_sums[i].nb) : 0;
+        }
+      for (size_t i = L.kept_edges.size(); i < L.kept_sums.size(); ++i) L.pb[i] = L.pa[i];  // a point: distances to P_A
+    }
+    auto sum_distances = [&](LevelState& L, uint32_t e, bool in_a, const double* p) {
+      const double d = distance_to_line(p, L.pa[e].data(), L.pb[e].data());
+      if (in_a) L.distances[e].a += d;
+      else L.distances[e].b += d;
+    };
+    distinct.merge([&](uint64_t key) {
+      batch.push_back(key);
+      if (batch.size() == batch_size) visit_batch(sum_distances);
+    });
+    visit_batch(sum_distances);
   }
   weld.reset();
-
-  // Pass C: mean distances of the distinct corners to the line through the mean positions, from the corner
-  // list (no pass over the input): distances in parallel, summed per edge in corner order.
-  for (LevelState& L : levels) {
-    L.corner_set = FlatMap<2, false>();
-    L.pa.resize(L.kept_sums.size()), L.pb.resize(L.kept_sums.size());
-    for (size_t i = 0; i < L.kept_sums.size(); ++i)
-      for (int k = 0; k < 3; ++k) {
-        L.pa[i][k] = L.kept_sums[i].na ? L.kept_sums[i].a[k] / static_cast<double>(L.kept_sums[i].na) : 0;
-        L.pb[i][k] = L.kept_sums[i].nb ? L.kept_sums[i].b[k] / static_cast<double>(L.kept_sums[i].nb) : 0;
-      }
-    for (size_t i = L.kept_edges.size(); i < L.kept_sums.size(); ++i) L.pb[i] = L.pa[i];  // a point: distances to P_A
-    std::vector<double> d(L.corners.size());
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, L.corners.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        const auto [e, v] = L.corners[i];
-        double p[3];
-        positions.get(v, p);
-        d[i] = distance_to_line(p, L.pa[e].data(), L.pb[e].data());
-      }
-    });
-    for (size_t i = 0; i < L.corners.size(); ++i) {
-      const auto [e, v] = L.corners[i];
-      if (cell(L, record_of(v)) == lower_cell(L, e)) L.distances[e].a += d[i];
-      else L.distances[e].b += d[i];
-    }
-    std::vector<std::array<uint32_t, 2>>().swap(L.corners);
-  }
   positions.release();
   for (BlockOut& o : outs[0]) o = BlockOut();
   for (BlockOut& o : outs[1]) o = BlockOut();

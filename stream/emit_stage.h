@@ -51,6 +51,7 @@
 #include "stream/emit_regions.h"
 #include "stream/progress.h"
 #include "stream/scene_store.h"
+#include "stream/work_dir.h"
 
 namespace lodstream::stream {
 
@@ -66,6 +67,10 @@ struct EmitOptions {
   std::string grades_path = {};
   bool colors = false;     // the store has vertex colours (emit_level_bytes: nothing at the peak)
   bool materials = false;  // the store has a material table: counted in emit_level_bytes
+  // Where passes B and C (thickness, point sizes) spill the sorted runs of their {kept edge, corner} pairs
+  // when these outgrow the stage's share for them (emit_corner_bytes); none: they are sorted in memory.
+  const WorkDir* work = nullptr;
+  uint64_t chunk_bytes = 0;  // --chunk-bytes (0: none) caps those sorts' memory too, so that tests make them spill
 };
 
 struct EmitCounts {
@@ -133,6 +138,9 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
 
 // Memory model of the grouping. A level of C cells takes emit_bits(C) bits of each packed map record.
 unsigned emit_bits(uint64_t cells);
+// What the sort of a group's {kept edge, corner} pairs (passes B and C) holds: a share of what pass A held
+// before them (`level_bytes`, the sum of the group's emit_level_bytes), which elimination has freed.
+uint64_t emit_corner_bytes(uint64_t level_bytes);
 // Working memory of one level in a group (its dedupe tables, outputs and quadrics at the peak, pass A,
 // plus its share of the buffers of the blocks in flight, of an input of `primitives` primitives).
 uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions& options);

@@ -790,7 +790,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         run_stage(&report.stages, "error", [&](StageStats&) {
           error_json = bound_silhouette_error(input, so, options, work, sizes, fine_factors, switch_distances, report,
                                               [&](const std::vector<double>& s, const std::vector<std::string>& paths) {
-                                                const stream::EmitOptions eo{so.representative, so.crease_degrees, true, false};
+                                                stream::EmitOptions eo{so.representative, so.crease_degrees, true, false};
+                                                eo.work = &work, eo.chunk_bytes = options.chunk_bytes;
                                                 const std::vector<uint64_t> cells = cluster(s, nullptr);
                                                 stream::OpenLevels levels(work, "error-level", cells);
                                                 emit_all(
@@ -805,6 +806,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       if (sharded) {
         shard_input = {store_dir, canonical, prefix, &meta, grade.records, copts,
                        {so.representative, so.crease_degrees, true, false}, plan.stage_bytes, so.tile_triangles, sizes, cells, so.write_tiles};
+        shard_input.options.work = &work, shard_input.options.chunk_bytes = options.chunk_bytes;
         run_stage(&report.stages, "representatives", [&](StageStats& st) {
           ordered_json key = cluster_base;
           key["cells"] = cells;
@@ -886,6 +888,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       emit_options.grades_path = grades_path;
       emit_options.colors = meta.colors;
       emit_options.materials = !meta.materials.empty();
+      emit_options.work = &work, emit_options.chunk_bytes = options.chunk_bytes;
       run_stage(&report.stages, "emit", [&](StageStats&) {
         const std::vector<stream::EmitCounts> counts =
             sharded ? stream::emit_shard(shard_input, so.shard_index, so.shard_count, so.output_dir, progress, scratch)

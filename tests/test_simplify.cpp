@@ -1424,6 +1424,23 @@ TEST(SimplifyThickEdge, SymmetricStripHasExactlyItsWidth) {
   EXPECT_EQ(std::abs(e1[1]), 0.125f);
 }
 
+TEST(SimplifyThickEdge, CornerPairsSpilledToDiskGiveTheSameBytes) {
+  // The {kept edge, corner} pairs of the thickness and point-size passes go through an external sort; with
+  // --chunk-bytes 4096 its buffer holds 1024 pairs, so a level with more kept edges than that (two corners
+  // each at least) spills sorted runs and merges them. Every file must be the in-memory run's.
+  test::TempDir tmp;
+  SimplifyOptions a = make_simplify(tmp.file("a")), b = make_simplify(tmp.file("b"));
+  a.cell_sizes = b.cell_sizes = {0.02, 0.08, 0.3};
+  a.representative = b.representative = Representative::quadric;
+  ASSERT_TRUE(simplify_ok(sample_room(), a, make_options(2)));
+  ASSERT_TRUE(simplify_ok(sample_room(), b, make_options(2, 0, 4096)));
+  const Json m = manifest(a.output_dir);
+  uint64_t most = 0;
+  for (const auto& l : m["levels"]) most = std::max(most, l["edges"].get<uint64_t>() + l["points"].get<uint64_t>());
+  EXPECT_GT(most, 1024u) << "no level has enough kept edges and points to spill";
+  expect_same_output(a.output_dir, b.output_dir, "corner sort in memory vs spilled");
+}
+
 // ---- points at their size (issue 14) over distinct corners ----
 
 // The size of the single point that `obj` (inside [0, 0.5]²) collapses to at cell size 2.
