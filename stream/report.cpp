@@ -37,6 +37,7 @@
 #include <map>
 #include <numeric>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -61,7 +62,9 @@
 #include "stream/kill_point.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
+#include "stream/report_shard.h"
 #include "stream/scene_store.h"
+#include "stream/shard.h"
 #include "stream/store_access.h"
 #include "stream/chunk_scene.h"
 #include "stream/store_chunks.h"
@@ -361,11 +364,11 @@ void load_original(const std::string& store_dir, const stream::StoreMeta& meta, 
   progress.report("load", 1);
 }
 
-// Distances from every sample to the nearest primitive of any of `scenes`, lowered into `d` (sample order).
+// Distances from samples [first, end) to the nearest primitive of any of `scenes`, lowered into `d` (sample
+// order).
 void lower_closest_distances(const std::vector<float>& samples, std::span<const core::RayScene* const> scenes,
-                             std::vector<float>& d) {
-  const size_t n = samples.size() / 3;
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 512), [&](const tbb::blocked_range<size_t>& r) {
+                             std::vector<float>& d, uint64_t first, uint64_t end) {
+  tbb::parallel_for(tbb::blocked_range<size_t>(first, end, 512), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i)
       for (const core::RayScene* s : scenes)
         if (!s->empty()) d[i] = std::min(d[i], s->closest_distance(samples.data() + 3 * i, nullptr, d[i]));
@@ -459,6 +462,14 @@ struct LevelWork {
   std::vector<core::Camera> cameras;
   std::vector<core::ViewImage> original_views;  // during the passes that trace its views
   uint64_t level_chunks = 1;                    // chunks the level itself was traced in
+  // A task of a sharded report (stream/report_shard.h) measures views [view_first, view_end) and the
+  // samples [from_first, from_end) of the original and [to_first, to_end) of the level (one machine: all),
+  // and keeps its share of the raw values in `share` instead of forming the figures. A level whose distance
+  // comes from its Hausdorff max needs every sample first: each task measures them all, and keeps its share.
+  bool sharded = false;
+  unsigned view_first = 0, view_end = 0;
+  uint64_t from_first = 0, from_end = 0, to_first = 0, to_end = 0;
+  stream::ReportLevelShare share;
   double pixel_at(double d, unsigned resolution) const { return 2 * d * tan_half / resolution; }
 };
 
@@ -637,6 +648,39 @@ uint64_t level_chunk_bytes(uint64_t limit, uint64_t chunk_cap) {
   return chunk_cap ? std::min(chunk_cap, limit / 4 * 3) : limit / 4 * 3;
 }
 
+// A task's shares of the level's views and samples (stream/report_shard.h); one machine's: all of them.
+void set_shares(const Original& o, LevelWork& w, const ReportOptions& ro) {
+  w.sharded = ro.shard_count > 0;
+  const auto views = stream::share_of(w.views, ro.shard_index, ro.shard_count);
+  w.view_first = static_cast<unsigned>(views.first), w.view_end = static_cast<unsigned>(views.second);
+  const unsigned count = w.distance_known ? ro.shard_count : 0;
+  std::tie(w.from_first, w.from_end) = stream::share_of(o.samples.xyz.size() / 3, ro.shard_index, count);
+  std::tie(w.to_first, w.to_end) = stream::share_of(w.samples.xyz.size() / 3, ro.shard_index, count);
+}
+
+// What a task keeps of one direction's distances: its share (all of them were measured when the level's
+// distance comes from its Hausdorff max).
+std::vector<float> kept_share(const std::vector<float>& d, const ReportOptions& ro) {
+  const auto [first, end] = stream::share_of(d.size(), ro.shard_index, ro.shard_count);
+  return std::vector<float>(d.begin() + static_cast<std::ptrdiff_t>(first), d.begin() + static_cast<std::ptrdiff_t>(end));
+}
+
+// The level's view figures from the silhouette counts and the depth and normal errors of every view (in
+// view order: the sums run in it).
+void view_figures(ReportLevel& L, const core::SilhouetteCounts& total, std::vector<float>& depth_err, std::vector<float>& normal_err) {
+  const core::SilhouetteStats s = core::silhouette_stats(total);
+  L.silhouette.max = s.max, L.silhouette.p95 = s.p95, L.silhouette.mean = s.mean, L.silhouette.count = s.mismatched;
+  double sum2 = 0;
+  for (const core::SquaredDistanceCount& bin : total.histogram) sum2 += double(bin.squared) * double(bin.count);
+  L.silhouette.rms = s.mismatched ? std::sqrt(sum2 / double(s.mismatched)) : 0;
+  L.mismatched_pixels = s.mismatched;
+  L.covered_pixels = s.covered_either;
+  L.mismatch_fraction = s.mismatch_fraction;
+  L.thin_pixels = s.thin, L.thin_kept_pixels = s.thin_kept, L.thin_kept_fraction = s.thin_kept_fraction;
+  L.depth = stats_of(depth_err);
+  L.normal = stats_of(normal_err);
+}
+
 // embree_limit: what the level's scene may take; chunk_cap: --chunk-bytes (0 = none), which cuts a level
 // into chunks of at most that many bytes as it does the original.
 void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint64_t embree_limit, uint64_t chunk_cap) {
@@ -655,6 +699,7 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   w.views = std::min<unsigned>(ro.views, static_cast<unsigned>(o.targets.size() / 3));
   w.samples = sample_mesh(mesh, ro.samples, ro.seed, kStreamLodSamples);
   w.to_original.assign(w.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
+  set_shares(o, w, ro);
   // Segment and point radii do not enter the point queries: any distance builds the same query scene.
   const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh));
   LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap));
@@ -663,11 +708,12 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   for (size_t c = 0; c < chunks.size(); ++c) {
     const LevelScene scene = chunks.scene(c, WireRadii(w.pixel_at(w.distance, ro.resolution), ro.supersample), limit);
     const auto t_q = std::chrono::steady_clock::now();
-    lower_closest_distances(o.samples.xyz, scene.list(), d);
-    w.out.queries += d.size();
+    lower_closest_distances(o.samples.xyz, scene.list(), d, w.from_first, w.from_end);
+    w.out.queries += w.from_end - w.from_first;
     w.out.query_seconds += seconds_since(t_q);
   }
-  L.original_to_lod = hausdorff_stats(d, o.samples.faces);
+  if (w.sharded) w.share.original_to_lod = kept_share(d, ro), w.share.original_faces = o.samples.faces;
+  if (!w.sharded || !w.distance_known) L.original_to_lod = hausdorff_stats(d, o.samples.faces);
   L.seconds += seconds_since(t0);
 }
 
@@ -675,6 +721,13 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
 // was given (where the Hausdorff max spans pixels_per_cell pixels, at least a tiny positive distance).
 void finish_hausdorff(const Original& o, LevelWork& w, const ReportOptions& ro) {
   ReportLevel& L = w.out.level;
+  if (w.sharded) {
+    w.share.lod_to_original = kept_share(w.to_original, ro), w.share.lod_faces = w.samples.faces;
+    if (w.distance_known) {  // the merge forms the figures from every task's share
+      w.to_original = {};
+      return;
+    }
+  }
   L.lod_to_original = hausdorff_stats(w.to_original, w.samples.faces);
   w.to_original = {};
   const ErrorStats& a = L.lod_to_original;
@@ -750,8 +803,9 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
       // Radii do not enter the point queries.
       std::unique_ptr<core::RayScene> lines = wire ? build_wire(chunk->geometry, WireRadii(1.0, 1), embree_limit) : nullptr;
       const core::RayScene* scenes[] = {chunk->triangles.get(), lines ? lines.get() : chunk->triangles.get()};
-      lower_closest_distances(w->samples.xyz, std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->to_original);
-      w->out.queries += w->to_original.size();
+      lower_closest_distances(w->samples.xyz, std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->to_original,
+                              w->to_first, w->to_end);
+      w->out.queries += w->to_end - w->to_first;
       w->out.query_seconds += seconds_since(t0);
       w->out.level.seconds += seconds_since(t0);
     }
@@ -760,7 +814,7 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
       std::unique_ptr<core::RayScene> lines =
           wire ? build_wire(chunk->geometry, WireRadii(w->pixel_at(w->distance, ro.resolution), ro.supersample), embree_limit) : nullptr;
       const core::RayScene* scenes[] = {chunk->triangles.get(), lines.get()};
-      for (unsigned k = 0; k < w->views; ++k)
+      for (unsigned k = w->view_first; k < w->view_end; ++k)
         w->out.rays += core::cast_view(std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->cameras[k],
                                        &w->original_views[k], true);
       w->out.ray_seconds += seconds_since(t0);
@@ -792,17 +846,19 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
       lod = chunks.scene(c, wire, limit);
       const auto lod_scenes = lod.list();
       const auto t_r = std::chrono::steady_clock::now();
-      for (unsigned k = 0; k < w.views; ++k) w.out.rays += core::cast_view(lod_scenes, w.cameras[k], &lod_views[k], true);
+      for (unsigned k = w.view_first; k < w.view_end; ++k) w.out.rays += core::cast_view(lod_scenes, w.cameras[k], &lod_views[k], true);
       w.out.ray_seconds += seconds_since(t_r);
     }
     lod = {};
   } else {
     lod = chunks.scene(0, wire, limit);
   }
-  core::SilhouetteCounts total;
+  core::SilhouetteCounts& total = w.share.silhouette;
   core::SilhouetteScratch scratch;
-  std::vector<float> depth_err, normal_err, distance_image(pixels);
-  for (unsigned k = 0; k < w.views; ++k) {
+  std::vector<float>& depth_err = w.share.depth_err;
+  std::vector<float>& normal_err = w.share.normal_err;
+  std::vector<float> distance_image(pixels);
+  for (unsigned k = w.view_first; k < w.view_end; ++k) {
     double dir[3], target[3], eye[3];
     view_geometry(o, w, ro, k, dir, target, eye);
     const core::Camera& cam = w.cameras[k];
@@ -847,17 +903,10 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   }
   w.original_views = {};
   lod_views = {};
-  const core::SilhouetteStats s = core::silhouette_stats(total);
-  L.silhouette.max = s.max, L.silhouette.p95 = s.p95, L.silhouette.mean = s.mean, L.silhouette.count = s.mismatched;
-  double sum2 = 0;
-  for (const core::SquaredDistanceCount& bin : total.histogram) sum2 += double(bin.squared) * double(bin.count);
-  L.silhouette.rms = s.mismatched ? std::sqrt(sum2 / double(s.mismatched)) : 0;
-  L.mismatched_pixels = s.mismatched;
-  L.covered_pixels = s.covered_either;
-  L.mismatch_fraction = s.mismatch_fraction;
-  L.thin_pixels = s.thin, L.thin_kept_pixels = s.thin_kept, L.thin_kept_fraction = s.thin_kept_fraction;
-  L.depth = stats_of(depth_err);
-  L.normal = stats_of(normal_err);
+  if (!w.sharded) {  // a task hands the counts and errors to the merge
+    view_figures(L, total, depth_err, normal_err);
+    w.share = {};
+  }
   L.seconds += seconds_since(t0);
 }
 
@@ -935,6 +984,145 @@ std::string absolute(const std::string& p) {
   return ec ? p : a.string();
 }
 
+// ------------------------------------------------------------------------------------------- shards
+
+void check_report_shard(const ReportOptions& ro, const Options& options) {
+  if (options.work_dir.empty()) fail(Status::usage, "--shard and --shard-prepare need --work DIR, a directory every task shares");
+  if (ro.shard_count > 0 && ro.shard_index >= ro.shard_count)
+    fail(Status::usage, fmt::format("--shard {}/{}: the index must be below the count", ro.shard_index, ro.shard_count));
+}
+
+// What the figures depend on: every task of one report has the same; the merge measures nothing and
+// takes the options from it.
+nlohmann::ordered_json report_options_json(const ReportOptions& ro) {
+  return {{"runs", ro.runs}, {"original", ro.original}, {"lods", ro.lods}, {"switch_distances", ro.switch_distances},
+          {"views", ro.views}, {"resolution", ro.resolution}, {"seed", ro.seed}, {"samples", ro.samples},
+          {"fov_degrees", ro.fov_degrees}, {"pixels_per_cell", ro.pixels_per_cell}, {"html_views", ro.html_views},
+          {"supersample", ro.supersample}};
+}
+
+ReportOptions report_options_from_json(const nlohmann::ordered_json& j) {
+  ReportOptions ro;
+  ro.runs = j.at("runs").get<std::vector<std::string>>();
+  ro.original = j.at("original");
+  ro.lods = j.at("lods").get<std::vector<std::string>>();
+  ro.switch_distances = j.at("switch_distances").get<std::vector<double>>();
+  ro.views = j.at("views"), ro.resolution = j.at("resolution"), ro.seed = j.at("seed"), ro.samples = j.at("samples");
+  ro.fov_degrees = j.at("fov_degrees"), ro.pixels_per_cell = j.at("pixels_per_cell"), ro.html_views = j.at("html_views");
+  ro.supersample = j.at("supersample");
+  return ro;
+}
+
+// A task starting (again): its older summary no longer vouches for its shares; tasks of a report with more
+// tasks are stale.
+void begin_report_task(const ReportOptions& ro) {
+  const std::string dir = stream::report_shards_dir(ro.output_dir);
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) fail(Status::io_error, dir + ": cannot create: " + ec.message());
+  fs::remove(stream::report_task_path(ro.output_dir, ro.shard_index), ec);
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    unsigned i;
+    if (std::sscanf(e.path().filename().c_str(), "task-%u", &i) == 1 && i >= ro.shard_count) fs::remove(e.path(), ec);
+  }
+}
+
+// Writes the task's shares (run by run, level by level), then its summary, task-I.json (durably, last).
+void write_report_task(const ReportOptions& ro, const std::vector<RunSpec>& runs, const Report& rep,
+                       const std::vector<std::vector<stream::ReportLevelShare>>& shares,
+                       const std::vector<std::vector<std::vector<io::HtmlView>>>& views) {
+  stream::ReportShareWriter writer(stream::report_levels_path(ro.output_dir, ro.shard_index));
+  nlohmann::ordered_json jruns = nlohmann::ordered_json::array();
+  for (size_t r = 0; r < runs.size(); ++r) {
+    const ReportRun& rr = rep.runs[r];
+    nlohmann::ordered_json levels = nlohmann::ordered_json::array();
+    for (size_t l = 0; l < runs[r].levels.size(); ++l) {
+      stream::ReportLevelShare share = shares[r][l];
+      share.views = views[r][l];
+      writer.add(share);
+      const ReportLevel& L = rr.levels[l];
+      levels.push_back({{"file", L.file}, {"cell_size", L.cell_size}, {"switch_distance", runs[r].levels[l].switch_distance},
+                        {"vertices", L.vertices}, {"triangles", L.triangles}, {"edges", L.edges}, {"points", L.points},
+                        {"seconds", L.seconds}});
+    }
+    jruns.push_back({{"name", rr.name}, {"original", rr.original}, {"fov_degrees", rr.fov_degrees},
+                     {"original_triangles", rr.original_triangles}, {"original_vertices", rr.original_vertices},
+                     {"bbox_diagonal", rr.bbox_diagonal}, {"levels", levels}});
+  }
+  writer.commit();
+  nlohmann::ordered_json stages = nlohmann::ordered_json::array();
+  for (const StageStats& s : rep.stages) stages.push_back(stream::stage_json(s));
+  const nlohmann::ordered_json task{
+      {"index", ro.shard_index},
+      {"key", {{"count", ro.shard_count}, {"options", report_options_json(ro)}}},
+      {"runs", jruns},
+      {"performance",
+       {{"rays", rep.rays}, {"ray_seconds", rep.ray_seconds}, {"point_queries", rep.point_queries},
+        {"query_seconds", rep.query_seconds}, {"original_chunks", rep.original_chunks}, {"chunk_scenes", rep.chunk_scenes},
+        {"chunk_embree_peak_bytes", rep.chunk_embree_peak_bytes}, {"chunk_triangles", rep.chunk_triangles},
+        {"level_chunks", rep.level_chunks}}},
+      {"stages", stages},
+      {"seconds", rep.seconds},
+      {"peak_rss_bytes", rep.peak_rss_bytes},
+      {"work_dir", {{"bytes", rep.work_dir.bytes}, {"input_bytes", rep.work_dir.input_bytes}}}};
+  stream::kill_point(fmt::format("report-task-{}.json", ro.shard_index));
+  io::write_file_atomic(stream::report_task_path(ro.output_dir, ro.shard_index), task.dump(1) + "\n", io::Sync::durable);
+}
+
+// Every task's summary, checked to be one report's: N tasks of count N with the same key. Fails with
+// Status::no_input naming the missing tasks.
+std::vector<nlohmann::ordered_json> read_report_tasks(const std::string& output_dir) {
+  using nlohmann::ordered_json;
+  const std::string dir = stream::report_shards_dir(output_dir);
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec))
+    fail(Status::no_input, dir + ": no report shares to merge (run `lodstream report ... --shard I/N --work DIR` for every task first)");
+  std::map<unsigned, ordered_json> tasks;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    unsigned i;
+    char tail[8] = {0};
+    if (std::sscanf(name.c_str(), "task-%u.%5s", &i, tail) != 2 || std::string(tail) != "json") continue;
+    try {
+      tasks[i] = ordered_json::parse(io::read_small_file(e.path().string()));
+    } catch (const std::exception&) {
+      fail(Status::io_error, e.path().string() + ": cannot read a report task's summary");
+    }
+  }
+  if (tasks.empty())
+    fail(Status::no_input, dir + ": no report task has finished (no task-I.json): run every task (`lodstream report ... --shard I/N`) first");
+  // The count of the report: the one most tasks name (a task of an older report with another count is stale).
+  std::map<unsigned, unsigned> votes;
+  for (const auto& [i, t] : tasks) ++votes[t.at("key").at("count").get<unsigned>()];
+  const unsigned count = std::max_element(votes.begin(), votes.end(), [](auto& a, auto& b) { return a.second < b.second; })->first;
+  std::vector<unsigned> missing, stale;
+  const ordered_json* key = nullptr;
+  for (unsigned i = 0; i < count; ++i) {
+    const auto it = tasks.find(i);
+    if (it == tasks.end()) {
+      missing.push_back(i);
+      continue;
+    }
+    const ordered_json& k = it->second.at("key");
+    if (k.at("count") != count || (key && k != *key)) stale.push_back(i);
+    else if (!key) key = &k;
+  }
+  if (!missing.empty() || !stale.empty()) {
+    std::string what;
+    if (!missing.empty())
+      what = fmt::format("report task{} {} of {} ha{} not finished (no {}/task-I.json)", missing.size() == 1 ? "" : "s",
+                         fmt::join(missing, ", "), count, missing.size() == 1 ? "s" : "ve", dir);
+    if (!stale.empty())
+      what += fmt::format("{}report task{} {} of {} belong{} to another report (other options or task count)", what.empty() ? "" : "; ",
+                          stale.size() == 1 ? "" : "s", fmt::join(stale, ", "), count, stale.size() == 1 ? "s" : "");
+    fail(Status::no_input, "merge: " + what + ": rerun " + (missing.size() + stale.size() == 1 ? "it" : "them") +
+                               " (`lodstream report ... --shard I/" + std::to_string(count) + "` on the same work directory)");
+  }
+  std::vector<ordered_json> out;
+  for (unsigned i = 0; i < count; ++i) out.push_back(std::move(tasks[i]));
+  return out;
+}
+
 }  // namespace
 
 Result report(const ReportOptions& ro, const Options& options, Report* out) {
@@ -944,6 +1132,12 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     if (ro.output_dir.empty()) fail(Status::usage, "no output directory given (-o)");
     const std::vector<RunSpec> runs = resolve_runs(ro);
     stream::Progress progress(options);
+    // A task of a sharded report (stream/report_shard.h) ingests the originals under the work directory's
+    // lock, taken before the directory is opened (as simplify's tasks do, stream/shard.h).
+    const bool sharded = ro.shard_count > 0 || ro.shard_prepare;
+    if (sharded) check_report_shard(ro, options);
+    std::unique_ptr<stream::ShardLock> shard_lock;
+    if (sharded) shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
     stream::WorkDir work(options.work_dir);
     if (options.check_disk_space) {
       std::vector<std::string> originals;
@@ -954,11 +1148,13 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     }
     stream::make_output_dir(ro.output_dir);
     stream::remove_summary(ro.output_dir + "/report.json");
+    if (ro.shard_count > 0 && !ro.shard_prepare) begin_report_task(ro);
     Report rep;
     uint64_t input_bytes = 0;  // the originals'
     rep.runs.resize(runs.size());
     std::vector<std::vector<std::vector<io::HtmlView>>> views(runs.size());
     std::vector<std::vector<std::string>> csvs(runs.size());
+    std::vector<std::vector<stream::ReportLevelShare>> shares(runs.size());  // a task's
     tbb::task_arena arena(static_cast<int>(plan.threads));
     arena.execute([&] {
       // One original at a time, each loaded once for every run that measures against it.
@@ -972,9 +1168,12 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         const std::string store_dir = work.subdir(g == 0 ? std::string("store") : "store-" + std::to_string(g));
         SceneInfo scene;
         bool reused = false;
+        if (sharded && !shard_lock) shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
         const stream::StoreMeta meta =
             stream::run_ingest_stage(originals[g], store_dir, plan, work, progress, &rep.stages, &scene, &reused);
+        shard_lock.reset();
         input_bytes += scene.file_bytes;
+        if (ro.shard_prepare) continue;
         Original o;
         o.path = originals[g];
         std::vector<LevelWork> works;
@@ -1041,6 +1240,11 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
             rr.levels.resize(runs[r].levels.size());
             LevelResult& lr = w.out;
             lr.level.csv = runs.size() > 1 ? fmt::format("run{}-lod{}.csv", r, l) : fmt::format("lod{}.csv", l);
+            if (w.sharded) {
+              shares[r].resize(runs[r].levels.size());
+              shares[r][l] = std::move(w.share);
+              shares[r][l].csv_rows = lr.csv_rows;
+            }
             std::string csv = kCsvHeader;
             for (const std::string& row : lr.csv_rows) csv += row;
             csvs[r][l] = std::move(csv);
@@ -1052,6 +1256,14 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         });
       }
     });
+    if (sharded) {
+      rep.seconds = seconds_since(t0);
+      rep.peak_rss_bytes = stream::peak_rss_bytes();
+      rep.work_dir = stream::work_dir_usage(work.path(), input_bytes);
+      if (!ro.shard_prepare) write_report_task(ro, runs, rep, shares, views);
+      *out = std::move(rep);
+      return;
+    }
     run_stage(&rep.stages, "write", [&](StageStats&) {
       for (size_t r = 0; r < runs.size(); ++r)
         for (size_t l = 0; l < csvs[r].size(); ++l)
@@ -1064,6 +1276,131 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     // report.json last: its presence means the report is complete.
     stream::kill_point("report.json");
     io::write_file_atomic(ro.output_dir + "/report.json", report_json(rep, ro).dump(2) + "\n", io::Sync::durable);
+    *out = std::move(rep);
+  });
+}
+
+bool has_report_shards(const std::string& output_dir) {
+  std::error_code ec;
+  return fs::is_directory(stream::report_shards_dir(output_dir), ec);
+}
+
+// The merge of a sharded report (stream/report_shard.h): every level's arrays are the tasks' shares in task
+// order, which is one machine's sample and view order, and its figures are formed by the same functions.
+Result merge_report(const std::string& output_dir, const Options& options, Report* out) {
+  return stream::guarded([&] {
+    using nlohmann::ordered_json;
+    const auto t0 = std::chrono::steady_clock::now();
+    stream::Progress progress(options);
+    const std::vector<ordered_json> tasks = read_report_tasks(output_dir);
+    const unsigned count = static_cast<unsigned>(tasks.size());
+    ReportOptions ro = report_options_from_json(tasks[0].at("key").at("options"));
+    ro.output_dir = output_dir;
+    stream::remove_summary(output_dir + "/report.json");
+    const ordered_json& jruns = tasks[0].at("runs");
+    std::vector<RunSpec> runs(jruns.size());
+    Report rep;
+    rep.runs.resize(runs.size());
+    std::vector<std::vector<std::vector<io::HtmlView>>> views(runs.size());
+    std::vector<std::vector<std::string>> csvs(runs.size());
+    std::vector<std::unique_ptr<stream::ReportShareReader>> readers;
+    for (unsigned t = 0; t < count; ++t)
+      readers.push_back(std::make_unique<stream::ReportShareReader>(stream::report_levels_path(output_dir, t)));
+    run_stage(&rep.stages, "merge", [&](StageStats&) {
+      size_t done = 0, total_levels = 0;
+      for (const ordered_json& jr : jruns) total_levels += jr.at("levels").size();
+      for (size_t r = 0; r < runs.size(); ++r) {
+        const ordered_json& jr = jruns[r];
+        RunSpec& run = runs[r];
+        run.name = jr.at("name"), run.original = jr.at("original"), run.fov_degrees = jr.at("fov_degrees");
+        ReportRun& rr = rep.runs[r];
+        rr.name = run.name, rr.original = run.original, rr.fov_degrees = run.fov_degrees;
+        rr.original_triangles = jr.at("original_triangles"), rr.original_vertices = jr.at("original_vertices");
+        rr.bbox_diagonal = jr.at("bbox_diagonal");
+        for (const ordered_json& jl : jr.at("levels")) {
+          LevelSpec spec;
+          spec.file = jl.at("file"), spec.cell_size = jl.at("cell_size"), spec.switch_distance = jl.at("switch_distance");
+          run.levels.push_back(spec);
+        }
+        Original o;
+        o.diagonal = rr.bbox_diagonal;
+        rr.levels.resize(run.levels.size());
+        views[r].resize(run.levels.size());
+        csvs[r].resize(run.levels.size());
+        for (size_t l = 0; l < run.levels.size(); ++l) {
+          const ordered_json& jl = jr.at("levels").at(l);
+          LevelWork w;
+          w.run = &run, w.index = l;
+          ReportLevel& L = w.out.level;
+          L.file = jl.at("file"), L.cell_size = jl.at("cell_size");
+          L.vertices = jl.at("vertices"), L.triangles = jl.at("triangles"), L.edges = jl.at("edges"), L.points = jl.at("points");
+          for (const ordered_json& t : tasks) L.seconds += t.at("runs").at(r).at("levels").at(l).at("seconds").get<double>();
+          w.tan_half = std::tan(run.fov_degrees * M_PI / 360.0);
+          w.distance_known = run.levels[l].switch_distance > 0;
+          w.distance = w.distance_known ? run.levels[l].switch_distance : 1.0;
+          // Every array in task order: one machine's sample and view order.
+          std::vector<float> from_original;
+          core::SilhouetteCounts silhouette;
+          std::vector<float> depth_err, normal_err;
+          std::vector<std::string> rows;
+          uint64_t original_faces = 0;
+          stream::ReportLevelShare share;
+          for (unsigned t = 0; t < count; ++t) {
+            readers[t]->next(&share);
+            original_faces = share.original_faces, w.samples.faces = share.lod_faces;
+            from_original.insert(from_original.end(), share.original_to_lod.begin(), share.original_to_lod.end());
+            w.to_original.insert(w.to_original.end(), share.lod_to_original.begin(), share.lod_to_original.end());
+            core::add_silhouette_counts(silhouette, share.silhouette);
+            depth_err.insert(depth_err.end(), share.depth_err.begin(), share.depth_err.end());
+            normal_err.insert(normal_err.end(), share.normal_err.begin(), share.normal_err.end());
+            rows.insert(rows.end(), share.csv_rows.begin(), share.csv_rows.end());
+            for (io::HtmlView& v : share.views) views[r][l].push_back(std::move(v));
+          }
+          L.original_to_lod = hausdorff_stats(from_original, original_faces);
+          finish_hausdorff(o, w, ro);
+          view_figures(L, silhouette, depth_err, normal_err);
+          L.csv = runs.size() > 1 ? fmt::format("run{}-lod{}.csv", r, l) : fmt::format("lod{}.csv", l);
+          std::string csv = kCsvHeader;
+          for (const std::string& row : rows) csv += row;
+          csvs[r][l] = std::move(csv);
+          rr.levels[l] = std::move(L);
+          progress.report("merge", double(++done) / double(total_levels));
+        }
+      }
+    });
+    readers.clear();
+    run_stage(&rep.stages, "write", [&](StageStats&) {
+      for (size_t r = 0; r < runs.size(); ++r)
+        for (size_t l = 0; l < csvs[r].size(); ++l)
+          io::write_file_atomic(ro.output_dir + "/" + rep.runs[r].levels[l].csv, csvs[r][l], io::Sync::durable);
+      io::write_report_html(ro.output_dir + "/report.html", rep, ro, views);
+    });
+    // Performance: the tasks' counters summed (the original's chunks: the most any task cut it into).
+    ordered_json shards = ordered_json::array();
+    for (unsigned t = 0; t < count; ++t) {
+      const ordered_json& tj = tasks[t];
+      const ordered_json& p = tj.at("performance");
+      rep.rays += p.at("rays").get<uint64_t>(), rep.ray_seconds += p.at("ray_seconds").get<double>();
+      rep.point_queries += p.at("point_queries").get<uint64_t>(), rep.query_seconds += p.at("query_seconds").get<double>();
+      rep.original_chunks = std::max(rep.original_chunks, p.at("original_chunks").get<uint64_t>());
+      rep.chunk_scenes += p.at("chunk_scenes").get<uint64_t>();
+      if (p.at("chunk_embree_peak_bytes").get<uint64_t>() > rep.chunk_embree_peak_bytes)
+        rep.chunk_embree_peak_bytes = p.at("chunk_embree_peak_bytes"), rep.chunk_triangles = p.at("chunk_triangles");
+      rep.level_chunks = std::max(rep.level_chunks, p.at("level_chunks").get<uint64_t>());
+      rep.work_dir.bytes = std::max(rep.work_dir.bytes, tj.at("work_dir").at("bytes").get<uint64_t>());
+      rep.work_dir.input_bytes = tj.at("work_dir").at("input_bytes");
+      shards.push_back({{"index", t}, {"stages", tj.at("stages")}, {"seconds", tj.at("seconds")}, {"peak_rss_bytes", tj.at("peak_rss_bytes")}});
+    }
+    rep.seconds = seconds_since(t0);
+    rep.peak_rss_bytes = stream::peak_rss_bytes();
+    ordered_json j = report_json(rep, ro);
+    j["shards"] = {{"count", count}, {"tasks", shards}};
+    stream::kill_point("report.json");
+    io::write_file_atomic(ro.output_dir + "/report.json", j.dump(2) + "\n", io::Sync::durable);
+    // The shares have served: report.json now vouches for the outputs.
+    std::error_code ec;
+    fs::remove_all(stream::report_shards_dir(output_dir), ec);
+    if (fs::is_empty(stream::shards_dir(output_dir), ec)) fs::remove(stream::shards_dir(output_dir), ec);
     *out = std::move(rep);
   });
 }

@@ -6,6 +6,8 @@
 # peaks and the tasks' list); the tileset passes the 3D Tiles validator when it is installed; a task killed
 # with SIGKILL (LODSTREAM_TEST_KILL_AT, just before its summary) fails the run with 137, `lodstream merge`
 # then refuses naming it (exit 66), and `lodstream slurm resubmit` reruns it alone to the same bytes.
+# `lodstream slurm report` as 3 tasks on the room's levels (and the city's) must give report.html and the
+# CSVs byte for byte as one machine's report, and report.json equal but for timings and counters.
 # Prints "skipped:" and exits 77 when a cluster cannot start here (not root, Slurm or MUNGE missing).
 # Usage: slurm_test.sh LODSTREAM_CLI SOURCE_DIR
 set -uo pipefail
@@ -92,6 +94,45 @@ rc=$?
 grep -q "array 1 of 3" "$tmp/resubmit.log" || fail "resubmit did not submit task 1 alone: $(cat "$tmp/resubmit.log")"
 same_outputs "$tmp/room-one" "$out"
 
+# The report of $1's levels ($2: one machine's simplify output) as 3 tasks through Slurm, against one
+# machine's report; prints the time of each task (its stages) and of the merge.
+run_report() {
+  local name=$1 levels=$2 one=$tmp/$1-report-one out=$tmp/$1-report-3 t0 t1 rc f; shift 2
+  t0=$(date +%s.%N)
+  "$cli" report "$levels" -o "$one" --work "$tmp/$name-work" --no-space-check "$@" >/dev/null || { fail "$name: one machine's report"; return; }
+  t1=$(date +%s.%N)
+  echo "$name report: one machine $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
+  t0=$(date +%s.%N)
+  "$cli" slurm report "$levels" -o "$out" --work "$tmp/$name-work" --shards 3 --wait --no-space-check "$@" >"$tmp/$name-report.log" 2>&1
+  rc=$?
+  t1=$(date +%s.%N)
+  echo "$name report: 3 tasks through Slurm: exit $rc, $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
+  [ $rc -eq 0 ] || { fail "$name slurm report: exit $rc"; cat "$tmp/$name-report.log" "$out"/slurm/logs/* 2>/dev/null | tail -30; return; }
+  diff <(cd "$one" && find . -type f | sort) <(cd "$out" && find . -type f ! -path './slurm/*' | sort) \
+    || { fail "$out: not the same files as $one"; return; }
+  while read -r f; do
+    [ "$f" = ./report.json ] && continue
+    cmp -s "$one/$f" "$out/$f" || fail "$out/$f differs from one machine's"
+  done < <(cd "$one" && find . -type f | sort)
+  python3 - "$one/report.json" "$out/report.json" <<'EOF' || fail "$out/report.json differs from one machine's"
+import json, sys
+def strip(j):
+    for k in ("stages", "seconds", "peak_rss_bytes", "work_dir", "performance", "shards"):
+        j.pop(k, None)
+    for r in j["runs"]:
+        for l in r["levels"]:
+            l.pop("seconds", None)
+    return j
+a, b = (json.load(open(p)) for p in sys.argv[1:])
+for t in b["shards"]["tasks"]:
+    print("  task %d: %.2f s (%s)" % (t["index"], t["seconds"], ", ".join("%s %.2f s cpu %.2f s" % (s["name"], s["seconds"], s.get("cpu_seconds", 0)) for s in t["stages"])))
+print("  merge: %.2f s" % b["seconds"])
+sys.exit(0 if strip(a) == strip(b) else 1)
+EOF
+  echo "  $out: report.html and CSVs byte-identical to one machine's, report.json equal"
+}
+run_report room "$tmp/room-one" --views 8 --resolution 128 --samples 20000
+
 validator=${LODSTREAM_TILES_VALIDATOR:-${TMPDIR:-/tmp}/3d-tiles-validator}
 if command -v node >/dev/null 2>&1 && [ -f "$validator/build/main.js" ] && [ -f "$validator/.installed" ]; then
   node "$validator/build/main.js" --tilesetFile "$tmp/room-3/tiles/tileset.json" --reportFile "$tmp/validator.json" >/dev/null 2>&1
@@ -106,6 +147,7 @@ make_scene=$src/../shared/data/tools/make-scene.sh
 if [ -x "$make_scene" ] || [ -f "$make_scene" ]; then
   if bash "$make_scene" 2 1 "$tmp/city.ply" >/dev/null 2>&1; then
     run_scene city "$tmp/city.ply" --tiles
+    run_report city "$tmp/city-one" --views 8 --resolution 256 --samples 100000
   else
     fail "make-scene.sh 2 1 failed"
   fi

@@ -251,5 +251,158 @@ TEST(Shard, ConcurrentTasksAndAKilledTaskThroughTheCli) {
   }
 }
 
+// ---- report as N tasks (stream/report_shard.h)
+
+ReportOptions small_report(const std::string& out) {
+  ReportOptions ro;
+  ro.output_dir = out;
+  ro.views = 7;  // not a multiple of 3 or 4: tasks' shares differ in size
+  ro.resolution = 48;
+  ro.samples = 3001;
+  ro.html_views = 2;
+  return ro;
+}
+
+// Every file of a report directory but report.json, and report.json without its timings, performance
+// counters and task list.
+std::map<std::string, std::string> report_files(const std::string& dir) {
+  std::map<std::string, std::string> f = outputs(dir);
+  f.erase("report.json");
+  nlohmann::json j = nlohmann::json::parse(slurp(dir + "/report.json"));
+  for (const char* k : {"stages", "seconds", "peak_rss_bytes", "work_dir", "performance", "shards"}) j.erase(k);
+  for (auto& run : j["runs"])
+    for (auto& level : run["levels"]) level.erase("seconds");
+  f["report.json"] = j.dump(1);
+  return f;
+}
+
+// Runs report tasks `tasks` of `count` on `work` (then merge_report when `merge_after`).
+Result run_report_tasks(ReportOptions ro, const std::string& work, unsigned count, const std::vector<unsigned>& tasks,
+                        bool merge_after, Report* merged) {
+  for (unsigned i : tasks) {
+    ro.shard_index = i, ro.shard_count = count;
+    Options o;
+    o.work_dir = work;
+    o.check_disk_space = false;
+    Report r;
+    const Result res = report(ro, o, &r);
+    if (!res.ok()) return res;
+  }
+  if (!merge_after) return {};
+  return merge_report(ro.output_dir, Options{}, merged);
+}
+
+// A simplify output directory of the sample room (three levels), for the reports.
+std::string room_levels(const TempDir& dir) {
+  SimplifyOptions so;
+  so.output_dir = dir.file("lods");
+  so.levels = 3;
+  SimplifyReport r;
+  EXPECT_TRUE(simplify(sample_room(), so, shared_work(dir), &r).ok());
+  return so.output_dir;
+}
+
+TEST(ReportShard, AnyTaskCountGivesOneMachinesReport) {
+  TempDir dir;
+  const std::string lods = room_levels(dir);
+  ReportOptions ro = small_report(dir.file("one"));
+  ro.runs = {lods};
+  Report one;
+  const Result r1 = report(ro, shared_work(dir), &one);
+  ASSERT_TRUE(r1.ok()) << r1.message;
+  const auto want = report_files(dir.file("one"));
+  ASSERT_EQ(want.count("lod2.csv"), 1u);
+  for (unsigned n : {1u, 3u, 4u}) {
+    SCOPED_TRACE("tasks " + std::to_string(n));
+    ReportOptions rn = ro;
+    rn.output_dir = dir.file("sharded-" + std::to_string(n));
+    std::vector<unsigned> all;
+    for (unsigned i = 0; i < n; ++i) all.push_back(i);
+    Report merged;
+    const Result r = run_report_tasks(rn, dir.file("work"), n, all, true, &merged);
+    ASSERT_TRUE(r.ok()) << r.message;
+    EXPECT_EQ(report_files(rn.output_dir), want);
+    EXPECT_FALSE(std::filesystem::exists(rn.output_dir + "/shards")) << "merge removes the shares";
+    const nlohmann::json j = nlohmann::json::parse(slurp(rn.output_dir + "/report.json"));
+    EXPECT_EQ(j["shards"]["count"], n);
+    EXPECT_EQ(j["shards"]["tasks"].size(), n);
+    EXPECT_EQ(j["performance"]["rays"], nlohmann::json::parse(slurp(dir.file("one/report.json")))["performance"]["rays"])
+        << "every ray is cast by exactly one task";
+  }
+}
+
+// Levels given as files without switching distances: their distance comes from the whole Hausdorff max,
+// which every task measures (keeping its share); a small budget cuts the original into several chunks.
+TEST(ReportShard, LevelsWithoutDistancesAndChunksGiveOneMachinesReport) {
+  TempDir dir;
+  const std::string lods = room_levels(dir);
+  ReportOptions ro = small_report(dir.file("one"));
+  ro.original = sample_room();
+  ro.lods = {lods + "/lod1.ply", lods + "/lod2.ply"};
+  Options o = shared_work(dir);
+  o.chunk_bytes = 1 << 20;
+  Report one;
+  ASSERT_TRUE(report(ro, o, &one).ok());
+  ASSERT_GE(one.original_chunks, 2u);
+  ReportOptions rn = ro;
+  rn.output_dir = dir.file("sharded");
+  Report merged;
+  const Result r = run_report_tasks(rn, dir.file("work"), 3, {0, 1, 2}, true, &merged);
+  ASSERT_TRUE(r.ok()) << r.message;
+  EXPECT_EQ(report_files(rn.output_dir), report_files(dir.file("one")));
+}
+
+TEST(ReportShard, MergeNamesTheMissingTasksAndATaskRerunResumes) {
+  TempDir dir;
+  const std::string lods = room_levels(dir);
+  ReportOptions ro = small_report(dir.file("out"));
+  ro.runs = {lods};
+  Report merged;
+  Result r = run_report_tasks(ro, dir.file("work"), 4, {0, 2}, true, &merged);
+  EXPECT_EQ(r.status, Status::no_input);
+  EXPECT_NE(r.message.find("report tasks 1, 3 of 4 have not finished"), std::string::npos) << r.message;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("out/report.json")));
+  ro.shard_count = 2;
+  EXPECT_EQ(report(ro, Options{}, &merged).status, Status::usage) << "a task needs --work";
+  // The missing tasks alone, then the merge: complete, and through the CLI's merge, which tells a report's
+  // shares from a simplify's parts.
+  r = run_report_tasks(ro, dir.file("work"), 4, {1, 3}, false, &merged);
+  ASSERT_TRUE(r.ok()) << r.message;
+  TempDir log;
+  const test::CliRun m = test::run_cli({"merge", dir.file("out"), "--progress", "none"}, log);
+  ASSERT_EQ(m.exit_code, 0) << m.err;
+  ro.output_dir = dir.file("one");
+  ro.shard_count = 0;
+  ASSERT_TRUE(report(ro, Options{}, &merged).ok());
+  EXPECT_EQ(report_files(dir.file("out")), report_files(dir.file("one")));
+}
+
+// Through the CLI, the task index from the environment as Slurm gives it.
+TEST(ReportShard, ShardFromEnvironmentThroughTheCli) {
+  TempDir dir, log;
+  const std::string lods = room_levels(dir);
+  const std::vector<std::string> common{"--views", "5", "--resolution", "40", "--samples", "2000", "--no-space-check", "--progress", "none"};
+  auto args = [&](std::vector<std::string> a) {
+    a.insert(a.end(), common.begin(), common.end());
+    return a;
+  };
+  ASSERT_EQ(test::run_cli(args({"report", lods, "-o", dir.file("one")}), log).exit_code, 0);
+  ASSERT_EQ(test::run_cli(args({"report", lods, "-o", dir.file("out"), "--work", dir.file("work"), "--shard-prepare"}), log).exit_code, 0);
+  setenv("SLURM_ARRAY_TASK_COUNT", "2", 1);
+  for (const char* i : {"1", "0"}) {
+    setenv("SLURM_ARRAY_TASK_ID", i, 1);
+    const test::CliRun t = test::run_cli(args({"report", lods, "-o", dir.file("out"), "--work", dir.file("work"), "--shard-from-env"}), log);
+    EXPECT_EQ(t.exit_code, 0) << t.err;
+    EXPECT_NE(t.out.find("(reused from work directory)"), std::string::npos) << "the prepared store is reused";
+  }
+  unsetenv("SLURM_ARRAY_TASK_ID");
+  unsetenv("SLURM_ARRAY_TASK_COUNT");
+  const test::CliRun m = test::run_cli({"merge", dir.file("out"), "--progress", "none"}, log);
+  ASSERT_EQ(m.exit_code, 0) << m.err;
+  EXPECT_EQ(report_files(dir.file("out")), report_files(dir.file("one")));
+  const test::CliRun bad = test::run_cli(args({"report", lods, "-o", dir.file("bad"), "--work", dir.file("work"), "--shard", "2/2"}), log);
+  EXPECT_EQ(bad.exit_code, 64);
+}
+
 }  // namespace
 }  // namespace lodstream

@@ -198,6 +198,17 @@ void print_grid(const lodstream::GridReport& r, const std::string& out_dir) {
               out_dir.c_str());
 }
 
+// --shard I/N or --shard-from-env (report's; simplify parses its own).
+bool parse_shard(const std::string& text, bool from_env, unsigned* index, unsigned* count, std::string* error) {
+  if (from_env) return lodstream::shard_from_env(index, count, error);
+  char slash = 0, extra = 0;
+  if (std::sscanf(text.c_str(), "%u%c%u%c", index, &slash, count, &extra) != 3 || slash != '/' || *count == 0 || *index >= *count) {
+    *error = "--shard: '" + text + "' is not I/N with 0 <= I < N";
+    return false;
+  }
+  return true;
+}
+
 void print_report(const lodstream::Report& r, const std::string& out_dir) {
   for (const auto& run : r.runs) {
     std::printf("run          %s: original %s, %s triangles\n", run.name.c_str(), run.original.c_str(),
@@ -368,7 +379,7 @@ int main(int argc, char** argv) {
   merge_cmd->add_option("--progress", progress_text, "Progress on stderr: auto (bar on a terminal), bar, json (NDJSON), none")
       ->check(CLI::IsMember({"auto", "bar", "json", "none"}));
 
-  CLI::App* slurm_cmd = app.add_subcommand("slurm", "Run simplify as Slurm jobs: lodstream slurm simplify IN -o OUT --shards N [--wait] ...");
+  CLI::App* slurm_cmd = app.add_subcommand("slurm", "Run simplify or report as Slurm jobs: lodstream slurm simplify|report IN -o OUT --shards N [--wait] ...");
   slurm_cmd->prefix_command();
 
   CLI::App* report_cmd = app.add_subcommand(
@@ -393,6 +404,12 @@ int main(int argc, char** argv) {
   report_cmd->add_flag("--json", json, "Print report.json instead of the table");
   add_common(report_cmd);
   add_space_check(report_cmd);
+  std::string report_shard_text;
+  bool report_shard_from_env = false;
+  report_cmd->add_option("--shard", report_shard_text, "Measure task I of N's share over a shared --work DIR (then `lodstream merge -o's DIR`)");
+  report_cmd->add_flag("--shard-from-env", report_shard_from_env,
+                       "--shard from SLURM_ARRAY_TASK_ID/COUNT, JOB_COMPLETION_INDEX or AWS_BATCH_JOB_ARRAY_INDEX (count: LODSTREAM_SHARD_COUNT)");
+  report_cmd->add_flag("--shard-prepare", ro.shard_prepare, "Ingest the originals into --work DIR for the tasks, then stop");
 
   CLI::App* grid_cmd = app.add_subcommand("grid", "Fit polygons to a height grid by adaptive subdivision (DeHaemer 1989)");
   lodstream::GridOptions go;
@@ -553,6 +570,11 @@ int main(int argc, char** argv) {
     return code;
   }
 
+  if (merge_cmd->parsed() && lodstream::has_report_shards(merge_dir)) {
+    lodstream::Report report;
+    const lodstream::Result r = lodstream::merge_report(merge_dir, options, &report);
+    return finish(r, progress, json ? merge_dir + "/report.json" : std::string(), [&] { print_report(report, merge_dir); });
+  }
   if (merge_cmd->parsed()) {
     lodstream::SimplifyReport report;
     const lodstream::Result r = lodstream::merge(merge_dir, options, &report);
@@ -590,9 +612,25 @@ int main(int argc, char** argv) {
       }
       ro.output_dir = ro.runs[0];
     }
+    if (!report_shard_text.empty() || report_shard_from_env) {
+      std::string error;
+      if (!parse_shard(report_shard_text, report_shard_from_env, &ro.shard_index, &ro.shard_count, &error)) {
+        std::fprintf(stderr, "lodstream: %s\n", error.c_str());
+        return static_cast<int>(lodstream::Status::usage);
+      }
+    }
+    const bool sharded = ro.shard_count > 0 || ro.shard_prepare;
     lodstream::Report report;
     const lodstream::Result r = lodstream::report(ro, options, &report);
-    return finish(r, progress, json ? ro.output_dir + "/report.json" : std::string(), [&] { print_report(report, ro.output_dir); });
+    return finish(r, progress, json && !sharded ? ro.output_dir + "/report.json" : std::string(), [&] {
+      if (!sharded) return print_report(report, ro.output_dir);
+      for (const auto& s : report.stages)
+        std::printf("stage        %-15s %8.3f s  peak %s%s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str(),
+                    s.reused ? "  (reused from work directory)" : "");
+      if (ro.shard_prepare) std::printf("prepared     %s for the tasks\n", options.work_dir.c_str());
+      else std::printf("task         %u of %u: shares in %s/shards/report (then: lodstream merge %s)\n", ro.shard_index, ro.shard_count,
+                       ro.output_dir.c_str(), ro.output_dir.c_str());
+    });
   }
 
   lodstream::SceneInfo info;

@@ -1,6 +1,7 @@
-// `lodstream slurm`: runs a sharded simplify (stream/shard.h) on a Slurm cluster. It only writes sbatch
+// `lodstream slurm`: runs a sharded simplify (stream/shard.h) or report (stream/report_shard.h) on a Slurm
+// cluster. It only writes sbatch
 // scripts (readable, resubmittable by hand) under OUT/slurm/ and submits them with sbatch: a prepare job
-// (the shared stages), an array job of N tasks after it (--dependency=afterok), and the merge after the
+// (the shared stages: a report's is the ingest of its originals), an array job of N tasks after it (--dependency=afterok), and the merge after the
 // array. The scheduler is Slurm's; lodstream adds none of its own. Each script records its command's exit
 // status in OUT/slurm/status/NAME.rc (and the command's pid in NAME.pid while it runs), which is how
 // --wait tells a failed task's one-machine exit code from the merge's.
@@ -32,9 +33,12 @@ constexpr int kUsage = 64, kNoInput = 66, kInternal = 70, kIoError = 74;
 
 const char* const kUsageText =
     "usage: lodstream slurm simplify INPUT -o OUTDIR --shards N [--work DIR] [--wait] [--sbatch-arg ARG]... [simplify options]\n"
+    "       lodstream slurm report RUNDIR -o REPORTDIR --shards N [--work DIR] [--wait] [--sbatch-arg ARG]... [report options]\n"
     "       lodstream slurm resubmit OUTDIR [--wait]\n"
     "  simplify  writes OUTDIR/slurm/{prepare,tasks,merge}.sbatch and submits them (afterok dependencies);\n"
     "            --work: the work directory every task shares (default OUTDIR/slurm/work; on a shared file system)\n"
+    "  report    the same for `lodstream report RUNDIR -o REPORTDIR` (scripts in REPORTDIR/slurm/; more report\n"
+    "            arguments go to every job as given, relative paths from the current directory)\n"
     "  resubmit  submits again the tasks that did not finish (and the merge), or the whole chain when the\n"
     "            prepare job did not (the scripts keep the first submission's sbatch options)\n"
     "  --wait    wait for the merge and exit with the one-machine exit code (a failed job's, else the merge's)\n"
@@ -189,7 +193,8 @@ int wait_chain(const Submission& s, const std::vector<unsigned>& tasks) {
   }
 }
 
-int simplify(const std::string& self, const std::vector<std::string>& args) {
+// `command`: simplify (INPUT: the input file) or report (INPUT: a simplify output directory).
+int submit_sharded(const std::string& self, const std::vector<std::string>& args, const std::string& command) {
   std::string input, out, work;
   unsigned shards = 0;
   bool wait = false;
@@ -236,8 +241,8 @@ int simplify(const std::string& self, const std::vector<std::string>& args) {
     return kUsage;
   }
   std::error_code ec;
-  if (!fs::is_regular_file(input, ec)) {
-    std::fprintf(stderr, "lodstream slurm: %s: no such input file\n", input.c_str());
+  if (command == "simplify" ? !fs::is_regular_file(input, ec) : !fs::is_directory(input, ec)) {
+    std::fprintf(stderr, "lodstream slurm: %s: no such %s\n", input.c_str(), command == "simplify" ? "input file" : "simplify output directory");
     return kNoInput;
   }
   input = absolute(input), out = absolute(out);
@@ -252,14 +257,14 @@ int simplify(const std::string& self, const std::vector<std::string>& args) {
     return kIoError;
   }
   for (const auto& e : fs::directory_iterator(s.slurm_dir + "/status", ec)) fs::remove(e.path(), ec);
-  std::string common = quote(self) + " simplify " + quote(input) + " -o " + quote(out) + " --work " + quote(work);
+  std::string common = quote(self) + " " + command + " " + quote(input) + " -o " + quote(out) + " --work " + quote(work);
   for (const std::string& a : passthrough) common += " " + quote(a);
   const std::string tasks_array = fmt::format("0-{}", shards - 1);
   const bool ok =
       write_text(s.slurm_dir + "/prepare.sbatch",
                  script(s.slurm_dir, "lodstream-prepare", "prepare.out", "", sbatch_args, "prepare", common + " --shard-prepare"), true) &&
       write_text(s.slurm_dir + "/tasks.sbatch",
-                 script(s.slurm_dir, "lodstream-simplify", "task-%a.out", tasks_array, sbatch_args, "task-${SLURM_ARRAY_TASK_ID}",
+                 script(s.slurm_dir, "lodstream-" + command, "task-%a.out", tasks_array, sbatch_args, "task-${SLURM_ARRAY_TASK_ID}",
                         common + fmt::format(" --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\"", shards)),
                  true) &&
       write_text(s.slurm_dir + "/merge.sbatch",
@@ -352,12 +357,8 @@ int run_slurm(const std::string& self, const std::vector<std::string>& args) {
     return args.empty() ? kUsage : 0;
   }
   const std::vector<std::string> rest(args.begin() + 1, args.end());
-  if (args[0] == "simplify") return simplify(self, rest);
+  if (args[0] == "simplify" || args[0] == "report") return submit_sharded(self, rest, args[0]);
   if (args[0] == "resubmit") return resubmit(rest);
-  if (args[0] == "report") {
-    std::fprintf(stderr, "lodstream slurm report: not available yet (report --shard is not implemented); run `lodstream report` on one machine\n");
-    return kUsage;
-  }
   std::fputs(kUsageText, stderr);
   return kUsage;
 }

@@ -285,6 +285,13 @@ struct ReportOptions {
   // of k × k rays spread over it (k = supersample, 1 to 16). Lines and points are drawn one pixel wide,
   // thick edges at their thickness (README, "report").
   unsigned supersample = 3;
+  // Past one machine (README "Running on a cluster"): with shard_count N > 0 this call is task shard_index
+  // (0 <= I < N) over a shared work directory (Options::work_dir, required): it ingests the originals
+  // unless another task did (under the work directory's lock), measures the I-th N-th of every level's
+  // views and of its Hausdorff samples in each direction, and writes them to output_dir/shards/report/;
+  // merge_report() then writes report.json, the CSVs and report.html. shard_prepare: ingest only.
+  unsigned shard_index = 0, shard_count = 0;
+  bool shard_prepare = false;
 };
 
 // Distribution of an error over pixels or samples. Units depend on the field.
@@ -347,6 +354,14 @@ struct Report {
 
 // Measures every level of every run, writing report.json (written last), report.html and the CSVs.
 Result report(const ReportOptions& report, const Options& options, Report* out);
+
+// Writes into `output_dir` what report writes there (report.json, the CSVs, report.html) from the shares
+// its N tasks (ReportOptions::shard_count) left in output_dir/shards/report/, the same bytes as one
+// machine's report (report.json's timings and performance counters aside: it lists every task's stages
+// under "shards"). Fails with Status::no_input naming the tasks whose shares are missing.
+Result merge_report(const std::string& output_dir, const Options& options, Report* out);
+// True when output_dir/shards/report/ exists: `lodstream merge` then merges a report, not a simplify.
+bool has_report_shards(const std::string& output_dir);
 
 // ---- grid: adaptive subdivision of height fields and range grids (DeHaemer 1989) ----
 
