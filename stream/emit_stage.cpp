@@ -299,10 +299,17 @@ void find_halos(std::vector<LevelState>& levels, RunBlocks& run_blocks, RecordOf
   bool any = false;
   for (LevelState& L : levels) {
     if (!L.in.batched) continue;
-    any = true;
     L.role.assign(L.in.cells, 0);
     for (uint64_t c = 0; c < L.in.cells; ++c)
       if (L.in.region_of[c] >= L.in.first_region && L.in.region_of[c] < L.in.end_region) L.role[c] = kOwned;
+    // A routed batch: its halo was found while routing (the same rule, over the whole input).
+    if (L.in.routes && L.in.routes->halo.size() == L.in.cells) {
+      const uint8_t bit = static_cast<uint8_t>(1u << L.in.route_bit);
+      for (uint64_t c = 0; c < L.in.cells; ++c)
+        if (L.role[c] != kOwned && (L.in.routes->halo[c] & bit)) L.role[c] = kHalo;
+      continue;
+    }
+    any = true;
   }
   if (!any) return;
   run_blocks(
@@ -584,9 +591,9 @@ EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_reg
   no_quadric.representative = Representative::center;
   const uint64_t per_cell = emit_level_bytes(1, 0, no_quadric) * 3 / 2;
   const uint64_t in_flight = emit_level_bytes(0, primitives, no_quadric);
-  // The routes of the batches (route_batches: a byte per 64 primitives) are held beside each of them; routing
-  // holds a byte a cell more, less than a batch's roles, uses and slots, which it does not hold.
-  const uint64_t routes = primitives / 64 + 3;
+  // The routes of the batches (route_batches: a byte per 64 primitives and a byte a cell) are held beside
+  // each of them.
+  const uint64_t routes = primitives / 64 + 3 + cells;
   const uint64_t need = map + tables + routes + in_flight + per_cell * largest_region;
   if (need > budget)
     fail(Status::usage, "emitting level " + std::to_string(level) + " (" + std::to_string(cells) + " cells) region by region needs about " +
@@ -699,7 +706,8 @@ void route_level(const LevelState& L, std::span<const std::pair<uint32_t, uint32
   for (size_t i = 0; i < batches.size(); ++i)
     for (uint32_t r = batches[i].first; r < batches[i].second; ++r) batch_bit[r] = static_cast<uint8_t>(1u << i);
   auto own = [&](uint32_t c) { return batch_bit[L.in.region_of[c]]; };
-  std::vector<uint8_t> halo(L.in.cells, 0);
+  std::vector<uint8_t>& halo = routes.halo;
+  halo.assign(L.in.cells, 0);
   run_blocks(
       "emit", true,
       [&](const Block& b, std::span<const uint32_t> ids, BlockOut*, Scratch*) {
