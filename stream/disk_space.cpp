@@ -121,23 +121,29 @@ uint64_t report_work_bytes(const SceneCounts& c) { return store_bytes(c) + inges
 //   record) and, for the mean representative, the grades (8);
 // - the end of the cluster stage: the order (and grades), one bit-packed cell map per level (at most
 //   bit_width(records) bits a record; 22 bits or less on the city scene's levels) and the cell info by
-//   representative (12 to 48 bytes a cell, about 12 cells per 100 vertices over all levels on the city).
-// The GLB's binary data is gathered in the output directory (simplify_output_bytes), not here.
+//   representative (12 to 48 bytes a cell, about 12 cells per 100 vertices over all levels on the city),
+//   and during emit a level emitted in batches' representatives (24 bytes a cell of the finest level,
+//   taken as half the cells).
+// The GLB's binary data and the levels' scratch files are in the output directory (simplify_output_bytes),
+// not here.
 uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative representative) {
   const uint64_t v = c.vertices;
   const uint64_t weld = v / 8 + 4 * v * 3 / 10;
   const uint64_t index = 4 * v + (representative == Representative::mean ? 8 * v : 0);
   const uint64_t maps = static_cast<uint64_t>(levels) * ((v * static_cast<uint64_t>(std::bit_width(v)) + 7) / 8);
   const uint64_t info = v * 12 / 100 * cell_info_bytes(cell_info_kind(representative), c.single_precision);
-  const uint64_t after_ingest = store_bytes(c) + weld + std::max(12 * v, index + maps + info);
+  const uint64_t reps = v * 6 / 100 * 24;
+  const uint64_t after_ingest = store_bytes(c) + weld + std::max(12 * v, index + maps + info + reps);
   return std::max(store_bytes(c) + ingest_transient_bytes(c), after_ingest);
 }
 
 // Per output triangle: PLY about 40 bytes (half a vertex of position and normal, 24 bytes, and a 13-byte
 // face), the GLB about as much, twice while its binary data, gathered beside it, is copied in behind its
-// JSON; OBJ text about 60.
+// JSON; OBJ text about 60. During emit, the levels' scratch files (stream/level_files.h: half a vertex of 24
+// bytes and a 24-byte triangle, about 40 bytes) sit beside the GLB's gathered data, before it is copied.
 uint64_t simplify_output_bytes(uint64_t output_triangles, const SimplifyOptions& o) {
-  const uint64_t per = (o.write_ply ? 40 : 0) + (o.write_glb ? 2 * 40 : 0) + (o.write_obj ? 60 : 0);
+  const uint64_t glb = o.write_glb ? 40 : 0;
+  const uint64_t per = (o.write_ply ? 40 : 0) + std::max(2 * glb, glb + 40) + (o.write_obj ? 60 : 0);
   return output_triangles * per;
 }
 

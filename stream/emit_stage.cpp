@@ -1,6 +1,8 @@
 // Stage 5: emit a group of levels in one pass over the input. See emit_stage.h for the rules.
 #include "stream/emit_stage.h"
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -168,6 +170,11 @@ class PackedMap {
     if (words.capacity() < n) std::vector<uint64_t>().swap(words);
     words.assign(n, ~uint64_t{0});
   }
+  // The map `words` already holds, at `bits` bits a record.
+  void attach(std::vector<uint64_t>& words, unsigned bits) {
+    words_ = &words, bits_ = bits;
+    mask_ = bits == 64 ? ~uint64_t{0} : (uint64_t{1} << bits) - 1;
+  }
   uint64_t get(uint64_t v) const {
     const uint64_t bit = v * bits_, s = bit % 64;
     const uint64_t* w = words_->data() + bit / 64;
@@ -187,6 +194,21 @@ class PackedMap {
   unsigned bits_ = 0;
   uint64_t mask_ = 0;
 };
+
+// What a lone level's packed map is made of: its cluster map and the weld, named with their sizes and
+// modification times, the order, and the counts.
+std::string packed_map_key(const std::string& prefix, const std::string& canonical_path, const EmitLevel& level,
+                           uint64_t vertices, uint64_t records) {
+  std::string key = std::to_string(level.level) + " " + std::to_string(level.cells) + " " + std::to_string(vertices) + " " +
+                    std::to_string(records);
+  for (const std::string& path : {cells_path(prefix, level.level), order_path(prefix), canonical_path}) {
+    struct stat st {};
+    if (!path.empty() && ::stat(path.c_str(), &st) != 0) return {};
+    key += " " + path + " " + std::to_string(st.st_ino) + " " + std::to_string(st.st_size) + " " +
+           std::to_string(st.st_mtim.tv_sec) + "." + std::to_string(st.st_mtim.tv_nsec);
+  }
+  return key;
+}
 
 // One level of a group: its field in the packed map and what it accumulates.
 struct LevelState {
@@ -271,10 +293,17 @@ void find_halos(std::vector<LevelState>& levels, RunBlocks& run_blocks, RecordOf
   bool any = false;
   for (LevelState& L : levels) {
     if (!L.in.batched) continue;
-    any = true;
     L.role.assign(L.in.cells, 0);
     for (uint64_t c = 0; c < L.in.cells; ++c)
       if (L.in.region_of[c] >= L.in.first_region && L.in.region_of[c] < L.in.end_region) L.role[c] = kOwned;
+    // A routed batch: its halo was found while routing (the same rule, over the whole input).
+    if (L.in.routes && L.in.routes->halo.size() == L.in.cells) {
+      const uint8_t bit = static_cast<uint8_t>(1u << L.in.route_bit);
+      for (uint64_t c = 0; c < L.in.cells; ++c)
+        if (L.role[c] != kOwned && (L.in.routes->halo[c] & bit)) L.role[c] = kHalo;
+      continue;
+    }
+    any = true;
   }
   if (!any) return;
   run_blocks(
@@ -560,7 +589,10 @@ EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_reg
   no_quadric.representative = Representative::center;
   const uint64_t per_cell = emit_level_bytes(1, 0, no_quadric) * 3 / 2;
   const uint64_t in_flight = emit_level_bytes(0, primitives, no_quadric);
-  const uint64_t need = map + tables + in_flight + per_cell * largest_region;
+  // The routes of the batches (route_batches: a byte per 64 primitives and a byte a cell) are held beside
+  // each of them.
+  const uint64_t routes = primitives / 64 + 3 + cells;
+  const uint64_t need = map + tables + routes + in_flight + per_cell * largest_region;
   if (need > budget)
     fail(Status::usage, "emitting level " + std::to_string(level) + " (" + std::to_string(cells) + " cells) region by region needs about " +
                             std::to_string(need >> 20) + " MiB (its cluster map " + std::to_string(map >> 20) + " MiB, " +
@@ -568,7 +600,7 @@ EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_reg
                             " MiB, a region of " + std::to_string(largest_region) + " cells), more than --memory allows (" +
                             std::to_string(budget >> 20) + " MiB for the stage): raise --memory, or make the level coarser "
                             "(--cell-sizes, --target-triangles)");
-  plan.batch_cells = (budget - map - tables - in_flight) / per_cell;
+  plan.batch_cells = (budget - map - tables - routes - in_flight) / per_cell;
   // The representatives pass holds a quadric per cell of its range, and its blocks' quadrics in flight.
   const uint64_t quadric_bytes = sizeof(core::Quadric) + 8;
   plan.reps_range_cells = std::max<uint64_t>(1, (budget - map - tables - in_flight) / quadric_bytes);
@@ -658,11 +690,85 @@ void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const 
   }
 }
 
-std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
-                                    const std::string& canonical_path, const std::string& prefix,
-                                    std::span<const EmitLevel> group, uint64_t records,
-                                    const core::ClusterOptions& cluster, const EmitOptions& options,
-                                    Progress& progress, EmitScratch& emit_scratch, const EmitSink& sink) {
+namespace {
+
+// Routing (route_batches): the halo bits of every cell (pass H: like find_halos, for every routed batch at
+// once), then every word's batches (pass R: a primitive goes to the batches of its cells and of their halos,
+// exactly the primitives `visited` lets through in that batch). Halo bits only ever gain bits during pass H,
+// and each word of routes is written by the one block that holds it (blocks start at multiples of 64), so the
+// routes do not depend on the threads.
+template <class RunBlocks, class RecordOf, class CellOf>
+void route_level(const LevelState& L, std::span<const std::pair<uint32_t, uint32_t>> batches, const uint64_t* column_count,
+                 RunBlocks& run_blocks, RecordOf& record_of, CellOf& cell, BatchRoutes& routes) {
+  std::vector<uint8_t> batch_bit(L.in.cut->regions.size(), 0);  // per region: its batch's bit, or 0
+  for (size_t i = 0; i < batches.size(); ++i)
+    for (uint32_t r = batches[i].first; r < batches[i].second; ++r) batch_bit[r] = static_cast<uint8_t>(1u << i);
+  auto own = [&](uint32_t c) { return batch_bit[L.in.region_of[c]]; };
+  std::vector<uint8_t>& halo = routes.halo;
+  halo.assign(L.in.cells, 0);
+  run_blocks(
+      "emit", true,
+      [&](const Block& b, std::span<const uint32_t> ids, BlockOut*, Scratch*) {
+        const size_t arity = static_cast<size_t>(3 - b.kind);
+        for (size_t i = 0; i < ids.size(); i += arity) {
+          uint32_t c[3];
+          uint8_t touched = 0, owner[3];
+          for (size_t k = 0; k < arity; ++k) c[k] = cell(L, record_of(ids[i + k])), owner[k] = own(c[k]), touched |= owner[k];
+          if (!touched) continue;
+          for (size_t k = 0; k < arity; ++k) {
+            const uint8_t add = static_cast<uint8_t>(touched & ~owner[k]);
+            if (add && (std::atomic_ref<uint8_t>(halo[c[k]]).load(std::memory_order_relaxed) & add) != add)
+              std::atomic_ref<uint8_t>(halo[c[k]]).fetch_or(add, std::memory_order_relaxed);
+          }
+        }
+      },
+      [](BlockOut*) {});
+  for (int kind = 0; kind < 3; ++kind) routes.words[kind].assign((column_count[kind] + 63) / 64, 0);
+  run_blocks(
+      "emit", false,
+      [&](const Block& b, std::span<const uint32_t> ids, BlockOut*, Scratch*) {
+        const size_t arity = static_cast<size_t>(3 - b.kind);
+        uint8_t* words = routes.words[b.kind].data();
+        for (size_t i = 0; i < ids.size(); i += arity) {
+          uint8_t m = 0;
+          for (size_t k = 0; k < arity; ++k) {
+            const uint32_t c = cell(L, record_of(ids[i + k]));
+            m |= static_cast<uint8_t>(own(c) | halo[c]);
+          }
+          words[(b.first + i / arity) / 64] |= m;
+        }
+      },
+      [](BlockOut*) {});
+}
+
+// The blocks of a routed batch: runs of its words, cut at kEmitBlock primitives (every block starts at a
+// multiple of 64, as the collapsed bits need).
+std::vector<Block> routed_blocks(const BatchRoutes& routes, unsigned bit, const uint64_t* column_count) {
+  std::vector<Block> blocks;
+  const uint8_t mask = static_cast<uint8_t>(1u << bit);
+  for (int kind = 0; kind < 3; ++kind) {
+    const std::vector<uint8_t>& words = routes.words[kind];
+    if (words.size() != (column_count[kind] + 63) / 64) fail(Status::internal, "emit: routes of another input");
+    for (uint64_t w = 0; w < words.size();) {
+      if (!(words[w] & mask)) {
+        ++w;
+        continue;
+      }
+      uint64_t end = w + 1;
+      while (end < words.size() && (words[end] & mask) && (end - w) * 64 < kEmitBlock) ++end;
+      const uint64_t first = w * 64;
+      blocks.push_back({kind, first, std::min(end * 64, column_count[kind]) - first});
+      w = end;
+    }
+  }
+  return blocks;
+}
+
+std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
+                                      const std::string& prefix, std::span<const EmitLevel> group, uint64_t records,
+                                      const core::ClusterOptions& cluster, const EmitOptions& options, Progress& progress,
+                                      EmitScratch& emit_scratch, const EmitSink& sink,
+                                      std::span<const std::pair<uint32_t, uint32_t>> route_batches, BatchRoutes* routes) {
   const size_t nl = group.size();
   if (nl == 0) return {};
   std::vector<LevelState> levels(nl);
@@ -681,8 +787,17 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
   // weight index is in grade order); the threads split them by vertex range, each range a whole number of
   // words so that no two threads write one word, and each thread reads every record (sequential, cheap).
   PackedMap map;
-  map.reset(emit_scratch.map, meta.vertices, bits);
-  {
+  // The batches of a level (its representatives' passes and its routing) all use the one map: built for
+  // the first, kept in the scratch for the others (map_key names what it was built from, files' sizes and
+  // times included).
+  const bool lone_batched = nl == 1 && (levels[0].in.batched || routes || options.representatives_only);
+  const std::string map_key =
+      lone_batched ? packed_map_key(prefix, canonical_path, levels[0].in, meta.vertices, records) : std::string();
+  const bool reuse = !map_key.empty() && emit_scratch.map_key == map_key;
+  emit_scratch.map_key.clear();
+  if (reuse) map.attach(emit_scratch.map, bits);
+  else map.reset(emit_scratch.map, meta.vertices, bits);
+  if (!reuse) {
     io::MappedFile order(order_path(prefix));
     if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
     const size_t parts = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
@@ -716,6 +831,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     if (!canonical_path.empty())
       WeldFile(canonical_path, meta.vertices).for_each_welded([&](uint64_t v, uint32_t canon) { map.set(v, map.get(canon)); });
   }
+  emit_scratch.map_key = map_key;
 
   StorePositions positions(store_dir, meta);
   positions.acquire();
@@ -731,6 +847,8 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     for (uint64_t first = 0; first < column_count[kind]; first += kEmitBlock)
       blocks.push_back({kind, first, std::min(kEmitBlock, column_count[kind] - first)});
   }
+  if (nl == 1 && levels[0].in.batched && levels[0].in.routes && !routes)
+    blocks = routed_blocks(*levels[0].in.routes, levels[0].in.route_bit, column_count);
   const bool quadric = options.representative == Representative::quadric && !options.count_only;
   const bool materials = !meta.materials.empty() && !options.count_only && !options.representatives_only;
   std::vector<ObjectRun> material_runs[3];
@@ -785,6 +903,11 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
       if (merged > 0) progress.report(stage, static_cast<double>(merged) / static_cast<double>(blocks.size()));
     }
   };
+
+  if (routes) {
+    route_level(levels[0], route_batches, column_count, run_blocks, record_of, cell, *routes);
+    return {};
+  }
 
   // Pass A: classify, dedupe per block, sum quadrics; a triangle's positions and quadric are formed once for
   // every level of the group.
@@ -1154,6 +1277,29 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
     counts[l] = L.counts;
   }
   return counts;
+}
+
+}  // namespace
+
+std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
+                                    const std::string& canonical_path, const std::string& prefix,
+                                    std::span<const EmitLevel> group, uint64_t records,
+                                    const core::ClusterOptions& cluster, const EmitOptions& options,
+                                    Progress& progress, EmitScratch& scratch, const EmitSink& sink) {
+  return emit_or_route(store_dir, meta, canonical_path, prefix, group, records, cluster, options, progress, scratch, sink, {},
+                       nullptr);
+}
+
+void route_batches(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
+                   const std::string& prefix, const EmitLevel& level, std::span<const std::pair<uint32_t, uint32_t>> batches,
+                   uint64_t records, const core::ClusterOptions& cluster, Progress& progress, EmitScratch& scratch,
+                   BatchRoutes& routes) {
+  if (batches.size() > kRouteBatches || !level.cut || !level.region_of)
+    fail(Status::internal, "emit: at most " + std::to_string(kRouteBatches) + " batches of a cut level are routed at once");
+  EmitOptions options;
+  options.count_only = true;  // nothing beyond the packed map and the two passes
+  emit_or_route(store_dir, meta, canonical_path, prefix, std::span<const EmitLevel>(&level, 1), records, cluster, options, progress,
+                scratch, [](size_t, RegionPart&) {}, batches, &routes);
 }
 
 }  // namespace lodstream::stream

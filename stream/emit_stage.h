@@ -29,7 +29,9 @@
 // Levels are emitted in groups that share one pass over the input (emit_levels, emit_group_end below), and
 // each level region by region (stream/emit_regions.h): a level too large for the memory plan in batches of
 // regions, each batch visiting the primitives that touch its cells or its halo's, so that every cell it
-// outputs, and every neighbour's vertex its parts use, sees its whole neighbourhood.
+// outputs, and every neighbour's vertex its parts use, sees its whole neighbourhood. Routed batches
+// (route_batches) read only the words of 64 primitives that hold such primitives; their packed map is
+// built once for the level (EmitScratch).
 // Memory: the group's packed cluster maps (bit_width(cells) bits per stored vertex and level, kept in
 // EmitScratch between groups) and per level one bit per input triangle and segment (collapsed to an edge
 // or not), plus what grows with the output: at the peak (classification), the triangle and edge dedupe
@@ -81,8 +83,23 @@ struct EmitCounts {
 // What one group of levels leaves to the next: the buffer of the packed cluster maps, so that every group
 // does not fault in and zero fresh pages for it (measured at a tenth of the stage's time on a 48M-triangle
 // scene). Holds no result: any scratch, fresh or used, gives the same output.
+// The map of a lone level emitted in batches is kept whole for its next batches: map_key names what it was
+// made from (empty: nothing reusable), and a batch whose key matches does not build it again.
 struct EmitScratch {
   std::vector<uint64_t> map;
+  std::string map_key;
+};
+
+// Which batches of a batched level visit which primitives (route_batches below): per kind (triangles,
+// segments, points) one byte per word of 64 primitives (in store order), whose bit i says that batch i of the
+// routed batches visits a primitive of the word (it touches a cell of the batch or of its halo).
+// At most kRouteBatches batches are routed at once.
+inline constexpr size_t kRouteBatches = 8;
+// `halo`: per cell of the level, bit i set when the cell is in batch i's halo (the batch then takes it
+// from here instead of a pass of its own).
+struct BatchRoutes {
+  std::vector<uint8_t> words[3];
+  std::vector<uint8_t> halo;
 };
 
 // One level to emit: its index in the cluster stage's files, its cell count and size.
@@ -101,7 +118,12 @@ struct EmitLevel {
   bool batched = false;
   // representatives_only: the cells whose quadrics are summed.
   uint64_t first_cell = 0, end_cell = 0;
+  // Batched, with routes: only the words of 64 primitives whose route_bit is set in `routes` are read (the
+  // batch's halo and classification passes then cost its share of the input, not the whole input).
+  const BatchRoutes* routes = nullptr;
+  unsigned route_bit = 0;
 };
+
 
 // One region's part of a level, as emit hands it on: the part the region sink gets, and what welds the parts
 // into the level's mesh. A vertex of the level is (cell, variant): the variant-th output vertex of the cell
@@ -135,6 +157,17 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
                                     std::span<const EmitLevel> group, uint64_t records,
                                     const core::ClusterOptions& cluster, const EmitOptions& options,
                                     Progress& progress, EmitScratch& scratch, const EmitSink& sink);
+
+// Routes `batches` (at most kRouteBatches [first, end) region ranges of `level`, whose cut and region_of are
+// set) in two passes over the input, instead of two per batch: the first marks each cell's halo batches (one
+// byte a cell: the batches, other than its own, that it shares an input triangle or segment with), the second
+// each word's batches. A batch emitted with these routes visits exactly the primitives it visits without them,
+// and has the same halo. Memory: the level's packed map, a byte a cell and a byte per 64 primitives (the
+// routes, held beside each batch).
+void route_batches(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
+                   const std::string& prefix, const EmitLevel& level, std::span<const std::pair<uint32_t, uint32_t>> batches,
+                   uint64_t records, const core::ClusterOptions& cluster, Progress& progress, EmitScratch& scratch,
+                   BatchRoutes& routes);
 
 // Memory model of the grouping. A level of C cells takes emit_bits(C) bits of each packed map record.
 unsigned emit_bits(uint64_t cells);

@@ -126,8 +126,9 @@ class MaterialSweep {
 
 }  // namespace
 
-LevelFiles::LevelFiles(std::string scratch, uint64_t cells, std::vector<core::Material> materials, bool colors)
-    : scratch_(std::move(scratch)), first_vertex_(cells, UINT32_MAX), first_triangle_vertex_(cells, UINT32_MAX),
+LevelFiles::LevelFiles(std::string scratch, uint64_t cells, std::vector<core::Material> materials, bool colors,
+                       std::string suffix)
+    : scratch_(std::move(scratch)), suffix_(std::move(suffix)), first_vertex_(cells, UINT32_MAX), first_triangle_vertex_(cells, UINT32_MAX),
       materials_(std::move(materials)), colors_(colors) {
   const size_t m = materials_.empty() ? 0 : 4, c = colors_ ? 4 : 0;
   vertex_bytes_ = kVertexBytes + c, triangle_bytes_ = kTriangleBytes + m;
@@ -373,8 +374,11 @@ io::GlbStreamedLevel LevelFiles::glb(const std::string& name, double screen_cove
 
 void OpenLevels::add(size_t level, const RegionPart& part) {
   std::unique_ptr<LevelFiles>& files = open_[level];
-  if (!files)
-    files = std::make_unique<LevelFiles>(work_.scratch(stem_ + std::to_string(level)), cells_.at(level), materials_, colors_);
+  if (!files && work_)
+    files = std::make_unique<LevelFiles>(work_->scratch(stem_ + std::to_string(level)), cells_.at(level), materials_, colors_);
+  else if (!files)
+    files = std::make_unique<LevelFiles>(output_dir_ + "/" + stem_ + std::to_string(level) + ".scratch-", cells_.at(level),
+                                         materials_, colors_, ".partial");
   files->add(part);
 }
 

@@ -29,9 +29,11 @@ namespace lodstream::stream {
 
 class LevelFiles {
  public:
-  // scratch: a path prefix for the scratch files (removed by the destructor); cells: the level's cells;
-  // materials: the store's table (empty: none); colors: the parts carry vertex colours.
-  LevelFiles(std::string scratch, uint64_t cells, std::vector<core::Material> materials = {}, bool colors = false);
+  // scratch: a path prefix for the scratch files (removed by the destructor), each named prefix + what +
+  // suffix; cells: the level's cells; materials: the store's table (empty: none); colors: the parts carry
+  // vertex colours.
+  LevelFiles(std::string scratch, uint64_t cells, std::vector<core::Material> materials = {}, bool colors = false,
+             std::string suffix = {});
   LevelFiles(const LevelFiles&) = delete;
   LevelFiles& operator=(const LevelFiles&) = delete;
   ~LevelFiles();
@@ -48,8 +50,8 @@ class LevelFiles {
  private:
   uint32_t vertex_id(uint64_t key) const;
   uint32_t triangle_vertex_id(uint64_t key) const;
-  std::string path(const char* what) const { return scratch_ + what; }
-  std::string scratch_;
+  std::string path(const char* what) const { return scratch_ + what + suffix_; }
+  std::string scratch_, suffix_;
   std::vector<uint32_t> first_vertex_, first_triangle_vertex_;  // per cell: the id of its variant 0
   std::vector<core::Material> materials_;
   bool colors_ = false;
@@ -65,17 +67,29 @@ class LevelFiles {
 // The levels being welded while the emit stage hands out their parts (the levels of a group interleave):
 // a level's LevelFiles opens with its first part, on scratch files of `work` named after `stem` and the
 // level, and is taken, closed, after its last.
+// With an output directory instead (OutputScratch), the scratch files of the levels of the output go there:
+// STEMN.scratch-vertices.partial and so on (the level's PLY, OBJ and GLB data in the making, as the GLB's
+// gathered binary data is; a killed run's are replaced by the rerun's, which removes them when the level
+// is written), so that they do not add to the work directory's peak.
 class OpenLevels {
  public:
   OpenLevels(const WorkDir& work, std::string stem, std::vector<uint64_t> cells,
              std::vector<core::Material> materials = {}, bool colors = false)
-      : work_(work), stem_(std::move(stem)), cells_(std::move(cells)), materials_(std::move(materials)), colors_(colors) {}
+      : work_(&work), stem_(std::move(stem)), cells_(std::move(cells)), materials_(std::move(materials)), colors_(colors) {}
+  struct OutputScratch {
+    std::string dir;
+  };
+  OpenLevels(OutputScratch output, std::string stem, std::vector<uint64_t> cells, std::vector<core::Material> materials = {},
+             bool colors = false)
+      : output_dir_(std::move(output.dir)), stem_(std::move(stem)), cells_(std::move(cells)), materials_(std::move(materials)),
+        colors_(colors) {}
   void add(size_t level, const RegionPart& part);
   // Fails (Status::internal) when the level had no part.
   std::unique_ptr<LevelFiles> take(size_t level);
 
  private:
-  const WorkDir& work_;
+  const WorkDir* work_ = nullptr;
+  std::string output_dir_;  // without work_
   std::string stem_;
   std::vector<uint64_t> cells_;
   std::vector<core::Material> materials_;

@@ -682,12 +682,23 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
             stream::write_representatives(store_dir, meta, canonical, prefix, l, cells[l], sizes[l], grade.records, copts,
                                           eo.representative, plans[l].reps_range_cells, progress, scratch);
             const std::vector<uint32_t> region_of = stream::load_region_of(prefix, l, cells[l], cube, cuts[l], so.representative, meta.single_precision);
-            for (const auto& [r0, r1] : stream::region_batches(cuts[l], plans[l].batch_cells)) {
-              stream::EmitLevel level{l, cells[l], sizes[l], &cuts[l], region_of.data(), r0, r1, true};
-              const std::vector<stream::EmitCounts> c = stream::emit_levels(
-                  store_dir, meta, canonical, prefix, std::span<const stream::EmitLevel>(&level, 1), grade.records, copts, eo,
-                  progress, scratch, [&](size_t, stream::RegionPart& part) { sink(l, info(l, part.region), part); });
-              add(l, c[0]);
+            // The batches are routed kRouteBatches at a time (two passes over the input), and each batch then
+            // reads only the words of the input its routes name.
+            const std::vector<std::pair<uint32_t, uint32_t>> batches = stream::region_batches(cuts[l], plans[l].batch_cells);
+            for (size_t b0 = 0; b0 < batches.size(); b0 += stream::kRouteBatches) {
+              const std::span<const std::pair<uint32_t, uint32_t>> routed(
+                  batches.data() + b0, std::min(stream::kRouteBatches, batches.size() - b0));
+              stream::BatchRoutes routes;
+              stream::EmitLevel level{l, cells[l], sizes[l], &cuts[l], region_of.data(), 0, 0, true};
+              stream::route_batches(store_dir, meta, canonical, prefix, level, routed, grade.records, copts, progress, scratch, routes);
+              for (size_t i = 0; i < routed.size(); ++i) {
+                level.first_region = routed[i].first, level.end_region = routed[i].second;
+                level.routes = &routes, level.route_bit = static_cast<unsigned>(i);
+                const std::vector<stream::EmitCounts> c = stream::emit_levels(
+                    store_dir, meta, canonical, prefix, std::span<const stream::EmitLevel>(&level, 1), grade.records, copts, eo,
+                    progress, scratch, [&](size_t, stream::RegionPart& part) { sink(l, info(l, part.region), part); });
+                add(l, c[0]);
+              }
             }
             std::filesystem::remove(stream::representatives_path(prefix, l));
             level_done(l);
@@ -850,7 +861,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         glb = std::make_unique<io::GlbBuilder>(so.output_dir + "/lods.glb", so.output_dir + "/lods.glb.bin.partial", generator);
       // Each level's parts are welded into its files (stream/level_files.h) as they come; the level's PLY and
       // OBJ files and its part of the GLB are written after its last part (the three side by side).
-      stream::OpenLevels open_levels(work, "level", cells, meta.materials, meta.colors);
+      // Their scratch files are in the output directory (stream/level_files.h: the levels' data in the
+      // making, counted with the outputs, stream/disk_space.cpp), not in the work directory.
+      stream::OpenLevels open_levels(stream::OpenLevels::OutputScratch{so.output_dir}, "lod", cells, meta.materials, meta.colors);
       // The region sink of the 3D Tiles output (stream/emit_regions.h): every region of every level becomes a
       // tile as it is emitted (stream/tiles.h); tileset.json is written after the last.
       std::unique_ptr<stream::TilesetBuilder> tiles;
@@ -866,6 +879,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       };
       auto write_level = [&](size_t l) {
         const std::unique_ptr<stream::LevelFiles> level = open_levels.take(l);
+        stream::kill_point(fmt::format("lod{}.scratch", l));  // tests/test_crash.cpp: killed with the level's scratch complete
         LevelStats& ls = report.levels[l];
         ls.vertices = level->vertices();
         const std::vector<std::string> comments = level_comments(so, generator, l, sizes.size(), sizes[l]);

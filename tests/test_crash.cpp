@@ -402,6 +402,33 @@ TEST(CrashSafety, ScratchFilesOfAKilledRunAreRemovedWhenItResumes) {
   }
 }
 
+// The levels' scratch files are in the output directory (stream/level_files.h), as `.partial` files: a run
+// killed with the finest level's scratch complete (its parts all in, its files not yet written) leaves them,
+// and the rerun replaces and removes them.
+TEST(CrashSafety, LevelScratchInTheOutputDirectoryIsReplacedWhenItResumes) {
+  test::TempDir tmp;
+  const std::string grid = write_grid(tmp, 600);
+  auto args = [&](const std::string& out, const std::string& work) {
+    return std::vector<std::string>{"simplify", grid, "-o", out, "--work", work, "--levels", "2", "--memory", "64M",
+                                    "--progress", "json"};
+  };
+  const std::string ref_out = tmp.file("ref-out"), ref_work = tmp.file("ref-work");
+  std::vector<std::string> order;
+  std::set<std::string> resumable;
+  reference(args(ref_out, ref_work), ref_out, ref_work, "manifest.json", &order, &resumable);
+  for (const std::string& f : files_under(ref_out)) EXPECT_EQ(f.find("scratch"), std::string::npos) << f << " left behind";
+  const std::string out = tmp.file("out"), work = tmp.file("work");
+  const ChildRun killed = run_cli(args(out, work), {"LODSTREAM_TEST_KILL_AT=lod0.scratch"}, [](const Line&) { return false; });
+  ASSERT_EQ(killed.exit_code, 128 + SIGKILL) << killed.err;
+  const std::set<std::string> left = files_under(out);
+  for (const char* f : {"lod0.scratch-vertices.partial", "lod0.scratch-triangles.partial"}) {
+    EXPECT_TRUE(left.count(f)) << f << " is not in the output directory after the kill";
+  }
+  for (const std::string& f : files_under(work)) EXPECT_EQ(f.find("level"), std::string::npos) << f << " in the work directory";
+  kill_and_resume({"before lod0's files are written", "", -1, "lod0.scratch", "emit"}, args(out, work), out, work, ref_out,
+                  files_under(ref_work), "manifest.json", resumable, order);
+}
+
 // manifest.json (report.json) is written last, so that its presence means the directory is complete. A
 // run over an older run's output directory, killed while it writes its own files, must not leave the
 // older summary vouching for a mix of the two runs' files.

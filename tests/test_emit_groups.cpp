@@ -99,7 +99,7 @@ TEST(EmitGroups, SameMeshesAloneAndGrouped) {
     stream::EmitScratch scratch;
     const core::ClusterOptions copts;
     const stream::EmitOptions eo{rep, so.crease_degrees, true, false};
-    std::vector<Parts> alone(levels.size()), four(4), pair(2), batched(1);
+    std::vector<Parts> alone(levels.size()), four(4), pair(2), batched(1), routed(1);
     for (size_t l = 0; l < levels.size(); ++l)
       stream::emit_levels(store_dir, meta, canonical, prefix, std::span(&levels[l], 1), records, copts, eo, progress,
                           scratch, into(alone, l));
@@ -118,6 +118,28 @@ TEST(EmitGroups, SameMeshesAloneAndGrouped) {
       stream::emit_levels(store_dir, meta, canonical, prefix, std::span(&b, 1), records, copts, eo, progress, scratch,
                           into(batched, 0));
     }
+    // Routed (stream::route_batches), in more batches than one routing holds: each batch reads only its
+    // words of the input, and the map is built once for the routings and batches (EmitScratch).
+    const auto small = stream::region_batches(cuts[0], cells[0] / 12);
+    ASSERT_GT(small.size(), stream::kRouteBatches);
+    size_t words_read = 0, words = 0;
+    for (size_t b0 = 0; b0 < small.size(); b0 += stream::kRouteBatches) {
+      const std::span<const std::pair<uint32_t, uint32_t>> group(small.data() + b0,
+                                                                 std::min(stream::kRouteBatches, small.size() - b0));
+      stream::BatchRoutes routes;
+      stream::EmitLevel b = levels[0];
+      b.batched = true;
+      stream::route_batches(store_dir, meta, canonical, prefix, b, group, records, copts, progress, scratch, routes);
+      ASSERT_EQ(routes.words[0].size(), (meta.triangles + 63) / 64);
+      for (size_t i = 0; i < group.size(); ++i) {
+        b.first_region = group[i].first, b.end_region = group[i].second, b.routes = &routes, b.route_bit = static_cast<unsigned>(i);
+        for (uint8_t w : routes.words[0]) words_read += (w >> i) & 1;
+        words += routes.words[0].size();
+        stream::emit_levels(store_dir, meta, canonical, prefix, std::span(&b, 1), records, copts, eo, progress, scratch,
+                            into(routed, 0));
+      }
+    }
+    EXPECT_LT(words_read, words / 2) << "the batches' routes name most of the input";
     for (size_t l = 0; l < levels.size(); ++l) {
       EXPECT_EQ(alone[l].size(), cuts[l].regions.size());
       uint64_t triangles = 0;
@@ -129,6 +151,7 @@ TEST(EmitGroups, SameMeshesAloneAndGrouped) {
     expect_same_parts(alone[3], pair[0], "level 3 with level 0");
     expect_same_parts(alone[0], pair[1], "level 0 with level 3");
     expect_same_parts(alone[0], batched[0], "level 0 in batches");
+    expect_same_parts(alone[0], routed[0], "level 0 in routed batches");
   }
 }
 

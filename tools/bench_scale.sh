@@ -4,7 +4,7 @@
 # --memory cap, optionally followed by `lodstream report` of the levels. Per run it records what an
 # operator sees from outside: wall time and peak resident memory as /usr/bin/time -v reports them (the
 # process never resets its high-water mark), the work directory's size (its largest, sampled every 5 s,
-# and at the end), the input's size, and the time per input triangle, with its ratio to the first scene's;
+# and at the end), the output directory's largest (the levels' scratch files are there), the input's size, and the time per input triangle, with its ratio to the first scene's;
 # the stages' wall times and peaks from manifest.json, and the load average at the start and the end.
 #
 # usage: tools/bench_scale.sh [--scenes 9:1G,18:1G,41:4G] [--report 18:2G] [--build build]
@@ -77,9 +77,13 @@ with open(log, 'w') as f:
     p = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT)
     biggest = 0
     next_du = 0
+    # The output directory too: the levels' scratch files and the GLB's gathered data are written there.
+    odir = sys.argv[8:][sys.argv[8:].index('-o') + 1] if '-o' in sys.argv[8:] else None
+    out_biggest = 0
     while p.poll() is None:
         if time.time() >= next_du:
             biggest = max(biggest, du(wdir)); next_du = time.time() + 5
+            if odir: out_biggest = max(out_biggest, du(odir))
         time.sleep(0.5)
 wall = time.time() - t0
 end = du(wdir); biggest = max(biggest, end)
@@ -89,7 +93,7 @@ el = re.search(r'Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): ([\d:.]+)', tv
 wall_time = sum(float(x) * 60 ** i for i, x in enumerate(reversed(el)))
 cpu = sum(float(re.search(rf'{k} time \(seconds\): ([\d.]+)', tv).group(1)) for k in ('User', 'System'))
 rec = {'label': label, 'cap': cap, 'exit': p.returncode, 'wall_s': round(wall_time, 1), 'cpu_s': round(cpu, 1), 'peak_rss': rss,
-       'work_bytes_max': biggest, 'work_bytes_end': end, 'input_bytes': os.path.getsize(scene),
+       'work_bytes_max': biggest, 'work_bytes_end': end, 'out_bytes_max': out_biggest, 'input_bytes': os.path.getsize(scene),
        'load': [float(load0), float(open('/proc/loadavg').read().split()[0])]}
 out = [a for a in sys.argv[8:]]
 if '-o' in out:
@@ -107,7 +111,7 @@ with open(jsonl, 'a') as f:
 g = lambda b: f'{b / 2**30:.2f} GiB'
 over = rss > cap
 print(f"{label}: exit {p.returncode}, {rec['wall_s']} s ({rec['cpu_s']} CPU-s), peak {g(rss)} (cap {cap_s}){'  OVER THE CAP' if over else ''}, "
-      f"work dir max {g(biggest)} = {biggest / rec['input_bytes']:.2f}x input")
+      f"work dir max {g(biggest)} = {biggest / rec['input_bytes']:.2f}x input, output dir max {g(out_biggest)}")
 if p.returncode != 0:
     print('  ' + (open(log).read().strip().splitlines() or [''])[-1])
 sys.exit(1 if p.returncode != 0 or over else 0)
@@ -141,8 +145,8 @@ python3 - "$work/runs.jsonl" <<'EOF'
 import json, sys
 runs = [json.loads(l) for l in open(sys.argv[1])]
 base = next((r for r in runs if r['label'].startswith('simplify') and r.get('triangles') and r['exit'] == 0), None)
-print('\n| run | cap | exit | wall | CPU s | peak (time -v) | work dir max / input | ns per input triangle: wall, CPU | vs first: wall, CPU | load (start, end) | stages: wall s / CPU s / peak MiB |')
-print('|---|---|---|---|---|---|---|---|---|---|---|')
+print('\n| run | cap | exit | wall | CPU s | peak (time -v) | work dir max / input | output dir max | ns per input triangle: wall, CPU | vs first: wall, CPU | load (start, end) | stages: wall s / CPU s / peak MiB |')
+print('|---|---|---|---|---|---|---|---|---|---|---|---|')
 for r in runs:
     tri = r.get('triangles')
     ns = r['wall_s'] / tri * 1e9 if tri else None
@@ -151,6 +155,7 @@ for r in runs:
     cratio = cns / (base['cpu_s'] / base['triangles'] * 1e9) if cns and base else None
     print(f"| {r['label']} | {r['cap'] / 2**30:.2f} GiB | {r['exit']} | {r['wall_s']} s | {r['cpu_s']} | {r['peak_rss'] / 2**30:.2f} GiB | "
           f"{r['work_bytes_max'] / 2**30:.2f} / {r['input_bytes'] / 2**30:.2f} GiB = {r['work_bytes_max'] / r['input_bytes']:.2f}x | "
+          f"{r.get('out_bytes_max', 0) / 2**30:.2f} GiB | "
           f"{f'{ns:.0f}, {cns:.0f}' if ns else '-'} | {f'{ratio:.2f}x, {cratio:.2f}x' if ratio else '-'} | {r['load'][0]:.1f}, {r['load'][1]:.1f} | "
           + ', '.join(f"{k} {v[0]} / {v[1]} / {v[2] >> 20}" for k, v in r.get('stages', {}).items()) + ' |')
 EOF
