@@ -3,6 +3,7 @@
 
 usage: tools/bench_labels_sweep.py [--build DIR] [--work DIR] [--views K] [--resolution H] [--samples N]
                                    [--threads T] [--configs D:f,...] [--tolerance P] [--out FILE.md] MODEL...
+       tools/bench_labels_sweep.py --from-json WORK/sweep.json [--configs D:f,...]   (the table again)
 
 For each MODEL, as tools/bench_peers.py does it (its Bench class: the same reference, matching and report):
 the reference is `lodstream simplify` with its defaults (no labels) at --resolution H; sloppy
@@ -66,8 +67,8 @@ def table(rows, configs):
     key = {(r["model"], r["level"], r["run"]): r for r in rows}
     levels = sorted({(r["model"], r["level"]) for r in rows})
     out = ["| D px | f | levels | p95 and mismatch ≤ sloppy | p95 and mismatch ≤ no labels | Hd mean < no labels | "
-           "Hd mean / no labels (median) | thin kept, mean (no labels) |",
-           "|---:|---:|---:|---:|---:|---:|---:|---|"]
+           "Hd mean / no labels (median) | mismatch / no labels (median) | thin kept, mean (no labels) |",
+           "|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     def ok(x, y):
         return x["sil_p95"] <= y["sil_p95"] and x["mismatch"] <= y["mismatch"]
     for run in ["lodstream"] + [f"D{D:g}-f{f:g}" for D, f in configs]:
@@ -83,18 +84,20 @@ def table(rows, configs):
         vs_ref = sum(ok(x, r) for x, r, _ in trip)
         hd_lower = sum(x["hd_mean"] < r["hd_mean"] for x, r, _ in trip)
         hd = statistics.median(x["hd_mean"] / r["hd_mean"] for x, r, _ in trip if r["hd_mean"] > 0)
+        mis = statistics.median(x["mismatch"] / r["mismatch"] for x, r, _ in trip if r["mismatch"] > 0)
         thin = [(x, r) for x, r, _ in trip if r["thin_pixels"] > 0]
         tk = statistics.mean(x["thin_kept"] for x, _ in thin) if thin else float("nan")
         tr = statistics.mean(r["thin_kept"] for _, r in thin) if thin else float("nan")
         D, f = ("—", "no labels") if run == "lodstream" else run[1:].split("-f")
         out.append(f"| {D} | {f} | {n} | {vs_sloppy} ({100 * vs_sloppy / n:.0f} %) | {vs_ref} ({100 * vs_ref / n:.0f} %) | "
-                   f"{hd_lower} | {hd:.2f} | {100 * tk:.1f} % ({100 * tr:.1f} %) |")
+                   f"{hd_lower} | {hd:.2f} | {mis:.2f} | {100 * tk:.1f} % ({100 * tr:.1f} %) |")
     return out
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("models", nargs="+")
+    ap.add_argument("models", nargs="*")
+    ap.add_argument("--from-json", help="only the table, from an earlier run's WORK/sweep.json")
     ap.add_argument("--build", default=os.path.join(bp.ROOT, "build"))
     ap.add_argument("--work")
     ap.add_argument("--views", type=int, default=16)
@@ -107,6 +110,13 @@ def main():
     ap.add_argument("--out")
     a = ap.parse_args()
     configs = [(float(c.split(":")[0]), float(c.split(":")[1])) for c in a.configs.split(",")]
+    if a.from_json:
+        rows = json.load(open(a.from_json))
+        print(f"From {a.from_json}: {len({(r['model'], r['level']) for r in rows})} levels of "
+              f"{len({r['model'] for r in rows})} models.\n\n" + "\n".join(table(rows, configs)))
+        return
+    if not a.models:
+        ap.error("give models, or --from-json")
     a.build = os.path.abspath(a.build)
     a.memory, a.max_steps = None, 12
     a.work = os.path.abspath(a.work or tempfile.mkdtemp(prefix="bench_labels_sweep."))

@@ -352,8 +352,34 @@ def summarize(rows):
     return head + out
 
 
+def misses(rows, m="labels", p="sloppy"):
+    """Issue 14's target, A = m against B = p: the levels (both matched) where A misses each part of it."""
+    key = {(r["model"], r["level"], r["method"]): r for r in rows}
+    miss = {"sil p95 and mismatch not both at most B's": [], "Hd mean not lower": [], "thin kept lower": []}
+    unmatched = []
+    for lv in sorted({(r["model"], r["level"]) for r in rows}):
+        a, b = key.get(lv + (m,)), key.get(lv + (p,))
+        if not (a and b):
+            continue
+        if not (a["matched"] and b["matched"]):
+            unmatched.append(f"{lv[0][:24]} {lv[1]}")
+            continue
+        tag = f"{lv[0][:24]} {lv[1]}"
+        if not (a["sil_p95"] <= b["sil_p95"] and a["mismatch"] <= b["mismatch"]):
+            miss["sil p95 and mismatch not both at most B's"].append(
+                f"{tag} ({a['sil_p95']:.3g}/{b['sil_p95']:.3g} px, {100 * a['mismatch']:.3g}/{100 * b['mismatch']:.3g} %)")
+        if not a["hd_mean"] < b["hd_mean"]:
+            miss["Hd mean not lower"].append(f"{tag} ({a['hd_mean']:.3g}/{b['hd_mean']:.3g} %)")
+        if b["thin_pixels"] > 0 and a["thin_kept"] < b["thin_kept"]:
+            miss["thin kept lower"].append(f"{tag} ({100 * a['thin_kept']:.3g}/{100 * b['thin_kept']:.3g} %)")
+    out = [f"Misses, {m} (A) against {p} (B), A/B in brackets:"]
+    out += [f"- {k}: {len(v)}: {'; '.join(v)}" for k, v in miss.items()]
+    out.append(f"- not compared (a count more than the tolerance off): {len(unmatched)}: {'; '.join(unmatched)}")
+    return out
+
+
 def markdown(rows, head):
-    md = [head, ""] + summarize(rows) + [""]
+    md = [head, ""] + summarize(rows) + [""] + misses(rows) + [""]
     md += ["| model | lvl | method | tris | sil p95 px | sil mean px | mismatch % | thin kept % | Hd mean % | Hd max % |",
            "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
