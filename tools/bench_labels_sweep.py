@@ -10,7 +10,7 @@ the reference is `lodstream simplify` with its defaults (no labels) at --resolut
 (meshopt_simplifySloppy) and every labels configuration D:f (`--silhouette-interval D --silhouette-factor f`)
 are matched to the reference's triangle counts within --tolerance (search on the cell sizes, at most 12
 steps); one `report` measures every level of every run from the reference's switching distances.
-Per configuration, over the levels where it, the reference and sloppy are all matched: on how many its
+Per configuration, over the levels where every configuration, the reference and sloppy are matched: on how many its
 silhouette p95 and mismatch are both at most sloppy's (the target of issue 14), both at most the
 reference's, its Hausdorff mean against the reference's (median ratio, and levels lower), its thin-feature
 share against the reference's (mean). Writes WORK/sweep.json and WORK/sweep.md (also printed).
@@ -65,7 +65,10 @@ def model_rows(b, model, configs):
 
 def table(rows, configs):
     key = {(r["model"], r["level"], r["run"]): r for r in rows}
-    levels = sorted({(r["model"], r["level"]) for r in rows})
+    names = ["lodstream", "sloppy"] + [f"D{D:g}-f{f:g}" for D, f in configs]
+    # The levels where every run is matched, so that every row counts the same levels.
+    levels = sorted(lv for lv in {(r["model"], r["level"]) for r in rows}
+                    if all(key.get(lv + (n,)) and key[lv + (n,)]["matched"] for n in names))
     out = ["| D px | f | levels | p95 and mismatch ≤ sloppy | p95 and mismatch ≤ no labels | Hd mean < no labels | "
            "Hd mean / no labels (median) | mismatch / no labels (median) | thin kept, mean (no labels) |",
            "|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
