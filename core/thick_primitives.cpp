@@ -126,8 +126,12 @@ LodMesh expand_thick(const LodMesh& mesh, const ThickOptions& options, double* m
     const uint32_t p = mesh.points[i];
     out.rgba = rgba(p);
     if (materials) out.material = mesh.point_materials[i];
-    octahedron(out, position(mesh, p), options.point_radius);
-    radius = std::max(radius, options.point_radius);
+    // A point as wide as what collapsed into it (its size, a diameter), as an edge is as wide as its
+    // thickness, and like an edge never thinner than the floor.
+    const double pr = mesh.point_size.empty() ? options.point_radius
+                                              : std::max(static_cast<double>(mesh.point_size[i]) / 2, options.point_radius);
+    octahedron(out, position(mesh, p), pr);
+    radius = std::max(radius, pr);
   }
   if (max_radius) *max_radius = radius;
   return r;

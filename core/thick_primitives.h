@@ -7,8 +7,9 @@
 //   where (d, u, v) is an orthonormal frame around the edge direction d (u from the axis least aligned with
 //   d). 4 triangles and 8 vertices an edge; each quad's normal is its plane's (the material is double
 //   sided). From any side, a quad is at least w·cos 45° wide on screen; a closed thin prism costs 6 to 8.
-// - A point becomes an octahedron of radius point_radius around it: 8 triangles, 6 vertices with radial
-//   unit normals.
+// - A point becomes an octahedron around it of radius max(size / 2, point_radius), its size being the
+//   diameter of what collapsed into it (core/mesh.h point_size; point_radius alone when the mesh has no
+//   sizes): 8 triangles, 6 vertices with radial unit normals.
 // - An edge whose ends coincide in float (never emitted: its cells differ, but their representatives may
 //   round together) is drawn as a point of radius max(w/2, point_radius).
 // - Colours and materials: a new vertex takes the colour of the edge end or point it stands for, a new
@@ -18,7 +19,7 @@
 // other primitives share its part.
 //
 // Geometric effect: every point of an expanded primitive is within `max_radius` (the largest w/2 over the
-// edges and point_radius over the points, the diagonal case included) of the edge or point it replaces,
+// edges and the octahedra's radii over the points, the diagonal case included) of the edge or point it replaces,
 // which lies inside it: error bounds of the edge or point grow by at most that (stream/tiles.cpp).
 #pragma once
 
@@ -28,7 +29,7 @@ namespace lodstream::core {
 
 struct ThickOptions {
   double min_width = 0;     // scene units; the width of an edge thinner than this (thickness 0: a wire)
-  double point_radius = 0;  // scene units; must be > 0 when the mesh has points
+  double point_radius = 0;  // scene units; the radius of a point smaller than this; > 0 when the mesh has points
 };
 
 // `mesh` with its edges and points replaced by triangles (the returned mesh has no edges, thickness or

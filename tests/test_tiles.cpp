@@ -78,7 +78,8 @@ std::string slurp(const std::string& path) {
 }
 
 // A tile GLB read back into a LodMesh (positions, triangles from indices, LINES and POINTS as
-// unindexed vertices); `thickness` from _THICKNESS. Enough for the files stream/tiles.cpp writes: float or
+// unindexed vertices); `thickness` from _THICKNESS, `point_size` from _SIZE (left empty when a POINTS
+// primitive has none). Enough for the files stream/tiles.cpp writes: float or
 // KHR_mesh_quantization SHORT positions (dequantized through the node's translation and scale, in double,
 // then rounded to float), uint16 or uint32 indices, views plain or EXT_meshopt_compression.
 core::LodMesh read_tile(const std::string& path) {
@@ -168,8 +169,19 @@ core::LodMesh read_tile(const std::string& path) {
       }
     } else {
       for (int i = 0; i < n; ++i) m.points.push_back(base + i);
+      if (p["attributes"].contains("_SIZE")) {
+        int ns, ss;
+        const char* sz = view(p["attributes"]["_SIZE"].get<int>(), &ns, &ss);
+        EXPECT_EQ(ns, n) << path;
+        for (int i = 0; i < ns; ++i) {
+          float f;
+          std::memcpy(&f, sz + 4 * size_t(i), 4);
+          m.point_size.push_back(f);
+        }
+      }
     }
   }
+  if (m.point_size.size() != m.points.size()) m.point_size.clear();
   return m;
 }
 
@@ -217,6 +229,30 @@ TEST(ThickPrimitives, EdgesBecomeCrossedQuadsAndPointsOctahedra) {
   for (uint64_t v = 4; v < 12; ++v) EXPECT_NEAR(distance_to_line(v, &m.positions[3], &m.positions[9]), 0.25, 1e-6);
   for (uint64_t v = 12; v < 20; ++v) EXPECT_NEAR(distance_to_line(v, &m.positions[0], &m.positions[9]), 0.05, 1e-6);
   EXPECT_THROW(core::expand_thick(m, {0.1, 0}, nullptr), Failure);
+}
+
+// A point with a size (the diameter of what collapsed into it) becomes an octahedron of radius size / 2,
+// never below point_radius; without sizes every point takes point_radius.
+TEST(ThickPrimitives, PointsAreOctahedraOfTheirSize) {
+  core::LodMesh m;
+  m.positions = {0, 0, 0, 4, 0, 0, 8, 0, 0};
+  m.points = {0, 1, 2};
+  m.point_size = {1.0f, 0.02f, 0.0f};
+  double radius = 0;
+  const core::LodMesh r = core::expand_thick(m, {0.1, 0.05}, &radius);
+  ASSERT_EQ(r.vertex_count(), 3u + 3 * 6);
+  EXPECT_EQ(core::convention_violation(r), "");
+  EXPECT_DOUBLE_EQ(radius, 0.5);
+  auto distance = [&](uint64_t v, uint32_t centre) {
+    return std::hypot(r.positions[3 * v] - m.positions[3 * centre], r.positions[3 * v + 1] - m.positions[3 * centre + 1],
+                      r.positions[3 * v + 2] - m.positions[3 * centre + 2]);
+  };
+  const double want[3] = {0.5, 0.05, 0.05};  // size / 2; the floor for 0.02 and for an unsized 0
+  for (uint32_t p = 0; p < 3; ++p)
+    for (uint64_t v = 3 + 6 * p; v < 3 + 6 * (p + 1); ++v) EXPECT_NEAR(distance(v, p), want[p], 1e-6) << "point " << p;
+  m.point_size.clear();
+  core::expand_thick(m, {0.1, 0.05}, &radius);
+  EXPECT_DOUBLE_EQ(radius, 0.05);
 }
 
 // The side bound of 3D Tiles cuts (core/octree_regions.h SideBound): a node holding more than min_cells is
@@ -344,6 +380,7 @@ TEST(Tiles, UnionOfALevelsTilesIsTheLevel) {
   const std::vector<Tile> tiles = check_tree(dir.file("out/tiles"));
   EXPECT_GT(report.tiles.content_tiles, report.levels.size()) << "the small tile size splits some level";
   EXPECT_EQ(report.tiles.tiles, tiles.size());
+  uint64_t points = 0, sizes_above_floor = 0;
   for (size_t l = 0; l < report.levels.size(); ++l) {
     SCOPED_TRACE("level " + std::to_string(l));
     core::LodMesh level = io::read_lod_mesh(dir.file("out/lod" + std::to_string(l) + ".ply"));
@@ -359,7 +396,7 @@ TEST(Tiles, UnionOfALevelsTilesIsTheLevel) {
     EXPECT_LE(quantum, s_cell_size(report, l) / 32);
     for (float& x : level.positions) x = snapped(x, quantum);
     std::array<std::multiset<Prim>, 3> got;
-    std::multiset<std::pair<Prim, float>> thick, expected_thick;
+    std::multiset<std::pair<Prim, float>> thick, expected_thick, sized, expected_sized;
     uint64_t largest = 0;
     for (const Tile& t : tiles) {
       if (t.level != static_cast<int>(l) || t.uri.empty()) continue;
@@ -368,14 +405,24 @@ TEST(Tiles, UnionOfALevelsTilesIsTheLevel) {
       const auto s = primitives(m);
       for (int k = 0; k < 3; ++k) got[k].insert(s[k].begin(), s[k].end());
       for (uint64_t e = 0; e < m.edge_count(); ++e) thick.insert({prim(m, &m.edges[2 * e], 2), m.thickness[e]});
+      // Every point keeps its size (_SIZE, as lods.glb has it) through quantization and meshopt compression.
+      EXPECT_EQ(m.point_size.size(), m.point_count()) << t.uri;
+      for (uint64_t i = 0; i < m.point_size.size(); ++i) sized.insert({prim(m, &m.points[i], 1), m.point_size[i]});
     }
     const auto want = primitives(level);
     for (int k = 0; k < 3; ++k) EXPECT_EQ(got[k], want[k]) << "kind " << k;
     for (uint64_t e = 0; e < level.edge_count(); ++e) expected_thick.insert({prim(level, &level.edges[2 * e], 2), level.thickness[e]});
     EXPECT_EQ(thick, expected_thick);
+    ASSERT_EQ(level.point_size.size(), level.point_count());
+    for (uint64_t i = 0; i < level.point_count(); ++i) expected_sized.insert({prim(level, &level.points[i], 1), level.point_size[i]});
+    EXPECT_EQ(sized, expected_sized);
+    points += level.point_count();
+    for (float z : level.point_size) sizes_above_floor += z > 0;
     // A region holds at most tile_triangles / 2 cells; a surface has about twice as many triangles as vertices.
     EXPECT_LE(largest, 2 * 3000u) << "tile triangles";
   }
+  EXPECT_GT(points, 0u) << "the sample room's levels have points";
+  EXPECT_GT(sizes_above_floor, 0u) << "some point has a size";
 }
 
 TEST(Tiles, BytesDoNotDependOnThreadsMemoryOrChunks) {

@@ -2,7 +2,8 @@
 """Quality benchmark against peer simplifiers (issue 14, item 4), at matched triangle counts.
 
 usage: tools/bench_peers.py [--build DIR] [--work DIR] [--views K] [--resolution H] [--samples N]
-                            [--threads T] [--silhouette-interval D] [--silhouette-factor F] [--tolerance P]
+                            [--threads T] [--memory M] [--silhouette-interval D] [--silhouette-factor F]
+                            [--tolerance P] [--max-steps S] [--methods M,...] [--no-weld]
                             [--no-meshlab] [--no-qec] [--reuse] [--out FILE.md] MODEL...
        tools/bench_peers.py --from-json WORK/peers.json [...]   (the tables again, e.g. of several runs)
 
@@ -21,11 +22,18 @@ switching distances are where every level of every method is seen from. The meth
 Matching: labels and uniform search each level's cell size (--cell-sizes, all levels in one run per step,
 bisection on log c), ml-clust its cell size, sloppy its target count (it returns at most what it is given,
 often far fewer), each until the count is within --tolerance (default 5 %) of the reference's or 12 steps
-are spent; the step nearest in ratio is kept. A level still outside the tolerance is marked and left out of
+are spent (--max-steps; fewer for a scene where one step takes minutes); the step nearest in ratio is kept. A level still outside the tolerance is marked and left out of
 the comparisons.
 The peers get a triangle-only copy of the model (binary PLY, identical positions welded; an OBJ's lines and
-points dropped); `lodstream report --original MODEL --lod ... --switch-distances <reference's>` measures every
-method (--views 16 --resolution 512 --samples 100000 by default, the pixel rule's default --supersample 3).
+points dropped); with --no-weld they read MODEL itself (a binary PLY whose faces they fan-triangulate, so
+two-index faces, lines, give no triangle): for scenes too large for this script's converter, and fair to
+sloppy alone, which clusters by position and does not need welded vertices.
+`lodstream report --original MODEL --lod ... --switch-distances <reference's>` measures every level of every
+method in one run (the original is read once; views and samples depend on the original, the level and the
+seed only, so the figures are those of one run per method), with --views 16 --resolution 512
+--samples 100000 by default and the pixel rule's default --supersample 3.
+A method that fails on a level (MeshLab's edge collapse aborts on some scenes) gets a row saying so, left
+out of the comparisons; --methods leaves methods out altogether (they get no row).
 Writes WORK/peers.json (every figure) and WORK/peers.md (tables and summary, also printed).
 """
 import argparse
@@ -33,6 +41,7 @@ import datetime
 import json
 import math
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -45,7 +54,6 @@ sys.path.insert(0, os.path.join(ROOT, "tools"))
 import meshlab_hausdorff as mh  # noqa: E402
 
 METHODS = ["lodstream", "labels", "uniform", "sloppy", "simplify", "ml-clust", "ml-qec"]
-MAX_STEPS = 12
 
 
 def run(cmd, **kw):
@@ -80,7 +88,7 @@ class Bench:
         self.a = a
         self.lodstream = os.path.join(a.build, "lodstream")
         self.peer = os.path.join(a.build, "peer_sloppy")
-        self.common = ["--progress", "none", "--threads", str(a.threads)]
+        self.common = ["--progress", "none", "--threads", str(a.threads)] + (["--memory", a.memory] if a.memory else [])
 
     # lodstream simplify with explicit cell sizes; returns per-level triangle counts and the run directory
     def simplify(self, model, out, extra, sizes=None):
@@ -99,7 +107,7 @@ class Bench:
         lo, hi = [None] * n, [None] * n  # sizes known to give too many (lo) / too few (hi) triangles
         best = [None] * n                # (error, size, count)
         os.makedirs(os.path.join(d, name), exist_ok=True)
-        for step in range(MAX_STEPS):
+        for step in range(self.a.max_steps):
             # strictly increasing sizes are required: a level whose size would not be is nudged
             sizes = list(size)
             for i in range(1, n):
@@ -137,7 +145,7 @@ class Bench:
         x, best = x0, None
         tmp = tempfile.mktemp(suffix=".ply", dir=self.tmpdir)
         keep = tempfile.mktemp(suffix=".ply", dir=self.tmpdir)
-        for _ in range(MAX_STEPS):
+        for _ in range(self.a.max_steps):
             got = make(x, tmp)
             if got > 0 and (best is None or ratio_err(got, want) < ratio_err(best[1], want)):
                 best = (x, got)
@@ -221,7 +229,8 @@ class Bench:
             return {"triangles": self.meshlab(src, "qec", want, out, clean=True), "param": "cleaned"}
         except RuntimeError as e:
             print(f"bench_peers: {e}; level left out", file=sys.stderr)
-            return None
+            why = "assertion" if "Assertion" in str(e) else "error"
+            return {"failed": f"MeshLab aborted ({why}, also after cleaning)"}
 
     def report(self, model, lods, dists, out):
         cmd = [self.lodstream, "report", "--original", model]
@@ -254,13 +263,15 @@ class Bench:
                 return None
             print(f"bench_peers: {name}: {m} reused", file=sys.stderr)
             return [{"triangles": ply_face_count(f), "param": None} for f in files]
-        res["labels"] = reused("labels") or self.match_lodstream(model, d, "labels", labels, ref)
-        res["uniform"] = reused("uniform") or self.match_lodstream(model, d, "uniform", ["--clustering", "uniform"], ref)
-        src = os.path.join(d, "original.ply")  # also for a PLY: lodstream's edge and point elements dropped
-        if not (a.reuse and os.path.exists(src)):
+        if "labels" in a.methods:
+            res["labels"] = reused("labels") or self.match_lodstream(model, d, "labels", labels, ref)
+        if "uniform" in a.methods:
+            res["uniform"] = reused("uniform") or self.match_lodstream(model, d, "uniform", ["--clustering", "uniform"], ref)
+        src = model if a.no_weld else os.path.join(d, "original.ply")  # also for a PLY: edges and points dropped
+        if not a.no_weld and not (a.reuse and os.path.exists(src)):
             to_ply(model, src)
         for m in ("sloppy", "simplify", "ml-clust", "ml-qec"):
-            if (m.startswith("ml-") and a.no_meshlab) or (m == "ml-qec" and a.no_qec):
+            if (m.startswith("ml-") and a.no_meshlab) or (m == "ml-qec" and a.no_qec) or m not in a.methods:
                 continue
             os.makedirs(os.path.join(d, m), exist_ok=True)
             if m != "ml-qec" and (r := reused(m)):
@@ -278,24 +289,26 @@ class Bench:
                 else:
                     r = self.ml_qec(src, w, out)
                 res[m].append(r)
-        rows = []
+        rows, measured = [], []  # measured: (method, level) of every file given to the one report
         for m in METHODS:
-            if m not in res:
-                continue
-            present = [i for i, r in enumerate(res[m]) if r and r["triangles"] > 0]
-            if not present:
-                continue
-            lods = [os.path.join(d, "lodstream" if m == "lodstream" else m, f"lod{i}.ply") for i in present]
-            levels = self.report(model, lods, [dists[i] for i in present], os.path.join(d, "report_" + m))
-            for i, L in zip(present, levels):
-                s, h = L["silhouette"], L["hausdorff"]
-                rows.append({"model": name, "level": i, "method": m, "target": want[i],
-                             "triangles": L["triangles"], "edges": L["edges"], "points": L["points"],
-                             "matched": within(L["triangles"], want[i], a.tolerance) or m == "lodstream",
-                             "param": res[m][i]["param"], "switch_distance": dists[i],
-                             "sil_p95": s["p95_px"], "sil_mean": s["mean_px"], "mismatch": s["mismatch_fraction"],
-                             "thin_kept": s["thin_kept_fraction"], "thin_pixels": s["thin_pixels"],
-                             "hd_mean": h["mean_percent_diagonal"], "hd_max": h["max_percent_diagonal"]})
+            for i, r in enumerate(res.get(m, [])):
+                if r and r.get("triangles", 0) > 0:
+                    measured.append((m, i))
+                elif r and "failed" in r:
+                    rows.append({"model": name, "level": i, "method": m, "target": want[i], "failed": r["failed"],
+                                 "matched": False, "switch_distance": dists[i]})
+        lods = [os.path.join(d, m, f"lod{i}.ply") for m, i in measured]
+        levels = self.report(model, lods, [dists[i] for _, i in measured], os.path.join(d, "report"))
+        for (m, i), L in zip(measured, levels):
+            s, h = L["silhouette"], L["hausdorff"]
+            rows.append({"model": name, "level": i, "method": m, "target": want[i],
+                         "triangles": L["triangles"], "edges": L["edges"], "points": L["points"],
+                         "matched": within(L["triangles"], want[i], a.tolerance) or m == "lodstream",
+                         "param": res[m][i]["param"], "switch_distance": dists[i],
+                         "sil_p95": s["p95_px"], "sil_mean": s["mean_px"], "mismatch": s["mismatch_fraction"],
+                         "thin_kept": s["thin_kept_fraction"], "thin_pixels": s["thin_pixels"],
+                         "hd_mean": h["mean_percent_diagonal"], "hd_max": h["max_percent_diagonal"]})
+        rows.sort(key=lambda r: (METHODS.index(r["method"]), r["level"]))
         print(f"bench_peers: {name} done in {time.time() - t0:.0f} s (targets {want})", file=sys.stderr)
         return rows
 
@@ -339,11 +352,40 @@ def summarize(rows):
     return head + out
 
 
+def misses(rows, m="labels", p="sloppy"):
+    """Issue 14's target, A = m against B = p: the levels (both matched) where A misses each part of it."""
+    key = {(r["model"], r["level"], r["method"]): r for r in rows}
+    miss = {"sil p95 and mismatch not both at most B's": [], "Hd mean not lower": [], "thin kept lower": []}
+    unmatched = []
+    for lv in sorted({(r["model"], r["level"]) for r in rows}):
+        a, b = key.get(lv + (m,)), key.get(lv + (p,))
+        if not (a and b):
+            continue
+        if not (a["matched"] and b["matched"]):
+            unmatched.append(f"{lv[0][:24]} {lv[1]}")
+            continue
+        tag = f"{lv[0][:24]} {lv[1]}"
+        if not (a["sil_p95"] <= b["sil_p95"] and a["mismatch"] <= b["mismatch"]):
+            miss["sil p95 and mismatch not both at most B's"].append(
+                f"{tag} ({a['sil_p95']:.3g}/{b['sil_p95']:.3g} px, {100 * a['mismatch']:.3g}/{100 * b['mismatch']:.3g} %)")
+        if not a["hd_mean"] < b["hd_mean"]:
+            miss["Hd mean not lower"].append(f"{tag} ({a['hd_mean']:.3g}/{b['hd_mean']:.3g} %)")
+        if b["thin_pixels"] > 0 and a["thin_kept"] < b["thin_kept"]:
+            miss["thin kept lower"].append(f"{tag} ({100 * a['thin_kept']:.3g}/{100 * b['thin_kept']:.3g} %)")
+    out = [f"Misses, {m} (A) against {p} (B), A/B in brackets:"]
+    out += [f"- {k}: {len(v)}: {'; '.join(v)}" for k, v in miss.items()]
+    out.append(f"- not compared (a count more than the tolerance off): {len(unmatched)}: {'; '.join(unmatched)}")
+    return out
+
+
 def markdown(rows, head):
-    md = [head, ""] + summarize(rows) + [""]
+    md = [head, ""] + summarize(rows) + [""] + misses(rows) + [""]
     md += ["| model | lvl | method | tris | sil p95 px | sil mean px | mismatch % | thin kept % | Hd mean % | Hd max % |",
            "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
+        if "failed" in r:
+            md.append(f"| {r['model'][:28]} | {r['level']} | {r['method']} | {r['failed']} | | | | | | |")
+            continue
         tris = str(r["triangles"]) + ("" if r["matched"] else " (unmatched)")
         thin = "—" if r["thin_pixels"] == 0 else f"{100 * r['thin_kept']:.3g}"
         md.append(f"| {r['model'][:28]} | {r['level']} | {r['method']} | {tris} | {r['sil_p95']:.3g} | "
@@ -364,6 +406,10 @@ def main():
     ap.add_argument("--silhouette-interval", type=float, default=5)
     ap.add_argument("--silhouette-factor", type=float, default=0.5)
     ap.add_argument("--tolerance", type=float, default=0.05)
+    ap.add_argument("--max-steps", type=int, default=12, help="search steps per level and method (default 12)")
+    ap.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset of " + ",".join(METHODS))
+    ap.add_argument("--memory", help="--memory of lodstream simplify and report (default: theirs)")
+    ap.add_argument("--no-weld", action="store_true", help="the peers read MODEL itself (a binary PLY), unwelded")
     ap.add_argument("--no-meshlab", action="store_true")
     ap.add_argument("--no-qec", action="store_true", help="leave MeshLab's edge collapse out (slow on large scenes)")
     ap.add_argument("--reuse", action="store_true", help="keep what a killed run in --work left complete")
@@ -376,6 +422,9 @@ def main():
         return
     if not a.models:
         ap.error("give models, or --from-json")
+    a.methods = a.methods.split(",")
+    if "lodstream" not in a.methods or any(m not in METHODS for m in a.methods):
+        ap.error("--methods: lodstream (the reference) and any of " + ",".join(METHODS))
     a.build = os.path.abspath(a.build)
     if not a.no_meshlab and not (shutil.which("meshlabserver") and shutil.which("xvfb-run")):
         sys.exit("bench_peers: meshlabserver or xvfb-run not found (use --no-meshlab)")
@@ -390,13 +439,17 @@ def main():
         rows += b.model(os.path.abspath(m))
         json.dump(rows, open(os.path.join(a.work, "peers.json"), "w"), indent=1)
     elapsed = time.time() - start
+    cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
     load = open("/proc/loadavg").read().split()[:3]
     text = markdown(rows, f"Run {datetime.datetime.utcnow():%Y-%m-%d %H:%M} UTC: `tools/bench_peers.py` ({b.lodstream}), "
                           f"report --views {a.views} --resolution {a.resolution} --samples {a.samples}; simplify "
                           f"--resolution {a.resolution}; labels D = {a.silhouette_interval:g} px, f = "
                           f"{a.silhouette_factor:g}; tolerance {100 * a.tolerance:g} %; "
                           f"{len({(r['model'], r['level']) for r in rows})} levels of {len({r['model'] for r in rows})} "
-                          f"models, {elapsed:.0f} s, load average at the end {' '.join(load)}.")
+                          f"models, {elapsed:.0f} s wall, {cpu.ru_utime + cpu.ru_stime:.0f} CPU seconds (every child process), "
+                          f"load average at the end {' '.join(load)}; search steps at most {a.max_steps}"
+                          f"{'; methods ' + ','.join(a.methods) if len(a.methods) < len(METHODS) else ''}"
+                          f"{'; peers read the model unwelded' if a.no_weld else ''}.")
     open(os.path.join(a.work, "peers.md"), "w").write(text)
     if a.out:
         shutil.copy(os.path.join(a.work, "peers.md"), a.out)
