@@ -447,6 +447,7 @@ PrimitiveKind RayScene::kind_of(unsigned geom_id) const {
 }
 uint64_t RayScene::embree_bytes() const { return static_cast<uint64_t>(std::max<int64_t>(0, impl_->bytes.load())); }
 uint64_t RayScene::peak_embree_bytes() const { return static_cast<uint64_t>(std::max<int64_t>(0, impl_->peak.load())); }
+bool RayScene::over_limit() const { return impl_->over; }
 void* RayScene::handle() const { return impl_->scene; }
 bool RayScene::empty() const { return !impl_->has_primitives; }
 

@@ -88,6 +88,9 @@ class RayScene {
   bool only_triangles() const;
   uint64_t embree_bytes() const;  // bytes Embree holds now
   uint64_t peak_embree_bytes() const;
+  // True once the memory monitor refused an allocation (the Failure(usage) above): the scene is unusable,
+  // and a caller that can cut its work smaller may release it and try again.
+  bool over_limit() const;
   void* handle() const;           // the RTCScene, for the ray caster
   bool empty() const;
 

@@ -205,7 +205,49 @@ OnePixelRadii one_pixel_radii(double pixel, unsigned k) {
   return {static_cast<float>(s / 2), static_cast<float>(s * M_SQRT1_2)};
 }
 
+PixelRect project_box(const Box& box, const Camera& camera) {
+  const unsigned h = camera.resolution;
+  for (int c = 0; c < 3; ++c)
+    if (!(box.min[c] <= box.max[c])) return {};  // nothing in it
+  double u0 = std::numeric_limits<double>::infinity(), u1 = -u0, v0 = u0, v1 = -u0;
+  bool ahead = false, behind = false;
+  // Widened by the float rounding of the rays' origin (the eye as float) and of the box's coordinates.
+  double magnitude = 0;
+  for (int c = 0; c < 3; ++c)
+    magnitude = std::max({magnitude, std::fabs(camera.eye[c]), std::fabs(box.min[c]), std::fabs(box.max[c])});
+  const double slack = magnitude * 0x1p-20;
+  for (int corner = 0; corner < 8; ++corner) {
+    double p[3];
+    for (int c = 0; c < 3; ++c) p[c] = ((corner >> c) & 1 ? box.max[c] + slack : box.min[c] - slack) - camera.eye[c];
+    const double z = p[0] * camera.forward[0] + p[1] * camera.forward[1] + p[2] * camera.forward[2];
+    const double x = p[0] * camera.right[0] + p[1] * camera.right[1] + p[2] * camera.right[2];
+    const double y = p[0] * camera.up[0] + p[1] * camera.up[1] + p[2] * camera.up[2];
+    // A corner near the eye's plane projects arbitrarily far: then no bound.
+    const double near = 1e-6 * (std::fabs(x) + std::fabs(y) + std::fabs(z));
+    if (z <= near) {
+      behind = true;
+      continue;
+    }
+    ahead = true;
+    const double u = (x / z / camera.tan_half_fov + 1) * h / 2, v = (1 - y / z / camera.tan_half_fov) * h / 2;
+    u0 = std::min(u0, u), u1 = std::max(u1, u), v0 = std::min(v0, v), v1 = std::max(v1, v);
+  }
+  // Every ray leaves the eye forwards (tnear = 0): a box wholly behind its plane is never met.
+  if (!ahead) return {};
+  if (behind) return {0, 0, h, h};
+  const auto clamp_to = [h](double t) { return static_cast<unsigned>(std::clamp(t, 0.0, double(h))); };
+  PixelRect r{clamp_to(std::floor(u0) - 2), clamp_to(std::floor(v0) - 2), clamp_to(std::ceil(u1) + 2),
+              clamp_to(std::ceil(v1) + 2)};
+  if (r.empty()) return {};
+  return r;
+}
+
 uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out, bool accumulate) {
+  return cast_view(scenes, camera, out, accumulate, PixelRect{0, 0, camera.resolution, camera.resolution});
+}
+
+uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out, bool accumulate,
+                   const PixelRect& rect) {
   const unsigned h = camera.resolution;
   const unsigned k = std::max(1u, camera.supersample);
   const uint64_t pixels = uint64_t{h} * h;
@@ -229,16 +271,19 @@ uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera
     for (int c = 0; c < 3; ++c) d[c] = camera.forward[c] + sx * camera.right[c] + sy * camera.up[c];
     normalize(d);
   };
-  const unsigned tiles = (h + kTile - 1) / kTile;
+  if (rect.empty()) return 0;
+  // The tiles that meet the rectangle; a tile's pixels outside it are traced too (same rays, same hits).
+  const unsigned tx0 = rect.x0 / kTile, tx1 = std::min((rect.x1 + kTile - 1) / kTile, (h + kTile - 1) / kTile);
+  const unsigned ty0 = rect.y0 / kTile, ty1 = std::min((rect.y1 + kTile - 1) / kTile, (h + kTile - 1) / kTile);
   std::atomic<uint64_t> cast{0};
-  tbb::parallel_for(tbb::blocked_range<unsigned>(0, tiles), [&](const tbb::blocked_range<unsigned>& rows) {
+  tbb::parallel_for(tbb::blocked_range<unsigned>(ty0, ty1), [&](const tbb::blocked_range<unsigned>& rows) {
     Batch batch;
     uint64_t rays = 0;
     unsigned lane_pixel[16], lane_sub[16];
     Hit best[kTile * kTile];
     Hit hit;
     for (unsigned ty = rows.begin(); ty != rows.end(); ++ty) {
-      for (unsigned tx = 0; tx < tiles; ++tx) {
+      for (unsigned tx = tx0; tx < tx1; ++tx) {
         // Centre rays. An earlier chunk's centre hit bounds them; a k × k hit does not.
         batch.count = 0;
         for (unsigned i = 0; i < kTile * kTile; ++i) {

@@ -73,4 +73,24 @@ struct ViewImage {
 uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out,
                    bool accumulate = false);
 
+// An axis-aligned box, as the bounds of what a scene list holds (its segments and discs widened by their
+// radii).
+struct Box {
+  double min[3] = {0, 0, 0}, max[3] = {0, 0, 0};
+};
+
+// Pixels [x0, x1) × [y0, y1) of the camera's image that a ray can meet `box` through: its corners'
+// projection, widened by two pixels for the rays' float rounding; the whole image when the box reaches
+// the eye's plane, and nothing when it lies behind it. Pixels outside cannot hit anything in the box.
+struct PixelRect {
+  unsigned x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  bool empty() const { return x0 >= x1 || y0 >= y1; }
+};
+PixelRect project_box(const Box& box, const Camera& camera);
+
+// cast_view over the pixels of `rect` only (with accumulate: the others keep their earlier chunks' hits).
+// Same image as cast_view when every primitive of `scenes` lies in a box whose project_box is inside rect.
+uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out, bool accumulate,
+                   const PixelRect& rect);
+
 }  // namespace lodstream::core

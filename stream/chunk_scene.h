@@ -30,6 +30,14 @@ struct ChunkScene {
 // primitives carry their colours (core::RayScene::set_colors, for the report's renders).
 std::unique_ptr<ChunkScene> load_chunk_scene(StoreChunks& chunks, size_t index, uint64_t embree_limit, bool colors = false);
 
+// Builds the triangle scene of a chunk read into `g` (taken) within `embree_limit` bytes. Returns null
+// when Embree's memory monitor refused an allocation (the chunk does not fit the limit: the caller may cut
+// it smaller and try again; nothing of it is left allocated); throws on any other failure.
+std::unique_ptr<ChunkScene> build_chunk_scene(ChunkGeometry&& g, uint64_t embree_limit);
+
+// Bytes the chunk's own arrays (ChunkScene::geometry, and its triangles until Embree has copied them) hold.
+uint64_t chunk_geometry_bytes(const ChunkGeometry& g);
+
 // The chunk's lines and points as segments and discs of the given radii (what a renderer draws one pixel
 // wide, at the radii of the caller's pixel rule).
 std::unique_ptr<core::RayScene> build_wire(const ChunkGeometry& g, float line_radius, float point_radius,

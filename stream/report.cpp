@@ -36,6 +36,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -315,6 +316,29 @@ Samples sample_mesh(const core::LodMesh& m, uint64_t n, uint64_t seed, uint64_t 
   return s.finish(nullptr, {});
 }
 
+// How the original's chunks are sized, and kept within what the measure stage leaves them (`room`: a
+// chunk's own arrays, its triangles' Embree scene and its wire scene together). Embree's bytes per
+// triangle are first estimated, then measured on the first chunk large enough to tell (its memory
+// monitor's peak, vertex copies aside) and the chunks still to come cut again by that figure, 5 % above
+// it; a chunk whose build the monitor still refuses (its limit is what the room leaves beside the chunk's
+// own arrays and its wire) is cut again smaller and built again. So no chunk takes more than the room,
+// whatever the scene. The chunking never changes a figure (trace_original).
+struct ChunkSizing {
+  uint64_t room = 0;
+  uint64_t cap = 0;               // --chunk-bytes, 0 = none
+  double embree_triangle = 96;    // Embree's bytes per triangle (measured 82-94 on the city and the room)
+  bool calibrated = false;
+  bool colored = false;
+
+  // Estimated bytes of a chunk per primitive and distinct vertex: Embree's and the chunk's own arrays.
+  stream::ChunkCosts costs() const {
+    const double rgb = colored ? 3 : 0;
+    return {.triangle = embree_triangle + 12 + rgb, .line = kChunkCosts.line + 8 + rgb,
+            .point = kChunkCosts.point + 4 + rgb, .vertex = colored ? 28.0 : 24.0};
+  }
+  uint64_t bytes() const { return cap ? std::min(cap, room) : room; }
+};
+
 // An original: its scene store, cut into chunks that each fit the memory left for tracing.
 struct Original {
   std::string path;
@@ -325,13 +349,13 @@ struct Original {
   double diagonal = 0;
 };
 
-// Cuts the original into chunks of at most `chunk_bytes` and draws its samples and view targets: two
+// Cuts the original into chunks of at most `sizing.bytes()` and draws its samples and view targets: two
 // passes over the chunks (measure, sample), then its used vertices in store order.
 void load_original(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
-                   uint64_t chunk_bytes, stream::Progress& progress, Original* o) {
+                   const ChunkSizing& sizing, stream::Progress& progress, Original* o) {
   o->meta = meta;
   o->chunks = std::make_unique<stream::StoreChunks>(store_dir, meta);
-  o->chunks->plan(kChunkCosts, chunk_bytes);
+  o->chunks->plan(sizing.costs(), sizing.bytes());
   progress.report("load", 0.1);
   const size_t n = o->chunks->chunks().size();
   MeshSampling s(ro.samples, ro.seed, kStreamOriginalSamples, ro.views, meta.triangles > 0);
@@ -444,6 +468,38 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+// Where the measure stage's time goes (report.json performance.phases): wall and CPU seconds of the whole
+// process while each part ran, summed over chunks and levels (the parts run one at a time, each on every
+// thread).
+enum Phase : int {
+  kChunkRead, kChunkBuild, kWireBuild, kQueriesOnOriginal, kRaysOnOriginal,
+  kLevelRead, kLevelBuild, kQueriesOnLevel, kRaysOnLevel, kCompare, kPhaseCount
+};
+constexpr const char* kPhaseNames[kPhaseCount] = {
+    "chunk_read", "chunk_build", "wire_build", "queries_on_original", "rays_on_original",
+    "level_read", "level_build", "queries_on_level", "rays_on_level", "compare"};
+struct PhaseTimes {
+  double wall[kPhaseCount] = {}, cpu[kPhaseCount] = {};
+};
+class PhaseTimer {
+ public:
+  PhaseTimer(PhaseTimes* times, Phase phase)
+      : times_(times), phase_(phase), t0_(std::chrono::steady_clock::now()), cpu0_(stream::process_cpu_seconds()) {}
+  ~PhaseTimer() {
+    if (!times_) return;
+    times_->wall[phase_] += seconds_since(t0_);
+    times_->cpu[phase_] += stream::process_cpu_seconds() - cpu0_;
+  }
+  PhaseTimer(const PhaseTimer&) = delete;
+  PhaseTimer& operator=(const PhaseTimer&) = delete;
+
+ private:
+  PhaseTimes* times_;
+  Phase phase_;
+  std::chrono::steady_clock::time_point t0_;
+  double cpu0_;
+};
+
 // One level's measurement, in three phases around the original's chunk passes:
 // 1. begin_level: read the level, draw its samples, original → level Hausdorff (its own scene);
 // 2. chunk passes (trace_original): level → original distances, lowered chunk by chunk; the original's
@@ -470,11 +526,14 @@ struct LevelWork {
   unsigned view_first = 0, view_end = 0;
   uint64_t from_first = 0, from_end = 0, to_first = 0, to_end = 0;
   stream::ReportLevelShare share;
+  PhaseTimes* phases = nullptr;
   double pixel_at(double d, unsigned resolution) const { return 2 * d * tan_half / resolution; }
 };
 
-// Per-pixel bytes of a view image held between chunks: depth, normal, kind, centre.
+// Per-pixel bytes of a view image held between chunks: depth, normal, kind, centre; and RGB when the
+// scene has colours (ViewImage::color).
 constexpr uint64_t kViewPixelBytes = 4 + 12 + 1 + 1;
+uint64_t view_pixel_bytes(bool colored) { return kViewPixelBytes + (colored ? 3 : 0); }
 
 // What a renderer draws one pixel wide (an original's lines and points, a level's points and its edges of
 // thickness 0), at the radii of core::one_pixel_radii for the pixel's width at the level's distance.
@@ -490,8 +549,19 @@ struct WireRadii {
 // order keeps the key order of the tie rule: triangles, then edges, then points.
 struct LevelScene {
   std::unique_ptr<core::RayScene> triangles, wire;
+  core::Box box;  // bounds of its primitives, edges and points widened by their radii
   std::vector<const core::RayScene*> list() const { return {triangles.get(), wire.get()}; }
 };
+
+// Bounds of the vertices `xyz`, widened by `radius` (what a scene's segments and discs reach past them).
+core::Box bounds_of(std::span<const float> xyz, double radius) {
+  core::Box b;
+  for (int c = 0; c < 3; ++c) b.min[c] = std::numeric_limits<double>::infinity(), b.max[c] = -b.min[c];
+  for (size_t v = 0; v + 2 < xyz.size(); v += 3)
+    for (int c = 0; c < 3; ++c) b.min[c] = std::min<double>(b.min[c], xyz[v + c]), b.max[c] = std::max<double>(b.max[c], xyz[v + c]);
+  for (int c = 0; c < 3; ++c) b.min[c] -= radius, b.max[c] += radius;
+  return b;
+}
 
 // The colours a level's primitives are rendered in (RGB per triangle, edge, point), for a level with
 // vertex colours or materials (else empty): its material's base colour times the mean of its vertices'
@@ -546,6 +616,10 @@ LevelScene build_level_scene(const core::LodMesh& mesh, const WireRadii& wire, u
   scene.wire->add_points(mesh.positions, mesh.points, point_radius);
   if (!colors.points.empty() && !mesh.points.empty()) scene.wire->set_colors(vec(colors.points));
   scene.wire->commit();
+  float reach = 0;
+  for (float r : radius) reach = std::max(reach, r);
+  for (float r : point_radius) reach = std::max(reach, r);
+  scene.box = bounds_of(mesh.positions, 1.01 * double(reach));
   return scene;
 }
 
@@ -689,6 +763,7 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   ReportLevel& L = w.out.level;
   L.file = spec.file;
   L.cell_size = spec.cell_size;
+  std::optional<PhaseTimer> read_time(std::in_place, w.phases, kLevelRead);
   const core::LodMesh mesh = io::read_lod_mesh(spec.file);
   L.vertices = mesh.vertex_count(), L.triangles = mesh.triangle_count(), L.edges = mesh.edge_count(),
   L.points = mesh.point_count();
@@ -699,6 +774,7 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   w.views = std::min<unsigned>(ro.views, static_cast<unsigned>(o.targets.size() / 3));
   w.samples = sample_mesh(mesh, ro.samples, ro.seed, kStreamLodSamples);
   w.to_original.assign(w.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
+  read_time.reset();
   set_shares(o, w, ro);
   // Segment and point radii do not enter the point queries: any distance builds the same query scene.
   const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh));
@@ -706,7 +782,10 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   w.level_chunks = chunks.size();
   std::vector<float> d(o.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
   for (size_t c = 0; c < chunks.size(); ++c) {
+    std::optional<PhaseTimer> build_time(std::in_place, w.phases, kLevelBuild);
     const LevelScene scene = chunks.scene(c, WireRadii(w.pixel_at(w.distance, ro.resolution), ro.supersample), limit);
+    build_time.reset();
+    PhaseTimer query_time(w.phases, kQueriesOnLevel);
     const auto t_q = std::chrono::steady_clock::now();
     lower_closest_distances(o.samples.xyz, scene.list(), d, w.from_first, w.from_end);
     w.out.queries += w.from_end - w.from_first;
@@ -776,9 +855,74 @@ std::unique_ptr<core::RayScene> build_wire(const stream::ChunkGeometry& g, const
 
 struct TraceTotals {
   uint64_t chunks = 0;              // chunk scenes built
-  uint64_t embree_peak_bytes = 0;   // the largest chunk scene's peak, as Embree's monitor counts it
+  uint64_t embree_peak_bytes = 0;   // the largest chunk scene's peak, as Embree's memory monitor counts it
   uint64_t chunk_triangles = 0;     // triangles of that chunk
+  uint64_t replans = 0;             // times the chunks still to come were cut again (ChunkSizing)
+  PhaseTimes* phases = nullptr;
 };
+
+// The wire scene's estimated bytes (Embree's, as kChunkCosts counts them).
+uint64_t wire_bytes(const stream::ChunkGeometry& g) {
+  return static_cast<uint64_t>(kChunkCosts.line * double(g.lines.size() / 2) + kChunkCosts.point * double(g.points.size()));
+}
+
+// Reads and builds chunk `c` within the room, cutting the chunks from `c` on again while its build is
+// refused (see ChunkSizing).
+std::unique_ptr<ChunkScene> load_sized_chunk(const Original& o, size_t c, ChunkSizing& sizing, TraceTotals& totals) {
+  for (;;) {
+    stream::ChunkGeometry g;
+    {
+      PhaseTimer t(totals.phases, kChunkRead);
+      o.chunks->read(c, &g, true);
+    }
+    const uint64_t own = stream::chunk_geometry_bytes(g) + wire_bytes(g);
+    const uint64_t vertices = g.xyz.size() / 3, triangles = g.triangles.size() / 3;
+    const uint64_t limit = left_of(sizing.room, own);
+    std::unique_ptr<ChunkScene> chunk;
+    {
+      PhaseTimer t(totals.phases, kChunkBuild);
+      chunk = stream::build_chunk_scene(std::move(g), limit);
+    }
+    if (chunk) {
+      ++totals.chunks;
+      const uint64_t peak = chunk->triangles->peak_embree_bytes();
+      if (peak > totals.embree_peak_bytes) totals.embree_peak_bytes = peak, totals.chunk_triangles = chunk->triangle_count;
+      if (!sizing.calibrated && triangles >= (1u << 16)) {
+        sizing.calibrated = true;
+        const double measured = 1.05 * double(peak - std::min(peak, 12 * vertices)) / double(triangles);
+        if (measured > sizing.embree_triangle || measured < 0.97 * sizing.embree_triangle) {
+          sizing.embree_triangle = measured;
+          PhaseTimer t(totals.phases, kChunkRead);
+          o.chunks->replan(c + 1, sizing.costs(), sizing.bytes());
+          ++totals.replans;
+        }
+      }
+      return chunk;
+    }
+    const stream::StoreChunk& sc = o.chunks->chunks()[c];
+    if (sc.end - sc.first <= 1)
+      fail(Status::usage, "a primitive of the original needs more memory for its ray-casting scene than --memory leaves");
+    // It needed more than `limit` for its triangles: cut from here by at least that, and a quarter more.
+    const double needed = triangles ? double(limit - std::min(limit, 12 * vertices)) / double(triangles) : 0;
+    sizing.embree_triangle = std::max(1.25 * sizing.embree_triangle, 1.1 * needed);
+    sizing.calibrated = true;
+    PhaseTimer t(totals.phases, kChunkRead);
+    o.chunks->replan(c, sizing.costs(), sizing.bytes());
+    ++totals.replans;
+  }
+}
+
+// Bytes a built chunk holds (its arrays and its Embree scene now).
+uint64_t cached_bytes(const ChunkScene& chunk) {
+  return stream::chunk_geometry_bytes(chunk.geometry) + chunk.triangles->embree_bytes();
+}
+
+// Estimated bytes of a level in one scene, beside its mesh: as an original's chunk (ChunkSizing::costs).
+uint64_t level_scene_bytes(const ReportLevel& level, const ChunkSizing& sizing) {
+  const stream::ChunkCosts c = sizing.costs();
+  return static_cast<uint64_t>(c.triangle * double(level.triangles) + c.line * double(level.edges) +
+                               c.point * double(level.points) + c.vertex * double(level.vertices));
+}
 
 // One pass over the original's chunks: each chunk's scene is built, the samples of `queries` levels are
 // lowered to their distance to it, and the views of `viewed` levels accumulate its image; then it is
@@ -786,42 +930,52 @@ struct TraceTotals {
 // with the lowest (distance, primitive order) over all chunks (core/nearest_hit.h), chunks being
 // consecutive in the store's primitive order. With one chunk, its scene is kept in `cache` for the next pass.
 void trace_original(const Original& o, const std::vector<LevelWork*>& queries, const std::vector<LevelWork*>& viewed,
-                    const ReportOptions& ro, uint64_t embree_limit, stream::Progress& progress,
+                    const ReportOptions& ro, ChunkSizing& sizing, stream::Progress& progress,
                     std::unique_ptr<ChunkScene>& cache, TraceTotals& totals) {
-  const size_t n = o.chunks->chunks().size();
-  for (size_t c = 0; c < n; ++c) {
+  for (size_t c = 0; c < o.chunks->chunks().size(); ++c) {
     std::unique_ptr<ChunkScene> chunk = std::move(cache);
-    if (!chunk) {
-      chunk = stream::load_chunk_scene(*o.chunks, c, embree_limit, true);
-      ++totals.chunks;
-      if (chunk->triangles->peak_embree_bytes() > totals.embree_peak_bytes)
-        totals.embree_peak_bytes = chunk->triangles->peak_embree_bytes(), totals.chunk_triangles = chunk->triangle_count;
-    }
+    if (!chunk) chunk = load_sized_chunk(o, c, sizing, totals);
+    // The wire scenes take what the room leaves beside the chunk.
+    const uint64_t wire_limit = left_of(sizing.room, stream::chunk_geometry_bytes(chunk->geometry) + chunk->triangles->embree_bytes());
     const bool wire = chunk->has_wire();
-    for (LevelWork* w : queries) {
-      const auto t0 = std::chrono::steady_clock::now();
-      // Radii do not enter the point queries.
-      std::unique_ptr<core::RayScene> lines = wire ? build_wire(chunk->geometry, WireRadii(1.0, 1), embree_limit) : nullptr;
+    if (!queries.empty()) {
+      // Radii do not enter the point queries: one wire scene serves every level.
+      std::unique_ptr<core::RayScene> lines;
+      if (wire) {
+        PhaseTimer t(totals.phases, kWireBuild);
+        lines = build_wire(chunk->geometry, WireRadii(1.0, 1), wire_limit);
+      }
       const core::RayScene* scenes[] = {chunk->triangles.get(), lines ? lines.get() : chunk->triangles.get()};
-      lower_closest_distances(w->samples.xyz, std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->to_original,
-                              w->to_first, w->to_end);
-      w->out.queries += w->to_end - w->to_first;
-      w->out.query_seconds += seconds_since(t0);
-      w->out.level.seconds += seconds_since(t0);
+      for (LevelWork* w : queries) {
+        PhaseTimer t(totals.phases, kQueriesOnOriginal);
+        const auto t0 = std::chrono::steady_clock::now();
+        lower_closest_distances(w->samples.xyz, std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->to_original,
+                                w->to_first, w->to_end);
+        w->out.queries += w->to_end - w->to_first;
+        w->out.query_seconds += seconds_since(t0);
+        w->out.level.seconds += seconds_since(t0);
+      }
     }
     for (LevelWork* w : viewed) {
       const auto t0 = std::chrono::steady_clock::now();
-      std::unique_ptr<core::RayScene> lines =
-          wire ? build_wire(chunk->geometry, WireRadii(w->pixel_at(w->distance, ro.resolution), ro.supersample), embree_limit) : nullptr;
+      std::unique_ptr<core::RayScene> lines;
+      if (wire) {
+        PhaseTimer t(totals.phases, kWireBuild);
+        lines = build_wire(chunk->geometry, WireRadii(w->pixel_at(w->distance, ro.resolution), ro.supersample), wire_limit);
+      }
       const core::RayScene* scenes[] = {chunk->triangles.get(), lines.get()};
+      PhaseTimer t(totals.phases, kRaysOnOriginal);
+      // Rays that cannot reach the chunk's bounds are not cast: they would hit nothing in it.
+      const WireRadii radii(w->pixel_at(w->distance, ro.resolution), ro.supersample);
+      const core::Box box = bounds_of(chunk->geometry.xyz, wire ? 1.01 * std::max(radii.line, radii.point) : 0.0);
       for (unsigned k = w->view_first; k < w->view_end; ++k)
         w->out.rays += core::cast_view(std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->cameras[k],
-                                       &w->original_views[k], true);
+                                       &w->original_views[k], true, core::project_box(box, w->cameras[k]));
       w->out.ray_seconds += seconds_since(t0);
       w->out.level.seconds += seconds_since(t0);
     }
-    progress.report("measure", double(c + 1) / double(n));
-    if (n == 1) cache = std::move(chunk);
+    progress.report("measure", double(c + 1) / double(o.chunks->chunks().size()));
+    if (o.chunks->chunks().size() == 1) cache = std::move(chunk);
   }
 }
 
@@ -829,28 +983,36 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
 void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint64_t embree_limit, uint64_t chunk_cap) {
   const auto t0 = std::chrono::steady_clock::now();
   ReportLevel& L = w.out.level;
+  std::optional<PhaseTimer> read_time(std::in_place, w.phases, kLevelRead);
   const core::LodMesh mesh = io::read_lod_mesh(w.run->levels[w.index].file);
+  read_time.reset();
   const unsigned h = ro.resolution;
   const uint64_t pixels = uint64_t{h} * h;
   const WireRadii wire(w.pixel_at(w.distance, ro.resolution), ro.supersample);
   // In one chunk, each view is cast and compared in turn; in several, every view's image is accumulated
   // chunk by chunk first (the level's images then take as much memory as the original's).
   // Besides the level: with several chunks, every view's image.
-  const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh) + pixels * kViewPixelBytes * w.views);
+  const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh) + pixels * view_pixel_bytes(!mesh.colors.empty() || !mesh.materials.empty()) * w.views);
   LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap));
   w.level_chunks = std::max<uint64_t>(w.level_chunks, chunks.size());
   std::vector<core::ViewImage> lod_views(chunks.size() > 1 ? w.views : 1);
   LevelScene lod;
   if (chunks.size() > 1) {
     for (size_t c = 0; c < chunks.size(); ++c) {
-      lod = chunks.scene(c, wire, limit);
+      {
+        PhaseTimer t(w.phases, kLevelBuild);
+        lod = chunks.scene(c, wire, limit);
+      }
       const auto lod_scenes = lod.list();
+      PhaseTimer t(w.phases, kRaysOnLevel);
       const auto t_r = std::chrono::steady_clock::now();
-      for (unsigned k = w.view_first; k < w.view_end; ++k) w.out.rays += core::cast_view(lod_scenes, w.cameras[k], &lod_views[k], true);
+      for (unsigned k = w.view_first; k < w.view_end; ++k)
+        w.out.rays += core::cast_view(lod_scenes, w.cameras[k], &lod_views[k], true, core::project_box(lod.box, w.cameras[k]));
       w.out.ray_seconds += seconds_since(t_r);
     }
     lod = {};
   } else {
+    PhaseTimer t(w.phases, kLevelBuild);
     lod = chunks.scene(0, wire, limit);
   }
   core::SilhouetteCounts& total = w.share.silhouette;
@@ -858,6 +1020,8 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   std::vector<float>& depth_err = w.share.depth_err;
   std::vector<float>& normal_err = w.share.normal_err;
   std::vector<float> distance_image(pixels);
+  // At most a value a pixel of every view of the share: reserved, so that neither grows by doubling.
+  depth_err.reserve(pixels * (w.view_end - w.view_first)), normal_err.reserve(pixels * (w.view_end - w.view_first));
   for (unsigned k = w.view_first; k < w.view_end; ++k) {
     double dir[3], target[3], eye[3];
     view_geometry(o, w, ro, k, dir, target, eye);
@@ -866,10 +1030,12 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
     core::ViewImage& vl = lod.triangles ? lod_views[0] : lod_views[k];
     if (lod.triangles) {
       const auto lod_scenes = lod.list();
+      PhaseTimer t(w.phases, kRaysOnLevel);
       const auto t_r = std::chrono::steady_clock::now();
-      w.out.rays += core::cast_view(lod_scenes, cam, &vl);
+      w.out.rays += core::cast_view(lod_scenes, cam, &vl, false, core::project_box(lod.box, cam));
       w.out.ray_seconds += seconds_since(t_r);
     }
+    PhaseTimer compare_time(w.phases, kCompare);
     core::SilhouetteCounts view;
     core::compare_silhouettes(vo.kind, vl.kind, int(h), int(h), scratch, view, distance_image);
     core::add_silhouette_counts(total, view);
@@ -968,7 +1134,11 @@ nlohmann::ordered_json report_json(const Report& rep, const ReportOptions& ro) {
                       {"queries_per_second", rep.query_seconds > 0 ? double(rep.point_queries) / rep.query_seconds : 0.0},
                       {"original_chunks", rep.original_chunks}, {"chunk_scenes", rep.chunk_scenes},
                       {"chunk_embree_peak_bytes", rep.chunk_embree_peak_bytes}, {"chunk_triangles", rep.chunk_triangles},
-                      {"level_chunks", rep.level_chunks}};
+                      {"level_chunks", rep.level_chunks}, {"chunk_replans", rep.chunk_replans},
+                      {"chunk_triangle_bytes", rep.chunk_triangle_bytes}};
+  auto& phases = j["performance"]["phases"] = nlohmann::ordered_json::array();
+  for (const StageStats& p : rep.phases)
+    phases.push_back({{"name", p.name}, {"seconds", p.seconds}, {"cpu_seconds", p.cpu_seconds}});
   auto& stages = j["stages"] = nlohmann::ordered_json::array();
   for (const StageStats& s : rep.stages)
     stages.push_back(stream::stage_json(s));
@@ -1183,33 +1353,47 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
               works.emplace_back();
               works.back().run = &runs[r], works.back().index = l;
             }
-        // Memory: what the process holds now and the samples aside, the rest is split between the view
-        // images of a group of levels (traced in one pass over the chunks; at most half of it, or one
-        // level) and one chunk's scene.
-        const uint64_t view_bytes = uint64_t{ro.views} * ro.resolution * ro.resolution * kViewPixelBytes;
-        // Held besides: the samples and their distances, a level's depth and normal errors (8 bytes a
-        // pixel of every view) while it is compared, and a margin.
-        const uint64_t held = resident_bytes() + (works.size() + 1) * 3 * ro.samples * 16 + view_bytes / kViewPixelBytes * 8 +
-                              (32ull << 20);
+        // Memory of the measure stage, every part that grows with the options or the scene counted:
+        // - held throughout: what the process holds now (resident, mapped pages included), the samples
+        //   and their distances (the original's and every level's: 3 × samples × 16 bytes each), each
+        //   level's renders kept for report.html (3 RGB images a view), the comparison of one level (its
+        //   depth and normal errors, 8 bytes a pixel of every view; its distance image and the
+        //   distance transforms' scratch, 64 bytes a pixel), the reading of a chunk (a bit and a rank per
+        //   16 store vertices, 3/16 byte; a mapped window of the positions, up to 64 MiB, and of a
+        //   primitive column, up to 12 MiB), and a margin for the allocator (48 MiB, a sixteenth of
+        //   smaller budgets);
+        // - the original's view images of a group of levels traced in one pass (18 bytes a pixel, 21
+        //   with colours; at most half of what is left, or one level);
+        // - the rest, for one chunk of the original at a time (ChunkSizing: its arrays, its Embree scenes)
+        //   or, between passes, one level's scene.
+        const bool colored = meta.colors || !meta.materials.empty();
+        const uint64_t pixels = uint64_t{ro.resolution} * ro.resolution;
+        const uint64_t view_bytes = uint64_t{ro.views} * pixels * view_pixel_bytes(colored);
+        const uint64_t html_bytes = uint64_t{std::min(ro.html_views, ro.views)} * 3 * 3 * pixels;
+        const uint64_t windows = std::min<uint64_t>(64ull << 20, meta.vertices * (meta.single_precision ? 12 : 24)) +
+                                 std::min<uint64_t>(12ull << 20, meta.primitives() * 12);
+        const uint64_t held = resident_bytes() + (works.size() + 1) * 3 * ro.samples * 16 + works.size() * html_bytes +
+                              uint64_t{ro.views} * pixels * 8 + pixels * 64 + meta.vertices * 3 / 16 + windows +
+                              std::min<uint64_t>(48ull << 20, plan.budget / 16);
         const uint64_t avail = plan.budget - std::min(plan.budget, held);
         const uint64_t levels_per_group = std::max<uint64_t>(1, avail / 2 / std::max<uint64_t>(1, view_bytes));
         const uint64_t group_bytes = std::min<uint64_t>(levels_per_group, works.size()) * view_bytes;
         const uint64_t embree_limit = left_of(avail, group_bytes);
-        // Chunks are sized from an estimate of Embree's bytes per primitive (kChunkCosts: 80 a triangle,
-        // measured 82-94), so they take three quarters of the guard, as a level's chunks do.
-        const uint64_t chunk_bytes = options.chunk_bytes ? std::min(options.chunk_bytes, embree_limit / 4 * 3) : embree_limit / 4 * 3;
-        run_stage(&rep.stages, "load", [&](StageStats&) { load_original(store_dir, meta, ro, chunk_bytes, progress, &o); });
-        rep.original_chunks += o.chunks->chunks().size();
+        ChunkSizing sizing;
+        sizing.room = embree_limit, sizing.cap = options.chunk_bytes, sizing.colored = colored;
+        run_stage(&rep.stages, "load", [&](StageStats&) { load_original(store_dir, meta, ro, sizing, progress, &o); });
+        PhaseTimes phases;
         run_stage(&rep.stages, "measure", [&](StageStats&) {
-          for (LevelWork& w : works) begin_level(o, w, ro, embree_limit, options.chunk_bytes);
+          for (LevelWork& w : works) w.phases = &phases, begin_level(o, w, ro, embree_limit, options.chunk_bytes);
           std::unique_ptr<ChunkScene> cache;
           TraceTotals totals;
+          totals.phases = &phases;
           std::vector<LevelWork*> pending;  // levels whose samples have not met the original's chunks yet
           for (LevelWork& w : works) pending.push_back(&w);
           // Levels without a given distance need their Hausdorff max before their views.
           const bool unknown = std::any_of(works.begin(), works.end(), [](const LevelWork& w) { return !w.distance_known; });
           if (unknown) {
-            trace_original(o, pending, {}, ro, embree_limit, progress, cache, totals);
+            trace_original(o, pending, {}, ro, sizing, progress, cache, totals);
             for (LevelWork* w : pending) finish_hausdorff(o, *w, ro);
             pending.clear();
           }
@@ -1217,12 +1401,24 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
             std::vector<LevelWork*> group;
             for (size_t i = first; i < std::min<size_t>(works.size(), first + levels_per_group); ++i) group.push_back(&works[i]);
             for (LevelWork* w : group) begin_views(o, *w, ro);
-            trace_original(o, pending, group, ro, embree_limit, progress, cache, totals);
+            trace_original(o, pending, group, ro, sizing, progress, cache, totals);
             for (LevelWork* w : pending) finish_hausdorff(o, *w, ro);
             pending.clear();
-            for (LevelWork* w : group) finish_level(o, *w, ro, embree_limit, options.chunk_bytes);
+            for (LevelWork* w : group) {
+              // A single chunk stays built between passes, unless the level's scene needs its room.
+              if (cache && cached_bytes(*cache) + level_scene_bytes(w->out.level, sizing) > embree_limit) cache.reset();
+              finish_level(o, *w, ro, left_of(embree_limit, cache ? cached_bytes(*cache) : 0), options.chunk_bytes);
+            }
           }
           rep.chunk_scenes += totals.chunks;
+          rep.original_chunks += o.chunks->chunks().size();
+            rep.chunk_replans += totals.replans;
+          rep.chunk_triangle_bytes = std::max(rep.chunk_triangle_bytes, sizing.embree_triangle);
+          for (int p = 0; p < kPhaseCount; ++p) {
+            StageStats st;
+            st.name = kPhaseNames[p], st.seconds = phases.wall[p], st.cpu_seconds = phases.cpu[p];
+            rep.phases.push_back(st);
+          }
           for (const LevelWork& w : works) rep.level_chunks = std::max(rep.level_chunks, w.level_chunks);
           if (totals.embree_peak_bytes > rep.chunk_embree_peak_bytes)
             rep.chunk_embree_peak_bytes = totals.embree_peak_bytes, rep.chunk_triangles = totals.chunk_triangles;

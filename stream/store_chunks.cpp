@@ -55,14 +55,25 @@ void StoreChunks::for_ids(uint64_t first, uint64_t end,
 
 void StoreChunks::plan(const ChunkCosts& costs, uint64_t bytes) {
   chunks_.clear();
-  const uint64_t words = (meta_.vertices + 63) / 64;
-  used_.assign(words, 0);
+  used_.assign((meta_.vertices + 63) / 64, 0);
   used_count_ = 0;
+  cut(0, costs, bytes, true);
+}
+
+void StoreChunks::replan(size_t from, const ChunkCosts& costs, uint64_t bytes) {
+  if (from >= chunks_.size()) return;
+  const uint64_t first = chunks_[from].first;
+  chunks_.resize(from);
+  cut(first, costs, bytes, false);
+}
+
+void StoreChunks::cut(uint64_t from, const ChunkCosts& costs, uint64_t bytes, bool mark) {
+  const uint64_t words = (meta_.vertices + 63) / 64;
   std::vector<uint64_t> in_chunk(words, 0);
-  StoreChunk chunk;
+  StoreChunk chunk{from, from, 0};
   double cost = 0;
   const double prim_cost[4] = {0, costs.point, costs.line, costs.triangle};  // by arity
-  for_ids(0, meta_.primitives(), [&](uint64_t first, int arity, std::span<const uint32_t> ids) {
+  for_ids(from, meta_.primitives(), [&](uint64_t first, int arity, std::span<const uint32_t> ids) {
     for (size_t i = 0; i < ids.size(); i += static_cast<size_t>(arity)) {
       const uint32_t* p = ids.data() + i;
       int fresh = 0;
@@ -83,7 +94,7 @@ void StoreChunks::plan(const ChunkCosts& costs, uint64_t bytes) {
       cost += prim_cost[arity] + fresh * costs.vertex;
       for (int k = 0; k < arity; ++k) {
         if (test_and_set(in_chunk, p[k])) ++chunk.vertices;
-        if (test_and_set(used_, p[k])) ++used_count_;
+        if (mark && test_and_set(used_, p[k])) ++used_count_;
       }
     }
   });
@@ -132,6 +143,14 @@ void StoreChunks::read(size_t index, ChunkGeometry* out, bool colors) {
   for (uint64_t w = 0; w < words; ++w) rank[w] = static_cast<uint32_t>(run), run += static_cast<uint64_t>(std::popcount(bits[w]));
   out->first = c.first;
   out->triangles.clear(), out->lines.clear(), out->points.clear();
+  // Exact sizes, so that no array grows by doubling (its peak would be up to twice its size).
+  const auto overlap = [&](uint64_t lo, uint64_t n) {
+    const uint64_t a = std::max(c.first, lo), b = std::min(c.end, lo + n);
+    return b > a ? b - a : 0;
+  };
+  out->triangles.reserve(3 * overlap(0, meta_.triangles));
+  out->lines.reserve(2 * overlap(meta_.triangles, meta_.lines));
+  out->points.reserve(overlap(meta_.triangles + meta_.lines, meta_.points));
   read_positions(bits, 0, count, out->xyz);
   for_ids(c.first, c.end, [&](uint64_t, int arity, std::span<const uint32_t> ids) {
     std::vector<uint32_t>& dst = arity == 3 ? out->triangles : arity == 2 ? out->lines : out->points;

@@ -45,6 +45,9 @@ class StoreChunks {
   // Cuts the store into chunks of at most `bytes` by `costs` (at least one primitive each). Also marks
   // every vertex any primitive uses (used()).
   void plan(const ChunkCosts& costs, uint64_t bytes);
+  // Cuts again, from chunk `from` on (the chunks before it stay), by other costs or another size: for a
+  // caller that measured what a chunk really takes. One pass over the ids from there.
+  void replan(size_t from, const ChunkCosts& costs, uint64_t bytes);
   const std::vector<StoreChunk>& chunks() const { return chunks_; }
   // Reads chunk `index` into `out`; with `colors`, its primitives' colours too (ChunkGeometry::*_rgb).
   void read(size_t index, ChunkGeometry* out, bool colors = false);
@@ -56,6 +59,8 @@ class StoreChunks {
   std::vector<float> positions_of(const std::vector<uint32_t>& ids) const;
 
  private:
+  // Cuts [from, primitives) into chunks appended to chunks_; with `mark`, sets used_ too.
+  void cut(uint64_t from, const ChunkCosts& costs, uint64_t bytes, bool mark);
   // visit(global id of the first primitive, arity, its ids) over consecutive blocks of [first, end).
   void for_ids(uint64_t first, uint64_t end,
                const std::function<void(uint64_t, int, std::span<const uint32_t>)>& visit) const;

@@ -5,7 +5,9 @@
 # is the same VmHWM), the chunks the original was traced in (1 = in core; more when it does not fit
 # --memory), primary rays per second and point queries per second (report.json
 # "performance": rays and queries over the wall time spent casting and querying), and the CPU seconds
-# other processes used meanwhile; then the medians.
+# other processes used meanwhile, the CPU seconds of the run and of each part of its measure stage
+# (report.json performance.phases: chunk reads and builds, rays and point queries on the original and on
+# the levels, the comparison); then the medians.
 #
 # usage: tools/bench_report.sh [--runs N] [--build DIR] [--lods DIR] [--memory 4G] [--work DIR] [--threads "0 1"]
 #   --lods DIR: a simplify output directory (default: made first, from /work/scenes/city.ply, into the
@@ -22,7 +24,7 @@ while [[ $# -gt 0 ]]; do
     --memory) memory=$2; shift 2 ;;
     --work) work=$2; shift 2 ;;
     --threads) thread_list=$2; shift 2 ;;
-    -h|--help) sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "bench_report: unknown option $1" >&2; exit 64 ;;
   esac
 done
@@ -61,7 +63,9 @@ print(json.dumps({"threads": int(sys.argv[3]) or "all", "run": int(sys.argv[4]),
                   "rays_per_s": p["rays_per_second"], "queries_per_s": p["queries_per_second"],
                   "levels": len(rep["runs"][0]["levels"]), "others_cpu_s": round(max(others, 0), 1),
                   "chunks": p.get("original_chunks", 1), "level_chunks": p.get("level_chunks", 1),
-                  "stages": {s["name"]: round(s["seconds"], 2) for s in rep["stages"]}}))
+                  "cpu_s": round(own, 1),
+                  "stages": {s["name"]: round(s["seconds"], 2) for s in rep["stages"]},
+                  "phases_cpu_s": {q["name"]: round(q["cpu_seconds"], 1) for q in p.get("phases", [])}}))
 PY
     tail -1 "$results"
   done

@@ -346,7 +346,13 @@ struct Report {
   uint64_t chunk_embree_peak_bytes = 0;  // the largest chunk scene's peak by Embree's memory monitor
   uint64_t chunk_triangles = 0;          // triangles of that chunk
   uint64_t level_chunks = 0;             // the most chunks a level was traced in (1 = in core)
+  uint64_t chunk_replans = 0;            // times the chunks still to come were cut again by measured bytes
+  double chunk_triangle_bytes = 0;       // Embree's bytes per triangle the chunks were last cut by
   std::vector<StageStats> stages;
+  // The measure stage's parts (chunk_read, chunk_build, wire_build, queries_on_original, rays_on_original,
+  // level_read, level_build, queries_on_level, rays_on_level, compare): wall and CPU seconds summed over
+  // chunks and levels; peak_rss_bytes unused.
+  std::vector<StageStats> phases;
   double seconds = 0;
   uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)
   WorkDirUsage work_dir;
