@@ -541,16 +541,15 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
          24 * std::min(primitives, 16 * kEmitBlock);
 }
 
-// A quarter of what pass A held, within [8 MiB, 128 MiB]: the sorts run in memory on most scenes and
-// spill in runs of at least 4 MiB on the largest.
-uint64_t emit_corner_bytes(uint64_t level_bytes) { return std::clamp<uint64_t>(level_bytes / 4, 8 << 20, 128 << 20); }
+uint64_t emit_corner_bytes(uint64_t budget) { return std::clamp<uint64_t>(budget / 24, 1 << 20, 40 << 20); }
 
 uint64_t emit_map_bytes(uint64_t vertices, unsigned bits) { return (vertices * bits + 63) / 64 * 8 + 8; }
 
 void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives,
                        uint64_t budget, uint64_t resident, const EmitOptions& options) {
   const uint64_t need =
-      resident + emit_map_bytes(vertices, emit_bits(cells[first])) + emit_level_bytes(cells[first], primitives, options);
+      resident + emit_map_bytes(vertices, emit_bits(cells[first])) + emit_level_bytes(cells[first], primitives, options) +
+      emit_corner_bytes(budget);
   if (need <= budget) return;
   fail(Status::usage, "emitting level " + std::to_string(first) + " (" + std::to_string(cells[first]) +
                           " cells) needs about " + std::to_string(need >> 20) + " MiB, more than --memory allows (" +
@@ -562,7 +561,7 @@ void check_emit_budget(std::span<const uint64_t> cells, size_t first, uint64_t v
 size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t vertices, uint64_t primitives, uint64_t budget,
                       uint64_t resident, const EmitOptions& options) {
   unsigned bits = emit_bits(cells[first]);
-  uint64_t work = emit_level_bytes(cells[first], primitives, options);
+  uint64_t work = emit_level_bytes(cells[first], primitives, options) + emit_corner_bytes(budget);
   size_t end = first + 1;
   while (end < cells.size()) {
     const unsigned b = bits + emit_bits(cells[end]);
@@ -578,7 +577,7 @@ EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_reg
   EmitLevelPlan plan;
   const uint64_t map = emit_map_bytes(vertices, emit_bits(cells));
   const uint64_t tables = kLevelBytesPerCell * cells;
-  if (map + tables + emit_level_bytes(cells, primitives, options) <= budget) {
+  if (map + tables + emit_level_bytes(cells, primitives, options) + emit_corner_bytes(budget) <= budget) {
     plan.batch_cells = cells;
     return plan;
   }
@@ -588,7 +587,7 @@ EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_reg
   EmitOptions no_quadric = options;
   no_quadric.representative = Representative::center;
   const uint64_t per_cell = emit_level_bytes(1, 0, no_quadric) * 3 / 2;
-  const uint64_t in_flight = emit_level_bytes(0, primitives, no_quadric);
+  const uint64_t in_flight = emit_level_bytes(0, primitives, no_quadric) + emit_corner_bytes(budget);
   // The routes of the batches (route_batches: a byte per 64 primitives and a byte a cell) are held beside
   // each of them.
   const uint64_t routes = primitives / 64 + 3 + cells;
@@ -1124,7 +1123,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // (Scratch::corners); all of them go through one external sort (stream/external_sort.h), which puts each
   // kept edge's distinct corners together in vertex order, whatever the blocks, threads or memory.
   // The pairs grow with the scene (on a 48.6 M-triangle city's four coarse levels, 15 M distinct corners):
-  // they are held in memory up to emit_corner_bytes and spilled in sorted runs beyond, never hashed.
+  // they are held in memory up to a share of options.corner_bytes and spilled in sorted runs beyond, never hashed.
   // It also clears the bit of every primitive whose edge was eliminated.
   std::unique_ptr<WeldFile> weld;
   if (any_kept_edges && !canonical_path.empty() && meta.vertices > 0) {
@@ -1132,11 +1131,8 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     weld->acquire();
   }
   auto canonical = [&](uint32_t v) { return weld ? (*weld)(v) : v; };
-  uint64_t targets = 0, level_bytes = 0;
-  for (LevelState& L : levels) {
-    L.first_target = targets, targets += L.kept_sums.size();
-    level_bytes += emit_level_bytes(L.in.cells, meta.primitives(), options);
-  }
+  uint64_t targets = 0;
+  for (LevelState& L : levels) L.first_target = targets, targets += L.kept_sums.size();
   if (targets > UINT32_MAX) fail(Status::internal, "emit: more than 2^32 kept edges and points in one group");
   auto corner_key = [](uint64_t target, uint32_t vertex) { return target << 32 | vertex; };
   auto collect_corners = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
@@ -1180,7 +1176,8 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // serially, so they depend on the input and options only. The distinct pairs of C1 are pushed, already in
   // order, into a second sorter that keeps them (in memory, or in runs) for C2.
   if (any_kept_edges) {
-    uint64_t sort_bytes = emit_corner_bytes(level_bytes) / 2;  // each of the two sorters
+    // Each of the two sorters a third of corner_bytes, the positions' batch the rest.
+    uint64_t sort_bytes = options.corner_bytes / 3;
     if (options.chunk_bytes) sort_bytes = std::min(sort_bytes, options.chunk_bytes);
     std::unique_ptr<WorkDir> own_dir;  // a temporary directory for the runs, should they spill
     if (!options.work) own_dir = std::make_unique<WorkDir>("");
@@ -1213,7 +1210,8 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       }
       batch.clear();
     };
-    const size_t batch_size = static_cast<size_t>(std::clamp<uint64_t>(sort_bytes / 40, 1 << 12, 1 << 20));
+    // A pair in the batch: its key, id, position and the gather's slot (8 + 4 + 24 + 4 bytes).
+    const size_t batch_size = static_cast<size_t>(std::max<uint64_t>(options.corner_bytes / 3 / 40, 1024));
     ExternalSorter<uint64_t, std::less<uint64_t>> distinct(dir, "corners-distinct", sort_bytes);
     auto sum_positions = [&](LevelState& L, uint32_t e, bool in_a, const double* p) {
       EdgeSums& s = L.kept_sums[e];

@@ -70,8 +70,10 @@ struct EmitOptions {
   bool colors = false;     // the store has vertex colours (emit_level_bytes: nothing at the peak)
   bool materials = false;  // the store has a material table: counted in emit_level_bytes
   // Where passes B and C (thickness, point sizes) spill the sorted runs of their {kept edge, corner} pairs
-  // when these outgrow the stage's share for them (emit_corner_bytes); none: they are sorted in memory.
+  // when these outgrow their share (corner_bytes: emit_corner_bytes of the stage's budget); none: in a
+  // temporary directory.
   const WorkDir* work = nullptr;
+  uint64_t corner_bytes = 40 << 20;
   uint64_t chunk_bytes = 0;  // --chunk-bytes (0: none) caps those sorts' memory too, so that tests make them spill
 };
 
@@ -171,9 +173,12 @@ void route_batches(const std::string& store_dir, const StoreMeta& meta, const st
 
 // Memory model of the grouping. A level of C cells takes emit_bits(C) bits of each packed map record.
 unsigned emit_bits(uint64_t cells);
-// What the sort of a group's {kept edge, corner} pairs (passes B and C) holds: a share of what pass A held
-// before them (`level_bytes`, the sum of the group's emit_level_bytes), which elimination has freed.
-uint64_t emit_corner_bytes(uint64_t level_bytes);
+// What passes B and C (thickness, point sizes) hold beside what pass A leaves, once per group, for a stage
+// budget of `budget` bytes: a twenty-fourth of it, within [1 MiB, 40 MiB]; a third each for the two sorts of
+// {kept edge, corner} pairs (beyond, they spill) and for a batch of corner positions. Counted on top of pass
+// A's peak, not inside it: elimination frees pass A's hash tables, but the allocator keeps most of their
+// pages (measured on the 193 M-triangle city at --memory 1G: 46 MiB of pass A's 189 came back).
+uint64_t emit_corner_bytes(uint64_t budget);
 // Working memory of one level in a group (its dedupe tables, outputs and quadrics at the peak, pass A,
 // plus its share of the buffers of the blocks in flight, of an input of `primitives` primitives).
 uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions& options);

@@ -259,7 +259,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   EmitOptions no_quadric = in.options;
   no_quadric.representative = Representative::center;
   const uint64_t per_cell = emit_level_bytes(1, 0, no_quadric) * 3 / 2;
-  const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), no_quadric);
+  const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), no_quadric) + emit_corner_bytes(in.budget);
   auto level_bytes = [&](size_t l, uint64_t batch) { return kLevelBytesPerCell * in.cells[l] + in_flight + per_cell * batch; };
 
   std::vector<EmitCounts> counts(n);

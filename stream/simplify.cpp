@@ -802,7 +802,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           error_json = bound_silhouette_error(input, so, options, work, sizes, fine_factors, switch_distances, report,
                                               [&](const std::vector<double>& s, const std::vector<std::string>& paths) {
                                                 stream::EmitOptions eo{so.representative, so.crease_degrees, true, false};
-                                                eo.work = &work, eo.chunk_bytes = options.chunk_bytes;
+                                                eo.work = &work, eo.chunk_bytes = options.chunk_bytes, eo.corner_bytes = stream::emit_corner_bytes(plan.stage_bytes);
                                                 const std::vector<uint64_t> cells = cluster(s, nullptr);
                                                 stream::OpenLevels levels(work, "error-level", cells);
                                                 emit_all(
@@ -818,6 +818,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         shard_input = {store_dir, canonical, prefix, &meta, grade.records, copts,
                        {so.representative, so.crease_degrees, true, false}, plan.stage_bytes, so.tile_triangles, sizes, cells, so.write_tiles};
         shard_input.options.work = &work, shard_input.options.chunk_bytes = options.chunk_bytes;
+        shard_input.options.corner_bytes = stream::emit_corner_bytes(plan.stage_bytes);
         run_stage(&report.stages, "representatives", [&](StageStats& st) {
           ordered_json key = cluster_base;
           key["cells"] = cells;
@@ -903,6 +904,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       emit_options.colors = meta.colors;
       emit_options.materials = !meta.materials.empty();
       emit_options.work = &work, emit_options.chunk_bytes = options.chunk_bytes;
+      emit_options.corner_bytes = stream::emit_corner_bytes(plan.stage_bytes);
       run_stage(&report.stages, "emit", [&](StageStats&) {
         const std::vector<stream::EmitCounts> counts =
             sharded ? stream::emit_shard(shard_input, so.shard_index, so.shard_count, so.output_dir, progress, scratch)
