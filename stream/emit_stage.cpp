@@ -1113,6 +1113,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     any_kept_edges = any_kept_edges || !L.kept_sums.empty();
   }
 
+  release_free_memory();  // pass A's dedupe tables, before the thickness passes
   // Pass B visits the input triangles and segments that collapsed to a kept edge (or a kept point:
   // index_kept_points) in some level of the group (an eliminated edge's thickness would go unused), and
   // gives each of their corners as a pair {kept edge, canonical vertex} (corner_key): a vertex shared by

@@ -38,6 +38,7 @@ inline nlohmann::ordered_json stage_json(const StageStats& s) {
 // whole run's peak.
 template <class Body>
 auto run_stage(std::vector<StageStats>* stages, const char* name, Body&& body) {
+  release_free_memory();
   StagePeak peak;
   const auto t0 = std::chrono::steady_clock::now();
   const double cpu0 = process_cpu_seconds();

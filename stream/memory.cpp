@@ -1,6 +1,7 @@
 #include "stream/memory.h"
 
 #include <fcntl.h>
+#include <malloc.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -45,6 +46,8 @@ uint64_t physical_memory_bytes() {
 }
 
 uint64_t peak_rss_bytes() { return status_field_kib("VmHWM") << 10; }
+
+void release_free_memory() { malloc_trim(0); }
 
 uint64_t resident_bytes() {
   // statm is "size resident shared ..." in pages; one short read, cheaper than parsing status.

@@ -14,6 +14,13 @@ uint64_t peak_rss_bytes();
 // The resident set now (/proc/self/statm), mapped file pages included; 0 if unknown.
 uint64_t resident_bytes();
 
+// Gives the heap's free pages back to the system (glibc malloc_trim). Freed memory otherwise stays in the
+// resident set: the allocator keeps most of a stage's freed tables, and the next stage's larger blocks come
+// from fresh pages beside them (measured on the 193 M-triangle city at --memory 1G: the emit stage peaked
+// 150 MiB higher after the cluster stage than in a process that ran emit alone). Called between stages
+// and between emit's passes; changes no output byte.
+void release_free_memory();
+
 // How often StagePeak samples the resident set.
 inline constexpr unsigned kRssSampleMilliseconds = 5;
 
