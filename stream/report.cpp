@@ -1239,58 +1239,10 @@ void write_report_task(const ReportOptions& ro, const std::vector<RunSpec>& runs
   io::write_file_atomic(stream::report_task_path(ro.output_dir, ro.shard_index), task.dump(1) + "\n", io::Sync::durable);
 }
 
-// Every task's summary, checked to be one report's: N tasks of count N with the same key. Fails with
-// Status::no_input naming the missing tasks.
+// Every task's summary, checked to be one report's (stream::read_task_summaries).
 std::vector<nlohmann::ordered_json> read_report_tasks(const std::string& output_dir) {
-  using nlohmann::ordered_json;
-  const std::string dir = stream::report_shards_dir(output_dir);
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec))
-    fail(Status::no_input, dir + ": no report shares to merge (run `lodstream report ... --shard I/N --work DIR` for every task first)");
-  std::map<unsigned, ordered_json> tasks;
-  for (const auto& e : fs::directory_iterator(dir, ec)) {
-    const std::string name = e.path().filename().string();
-    unsigned i;
-    char tail[8] = {0};
-    if (std::sscanf(name.c_str(), "task-%u.%5s", &i, tail) != 2 || std::string(tail) != "json") continue;
-    try {
-      tasks[i] = ordered_json::parse(io::read_small_file(e.path().string()));
-    } catch (const std::exception&) {
-      fail(Status::io_error, e.path().string() + ": cannot read a report task's summary");
-    }
-  }
-  if (tasks.empty())
-    fail(Status::no_input, dir + ": no report task has finished (no task-I.json): run every task (`lodstream report ... --shard I/N`) first");
-  // The count of the report: the one most tasks name (a task of an older report with another count is stale).
-  std::map<unsigned, unsigned> votes;
-  for (const auto& [i, t] : tasks) ++votes[t.at("key").at("count").get<unsigned>()];
-  const unsigned count = std::max_element(votes.begin(), votes.end(), [](auto& a, auto& b) { return a.second < b.second; })->first;
-  std::vector<unsigned> missing, stale;
-  const ordered_json* key = nullptr;
-  for (unsigned i = 0; i < count; ++i) {
-    const auto it = tasks.find(i);
-    if (it == tasks.end()) {
-      missing.push_back(i);
-      continue;
-    }
-    const ordered_json& k = it->second.at("key");
-    if (k.at("count") != count || (key && k != *key)) stale.push_back(i);
-    else if (!key) key = &k;
-  }
-  if (!missing.empty() || !stale.empty()) {
-    std::string what;
-    if (!missing.empty())
-      what = fmt::format("report task{} {} of {} ha{} not finished (no {}/task-I.json)", missing.size() == 1 ? "" : "s",
-                         fmt::join(missing, ", "), count, missing.size() == 1 ? "s" : "ve", dir);
-    if (!stale.empty())
-      what += fmt::format("{}report task{} {} of {} belong{} to another report (other options or task count)", what.empty() ? "" : "; ",
-                          stale.size() == 1 ? "" : "s", fmt::join(stale, ", "), count, stale.size() == 1 ? "s" : "");
-    fail(Status::no_input, "merge: " + what + ": rerun " + (missing.size() + stale.size() == 1 ? "it" : "them") +
-                               " (`lodstream report ... --shard I/" + std::to_string(count) + "` on the same work directory)");
-  }
-  std::vector<ordered_json> out;
-  for (unsigned i = 0; i < count; ++i) out.push_back(std::move(tasks[i]));
-  return out;
+  return stream::read_task_summaries(stream::report_shards_dir(output_dir),
+                                     {"report shares", "report task", "report", "other options or task count", "report"});
 }
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <map>
 
 #include <fmt/format.h>
 
@@ -372,6 +373,58 @@ void write_shard_task(const std::string& output_dir, unsigned index, const nlohm
   const nlohmann::ordered_json task{{"index", index}, {"key", key}, {"manifest", manifest}};
   kill_point(fmt::format("task-{}.json", index));
   io::write_file_atomic(shard_task_path(output_dir, index), task.dump(1) + "\n", io::Sync::durable);
+}
+
+std::vector<nlohmann::ordered_json> read_task_summaries(const std::string& dir, const TaskNames& n) {
+  using nlohmann::ordered_json;
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec))
+    fail(Status::no_input, dir + ": no " + n.parts + " to merge (run `lodstream " + n.command + " ... --shard I/N --work DIR` for every task first)");
+  std::map<unsigned, ordered_json> tasks;
+  for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    unsigned i;
+    char tail[8] = {0};
+    if (std::sscanf(name.c_str(), "task-%u.%5s", &i, tail) != 2 || std::string(tail) != "json") continue;
+    try {
+      tasks[i] = ordered_json::parse(io::read_small_file(e.path().string()));
+    } catch (const std::exception&) {
+      fail(Status::io_error, e.path().string() + ": cannot read a " + n.task + "'s summary");
+    }
+  }
+  if (tasks.empty())
+    fail(Status::no_input, dir + ": no " + n.task + " has finished (no task-I.json): run every task (`lodstream " + n.command +
+                               " ... --shard I/N`) first");
+  // The count of the job: the one most tasks name (a task of an older job with another count is stale).
+  std::map<unsigned, unsigned> votes;
+  for (const auto& [i, t] : tasks) ++votes[t.at("key").at("count").get<unsigned>()];
+  const unsigned count = std::max_element(votes.begin(), votes.end(), [](auto& a, auto& b) { return a.second < b.second; })->first;
+  std::vector<unsigned> missing, stale;
+  const ordered_json* key = nullptr;
+  for (unsigned i = 0; i < count; ++i) {
+    const auto it = tasks.find(i);
+    if (it == tasks.end()) {
+      missing.push_back(i);
+      continue;
+    }
+    const ordered_json& k = it->second.at("key");
+    if (k.at("count") != count || (key && k != *key)) stale.push_back(i);
+    else if (!key) key = &k;
+  }
+  if (!missing.empty() || !stale.empty()) {
+    std::string what;
+    if (!missing.empty())
+      what = fmt::format("{}{} {} of {} ha{} not finished (no {}/task-I.json)", n.task, missing.size() == 1 ? "" : "s",
+                         fmt::join(missing, ", "), count, missing.size() == 1 ? "s" : "ve", dir);
+    if (!stale.empty())
+      what += fmt::format("{}{}{} {} of {} belong{} to another {} ({})", what.empty() ? "" : "; ", n.task, stale.size() == 1 ? "" : "s",
+                          fmt::join(stale, ", "), count, stale.size() == 1 ? "s" : "", n.job, n.other);
+    fail(Status::no_input, "merge: " + what + ": rerun " + (missing.size() + stale.size() == 1 ? "it" : "them") + " (`lodstream " +
+                               n.command + " ... --shard I/" + std::to_string(count) + "` on the same work directory)");
+  }
+  std::vector<ordered_json> out;
+  for (unsigned i = 0; i < count; ++i) out.push_back(std::move(tasks[i]));
+  return out;
 }
 
 }  // namespace lodstream::stream

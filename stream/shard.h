@@ -141,4 +141,13 @@ TilesOptions tiles_options_from_json(const nlohmann::ordered_json& j);
 void write_shard_task(const std::string& output_dir, unsigned index, const nlohmann::ordered_json& key,
                       const nlohmann::ordered_json& manifest);
 
+// What a merge calls a sharded job's pieces in its messages: its parts ("task parts"), a task ("task"),
+// the job ("run"), what makes a task another job's, and the command that runs a task ("simplify").
+struct TaskNames {
+  const char *parts, *task, *job, *other, *command;
+};
+// The summaries task-I.json of a sharded job's tasks in `dir`, checked to be one job's: N tasks of count N
+// with the same key, in task order. Fails with Status::no_input naming the missing and stale tasks.
+std::vector<nlohmann::ordered_json> read_task_summaries(const std::string& dir, const TaskNames& names);
+
 }  // namespace lodstream::stream
