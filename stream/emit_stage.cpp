@@ -1248,7 +1248,6 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     });
     visit_batch(sum_distances);
   }
-  weld.reset();
   positions.release();
   for (BlockOut& o : outs[0]) o = BlockOut();
   for (BlockOut& o : outs[1]) o = BlockOut();

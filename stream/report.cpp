@@ -553,12 +553,17 @@ struct LevelScene {
   std::vector<const core::RayScene*> list() const { return {triangles.get(), wire.get()}; }
 };
 
-// Bounds of the vertices `xyz`, widened by `radius` (what a scene's segments and discs reach past them).
-core::Box bounds_of(std::span<const float> xyz, double radius) {
+// Bounds of the vertices `xyz`.
+core::Box bounds_of(std::span<const float> xyz) {
   core::Box b;
   for (int c = 0; c < 3; ++c) b.min[c] = std::numeric_limits<double>::infinity(), b.max[c] = -b.min[c];
   for (size_t v = 0; v + 2 < xyz.size(); v += 3)
     for (int c = 0; c < 3; ++c) b.min[c] = std::min<double>(b.min[c], xyz[v + c]), b.max[c] = std::max<double>(b.max[c], xyz[v + c]);
+  return b;
+}
+
+// `b` widened by `radius` (what a scene's segments and discs reach past their vertices).
+core::Box widened(core::Box b, double radius) {
   for (int c = 0; c < 3; ++c) b.min[c] -= radius, b.max[c] += radius;
   return b;
 }
@@ -619,7 +624,7 @@ LevelScene build_level_scene(const core::LodMesh& mesh, const WireRadii& wire, u
   float reach = 0;
   for (float r : radius) reach = std::max(reach, r);
   for (float r : point_radius) reach = std::max(reach, r);
-  scene.box = bounds_of(mesh.positions, 1.01 * double(reach));
+  scene.box = widened(bounds_of(mesh.positions), 1.01 * double(reach));
   return scene;
 }
 
@@ -956,18 +961,19 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
         w->out.level.seconds += seconds_since(t0);
       }
     }
+    // Rays that cannot reach the chunk's bounds are not cast: they would hit nothing in it.
+    const core::Box chunk_box = viewed.empty() ? core::Box{} : bounds_of(chunk->geometry.xyz);
     for (LevelWork* w : viewed) {
       const auto t0 = std::chrono::steady_clock::now();
+      const WireRadii radii(w->pixel_at(w->distance, ro.resolution), ro.supersample);
       std::unique_ptr<core::RayScene> lines;
       if (wire) {
         PhaseTimer t(totals.phases, kWireBuild);
-        lines = build_wire(chunk->geometry, WireRadii(w->pixel_at(w->distance, ro.resolution), ro.supersample), wire_limit);
+        lines = build_wire(chunk->geometry, radii, wire_limit);
       }
       const core::RayScene* scenes[] = {chunk->triangles.get(), lines.get()};
       PhaseTimer t(totals.phases, kRaysOnOriginal);
-      // Rays that cannot reach the chunk's bounds are not cast: they would hit nothing in it.
-      const WireRadii radii(w->pixel_at(w->distance, ro.resolution), ro.supersample);
-      const core::Box box = bounds_of(chunk->geometry.xyz, wire ? 1.01 * std::max(radii.line, radii.point) : 0.0);
+      const core::Box box = widened(chunk_box, wire ? 1.01 * std::max(radii.line, radii.point) : 0.0);
       for (unsigned k = w->view_first; k < w->view_end; ++k)
         w->out.rays += core::cast_view(std::span<const core::RayScene* const>(scenes, lines ? 2 : 1), w->cameras[k],
                                        &w->original_views[k], true, core::project_box(box, w->cameras[k]));

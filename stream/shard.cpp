@@ -262,6 +262,8 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   const uint64_t per_cell = emit_level_bytes(1, 0, no_quadric) * 3 / 2;
   const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), no_quadric) + emit_corner_bytes(in.budget);
   auto level_bytes = [&](size_t l, uint64_t batch) { return kLevelBytesPerCell * in.cells[l] + in_flight + per_cell * batch; };
+  EmitOptions emit = in.options;  // its thickness passes hold what in_flight counts for them
+  emit.corner_bytes = emit_corner_bytes(in.budget);
 
   std::vector<EmitCounts> counts(n);
   std::vector<std::unique_ptr<PartsWriter>> writers(n);
@@ -324,7 +326,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
         levels.push_back({l, in.cells[l], in.sizes[l], &cuts[l], region_of[i].data(), runs[l].first, runs[l].second, true});
       }
       const std::vector<EmitCounts> c = emit_levels(in.store_dir, meta, in.canonical, in.prefix, levels, in.records, in.cluster,
-                                                    in.options, progress, scratch, [&](size_t i, RegionPart& part) {
+                                                    emit, progress, scratch, [&](size_t i, RegionPart& part) {
                                                       const size_t l = group[i];
                                                       writers[l]->add(info(l, part.region), part);
                                                     });
@@ -333,7 +335,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
       for (const auto& [r0, r1] : batches) {
         const EmitLevel level{first, in.cells[first], in.sizes[first], &cuts[first], region_of[0].data(), r0, r1, true};
         const std::vector<EmitCounts> c = emit_levels(in.store_dir, meta, in.canonical, in.prefix, std::span<const EmitLevel>(&level, 1),
-                                                      in.records, in.cluster, in.options, progress, scratch,
+                                                      in.records, in.cluster, emit, progress, scratch,
                                                       [&](size_t, RegionPart& part) { writers[first]->add(info(first, part.region), part); });
         add(first, c[0]);
       }

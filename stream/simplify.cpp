@@ -637,7 +637,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       // that fit whole share passes as when counting; the others are emitted in batches of regions. Neither
       // the grouping nor the batches change a byte.
       using PartSink = std::function<void(size_t, const stream::RegionInfo&, stream::RegionPart&)>;
-      auto emit_all = [&](const std::vector<double>& sizes, const std::vector<uint64_t>& cells, const stream::EmitOptions& eo,
+      auto emit_all = [&](const std::vector<double>& sizes, const std::vector<uint64_t>& cells, const stream::EmitOptions& options_in,
                           const PartSink& sink, const std::function<void(size_t)>& level_done) {
         // What is resident before the levels are emitted (code and libraries touched so far, pages the heap
         // kept from earlier stages) beyond what the memory plan sets aside for the process (budget less
@@ -648,6 +648,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         const uint64_t set_aside = plan.budget - plan.stage_bytes, resident = stream::resident_bytes();
         const uint64_t budget = plan.stage_bytes - plan.stage_bytes / 32 -
                                 std::min(resident > set_aside ? resident - set_aside : 0, plan.stage_bytes / 2);
+        // The thickness passes hold what the plan counts for them (stream::emit_corner_bytes of this budget).
+        stream::EmitOptions eo = options_in;
+        eo.corner_bytes = stream::emit_corner_bytes(budget);
         std::vector<stream::EmitCounts> counts(sizes.size());
         if (eo.count_only) {
           for (size_t l = 0; l < sizes.size(); ++l)
@@ -811,7 +814,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           error_json = bound_silhouette_error(input, so, options, work, sizes, fine_factors, switch_distances, report,
                                               [&](const std::vector<double>& s, const std::vector<std::string>& paths) {
                                                 stream::EmitOptions eo{so.representative, so.crease_degrees, true, false};
-                                                eo.work = &work, eo.chunk_bytes = options.chunk_bytes, eo.corner_bytes = stream::emit_corner_bytes(plan.stage_bytes);
+                                                eo.work = &work, eo.chunk_bytes = options.chunk_bytes;
                                                 const std::vector<uint64_t> cells = cluster(s, nullptr);
                                                 stream::OpenLevels levels(work, "error-level", cells);
                                                 emit_all(
@@ -827,7 +830,6 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         shard_input = {store_dir, canonical, prefix, &meta, grade.records, copts,
                        {so.representative, so.crease_degrees, true, false}, plan.stage_bytes, so.tile_triangles, sizes, cells, so.write_tiles};
         shard_input.options.work = &work, shard_input.options.chunk_bytes = options.chunk_bytes;
-        shard_input.options.corner_bytes = stream::emit_corner_bytes(plan.stage_bytes);
         run_stage(&report.stages, "representatives", [&](StageStats& st) {
           ordered_json key = cluster_base;
           key["cells"] = cells;
@@ -913,7 +915,6 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       emit_options.colors = meta.colors;
       emit_options.materials = !meta.materials.empty();
       emit_options.work = &work, emit_options.chunk_bytes = options.chunk_bytes;
-      emit_options.corner_bytes = stream::emit_corner_bytes(plan.stage_bytes);
       run_stage(&report.stages, "emit", [&](StageStats&) {
         const std::vector<stream::EmitCounts> counts =
             sharded ? stream::emit_shard(shard_input, so.shard_index, so.shard_count, so.output_dir, progress, scratch)

@@ -383,13 +383,15 @@ std::string write_grid(const test::TempDir& tmp, int n) {
   return tmp.write("grid.ply", ply);
 }
 
+// simplify of the grid into `out` with `work`, two levels at the minimum budget, progress as JSON lines.
+std::vector<std::string> grid_simplify_args(const std::string& grid, const std::string& out, const std::string& work) {
+  return {"simplify", grid, "-o", out, "--work", work, "--levels", "2", "--memory", "64M", "--progress", "json"};
+}
+
 TEST(CrashSafety, ScratchFilesOfAKilledRunAreRemovedWhenItResumes) {
   test::TempDir tmp;
   const std::string grid = write_grid(tmp, 600);
-  auto args = [&](const std::string& out, const std::string& work) {
-    return std::vector<std::string>{"simplify", grid, "-o", out, "--work", work, "--levels", "2", "--memory", "64M",
-                                    "--progress", "json"};
-  };
+  auto args = [&](const std::string& out, const std::string& work) { return grid_simplify_args(grid, out, work); };
   const std::string ref_out = tmp.file("ref-out"), ref_work = tmp.file("ref-work");
   std::vector<std::string> order;
   std::set<std::string> resumable;
@@ -408,10 +410,7 @@ TEST(CrashSafety, ScratchFilesOfAKilledRunAreRemovedWhenItResumes) {
 TEST(CrashSafety, LevelScratchInTheOutputDirectoryIsReplacedWhenItResumes) {
   test::TempDir tmp;
   const std::string grid = write_grid(tmp, 600);
-  auto args = [&](const std::string& out, const std::string& work) {
-    return std::vector<std::string>{"simplify", grid, "-o", out, "--work", work, "--levels", "2", "--memory", "64M",
-                                    "--progress", "json"};
-  };
+  auto args = [&](const std::string& out, const std::string& work) { return grid_simplify_args(grid, out, work); };
   const std::string ref_out = tmp.file("ref-out"), ref_work = tmp.file("ref-work");
   std::vector<std::string> order;
   std::set<std::string> resumable;
