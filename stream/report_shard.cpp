@@ -57,21 +57,7 @@ void ReportShareWriter::add(const ReportLevelShare& l) {
   }
 }
 
-ReportShareReader::ReportShareReader(const std::string& path) : path_(path) {
-  f_ = std::fopen(path.c_str(), "rb");
-  if (!f_) fail(Status::io_error, path + ": cannot open a report task's shares: " + std::strerror(errno));
-  char magic[sizeof kMagic];
-  read(magic, sizeof magic);
-  if (std::memcmp(magic, kMagic, sizeof magic) != 0) fail(Status::io_error, path + ": not a report task's shares of this version");
-}
-
-ReportShareReader::~ReportShareReader() {
-  if (f_) std::fclose(f_);
-}
-
-void ReportShareReader::read(void* data, size_t bytes) {
-  if (bytes && std::fread(data, 1, bytes, f_) != bytes) fail(Status::io_error, path_ + ": a report task's shares are cut short");
-}
+ReportShareReader::ReportShareReader(const std::string& path) : TaskFileReader(path, kMagic, "a report task's shares") {}
 
 template <class T>
 void ReportShareReader::array(std::vector<T>& v) {

@@ -22,6 +22,7 @@
 #include "core/silhouette_error.h"
 #include "io/file_writer.h"
 #include "io/report_html.h"
+#include "stream/shard.h"
 
 namespace lodstream::stream {
 
@@ -57,20 +58,14 @@ class ReportShareWriter {
 
 // Reads a task's levels in the order they were added. Failure(io_error) naming the file when it is
 // missing, cut short or damaged.
-class ReportShareReader {
+class ReportShareReader : TaskFileReader {
  public:
   explicit ReportShareReader(const std::string& path);
-  ~ReportShareReader();
-  ReportShareReader(const ReportShareReader&) = delete;
-  ReportShareReader& operator=(const ReportShareReader&) = delete;
   void next(ReportLevelShare* out);
 
  private:
-  void read(void* data, size_t bytes);
   template <class T>
   void array(std::vector<T>& v);
-  std::string path_;
-  std::FILE* f_ = nullptr;
 };
 
 }  // namespace lodstream::stream

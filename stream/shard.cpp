@@ -126,21 +126,24 @@ void PartsWriter::add(const RegionInfo& info, const RegionPart& part) {
 
 void PartsWriter::commit() { out_.commit(); }
 
-PartsReader::PartsReader(const std::string& path) : path_(path) {
+TaskFileReader::TaskFileReader(const std::string& path, const char (&magic)[8], std::string what)
+    : path_(path), what_(std::move(what)) {
   f_ = std::fopen(path.c_str(), "rb");
-  if (!f_) fail(Status::io_error, path + ": cannot open a task's parts: " + std::strerror(errno));
-  char magic[sizeof kPartsMagic];
-  read(magic, sizeof magic);
-  if (std::memcmp(magic, kPartsMagic, sizeof magic) != 0) fail(Status::io_error, path + ": not a parts file of this version");
+  if (!f_) fail(Status::io_error, path + ": cannot open " + what_ + ": " + std::strerror(errno));
+  char got[8];
+  read(got, sizeof got);
+  if (std::memcmp(got, magic, sizeof got) != 0) fail(Status::io_error, path + ": not " + what_ + " of this version");
 }
 
-PartsReader::~PartsReader() {
+TaskFileReader::~TaskFileReader() {
   if (f_) std::fclose(f_);
 }
 
-void PartsReader::read(void* data, size_t bytes) {
-  if (bytes && std::fread(data, 1, bytes, f_) != bytes) fail(Status::io_error, path_ + ": a task's parts file is cut short");
+void TaskFileReader::read(void* data, size_t bytes) {
+  if (bytes && std::fread(data, 1, bytes, f_) != bytes) fail(Status::io_error, path_ + ": " + what_ + " is cut short");
 }
+
+PartsReader::PartsReader(const std::string& path) : TaskFileReader(path, kPartsMagic, "a task's parts") {}
 
 bool PartsReader::next(StoredPart* out) {
   uint64_t level;

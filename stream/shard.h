@@ -92,20 +92,27 @@ class PartsWriter {
   io::FileWriter out_;
   uint64_t parts_ = 0;
 };
-// Reads a parts file part by part; next() returns false after the last. Failure(io_error) naming the file
-// when it is missing or damaged.
-class PartsReader {
+// A task's binary file, read from its start: opened, its 8-byte magic checked, then read in order.
+// Failure(io_error) naming the file and `what` it holds ("a task's parts") when it is missing, of
+// another version or cut short.
+class TaskFileReader {
+ public:
+  TaskFileReader(const TaskFileReader&) = delete;
+  TaskFileReader& operator=(const TaskFileReader&) = delete;
+
+ protected:
+  TaskFileReader(const std::string& path, const char (&magic)[8], std::string what);
+  ~TaskFileReader();
+  void read(void* data, size_t bytes);
+  std::string path_, what_;
+  std::FILE* f_ = nullptr;
+};
+
+// Reads a parts file part by part; next() returns false after the last.
+class PartsReader : TaskFileReader {
  public:
   explicit PartsReader(const std::string& path);
-  ~PartsReader();
-  PartsReader(const PartsReader&) = delete;
-  PartsReader& operator=(const PartsReader&) = delete;
   bool next(StoredPart* out);
-
- private:
-  void read(void* data, size_t bytes);
-  std::string path_;
-  std::FILE* f_ = nullptr;
 };
 
 // What a task's emit needs from simplify (the shared stages' results).
