@@ -4,7 +4,8 @@
 usage: tools/bench_peers.py [--build DIR] [--work DIR] [--views K] [--resolution H] [--samples N]
                             [--threads T] [--memory M] [--silhouette-interval D] [--silhouette-factor F]
                             [--tolerance P] [--max-steps S] [--methods M,...] [--no-weld]
-                            [--no-meshlab] [--no-qec] [--reuse] [--out FILE.md] MODEL...
+                            [--no-meshlab] [--no-qec] [--meshlab-timeout S] [--meshlab-memory M] [--qec-once]
+                            [--no-report] [--reuse] [--out FILE.md] MODEL...
        tools/bench_peers.py --from-json WORK/peers.json [...]   (the tables again, e.g. of several runs)
 
 For each MODEL, the reference is `lodstream simplify` with its defaults (floating cells, nearest, quadric
@@ -19,11 +20,12 @@ switching distances are where every level of every method is seen from. The meth
   ml-clust   MeshLab 2020.09 "Simplification: Clustering Decimation" (meshlabserver under xvfb-run);
   ml-qec     MeshLab 2020.09 "Simplification: Quadric Edge Collapse Decimation" (TargetFaceNum = the target;
              MeshLab's defaults otherwise: quality threshold 0.3, optimal placement, post-cleaning).
-Matching: labels and uniform search each level's cell size (--cell-sizes, all levels in one run per step,
-bisection on log c), ml-clust its cell size, sloppy its target count (it returns at most what it is given,
-often far fewer), each until the count is within --tolerance (default 5 %) of the reference's or 12 steps
-are spent (--max-steps; fewer for a scene where one step takes minutes); the step nearest in ratio is kept. A level still outside the tolerance is marked and left out of
-the comparisons.
+Matching: labels and uniform search each level's cell size (--cell-sizes, all levels in one run per step),
+ml-clust its cell size, sloppy its target count (it returns at most what it is given, often far fewer), by
+a CountSearch (secant steps on log count against log x, then regula falsi once a step has given too many
+and one too few), each until the count is within --tolerance (default 5 %) of the reference's, the count
+stops following x (sloppy's most triangles), or 12 steps are spent (--max-steps); the step nearest in ratio
+is kept. A level still outside the tolerance is marked and left out of the comparisons.
 The peers get a triangle-only copy of the model (binary PLY, identical positions welded; an OBJ's lines and
 points dropped); with --no-weld they read MODEL itself (a binary PLY whose faces they fan-triangulate, so
 two-index faces, lines, give no triangle): for scenes too large for this script's converter, and fair to
@@ -33,7 +35,12 @@ method in one run (the original is read once; views and samples depend on the or
 seed only, so the figures are those of one run per method), with --views 16 --resolution 512
 --samples 100000 by default and the pixel rule's default --supersample 3.
 A method that fails on a level (MeshLab's edge collapse aborts on some scenes) gets a row saying so, left
-out of the comparisons; --methods leaves methods out altogether (they get no row).
+out of the comparisons; --methods leaves methods out altogether (they get no row). For a large scene:
+--meshlab-timeout and --meshlab-memory (prlimit --as) bound each meshlabserver run, a failure (timeout,
+limit, abort) is recorded as such, and --qec-once stops trying the edge collapse after its first failure;
+--no-report makes the levels only, so that methods can run as separate processes into one --work (each
+method's levels and search record in WORK/MODEL/METHOD/levels.json, written level by level for the peers),
+and a last run with --reuse measures them all in one report.
 Writes WORK/peers.json (every figure) and WORK/peers.md (tables and summary, also printed).
 """
 import argparse
@@ -43,6 +50,7 @@ import math
 import os
 import resource
 import shutil
+import signal
 import statistics
 import subprocess
 import sys
@@ -83,6 +91,72 @@ def ratio_err(got, want):
     return abs(math.log(max(got, 1) / want))
 
 
+def parse_size(text):
+    units = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30}
+    return int(float(text[:-1]) * units[text[-1].upper()]) if text[-1].upper() in units else int(text)
+
+
+class MeshLabFailed(RuntimeError):
+    def __init__(self, msg, why):
+        super().__init__(msg)
+        self.why = why  # "timeout", "assertion", "out of memory" or "error"
+
+
+class CountSearch:
+    """The parameter x (a cell size, a target) that gives a wanted triangle count, on u = log x and
+    y = log(count / wanted). While no step has given too many and none too few: a secant step from the
+    last step, through the step nearest it in x (their slope, if the counts differ by 2 % at least and the
+    slope has the expected sign, at most a factor 32 at a time; else the clustering model's, count ~ 1/x^2
+    for a cell size, ~ x for a target, at most a factor 8). Once two steps next to each other in x give
+    too many and too few: regula falsi in the narrowest such bracket, kept inside its middle 80 %
+    (half-way towards its middle when the last two steps fell on the same side), so that it shrinks by a
+    tenth at least per step. The count is a step function of x, not always monotone (a uniform grid's cells fall
+    differently), and a level's count may depend a little on the other levels' sizes: the search follows
+    what it sees. stuck: x changed by a factor 2 towards the count and the count by less than 1 % (the
+    method cannot reach it, e.g. sloppy's most triangles), or a bracket narrower than 0.1 % of x."""
+
+    def __init__(self, want, x0, grows):
+        self.want, self.grows, self.x, self.stuck = want, grows, x0, False
+        self.pts = []  # (u, y) of every step
+
+    def add(self, x, got):
+        u, y = math.log(x), math.log(max(got, 1) / self.want)
+        self.pts.append((u, y))
+        if all(p[1] == 0 for p in self.pts):
+            self.stuck = True
+            return
+        # a bracket: two steps next to each other in x, one with too many and one with too few; the
+        # narrowest, so that a count that is not monotone in x cannot send the search back to a wider one
+        order = sorted(self.pts)
+        pairs = [(p, q) for p, q in zip(order, order[1:]) if p[1] * q[1] < 0]
+        if pairs:
+            a, b = min(pairs, key=lambda pq: pq[1][0] - pq[0][0])
+            if b[0] - a[0] < 1e-3:
+                self.stuck = True
+                return
+            t = min(0.9, max(0.1, a[1] / (a[1] - b[1])))
+            if len(self.pts) >= 2 and (self.pts[-1][1] > 0) == (self.pts[-2][1] > 0):
+                t = (t + 0.5) / 2
+            self.x = math.exp(a[0] + t * (b[0] - a[0]))
+            return
+        model = 1.0 if self.grows else -2.0
+        last = self.pts[-1]
+        slope, reach = model, math.log(8)
+        for q in sorted(self.pts[:-1], key=lambda p: abs(p[0] - last[0])):
+            du, dy = last[0] - q[0], last[1] - q[1]
+            if abs(du) < 1e-6:
+                continue
+            # no bracket: every step went towards the count, so a count that did not follow x over a
+            # factor 2 is a plateau the method cannot leave
+            if abs(dy) < 0.01 and abs(du) > math.log(2):
+                self.stuck = True
+                return
+            if abs(dy) >= 0.02 and dy / du * model > 0:  # a measured slope: trusted further than the model
+                slope, reach = math.copysign(min(8.0, max(0.05, abs(dy / du))), model), math.log(32)
+            break
+        self.x = math.exp(last[0] + max(-reach, min(reach, -last[1] / slope)))
+
+
 class Bench:
     def __init__(self, a):
         self.a = a
@@ -100,72 +174,59 @@ class Bench:
         return json.load(open(os.path.join(out, "manifest.json")))["levels"]
 
     def match_lodstream(self, model, d, name, extra, ref):
-        """Per level, bisection on log(cell size); one simplify run per step serves every level."""
+        """Per level, a CountSearch on the cell size; one simplify run per step serves every level."""
         tol, n = self.a.tolerance, len(ref)
         want = [L["triangles"] for L in ref]
-        size = [L["cell_size"] for L in ref]
-        lo, hi = [None] * n, [None] * n  # sizes known to give too many (lo) / too few (hi) triangles
+        search = [CountSearch(w, L["cell_size"], False) for w, L in zip(want, ref)]
         best = [None] * n                # (error, size, count)
+        steps = [0] * n                  # the steps a level took until it was within the tolerance or stuck
+        settled = [False] * n
         os.makedirs(os.path.join(d, name), exist_ok=True)
         for step in range(self.a.max_steps):
             # strictly increasing sizes are required: a level whose size would not be is nudged
-            sizes = list(size)
+            sizes = [s.x for s in search]
             for i in range(1, n):
                 sizes[i] = max(sizes[i], sizes[i - 1] * 1.0001)
             tmp = os.path.join(d, f"{name}.step")
             shutil.rmtree(tmp, ignore_errors=True)
             levels = self.simplify(model, tmp, extra, sizes)
-            done = True
             for i in range(n):
+                if settled[i]:
+                    continue
+                steps[i] = step + 1
                 got = levels[i]["triangles"]
                 err = ratio_err(got, want[i])
                 if best[i] is None or err < best[i][0]:
                     best[i] = (err, sizes[i], got)
                     shutil.copy(os.path.join(tmp, f"lod{i}.ply"), os.path.join(d, name, f"lod{i}.ply"))
-                if within(best[i][2], want[i], tol):
-                    continue
-                done = False
-                if got > want[i]:
-                    lo[i] = sizes[i] if lo[i] is None else max(lo[i], sizes[i])
-                else:
-                    hi[i] = sizes[i] if hi[i] is None else min(hi[i], sizes[i])
-                if lo[i] is not None and hi[i] is not None:
-                    size[i] = math.sqrt(lo[i] * hi[i])
-                else:  # clustering: triangles fall roughly as 1 / c^2
-                    size[i] = sizes[i] * min(4.0, max(0.25, math.sqrt(got / want[i]) if got else 0.5))
+                if not within(best[i][2], want[i], tol):
+                    search[i].add(sizes[i], got)
+                settled[i] = within(best[i][2], want[i], tol) or search[i].stuck
+            print(f"bench_peers: {name} step {step + 1}: {[L['triangles'] for L in levels]} for {want}", file=sys.stderr)
             shutil.rmtree(tmp, ignore_errors=True)
-            if done:
+            if all(settled):
                 break
-        return [{"triangles": b[2], "param": b[1]} for b in best]
+        return [{"triangles": b[2], "param": b[1], "steps": k} for b, k in zip(best, steps)]
 
     def match_one(self, want, x0, grows, make):
-        """One level: bisection on log x; make(x, path) writes a PLY and returns its triangle count."""
+        """One level: a CountSearch on x; make(x, path) writes a PLY and returns its triangle count."""
         tol = self.a.tolerance
-        lo = hi = None
-        x, best = x0, None
+        search = CountSearch(want, x0, grows)
+        best = None
         tmp = tempfile.mktemp(suffix=".ply", dir=self.tmpdir)
         keep = tempfile.mktemp(suffix=".ply", dir=self.tmpdir)
-        for _ in range(self.a.max_steps):
+        steps = 0
+        while steps < self.a.max_steps and not search.stuck:
+            x = search.x
             got = make(x, tmp)
+            steps += 1
             if got > 0 and (best is None or ratio_err(got, want) < ratio_err(best[1], want)):
                 best = (x, got)
                 shutil.move(tmp, keep)
             if best and within(best[1], want, tol):
                 break
-            too_many = got > want
-            if too_many == grows:  # move x down
-                hi = x if hi is None else min(hi, x)
-            else:
-                lo = x if lo is None else max(lo, x)
-            if lo is not None and hi is not None:
-                x = math.sqrt(lo * hi)
-            else:
-                f = math.sqrt(got / want) if got else 0.5
-                if grows:
-                    x = x / f if got else x * 2
-                else:
-                    x = x * min(4.0, max(0.25, f))
-        return best, keep
+            search.add(x, got)
+        return best, keep, steps
 
     def sloppy(self, src, want, out, full=False):
         def make(t, path):
@@ -174,11 +235,11 @@ class Bench:
         if full:  # given the target itself: what it reaches is the result
             got = make(want, out)
             return {"triangles": got, "param": want}
-        best, keep = self.match_one(want, want, True, make)
+        best, keep, steps = self.match_one(want, want, True, make)
         if best is None:
             return None
         shutil.move(keep, out)
-        return {"triangles": best[1], "param": best[0]}
+        return {"triangles": best[1], "param": best[0], "steps": steps}
 
     def meshlab(self, src, filt, x, out, clean=False):
         if filt == "clust":
@@ -204,33 +265,60 @@ class Bench:
             f.write(f"<!DOCTYPE FilterScript>\n<FilterScript>\n{body}\n</FilterScript>\n")
         if os.path.exists(out):
             os.remove(out)
+        cmd = ["xvfb-run", "-a", "meshlabserver", "-i", src, "-o", out, "-s", mlx]
+        if self.a.meshlab_memory:  # an address-space limit, so that MeshLab on a large scene fails alone
+            cmd = ["prlimit", f"--as={parse_size(self.a.meshlab_memory)}", "--"] + cmd
         t0 = time.time()
-        p = subprocess.run(["xvfb-run", "-a", "meshlabserver", "-i", src, "-o", out, "-s", mlx],
-                           capture_output=True, text=True, timeout=3600)
-        self.meshlab_seconds += time.time() - t0
-        os.remove(mlx)
+        # a session of its own: on a timeout the whole group (xvfb-run, Xvfb, meshlabserver) is killed
+        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        try:
+            _, err = p.communicate(timeout=self.a.meshlab_timeout)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.communicate()
+            raise MeshLabFailed(f"stopped after {self.a.meshlab_timeout:g} s (--meshlab-timeout)", "timeout")
+        finally:
+            self.meshlab_seconds += time.time() - t0
+            os.remove(mlx)
         if p.returncode != 0 or not os.path.exists(out):
-            raise RuntimeError(f"meshlabserver failed ({p.returncode}): {p.stderr[-2000:]}")
+            why = ("assertion" if "Assertion" in err else "out of memory" if "bad_alloc" in err or "alloc" in err.lower()
+                   else "error")
+            raise MeshLabFailed(f"meshlabserver failed ({p.returncode}, {time.time() - t0:.0f} s): {err[-2000:]}", why)
         return ply_face_count(out)
 
     def ml_clust(self, src, want, cell, out):
-        best, keep = self.match_one(want, cell, False, lambda x, path: self.meshlab(src, "clust", x, path))
+        try:
+            best, keep, steps = self.match_one(want, cell, False, lambda x, path: self.meshlab(src, "clust", x, path))
+        except MeshLabFailed as e:
+            print(f"bench_peers: {e}; level left out", file=sys.stderr)
+            return {"failed": f"MeshLab failed ({e.why})" if e.why != "timeout" else
+                              f"MeshLab stopped after {self.a.meshlab_timeout:g} s"}
         if best is None:
             return None
         shutil.move(keep, out)
-        return {"triangles": best[1], "param": best[0]}
+        return {"triangles": best[1], "param": best[0], "steps": steps}
 
     def ml_qec(self, src, want, out):
+        if self.qec_failed:  # --qec-once: one failure (a timeout, a limit) stands for the later levels
+            return {"failed": f"not tried ({self.qec_failed})"}
         try:
             return {"triangles": self.meshlab(src, "qec", want, out), "param": want}
-        except RuntimeError as e:
-            print(f"bench_peers: {e}; retrying after cleaning", file=sys.stderr)
-        try:
-            return {"triangles": self.meshlab(src, "qec", want, out, clean=True), "param": "cleaned"}
-        except RuntimeError as e:
-            print(f"bench_peers: {e}; level left out", file=sys.stderr)
-            why = "assertion" if "Assertion" in str(e) else "error"
-            return {"failed": f"MeshLab aborted ({why}, also after cleaning)"}
+        except MeshLabFailed as e:
+            print(f"bench_peers: {e}", file=sys.stderr)
+            first = e.why
+        if first == "timeout":
+            why = f"MeshLab stopped after {self.a.meshlab_timeout:g} s"
+        else:
+            print("bench_peers: retrying after cleaning", file=sys.stderr)
+            try:
+                return {"triangles": self.meshlab(src, "qec", want, out, clean=True), "param": "cleaned"}
+            except MeshLabFailed as e:
+                print(f"bench_peers: {e}; level left out", file=sys.stderr)
+                why = (f"MeshLab aborted ({first}, also after cleaning: {e.why})" if e.why != "timeout" else
+                       f"MeshLab aborted ({first}); after cleaning stopped after {self.a.meshlab_timeout:g} s")
+        if self.a.qec_once:
+            self.qec_failed = f"{why} on a level before"
+        return {"failed": why}
 
     def report(self, model, lods, dists, out):
         cmd = [self.lodstream, "report", "--original", model]
@@ -257,29 +345,38 @@ class Bench:
         dists = [L["switch_distance"] for L in ref]
         res = {"lodstream": [{"triangles": w, "param": L["cell_size"]} for w, L in zip(want, ref)]}
         labels = ["--silhouette-interval", str(a.silhouette_interval), "--silhouette-factor", str(a.silhouette_factor)]
-        def reused(m):  # --reuse: a method whose levels a killed run left complete
+        def reused(m):  # --reuse: a method whose levels a killed (or --no-report) run left complete
+            done = os.path.join(d, m, "levels.json")
+            if a.reuse and os.path.exists(done):
+                print(f"bench_peers: {name}: {m} reused", file=sys.stderr)
+                return json.load(open(done))
             files = [os.path.join(d, m, f"lod{i}.ply") for i in range(len(want))]
-            if not a.reuse or not all(os.path.exists(f) for f in files):
+            if not a.reuse or m == "ml-qec" or not all(os.path.exists(f) for f in files):
                 return None
-            print(f"bench_peers: {name}: {m} reused", file=sys.stderr)
+            print(f"bench_peers: {name}: {m} reused (files only)", file=sys.stderr)
             return [{"triangles": ply_face_count(f), "param": None} for f in files]
+        def record(m, r):  # what reused() reads again
+            json.dump(r, open(os.path.join(d, m, "levels.json"), "w"), indent=1)
+            return r
         if "labels" in a.methods:
-            res["labels"] = reused("labels") or self.match_lodstream(model, d, "labels", labels, ref)
+            res["labels"] = reused("labels") or record("labels", self.match_lodstream(model, d, "labels", labels, ref))
         if "uniform" in a.methods:
-            res["uniform"] = reused("uniform") or self.match_lodstream(model, d, "uniform", ["--clustering", "uniform"], ref)
+            res["uniform"] = reused("uniform") or record("uniform", self.match_lodstream(
+                model, d, "uniform", ["--clustering", "uniform"], ref))
         src = model if a.no_weld else os.path.join(d, "original.ply")  # also for a PLY: edges and points dropped
-        if not a.no_weld and not (a.reuse and os.path.exists(src)):
+        peers = [m for m in ("sloppy", "simplify", "ml-clust", "ml-qec") if m in a.methods and not (
+                 (m.startswith("ml-") and a.no_meshlab) or (m == "ml-qec" and a.no_qec))]
+        if peers and not a.no_weld and not (a.reuse and os.path.exists(src)):
             to_ply(model, src)
-        for m in ("sloppy", "simplify", "ml-clust", "ml-qec"):
-            if (m.startswith("ml-") and a.no_meshlab) or (m == "ml-qec" and a.no_qec) or m not in a.methods:
-                continue
+        for m in peers:
             os.makedirs(os.path.join(d, m), exist_ok=True)
-            if m != "ml-qec" and (r := reused(m)):
+            if r := reused(m):
                 res[m] = r
                 continue
             res[m] = []
             for i, w in enumerate(want):
                 out = os.path.join(d, m, f"lod{i}.ply")
+                t1 = time.time()
                 if m == "sloppy":
                     r = self.sloppy(src, w, out)
                 elif m == "simplify":
@@ -288,7 +385,12 @@ class Bench:
                     r = self.ml_clust(src, w, ref[i]["cell_size"], out)
                 else:
                     r = self.ml_qec(src, w, out)
+                print(f"bench_peers: {name}: {m} level {i}: {r} ({time.time() - t1:.0f} s)", file=sys.stderr)
                 res[m].append(r)
+                record(m, res[m])  # level by level: a run stopped for time keeps the levels it made
+        if a.no_report:
+            print(f"bench_peers: {name}: levels made in {time.time() - t0:.0f} s (targets {want})", file=sys.stderr)
+            return []
         rows, measured = [], []  # measured: (method, level) of every file given to the one report
         for m in METHODS:
             for i, r in enumerate(res.get(m, [])):
@@ -304,7 +406,7 @@ class Bench:
             rows.append({"model": name, "level": i, "method": m, "target": want[i],
                          "triangles": L["triangles"], "edges": L["edges"], "points": L["points"],
                          "matched": within(L["triangles"], want[i], a.tolerance) or m == "lodstream",
-                         "param": res[m][i]["param"], "switch_distance": dists[i],
+                         "param": res[m][i]["param"], "steps": res[m][i].get("steps"), "switch_distance": dists[i],
                          "sil_p95": s["p95_px"], "sil_mean": s["mean_px"], "mismatch": s["mismatch_fraction"],
                          "thin_kept": s["thin_kept_fraction"], "thin_pixels": s["thin_pixels"],
                          "hd_mean": h["mean_percent_diagonal"], "hd_max": h["max_percent_diagonal"]})
@@ -412,6 +514,12 @@ def main():
     ap.add_argument("--no-weld", action="store_true", help="the peers read MODEL itself (a binary PLY), unwelded")
     ap.add_argument("--no-meshlab", action="store_true")
     ap.add_argument("--no-qec", action="store_true", help="leave MeshLab's edge collapse out (slow on large scenes)")
+    ap.add_argument("--meshlab-timeout", type=float, default=3600, help="seconds per meshlabserver run (default 3600)")
+    ap.add_argument("--meshlab-memory", help="address-space limit of each meshlabserver run (prlimit --as), e.g. 10G")
+    ap.add_argument("--qec-once", action="store_true",
+                    help="after MeshLab's edge collapse fails on a level, do not try the later levels")
+    ap.add_argument("--no-report", action="store_true",
+                    help="make the levels only (for runs of different methods into one --work, then --reuse)")
     ap.add_argument("--reuse", action="store_true", help="keep what a killed run in --work left complete")
     ap.add_argument("--out")
     a = ap.parse_args()
@@ -433,11 +541,15 @@ def main():
     print(f"bench_peers: work directory {a.work}", file=sys.stderr)
     b = Bench(a)
     b.meshlab_seconds = 0
+    b.qec_failed = None
     start = time.time()
     rows = []
     for m in a.models:
         rows += b.model(os.path.abspath(m))
-        json.dump(rows, open(os.path.join(a.work, "peers.json"), "w"), indent=1)
+        if not a.no_report:
+            json.dump(rows, open(os.path.join(a.work, "peers.json"), "w"), indent=1)
+    if a.no_report:
+        return
     elapsed = time.time() - start
     cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
     load = open("/proc/loadavg").read().split()[:3]
