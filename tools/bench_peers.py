@@ -141,16 +141,16 @@ class CountSearch:
             return
         model = 1.0 if self.grows else -2.0
         last = self.pts[-1]
+        # no bracket: every step went towards the count, so a count that did not follow x over a factor 2
+        # is a plateau the method cannot leave
+        if any(abs(last[1] - q[1]) < 0.01 and abs(last[0] - q[0]) > math.log(2) for q in self.pts[:-1]):
+            self.stuck = True
+            return
         slope, reach = model, math.log(8)
         for q in sorted(self.pts[:-1], key=lambda p: abs(p[0] - last[0])):
             du, dy = last[0] - q[0], last[1] - q[1]
             if abs(du) < 1e-6:
                 continue
-            # no bracket: every step went towards the count, so a count that did not follow x over a
-            # factor 2 is a plateau the method cannot leave
-            if abs(dy) < 0.01 and abs(du) > math.log(2):
-                self.stuck = True
-                return
             if abs(dy) >= 0.02 and dy / du * model > 0:  # a measured slope: trusted further than the model
                 slope, reach = math.copysign(min(8.0, max(0.05, abs(dy / du))), model), math.log(32)
             break
