@@ -112,7 +112,7 @@ class CountSearch:
     (half-way towards its middle when the last two steps fell on the same side), so that it shrinks by a
     tenth at least per step. The count is a step function of x, not always monotone (a uniform grid's cells fall
     differently), and a level's count may depend a little on the other levels' sizes: the search follows
-    what it sees. stuck: x changed by a factor 2 towards the count and the count by less than 1 % (the
+    what it sees. stuck: x changed by a factor 4 towards the count and the count by less than 1 % (the
     method cannot reach it, e.g. sloppy's most triangles), or a bracket narrower than 0.1 % of x."""
 
     def __init__(self, want, x0, grows):
@@ -141,9 +141,10 @@ class CountSearch:
             return
         model = 1.0 if self.grows else -2.0
         last = self.pts[-1]
-        # no bracket: every step went towards the count, so a count that did not follow x over a factor 2
-        # is a plateau the method cannot leave
-        if any(abs(last[1] - q[1]) < 0.01 and abs(last[0] - q[0]) > math.log(2) for q in self.pts[:-1]):
+        # no bracket: every step went towards the count, so a count that did not follow x over a factor 4
+        # is a plateau the method cannot leave (over a factor 2, sloppy's count on LQFP-52 did not move
+        # and then did)
+        if any(abs(last[1] - q[1]) < 0.01 and abs(last[0] - q[0]) > math.log(4) for q in self.pts[:-1]):
             self.stuck = True
             return
         slope, reach = model, math.log(8)
