@@ -338,6 +338,7 @@ class Bench:
             shutil.rmtree(d, ignore_errors=True)
         os.makedirs(d, exist_ok=True)
         self.tmpdir = d
+        self.qec_failed = None  # --qec-once holds within a model
         t0 = time.time()
         if a.reuse and os.path.exists(os.path.join(d, "lodstream", "manifest.json")):
             ref = json.load(open(os.path.join(d, "lodstream", "manifest.json")))["levels"]
@@ -551,7 +552,6 @@ def main():
     print(f"bench_peers: work directory {a.work}", file=sys.stderr)
     b = Bench(a)
     b.meshlab_seconds = 0
-    b.qec_failed = None
     start = time.time()
     rows = []
     for m in a.models:
