@@ -38,7 +38,8 @@ seed only, so the figures are those of one run per method), with --views 16 --re
 A method that fails on a level (MeshLab's edge collapse aborts on some scenes) gets a row saying so, left
 out of the comparisons; --methods leaves methods out altogether (they get no row). For a large scene:
 --meshlab-timeout and --meshlab-memory (prlimit --as) bound each meshlabserver run, a failure (timeout,
-limit, abort) is recorded as such, and --qec-once stops trying the edge collapse after its first failure;
+limit, abort) is recorded as such, and --qec-once stops trying the edge collapse on a model after a timeout
+or a memory limit (an abort, which comes within seconds, is tried again on the next level);
 --no-report makes the levels only, so that methods can run as separate processes into one --work (each
 method's levels and search record in WORK/MODEL/METHOD/levels.json, written level by level for the peers),
 and a last run with --reuse measures them all in one report.
@@ -301,7 +302,7 @@ class Bench:
         return {"triangles": best[1], "param": best[0], "steps": steps}
 
     def ml_qec(self, src, want, out):
-        if self.qec_failed:  # --qec-once: one failure (a timeout, a limit) stands for the later levels
+        if self.qec_failed:  # --qec-once: a timeout or a memory limit stands for the later levels
             return {"failed": f"not tried ({self.qec_failed})"}
         try:
             return {"triangles": self.meshlab(src, "qec", want, out), "param": want}
@@ -310,6 +311,8 @@ class Bench:
             first = e.why
         if first == "timeout":
             why = f"MeshLab stopped after {self.a.meshlab_timeout:g} s"
+        elif first == "out of memory":
+            why = f"MeshLab out of memory (std::bad_alloc{', --meshlab-memory ' + self.a.meshlab_memory if self.a.meshlab_memory else ''})"
         else:
             print("bench_peers: retrying after cleaning", file=sys.stderr)
             try:
@@ -318,7 +321,7 @@ class Bench:
                 print(f"bench_peers: {e}; level left out", file=sys.stderr)
                 why = (f"MeshLab aborted ({first}, also after cleaning: {e.why})" if e.why != "timeout" else
                        f"MeshLab aborted ({first}); after cleaning stopped after {self.a.meshlab_timeout:g} s")
-        if self.a.qec_once:
+        if self.a.qec_once and first in ("timeout", "out of memory"):  # an abort comes within seconds
             self.qec_failed = f"{why} on a level before"
         return {"failed": why}
 
@@ -528,7 +531,7 @@ def main():
     ap.add_argument("--meshlab-timeout", type=float, default=3600, help="seconds per meshlabserver run (default 3600)")
     ap.add_argument("--meshlab-memory", help="address-space limit of each meshlabserver run (prlimit --as), e.g. 10G")
     ap.add_argument("--qec-once", action="store_true",
-                    help="after MeshLab's edge collapse fails on a level, do not try the later levels")
+                    help="after MeshLab's edge collapse times out or runs out of memory on a level, do not try the later ones")
     ap.add_argument("--no-report", action="store_true",
                     help="make the levels only (for runs of different methods into one --work, then --reuse)")
     ap.add_argument("--reuse", action="store_true", help="keep what a killed run in --work left complete")
