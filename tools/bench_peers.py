@@ -120,10 +120,12 @@ class CountSearch:
     def __init__(self, want, x0, grows):
         self.want, self.grows, self.x, self.stuck = want, grows, x0, False
         self.pts = []  # (u, y) of every step
+        self.seen = []  # (x, count) of every step, for the record (levels.json)
 
     def add(self, x, got):
         u, y = math.log(x), math.log(max(got, 1) / self.want)
         self.pts.append((u, y))
+        self.seen.append((x, got))
         if all(p[1] == 0 for p in self.pts):
             self.stuck = True
             return
@@ -202,14 +204,13 @@ class Bench:
                 if best[i] is None or err < best[i][0]:
                     best[i] = (err, sizes[i], got)
                     shutil.copy(os.path.join(tmp, f"lod{i}.ply"), os.path.join(d, name, f"lod{i}.ply"))
-                if not within(best[i][2], want[i], tol):
-                    search[i].add(sizes[i], got)
+                search[i].add(sizes[i], got)  # also when within: its record (seen) has every step
                 settled[i] = within(best[i][2], want[i], tol) or search[i].stuck
             print(f"bench_peers: {name} step {step + 1}: {[L['triangles'] for L in levels]} for {want}", file=sys.stderr)
             shutil.rmtree(tmp, ignore_errors=True)
             if all(settled):
                 break
-        return [{"triangles": b[2], "param": b[1], "steps": k} for b, k in zip(best, steps)]
+        return [{"triangles": b[2], "param": b[1], "steps": k, "seen": sr.seen} for b, k, sr in zip(best, steps, search)]
 
     def match_one(self, want, x0, grows, make):
         """One level: a CountSearch on x; make(x, path) writes a PLY and returns its triangle count."""
@@ -226,10 +227,10 @@ class Bench:
             if got > 0 and (best is None or ratio_err(got, want) < ratio_err(best[1], want)):
                 best = (x, got)
                 shutil.move(tmp, keep)
+            search.add(x, got)
             if best and within(best[1], want, tol):
                 break
-            search.add(x, got)
-        return best, keep, steps
+        return best, keep, steps, search.seen
 
     def sloppy(self, src, want, out, full=False):
         def make(t, path):
@@ -238,11 +239,11 @@ class Bench:
         if full:  # given the target itself: what it reaches is the result
             got = make(want, out)
             return {"triangles": got, "param": want}
-        best, keep, steps = self.match_one(want, want, True, make)
+        best, keep, steps, seen = self.match_one(want, want, True, make)
         if best is None:
             return None
         shutil.move(keep, out)
-        return {"triangles": best[1], "param": best[0], "steps": steps}
+        return {"triangles": best[1], "param": best[0], "steps": steps, "seen": seen}
 
     def meshlab(self, src, filt, x, out, clean=False):
         if filt == "clust":
@@ -291,7 +292,7 @@ class Bench:
 
     def ml_clust(self, src, want, cell, out):
         try:
-            best, keep, steps = self.match_one(want, cell, False, lambda x, path: self.meshlab(src, "clust", x, path))
+            best, keep, steps, seen = self.match_one(want, cell, False, lambda x, path: self.meshlab(src, "clust", x, path))
         except MeshLabFailed as e:
             print(f"bench_peers: {e}; level left out", file=sys.stderr)
             return {"failed": f"MeshLab failed ({e.why})" if e.why != "timeout" else
@@ -299,7 +300,7 @@ class Bench:
         if best is None:
             return None
         shutil.move(keep, out)
-        return {"triangles": best[1], "param": best[0], "steps": steps}
+        return {"triangles": best[1], "param": best[0], "steps": steps, "seen": seen}
 
     def ml_qec(self, src, want, out):
         if self.qec_failed:  # --qec-once: a timeout or a memory limit stands for the later levels
