@@ -101,7 +101,7 @@ def parse_size(text):
 class MeshLabFailed(RuntimeError):
     def __init__(self, msg, why):
         super().__init__(msg)
-        self.why = why  # "timeout", "assertion", "out of memory" or "error"
+        self.why = why  # "timeout", "assertion", "out of memory", "vcg::MissingComponentException" or "error"
 
 
 class CountSearch:
@@ -285,8 +285,8 @@ class Bench:
             self.meshlab_seconds += time.time() - t0
             os.remove(mlx)
         if p.returncode != 0 or not os.path.exists(out):
-            why = ("assertion" if "Assertion" in err else "out of memory" if "bad_alloc" in err or "alloc" in err.lower()
-                   else "error")
+            why = ("assertion" if "Assertion" in err else "out of memory" if "bad_alloc" in err
+                   else "vcg::MissingComponentException" if "MissingComponent" in err else "error")
             raise MeshLabFailed(f"meshlabserver failed ({p.returncode}, {time.time() - t0:.0f} s): {err[-2000:]}", why)
         return ply_face_count(out)
 
