@@ -112,8 +112,8 @@ class CountSearch:
     for a cell size, ~ x for a target, at most a factor 8). Once two steps next to each other in x give
     too many and too few: regula falsi in the narrowest such bracket, kept inside its middle 80 %
     (half-way towards its middle when the last two steps fell on the same side), so that it shrinks by a
-    tenth at least per step. The count is a step function of x, not always monotone (a uniform grid's cells fall
-    differently), and a level's count may depend a little on the other levels' sizes: the search follows
+    tenth at least per step. The count is a step function of x, not always monotone (a uniform grid's
+    cells fall differently), and a level's count may depend a little on the other levels' sizes: the search follows
     what it sees. stuck: x changed by a factor 4 towards the count and the count by less than 1 % (the
     method cannot reach it, e.g. sloppy's most triangles), or a bracket narrower than 0.1 % of x."""
 
@@ -206,11 +206,13 @@ class Bench:
                     shutil.copy(os.path.join(tmp, f"lod{i}.ply"), os.path.join(d, name, f"lod{i}.ply"))
                 search[i].add(sizes[i], got)  # also when within: its record (seen) has every step
                 settled[i] = within(best[i][2], want[i], tol) or search[i].stuck
-            print(f"bench_peers: {name} step {step + 1}: {[L['triangles'] for L in levels]} for {want}", file=sys.stderr)
+            print(f"bench_peers: {name} step {step + 1}: {[L['triangles'] for L in levels]} for {want}",
+                  file=sys.stderr)
             shutil.rmtree(tmp, ignore_errors=True)
             if all(settled):
                 break
-        return [{"triangles": b[2], "param": b[1], "steps": k, "seen": sr.seen} for b, k, sr in zip(best, steps, search)]
+        return [{"triangles": b[2], "param": b[1], "steps": k, "seen": sr.seen}
+                for b, k, sr in zip(best, steps, search)]
 
     def match_one(self, want, x0, grows, make):
         """One level: a CountSearch on x; make(x, path) writes a PLY and returns its triangle count."""
@@ -292,7 +294,8 @@ class Bench:
 
     def ml_clust(self, src, want, cell, out):
         try:
-            best, keep, steps, seen = self.match_one(want, cell, False, lambda x, path: self.meshlab(src, "clust", x, path))
+            best, keep, steps, seen = self.match_one(want, cell, False,
+                                                     lambda x, path: self.meshlab(src, "clust", x, path))
         except MeshLabFailed as e:
             print(f"bench_peers: {e}; level left out", file=sys.stderr)
             return {"failed": f"MeshLab failed ({e.why})" if e.why != "timeout" else
@@ -313,7 +316,8 @@ class Bench:
         if first == "timeout":
             why = f"MeshLab stopped after {self.a.meshlab_timeout:g} s"
         elif first == "out of memory":
-            why = f"MeshLab out of memory (std::bad_alloc{', --meshlab-memory ' + self.a.meshlab_memory if self.a.meshlab_memory else ''})"
+            limit = f", --meshlab-memory {self.a.meshlab_memory}" if self.a.meshlab_memory else ""
+            why = f"MeshLab out of memory (std::bad_alloc{limit})"
         else:
             print("bench_peers: retrying after cleaning", file=sys.stderr)
             try:
@@ -532,7 +536,8 @@ def main():
     ap.add_argument("--meshlab-timeout", type=float, default=3600, help="seconds per meshlabserver run (default 3600)")
     ap.add_argument("--meshlab-memory", help="address-space limit of each meshlabserver run (prlimit --as), e.g. 10G")
     ap.add_argument("--qec-once", action="store_true",
-                    help="after MeshLab's edge collapse times out or runs out of memory on a level, do not try the later ones")
+                    help="after MeshLab's edge collapse times out or runs out of memory on a level, "
+                         "do not try the later ones")
     ap.add_argument("--no-report", action="store_true",
                     help="make the levels only (for runs of different methods into one --work, then --reuse)")
     ap.add_argument("--reuse", action="store_true", help="keep what a killed run in --work left complete")
