@@ -51,7 +51,7 @@ MappedFile::~MappedFile() {
   if (fd_ >= 0) close(fd_);
 }
 
-Window MappedFile::map(uint64_t begin, uint64_t end) const {
+Window MappedFile::map(uint64_t begin, uint64_t end, Access access) const {
   Window w;
   if (end > size_) end = size_;
   if (begin >= end) {
@@ -64,9 +64,11 @@ Window MappedFile::map(uint64_t begin, uint64_t end) const {
   const size_t bytes = static_cast<size_t>(end - aligned);
   void* p = mmap(nullptr, bytes, PROT_READ, MAP_PRIVATE, fd_, static_cast<off_t>(aligned));
   if (p == MAP_FAILED) fail(Status::no_input, path_ + ": cannot map: " + std::strerror(errno));
-  // Advice values are not flags: give each on its own.
-  madvise(p, bytes, MADV_SEQUENTIAL);
-  madvise(p, bytes, MADV_WILLNEED);
+  if (access == Access::sequential) {
+    // Advice values are not flags: give each on its own.
+    madvise(p, bytes, MADV_SEQUENTIAL);
+    madvise(p, bytes, MADV_WILLNEED);
+  }
   w.base_ = p;
   w.mapped_bytes_ = bytes;
   w.data_ = static_cast<const char*>(p) + (begin - aligned);

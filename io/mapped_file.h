@@ -45,8 +45,14 @@ class MappedFile {
   const std::string& path() const { return path_; }
   uint64_t size() const { return size_; }
   int64_t mtime_ns() const { return mtime_ns_; }
+  // How a window will be read. `sequential`: front to back once (a chunk of a column): the kernel is asked
+  // to read the whole window ahead and to drop its pages early. `random`: at scattered offsets, and often
+  // a whole column mapped again and again to drop its touched pages from the resident set: no advice, so
+  // mapping costs nothing. Asking to read a whole column ahead at every remap made the kernel walk (and,
+  // where the page cache cannot hold the store, read) gigabytes per remap on a 1 B-triangle scene.
+  enum class Access { sequential, random };
   // Maps [begin, min(end, size())). An empty range gives an empty window. Thread-safe.
-  Window map(uint64_t begin, uint64_t end) const;
+  Window map(uint64_t begin, uint64_t end, Access access = Access::sequential) const;
 
  private:
   std::string path_;

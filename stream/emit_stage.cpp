@@ -643,7 +643,7 @@ void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const 
     if (index_file->size() != records * rb) fail(Status::io_error, index_file->path() + ": size does not match the weight index");
   }
   if (records > 0) {
-    const io::Window rgba = colors.map(0, colors.size());
+    const io::Window rgba = colors.map(0, colors.size(), io::MappedFile::Access::random);
     constexpr uint64_t kChunk = 1 << 18;
     std::vector<std::unique_ptr<CellMapReader>> maps;
     for (const LevelState& L : levels) maps.push_back(std::make_unique<CellMapReader>(cells_path(prefix, L.in.level)));

@@ -26,7 +26,7 @@ PositionGather::PositionGather(const std::string& path, bool single_precision, u
   segment_vertices_ = std::max<uint64_t>(segment_bytes / stride_, 1);
   if (vertices_ == 0) return;
   if (mapped_) {
-    window_ = file_.map(0, file_.size());
+    window_ = file_.map(0, file_.size(), io::MappedFile::Access::random);
     return;
   }
   fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);

@@ -28,7 +28,7 @@ class StorePositions {
   }
   // (Re)maps the column; positions are readable until release().
   void acquire() {
-    if (!window_.data() && count_ > 0) window_ = file_.map(0, file_.size());
+    if (!window_.data() && count_ > 0) window_ = file_.map(0, file_.size(), io::MappedFile::Access::random);
   }
   void release() { window_.reset(); }
   void prefetch(uint64_t v) const { __builtin_prefetch(window_.data() + (single_ ? 12 : 24) * v); }

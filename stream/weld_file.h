@@ -67,7 +67,7 @@ class WeldFile {
   }
   // Maps the file whole for operator(); release() unmaps it (its pages then stop counting as resident).
   void acquire() {
-    if (!window_.data()) window_ = file_.map(0, file_.size());
+    if (!window_.data()) window_ = file_.map(0, file_.size(), io::MappedFile::Access::random);
   }
   void release() { window_.reset(); }
   uint32_t operator()(uint32_t v) const {
