@@ -10,6 +10,7 @@
 #include <chrono>
 #include <filesystem>
 #include <mutex>
+#include <tuple>
 
 #include <fmt/format.h>
 #include <tbb/parallel_pipeline.h>
@@ -27,10 +28,8 @@ uint64_t range_chunk_bytes(uint64_t file_bytes, unsigned count) {
 }
 
 std::pair<uint64_t, uint64_t> range_bytes(uint64_t file_bytes, unsigned index, unsigned count) {
-  // file_bytes < 2^48 and count < 2^16 in practice; the product is taken in 128 bits all the same.
-  auto at = [&](unsigned i) {
-    return static_cast<uint64_t>(static_cast<unsigned __int128>(file_bytes) * i / count);
-  };
+  // floor(file_bytes · i / count) without overflow: file_bytes = q · count + r, and r · i < count².
+  auto at = [&](unsigned i) { return file_bytes / count * i + file_bytes % count * i / count; };
   return {at(index), index + 1 == count ? UINT64_MAX : at(index + 1)};
 }
 
@@ -49,8 +48,12 @@ RangeStats ingest_range(const std::string& input, const WorkDir& work, unsigned 
   reader->open();
   const uint64_t chunk_bytes = range_chunk_bytes(file.size(), count);
   RangeStats stats;
-  std::tie(stats.range_begin, stats.range_end) = range_bytes(file.size(), index, count);
-  stats.range_end = std::min(stats.range_end, file.size());
+  // The last range's end is open: a chunk may begin at the end of the file (glTF's cut the splitter's
+  // progress, not their data's bytes, into chunk windows, and an empty one may sit there).
+  uint64_t range_begin = 0, range_end = 0;
+  std::tie(range_begin, range_end) = range_bytes(file.size(), index, count);
+  stats.range_begin = range_begin;
+  stats.range_end = std::min(range_end, file.size());
 
   const std::string dir = ingest_ranges_dir(work);
   std::error_code ec;
@@ -92,8 +95,8 @@ RangeStats ingest_range(const std::string& input, const WorkDir& work, unsigned 
                                         if (done || !reader->next_chunk(chunk_bytes, &s->chunk)) break;
                                         ++seq;
                                         const uint64_t begin = s->chunk.bytes.begin();
-                                        if (begin >= stats.range_end) break;
-                                        if (begin >= stats.range_begin) return s;
+                                        if (begin >= range_end) break;
+                                        if (begin >= range_begin) return s;
                                         s->chunk.bytes.reset();  // another range's chunk: not parsed
                                         ++stats.skipped_chunks;
                                         stats.skip_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -206,11 +206,13 @@ bool Segments::open(const std::string& dir, const SourceId& source) {
 void Segments::load(const io::Chunk& chunk, io::ParsedChunk* out) {
   // The range whose byte range holds the chunk's first byte (ranges are ordered and may be empty).
   const uint64_t begin = chunk.bytes.begin();
-  unsigned r = static_cast<unsigned>(
-      std::min<unsigned __int128>(count_ - 1, static_cast<unsigned __int128>(begin) * count_ / std::max<uint64_t>(1, file_bytes_)));
-  while (r > 0 && range_bytes(file_bytes_, r, count_).first > begin) --r;
-  while (r + 1 < count_ && range_bytes(file_bytes_, r + 1, count_).first <= begin) ++r;
-  readers_[r]->load(chunk, out);
+  unsigned lo = 0, hi = count_;  // the last range whose first byte is at or before `begin`: in [lo, hi)
+  while (hi - lo > 1) {
+    const unsigned mid = lo + (hi - lo) / 2;
+    if (range_bytes(file_bytes_, mid, count_).first <= begin) lo = mid;
+    else hi = mid;
+  }
+  readers_[lo]->load(chunk, out);
 }
 
 void Segments::remove() {
