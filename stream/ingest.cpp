@@ -516,6 +516,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
     if (!segments->open(ranges_dir, source)) segments.reset();
   }
   const uint64_t chunk_bytes = segments ? segments->chunk_bytes() : plan.chunk_bytes;
+  const unsigned tokens = segments ? range_tokens(plan, chunk_bytes) : plan.tokens;
   meta = StoreMeta{};
   meta.source = source;
   meta.format = reader->format();
@@ -537,7 +538,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   std::vector<std::unique_ptr<Slot>> slots;
   std::vector<Slot*> free_slots;
   std::mutex free_mutex;
-  for (unsigned i = 0; i < plan.tokens; ++i) {
+  for (unsigned i = 0; i < tokens; ++i) {
     slots.push_back(std::make_unique<Slot>());
     free_slots.push_back(slots.back().get());
   }
@@ -560,7 +561,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   };
   // Five stages; the serial ones do only what needs file order, so both cores stay busy.
   tbb::parallel_pipeline(
-      plan.tokens,
+      tokens,
       tbb::make_filter<void, Slot*>(tbb::filter_mode::serial_in_order,
                                     [&](tbb::flow_control& fc) -> Slot* {
                                       progress.check();

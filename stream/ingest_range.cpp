@@ -23,8 +23,13 @@
 namespace lodstream::stream {
 
 uint64_t range_chunk_bytes(uint64_t file_bytes, unsigned count) {
-  constexpr uint64_t kMax = 4 << 20, kChunksPerRange = 16;
+  constexpr uint64_t kMax = 1 << 20, kChunksPerRange = 16;
   return std::clamp<uint64_t>(file_bytes / std::max(1u, count) / kChunksPerRange, 1, kMax);
+}
+
+unsigned range_tokens(const MemoryPlan& plan, uint64_t chunk_bytes) {
+  if (chunk_bytes <= plan.chunk_bytes) return plan.tokens;
+  return static_cast<unsigned>(std::clamp<uint64_t>(plan.tokens * plan.chunk_bytes / chunk_bytes, 2, plan.tokens));
 }
 
 std::pair<uint64_t, uint64_t> range_bytes(uint64_t file_bytes, unsigned index, unsigned count) {
@@ -69,7 +74,8 @@ RangeStats ingest_range(const std::string& input, const WorkDir& work, unsigned 
   std::vector<std::unique_ptr<Slot>> slots;
   std::vector<Slot*> free_slots;
   std::mutex free_mutex;
-  for (unsigned i = 0; i < plan.tokens; ++i) {
+  const unsigned tokens = range_tokens(plan, chunk_bytes);
+  for (unsigned i = 0; i < tokens; ++i) {
     slots.push_back(std::make_unique<Slot>());
     free_slots.push_back(slots.back().get());
   }
@@ -78,7 +84,7 @@ RangeStats ingest_range(const std::string& input, const WorkDir& work, unsigned 
   const double span = static_cast<double>(std::max<uint64_t>(1, stats.range_end - stats.range_begin));
   progress.report("ingest-range", 0);
   tbb::parallel_pipeline(
-      plan.tokens,
+      tokens,
       tbb::make_filter<void, Slot*>(tbb::filter_mode::serial_in_order,
                                     [&](tbb::flow_control& fc) -> Slot* {
                                       Slot* s = nullptr;

@@ -39,8 +39,11 @@
 namespace lodstream::stream {
 
 // The splitter's chunk size for a file of `file_bytes` cut into `count` ranges: about 16 chunks a range,
-// at most 4 MiB (at least 1: one record a chunk).
+// at most 1 MiB, the largest chunk a memory plan gives (at least 1: one record a chunk).
 uint64_t range_chunk_bytes(uint64_t file_bytes, unsigned count);
+// Chunks in flight for a range task or the join: the plan's tokens, fewer when the range chunks are larger
+// than the plan's, so that they hold about the bytes the plan gives (at least 2).
+unsigned range_tokens(const MemoryPlan& plan, uint64_t chunk_bytes);
 // Range `index` of `count`: the chunks beginning in [first, second) are its.
 std::pair<uint64_t, uint64_t> range_bytes(uint64_t file_bytes, unsigned index, unsigned count);
 
