@@ -40,8 +40,9 @@
 #include "io/mapped_file.h"
 #include "io/reader.h"
 #include "stream/distinct_count.h"
-#include "stream/job.h"
 #include "stream/external_sort.h"
+#include "stream/ingest_range.h"
+#include "stream/job.h"
 
 namespace lodstream::stream {
 
@@ -486,13 +487,14 @@ struct Slot {
   io::ParsedChunk parsed;
   uint64_t first_vertex = 0;  // global id of the chunk's first vertex, set when resolved
   uint64_t end_offset = 0;    // file offset where the chunk ends, for progress
+  bool loaded = false;        // parsed by a range task: `parsed` came from its segment
   Prepared prepared;
 };
 
 }  // namespace
 
 StoreMeta ingest(const std::string& input, const std::string& store_dir, const MemoryPlan& plan,
-                 const WorkDir& work, Progress& progress, bool* reused) {
+                 const WorkDir& work, Progress& progress, bool* reused, const std::string& ranges_dir) {
   io::MappedFile file(input);
   std::error_code ec;
   SourceId source{std::filesystem::absolute(input, ec).lexically_normal().string(), file.size(), file.mtime_ns()};
@@ -507,6 +509,14 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
 
   std::unique_ptr<io::Reader> reader = io::open_reader(file);
   reader->open();
+  // A join of range tasks' parses (stream/ingest_range.h): the splitter cuts the chunks they cut.
+  std::unique_ptr<Segments> segments;
+  if (!ranges_dir.empty()) {
+    segments = std::make_unique<Segments>();
+    if (!segments->open(ranges_dir, source)) segments.reset();
+  }
+  const uint64_t chunk_bytes = segments ? segments->chunk_bytes() : plan.chunk_bytes;
+  const unsigned tokens = segments ? range_tokens(plan, chunk_bytes) : plan.tokens;
   meta = StoreMeta{};
   meta.source = source;
   meta.format = reader->format();
@@ -528,7 +538,7 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   std::vector<std::unique_ptr<Slot>> slots;
   std::vector<Slot*> free_slots;
   std::mutex free_mutex;
-  for (unsigned i = 0; i < plan.tokens; ++i) {
+  for (unsigned i = 0; i < tokens; ++i) {
     slots.push_back(std::make_unique<Slot>());
     free_slots.push_back(slots.back().get());
   }
@@ -551,23 +561,31 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
   };
   // Five stages; the serial ones do only what needs file order, so both cores stay busy.
   tbb::parallel_pipeline(
-      plan.tokens,
+      tokens,
       tbb::make_filter<void, Slot*>(tbb::filter_mode::serial_in_order,
                                     [&](tbb::flow_control& fc) -> Slot* {
                                       progress.check();
                                       Slot* s = take_slot();
                                       s->chunk = io::Chunk{};
                                       s->chunk.seq = seq;
-                                      if (!reader->next_chunk(plan.chunk_bytes, &s->chunk)) {
+                                      if (!reader->next_chunk(chunk_bytes, &s->chunk)) {
                                         give_slot(s);
                                         fc.stop();
                                         return nullptr;
                                       }
                                       ++seq;
+                                      s->loaded = segments != nullptr;
+                                      if (s->loaded) {
+                                        s->parsed.clear();
+                                        segments->load(s->chunk, &s->parsed);
+                                        s->end_offset = s->chunk.bytes.end();
+                                        s->chunk.bytes.reset();
+                                      }
                                       return s;
                                     }) &
           tbb::make_filter<Slot*, Slot*>(tbb::filter_mode::parallel,
                                          [&](Slot* s) {
+                                           if (s->loaded) return s;
                                            s->parsed.clear();
                                            s->parsed.seq = s->chunk.seq;
                                            reader->parse(s->chunk, &s->parsed);
@@ -615,7 +633,9 @@ StoreMeta ingest(const std::string& input, const std::string& store_dir, const M
     store.commit_columns();
     triangulate_planar_faces(store_dir, single, planar_path, planar_faces, &meta, progress);
   }
-  return store.commit(std::move(meta));
+  StoreMeta done = store.commit(std::move(meta));
+  if (segments) segments->remove();
+  return done;
 }
 
 
@@ -657,9 +677,9 @@ Census census(const std::string& store_dir, const StoreMeta& meta, const MemoryP
 
 StoreMeta run_ingest_stage(const std::string& input, const std::string& store_dir, const MemoryPlan& plan,
                            const WorkDir& work, Progress& progress, std::vector<StageStats>* stages,
-                           SceneInfo* scene, bool* reused) {
+                           SceneInfo* scene, bool* reused, const std::string& ranges_dir) {
   const StoreMeta meta = run_stage(stages, "ingest", [&](StageStats& st) {
-    StoreMeta m = ingest(input, store_dir, plan, work, progress, reused);
+    StoreMeta m = ingest(input, store_dir, plan, work, progress, reused, ranges_dir);
     st.reused = *reused;
     return m;
   });

@@ -14,16 +14,19 @@
 namespace lodstream::stream {
 
 // Builds (or, when work/store holds a complete store of the same source, reuses) the scene store in
-// `store_dir`. Sets *reused accordingly. Throws Failure.
+// `store_dir`. Sets *reused accordingly. Throws Failure. With `ranges_dir` (a sharded run's
+// WORK/ingest-ranges) holding range ingest segments of this input, the store is joined from them
+// (stream/ingest_range.h), the same bytes, and they are removed once it is complete; a set of them that
+// is incomplete fails with Status::no_input naming the missing ranges.
 StoreMeta ingest(const std::string& input, const std::string& store_dir, const MemoryPlan& plan,
-                 const WorkDir& work, Progress& progress, bool* reused);
+                 const WorkDir& work, Progress& progress, bool* reused, const std::string& ranges_dir = {});
 
 // The ingest stage as every entry point runs it: ingest() timed as the stage "ingest" into `stages`, and
 // the ingest fields of *scene filled from the store (path, format, counts, bbox; the census fields are
-// left alone). Sets *reused.
+// left alone). Sets *reused. `ranges_dir`: as ingest()'s.
 StoreMeta run_ingest_stage(const std::string& input, const std::string& store_dir, const MemoryPlan& plan,
                            const WorkDir& work, Progress& progress, std::vector<StageStats>* stages,
-                           SceneInfo* scene, bool* reused);
+                           SceneInfo* scene, bool* reused, const std::string& ranges_dir = {});
 
 // Statistics of a store that only `info` needs: distinct positions among the vertices (exact comparison,
 // -0 equals +0; see distinct_count.h) and vertices no primitive uses.

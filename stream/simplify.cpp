@@ -37,6 +37,7 @@
 #include "stream/level_files.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
+#include "stream/ingest_range.h"
 #include "stream/shard.h"
 #include "stream/tiles.h"
 #include "stream/work_dir.h"
@@ -462,6 +463,30 @@ void check_shard_options(const SimplifyOptions& so, const Options& options) {
   if (so.max_error_px > 0) fail(Status::usage, "--max-error-px is not available with --shard");
 }
 
+// A range ingest task (stream/ingest_range.h): parses its byte range of the input into the work
+// directory's segments, for the prepare job's join; no lock (the tasks run at once).
+void run_ingest_range(const std::string& input, const SimplifyOptions& so, const Options& options,
+                      SimplifyReport* out) {
+  if (options.work_dir.empty()) fail(Status::usage, "--shard-ingest needs --work DIR, a directory every task shares");
+  if (so.ingest_index >= so.ingest_count)
+    fail(Status::usage, fmt::format("--shard-ingest {}/{}: the index must be below the count", so.ingest_index, so.ingest_count));
+  const stream::MemoryPlan plan = stream::plan_memory(options);
+  stream::Progress progress(options);
+  stream::WorkDir work(options.work_dir);
+  SimplifyReport report;
+  report.input = input;
+  tbb::task_arena arena(static_cast<int>(plan.threads));
+  arena.execute([&] {
+    stream::run_stage(&report.stages, "ingest-range", [&](StageStats&) {
+      const stream::RangeStats r = stream::ingest_range(input, work, so.ingest_index, so.ingest_count, plan, progress);
+      report.scene.path = input;
+      report.scene.file_bytes = r.parsed_end - r.parsed_begin;
+      return 0;
+    });
+  });
+  *out = std::move(report);
+}
+
 // A task's summary, OUTDIR/shards/task-I.json (stream/shard.h): its manifest as one machine would write it
 // (the level counts its own), what merge needs to write the outputs, and its key.
 void write_shard_task(const SimplifyOptions& so, const SimplifyReport& report, const ordered_json& manifest,
@@ -484,6 +509,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
   return guarded([&] {
     const auto t0 = std::chrono::steady_clock::now();
     check_options(so);
+    if (so.ingest_count > 0) return run_ingest_range(input, so, options, out);
     const stream::MemoryPlan plan = stream::plan_memory(options);
     stream::Progress progress(options);
     // A task of a sharded run (stream/shard.h) holds the work directory's lock through the shared stages.
@@ -505,7 +531,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     arena.execute([&] {
       bool reused = false;
       const stream::StoreMeta meta =
-          stream::run_ingest_stage(input, store_dir, plan, work, progress, &report.stages, &report.scene, &reused);
+          stream::run_ingest_stage(input, store_dir, plan, work, progress, &report.stages, &report.scene, &reused,
+                                   sharded ? stream::ingest_ranges_dir(work) : std::string());
       if (meta.primitives() == 0)
         fail(Status::bad_data, input + ": nothing to simplify (no triangles, lines or points)");
 

@@ -1,11 +1,14 @@
 #!/bin/bash
 # `lodstream slurm` on a one-node Slurm cluster started here (tools/slurm_local_cluster.sh: munged,
 # slurmctld and slurmd as root, in a temporary directory): the sample room and, with ../shared/data, a
-# 2 M-triangle city from make-scene.sh, simplified as 1, 3 and 4 tasks (prepare job, array job, merge job)
-# must give every output file byte for byte as one machine's run (manifest.json: equal but for timings,
+# 2 M-triangle city from make-scene.sh, simplified as 1, 3 and 4 tasks (ingest array job, prepare job,
+# array job, merge job; the 3 tasks' run in a fresh work directory, so that its prepare job joins the 3
+# ingest ranges into the scene store) must give every output file byte for byte as one machine's run (manifest.json: equal but for timings,
 # peaks and the tasks' list); the tileset passes the 3D Tiles validator when it is installed; a task killed
 # with SIGKILL (LODSTREAM_TEST_KILL_AT, just before its summary) fails the run with 137, `lodstream merge`
-# then refuses naming it (exit 66), and `lodstream slurm resubmit` reruns it alone to the same bytes.
+# then refuses naming it (exit 66), and `lodstream slurm resubmit` reruns it alone to the same bytes;
+# likewise an ingest range killed before its segment is complete: the prepare job does not run, a prepare
+# by hand refuses naming the range (exit 66), and resubmitting reruns that range alone, then the chain.
 # `lodstream slurm report` as 3 tasks on the room's levels (and the city's) must give report.html and the
 # CSVs byte for byte as one machine's report, and report.json equal but for timings and counters.
 # Prints "skipped:" and exits 77 when a cluster cannot start here (not root, Slurm or MUNGE missing).
@@ -59,14 +62,21 @@ run_scene() {
   t1=$(date +%s.%N)
   echo "$name: one machine $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
   for n in 1 3 4; do
-    local out=$tmp/$name-$n
+    local out=$tmp/$name-$n w=$work
+    [ "$n" = 3 ] && w=$tmp/$name-work-ranges
     t0=$(date +%s.%N)
-    "$cli" slurm simplify "$scene" -o "$out" --work "$work" --shards "$n" --wait --no-space-check "$@" >"$tmp/$name-$n.log" 2>&1
+    "$cli" slurm simplify "$scene" -o "$out" --work "$w" --shards "$n" --wait --no-space-check "$@" >"$tmp/$name-$n.log" 2>&1
     rc=$?
     t1=$(date +%s.%N)
     echo "$name: $n task(s) through Slurm: exit $rc, $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
     [ $rc -eq 0 ] || { fail "$name --shards $n: exit $rc"; cat "$tmp/$name-$n.log" "$out"/slurm/logs/* 2>/dev/null | tail -30; continue; }
     same_outputs "$one" "$out"
+    if [ "$n" = 3 ]; then
+      for r in 0 1 2; do [ "$(cat "$out/slurm/status/ingest-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: ingest range $r did not finish"; done
+      ls "$w"/ingest-ranges/*.seg >/dev/null 2>&1 && fail "$name: the prepare job did not join the ingest ranges"
+      grep -q "range        0 of 3" "$out/slurm/logs/ingest-0.out" || fail "$name: ingest range 0 did not say what it parsed"
+      echo "  3 ingest ranges joined by the prepare job: $(grep -h '^range' "$out"/slurm/logs/ingest-*.out | awk '{print $5}' | paste -sd+) bytes parsed"
+    fi
     python3 -c 'import json,sys; m=json.load(open(sys.argv[1])); assert m["shards"]["count"]==int(sys.argv[2]) and len(m["shards"]["tasks"])==int(sys.argv[2])' \
       "$out/manifest.json" "$n" || fail "$name --shards $n: the manifest does not list every task"
   done
@@ -92,6 +102,24 @@ echo "killed task: run exit 137; merge: $msg"
 rc=$?
 [ $rc -eq 0 ] || { fail "resubmit: exit $rc"; cat "$tmp/resubmit.log"; }
 grep -q "array 1 of 3" "$tmp/resubmit.log" || fail "resubmit did not submit task 1 alone: $(cat "$tmp/resubmit.log")"
+same_outputs "$tmp/room-one" "$out"
+
+# An ingest range killed just before its segment is complete, in a fresh work directory.
+out=$tmp/room-kill-ingest
+LODSTREAM_TEST_KILL_AT=range-1-of-3.seg "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill" --shards 3 --wait \
+  --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/kill-ingest.log" 2>&1
+rc=$?
+[ $rc -eq 137 ] || fail "an ingest range killed with SIGKILL: the run exited $rc, not 137"
+grep -q "ingest range 1 failed with exit 137" "$tmp/kill-ingest.log" || fail "the run does not name the killed range: $(cat "$tmp/kill-ingest.log")"
+[ -e "$out/slurm/status/prepare.rc" ] && fail "the prepare job ran after a failed ingest range"
+msg=$("$cli" simplify "$room" -o "$out" --work "$tmp/room-work-kill" --shard-prepare --no-space-check 2>&1); rc=$?
+[ $rc -eq 66 ] || fail "a prepare with an ingest range missing: exit $rc, not 66"
+echo "$msg" | grep -q "range 1 missing" || fail "the prepare does not name the missing range: $msg"
+echo "killed ingest range: run exit 137; prepare: $msg"
+"$cli" slurm resubmit "$out" --wait >"$tmp/resubmit-ingest.log" 2>&1
+rc=$?
+[ $rc -eq 0 ] || { fail "resubmit after a killed ingest range: exit $rc"; cat "$tmp/resubmit-ingest.log"; }
+grep -q "ingest  job .* (array 1 of 3)" "$tmp/resubmit-ingest.log" || fail "resubmit did not submit range 1 alone: $(cat "$tmp/resubmit-ingest.log")"
 same_outputs "$tmp/room-one" "$out"
 
 # The report of $1's levels ($2: one machine's simplify output) as 3 tasks through Slurm, against one

@@ -368,6 +368,9 @@ int main(int argc, char** argv) {
   simplify_cmd->add_flag("--shard-from-env", shard_from_env,
                          "--shard from SLURM_ARRAY_TASK_ID/COUNT, JOB_COMPLETION_INDEX or AWS_BATCH_JOB_ARRAY_INDEX (count: LODSTREAM_SHARD_COUNT)");
   simplify_cmd->add_flag("--shard-prepare", so.shard_prepare, "Run the stages every task shares (ingest to cluster) over --work DIR, then stop");
+  std::string shard_ingest_text;
+  simplify_cmd->add_option("--shard-ingest", shard_ingest_text,
+                           "Parse byte range I of N of the input into --work DIR, then stop (--shard-prepare joins the N ranges)");
   add_common(simplify_cmd);
   add_space_check(simplify_cmd);
 
@@ -551,7 +554,14 @@ int main(int argc, char** argv) {
       }
       so.shard_index = i, so.shard_count = n;
     }
-    const bool sharded = so.shard_count > 0 || so.shard_prepare;
+    if (!shard_ingest_text.empty()) {
+      std::string error;
+      if (!parse_shard(shard_ingest_text, false, &so.ingest_index, &so.ingest_count, &error)) {
+        std::fprintf(stderr, "lodstream: --shard-ingest%s\n", error.substr(error.find(':')).c_str());
+        return static_cast<int>(lodstream::Status::usage);
+      }
+    }
+    const bool sharded = so.shard_count > 0 || so.shard_prepare || so.ingest_count > 0;
     lodstream::SimplifyReport report;
     const lodstream::Result r = lodstream::simplify(input, so, options, &report);
     const int code = finish(r, progress, json && !sharded ? so.output_dir + "/manifest.json" : std::string(), [&] {
@@ -559,7 +569,10 @@ int main(int argc, char** argv) {
       for (const auto& s : report.stages)
         std::printf("stage        %-15s %8.3f s  peak %s%s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str(),
                     s.reused ? "  (reused from work directory)" : "");
-      if (so.shard_prepare) std::printf("prepared     %s for the tasks\n", options.work_dir.c_str());
+      if (so.ingest_count > 0)
+        std::printf("range        %u of %u: %s bytes parsed into %s/ingest-ranges (then: --shard-prepare joins them)\n",
+                    so.ingest_index, so.ingest_count, std::to_string(report.scene.file_bytes).c_str(), options.work_dir.c_str());
+      else if (so.shard_prepare) std::printf("prepared     %s for the tasks\n", options.work_dir.c_str());
       else std::printf("task         %u of %u: parts in %s/shards (then: lodstream merge %s)\n", so.shard_index, so.shard_count,
                        so.output_dir.c_str(), so.output_dir.c_str());
     });

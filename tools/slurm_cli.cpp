@@ -1,7 +1,9 @@
 // `lodstream slurm`: runs a sharded simplify (stream/shard.h) or report (stream/report_shard.h) on a Slurm
 // cluster. It only writes sbatch
-// scripts (readable, resubmittable by hand) under OUT/slurm/ and submits them with sbatch: a prepare job
-// (the shared stages: a report's is the ingest of its originals), an array job of N tasks after it (--dependency=afterok), and the merge after the
+// scripts (readable, resubmittable by hand) under OUT/slurm/ and submits them with sbatch: for simplify an
+// ingest array job of N range tasks (each parses an N-th of the input's bytes, stream/ingest_range.h),
+// then a prepare job (the shared stages, joining the ranges into the scene store: a report's is the ingest
+// of its originals), an array job of N tasks after it (--dependency=afterok), and the merge after the
 // array. The scheduler is Slurm's; lodstream adds none of its own. Each script records its command's exit
 // status in OUT/slurm/status/NAME.rc (and the command's pid in NAME.pid while it runs), which is how
 // --wait tells a failed task's one-machine exit code from the merge's.
@@ -35,12 +37,13 @@ const char* const kUsageText =
     "usage: lodstream slurm simplify INPUT -o OUTDIR --shards N [--work DIR] [--wait] [--sbatch-arg ARG]... [simplify options]\n"
     "       lodstream slurm report RUNDIR -o REPORTDIR --shards N [--work DIR] [--wait] [--sbatch-arg ARG]... [report options]\n"
     "       lodstream slurm resubmit OUTDIR [--wait]\n"
-    "  simplify  writes OUTDIR/slurm/{prepare,tasks,merge}.sbatch and submits them (afterok dependencies);\n"
+    "  simplify  writes OUTDIR/slurm/{ingest,prepare,tasks,merge}.sbatch and submits them (afterok dependencies);\n"
     "            --work: the work directory every task shares (default OUTDIR/slurm/work; on a shared file system)\n"
     "  report    the same for `lodstream report RUNDIR -o REPORTDIR` (scripts in REPORTDIR/slurm/; more report\n"
     "            arguments go to every job as given, relative paths from the current directory)\n"
     "  resubmit  submits again the tasks that did not finish (and the merge), or the whole chain when the\n"
-    "            prepare job did not (the scripts keep the first submission's sbatch options)\n"
+    "            prepare job did not, from the ingest ranges that did not finish (the scripts keep the first\n"
+    "            submission's sbatch options)\n"
     "  --wait    wait for the merge and exit with the one-machine exit code (a failed job's, else the merge's)\n"
     "  --sbatch-arg ARG  an sbatch option for every job (repeat), e.g. --sbatch-arg=--partition=big --sbatch-arg=--mem=2G\n";
 
@@ -122,21 +125,28 @@ struct Submission {
   std::string slurm_dir;
   unsigned shards = 0;
   std::vector<std::string> sbatch_args;
-  std::string prepare, tasks, merge;  // job ids
+  bool ranges = false;  // the chain starts with the ingest array (ingest.sbatch): simplify's
+  std::string ingest, prepare, tasks, merge;  // job ids
 };
 
 bool save(const Submission& s) {
-  const ordered_json j{{"shards", s.shards}, {"sbatch_args", s.sbatch_args},
-                       {"jobs", {{"prepare", s.prepare}, {"tasks", s.tasks}, {"merge", s.merge}}}};
+  const ordered_json j{{"shards", s.shards}, {"sbatch_args", s.sbatch_args}, {"ingest_ranges", s.ranges},
+                       {"jobs", {{"ingest", s.ingest}, {"prepare", s.prepare}, {"tasks", s.tasks}, {"merge", s.merge}}}};
   return write_text(s.slurm_dir + "/submit.json", j.dump(2) + "\n", false);
 }
 
-// Submits the chain from `from_prepare` (else the tasks in `array`, then the merge).
-int submit_chain(Submission& s, bool from_prepare, const std::string& array) {
+// Submits the chain from `from_prepare` (else the tasks in `array`, then the merge); from the prepare job,
+// the ingest ranges in `ingest_array` first when it is not empty.
+int submit_chain(Submission& s, bool from_prepare, const std::string& array, const std::string& ingest_array) {
   const std::string dep_args = "--kill-on-invalid-dep=yes --dependency=afterok:";
   std::string after;
+  s.ingest.clear();
+  if (from_prepare && !ingest_array.empty()) {
+    s.ingest = submit("--array=" + ingest_array, s.slurm_dir + "/ingest.sbatch");
+    if (s.ingest.empty()) return kIoError;
+  }
   if (from_prepare) {
-    s.prepare = submit("", s.slurm_dir + "/prepare.sbatch");
+    s.prepare = submit(s.ingest.empty() ? std::string() : dep_args + s.ingest, s.slurm_dir + "/prepare.sbatch");
     if (s.prepare.empty()) return kIoError;
     after = s.prepare;
   }
@@ -148,6 +158,7 @@ int submit_chain(Submission& s, bool from_prepare, const std::string& array) {
     std::fprintf(stderr, "lodstream slurm: cannot write %s/submit.json\n", s.slurm_dir.c_str());
     return kIoError;
   }
+  if (!s.ingest.empty()) std::printf("ingest  job %s (array %s of %u)\n", s.ingest.c_str(), ingest_array.c_str(), s.shards);
   if (from_prepare) std::printf("prepare job %s\n", s.prepare.c_str());
   std::printf("tasks   job %s (array %s of %u)\nmerge   job %s\n", s.tasks.c_str(), array.c_str(), s.shards, s.merge.c_str());
   std::fflush(stdout);
@@ -157,10 +168,12 @@ int submit_chain(Submission& s, bool from_prepare, const std::string& array) {
 // Waits until the merge has recorded its status, or none of the chain's jobs is queued any more (a failed
 // task's merge is cancelled by Slurm, --kill-on-invalid-dep; the other tasks are left to finish, so that a
 // resubmission reruns the failed ones only); returns the one-machine exit code: the merge's, else the
-// prepare job's or the first failed task's (a task killed by a signal records 128 + the signal).
-int wait_chain(const Submission& s, const std::vector<unsigned>& tasks) {
+// first failed ingest range's, the prepare job's or the first failed task's (a task killed by a signal
+// records 128 + the signal).
+int wait_chain(const Submission& s, const std::vector<unsigned>& tasks, const std::vector<unsigned>& ranges) {
   const std::string st = s.slurm_dir + "/status/";
-  const std::string ids = s.prepare.empty() ? (s.tasks.empty() ? s.merge : s.tasks + "," + s.merge) : s.prepare + "," + s.tasks + "," + s.merge;
+  std::string ids = s.prepare.empty() ? (s.tasks.empty() ? s.merge : s.tasks + "," + s.merge) : s.prepare + "," + s.tasks + "," + s.merge;
+  if (!s.ingest.empty()) ids = s.ingest + "," + ids;
   for (;;) {
     const int merge_rc = read_rc(st + "merge.rc");
     if (merge_rc >= 0) return merge_rc;
@@ -173,7 +186,14 @@ int wait_chain(const Submission& s, const std::vector<unsigned>& tasks) {
     if (const int rc = read_rc(st + "merge.rc"); rc >= 0) return rc;
     int failed = -1;
     std::string failed_name;
-    if (!s.prepare.empty()) {
+    for (unsigned r : ranges) {
+      const int rc = read_rc(st + fmt::format("ingest-{}.rc", r));
+      if (rc > 0) {
+        failed = rc, failed_name = fmt::format("ingest range {}", r);
+        break;
+      }
+    }
+    if (failed < 0 && !s.prepare.empty()) {
       const int rc = read_rc(st + "prepare.rc");
       if (rc != 0) failed = rc, failed_name = "the prepare job";
     }
@@ -231,7 +251,8 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
       }
       shards = static_cast<unsigned>(n);
     } else if (a == "--wait") wait = true;
-    else if (a == "--shard" || a == "--shard-from-env" || a == "--shard-prepare" || a.rfind("--shard=", 0) == 0) {
+    else if (a == "--shard" || a == "--shard-from-env" || a == "--shard-prepare" || a.rfind("--shard=", 0) == 0 ||
+             a == "--shard-ingest" || a.rfind("--shard-ingest=", 0) == 0) {
       std::fprintf(stderr, "lodstream slurm: %s is for the tasks; give --shards N\n", a.c_str());
       return kUsage;
     } else passthrough.push_back(a);
@@ -250,6 +271,7 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
   s.slurm_dir = out + "/slurm";
   s.shards = shards;
   s.sbatch_args = sbatch_args;
+  s.ranges = command == "simplify";
   work = work.empty() ? s.slurm_dir + "/work" : absolute(work);
   for (const char* d : {"", "/logs", "/status"}) fs::create_directories(s.slurm_dir + d, ec);
   if (ec) {
@@ -261,6 +283,11 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
   for (const std::string& a : passthrough) common += " " + quote(a);
   const std::string tasks_array = fmt::format("0-{}", shards - 1);
   const bool ok =
+      (!s.ranges ||
+       write_text(s.slurm_dir + "/ingest.sbatch",
+                  script(s.slurm_dir, "lodstream-ingest", "ingest-%a.out", tasks_array, sbatch_args, "ingest-${SLURM_ARRAY_TASK_ID}",
+                         common + fmt::format(" --shard-ingest \"${{SLURM_ARRAY_TASK_ID}}/{}\"", shards)),
+                  true)) &&
       write_text(s.slurm_dir + "/prepare.sbatch",
                  script(s.slurm_dir, "lodstream-prepare", "prepare.out", "", sbatch_args, "prepare", common + " --shard-prepare"), true) &&
       write_text(s.slurm_dir + "/tasks.sbatch",
@@ -273,12 +300,12 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
     std::fprintf(stderr, "lodstream slurm: cannot write the scripts in %s\n", s.slurm_dir.c_str());
     return kIoError;
   }
-  std::printf("scripts %s/{prepare,tasks,merge}.sbatch\n", s.slurm_dir.c_str());
-  if (const int rc = submit_chain(s, true, tasks_array)) return rc;
+  std::printf("scripts %s/{%sprepare,tasks,merge}.sbatch\n", s.slurm_dir.c_str(), s.ranges ? "ingest," : "");
+  if (const int rc = submit_chain(s, true, tasks_array, s.ranges ? tasks_array : std::string())) return rc;
   if (!wait) return 0;
   std::vector<unsigned> all(shards);
   for (unsigned t = 0; t < shards; ++t) all[t] = t;
-  return wait_chain(s, all);
+  return wait_chain(s, all, s.ranges ? all : std::vector<unsigned>());
 }
 
 int resubmit(const std::vector<std::string>& args) {
@@ -304,12 +331,15 @@ int resubmit(const std::vector<std::string>& args) {
     j = ordered_json::parse(f);
     s.shards = j.at("shards");
     s.sbatch_args = j.at("sbatch_args").get<std::vector<std::string>>();
+    s.ranges = j.value("ingest_ranges", false);
   } catch (const std::exception&) {
     std::fprintf(stderr, "lodstream slurm: %s/submit.json: no submission to resubmit (run `lodstream slurm simplify` first)\n",
                  s.slurm_dir.c_str());
     return kNoInput;
   }
-  const std::string old = fmt::format("{},{},{}", j["jobs"].value("prepare", ""), j["jobs"].value("tasks", ""), j["jobs"].value("merge", ""));
+  std::string old;
+  for (const char* job : {"ingest", "prepare", "tasks", "merge"})
+    if (const std::string id = j["jobs"].value(job, ""); !id.empty()) old += (old.empty() ? "" : ",") + id;
   int status = 0;
   const std::string queued = run("squeue -h -o %i -j " + old + " 2>/dev/null", &status);
   if (status == 0 && !queued.empty()) {
@@ -328,6 +358,17 @@ int resubmit(const std::vector<std::string>& args) {
       std::error_code ec;
       fs::remove(st + fmt::format("task-{}.rc", t), ec);
     }
+  // The ingest ranges that did not finish run again before the prepare job (those that did left their
+  // segments, or the prepare job joined them already).
+  std::vector<unsigned> ranges;
+  std::string ingest_array;
+  for (unsigned r = 0; r < s.shards && s.ranges && from_prepare; ++r)
+    if (read_rc(st + fmt::format("ingest-{}.rc", r)) != 0) {
+      ranges.push_back(r);
+      ingest_array += (ingest_array.empty() ? "" : ",") + std::to_string(r);
+      std::error_code ec;
+      fs::remove(st + fmt::format("ingest-{}.rc", r), ec);
+    }
   std::error_code ec;
   fs::remove(st + "merge.rc", ec);
   if (from_prepare) fs::remove(st + "prepare.rc", ec);
@@ -341,12 +382,12 @@ int resubmit(const std::vector<std::string>& args) {
     std::printf("merge   job %s\n", s.merge.c_str());
     std::fflush(stdout);
     if (!wait) return 0;
-    return wait_chain(s, {});
+    return wait_chain(s, {}, {});
   }
   if (!from_prepare) s.prepare.clear();
-  if (const int rc = submit_chain(s, from_prepare, array)) return rc;
+  if (const int rc = submit_chain(s, from_prepare, array, ingest_array)) return rc;
   if (!wait) return 0;
-  return wait_chain(s, tasks);
+  return wait_chain(s, tasks, ranges);
 }
 
 }  // namespace

@@ -201,6 +201,11 @@ struct SimplifyOptions {
   // the shared stages only (any N), then stop. Not with max_error_px.
   unsigned shard_index = 0, shard_count = 0;
   bool shard_prepare = false;
+  // With ingest_count N > 0: only parse byte range ingest_index of N of the input into the work
+  // directory (WORK/ingest-ranges; README "Running on a cluster"), then stop; the prepare job (or the
+  // first task) joins the N ranges into the scene store, the same bytes as one machine's ingest. The
+  // report gets the stage "ingest-range" and, in scene.file_bytes, the bytes the task parsed.
+  unsigned ingest_index = 0, ingest_count = 0;
 };
 
 inline constexpr unsigned default_levels = 5;
