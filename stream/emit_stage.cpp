@@ -573,7 +573,7 @@ size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t ve
 }
 
 EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_region, uint64_t vertices,
-                              uint64_t primitives, uint64_t budget, const EmitOptions& options) {
+                              uint64_t primitives, uint64_t budget, const EmitOptions& options, bool* fits) {
   EmitLevelPlan plan;
   const uint64_t map = emit_map_bytes(vertices, emit_bits(cells));
   const uint64_t tables = kLevelBytesPerCell * cells;
@@ -592,6 +592,10 @@ EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_reg
   // each of them.
   const uint64_t routes = primitives / 64 + 3 + cells;
   const uint64_t need = map + tables + routes + in_flight + per_cell * largest_region;
+  if (need > budget && fits) {
+    *fits = false;
+    return plan;
+  }
   if (need > budget)
     fail(Status::usage, "emitting level " + std::to_string(level) + " (" + std::to_string(cells) + " cells) region by region needs about " +
                             std::to_string(need >> 20) + " MiB (its cluster map " + std::to_string(map >> 20) + " MiB, " +
@@ -868,6 +872,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // parallel groups, and `merge(outs)` in block order: group g's outputs are merged (one thread) while group
   // g + 1 runs (the others), so the two sets of outputs alternate. Merges stay serial and in block order, so
   // this changes no sum.
+  std::unique_ptr<WeldFile> weld;  // mapped during pass B only
   tbb::enumerable_thread_specific<std::vector<Scratch>> scratch([nl] { return std::vector<Scratch>(nl); });
   const size_t concurrent = 4 * static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
   std::vector<BlockOut> outs[2] = {std::vector<BlockOut>(concurrent * nl), std::vector<BlockOut>(concurrent * nl)};
@@ -896,9 +901,12 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       });
       merging.wait();
       merged = before;
-      // Drop the position pages this group touched from the resident set (they stay in the page cache).
+      // Drop the position (and weld map) pages this group touched from the resident set (they stay in the
+      // page cache). The weld map's pages, read at random through pass B, were 642 MiB of a group's peak on
+      // the 1 B-triangle city (4.31 GiB at --memory 4G) before they were dropped here too.
       positions.release();
       positions.acquire();
+      if (weld) weld->release(), weld->acquire();
       if (merged > 0) progress.report(stage, static_cast<double>(merged) / static_cast<double>(blocks.size()));
     }
   };
@@ -1126,7 +1134,6 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // The pairs grow with the scene (on a 48.6 M-triangle city's four coarse levels, 15 M distinct corners):
   // they are held in memory up to a share of options.corner_bytes and spilled in sorted runs beyond, never hashed.
   // It also clears the bit of every primitive whose edge was eliminated.
-  std::unique_ptr<WeldFile> weld;
   if (any_kept_edges && !canonical_path.empty() && meta.vertices > 0) {
     weld = std::make_unique<WeldFile>(canonical_path, meta.vertices);
     weld->acquire();

@@ -209,8 +209,9 @@ struct EmitLevelPlan {
   uint64_t batch_cells = 0, reps_range_cells = 0;
 };
 // Fails with Status::usage, naming the level, its cells and the memory it needs, when even a batch of its
-// largest region (`largest_region` cells) does not fit, so that the stage stops before it starts.
+// largest region (`largest_region` cells) does not fit, so that the stage stops before it starts; with
+// `fits`, sets it to false instead.
 EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_region, uint64_t vertices,
-                              uint64_t primitives, uint64_t budget, const EmitOptions& options);
+                              uint64_t primitives, uint64_t budget, const EmitOptions& options, bool* fits = nullptr);
 
 }  // namespace lodstream::stream

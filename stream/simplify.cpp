@@ -670,10 +670,15 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         // kept from earlier stages) beyond what the memory plan sets aside for the process (budget less
         // stage_bytes) counts against the stage: the plan gets the rest. On the 193 M-triangle city at
         // --memory 1G, a whole run came to emit with about 70 MiB more resident than a rerun of emit alone,
-        // and went over. A 32nd of the stage stays spare for what the model of emit's memory misses. The plan
-        // changes how levels are grouped and batched, never a byte.
+        // and went over. The plan changes how levels are grouped and batched, never a byte.
+        // A 32nd of the stage stays spare for what the model of emit's memory misses, and at least 64 MiB
+        // from a 256 MiB stage up: part of what it misses has a fixed size (bursts of the threads' block
+        // tables; at --memory 1G the 193 M-triangle city's whole runs peaked at 1019 and 1035 MiB with a
+        // 32nd, 30 MiB, spare, and at 991 MiB with 64 MiB).
         const uint64_t set_aside = plan.budget - plan.stage_bytes, resident = stream::resident_bytes();
-        const uint64_t budget = plan.stage_bytes - plan.stage_bytes / 32 -
+        const uint64_t spare = plan.stage_bytes >= (256 << 20) ? std::max<uint64_t>(plan.stage_bytes / 32, 64 << 20)
+                                                               : plan.stage_bytes / 32;
+        const uint64_t budget = plan.stage_bytes - spare -
                                 std::min(resident > set_aside ? resident - set_aside : 0, plan.stage_bytes / 2);
         // The thickness passes hold what the plan counts for them (stream::emit_corner_bytes of this budget).
         stream::EmitOptions eo = options_in;
@@ -711,13 +716,35 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           core::region_box(cube, i.key, i.box_min, i.box_max);
           return i;
         };
+        // Before each level or group: the previous group's packed map dropped (a smaller map would otherwise
+        // reuse its larger capacity, all of it resident) and the heap's free pages returned; what is still
+        // resident beyond what it was when the budget was set counts against the group (on the 1 B-triangle
+        // city at --memory 4G, 741 MiB were resident besides the maps when the group after the batched
+        // finest level began, against 220 MiB at emit's start).
+        auto held_since_start = [&] {
+          scratch = stream::EmitScratch();
+          stream::release_free_memory();
+          const uint64_t now = stream::resident_bytes();
+          return now > resident ? now - resident : 0;
+        };
         auto add = [&](size_t l, const stream::EmitCounts& c) {
           counts[l].triangles += c.triangles, counts[l].edges += c.edges, counts[l].points += c.points;
           counts[l].edges_on_triangles += c.edges_on_triangles, counts[l].points_covered += c.points_covered;
         };
         for (size_t first = 0; first < sizes.size();) {
+          const uint64_t held = held_since_start();
           if (plans[first].batched) {
             const size_t l = first++;
+            // Planned again with what is held now (the batches change no byte); the plan made before the
+            // first level, which stopped the run if the level could not fit at all, stays when this one
+            // would not fit.
+            if (held > 0 && held < budget) {
+              bool fits = true;
+              const stream::EmitLevelPlan now = stream::plan_emit_level(
+                  l, cells[l], *std::max_element(cuts[l].cells.begin(), cuts[l].cells.end()), meta.vertices, meta.primitives(),
+                  budget - held, eo, &fits);
+              if (fits) plans[l] = now;
+            }
             stream::write_representatives(store_dir, meta, canonical, prefix, l, cells[l], sizes[l], grade.records, copts,
                                           eo.representative, plans[l].reps_range_cells, progress, scratch);
             const std::vector<uint32_t> region_of = stream::load_region_of(prefix, l, cells[l], cube, cuts[l], so.representative, meta.single_precision);
@@ -746,7 +773,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           // Beside the group's working memory, its levels' per-cell tables (stream::kLevelBytesPerCell).
           uint64_t tables = 0;
           for (size_t l = first; l < sizes.size(); ++l) tables += stream::kLevelBytesPerCell * cells[l];
-          size_t end = stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), budget, tables, eo);
+          size_t end = stream::emit_group_end(cells, first, meta.vertices, meta.primitives(), budget, tables + held, eo);
           end = static_cast<size_t>(std::find_if(plans.begin() + static_cast<ptrdiff_t>(first), plans.begin() + static_cast<ptrdiff_t>(end),
                                                  [](const stream::EmitLevelPlan& p) { return p.batched; }) -
                                     plans.begin());
