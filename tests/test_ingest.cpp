@@ -17,16 +17,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::map<std::string, std::string> read_dir(const fs::path& dir) {
-  std::map<std::string, std::string> files;
-  for (const auto& e : fs::directory_iterator(dir)) {
-    std::ifstream f(e.path(), std::ios::binary);
-    std::stringstream ss;
-    ss << f.rdbuf();
-    files[e.path().filename().string()] = ss.str();
-  }
-  return files;
-}
+using test::read_dir;
 
 SceneInfo run_info(const std::string& input, const std::string& work, unsigned threads, uint64_t memory,
                    uint64_t chunk) {

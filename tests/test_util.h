@@ -8,6 +8,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <sstream>
 #include <string>
 #include <string_view>
 
@@ -47,6 +49,18 @@ inline std::string shared_data_dir() {
 }
 
 inline std::string source_dir() { return LODSTREAM_SOURCE_DIR; }
+
+// Every file of `dir` (not its subdirectories' files), name to bytes: two directories compare as maps.
+inline std::map<std::string, std::string> read_dir(const std::filesystem::path& dir) {
+  std::map<std::string, std::string> files;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    std::ifstream f(e.path(), std::ios::binary);
+    std::stringstream ss;
+    ss << f.rdbuf();
+    files[e.path().filename().string()] = ss.str();
+  }
+  return files;
+}
 
 }  // namespace lodstream::test
 
