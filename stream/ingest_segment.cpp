@@ -26,20 +26,6 @@ namespace {
 constexpr char kSegmentMagic[8] = {'L', 'O', 'D', 'I', 'N', 'G', 'R', '1'};
 constexpr uint64_t kEnd = UINT64_MAX;
 
-template <class T>
-void put(io::FileWriter& out, const T& v) {
-  out.write(&v, sizeof v);
-}
-template <class T>
-void put_vector(io::FileWriter& out, const std::vector<T>& v) {
-  put(out, static_cast<uint64_t>(v.size()));
-  out.write_array(std::span<const T>(v));
-}
-void put_string(io::FileWriter& out, const std::string& s) {
-  put(out, static_cast<uint64_t>(s.size()));
-  out.write(s);
-}
-
 }  // namespace
 
 void write_segment_header(io::FileWriter& out, const SegmentHeader& h) {
@@ -55,19 +41,19 @@ void write_parsed_chunk(io::FileWriter& out, const io::Chunk& chunk, const io::P
   put(out, chunk.seq);
   put(out, chunk.bytes.begin());
   put(out, chunk.bytes.end());
-  put_vector(out, c.positions);
-  put_vector(out, c.triangles);
-  put_vector(out, c.positions32);
-  put_vector(out, c.triangles32);
-  put_vector(out, c.lines);
-  put_vector(out, c.points);
+  put_array(out, c.positions);
+  put_array(out, c.triangles);
+  put_array(out, c.positions32);
+  put_array(out, c.triangles32);
+  put_array(out, c.lines);
+  put_array(out, c.points);
   for (const auto* v : {&c.triangle_objects, &c.line_objects, &c.point_objects, &c.triangle_materials,
                         &c.line_materials, &c.point_materials})
-    put_vector(out, *v);
-  put_vector(out, c.colors);
+    put_array(out, *v);
+  put_array(out, c.colors);
   put(out, static_cast<uint64_t>(c.object_names.size()));
   for (const std::string& name : c.object_names) put_string(out, name);
-  put_vector(out, c.planar_faces);
+  put_array(out, c.planar_faces);
   for (uint64_t v : {c.polygons, c.degenerate, c.face_segments, c.skipped, c.newlines}) put(out, v);
   put(out, c.reader_state);
   put(out, static_cast<uint8_t>(c.error.set));

@@ -14,20 +14,6 @@ namespace {
 
 constexpr char kMagic[8] = {'L', 'O', 'D', 'R', 'E', 'P', 'T', '1'};
 
-template <class T>
-void put(io::FileWriter& out, const T& v) {
-  out.write(&v, sizeof(T));
-}
-template <class T>
-void put_array(io::FileWriter& out, const std::vector<T>& v) {
-  put(out, uint64_t{v.size()});
-  if (!v.empty()) out.write(v.data(), v.size() * sizeof(T));
-}
-void put_string(io::FileWriter& out, const std::string& s) {
-  put(out, uint64_t{s.size()});
-  out.write(s);
-}
-
 }  // namespace
 
 std::string report_shards_dir(const std::string& output_dir) { return output_dir + "/shards/report"; }

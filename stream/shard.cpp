@@ -25,17 +25,6 @@ namespace {
 
 constexpr char kPartsMagic[8] = {'L', 'O', 'D', 'P', 'A', 'R', 'T', '3'};
 
-template <class T>
-void put(io::FileWriter& out, const T& v) {
-  out.write(&v, sizeof(T));
-}
-template <class T>
-void put_array(io::FileWriter& out, const std::vector<T>& v) {
-  const uint64_t n = v.size();
-  put(out, n);
-  if (n) out.write(v.data(), n * sizeof(T));
-}
-
 }  // namespace
 
 ShardLock::ShardLock(const std::string& work_dir) {

@@ -92,6 +92,22 @@ class PartsWriter {
   io::FileWriter out_;
   uint64_t parts_ = 0;
 };
+// A task's binary file, written in order: a value's bytes, an array or a string as its count then its
+// elements.
+template <class T>
+void put(io::FileWriter& out, const T& v) {
+  out.write(&v, sizeof(T));
+}
+template <class T>
+void put_array(io::FileWriter& out, const std::vector<T>& v) {
+  put(out, uint64_t{v.size()});
+  if (!v.empty()) out.write(v.data(), v.size() * sizeof(T));
+}
+inline void put_string(io::FileWriter& out, const std::string& s) {
+  put(out, uint64_t{s.size()});
+  out.write(s);
+}
+
 // A task's binary file, read from its start: opened, its 8-byte magic checked, then read in order.
 // Failure(io_error) naming the file and `what` it holds ("a task's parts") when it is missing, of
 // another version or cut short.
