@@ -767,6 +767,64 @@ std::vector<Block> routed_blocks(const BatchRoutes& routes, unsigned bit, const 
   return blocks;
 }
 
+// The blocks of a bounded batch (block_bounds.h): runs of the boxes that reach a marked voxel of `reach`,
+// cut at kEmitBlock primitives (every block starts at a multiple of kBoundsBlock, so of 64).
+std::vector<Block> bounded_blocks(const BlockBounds& bounds, const ReachGrid& reach, const uint64_t* column_count) {
+  static_assert(kEmitBlock % kBoundsBlock == 0 && kBoundsBlock % 64 == 0);
+  std::vector<Block> blocks;
+  for (int kind = 0; kind < 3; ++kind) {
+    if (bounds.count[kind] != column_count[kind]) fail(Status::internal, "emit: block bounds of another input");
+    const uint64_t n = bounds.blocks(kind);
+    const double* box = bounds.box[kind].data();
+    for (uint64_t b = 0; b < n;) {
+      if (!reach.reaches(&box[6 * b], &box[6 * b + 3])) {
+        ++b;
+        continue;
+      }
+      uint64_t end = b + 1;
+      while (end < n && reach.reaches(&box[6 * end], &box[6 * end + 3]) && (end - b) * kBoundsBlock < kEmitBlock) ++end;
+      const uint64_t first = b * kBoundsBlock;
+      blocks.push_back({kind, first, std::min(end * kBoundsBlock, column_count[kind]) - first});
+      b = end;
+    }
+  }
+  return blocks;
+}
+
+// Marks where a bounded group's passes must read: every level's own regions' boxes, widened by its cell size
+// (block_bounds.h), and with `halo`, the representatives of its halo cells, widened the same.
+void mark_reach(const std::vector<LevelState>& levels, const core::SceneCube& cube, const std::string& prefix, bool halo,
+                ReachGrid& reach) {
+  for (const LevelState& L : levels) {
+    // A hair more than the cell size, so that the rounding of a box's corners never matters.
+    const double r = L.in.cell_size * (1 + 0x1p-20);
+    double lo[3], hi[3];
+    for (uint32_t region = L.in.first_region; region < L.in.end_region; ++region) {
+      core::region_box(cube, L.in.cut->regions[region], lo, hi);
+      for (int k = 0; k < 3; ++k) lo[k] -= r, hi[k] += r;
+      reach.mark(lo, hi);
+    }
+    if (!halo) continue;
+    io::MappedFile reps(representatives_path(prefix, L.in.level));
+    constexpr uint64_t record = 3 * sizeof(double);
+    if (reps.size() != L.in.cells * record) fail(Status::io_error, reps.path() + ": size does not match");
+    constexpr uint64_t window_cells = 1 << 16;
+    for (uint64_t first = 0; first < L.in.cells; first += window_cells) {
+      const uint64_t end = std::min(L.in.cells, first + window_cells);
+      io::Window w;
+      for (uint64_t c = first; c < end; ++c) {
+        if (L.role[c] != kHalo) continue;
+        if (!w.data()) w = reps.map(first * record, end * record);
+        double p[3];
+        std::memcpy(p, w.data() + (c - first) * record, record);
+        for (int k = 0; k < 3; ++k) lo[k] = p[k] - r, hi[k] = p[k] + r;
+        reach.mark(lo, hi);
+      }
+    }
+  }
+  reach.finish();
+}
+
 std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
                                       const std::string& prefix, std::span<const EmitLevel> group, uint64_t records,
                                       const core::ClusterOptions& cluster, const EmitOptions& options, Progress& progress,
@@ -852,6 +910,17 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   }
   if (nl == 1 && levels[0].in.batched && levels[0].in.routes && !routes)
     blocks = routed_blocks(*levels[0].in.routes, levels[0].in.route_bit, column_count);
+  // A bounded group: first the blocks near its own regions (all its halo pass needs), then, once the halo
+  // is known, those near its halo cells too.
+  bool bounded = options.block_bounds && !routes && !options.count_only && !options.representatives_only;
+  for (const LevelState& L : levels) bounded = bounded && L.in.batched && !L.in.routes;
+  std::unique_ptr<ReachGrid> reach;
+  const core::SceneCube cube = scene_cube_of(meta);
+  if (bounded) {
+    reach = std::make_unique<ReachGrid>(cube);
+    mark_reach(levels, cube, prefix, false, *reach);
+    blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
+  }
   const bool quadric = options.representative == Representative::quadric && !options.count_only;
   const bool materials = !meta.materials.empty() && !options.count_only && !options.representatives_only;
   std::vector<ObjectRun> material_runs[3];
@@ -895,6 +964,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
         if (segments_and_triangles_only && b.kind == 2) return;
         const uint64_t arity = static_cast<uint64_t>(3 - b.kind);
         const io::Window w = columns[b.kind]->map(b.first * arity * 4, (b.first + b.count) * arity * 4);
+        if (options.primitives_read) options.primitives_read->fetch_add(b.count, std::memory_order_relaxed);
         std::vector<Scratch>& s = scratch.local();
         for (Scratch& x : s) x.clear();
         work(b, std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), b.count * arity), o, s.data());
@@ -930,6 +1000,10 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       if (!options.count_only && !options.representatives_only) L.collapsed[kind].assign((column_count[kind] + 63) / 64, 0);
   }
   find_halos(levels, run_blocks, record_of, cell);
+  if (bounded) {
+    mark_reach(levels, cube, prefix, true, *reach);
+    blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
+  }
   auto classify = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
     auto mark = [&](LevelState& L, size_t i) {
       if (options.count_only) return;

@@ -40,6 +40,7 @@
 // and a list of them, about 40 bytes a corner); pass C reads that list, not the input.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <span>
@@ -49,6 +50,7 @@
 #include "core/floating_cell.h"
 #include "core/mesh.h"
 #include "lodstream/lodstream.h"
+#include "stream/block_bounds.h"
 #include "stream/memory.h"
 #include "stream/emit_regions.h"
 #include "stream/progress.h"
@@ -75,6 +77,11 @@ struct EmitOptions {
   const WorkDir* work = nullptr;
   uint64_t corner_bytes = 40 << 20;
   uint64_t chunk_bytes = 0;  // --chunk-bytes (0: none) caps those sorts' memory too, so that tests make them spill
+  // Batched levels only (a sharded task's, stream/shard.h): read only the blocks whose box comes within a
+  // cell size of the batch's regions, then of its halo cells (stream/block_bounds.h). The same bytes.
+  const BlockBounds* block_bounds = nullptr;
+  // When set, the primitives the passes read are added to it (the blocks' sizes, pass by pass).
+  std::atomic<uint64_t>* primitives_read = nullptr;
 };
 
 struct EmitCounts {

@@ -47,6 +47,7 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
     const ordered_json& key = tasks[0].at("key");
     const ordered_json& mi = key.at("merge");
     ordered_json m = tasks[0].at("manifest");
+    m.erase("input_primitives_read");  // a task's own figure: it goes under "shards"
     const size_t levels = m.at("levels").size();
     const unsigned count = static_cast<unsigned>(tasks.size());
     SimplifyReport report;
@@ -135,7 +136,8 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
     ordered_json shards = ordered_json::array();
     for (unsigned t = 0; t < count; ++t) {
       const ordered_json& tm = tasks[t].at("manifest");
-      shards.push_back({{"index", t}, {"stages", tm.at("stages")}, {"seconds", tm.at("seconds")}, {"peak_rss_bytes", tm.at("peak_rss_bytes")}});
+      shards.push_back({{"index", t}, {"stages", tm.at("stages")}, {"seconds", tm.at("seconds")}, {"peak_rss_bytes", tm.at("peak_rss_bytes")},
+                        {"input_primitives_read", tm.value("input_primitives_read", uint64_t{0})}});
     }
     m["stages"] = stages;
     m["seconds"] = report.seconds;

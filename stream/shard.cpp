@@ -222,8 +222,23 @@ bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::order
   return false;
 }
 
+bool write_shard_bounds(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress) {
+  const std::string stamp = in.prefix + "block-bounds.json", path = block_bounds_path(in.prefix);
+  std::error_code ec;
+  if (std::filesystem::exists(stamp, ec) && std::filesystem::exists(path, ec)) {
+    try {
+      if (nlohmann::ordered_json::parse(io::read_small_file(stamp)) == key) return true;
+    } catch (const std::exception&) {
+    }
+  }
+  std::filesystem::remove(stamp, ec);
+  write_block_bounds(in.store_dir, *in.meta, path, progress);
+  io::write_file_atomic(stamp, key.dump(1) + "\n");
+  return false;
+}
+
 std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, unsigned count, const std::string& output_dir,
-                                   Progress& progress, EmitScratch& scratch) {
+                                   Progress& progress, EmitScratch& scratch, uint64_t* primitives_read) {
   const StoreMeta& meta = *in.meta;
   const size_t n = in.sizes.size();
   // This task's older summary no longer vouches for its parts; tasks of a run with more tasks are stale.
@@ -256,6 +271,9 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   auto level_bytes = [&](size_t l, uint64_t batch) { return kLevelBytesPerCell * in.cells[l] + in_flight + per_cell * batch; };
   EmitOptions emit = in.options;  // its thickness passes hold what in_flight counts for them
   emit.corner_bytes = emit_corner_bytes(in.budget);
+  const BlockBounds bounds = read_block_bounds(block_bounds_path(in.prefix), meta);
+  std::atomic<uint64_t> read{0};
+  emit.block_bounds = &bounds, emit.primitives_read = &read;
 
   std::vector<EmitCounts> counts(n);
   std::vector<std::unique_ptr<PartsWriter>> writers(n);
@@ -335,6 +353,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     first = group.back() + 1;
   }
   for (auto& w : writers) w->commit();
+  if (primitives_read) *primitives_read = read.load();
   return counts;
 }
 

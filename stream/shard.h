@@ -19,8 +19,8 @@
 //   the task saw it (its own counts), its stages, and the key of what it was made from.
 // - A task run again (resubmitted, or killed and rerun) removes its task-I.json and redoes its emit from
 //   the start, reusing the shared stages; its parts files are written under .partial names and renamed.
-//   Every task reads the whole input in each of its passes: its cost falls with its share of the output,
-//   not of the input (README "simplify as N tasks").
+//   Its passes read only the store's blocks whose boxes (written by the shared stages, block_bounds.h) come
+//   near its regions and their halos; building its levels' cluster maps still reads the whole weight index.
 #pragma once
 
 #include <cstdint>
@@ -36,6 +36,7 @@
 #include "core/mesh.h"
 #include "io/file_writer.h"
 #include "lodstream/lodstream.h"
+#include "stream/block_bounds.h"
 #include "stream/emit_regions.h"
 #include "stream/emit_stage.h"
 #include "stream/progress.h"
@@ -151,10 +152,14 @@ struct ShardEmitInput {
 bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress,
                                  EmitScratch& scratch);
 
+// Writes the store's block boxes to the work directory (stream/block_bounds.h), unless a stamp there
+// (block-bounds.json) says they were written for `key`. Returns true when reused.
+bool write_shard_bounds(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress);
+
 // Emits task `index` of `count`'s regions of every level and writes their parts (see above). Returns the
-// task's counts per level.
+// task's counts per level; `primitives_read`, when given, is set to the input primitives its passes read.
 std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, unsigned count, const std::string& output_dir,
-                                   Progress& progress, EmitScratch& scratch);
+                                   Progress& progress, EmitScratch& scratch, uint64_t* primitives_read = nullptr);
 
 // TilesOptions (stream/tiles.h) as the task hands them to the merge, and back.
 nlohmann::ordered_json tiles_options_json(const TilesOptions& o);

@@ -526,6 +526,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     ordered_json error_json;  // --max-error-px: the passes and figures, for the manifest
     ordered_json shard_tiles;  // a sharded run's 3D Tiles options, for merge
     ordered_json shard_store;  // a sharded run's material table and colour flag, for merge's level files
+    uint64_t primitives_read = 0;  // a sharded task's emit: the input primitives its passes read
 
     tbb::task_arena arena(static_cast<int>(plan.threads));
     arena.execute([&] {
@@ -890,6 +891,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           for (double c : sizes) key["cell_sizes"].push_back(exact(c));
           st.reused = stream::write_shard_representatives(shard_input, key, progress, scratch);
         });
+        run_stage(&report.stages, "bounds", [&](StageStats& st) {
+          st.reused = stream::write_shard_bounds(shard_input, {{"version", kStampVersion}, {"source", source_json(meta)}}, progress);
+        });
         shard_lock.reset();
         if (so.shard_prepare) return;
         if (so.write_tiles)
@@ -971,7 +975,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       emit_options.work = &work, emit_options.chunk_bytes = options.chunk_bytes;
       run_stage(&report.stages, "emit", [&](StageStats&) {
         const std::vector<stream::EmitCounts> counts =
-            sharded ? stream::emit_shard(shard_input, so.shard_index, so.shard_count, so.output_dir, progress, scratch)
+            sharded ? stream::emit_shard(shard_input, so.shard_index, so.shard_count, so.output_dir, progress, scratch, &primitives_read)
                     : emit_all(sizes, cells, emit_options, add_part, write_level);
         for (size_t l = 0; l < sizes.size(); ++l) {
           LevelStats& ls = report.levels[l];
@@ -1081,6 +1085,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     m["peak_rss_bytes"] = report.peak_rss_bytes;
     m["work_dir"] = stream::work_dir_json(report.work_dir);
     if (sharded) {
+      m["input_primitives_read"] = primitives_read;
       write_shard_task(so, report, m, shard_tiles, shard_store);
       *out = std::move(report);
       return;

@@ -4,6 +4,8 @@
 // task ranges must cover every region once. tests/slurm_test.sh runs the same through Slurm.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -15,6 +17,7 @@
 
 #include "lodstream/lodstream.h"
 #include "cli_harness.h"
+#include "stream/block_bounds.h"
 #include "stream/shard.h"
 #include "test_util.h"
 
@@ -88,6 +91,7 @@ TEST(Shard, AnyTaskCountGivesOneMachinesBytes) {
   SimplifyReport one;
   ASSERT_TRUE(simplify(sample_room(), room_options(dir.file("one")), o, &one).ok());
   const auto want = outputs(dir.file("one"));
+  uint64_t read_by_one = 0;  // the input primitives one task's passes read
   for (unsigned n : {1u, 2u, 5u}) {
     SCOPED_TRACE("tasks " + std::to_string(n));
     const std::string out = dir.file("sharded-" + std::to_string(n));
@@ -98,6 +102,20 @@ TEST(Shard, AnyTaskCountGivesOneMachinesBytes) {
     ASSERT_TRUE(r.ok()) << r.message;
     EXPECT_EQ(outputs(out), want);
     EXPECT_EQ(manifest_without_timings(out), manifest_without_timings(dir.file("one")));
+    // Every task's passes read only the blocks near its regions (stream/block_bounds.h): one task reads
+    // the whole input in each pass; of five, each reads less than that and together less than five times it.
+    const nlohmann::json m = nlohmann::json::parse(slurp(out + "/manifest.json"));
+    uint64_t sum = 0, most = 0;
+    for (const auto& t : m.at("shards").at("tasks")) {
+      const uint64_t r = t.at("input_primitives_read");
+      EXPECT_GT(r, 0u);
+      sum += r, most = std::max(most, r);
+    }
+    if (n == 1) read_by_one = sum;
+    if (n == 5) {
+      EXPECT_LT(most, read_by_one);
+      EXPECT_LT(sum, 4 * read_by_one);
+    }
     EXPECT_FALSE(std::filesystem::exists(out + "/shards")) << "merge removes the parts";
     ASSERT_EQ(merged.levels.size(), one.levels.size());
     for (size_t l = 0; l < one.levels.size(); ++l) EXPECT_EQ(merged.levels[l].triangles, one.levels[l].triangles);
@@ -402,6 +420,32 @@ TEST(ReportShard, ShardFromEnvironmentThroughTheCli) {
   EXPECT_EQ(report_files(dir.file("out")), report_files(dir.file("one")));
   const test::CliRun bad = test::run_cli(args({"report", lods, "-o", dir.file("bad"), "--work", dir.file("work"), "--shard", "2/2"}), log);
   EXPECT_EQ(bad.exit_code, 64);
+}
+
+// The grid a task tests block boxes against is conservative: a box near a marked one reaches it, one far
+// away does not, and a coordinate outside the cube or NaN widens to the border rather than being lost.
+TEST(BlockBounds, ReachGridMarksConservatively) {
+  core::SceneCube cube;
+  cube.min[0] = cube.min[1] = cube.min[2] = 0, cube.side = 64;  // one unit a voxel
+  stream::ReachGrid g(cube);
+  const double lo[3] = {10.2, 10.2, 10.2}, hi[3] = {11.8, 11.8, 11.8};
+  g.mark(lo, hi);
+  g.finish();
+  auto reaches = [&](double x0, double y0, double z0, double x1, double y1, double z1) {
+    const double a[3] = {x0, y0, z0}, b[3] = {x1, y1, z1};
+    return g.reaches(a, b);
+  };
+  EXPECT_TRUE(reaches(11, 11, 11, 11, 11, 11));           // inside
+  EXPECT_TRUE(reaches(12.9, 12.9, 12.9, 13, 13, 13));     // in the voxel next to a marked one
+  EXPECT_TRUE(reaches(0, 0, 0, 63, 63, 63));              // a box around it
+  EXPECT_FALSE(reaches(30, 30, 30, 40, 40, 40));          // far away
+  EXPECT_FALSE(reaches(10, 30, 10, 11, 31, 11));          // far on one axis
+  EXPECT_TRUE(reaches(-100, -100, -100, 10, 10, 10));     // outside the cube: its border voxel on
+  const double nan = std::nan("");
+  EXPECT_TRUE(reaches(nan, 11, 11, nan, 11, 11));         // NaN: the whole axis
+  stream::ReachGrid empty(cube);
+  empty.finish();
+  EXPECT_FALSE(empty.reaches(lo, hi));
 }
 
 }  // namespace
