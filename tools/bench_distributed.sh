@@ -1,20 +1,29 @@
 #!/bin/bash
-# Sharded simplify against one machine (README "Running on a cluster", figures): one machine's run, then on
-# the same work directory the prepare step, the N tasks one after the other and the merge, each timed
-# (wall, CPU, peak RSS from /usr/bin/time -v), and the outputs compared byte for byte (cmp; manifest.json
-# aside). Tasks run one at a time so that each one's figures are its own on this shared machine; the wall
-# time N machines would take is then prepare + the slowest task + merge.
-# usage: tools/bench_distributed.sh [--bin LODSTREAM] [--input FILE] [--shards N] [--work DIR] [--out DIR]
-#                                   [--prepare-memory SIZE] -- [simplify options, e.g. --memory 1G]
+# Sharded simplify against one machine (README "Running on a cluster", figures). Two modes:
+#
+# --slurm (the issue's benchmark): one machine's whole run from an empty work directory, then the same
+#   input through `lodstream slurm simplify --shards N --wait` on a one-node Slurm cluster started for the
+#   run (tools/slurm_local_cluster.sh; as root) from another empty work directory: ingest array, prepare,
+#   task array, merge, the jobs sharing this machine's cores as Slurm schedules them. Prints both wall
+#   times and their ratio, every job's peak (the largest stage peak in its log) against the cap, the input
+#   primitives each task's emit read, and the largest size of the shared directories (work and output,
+#   sampled every 5 s), then compares the outputs byte for byte.
+# default (tasks one after another): one machine's run, then on the same work directory the prepare step,
+#   the N tasks one after the other and the merge, each timed (wall, CPU, peak RSS from /usr/bin/time -v),
+#   so that each task's figures are its own on this shared machine; the wall time N machines would take is
+#   then prepare + the slowest task + merge.
+# usage: tools/bench_distributed.sh [--slurm] [--bin LODSTREAM] [--input FILE] [--shards N] [--work DIR]
+#                                   [--out DIR] [--prepare-memory SIZE] -- [simplify options, e.g. --memory 1G]
 # Defaults: build/lodstream, /work/scenes/city-18.ply (read only), 8 shards, a fresh work and output
-# directory under $TMPDIR, --prepare-memory = the simplify options' --memory. Steps: one (one machine's
-# whole run), one-emit (the same again on its work directory: emit and write only), prepare (the shared
-# stages, reused from one's, plus the representatives), task-I, merge.
+# directory under $TMPDIR, --prepare-memory = the simplify options' --memory. Steps (default mode): one
+# (one machine's whole run), one-emit (the same again on its work directory: emit and write only), prepare
+# (the shared stages, reused from one's, plus the representatives), task-I, merge.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
-bin=$root/build/lodstream; input=/work/scenes/city-18.ply; shards=8; work=""; out=""; prepare_memory=""
+bin=$root/build/lodstream; input=/work/scenes/city-18.ply; shards=8; work=""; out=""; prepare_memory=""; slurm=0
 while [ $# -gt 0 ]; do
   case "$1" in
+    --slurm) slurm=1; shift ;;
     --bin) bin=$2; shift 2 ;;
     --input) input=$2; shift 2 ;;
     --shards) shards=$2; shift 2 ;;
@@ -48,6 +57,57 @@ timed() {
 
 echo "input $input, $shards shards, options: ${opts[*]:-}; $(date -u +%FT%TZ), load $(cut -d' ' -f1-3 /proc/loadavg)" | tee "$out/bench.txt"
 printf "%-12s %9s %9s %9s %5s\n" step wall_s cpu_s peak_MiB exit | tee -a "$out/bench.txt"
+# same_outputs A B: cmp of every file of A (manifest.json and logs aside) with B's
+same_outputs() {
+  local same=1 f
+  for f in $(cd "$1" && find . -type f ! -name manifest.json ! -path './logs/*' ! -path './slurm/*' | sort); do
+    cmp -s "$1/$f" "$2/$f" || { echo "DIFFERS: $f" | tee -a "$out/bench.txt"; same=0; }
+  done
+  [ $same -eq 1 ] && echo "outputs byte-identical (cmp of every file but manifest.json)" | tee -a "$out/bench.txt"
+  return 0
+}
+
+if [ $slurm -eq 1 ]; then
+  cluster=$out/cluster
+  conf=$("$root/tools/slurm_local_cluster.sh" start "$cluster") || { echo "bench_distributed: no Slurm cluster here" >&2; exit 77; }
+  export "${conf?}"
+  trap '"$root/tools/slurm_local_cluster.sh" stop "$cluster"' EXIT
+  timed one "$bin" simplify "$input" -o "$out/one" --work "$work-one" --no-space-check "${opts[@]}"
+  echo "  one machine: work directory $(du -sb "$work-one" | cut -f1) bytes at the end" | tee -a "$out/bench.txt"
+  rm -rf "$work-one"
+  # The shared directories' size, sampled while the jobs run.
+  ( while :; do du -sb "$work" "$out/sharded" 2>/dev/null | awk '{s += $1} END {print s + 0}' || true; sleep 5; done ) >"$logs/shared-bytes.txt" &
+  sampler=$!
+  timed slurm "$bin" slurm simplify "$input" -o "$out/sharded" --shards "$shards" --work "$work" --wait --no-space-check "${opts[@]}"
+  kill $sampler 2>/dev/null || true
+  python3 - "$out" "$shards" "$logs/shared-bytes.txt" <<'PY' | tee -a "$out/bench.txt"
+import json, os, re, sys
+out, n, sizes = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+walls = {}
+for line in open(os.path.join(out, "bench.txt")):
+    f = line.split()
+    if len(f) == 5 and f[0] in ("one", "slurm"): walls[f[0]] = float(f[1])
+print("wall: one machine %.1f s, %d tasks through Slurm %.1f s: %.2fx" % (walls["one"], n, walls["slurm"], walls["slurm"] / walls["one"]))
+logs = os.path.join(out, "sharded", "slurm", "logs")
+for name in sorted(os.listdir(logs)):
+    peaks = [float(m) for m in re.findall(r"peak ([0-9.]+) MiB", open(os.path.join(logs, name)).read())]
+    stages = re.findall(r"^stage\s+(\S+)\s+([0-9.]+) s", open(os.path.join(logs, name)).read(), re.M)
+    print("  job %-14s peak %7.1f MiB  %s" % (name[:-4], max(peaks, default=0), ", ".join("%s %s s" % s for s in stages)))
+m = json.load(open(os.path.join(out, "sharded", "manifest.json")))
+for t in m["shards"]["tasks"]:
+    print("  task %2d: %.1f s, peak %.1f MiB, input primitives read by its emit %d" %
+          (t["index"], t["seconds"], t["peak_rss_bytes"] / 2**20, t["input_primitives_read"]))
+total = m["input"]["triangles"] + m["input"]["lines"] + m["input"]["points"]
+reads = [t["input_primitives_read"] for t in m["shards"]["tasks"]]
+print("  input primitives %d; tasks' reads: sum %.2fx the input, largest %.2fx" % (total, sum(reads) / total, max(reads) / total))
+s = [int(x) for x in open(sizes).read().split() if x.strip()]
+print("  shared directories (work + output), largest sample: %.2f GB (input %.2f GB)" % (max(s, default=0) / 1e9, m["input"]["bytes"] / 1e9))
+PY
+  same_outputs "$out/one" "$out/sharded"
+  echo "results in $out/bench.txt"
+  exit 0
+fi
+
 # An output directory that already holds one machine's run (same work directory) keeps it: only the
 # sharded steps are run again.
 if [ -f "$out/one/manifest.json" ]; then
@@ -67,9 +127,5 @@ for ((i = 0; i < shards; i++)); do
   timed "task-$i" "$bin" simplify "$input" -o "$out/sharded" --work "$work" --shard "$i/$shards" --no-space-check "${opts[@]}"
 done
 timed merge "$bin" merge "$out/sharded"
-same=1
-for f in $(cd "$out/one" && find . -type f ! -name manifest.json ! -path './logs/*' | sort); do
-  cmp -s "$out/one/$f" "$out/sharded/$f" || { echo "DIFFERS: $f" | tee -a "$out/bench.txt"; same=0; }
-done
-[ $same -eq 1 ] && echo "outputs byte-identical (cmp of every file but manifest.json)" | tee -a "$out/bench.txt"
+same_outputs "$out/one" "$out/sharded"
 echo "results in $out/bench.txt; work directory $work"
