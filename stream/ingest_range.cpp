@@ -38,14 +38,16 @@ std::pair<uint64_t, uint64_t> range_bytes(uint64_t file_bytes, unsigned index, u
   return {at(index), index + 1 == count ? UINT64_MAX : at(index + 1)};
 }
 
-std::string ingest_ranges_dir(const WorkDir& work) { return work.file("ingest-ranges"); }
+std::string ingest_ranges_dir(const WorkDir& work, size_t original) {
+  return work.file(original == 0 ? std::string("ingest-ranges") : fmt::format("ingest-ranges-{}", original));
+}
 
 std::string segment_path(const std::string& dir, unsigned index, unsigned count) {
   return fmt::format("{}/range-{}-of-{}.seg", dir, index, count);
 }
 
 RangeStats ingest_range(const std::string& input, const WorkDir& work, unsigned index, unsigned count,
-                        const MemoryPlan& plan, Progress& progress) {
+                        const MemoryPlan& plan, Progress& progress, size_t original) {
   if (count == 0 || index >= count)
     fail(Status::usage, fmt::format("--shard-ingest {}/{}: the index must be below the count", index, count));
   io::MappedFile file(input);
@@ -60,7 +62,7 @@ RangeStats ingest_range(const std::string& input, const WorkDir& work, unsigned 
   stats.range_begin = range_begin;
   stats.range_end = std::min(range_end, file.size());
 
-  const std::string dir = ingest_ranges_dir(work);
+  const std::string dir = ingest_ranges_dir(work, original);
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) fail(Status::io_error, dir + ": cannot create: " + ec.message());

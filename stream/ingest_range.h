@@ -47,7 +47,9 @@ unsigned range_tokens(const MemoryPlan& plan, uint64_t chunk_bytes);
 // Range `index` of `count`: the chunks beginning in [first, second) are its.
 std::pair<uint64_t, uint64_t> range_bytes(uint64_t file_bytes, unsigned index, unsigned count);
 
-std::string ingest_ranges_dir(const WorkDir& work);
+// Where the segments of the work directory's store go: WORK/ingest-ranges; a report's further originals
+// (its store-G, G > 0) WORK/ingest-ranges-G.
+std::string ingest_ranges_dir(const WorkDir& work, size_t original = 0);
 std::string segment_path(const std::string& dir, unsigned index, unsigned count);
 
 // What a range task did.
@@ -62,7 +64,7 @@ struct RangeStats {
 // Task `index` of `count`: parses its chunks of `input` and writes its segment (under a .partial name,
 // renamed when complete). Throws Failure as ingest does (header errors; the source's identity).
 RangeStats ingest_range(const std::string& input, const WorkDir& work, unsigned index, unsigned count,
-                        const MemoryPlan& plan, Progress& progress);
+                        const MemoryPlan& plan, Progress& progress, size_t original = 0);
 
 // The segments of one range ingest, read by the join in chunk order.
 class Segments {

@@ -58,6 +58,7 @@
 #include <fmt/format.h>
 #include "lodstream/lodstream.h"
 #include "stream/ingest.h"
+#include "stream/ingest_range.h"
 #include "stream/disk_space.h"
 #include "stream/job.h"
 #include "stream/kill_point.h"
@@ -1162,6 +1163,38 @@ std::string absolute(const std::string& p) {
 
 // ------------------------------------------------------------------------------------------- shards
 
+// The runs' originals, each once, as absolute paths, in the order of the runs: original G's store is
+// WORK/store (G = 0) or WORK/store-G, its range segments stream::ingest_ranges_dir(work, G).
+std::vector<std::string> distinct_originals(const std::vector<RunSpec>& runs) {
+  std::vector<std::string> originals;
+  for (const RunSpec& r : runs)
+    if (std::find(originals.begin(), originals.end(), absolute(r.original)) == originals.end())
+      originals.push_back(absolute(r.original));
+  return originals;
+}
+
+// A range ingest task (stream/ingest_range.h): parses its byte range of every original into the work
+// directory's segments, for the prepare job's join; no lock (the tasks run at once).
+void run_report_ingest_range(const ReportOptions& ro, const std::vector<RunSpec>& runs, const Options& options,
+                             const stream::MemoryPlan& plan, Report* out) {
+  if (options.work_dir.empty()) fail(Status::usage, "--shard-ingest needs --work DIR, a directory every task shares");
+  if (ro.ingest_index >= ro.ingest_count)
+    fail(Status::usage, fmt::format("--shard-ingest {}/{}: the index must be below the count", ro.ingest_index, ro.ingest_count));
+  stream::Progress progress(options);
+  stream::WorkDir work(options.work_dir);
+  const std::vector<std::string> originals = distinct_originals(runs);
+  Report rep;
+  tbb::task_arena arena(static_cast<int>(plan.threads));
+  arena.execute([&] {
+    stream::run_stage(&rep.stages, "ingest-range", [&](StageStats&) {
+      for (size_t g = 0; g < originals.size(); ++g)
+        stream::ingest_range(originals[g], work, ro.ingest_index, ro.ingest_count, plan, progress, g);
+      return 0;
+    });
+  });
+  *out = std::move(rep);
+}
+
 void check_report_shard(const ReportOptions& ro, const Options& options) {
   if (options.work_dir.empty()) fail(Status::usage, "--shard and --shard-prepare need --work DIR, a directory every task shares");
   if (ro.shard_count > 0 && ro.shard_index >= ro.shard_count)
@@ -1259,6 +1292,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     const stream::MemoryPlan plan = stream::plan_memory(options);
     if (ro.output_dir.empty()) fail(Status::usage, "no output directory given (-o)");
     const std::vector<RunSpec> runs = resolve_runs(ro);
+    if (ro.ingest_count > 0) return run_report_ingest_range(ro, runs, options, plan, out);
     stream::Progress progress(options);
     // A task of a sharded report (stream/report_shard.h) ingests the originals under the work directory's
     // lock, taken before the directory is opened (as simplify's tasks do, stream/shard.h).
@@ -1267,13 +1301,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     std::unique_ptr<stream::ShardLock> shard_lock;
     if (sharded) shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
     stream::WorkDir work(options.work_dir);
-    if (options.check_disk_space) {
-      std::vector<std::string> originals;
-      for (const RunSpec& r : runs)
-        if (std::find(originals.begin(), originals.end(), absolute(r.original)) == originals.end())
-          originals.push_back(absolute(r.original));
-      stream::check_report_space(originals, work.path());
-    }
+    if (options.check_disk_space) stream::check_report_space(distinct_originals(runs), work.path());
     stream::make_output_dir(ro.output_dir);
     stream::remove_summary(ro.output_dir + "/report.json");
     if (ro.shard_count > 0 && !ro.shard_prepare) begin_report_task(ro);
@@ -1286,19 +1314,17 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     tbb::task_arena arena(static_cast<int>(plan.threads));
     arena.execute([&] {
       // One original at a time, each loaded once for every run that measures against it.
-      std::vector<std::string> originals, run_original;  // distinct originals; each run's, as absolute paths
-      for (const RunSpec& r : runs) {
-        run_original.push_back(absolute(r.original));
-        if (std::find(originals.begin(), originals.end(), run_original.back()) == originals.end())
-          originals.push_back(run_original.back());
-      }
+      const std::vector<std::string> originals = distinct_originals(runs);
+      std::vector<std::string> run_original;  // each run's, as an absolute path
+      for (const RunSpec& r : runs) run_original.push_back(absolute(r.original));
       for (size_t g = 0; g < originals.size(); ++g) {
         const std::string store_dir = work.subdir(g == 0 ? std::string("store") : "store-" + std::to_string(g));
         SceneInfo scene;
         bool reused = false;
         if (sharded && !shard_lock) shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
         const stream::StoreMeta meta =
-            stream::run_ingest_stage(originals[g], store_dir, plan, work, progress, &rep.stages, &scene, &reused);
+            stream::run_ingest_stage(originals[g], store_dir, plan, work, progress, &rep.stages, &scene, &reused,
+                                     sharded ? stream::ingest_ranges_dir(work, g) : std::string());
         shard_lock.reset();
         input_bytes += scene.file_bytes;
         if (ro.shard_prepare) continue;

@@ -349,6 +349,53 @@ TEST(ReportShard, AnyTaskCountGivesOneMachinesReport) {
   }
 }
 
+// Ingest by byte ranges for a report of two runs with different originals (a binary PLY and an OBJ): every
+// original's ranges go to their own segments, the first task joins them, and the report is one machine's.
+TEST(ReportShard, OriginalsIngestedByByteRangesGiveOneMachinesReport) {
+  TempDir dir;
+  const std::string room = room_levels(dir);
+  SimplifyOptions so;
+  so.output_dir = dir.file("table-lods");
+  so.levels = 2;
+  SimplifyReport sr;
+  ASSERT_TRUE(simplify(test::source_dir() + "/tests/data/small/bedsideTable2.obj", so, shared_work(dir), &sr).ok());
+  ReportOptions ro = small_report(dir.file("one"));
+  ro.runs = {room, so.output_dir};
+  Report one;
+  const Result r1 = report(ro, shared_work(dir), &one);
+  ASSERT_TRUE(r1.ok()) << r1.message;
+  // A fresh work directory, so that the tasks' stores come from the ranges.
+  const std::string work = dir.file("ranges-work");
+  Options o;
+  o.work_dir = work;
+  o.check_disk_space = false;
+  ReportOptions rn = ro;
+  rn.output_dir = dir.file("sharded");
+  for (unsigned i = 0; i < 3; ++i) {
+    rn.ingest_index = i, rn.ingest_count = 3;
+    Report rr;
+    const Result r = report(rn, o, &rr);
+    ASSERT_TRUE(r.ok()) << r.message;
+    ASSERT_EQ(rr.stages.size(), 1u);
+    EXPECT_EQ(rr.stages[0].name, "ingest-range");
+  }
+  for (const char* d : {"/ingest-ranges/range-2-of-3.seg", "/ingest-ranges-1/range-2-of-3.seg"})
+    EXPECT_TRUE(std::filesystem::exists(work + d)) << d;
+  EXPECT_FALSE(std::filesystem::exists(work + "/store/store.json")) << "a range task builds no store";
+  rn.ingest_count = 0;
+  Report merged;
+  const Result r = run_report_tasks(rn, work, 3, {0, 1, 2}, true, &merged);
+  ASSERT_TRUE(r.ok()) << r.message;
+  EXPECT_EQ(report_files(rn.output_dir), report_files(dir.file("one")));
+  EXPECT_FALSE(std::filesystem::exists(work + "/ingest-ranges/range-2-of-3.seg")) << "the join removes the segments";
+  // A range task needs the shared directory and an index below the count.
+  rn.ingest_index = 3, rn.ingest_count = 3;
+  Report bad;
+  EXPECT_EQ(report(rn, o, &bad).status, Status::usage);
+  rn.ingest_index = 0;
+  EXPECT_EQ(report(rn, Options{}, &bad).status, Status::usage);
+}
+
 // Levels given as files without switching distances: their distance comes from the whole Hausdorff max,
 // which every task measures (keeping its share); a small budget cuts the original into several chunks.
 TEST(ReportShard, LevelsWithoutDistancesAndChunksGiveOneMachinesReport) {

@@ -413,6 +413,9 @@ int main(int argc, char** argv) {
   report_cmd->add_flag("--shard-from-env", report_shard_from_env,
                        "--shard from SLURM_ARRAY_TASK_ID/COUNT, JOB_COMPLETION_INDEX or AWS_BATCH_JOB_ARRAY_INDEX (count: LODSTREAM_SHARD_COUNT)");
   report_cmd->add_flag("--shard-prepare", ro.shard_prepare, "Ingest the originals into --work DIR for the tasks, then stop");
+  std::string report_shard_ingest_text;
+  report_cmd->add_option("--shard-ingest", report_shard_ingest_text,
+                         "Parse byte range I of N of every original into --work DIR, then stop (--shard-prepare joins the N ranges)");
 
   CLI::App* grid_cmd = app.add_subcommand("grid", "Fit polygons to a height grid by adaptive subdivision (DeHaemer 1989)");
   lodstream::GridOptions go;
@@ -632,7 +635,14 @@ int main(int argc, char** argv) {
         return static_cast<int>(lodstream::Status::usage);
       }
     }
-    const bool sharded = ro.shard_count > 0 || ro.shard_prepare;
+    if (!report_shard_ingest_text.empty()) {
+      std::string error;
+      if (!parse_shard(report_shard_ingest_text, false, &ro.ingest_index, &ro.ingest_count, &error)) {
+        std::fprintf(stderr, "lodstream: --shard-ingest%s\n", error.substr(error.find(':')).c_str());
+        return static_cast<int>(lodstream::Status::usage);
+      }
+    }
+    const bool sharded = ro.shard_count > 0 || ro.shard_prepare || ro.ingest_count > 0;
     lodstream::Report report;
     const lodstream::Result r = lodstream::report(ro, options, &report);
     return finish(r, progress, json && !sharded ? ro.output_dir + "/report.json" : std::string(), [&] {
@@ -640,7 +650,10 @@ int main(int argc, char** argv) {
       for (const auto& s : report.stages)
         std::printf("stage        %-15s %8.3f s  peak %s%s\n", s.name.c_str(), s.seconds, human_bytes(s.peak_rss_bytes).c_str(),
                     s.reused ? "  (reused from work directory)" : "");
-      if (ro.shard_prepare) std::printf("prepared     %s for the tasks\n", options.work_dir.c_str());
+      if (ro.ingest_count > 0)
+        std::printf("range        %u of %u of the originals parsed into %s/ingest-ranges* (then: --shard-prepare joins them)\n",
+                    ro.ingest_index, ro.ingest_count, options.work_dir.c_str());
+      else if (ro.shard_prepare) std::printf("prepared     %s for the tasks\n", options.work_dir.c_str());
       else std::printf("task         %u of %u: shares in %s/shards/report (then: lodstream merge %s)\n", ro.shard_index, ro.shard_count,
                        ro.output_dir.c_str(), ro.output_dir.c_str());
     });

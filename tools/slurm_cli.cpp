@@ -1,9 +1,9 @@
 // `lodstream slurm`: runs a sharded simplify (stream/shard.h) or report (stream/report_shard.h) on a Slurm
 // cluster. It only writes sbatch
-// scripts (readable, resubmittable by hand) under OUT/slurm/ and submits them with sbatch: for simplify an
-// ingest array job of N range tasks (each parses an N-th of the input's bytes, stream/ingest_range.h),
-// then a prepare job (the shared stages, joining the ranges into the scene store: a report's is the ingest
-// of its originals), an array job of N tasks after it (--dependency=afterok), and the merge after the
+// scripts (readable, resubmittable by hand) under OUT/slurm/ and submits them with sbatch: an ingest
+// array job of N range tasks (each parses an N-th of the input's bytes, a report's of every original's,
+// stream/ingest_range.h), then a prepare job (the shared stages, joining the ranges into the scene store:
+// a report's is the join alone), an array job of N tasks after it (--dependency=afterok), and the merge after the
 // array. The scheduler is Slurm's; lodstream adds none of its own. Each script records its command's exit
 // status in OUT/slurm/status/NAME.rc (and the command's pid in NAME.pid while it runs), which is how
 // --wait tells a failed task's one-machine exit code from the merge's.
@@ -125,7 +125,7 @@ struct Submission {
   std::string slurm_dir;
   unsigned shards = 0;
   std::vector<std::string> sbatch_args;
-  bool ranges = false;  // the chain starts with the ingest array (ingest.sbatch): simplify's
+  bool ranges = false;  // the chain starts with the ingest array (ingest.sbatch); false: a submission of older code
   std::string ingest, prepare, tasks, merge;  // job ids
 };
 
@@ -271,7 +271,7 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
   s.slurm_dir = out + "/slurm";
   s.shards = shards;
   s.sbatch_args = sbatch_args;
-  s.ranges = command == "simplify";
+  s.ranges = true;  // both commands ingest by byte ranges first
   work = work.empty() ? s.slurm_dir + "/work" : absolute(work);
   for (const char* d : {"", "/logs", "/status"}) fs::create_directories(s.slurm_dir + d, ec);
   if (ec) {

@@ -297,6 +297,10 @@ struct ReportOptions {
   // merge_report() then writes report.json, the CSVs and report.html. shard_prepare: ingest only.
   unsigned shard_index = 0, shard_count = 0;
   bool shard_prepare = false;
+  // With ingest_count N > 0: only parse byte range ingest_index of N of every original into the work
+  // directory (WORK/ingest-ranges, WORK/ingest-ranges-G for the G-th further original), then stop; the
+  // prepare job (or the first task) joins them into the scene stores, as simplify's (SimplifyOptions).
+  unsigned ingest_index = 0, ingest_count = 0;
 };
 
 // Distribution of an error over pixels or samples. Units depend on the field.
