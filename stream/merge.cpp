@@ -78,8 +78,7 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
         ordered_json& lj = m["levels"][l];
         stream::LevelFiles level(work.scratch("level" + std::to_string(l)), lj.at("cells").get<uint64_t>(), materials, colors);
         uint64_t triangles = 0, edges = 0, points = 0, on_triangles = 0, covered = 0;
-        for (unsigned run = 0; run < count; ++run) {
-          const unsigned t = stream::shard_task_of_run(run, count, l);
+        for (unsigned t = 0; t < count; ++t) {  // task t's run of the level: region order (stream/shard.h)
           const ordered_json& tl = tasks[t].at("manifest").at("levels").at(l);
           triangles += tl.at("triangles").get<uint64_t>(), edges += tl.at("edges").get<uint64_t>();
           points += tl.at("points").get<uint64_t>();
@@ -94,7 +93,7 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
                          p.part.mesh);
             level.add(p.part);
           }
-          progress.report("merge", (l * count + run + 1.0) / static_cast<double>(levels * count));
+          progress.report("merge", (l * count + t + 1.0) / static_cast<double>(levels * count));
         }
         level.close();
         const std::vector<std::string> comments = mi.at("comments").at(l);

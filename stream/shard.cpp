@@ -75,11 +75,28 @@ std::pair<uint32_t, uint32_t> shard_regions(const LevelCut& cut, unsigned index,
   return {first, end};
 }
 
-unsigned shard_run(unsigned task, unsigned count, size_t level) {
-  return static_cast<unsigned>((task + count - level % count) % count);
+std::vector<uint64_t> shard_bounds(const LevelCut& finest, unsigned count) {
+  std::vector<uint64_t> bounds(count + 1, UINT64_MAX);
+  bounds[0] = 0;
+  const uint32_t n = static_cast<uint32_t>(finest.regions.size());
+  for (unsigned t = 1; t < count; ++t) {
+    const uint32_t first = shard_regions(finest, t, count).first;
+    if (first < n) bounds[t] = core::region_code(finest.regions[first]);
+  }
+  // Invariant: non-decreasing, since a cut's regions are disjoint nodes in region order (their codes
+  // strictly increase) and the first region of task t's run does not decrease with t.
+  return bounds;
 }
-unsigned shard_task_of_run(unsigned run, unsigned count, size_t level) {
-  return static_cast<unsigned>((run + level) % count);
+
+std::pair<uint32_t, uint32_t> shard_regions_in(const LevelCut& cut, const std::vector<uint64_t>& bounds, unsigned index) {
+  auto below = [&](uint64_t code) {
+    return static_cast<uint32_t>(std::partition_point(cut.regions.begin(), cut.regions.end(),
+                                                      [&](const core::RegionKey& k) { return core::region_code(k) < code; }) -
+                                 cut.regions.begin());
+  };
+  const uint32_t first = index == 0 ? 0 : below(bounds[index]);
+  const uint32_t end = index + 2 >= bounds.size() ? static_cast<uint32_t>(cut.regions.size()) : below(bounds[index + 1]);
+  return {first, std::max(first, end)};
 }
 
 std::string shards_dir(const std::string& output_dir) { return output_dir + "/shards"; }
@@ -256,8 +273,9 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
       cut_levels(in.prefix, in.cells, cube, in.tile_triangles / 2, in.options.representative, meta.single_precision, sides);
   std::vector<std::pair<uint32_t, uint32_t>> runs(n);
   std::vector<uint64_t> share(n, 0), largest(n, 0);
+  const std::vector<uint64_t> code_bounds = n == 0 ? std::vector<uint64_t>() : shard_bounds(cuts[0], count);  // level 0: the finest
   for (size_t l = 0; l < n; ++l) {
-    runs[l] = shard_regions(cuts[l], shard_run(index, count, l), count);
+    runs[l] = shard_regions_in(cuts[l], code_bounds, index);
     for (uint32_t r = runs[l].first; r < runs[l].second; ++r)
       share[l] += cuts[l].cells[r], largest[l] = std::max(largest[l], cuts[l].cells[r]);
   }

@@ -10,9 +10,10 @@
 //   `--shard-prepare` runs them alone (a scheduler's first job). They do not scale with N: they are what
 //   one machine runs before its emit stage, plus the representatives (which one machine's emit sums in
 //   its own passes unless a level is batched).
-// - A task's share: in every level, one contiguous run of regions (region order: octree Morton order, so
-//   whole subtrees but at its two ends) holding an N-th of the level's cells (shard_regions; which run,
-//   shard_run). It emits them as the batched emit does (each batch with its halo, representatives
+// - A task's share: one run of the Morton codes (shard_bounds), the codes of the finest level's regions
+//   that hold an N-th of its cells (shard_regions); in every level, the regions whose code falls in it, a
+//   contiguous run (region order is octree Morton order, so whole subtrees but at its two ends). So a
+//   task's levels cover about the same place, and its passes read about the same blocks. It emits them as the batched emit does (each batch with its halo, representatives
 //   read from the work directory), which gives every part the bytes it has in one machine's run
 //   (stream/emit_stage.h), and writes the parts, in region order, to OUTDIR/shards/task-I-lodL.parts;
 //   then OUTDIR/shards/task-I.json (last: its presence means the task is complete) with the manifest as
@@ -65,11 +66,16 @@ class ShardLock {
 // the cut; a run may be empty.
 std::pair<uint32_t, uint32_t> shard_regions(const LevelCut& cut, unsigned index, unsigned count);
 
-// Which run of a level a task emits: run k of level l is task (k + l) mod N's, so that the coarse levels'
-// few regions (each about as costly as the input: every input primitive maps to them) go to different
-// tasks rather than all to task 0. The merge reads a level's runs in run order, so region order.
-unsigned shard_run(unsigned task, unsigned count, size_t level);
-unsigned shard_task_of_run(unsigned run, unsigned count, size_t level);
+// The tasks' runs of Morton codes: task t's is [bounds[t], bounds[t + 1]) (count + 1 bounds, from 0 to
+// UINT64_MAX), cut at the first region of each task's run of `finest` (shard_regions). Why one cut for
+// every level: a task's passes read only the blocks near its regions (block_bounds.h), so its cost is the
+// place its regions cover; with one run per level cut independently (or, as before the block bounds, run
+// k of level l given to task (k + l) mod N to spread the coarse levels) a task's levels lay all over the
+// scene and each of its passes read most of the input.
+std::vector<uint64_t> shard_bounds(const LevelCut& finest, unsigned count);
+// The regions [first, end) of a level's cut whose region_code lies in task `index`'s run of `bounds`: the
+// tasks' runs are disjoint and cover the cut, in task order (the merge reads them so: region order).
+std::pair<uint32_t, uint32_t> shard_regions_in(const LevelCut& cut, const std::vector<uint64_t>& bounds, unsigned index);
 
 std::string shards_dir(const std::string& output_dir);
 std::string shard_parts_path(const std::string& output_dir, unsigned index, size_t level);

@@ -17,6 +17,7 @@
 
 #include "lodstream/lodstream.h"
 #include "cli_harness.h"
+#include "core/octree_regions.h"
 #include "stream/block_bounds.h"
 #include "stream/shard.h"
 #include "test_util.h"
@@ -183,6 +184,48 @@ TEST(Shard, TaskRangesCoverEveryRegionOnce) {
   // Balanced by cells: a region goes to the task whose share holds the cells before it (55 cells, 2 tasks:
   // the 30-cell region has 14 before it, in the first half).
   EXPECT_EQ(stream::shard_regions(cut, 0, 2), (std::pair<uint32_t, uint32_t>{0, 6}));
+}
+
+// Every level's runs follow the finest level's Morton cut (shard_bounds): they cover each level's regions
+// once in task order, the finest level's are its own shard_regions, and a coarser region goes to the task
+// whose run of codes holds its first code.
+TEST(Shard, LevelsShareTheFinestLevelsRunsOfCodes) {
+  // The finest level: the 64 depth-2 nodes in region order, all but a few holding cells; a coarser level:
+  // the 8 depth-1 nodes.
+  auto morton_sorted = [](unsigned depth) {
+    std::vector<core::RegionKey> keys;
+    const uint32_t side = 1u << depth;
+    for (uint32_t z = 0; z < side; ++z)
+      for (uint32_t y = 0; y < side; ++y)
+        for (uint32_t x = 0; x < side; ++x) keys.push_back({static_cast<uint8_t>(depth), x, y, z});
+    std::sort(keys.begin(), keys.end(), core::region_before);
+    return keys;
+  };
+  stream::LevelCut fine, coarse;
+  fine.regions = morton_sorted(2);
+  for (size_t i = 0; i < fine.regions.size(); ++i) fine.cells.push_back(i % 5 == 3 ? 0 : 1 + i % 7);
+  coarse.regions = morton_sorted(1);
+  coarse.cells.assign(coarse.regions.size(), 3);
+  for (unsigned n : {1u, 2u, 3u, 8u, 70u}) {
+    const std::vector<uint64_t> bounds = stream::shard_bounds(fine, n);
+    ASSERT_EQ(bounds.size(), n + 1u);
+    EXPECT_TRUE(std::is_sorted(bounds.begin(), bounds.end())) << n;
+    for (const stream::LevelCut* cut : {&fine, &coarse}) {
+      uint32_t next = 0;
+      for (unsigned t = 0; t < n; ++t) {
+        const auto [first, end] = stream::shard_regions_in(*cut, bounds, t);
+        EXPECT_EQ(first, next) << n << " tasks, task " << t;
+        EXPECT_LE(first, end);
+        for (uint32_t r = first; r < end; ++r) {
+          EXPECT_GE(core::region_code(cut->regions[r]), bounds[t]);
+          if (t + 1 < n) EXPECT_LT(core::region_code(cut->regions[r]), bounds[t + 1]);
+        }
+        if (cut == &fine) EXPECT_EQ(std::make_pair(first, end), stream::shard_regions(fine, t, n)) << n << " tasks, task " << t;
+        next = end;
+      }
+      EXPECT_EQ(next, cut->regions.size()) << n << " tasks";
+    }
+  }
 }
 
 TEST(Shard, OptionsAndEnvironment) {

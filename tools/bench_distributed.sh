@@ -86,7 +86,7 @@ if [ $slurm -eq 1 ]; then
     "$out/one/manifest.json" | tee -a "$out/bench.txt"
   rm -rf "$work" "$out/sharded"
   # The shared directories' size, sampled while the jobs run.
-  ( while :; do du -sb "$work" "$out/sharded" 2>/dev/null | awk '{s += $1} END {printf "%d\n", s}' || true; sleep 5; done ) >"$logs/shared-bytes.txt" &
+  ( while :; do du -sb "$work" "$out/sharded" 2>/dev/null | awk '{s += $1} END {printf "%.0f\n", s}' || true; sleep 5; done ) >"$logs/shared-bytes.txt" &
   sampler=$!
   timed slurm "$bin" slurm simplify "$input" -o "$out/sharded" --shards "$shards" --work "$work" --wait --no-space-check "${opts[@]}"
   kill $sampler 2>/dev/null || true
