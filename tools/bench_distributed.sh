@@ -100,7 +100,8 @@ for line in open(os.path.join(out, "bench.txt")):
 print("wall: one machine %.1f s, %d tasks through Slurm %.1f s: %.2fx" % (walls["one"], n, walls["slurm"], walls["slurm"] / walls["one"]))
 logs = os.path.join(out, "sharded", "slurm", "logs")
 for name in sorted(os.listdir(logs)):
-    peaks = [float(m) for m in re.findall(r"peak ([0-9.]+) MiB", open(os.path.join(logs, name)).read())]
+    unit = {"B": 2**-20, "KiB": 2**-10, "MiB": 1, "GiB": 2**10}
+    peaks = [float(v) * unit[u] for v, u in re.findall(r"peak ([0-9.]+) (B|KiB|MiB|GiB)\b", open(os.path.join(logs, name)).read())]
     stages = re.findall(r"^stage\s+(\S+)\s+([0-9.]+) s", open(os.path.join(logs, name)).read(), re.M)
     print("  job %-14s peak %7.1f MiB  %s" % (name[:-4], max(peaks, default=0), ", ".join("%s %s s" % s for s in stages)))
 m = json.load(open(os.path.join(out, "sharded", "manifest.json")))
