@@ -151,7 +151,7 @@ void write_representative_range(const std::string& prefix, size_t level, uint64_
 void write_representatives(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
                            const std::string& prefix, size_t level, uint64_t cells, double cell_size, uint64_t records,
                            const core::ClusterOptions& cluster, Representative representative, uint64_t range_cells,
-                           Progress& progress, EmitScratch& scratch) {
+                           Progress& progress, EmitScratch& scratch, bool vertex_cells) {
   std::filesystem::remove(representatives_path(prefix, level));
   if (representative != Representative::quadric) {
     write_representative_range(prefix, level, cells, 0, cells, {}, representative, cluster, cell_size, meta.single_precision);
@@ -160,6 +160,7 @@ void write_representatives(const std::string& store_dir, const StoreMeta& meta, 
   EmitOptions options;
   options.representative = representative;
   options.representatives_only = true;
+  options.write_vertex_cells = vertex_cells;
   range_cells = std::max<uint64_t>(range_cells, 1);
   for (uint64_t first = 0; first < cells; first += range_cells) {
     EmitLevel l;

@@ -74,11 +74,12 @@ std::string representatives_path(const std::string& prefix, size_t level);
 // input triangle touching the cell (summed per fixed store block in primitive order, blocks merged in
 // order, as the emit stage does), minimised around the cell's mean and clamped into its box. Quadrics are
 // summed for ranges of cells of at most `range_cells` cells, one pass over the triangles each (emit_levels
-// with EmitOptions::representatives_only, which calls write_representative_range).
+// with EmitOptions::representatives_only, which calls write_representative_range). `vertex_cells`: also
+// the level's cells by vertex (EmitOptions::write_vertex_cells), for quadric representatives.
 void write_representatives(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
                            const std::string& prefix, size_t level, uint64_t cells, double cell_size,
                            uint64_t records, const core::ClusterOptions& cluster, Representative representative,
-                           uint64_t range_cells, Progress& progress, EmitScratch& scratch);
+                           uint64_t range_cells, Progress& progress, EmitScratch& scratch, bool vertex_cells = false);
 
 // Writes the representatives of cells [first, first + count) of the level; quadrics: one per cell, or empty.
 void write_representative_range(const std::string& prefix, size_t level, uint64_t cells, uint64_t first, uint64_t count,

@@ -9,6 +9,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <memory>
 #include <vector>
 
@@ -29,6 +30,7 @@
 #include "stream/flat_map.h"
 #include "stream/position_gather.h"
 #include "stream/store_access.h"
+#include "stream/vertex_cells.h"
 #include "stream/weld_file.h"
 
 namespace lodstream::stream {
@@ -848,17 +850,23 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // weight index is in grade order); the threads split them by vertex range, each range a whole number of
   // words so that no two threads write one word, and each thread reads every record (sequential, cheap).
   PackedMap map;
+  // Or, for a task's batched levels, each level's cells by vertex from its file (vertex_cells.h).
+  bool by_file = options.vertex_cells && !routes && !options.count_only && !options.representatives_only;
+  for (const LevelState& L : levels) by_file = by_file && L.in.batched;
+  std::vector<std::unique_ptr<VertexCells>> vertex_cells;
+  if (by_file)
+    for (const LevelState& L : levels) vertex_cells.push_back(std::make_unique<VertexCells>(vertex_cells_path(prefix, L.in.level), meta.vertices));
   // The batches of a level (its representatives' passes and its routing) all use the one map: built for
   // the first, kept in the scratch for the others (map_key names what it was built from, files' sizes and
   // times included).
   const bool lone_batched = nl == 1 && (levels[0].in.batched || routes || options.representatives_only);
   const std::string map_key =
       lone_batched ? packed_map_key(prefix, canonical_path, levels[0].in, meta.vertices, records) : std::string();
-  const bool reuse = !map_key.empty() && emit_scratch.map_key == map_key;
-  emit_scratch.map_key.clear();
+  const bool reuse = !by_file && !map_key.empty() && emit_scratch.map_key == map_key;
+  if (!by_file) emit_scratch.map_key.clear();
   if (reuse) map.attach(emit_scratch.map, bits);
-  else map.reset(emit_scratch.map, meta.vertices, bits);
-  if (!reuse) {
+  else if (!by_file) map.reset(emit_scratch.map, meta.vertices, bits);
+  if (!reuse && !by_file) {
     io::MappedFile order(order_path(prefix));
     if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
     const size_t parts = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
@@ -892,10 +900,18 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     if (!canonical_path.empty())
       WeldFile(canonical_path, meta.vertices).for_each_welded([&](uint64_t v, uint32_t canon) { map.set(v, map.get(canon)); });
   }
-  emit_scratch.map_key = map_key;
+  if (!by_file) emit_scratch.map_key = map_key;
+  if (options.write_vertex_cells && options.representatives_only)
+    for (const LevelState& L : levels)
+      if (!reuse || !std::filesystem::exists(vertex_cells_path(prefix, L.in.level)))
+        write_vertex_cells_by(prefix, L.in.level, meta.vertices, [&](uint64_t v) {
+          const uint64_t c = (map.get(v) >> L.shift) & L.mask;
+          return c == L.mask ? kNoCell : static_cast<uint32_t>(c);
+        });
 
   StorePositions positions(store_dir, meta);
   positions.acquire();
+  for (auto& vc : vertex_cells) vc->acquire();
   const std::string column_path[3] = {store_dir + "/triangles.u32", store_dir + "/lines.u32", store_dir + "/points.u32"};
   const uint64_t column_count[3] = {meta.triangles, meta.lines, meta.points};
   std::unique_ptr<io::MappedFile> columns[3];
@@ -931,7 +947,16 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // A vertex's record; every level's field is all ones exactly when the vertex has no cell, so the first
   // level's field tells.
   auto record_of = [&](uint32_t v) {
-    const uint64_t r = map.get(v);
+    uint64_t r = 0;
+    if (by_file) {
+      for (size_t l = 0; l < nl; ++l) {
+        const uint32_t c = vertex_cells[l]->get(v);
+        if (c != kNoCell && c >= levels[l].in.cells) fail(Status::io_error, vertex_cells[l]->path() + ": cell id out of range");
+        r |= (c == kNoCell ? levels[l].mask : uint64_t{c}) << levels[l].shift;
+      }
+    } else {
+      r = map.get(v);
+    }
     if ((r & levels[0].mask) == levels[0].mask) fail(Status::internal, "emit: vertex " + std::to_string(v) + " has no cell");
     return r;
   };
@@ -976,6 +1001,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       // the 1 B-triangle city (4.31 GiB at --memory 4G) before they were dropped here too.
       positions.release();
       positions.acquire();
+      for (auto& vc : vertex_cells) vc->release(), vc->acquire();
       if (weld) weld->release(), weld->acquire();
       if (merged > 0) progress.report(stage, static_cast<double>(merged) / static_cast<double>(blocks.size()));
     }

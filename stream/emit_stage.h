@@ -80,6 +80,13 @@ struct EmitOptions {
   // Batched levels only (a sharded task's, stream/shard.h): read only the blocks whose box comes within a
   // cell size of the batch's regions, then of its halo cells (stream/block_bounds.h). The same bytes.
   const BlockBounds* block_bounds = nullptr;
+  // Batched levels only: look every vertex's cells up in the levels' vertex-cells files (written by the
+  // shared stages, stream/vertex_cells.h) instead of building the group's packed map from the cluster
+  // maps, which decodes every record of the scene. The same bytes.
+  bool vertex_cells = false;
+  // representatives_only: also write each level's cells by vertex (vertex_cells.h) from the group's packed
+  // map, when it builds one (a lone level's later ranges reuse it: the file is written with the first).
+  bool write_vertex_cells = false;
   // When set, the primitives the passes read are added to it (the blocks' sizes, pass by pass).
   std::atomic<uint64_t>* primitives_read = nullptr;
 };

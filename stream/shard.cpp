@@ -18,6 +18,7 @@
 #include "io/file_writer.h"
 #include "stream/kill_point.h"
 #include "stream/tiles.h"
+#include "stream/vertex_cells.h"
 
 namespace lodstream::stream {
 
@@ -193,9 +194,12 @@ bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::order
       reused = false;
     }
   }
-  for (size_t l = 0; reused && l < in.cells.size(); ++l) reused = std::filesystem::exists(representatives_path(in.prefix, l), ec);
+  for (size_t l = 0; reused && l < in.cells.size(); ++l)
+    reused = std::filesystem::exists(representatives_path(in.prefix, l), ec) &&
+             std::filesystem::exists(vertex_cells_path(in.prefix, l), ec);
   if (reused) return true;
   std::filesystem::remove(stamp, ec);
+  for (size_t l = 0; l < in.cells.size(); ++l) std::filesystem::remove(vertex_cells_path(in.prefix, l), ec);
   const StoreMeta& meta = *in.meta;
   const size_t n = in.cells.size();
   // Quadric representatives: the levels whose quadrics fit together are summed in one pass over the input
@@ -223,7 +227,7 @@ bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::order
         group.push_back(g);
       }
       EmitOptions options = in.options;
-      options.representatives_only = true;
+      options.representatives_only = true, options.write_vertex_cells = true;
       emit_levels(in.store_dir, meta, in.canonical, in.prefix, group, in.records, in.cluster, options, progress, scratch,
                   [](size_t, RegionPart&) {});
     } else {
@@ -231,7 +235,10 @@ bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::order
       const uint64_t held = emit_map_bytes(meta.vertices, emit_bits(in.cells[first])) + kLevelBytesPerCell * in.cells[first] + in_flight;
       const uint64_t range = in.budget > held ? (in.budget - held) / kQuadricBytes : 1;
       write_representatives(in.store_dir, meta, in.canonical, in.prefix, first, in.cells[first], in.sizes[first], in.records,
-                            in.cluster, in.options.representative, range, progress, scratch);
+                            in.cluster, in.options.representative, range, progress, scratch, true);
+      // Center and mean representatives make no pass over the input, hence no packed map to write from.
+      if (in.options.representative != Representative::quadric)
+        write_vertex_cells(in.prefix, in.canonical, meta.vertices, in.records, first, in.cells[first], in.budget, progress);
     }
     first = end;
   }
@@ -281,7 +288,8 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   }
   // Memory of a batched level (as plan_emit_level counts it): pass A's tables for the batch's cells and its
   // halo (half as many again), without quadrics (representatives are read), its per-cell tables and its
-  // share of the blocks in flight.
+  // share of the blocks in flight. No packed cluster map: cells are looked up in the vertex-cells files,
+  // whose pages are dropped after every group of blocks (stream/vertex_cells.h).
   EmitOptions no_quadric = in.options;
   no_quadric.representative = Representative::center;
   const uint64_t per_cell = emit_level_bytes(1, 0, no_quadric) * 3 / 2;
@@ -291,7 +299,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   emit.corner_bytes = emit_corner_bytes(in.budget);
   const BlockBounds bounds = read_block_bounds(block_bounds_path(in.prefix), meta);
   std::atomic<uint64_t> read{0};
-  emit.block_bounds = &bounds, emit.primitives_read = &read;
+  emit.block_bounds = &bounds, emit.primitives_read = &read, emit.vertex_cells = true;
 
   std::vector<EmitCounts> counts(n);
   std::vector<std::unique_ptr<PartsWriter>> writers(n);
@@ -313,7 +321,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
       ++first;
       continue;
     }
-    const uint64_t alone = emit_map_bytes(meta.vertices, emit_bits(in.cells[first])) + level_bytes(first, largest[first]);
+    const uint64_t alone = level_bytes(first, largest[first]);
     if (alone > in.budget)
       fail(Status::usage, fmt::format("task {} of {}: emitting level {} ({} cells) region by region needs about {} MiB, "
                                       "more than --memory allows ({} MiB for the stage): raise --memory",
@@ -322,12 +330,12 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     unsigned bits = emit_bits(in.cells[first]);
     uint64_t bytes = level_bytes(first, share[first]);
     size_t end = first + 1;
-    if (emit_map_bytes(meta.vertices, bits) + bytes <= in.budget) {
+    if (bytes <= in.budget) {
       for (; end < n; ++end) {
         if (runs[end].first == runs[end].second) continue;
         const unsigned b = bits + emit_bits(in.cells[end]);
         const uint64_t w = bytes + level_bytes(end, share[end]);
-        if (b > 64 || emit_map_bytes(meta.vertices, b) + w > in.budget) break;
+        if (b > 64 || w > in.budget) break;
         group.push_back(end), bits = b, bytes = w;
       }
     }
@@ -335,9 +343,9 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     for (size_t l : group)
       region_of.push_back(load_region_of(in.prefix, l, in.cells[l], cube, cuts[l], in.options.representative, meta.single_precision));
     std::vector<std::pair<uint32_t, uint32_t>> batches;
-    if (group.size() == 1 && emit_map_bytes(meta.vertices, bits) + bytes > in.budget) {
+    if (group.size() == 1 && bytes > in.budget) {
       // The share alone is too large for one batch: consecutive regions while they fit.
-      const uint64_t room = in.budget - emit_map_bytes(meta.vertices, bits) - level_bytes(first, 0);
+      const uint64_t room = in.budget - level_bytes(first, 0);
       const uint64_t batch_cells = std::max<uint64_t>(1, room / per_cell);
       for (uint32_t r = runs[first].first; r < runs[first].second;) {
         uint64_t held = cuts[first].cells[r];

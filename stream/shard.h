@@ -3,8 +3,8 @@
 // directory, the same bytes as one machine's. The contract any engine can drive (Slurm job arrays,
 // Kubernetes Indexed Jobs, AWS Batch arrays): a task is given only I and N.
 //
-// - Shared stages (ingest, grade, labels, cluster, and every level's representatives written ahead,
-//   stream/emit_regions.h): whichever task comes first runs them, holding an exclusive lock on
+// - Shared stages (ingest, grade, labels, cluster, the store's block boxes (block_bounds.h), and every
+//   level's representatives written ahead (emit_regions.h) with its cells by vertex (vertex_cells.h)): whichever task comes first runs them, holding an exclusive lock on
 //   WORK/shard.lock (flock; taken before the work directory is opened, so that no task takes another's
 //   live scratch files for a dead process's); the others wait, then find their stamps and reuse them.
 //   `--shard-prepare` runs them alone (a scheduler's first job). They do not scale with N: they are what
@@ -152,9 +152,10 @@ struct ShardEmitInput {
   bool tiles = false;  // the run writes 3D Tiles: regions are cut with the tiles' side bounds, as one machine cuts them
 };
 
-// Writes every level's representatives to the work directory (the batched emit reads them), unless a
-// stamp there (shard-reps.json) says they were written for `key`. Quadrics of the levels that fit
-// together are summed in one pass over the input. Returns true when reused.
+// Writes every level's representatives and its cells by vertex (vertex_cells.h) to the work directory
+// (the tasks' emit reads both), unless a stamp there (shard-reps.json) says they were written for `key`.
+// Quadrics of the levels that fit together are summed in one pass over the input, whose packed map gives
+// the cells by vertex. Returns true when reused.
 bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress,
                                  EmitScratch& scratch);
 

@@ -20,6 +20,7 @@
 #include "core/octree_regions.h"
 #include "stream/block_bounds.h"
 #include "stream/shard.h"
+#include "stream/vertex_cells.h"
 #include "test_util.h"
 
 namespace lodstream {
@@ -134,6 +135,53 @@ TEST(Shard, TasksInBatchesUnderASmallBudgetGiveTheSameBytes) {
   const Result r = run_tasks(dir.file("small"), dir.file("work"), 2, {0, 1}, min_memory_bytes, true, &merged);
   ASSERT_TRUE(r.ok()) << r.message;
   EXPECT_EQ(outputs(dir.file("small")), outputs(dir.file("one")));
+}
+
+// The tasks look their vertices' cells up in the vertex-cells files (stream/vertex_cells.h). Under quadric
+// representatives the shared stages write them from the packed maps their representatives pass builds;
+// under the others, by decoding the cluster maps. Both writers give the same bytes (here with ranges of
+// 4096 vertices, so that welded vertices find their canonical vertex's cell in an earlier range), and
+// tasks under center representatives give one machine's bytes.
+TEST(Shard, VertexCellsFromEitherWriterAgree) {
+  TempDir dir;
+  const Options o = shared_work(dir);
+  SimplifyReport merged;
+  const Result r = run_tasks(dir.file("sharded"), dir.file("work"), 2, {0, 1}, 0, true, &merged);
+  ASSERT_TRUE(r.ok()) << r.message;
+  const std::string prefix = dir.file("work") + "/";
+  const uint64_t records = std::filesystem::file_size(prefix + "order.u32") / 4;
+  const std::string weld = std::filesystem::exists(prefix + "weld.map") ? prefix + "weld.map" : std::string();
+  EXPECT_FALSE(weld.empty()) << "the sample room has welded vertices";
+  stream::Progress progress{Options{}};
+  for (size_t l = 0; l < merged.levels.size(); ++l) {
+    SCOPED_TRACE("level " + std::to_string(l));
+    const std::string path = stream::vertex_cells_path(prefix, l);
+    const std::string from_map = slurp(path);
+    const uint64_t vertices = from_map.size() / 4;
+    ASSERT_GT(vertices, 3 * 4096u);
+    std::filesystem::remove(path);
+    stream::write_vertex_cells(prefix, weld, vertices, records, l, merged.levels[l].cells, 4 * 4096, progress);
+    EXPECT_TRUE(slurp(path) == from_map);
+  }
+
+  for (Representative rep : {Representative::center, Representative::mean}) {
+    SCOPED_TRACE(rep == Representative::center ? "center" : "mean");
+    TempDir d;
+    SimplifyOptions so = room_options(d.file("one"));
+    so.representative = rep;
+    SimplifyReport one;
+    ASSERT_TRUE(simplify(sample_room(), so, shared_work(d), &one).ok());
+    for (unsigned i = 0; i < 3; ++i) {
+      SimplifyOptions t = room_options(d.file("sharded"));
+      t.representative = rep, t.shard_index = i, t.shard_count = 3;
+      SimplifyReport task;
+      const Result tr = simplify(sample_room(), t, shared_work(d), &task);
+      ASSERT_TRUE(tr.ok()) << tr.message;
+    }
+    SimplifyReport m;
+    ASSERT_TRUE(merge(d.file("sharded"), Options{}, &m).ok());
+    EXPECT_EQ(outputs(d.file("sharded")), outputs(d.file("one")));
+  }
 }
 
 // Materials and colours travel through the tasks' parts and the merge: the KiCad board (a glTF scene of

@@ -1,0 +1,129 @@
+// Cluster maps by vertex (see vertex_cells.h).
+#include "stream/vertex_cells.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <vector>
+
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include "core/status.h"
+#include "stream/cell_map_file.h"
+#include "stream/cluster_stage.h"
+#include "stream/weld_file.h"
+
+namespace lodstream::stream {
+
+namespace {
+
+// A file written at offsets and read back, through pwrite and pread; removed unless committed.
+class RandomFile {
+ public:
+  explicit RandomFile(const std::string& path) : path_(path), partial_(path + ".partial") {
+    fd_ = ::open(partial_.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd_ < 0) fail(Status::io_error, partial_ + ": cannot create: " + std::strerror(errno));
+  }
+  ~RandomFile() {
+    if (fd_ >= 0) ::close(fd_), ::unlink(partial_.c_str());
+  }
+  void write(const void* data, uint64_t bytes, uint64_t offset) {
+    const char* p = static_cast<const char*>(data);
+    while (bytes > 0) {
+      const ssize_t n = ::pwrite(fd_, p, std::min<uint64_t>(bytes, 1 << 30), static_cast<off_t>(offset));
+      if (n <= 0) fail(Status::io_error, partial_ + ": cannot write: " + std::strerror(n < 0 ? errno : ENOSPC));
+      p += n, bytes -= static_cast<uint64_t>(n), offset += static_cast<uint64_t>(n);
+    }
+  }
+  uint32_t read_u32(uint64_t offset) const {
+    uint32_t x;
+    if (::pread(fd_, &x, 4, static_cast<off_t>(offset)) != 4) fail(Status::io_error, partial_ + ": cannot read back");
+    return x;
+  }
+  void commit() {
+    if (::close(fd_) != 0) {
+      fd_ = -1;
+      fail(Status::io_error, partial_ + ": cannot write: " + std::strerror(errno));
+    }
+    fd_ = -1;
+    std::error_code ec;
+    std::filesystem::rename(partial_, path_, ec);
+    if (ec) fail(Status::io_error, path_ + ": cannot write: " + ec.message());
+  }
+
+ private:
+  std::string path_, partial_;
+  int fd_ = -1;
+};
+
+}  // namespace
+
+std::string vertex_cells_path(const std::string& prefix, size_t level) {
+  return prefix + "vertex-cells-" + std::to_string(level) + ".u32";
+}
+
+void write_vertex_cells(const std::string& prefix, const std::string& canonical_path, uint64_t vertices, uint64_t records,
+                        size_t level, uint64_t cells, uint64_t budget, Progress& progress) {
+  const std::string path = vertex_cells_path(prefix, level);
+  io::MappedFile order(order_path(prefix));
+  if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
+  std::unique_ptr<WeldFile> weld;
+  if (!canonical_path.empty()) weld = std::make_unique<WeldFile>(canonical_path, vertices);
+  RandomFile out(path);
+  const uint64_t range = std::clamp<uint64_t>(budget / 4, 4096, std::max<uint64_t>(vertices, 1));
+  std::vector<uint32_t> buf;
+  constexpr uint64_t kChunk = 1 << 18;
+  for (uint64_t lo = 0; lo < vertices; lo += range) {
+    const uint64_t n = std::min(range, vertices - lo);
+    buf.assign(n, kNoCell);
+    // Pass 1: the weight index's vertices (canonical ones) in this range, from the map in weight order.
+    // The threads split the range into whole parts, each decoding the stream whole (it is read only in
+    // order) and writing the cells of its own vertices.
+    const size_t parts = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+    const uint64_t per_part = (n + parts - 1) / parts;
+    tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
+      const uint64_t plo = lo + part * per_part, pn = std::min(n, (part + 1) * per_part) - std::min(n, part * per_part);
+      if (pn == 0) return;
+      CellMapReader map(cells_path(prefix, level));
+      std::vector<uint32_t> cs(kChunk);
+      for (uint64_t first = 0; first < records; first += kChunk) {
+        progress.check();
+        const uint64_t k = std::min(kChunk, records - first);
+        const io::Window a = order.map(first * 4, (first + k) * 4);
+        const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
+        map.read(std::span<uint32_t>(cs.data(), k));
+        for (uint64_t i = 0; i < k; ++i) {
+          if (cs[i] >= cells) fail(Status::io_error, cells_path(prefix, level) + ": cell id out of range");
+          if (ids[i] >= vertices) fail(Status::io_error, order.path() + ": vertex id out of range");
+          if (ids[i] - plo < pn) buf[ids[i] - lo] = cs[i];  // unsigned: below plo wraps around
+        }
+      }
+      map.finish(records, cells);
+    });
+    // Pass 2: welded vertices take their canonical vertex's cell (canonical ids are smaller, and canonical:
+    // weld_file.h), from this range or, read back, from an earlier one.
+    if (weld)
+      weld->for_each_welded([&](uint64_t v, uint32_t c) {
+        if (v - lo < n) buf[v - lo] = c >= lo ? buf[c - lo] : out.read_u32(4 * uint64_t{c});
+      });
+    out.write(buf.data(), 4 * n, 4 * lo);
+    progress.report("vertex cells", static_cast<double>(lo + n) / static_cast<double>(vertices));
+  }
+  out.commit();
+}
+
+VertexCells::VertexCells(const std::string& path, uint64_t vertices) : file_(path), vertices_(vertices) {
+  if (file_.size() != 4 * vertices) fail(Status::io_error, path + ": size does not match the store (vertex cells)");
+}
+
+void VertexCells::acquire() {
+  if (!window_.data() && vertices_ > 0) window_ = file_.map(0, file_.size(), io::MappedFile::Access::random);
+}
+
+}  // namespace lodstream::stream

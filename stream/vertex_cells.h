@@ -1,0 +1,80 @@
+// Every level's cluster map by stored vertex, for sharded tasks (stream/shard.h).
+//
+// WORK/vertex-cells-L.u32 holds, for each stored vertex in id order, its cell in level L (a welded
+// vertex: its canonical vertex's cell), or kNoCell. The cluster stage's maps (stream/cell_map_file.h) are
+// bit streams in weight order, readable only whole, so a task that built its group's packed map from them
+// decoded every record of the scene whatever its share (3.1 and 2.9 s for the two groups of one task of
+// eight on the 193 M-triangle city: a third of the task). These files are written once by the shared
+// stages; a task looks up only the vertices its blocks reference, through mapped pages it drops as it
+// goes (as it does the positions').
+//
+// Invariant: vertex-cells-L.u32[v] is the cell that the packed map of the emit stage (emit_stage.cpp)
+// gives v for level L, so a task that reads these emits the same bytes.
+// Memory: writing holds one range of vertices at 4 bytes each, as many as `budget` allows (one range on
+// both cities: 388 MB for the 193 M-triangle one's 97 M vertices).
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "io/file_writer.h"
+#include "io/mapped_file.h"
+#include "stream/progress.h"
+
+namespace lodstream::stream {
+
+inline constexpr uint32_t kNoCell = UINT32_MAX;
+
+std::string vertex_cells_path(const std::string& prefix, size_t level);
+
+// Writes level `level`'s file from `cell_of(v)` (kNoCell: none) for every stored vertex, in id order: the
+// emit stage's packed map of a level, once built (the representatives pass of the shared stages builds
+// it anyway, so the file costs one sequential write). Throws Failure(io_error).
+template <class CellOf>
+void write_vertex_cells_by(const std::string& prefix, size_t level, uint64_t vertices, CellOf&& cell_of) {
+  io::FileWriter out(vertex_cells_path(prefix, level), 4 << 20);
+  std::vector<uint32_t> buf(1 << 20);
+  for (uint64_t first = 0; first < vertices; first += buf.size()) {
+    const uint64_t n = std::min<uint64_t>(buf.size(), vertices - first);
+    tbb::parallel_for(tbb::blocked_range<uint64_t>(0, n, 1 << 14), [&](const tbb::blocked_range<uint64_t>& r) {
+      for (uint64_t i = r.begin(); i < r.end(); ++i) buf[i] = cell_of(first + i);
+    });
+    out.write(buf.data(), 4 * n);
+  }
+  out.commit();
+}
+
+// Writes level `level`'s file from the cluster stage's files under `prefix` (its cell map and the weight
+// index's order) and the weld map at `canonical_path` (empty: none), for a level whose packed map is not
+// built (center and mean representatives: no pass over the input). Throws Failure(io_error) on a map
+// that does not match `records` records of `cells` cells.
+void write_vertex_cells(const std::string& prefix, const std::string& canonical_path, uint64_t vertices, uint64_t records,
+                        size_t level, uint64_t cells, uint64_t budget, Progress& progress);
+
+// One level's file, read by vertex.
+class VertexCells {
+ public:
+  // Throws Failure(io_error) when the file does not hold `vertices` cells.
+  VertexCells(const std::string& path, uint64_t vertices);
+  // Maps the file; get() is valid until release() (which drops its pages from the resident set).
+  void acquire();
+  void release() { window_.reset(); }
+  uint32_t get(uint64_t v) const {
+    uint32_t c;
+    __builtin_memcpy(&c, window_.data() + 4 * v, 4);
+    return c;
+  }
+  const std::string& path() const { return file_.path(); }
+
+ private:
+  io::MappedFile file_;
+  uint64_t vertices_;
+  io::Window window_;
+};
+
+}  // namespace lodstream::stream
