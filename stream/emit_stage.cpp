@@ -850,27 +850,50 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // weight index is in grade order); the threads split them by vertex range, each range a whole number of
   // words so that no two threads write one word, and each thread reads every record (sequential, cheap).
   PackedMap map;
-  // Or, for a task's batched levels, each level's cells by vertex from its file (vertex_cells.h).
+  // For a task's batched levels, the map is read from each level's cells by vertex (vertex_cells.h), in
+  // vertex order, instead of decoded from the weight-ordered streams: the same records.
   bool by_file = options.vertex_cells && !routes && !options.count_only && !options.representatives_only;
   for (const LevelState& L : levels) by_file = by_file && L.in.batched;
-  std::vector<std::unique_ptr<VertexCells>> vertex_cells;
-  if (by_file)
-    for (const LevelState& L : levels) vertex_cells.push_back(std::make_unique<VertexCells>(vertex_cells_path(prefix, L.in.level), meta.vertices));
   // The batches of a level (its representatives' passes and its routing) all use the one map: built for
   // the first, kept in the scratch for the others (map_key names what it was built from, files' sizes and
   // times included).
   const bool lone_batched = nl == 1 && (levels[0].in.batched || routes || options.representatives_only);
   const std::string map_key =
       lone_batched ? packed_map_key(prefix, canonical_path, levels[0].in, meta.vertices, records) : std::string();
-  const bool reuse = !by_file && !map_key.empty() && emit_scratch.map_key == map_key;
-  if (!by_file) emit_scratch.map_key.clear();
+  const bool reuse = !map_key.empty() && emit_scratch.map_key == map_key;
+  emit_scratch.map_key.clear();
   if (reuse) map.attach(emit_scratch.map, bits);
-  else if (!by_file) map.reset(emit_scratch.map, meta.vertices, bits);
-  if (!reuse && !by_file) {
+  else map.reset(emit_scratch.map, meta.vertices, bits);
+  const size_t parts = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  const uint64_t per_part = ((meta.vertices + parts - 1) / parts + 63) / 64 * 64;  // 64 records: whole words
+  if (!reuse && by_file) {
+    std::vector<std::unique_ptr<io::MappedFile>> files;
+    for (const LevelState& L : levels) {
+      files.push_back(std::make_unique<io::MappedFile>(vertex_cells_path(prefix, L.in.level)));
+      if (files.back()->size() != 4 * meta.vertices) fail(Status::io_error, files.back()->path() + ": size does not match the store");
+    }
+    tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
+      const uint64_t lo = std::min(meta.vertices, part * per_part), hi = std::min(meta.vertices, lo + per_part);
+      constexpr uint64_t kChunk = 1 << 18;
+      std::vector<io::Window> w(nl);
+      for (uint64_t first = lo; first < hi; first += kChunk) {
+        const uint64_t end = std::min(hi, first + kChunk);
+        for (size_t l = 0; l < nl; ++l) w[l] = files[l]->map(4 * first, 4 * end);
+        for (uint64_t v = first; v < end; ++v) {
+          uint64_t record = 0;
+          for (size_t l = 0; l < nl; ++l) {
+            uint32_t c;
+            std::memcpy(&c, w[l].data() + 4 * (v - first), 4);
+            if (c != kNoCell && c >= levels[l].in.cells) fail(Status::io_error, files[l]->path() + ": cell id out of range");
+            record |= (c == kNoCell ? levels[l].mask : uint64_t{c}) << levels[l].shift;
+          }
+          map.set(v, record);
+        }
+      }
+    });
+  } else if (!reuse) {
     io::MappedFile order(order_path(prefix));
     if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
-    const size_t parts = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
-    const uint64_t per_part = ((meta.vertices + parts - 1) / parts + 63) / 64 * 64;  // 64 records: whole words
     constexpr uint64_t kChunk = 1 << 18;
     tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
       const uint64_t lo = part * per_part, span = std::min(meta.vertices, lo + per_part) - std::min(meta.vertices, lo);
@@ -900,7 +923,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     if (!canonical_path.empty())
       WeldFile(canonical_path, meta.vertices).for_each_welded([&](uint64_t v, uint32_t canon) { map.set(v, map.get(canon)); });
   }
-  if (!by_file) emit_scratch.map_key = map_key;
+  emit_scratch.map_key = map_key;
   if (options.write_vertex_cells && options.representatives_only)
     for (const LevelState& L : levels)
       if (!reuse || !std::filesystem::exists(vertex_cells_path(prefix, L.in.level)))
@@ -911,7 +934,6 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
 
   StorePositions positions(store_dir, meta);
   positions.acquire();
-  for (auto& vc : vertex_cells) vc->acquire();
   const std::string column_path[3] = {store_dir + "/triangles.u32", store_dir + "/lines.u32", store_dir + "/points.u32"};
   const uint64_t column_count[3] = {meta.triangles, meta.lines, meta.points};
   std::unique_ptr<io::MappedFile> columns[3];
@@ -947,16 +969,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // A vertex's record; every level's field is all ones exactly when the vertex has no cell, so the first
   // level's field tells.
   auto record_of = [&](uint32_t v) {
-    uint64_t r = 0;
-    if (by_file) {
-      for (size_t l = 0; l < nl; ++l) {
-        const uint32_t c = vertex_cells[l]->get(v);
-        if (c != kNoCell && c >= levels[l].in.cells) fail(Status::io_error, vertex_cells[l]->path() + ": cell id out of range");
-        r |= (c == kNoCell ? levels[l].mask : uint64_t{c}) << levels[l].shift;
-      }
-    } else {
-      r = map.get(v);
-    }
+    const uint64_t r = map.get(v);
     if ((r & levels[0].mask) == levels[0].mask) fail(Status::internal, "emit: vertex " + std::to_string(v) + " has no cell");
     return r;
   };
@@ -1001,7 +1014,6 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       // the 1 B-triangle city (4.31 GiB at --memory 4G) before they were dropped here too.
       positions.release();
       positions.acquire();
-      for (auto& vc : vertex_cells) vc->release(), vc->acquire();
       if (weld) weld->release(), weld->acquire();
       if (merged > 0) progress.report(stage, static_cast<double>(merged) / static_cast<double>(blocks.size()));
     }

@@ -80,9 +80,9 @@ struct EmitOptions {
   // Batched levels only (a sharded task's, stream/shard.h): read only the blocks whose box comes within a
   // cell size of the batch's regions, then of its halo cells (stream/block_bounds.h). The same bytes.
   const BlockBounds* block_bounds = nullptr;
-  // Batched levels only: look every vertex's cells up in the levels' vertex-cells files (written by the
-  // shared stages, stream/vertex_cells.h) instead of building the group's packed map from the cluster
-  // maps, which decodes every record of the scene. The same bytes.
+  // Batched levels only: read the group's packed map from the levels' vertex-cells files (written by the
+  // shared stages, stream/vertex_cells.h) instead of decoding every record of the cluster maps. The same
+  // map.
   bool vertex_cells = false;
   // representatives_only: also write each level's cells by vertex (vertex_cells.h) from the group's packed
   // map, when it builds one (a lone level's later ranges reuse it: the file is written with the first).

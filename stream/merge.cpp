@@ -4,6 +4,7 @@
 // stage gives them, and are written by the same code: the same bytes. What merge does grows with the
 // output (the levels' parts are read once and written once), not with the input.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <filesystem>
 #include <map>
@@ -37,6 +38,28 @@ std::vector<ordered_json> read_tasks(const std::string& output_dir) {
                                      {"task parts", "task", "run", "other input, options or task count", "simplify"});
 }
 
+// The tasks in the order of their runs of level `level`'s regions (stream/shard.h shard_runs: coarse
+// levels are handed out from the last task down), which is the order one machine writes the regions in.
+// Tasks with no region of the level come anywhere (their parts are empty). Throws Failure(internal) unless
+// the runs cover the level's regions once.
+std::vector<unsigned> tasks_in_region_order(const std::vector<ordered_json>& tasks, size_t level, const std::string& output_dir) {
+  std::vector<std::array<uint32_t, 3>> runs;
+  for (const ordered_json& t : tasks) runs.push_back(t.at("manifest").at("regions").at(level).get<std::array<uint32_t, 3>>());
+  std::vector<unsigned> order(tasks.size());
+  for (unsigned t = 0; t < order.size(); ++t) order[t] = t;
+  std::stable_sort(order.begin(), order.end(), [&](unsigned a, unsigned b) { return runs[a][0] < runs[b][0]; });
+  uint32_t next = 0;
+  for (unsigned t : order)
+    if (runs[t][0] < runs[t][1]) {
+      if (runs[t][0] != next || runs[t][2] != runs[order[0]][2])
+        fail(Status::internal, output_dir + "/shards: the tasks' runs of level " + std::to_string(level) + "'s regions do not fit together");
+      next = runs[t][1];
+    }
+  if (next != runs[order[0]][2])
+    fail(Status::internal, output_dir + "/shards: the tasks' runs of level " + std::to_string(level) + " miss regions");
+  return order;
+}
+
 }  // namespace
 
 Result merge(const std::string& output_dir, const Options& options, SimplifyReport* out) {
@@ -47,7 +70,8 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
     const ordered_json& key = tasks[0].at("key");
     const ordered_json& mi = key.at("merge");
     ordered_json m = tasks[0].at("manifest");
-    m.erase("input_primitives_read");  // a task's own figure: it goes under "shards"
+    m.erase("input_primitives_read");  // a task's own figures: the first goes under "shards"
+    m.erase("regions");
     const size_t levels = m.at("levels").size();
     const unsigned count = static_cast<unsigned>(tasks.size());
     SimplifyReport report;
@@ -78,7 +102,8 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
         ordered_json& lj = m["levels"][l];
         stream::LevelFiles level(work.scratch("level" + std::to_string(l)), lj.at("cells").get<uint64_t>(), materials, colors);
         uint64_t triangles = 0, edges = 0, points = 0, on_triangles = 0, covered = 0;
-        for (unsigned t = 0; t < count; ++t) {  // task t's run of the level: region order (stream/shard.h)
+        unsigned merged = 0;
+        for (unsigned t : tasks_in_region_order(tasks, l, output_dir)) {
           const ordered_json& tl = tasks[t].at("manifest").at("levels").at(l);
           triangles += tl.at("triangles").get<uint64_t>(), edges += tl.at("edges").get<uint64_t>();
           points += tl.at("points").get<uint64_t>();
@@ -93,7 +118,7 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
                          p.part.mesh);
             level.add(p.part);
           }
-          progress.report("merge", (l * count + t + 1.0) / static_cast<double>(levels * count));
+          progress.report("merge", (l * count + ++merged + 0.0) / static_cast<double>(levels * count));
         }
         level.close();
         const std::vector<std::string> comments = mi.at("comments").at(l);

@@ -100,6 +100,27 @@ std::pair<uint32_t, uint32_t> shard_regions_in(const LevelCut& cut, const std::v
   return {first, std::max(first, end)};
 }
 
+std::vector<std::pair<uint32_t, uint32_t>> shard_runs(const std::vector<LevelCut>& cuts, unsigned index, unsigned count) {
+  const size_t n = cuts.size();
+  std::vector<std::pair<uint32_t, uint32_t>> runs(n);
+  if (n == 0) return runs;
+  const std::vector<uint64_t> bounds = shard_bounds(cuts[0], count);
+  uint64_t handed = 0;  // coarse regions of the coarser levels, handed out already
+  for (size_t l = n; l-- > 0;) {
+    const uint32_t regions = static_cast<uint32_t>(cuts[l].regions.size());
+    if (l == 0 || regions >= count) {
+      runs[l] = shard_regions_in(cuts[l], bounds, index);
+      continue;
+    }
+    // Region j goes to task N - 1 - (handed + j) mod N: the one j of this task, if the level has it.
+    const uint64_t j = ((count - 1 - index) + count - handed % count) % count;
+    runs[l] = j < regions ? std::pair<uint32_t, uint32_t>{static_cast<uint32_t>(j), static_cast<uint32_t>(j + 1)}
+                          : std::pair<uint32_t, uint32_t>{regions, regions};
+    handed += regions;
+  }
+  return runs;
+}
+
 std::string shards_dir(const std::string& output_dir) { return output_dir + "/shards"; }
 std::string shard_parts_path(const std::string& output_dir, unsigned index, size_t level) {
   return fmt::format("{}/task-{}-lod{}.parts", shards_dir(output_dir), index, level);
@@ -262,7 +283,8 @@ bool write_shard_bounds(const ShardEmitInput& in, const nlohmann::ordered_json& 
 }
 
 std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, unsigned count, const std::string& output_dir,
-                                   Progress& progress, EmitScratch& scratch, uint64_t* primitives_read) {
+                                   Progress& progress, EmitScratch& scratch, uint64_t* primitives_read,
+                                   std::vector<std::array<uint32_t, 3>>* runs_out) {
   const StoreMeta& meta = *in.meta;
   const size_t n = in.sizes.size();
   // This task's older summary no longer vouches for its parts; tasks of a run with more tasks are stale.
@@ -278,18 +300,20 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   const std::vector<core::SideBound> sides = in.tiles ? tile_side_bounds(in.sizes, in.cells, cube.side) : std::vector<core::SideBound>();
   const std::vector<LevelCut> cuts =
       cut_levels(in.prefix, in.cells, cube, in.tile_triangles / 2, in.options.representative, meta.single_precision, sides);
-  std::vector<std::pair<uint32_t, uint32_t>> runs(n);
+  const std::vector<std::pair<uint32_t, uint32_t>> runs = shard_runs(cuts, index, count);
+  if (runs_out) {
+    runs_out->clear();
+    for (size_t l = 0; l < n; ++l) runs_out->push_back({runs[l].first, runs[l].second, static_cast<uint32_t>(cuts[l].regions.size())});
+  }
   std::vector<uint64_t> share(n, 0), largest(n, 0);
-  const std::vector<uint64_t> code_bounds = n == 0 ? std::vector<uint64_t>() : shard_bounds(cuts[0], count);  // level 0: the finest
   for (size_t l = 0; l < n; ++l) {
-    runs[l] = shard_regions_in(cuts[l], code_bounds, index);
     for (uint32_t r = runs[l].first; r < runs[l].second; ++r)
       share[l] += cuts[l].cells[r], largest[l] = std::max(largest[l], cuts[l].cells[r]);
   }
   // Memory of a batched level (as plan_emit_level counts it): pass A's tables for the batch's cells and its
   // halo (half as many again), without quadrics (representatives are read), its per-cell tables and its
-  // share of the blocks in flight. No packed cluster map: cells are looked up in the vertex-cells files,
-  // whose pages are dropped after every group of blocks (stream/vertex_cells.h).
+  // share of the blocks in flight; and the group's packed cluster map (read from the vertex-cells files,
+  // stream/vertex_cells.h).
   EmitOptions no_quadric = in.options;
   no_quadric.representative = Representative::center;
   const uint64_t per_cell = emit_level_bytes(1, 0, no_quadric) * 3 / 2;
@@ -321,7 +345,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
       ++first;
       continue;
     }
-    const uint64_t alone = level_bytes(first, largest[first]);
+    const uint64_t alone = emit_map_bytes(meta.vertices, emit_bits(in.cells[first])) + level_bytes(first, largest[first]);
     if (alone > in.budget)
       fail(Status::usage, fmt::format("task {} of {}: emitting level {} ({} cells) region by region needs about {} MiB, "
                                       "more than --memory allows ({} MiB for the stage): raise --memory",
@@ -330,12 +354,12 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     unsigned bits = emit_bits(in.cells[first]);
     uint64_t bytes = level_bytes(first, share[first]);
     size_t end = first + 1;
-    if (bytes <= in.budget) {
+    if (emit_map_bytes(meta.vertices, bits) + bytes <= in.budget) {
       for (; end < n; ++end) {
         if (runs[end].first == runs[end].second) continue;
         const unsigned b = bits + emit_bits(in.cells[end]);
         const uint64_t w = bytes + level_bytes(end, share[end]);
-        if (b > 64 || w > in.budget) break;
+        if (b > 64 || emit_map_bytes(meta.vertices, b) + w > in.budget) break;
         group.push_back(end), bits = b, bytes = w;
       }
     }
@@ -343,9 +367,9 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     for (size_t l : group)
       region_of.push_back(load_region_of(in.prefix, l, in.cells[l], cube, cuts[l], in.options.representative, meta.single_precision));
     std::vector<std::pair<uint32_t, uint32_t>> batches;
-    if (group.size() == 1 && bytes > in.budget) {
+    if (group.size() == 1 && emit_map_bytes(meta.vertices, bits) + bytes > in.budget) {
       // The share alone is too large for one batch: consecutive regions while they fit.
-      const uint64_t room = in.budget - level_bytes(first, 0);
+      const uint64_t room = in.budget - emit_map_bytes(meta.vertices, bits) - level_bytes(first, 0);
       const uint64_t batch_cells = std::max<uint64_t>(1, room / per_cell);
       for (uint32_t r = runs[first].first; r < runs[first].second;) {
         uint64_t held = cuts[first].cells[r];

@@ -13,7 +13,9 @@
 // - A task's share: one run of the Morton codes (shard_bounds), the codes of the finest level's regions
 //   that hold an N-th of its cells (shard_regions); in every level, the regions whose code falls in it, a
 //   contiguous run (region order is octree Morton order, so whole subtrees but at its two ends). So a
-//   task's levels cover about the same place, and its passes read about the same blocks. It emits them as the batched emit does (each batch with its halo, representatives
+//   task's levels cover about the same place, and its passes read about the same blocks. A coarse level
+//   of fewer regions than tasks is handed out a region a task from the last task down (shard_runs).
+//   It emits them as the batched emit does (each batch with its halo, representatives
 //   read from the work directory), which gives every part the bytes it has in one machine's run
 //   (stream/emit_stage.h), and writes the parts, in region order, to OUTDIR/shards/task-I-lodL.parts;
 //   then OUTDIR/shards/task-I.json (last: its presence means the task is complete) with the manifest as
@@ -24,6 +26,7 @@
 //   near its regions and their halos; building its levels' cluster maps still reads the whole weight index.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <cstdio>
 #include <memory>
@@ -76,6 +79,16 @@ std::vector<uint64_t> shard_bounds(const LevelCut& finest, unsigned count);
 // The regions [first, end) of a level's cut whose region_code lies in task `index`'s run of `bounds`: the
 // tasks' runs are disjoint and cover the cut, in task order (the merge reads them so: region order).
 std::pair<uint32_t, uint32_t> shard_regions_in(const LevelCut& cut, const std::vector<uint64_t>& bounds, unsigned index);
+
+// The regions [first, end) of every level's cut (finest first) that task `index` of `count` emits. The
+// finest level, and every level of at least `count` regions: its run of codes (shard_regions_in). A
+// coarser level of fewer regions than tasks: at most one region a task, handed out one by one from the
+// last task down, coarsest level first, wrapping around. Such a region costs a pass over the place it
+// covers (every input primitive there maps to its cells) however few its cells; by its code it would
+// go, with the coarser levels' other few regions, to task 0 (on the 193 M-triangle city at N = 8 that
+// task read 7.9 times the input, the others 1.3 to 2.6). For each level the tasks' runs are disjoint and
+// cover the cut; the merge orders them by their first region.
+std::vector<std::pair<uint32_t, uint32_t>> shard_runs(const std::vector<LevelCut>& cuts, unsigned index, unsigned count);
 
 std::string shards_dir(const std::string& output_dir);
 std::string shard_parts_path(const std::string& output_dir, unsigned index, size_t level);
@@ -164,9 +177,11 @@ bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::order
 bool write_shard_bounds(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress);
 
 // Emits task `index` of `count`'s regions of every level and writes their parts (see above). Returns the
-// task's counts per level; `primitives_read`, when given, is set to the input primitives its passes read.
+// task's counts per level; `primitives_read`, when given, is set to the input primitives its passes read;
+// `runs`, when given, to its run of each level {first, end, regions in the level} (shard_runs).
 std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, unsigned count, const std::string& output_dir,
-                                   Progress& progress, EmitScratch& scratch, uint64_t* primitives_read = nullptr);
+                                   Progress& progress, EmitScratch& scratch, uint64_t* primitives_read = nullptr,
+                                   std::vector<std::array<uint32_t, 3>>* runs = nullptr);
 
 // TilesOptions (stream/tiles.h) as the task hands them to the merge, and back.
 nlohmann::ordered_json tiles_options_json(const TilesOptions& o);

@@ -3,6 +3,7 @@
 // manifest.json. Each stage leaves its result in the work directory with a stamp of what it was made from,
 // and a later run with the same inputs and options reuses it.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -527,6 +528,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     ordered_json shard_tiles;  // a sharded run's 3D Tiles options, for merge
     ordered_json shard_store;  // a sharded run's material table and colour flag, for merge's level files
     uint64_t primitives_read = 0;  // a sharded task's emit: the input primitives its passes read
+    std::vector<std::array<uint32_t, 3>> shard_runs;  // and its run of each level's regions (stream/shard.h)
 
     tbb::task_arena arena(static_cast<int>(plan.threads));
     arena.execute([&] {
@@ -977,7 +979,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       emit_options.work = &work, emit_options.chunk_bytes = options.chunk_bytes;
       run_stage(&report.stages, "emit", [&](StageStats&) {
         const std::vector<stream::EmitCounts> counts =
-            sharded ? stream::emit_shard(shard_input, so.shard_index, so.shard_count, so.output_dir, progress, scratch, &primitives_read)
+            sharded ? stream::emit_shard(shard_input, so.shard_index, so.shard_count, so.output_dir, progress, scratch, &primitives_read,
+                                         &shard_runs)
                     : emit_all(sizes, cells, emit_options, add_part, write_level);
         for (size_t l = 0; l < sizes.size(); ++l) {
           LevelStats& ls = report.levels[l];
@@ -1088,6 +1091,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     m["work_dir"] = stream::work_dir_json(report.work_dir);
     if (sharded) {
       m["input_primitives_read"] = primitives_read;
+      m["regions"] = shard_runs;
       write_shard_task(so, report, m, shard_tiles, shard_store);
       *out = std::move(report);
       return;

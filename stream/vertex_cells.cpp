@@ -15,6 +15,7 @@
 #include <tbb/task_arena.h>
 
 #include "core/status.h"
+#include "io/mapped_file.h"
 #include "stream/cell_map_file.h"
 #include "stream/cluster_stage.h"
 #include "stream/weld_file.h"
@@ -116,14 +117,6 @@ void write_vertex_cells(const std::string& prefix, const std::string& canonical_
     progress.report("vertex cells", static_cast<double>(lo + n) / static_cast<double>(vertices));
   }
   out.commit();
-}
-
-VertexCells::VertexCells(const std::string& path, uint64_t vertices) : file_(path), vertices_(vertices) {
-  if (file_.size() != 4 * vertices) fail(Status::io_error, path + ": size does not match the store (vertex cells)");
-}
-
-void VertexCells::acquire() {
-  if (!window_.data() && vertices_ > 0) window_ = file_.map(0, file_.size(), io::MappedFile::Access::random);
 }
 
 }  // namespace lodstream::stream

@@ -4,14 +4,18 @@
 // vertex: its canonical vertex's cell), or kNoCell. The cluster stage's maps (stream/cell_map_file.h) are
 // bit streams in weight order, readable only whole, so a task that built its group's packed map from them
 // decoded every record of the scene whatever its share (3.1 and 2.9 s for the two groups of one task of
-// eight on the 193 M-triangle city: a third of the task). These files are written once by the shared
-// stages; a task looks up only the vertices its blocks reference, through mapped pages it drops as it
-// goes (as it does the positions').
+// eight on the 193 M-triangle city: a third of the task); from these files it reads the packed map in
+// vertex order, sequentially. They are written once by the shared stages, from the packed maps their
+// representatives pass builds anyway.
+// (Looking the cells up in the mapped files instead of packing the map did not hold the memory cap: a
+// group of blocks whose primitives reach all over the vertex ids, as the 193 M-triangle city's 484 K
+// segments, stored after its triangles, do, maps every page of every level's file: a task of eight at
+// --memory 1G peaked at 1.9 GiB.)
 //
 // Invariant: vertex-cells-L.u32[v] is the cell that the packed map of the emit stage (emit_stage.cpp)
 // gives v for level L, so a task that reads these emits the same bytes.
-// Memory: writing holds one range of vertices at 4 bytes each, as many as `budget` allows (one range on
-// both cities: 388 MB for the 193 M-triangle one's 97 M vertices).
+// Memory: writing from a packed map holds a 4 MiB buffer; decoding (write_vertex_cells) one range of
+// vertices at 4 bytes each, as many as `budget` allows.
 #pragma once
 
 #include <algorithm>
@@ -23,7 +27,6 @@
 #include <tbb/parallel_for.h>
 
 #include "io/file_writer.h"
-#include "io/mapped_file.h"
 #include "stream/progress.h"
 
 namespace lodstream::stream {
@@ -55,26 +58,5 @@ void write_vertex_cells_by(const std::string& prefix, size_t level, uint64_t ver
 // that does not match `records` records of `cells` cells.
 void write_vertex_cells(const std::string& prefix, const std::string& canonical_path, uint64_t vertices, uint64_t records,
                         size_t level, uint64_t cells, uint64_t budget, Progress& progress);
-
-// One level's file, read by vertex.
-class VertexCells {
- public:
-  // Throws Failure(io_error) when the file does not hold `vertices` cells.
-  VertexCells(const std::string& path, uint64_t vertices);
-  // Maps the file; get() is valid until release() (which drops its pages from the resident set).
-  void acquire();
-  void release() { window_.reset(); }
-  uint32_t get(uint64_t v) const {
-    uint32_t c;
-    __builtin_memcpy(&c, window_.data() + 4 * v, 4);
-    return c;
-  }
-  const std::string& path() const { return file_.path(); }
-
- private:
-  io::MappedFile file_;
-  uint64_t vertices_;
-  io::Window window_;
-};
 
 }  // namespace lodstream::stream

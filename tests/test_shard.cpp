@@ -94,7 +94,9 @@ TEST(Shard, AnyTaskCountGivesOneMachinesBytes) {
   ASSERT_TRUE(simplify(sample_room(), room_options(dir.file("one")), o, &one).ok());
   const auto want = outputs(dir.file("one"));
   uint64_t read_by_one = 0;  // the input primitives one task's passes read
-  for (unsigned n : {1u, 2u, 5u}) {
+  // 9 tasks: the level of 8 regions is coarse (stream/shard.h shard_runs), handed out from task 8 down, so
+  // the merge must order its tasks by their runs.
+  for (unsigned n : {1u, 2u, 5u, 9u}) {
     SCOPED_TRACE("tasks " + std::to_string(n));
     const std::string out = dir.file("sharded-" + std::to_string(n));
     std::vector<unsigned> all;
@@ -272,6 +274,66 @@ TEST(Shard, LevelsShareTheFinestLevelsRunsOfCodes) {
         next = end;
       }
       EXPECT_EQ(next, cut->regions.size()) << n << " tasks";
+    }
+  }
+}
+
+// shard_runs: levels of at least N regions by the runs of codes (as above); a coarser level of fewer
+// regions than tasks a region a task, from the last task down, coarsest level first, wrapping around;
+// every level's runs cover its regions once.
+TEST(Shard, CoarseLevelsAreHandedOutFromTheLastTaskDown) {
+  auto morton_sorted = [](unsigned depth) {
+    std::vector<core::RegionKey> keys;
+    const uint32_t side = 1u << depth;
+    for (uint32_t z = 0; z < side; ++z)
+      for (uint32_t y = 0; y < side; ++y)
+        for (uint32_t x = 0; x < side; ++x) keys.push_back({static_cast<uint8_t>(depth), x, y, z});
+    std::sort(keys.begin(), keys.end(), core::region_before);
+    return keys;
+  };
+  // Finest first: 64 depth-2 nodes, 8 depth-1 nodes, 3 of them alone, then the root.
+  std::vector<stream::LevelCut> cuts(4);
+  cuts[0].regions = morton_sorted(2), cuts[0].cells.assign(64, 5);
+  cuts[1].regions = morton_sorted(1), cuts[1].cells.assign(8, 4);
+  cuts[2].regions = {cuts[1].regions[0], cuts[1].regions[3], cuts[1].regions[6]}, cuts[2].cells.assign(3, 2);
+  cuts[3].regions = morton_sorted(0), cuts[3].cells.assign(1, 1);
+  for (unsigned n : {1u, 2u, 4u, 8u, 9u}) {
+    SCOPED_TRACE(std::to_string(n) + " tasks");
+    std::vector<std::vector<std::pair<uint32_t, uint32_t>>> runs;
+    for (unsigned t = 0; t < n; ++t) runs.push_back(stream::shard_runs(cuts, t, n));
+    const std::vector<uint64_t> bounds = stream::shard_bounds(cuts[0], n);
+    for (size_t l = 0; l < cuts.size(); ++l) {
+      std::vector<int> owner(cuts[l].regions.size(), -1);
+      for (unsigned t = 0; t < n; ++t)
+        for (uint32_t r = runs[t][l].first; r < runs[t][l].second; ++r) {
+          EXPECT_EQ(owner[r], -1) << "level " << l << " region " << r;
+          owner[r] = static_cast<int>(t);
+        }
+      for (size_t r = 0; r < owner.size(); ++r) EXPECT_GE(owner[r], 0) << "level " << l << " region " << r;
+      const bool coarse = l > 0 && cuts[l].regions.size() < n;
+      for (unsigned t = 0; t < n; ++t) {
+        if (!coarse) EXPECT_EQ(runs[t][l], stream::shard_regions_in(cuts[l], bounds, t)) << "level " << l;
+        else EXPECT_LE(runs[t][l].second - runs[t][l].first, 1u) << "level " << l;
+      }
+    }
+    if (n == 8) {  // the root to task 7; the 3 regions of level 2 to tasks 6, 5, 4
+      EXPECT_EQ(runs[7][3], (std::pair<uint32_t, uint32_t>{0, 1}));
+      EXPECT_EQ(runs[6][2], (std::pair<uint32_t, uint32_t>{0, 1}));
+      EXPECT_EQ(runs[4][2], (std::pair<uint32_t, uint32_t>{2, 3}));
+      EXPECT_EQ(runs[0][3].first, runs[0][3].second);
+    }
+    if (n == 4) {  // the root to task 3; level 2's 3 regions to tasks 2, 1, 0
+      EXPECT_EQ(runs[3][3], (std::pair<uint32_t, uint32_t>{0, 1}));
+      EXPECT_EQ(runs[2][2], (std::pair<uint32_t, uint32_t>{0, 1}));
+      EXPECT_EQ(runs[0][2], (std::pair<uint32_t, uint32_t>{2, 3}));
+      EXPECT_EQ(runs[3][2].first, runs[3][2].second);
+    }
+    if (n == 9) {  // the root to task 8, level 2 to 7, 6, 5, and level 1's 8 regions to 4, 3, 2, 1, 0, 8, 7, 6
+      EXPECT_EQ(runs[8][3], (std::pair<uint32_t, uint32_t>{0, 1}));
+      EXPECT_EQ(runs[5][2], (std::pair<uint32_t, uint32_t>{2, 3}));
+      EXPECT_EQ(runs[4][1], (std::pair<uint32_t, uint32_t>{0, 1}));
+      EXPECT_EQ(runs[8][1], (std::pair<uint32_t, uint32_t>{5, 6}));
+      EXPECT_EQ(runs[5][1].first, runs[5][1].second);
     }
   }
 }
