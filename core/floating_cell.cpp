@@ -357,6 +357,18 @@ uint64_t GrowableBuffer::resident_bytes() const {
   return (size_ + page - 1) / page * page;
 }
 
+bool floating_cell_contains(const double* p, const double* center, double half, double half_sq, CellShape shape,
+                            double& d2) {
+  const double dx = p[0] - center[0], dy = p[1] - center[1], dz = p[2] - center[2];
+  d2 = dx * dx + dy * dy + dz * dz;
+  const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
+  if (m > half) return false;
+  if (m == half && !(within(p[0], center[0], dx, half) && within(p[1], center[1], dy, half) &&
+                     within(p[2], center[2], dz, half)))
+    return false;
+  return shape != CellShape::sphere || d2 <= half_sq;
+}
+
 int64_t grid_square(double x, double size) {
   if (!(size >= kMinCellSize && size <= kMaxCellSize))
     fail(Status::usage, "clustering: cell size " + std::to_string(size) + " out of range");

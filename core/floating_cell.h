@@ -122,6 +122,13 @@ inline constexpr double kMaxCellSize = 0x1p480;
 // Failure(Status::usage).
 int64_t grid_square(double x, double size);
 
+// The exact inside test of a floating cell (the definitions above) of half size `half` = c/2 and
+// `half_sq` = fl((c/2)²) centred on `center`, as Clusterer decides it; d2 receives fl(dx² + dy² + dz²),
+// the key of the nearest choice. For callers that must reach the same decisions as a Clusterer
+// (core/floating_cell_region.h).
+bool floating_cell_contains(const double* p, const double* center, double half, double half_sq, CellShape shape,
+                            double& d2);
+
 // One clustering pass, all levels at once. Not thread-safe (one pass is inherently sequential: each
 // vertex's cell depends on every heavier vertex). Levels are independent, though: a Clusterer per level
 // (one cell size each), run on separate threads over the same vertex order, gives the same ids.

@@ -1,0 +1,88 @@
+// Floating cells over part of a scene, three-valued. This work is based on:
+// Kok-Lim Low and Tiow-Seng Tan. Model Simplification Using Vertex-Clustering. I3D 1997, §3.2
+// See floating_cell_region.h for the rule and the proof of its invariant.
+#include "core/floating_cell_region.h"
+
+#include <cmath>
+
+#include "core/hash.h"
+#include "core/status.h"
+
+namespace lodstream::core {
+
+size_t RegionClusterer::SquareHash::operator()(const std::array<int64_t, 3>& s) const {
+  return static_cast<size_t>(fmix64(static_cast<uint64_t>(s[0]) * 0x9E3779B97F4A7C15ull +
+                                    static_cast<uint64_t>(s[1]) * 0xC2B2AE3D27D4EB4Full +
+                                    static_cast<uint64_t>(s[2]) * 0x165667B19E3779F9ull));
+}
+
+RegionClusterer::RegionClusterer(double cell_size, ClusterOptions options, std::span<const double, 6> held)
+    : half_(cell_size / 2), half_sq_(half_ * half_), options_(options) {
+  if (options.clustering != Clustering::floating)
+    fail(Status::internal, "RegionClusterer: floating cells only (uniform cells need no halo)");
+  if (!(cell_size >= kMinCellSize && cell_size <= kMaxCellSize))
+    fail(Status::usage, "clustering: cell size " + std::to_string(cell_size) + " out of range");
+  for (int a = 0; a < 3; ++a) lo_[a] = held[a], hi_[a] = held[3 + a];
+}
+
+bool RegionClusterer::exposed(const double* p) const {
+  for (int a = 0; a < 3; ++a)
+    if (p[a] - lo_[a] <= half_ || hi_[a] - p[a] <= half_) return true;
+  return false;
+}
+
+RegionDecision RegionClusterer::assign(std::span<const double, 3> position) {
+  const double* p = position.data();
+  const uint32_t index = next_++;
+  const bool nearest = options_.choice == CellChoice::nearest;
+  // The order of the choice (floating_cell.h): nearest, ties by the earlier center; or the earlier center.
+  auto better = [&](uint32_t a, double a_d2, uint32_t b, double b_d2) {
+    if (b == kNoCell) return true;
+    return nearest ? (a_d2 < b_d2 || (a_d2 == b_d2 && a < b)) : a < b;
+  };
+
+  // A cell that holds p has its center within c/2 of p: in p's square or, per axis, the neighbour on the
+  // side of the half p lies in (floating_cell.h).
+  int64_t own[3], side[3];
+  for (int a = 0; a < 3; ++a) {
+    const int64_t h = grid_square(p[a], half_);  // floor(p / (c/2)), exact
+    own[a] = h >> 1;
+    side[a] = own[a] + ((h & 1) ? 1 : -1);
+  }
+  uint32_t settled = kNoCell, open = kNoCell;  // the best settled center, the best unsettled vertex holding p
+  double settled_d2 = 0, open_d2 = 0;
+  for (int i = 0; i < 8; ++i) {
+    const std::array<int64_t, 3> square = {(i & 1) ? side[0] : own[0], (i & 2) ? side[1] : own[1],
+                                           (i & 4) ? side[2] : own[2]};
+    const auto it = squares_.find(square);
+    if (it == squares_.end()) continue;
+    for (const Entry& e : it->second) {
+      double d2;
+      if (!floating_cell_contains(p, e.position, half_, half_sq_, options_.shape, d2)) continue;
+      if (e.settled) {
+        if (better(e.index, d2, settled, settled_d2)) settled = e.index, settled_d2 = d2;
+      } else if (better(e.index, d2, open, open_d2)) {
+        open = e.index, open_d2 = d2;
+      }
+    }
+  }
+
+  const bool outside_may_hold = exposed(p);
+  RegionDecision d;
+  if (settled != kNoCell) {
+    // invariant: a settled center's cell holds p, so p starts no cell in the whole-scene pass.
+    d.status = RegionStatus::member;
+    d.cell_settled = !outside_may_hold && (open == kNoCell || !better(open, open_d2, settled, settled_d2));
+    if (d.cell_settled) d.center = settled;
+    return d;
+  }
+  const bool is_center = !outside_may_hold && open == kNoCell;
+  d.status = is_center ? RegionStatus::center : RegionStatus::unsettled;
+  d.cell_settled = is_center;
+  if (is_center) d.center = index;
+  if (!is_center) ++unsettled_;
+  squares_[{own[0], own[1], own[2]}].push_back(Entry{{p[0], p[1], p[2]}, index, is_center});
+  return d;
+}
+
+}  // namespace lodstream::core

@@ -1,0 +1,90 @@
+// Floating cells over part of a scene: which vertices' clustering a task can settle from the vertices it
+// holds (issue 19, clustering by region with a halo).
+//
+// Low & Tan, "Model Simplification Using Vertex-Clustering", I3D 1997, §3.2 (floating cells, the nearest
+// variant of §3.2.3), as core/floating_cell.h runs it over the whole scene: vertices in weight order, a
+// vertex inside no earlier cell starts one, a vertex inside some joins the nearest (or heaviest). The pass
+// is sequential: a vertex's cell depends on the heavier centers within c/2 of it, whose own status depends
+// on the heavier centers within c/2 of them, and so on. A task that holds only the vertices inside a box
+// (its region and a halo around it) runs the same pass over them, in the same order, three-valued:
+//   center    — a center in the whole-scene pass, for certain;
+//   member    — not a center, for certain: it lies inside the cell of a settled center;
+//   unsettled — it lies inside no settled cell but inside the cell of an unsettled vertex (which may or may
+//               not be a center), or it lies within c/2 of the box's outside, where a heavier vertex the
+//               task does not hold may have started a cell that holds it.
+// A member's cell (the center it joins) is settled when no unsettled vertex's cell holds it and it is not
+// within c/2 of the outside: its candidates are then exactly the settled centers holding it.
+//
+// Invariant (by induction over the weight order; the tests compare with Clusterer on clouds and meshes
+// cut by many boxes): every settled status is the whole-scene pass's, and every settled cell is the
+// whole-scene pass's cell, named by its center's index in the task's order.
+// Proof. v is a whole-scene center iff no heavier whole-scene center's cell holds v. The heavier vertices
+// whose cell could hold v lie within c/2 of it: held ones (settled correctly, or unsettled, by the
+// induction) and, only when v is within c/2 of the outside, ones the task does not hold. If a settled
+// center's cell holds v, v is a member. If v is not near the outside and no settled center's or unsettled
+// vertex's cell holds v, no whole-scene center's cell holds v, and v is a center. Otherwise v is left
+// unsettled. A member's whole-scene cell is the best of the whole-scene centers holding it; when neither
+// an unsettled vertex nor the outside can hold it, those are exactly the settled centers holding it.
+//
+// "Within c/2 of the outside" is tested conservatively: the task holds every vertex p with
+// lo[a] <= p[a] < hi[a] on every axis a (infinite bounds allowed), and v counts as exposed when
+// fl(v[a] − lo[a]) <= c/2 or fl(hi[a] − v[a]) <= c/2 on some axis (rounding is monotone, so every truly
+// exposed vertex is caught).
+//
+// One grid of one cell size: a level with a fine grid (Mata et al.'s labels) is two such grids, each over
+// the vertices its mask sends it. Memory: one entry (its position and index, 32 bytes) per center and per
+// unsettled vertex, in a hash map of grid squares; members keep nothing.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <unordered_map>
+#include <vector>
+
+#include "core/floating_cell.h"
+
+namespace lodstream::core {
+
+enum class RegionStatus : uint8_t { center, member, unsettled };
+
+struct RegionDecision {
+  RegionStatus status = RegionStatus::unsettled;
+  bool cell_settled = false;  // a center's cell is itself; a member's, when it is settled
+  uint32_t center = kNoCell;  // with cell_settled: the index (in assign order) of the cell's center vertex
+};
+
+class RegionClusterer {
+ public:
+  // held: {lo x, lo y, lo z, hi x, hi y, hi z}, the box whose vertices the caller holds and will assign
+  // (lo <= p < hi per axis; ±infinity where the task holds everything on that side). Floating cells only:
+  // options.clustering must be floating (uniform cells need no halo: a vertex's cell is its square).
+  RegionClusterer(double cell_size, ClusterOptions options, std::span<const double, 6> held);
+
+  // The next held vertex in weight order (the whole-scene pass's order restricted to the box); its index
+  // is the number of calls before it.
+  RegionDecision assign(std::span<const double, 3> position);
+
+  uint64_t unsettled() const { return unsettled_; }
+
+ private:
+  struct Entry {
+    double position[3];
+    uint32_t index;
+    bool settled;  // a settled center; else an unsettled vertex
+  };
+  struct SquareHash {
+    size_t operator()(const std::array<int64_t, 3>& s) const;
+  };
+
+  bool exposed(const double* p) const;
+
+  double half_, half_sq_;
+  ClusterOptions options_;
+  double lo_[3], hi_[3];
+  std::unordered_map<std::array<int64_t, 3>, std::vector<Entry>, SquareHash> squares_;
+  uint32_t next_ = 0;
+  uint64_t unsettled_ = 0;
+};
+
+}  // namespace lodstream::core

@@ -1,0 +1,164 @@
+// Floating cells over part of a scene (core/floating_cell_region.h): every settled status and cell is
+// the whole-scene Clusterer's, on clouds (random, on a lattice with ties at c/2, and in clumps) cut by
+// many boxes, for every shape and choice; a hand-made chain that a halo settles only when it is wide
+// enough; and the whole scene as one box settles everything.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <random>
+#include <span>
+#include <vector>
+
+#include "core/floating_cell.h"
+#include "core/floating_cell_region.h"
+
+namespace lodstream {
+namespace {
+
+using core::CellChoice;
+using core::CellShape;
+using core::ClusterOptions;
+using core::Clustering;
+using core::RegionClusterer;
+using core::RegionStatus;
+using P = std::array<double, 3>;
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+constexpr ClusterOptions kVariants[] = {
+    {Clustering::floating, CellShape::cube, CellChoice::nearest},
+    {Clustering::floating, CellShape::cube, CellChoice::heaviest},
+    {Clustering::floating, CellShape::sphere, CellChoice::nearest},
+    {Clustering::floating, CellShape::sphere, CellChoice::heaviest},
+};
+
+// The whole-scene pass: per vertex (in weight order) the index of its cell's center vertex.
+std::vector<uint32_t> whole_scene_centers(const std::vector<P>& pts, double c, ClusterOptions o) {
+  const double sizes[] = {c};
+  core::Clusterer cl(sizes, o);
+  std::vector<uint32_t> center_of_cell, out;
+  for (uint32_t i = 0; i < pts.size(); ++i) {
+    uint32_t cell;
+    cl.assign(i, pts[i], std::span<uint32_t>(&cell, 1));
+    if (cell == center_of_cell.size()) center_of_cell.push_back(i);
+    out.push_back(center_of_cell[cell]);
+  }
+  return out;
+}
+
+struct Tally {
+  uint64_t held = 0, settled_status = 0, settled_cells = 0;
+};
+
+// Runs a RegionClusterer over the vertices in `box` and checks each settled decision against `whole`.
+Tally check_box(const std::vector<P>& pts, const std::vector<uint32_t>& whole, double c, ClusterOptions o,
+                const std::array<double, 6>& box) {
+  RegionClusterer rc(c, o, box);
+  std::vector<uint32_t> held;  // task index -> whole-scene index
+  Tally t;
+  for (uint32_t i = 0; i < pts.size(); ++i) {
+    const P& p = pts[i];
+    bool in = true;
+    for (int a = 0; a < 3; ++a) in &= p[a] >= box[a] && p[a] < box[3 + a];
+    if (!in) continue;
+    held.push_back(i);
+    const core::RegionDecision d = rc.assign(p);
+    ++t.held;
+    if (d.status != RegionStatus::unsettled) {
+      ++t.settled_status;
+      EXPECT_EQ(d.status == RegionStatus::center, whole[i] == i) << "vertex " << i;
+    }
+    if (d.cell_settled) {
+      ++t.settled_cells;
+      EXPECT_NE(d.status, RegionStatus::unsettled);
+      EXPECT_EQ(held.at(d.center), whole[i]) << "vertex " << i;
+    }
+  }
+  EXPECT_EQ(t.held - t.settled_status, rc.unsettled());
+  return t;
+}
+
+std::vector<P> cloud(std::mt19937_64& rng, int kind, size_t n) {
+  std::uniform_real_distribution<double> u(0.0, 10.0);
+  std::normal_distribution<double> g(0.0, 0.4);
+  std::vector<P> pts(n);
+  std::vector<P> clumps(12);
+  for (P& q : clumps) q = {u(rng), u(rng), u(rng)};
+  for (P& p : pts) {
+    if (kind == 0) {
+      p = {u(rng), u(rng), u(rng)};
+    } else if (kind == 1) {  // a lattice of step c/4 = 0.25: many points exactly c/2 apart
+      for (double& x : p) x = 0.25 * std::floor(4 * u(rng));
+    } else {
+      const P& q = clumps[rng() % clumps.size()];
+      p = {q[0] + g(rng), q[1] + g(rng), q[2] + g(rng)};
+    }
+  }
+  return pts;  // the order is the weight order
+}
+
+TEST(FloatingCellRegion, SettledDecisionsAreTheWholeScenePass) {
+  std::mt19937_64 rng(19);
+  std::uniform_real_distribution<double> u(-1.0, 11.0);
+  uint64_t settled = 0, held = 0;
+  for (int kind = 0; kind < 3; ++kind) {
+    const std::vector<P> pts = cloud(rng, kind, 6000);
+    for (const ClusterOptions& o : kVariants) {
+      for (double c : {0.5, 1.0, 2.0}) {
+        const std::vector<uint32_t> whole = whole_scene_centers(pts, c, o);
+        for (int b = 0; b < 6; ++b) {
+          std::array<double, 6> box;
+          for (int a = 0; a < 3; ++a) {
+            double x = u(rng), y = u(rng);
+            if (x > y) std::swap(x, y);
+            if (rng() % 4 == 0) x = -kInf;
+            box[a] = x, box[3 + a] = y;
+          }
+          const Tally t = check_box(pts, whole, c, o, box);
+          settled += t.settled_status, held += t.held;
+        }
+      }
+    }
+  }
+  // Not a vacuous check: most held vertices are settled.
+  EXPECT_GT(held, 10000u);
+  EXPECT_GT(settled, held / 4);
+}
+
+TEST(FloatingCellRegion, TheWholeSceneAsOneBoxSettlesEverything) {
+  std::mt19937_64 rng(7);
+  const std::vector<P> pts = cloud(rng, 2, 5000);
+  for (const ClusterOptions& o : kVariants) {
+    const std::vector<uint32_t> whole = whole_scene_centers(pts, 1.0, o);
+    const Tally t = check_box(pts, whole, 1.0, o, {-kInf, -kInf, -kInf, kInf, kInf, kInf});
+    EXPECT_EQ(t.settled_status, pts.size());
+    EXPECT_EQ(t.settled_cells, pts.size());
+  }
+}
+
+// A chain along x, 0.4 apart, heaviest first, c = 1 (c/2 = 0.5): 0 starts a cell, 0.4 joins it, 0.8
+// starts one, 1.2 joins it, and so on. A task that does not hold x = 0 cannot tell whether 0.4 starts a
+// cell, and the doubt runs down the whole chain; holding x = 0 settles it.
+TEST(FloatingCellRegion, ADoubtRunsDownAChainUntilTheHaloHoldsItsHead) {
+  std::vector<P> pts;
+  for (int i = 0; i < 10; ++i) pts.push_back({0.4 * i, 0.0, 0.0});
+  const ClusterOptions o = kVariants[0];
+  const std::vector<uint32_t> whole = whole_scene_centers(pts, 1.0, o);
+  // The task's region is x >= 2; its box starts at 0.2 (a halo of 1.8 that misses the head).
+  Tally t = check_box(pts, whole, 1.0, o, {0.2, -kInf, -kInf, kInf, kInf, kInf});
+  EXPECT_EQ(t.held, 9u);
+  EXPECT_EQ(t.settled_status, 0u);
+  // A halo reaching x = -0.6 holds the head: everything is settled.
+  t = check_box(pts, whole, 1.0, o, {-0.6, -kInf, -kInf, kInf, kInf, kInf});
+  EXPECT_EQ(t.settled_status, 10u);
+  EXPECT_EQ(t.settled_cells, 10u);
+  // Holding the head, but with it within c/2 of the box's edge: it is exposed, and the chain with it.
+  t = check_box(pts, whole, 1.0, o, {-0.4, -kInf, -kInf, kInf, kInf, kInf});
+  EXPECT_EQ(t.settled_status, 0u);
+}
+
+}  // namespace
+}  // namespace lodstream
