@@ -88,16 +88,7 @@ inline bool within(double x, double cx, double d, double h) {
   return d > 0 ? err <= 0 : err >= 0;
 }
 
-// The hash of square xyz is fmix64 of a linear mix of the coordinates; the mix is a sum of per-axis
-// terms, so that a query's 8 squares share the 6 products of their 2 coordinates per axis.
-constexpr uint64_t kAxisMul[3] = {0x9E3779B97F4A7C15ull, 0xC2B2AE3D27D4EB4Full, 0x165667B19E3779F9ull};
-
-inline uint64_t axis_term(int64_t x, int axis) { return static_cast<uint64_t>(x) * kAxisMul[axis]; }
-
-inline uint64_t hash_square(int64_t x, int64_t y, int64_t z) {
-  // The linear mix leaves neighbouring squares in neighbouring low bits: finish with fmix64.
-  return fmix64(axis_term(x, 0) + axis_term(y, 1) + axis_term(z, 2));
-}
+// Squares hash by hash_square (core/hash.h).
 
 // The two kinds of hash-table slot, with their keys: a Slot keys a square by its three coordinates; a
 // PackedSlot, used where the bounds allow, by one word (21 bits per axis, relative to the level's first
@@ -229,6 +220,7 @@ uint32_t scan_fast(const Cell* pool, const Clusterer::Query& q, const double* p,
 template <class Cell>
 uint32_t scan_exact(const Cell* pool, const Clusterer::Query& q, const double* p, double h, double half_sq,
                     bool sphere, bool nearest) {
+  const CellShape shape = sphere ? CellShape::sphere : CellShape::cube;
   uint32_t best = kNoCell;
   double best_d2 = 0;
   for (int i = 0; i < 8; ++i) {
@@ -237,13 +229,8 @@ uint32_t scan_exact(const Cell* pool, const Clusterer::Query& q, const double* p
       const double cp[3] = {static_cast<double>(run[j].position[0]), static_cast<double>(run[j].position[1]),
                             static_cast<double>(run[j].position[2])};
       const uint32_t c = run[j].id;
-      const double dx = p[0] - cp[0], dy = p[1] - cp[1], dz = p[2] - cp[2];
-      const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
-      if (m > h) continue;
-      if (m == h && !(within(p[0], cp[0], dx, h) && within(p[1], cp[1], dy, h) && within(p[2], cp[2], dz, h)))
-        continue;
-      const double d2 = dx * dx + dy * dy + dz * dz;
-      if (sphere && d2 > half_sq) continue;
+      double d2;
+      if (!floating_cell_contains(p, cp, h, half_sq, shape, d2)) continue;
       const bool better = best == kNoCell || (nearest ? (d2 < best_d2 || (d2 == best_d2 && c < best)) : c < best);
       if (better) best = c, best_d2 = d2;
     }

@@ -11,9 +11,7 @@
 namespace lodstream::core {
 
 size_t RegionClusterer::SquareHash::operator()(const std::array<int64_t, 3>& s) const {
-  return static_cast<size_t>(fmix64(static_cast<uint64_t>(s[0]) * 0x9E3779B97F4A7C15ull +
-                                    static_cast<uint64_t>(s[1]) * 0xC2B2AE3D27D4EB4Full +
-                                    static_cast<uint64_t>(s[2]) * 0x165667B19E3779F9ull));
+  return static_cast<size_t>(hash_square(s[0], s[1], s[2]));
 }
 
 RegionClusterer::RegionClusterer(double cell_size, ClusterOptions options, std::span<const double, 6> held)
@@ -83,6 +81,21 @@ RegionDecision RegionClusterer::assign(std::span<const double, 3> position) {
   if (!is_center) ++unsettled_;
   squares_[{own[0], own[1], own[2]}].push_back(Entry{{p[0], p[1], p[2]}, index, is_center});
   return d;
+}
+
+std::vector<uint32_t> whole_scene_centers(std::span<const double> positions, double cell_size, ClusterOptions options) {
+  const double sizes[] = {cell_size};
+  Clusterer clusterer(sizes, options);
+  const size_t n = positions.size() / 3;
+  std::vector<uint32_t> center_of_cell, out(n);
+  for (size_t i = 0; i < n; ++i) {
+    uint32_t cell;
+    clusterer.assign(static_cast<uint32_t>(i), std::span<const double, 3>(&positions[3 * i], 3),
+                     std::span<uint32_t>(&cell, 1));
+    if (cell == center_of_cell.size()) center_of_cell.push_back(static_cast<uint32_t>(i));  // i created the cell
+    out[i] = center_of_cell[cell];
+  }
+  return out;
 }
 
 }  // namespace lodstream::core

@@ -87,4 +87,8 @@ class RegionClusterer {
   uint64_t unsettled_ = 0;
 };
 
+// The whole-scene pass in RegionClusterer's terms, the reference its decisions are checked against: for
+// vertex i of `positions` (xyz, in weight order), the index of its cell's center vertex (i for a center).
+std::vector<uint32_t> whole_scene_centers(std::span<const double> positions, double cell_size, ClusterOptions options);
+
 }  // namespace lodstream::core

@@ -17,4 +17,16 @@ inline uint64_t fmix64(uint64_t k) {
   return k;
 }
 
+// The hash of grid square xyz (core/floating_cell.cpp, core/floating_cell_region.cpp): fmix64 of a linear
+// mix of the coordinates. The mix is a sum of per-axis terms, so that a query's 8 squares share the 6
+// products of their 2 coordinates per axis; it leaves neighbouring squares in neighbouring low bits, which
+// fmix64 then spreads.
+inline constexpr uint64_t kAxisMul[3] = {0x9E3779B97F4A7C15ull, 0xC2B2AE3D27D4EB4Full, 0x165667B19E3779F9ull};
+
+inline uint64_t axis_term(int64_t x, int axis) { return static_cast<uint64_t>(x) * kAxisMul[axis]; }
+
+inline uint64_t hash_square(int64_t x, int64_t y, int64_t z) {
+  return fmix64(axis_term(x, 0) + axis_term(y, 1) + axis_term(z, 2));
+}
+
 }  // namespace lodstream::core

@@ -37,16 +37,8 @@ constexpr ClusterOptions kVariants[] = {
 
 // The whole-scene pass: per vertex (in weight order) the index of its cell's center vertex.
 std::vector<uint32_t> whole_scene_centers(const std::vector<P>& pts, double c, ClusterOptions o) {
-  const double sizes[] = {c};
-  core::Clusterer cl(sizes, o);
-  std::vector<uint32_t> center_of_cell, out;
-  for (uint32_t i = 0; i < pts.size(); ++i) {
-    uint32_t cell;
-    cl.assign(i, pts[i], std::span<uint32_t>(&cell, 1));
-    if (cell == center_of_cell.size()) center_of_cell.push_back(i);
-    out.push_back(center_of_cell[cell]);
-  }
-  return out;
+  static_assert(sizeof(P) == 3 * sizeof(double));
+  return core::whole_scene_centers(std::span<const double>(pts.data()->data(), 3 * pts.size()), c, o);
 }
 
 struct Tally {

@@ -38,6 +38,7 @@
 
 using namespace lodstream;
 using P = std::array<double, 3>;
+static_assert(sizeof(P) == 3 * sizeof(double));  // a vector of P is a span of xyz
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
 namespace {
@@ -77,19 +78,6 @@ Run run_task(const std::vector<P>& pts, const std::vector<uint32_t>& whole, doub
   return r;
 }
 
-std::vector<uint32_t> whole_scene(const std::vector<P>& pts, double c, core::ClusterOptions o) {
-  const double sizes[] = {c};
-  core::Clusterer cl(sizes, o);
-  std::vector<uint32_t> center_of_cell, out(pts.size());
-  for (uint32_t i = 0; i < pts.size(); ++i) {
-    uint32_t cell;
-    cl.assign(i, pts[i], std::span<uint32_t>(&cell, 1));
-    if (cell == center_of_cell.size()) center_of_cell.push_back(i);
-    out[i] = center_of_cell[cell];
-  }
-  return out;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) try {
@@ -113,8 +101,13 @@ int main(int argc, char** argv) try {
       return 64;
     }
   }
+  std::ifstream manifest_file(outdir + "/manifest.json");
+  if (!manifest_file) {
+    std::fprintf(stderr, "cluster_halo: cannot read %s/manifest.json\n", outdir.c_str());
+    return 66;
+  }
   nlohmann::json manifest;
-  std::ifstream(outdir + "/manifest.json") >> manifest;
+  manifest_file >> manifest;
   core::ClusterOptions o;
   const nlohmann::json& opts = manifest["options"];
   if (opts.value("clustering", std::string("floating")) != "floating") {
@@ -146,25 +139,28 @@ int main(int argc, char** argv) try {
   fmt::print("level | cell size | cuts | reach (cells): max / median | halo needed (cells): max | held / region: max | "
              "region unsettled at H=0: share | mismatches\n");
 
+  // The tasks, the same in every level: each side of each cut plane.
+  struct Cut {
+    int axis;
+    double x0;
+    int side;
+  };
+  std::vector<Cut> jobs;
+  for (char ax : axes) {
+    const int axis = ax - 'x';
+    std::vector<double> xs(n);
+    for (uint64_t i = 0; i < n; ++i) xs[i] = pts[i][axis];
+    std::sort(xs.begin(), xs.end());
+    for (int k = 1; k <= cuts; ++k)
+      for (int side = 0; side < 2; ++side) jobs.push_back({axis, xs[n * k / (cuts + 1)], side});
+  }
+
   bool failed = false;
   for (size_t l = 0; l < sizes.size(); ++l) {
     if (!levels.empty() && levels.find(char('0' + l)) == std::string::npos) continue;
     const double c = sizes[l];
-    const std::vector<uint32_t> whole = verify ? whole_scene(pts, c, o) : std::vector<uint32_t>();
-    struct Cut {
-      int axis;
-      double x0;
-      int side;
-    };
-    std::vector<Cut> jobs;
-    for (char ax : axes) {
-      const int axis = ax - 'x';
-      std::vector<double> xs(n);
-      for (uint64_t i = 0; i < n; ++i) xs[i] = pts[i][axis];
-      std::sort(xs.begin(), xs.end());
-      for (int k = 1; k <= cuts; ++k)
-        for (int side = 0; side < 2; ++side) jobs.push_back({axis, xs[n * k / (cuts + 1)], side});
-    }
+    const std::vector<uint32_t> whole =
+        verify ? core::whole_scene_centers(std::span<const double>(pts.data()->data(), 3 * n), c, o) : std::vector<uint32_t>();
     struct Result {
       double reach, halo, held_ratio, unsettled_share;
       uint64_t mismatches;
@@ -205,4 +201,7 @@ int main(int argc, char** argv) try {
 } catch (const Failure& f) {
   std::fprintf(stderr, "cluster_halo: %s\n", f.what());
   return 70;
+} catch (const std::exception& e) {  // a manifest.json that is not JSON
+  std::fprintf(stderr, "cluster_halo: %s\n", e.what());
+  return 66;
 }
