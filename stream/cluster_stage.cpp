@@ -138,6 +138,159 @@ void fine_masks(const io::MappedFile& labels, const FineCells& fine, const std::
   }
 }
 
+// The ids of records [at, at + size) and their positions as plain arrays, widened to double (exact for
+// float): the read way's shared batch, or a group's own block (mapped).
+struct Batch {
+  uint64_t at = 0;
+  std::vector<uint32_t> ids;
+  std::vector<double> xyz;
+  PositionGather::Scratch scratch;
+  void load(const io::MappedFile& order, const PositionGather& positions, uint64_t first, uint64_t n) {
+    at = first;
+    const io::Window w = order.map(first * 4, (first + n) * 4);
+    ids.resize(n);
+    xyz.resize(3 * n);
+    std::memcpy(ids.data(), w.data(), n * 4);
+    positions.gather(ids, xyz.data(), scratch);
+  }
+};
+
+// The sums pass (mean and quadric representatives) over the levels `level_ids` (their maps and info files
+// under `prefix`), of `cells_per_level` cells each. `sum_bytes`: what the sums may hold at once.
+void sum_cells(const io::MappedFile& index, const PositionGather& positions, uint64_t batch, const io::MappedFile* grades,
+               uint64_t records, std::span<const size_t> level_ids, std::span<const uint64_t> cells_per_level,
+               CellInfoKind info_kind, bool single_precision, uint64_t sum_bytes, Progress& progress, const std::string& prefix,
+               double progress_from) {
+  constexpr uint64_t block = kBlock;
+  // The sums pass (mean and quadric representatives): each level's CellInfo records, from the cluster maps
+  // just written and the index, both read in order, so that every cell adds its vertices in weight order
+  // (as a running sum in the pass above would) and its first vertex, the one that created it, gives its
+  // center. The records are made in ranges of cell ids, packed into one chunk per thread that takes what
+  // the clusterers held at their peak divided among the threads (so the sums never raise the stage's
+  // peak), within the budget; a chunk costs one more sequential read of the index and of its levels'
+  // maps, where holding every record at once would cost 88 bytes a cell.
+  const size_t n_threads = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  const size_t levels = level_ids.size();
+  uint64_t total_cells = 0;
+  for (uint64_t c : cells_per_level) total_cells += c;
+  // As many chunks as that takes, rounded up to whole rounds of one per thread, and as even as can be.
+  const uint64_t most_per_chunk = std::max<uint64_t>(1, sum_bytes / n_threads / sizeof(CellInfo));
+  const uint64_t rounds = std::max<uint64_t>(1, (total_cells + most_per_chunk * n_threads - 1) / (most_per_chunk * n_threads));
+  const uint64_t per_chunk = std::max<uint64_t>(1, (total_cells + rounds * n_threads - 1) / (rounds * n_threads));
+  struct Range {
+    size_t level;
+    uint64_t first, end;  // cell ids
+  };
+  std::vector<std::vector<Range>> chunks(1);
+  uint64_t room = per_chunk;
+  for (size_t l = 0; l < levels; ++l) {
+    uint64_t first = 0;
+    do {
+      if (room == 0) chunks.emplace_back(), room = per_chunk;
+      const uint64_t end = std::min(cells_per_level[l], first + room);
+      chunks.back().push_back({l, first, end});
+      room -= end - first;
+      first = end;
+    } while (first < cells_per_level[l]);
+  }
+  std::unique_ptr<io::FileWriter> info;  // the level of the range being written
+  std::vector<char> record(cell_info_bytes(info_kind, single_precision));
+  uint64_t done_cells = 0;
+  for (size_t round = 0; round < chunks.size(); round += n_threads) {
+    const size_t round_end = std::min(chunks.size(), round + n_threads);
+    std::vector<std::vector<std::vector<CellInfo>>> sums(round_end - round);
+    std::vector<std::vector<std::unique_ptr<CellMapReader>>> chunk_maps(round_end - round);
+    for (size_t k = round; k < round_end; ++k)
+      for (const Range& range : chunks[k]) {
+        sums[k - round].emplace_back(range.end - range.first, CellInfo{});
+        chunk_maps[k - round].push_back(std::make_unique<CellMapReader>(cells_path(prefix, level_ids[range.level])));
+      }
+    // Chunk k's sums over records [lo, hi): positions from `shared` (the read way), else fetched per block.
+    auto sum_records = [&](size_t k, uint64_t lo, uint64_t hi, const Batch* shared) {
+      const std::vector<Range>& chunk = chunks[k];
+      std::vector<std::vector<CellInfo>>& outs = sums[k - round];
+      std::vector<std::unique_ptr<CellMapReader>>& maps = chunk_maps[k - round];
+      constexpr uint64_t kAhead = 8;
+      std::vector<uint32_t> cells(block);
+      std::vector<double> grade(block, 0.0);
+      Batch own;
+      for (uint64_t first = lo; first < hi; first += block) {
+        progress.check();
+        if (tbb::is_current_task_group_canceling()) return;
+        const uint64_t n = std::min(block, hi - first);
+        if (!shared) own.load(index, positions, first, n);
+        const Batch& b = shared ? *shared : own;
+        const double* xyz = b.xyz.data() + 3 * (first - b.at);
+        if (grades) {
+          const io::Window w = grades->map(first * 8, (first + n) * 8);
+          std::memcpy(grade.data(), w.data(), n * 8);
+        }
+        for (size_t r = 0; r < chunk.size(); ++r) {
+          std::vector<CellInfo>& out = outs[r];
+          maps[r]->read(std::span<uint32_t>(cells.data(), n));
+          if (out.empty()) continue;
+          const uint64_t base = chunk[r].first;
+          for (uint64_t i = 0; i < n; ++i) {
+            if (i + kAhead < n) {
+              const uint64_t ahead = cells[i + kAhead] - base;  // wraps below the range
+              if (ahead < out.size()) {
+                __builtin_prefetch(&out[ahead]);
+                __builtin_prefetch(reinterpret_cast<const char*>(&out[ahead]) + sizeof(CellInfo) - 1);
+              }
+            }
+            const uint64_t cell = cells[i] - base;
+            if (cell >= out.size()) continue;
+            CellInfo& c = out[cell];
+            const double* p = &xyz[3 * i];
+            const double g = grade[i];
+            if (c.vertices == 0) std::copy(p, p + 3, c.center);
+            for (int a = 0; a < 3; ++a) {
+              c.weighted[a] += g * p[a];
+              c.sum[a] += p[a];
+            }
+            c.weight += g;
+            ++c.vertices;
+          }
+        }
+      }
+    };
+    if (positions.mapped()) {
+      tbb::parallel_for(round, round_end, [&](size_t k) { sum_records(k, 0, records, nullptr); });
+    } else {
+      Batch shared;
+      for (uint64_t at = 0; at < records; at += batch) {
+        progress.check();
+        shared.load(index, positions, at, std::min(batch, records - at));
+        tbb::parallel_for(round, round_end, [&](size_t k) { sum_records(k, at, shared.at + shared.ids.size(), &shared); });
+      }
+    }
+    progress.check();
+    for (size_t k = round; k < round_end; ++k)
+      for (size_t r = 0; r < chunks[k].size(); ++r) chunk_maps[k - round][r]->finish(records, cells_per_level[chunks[k][r].level]);
+    for (size_t k = round; k < round_end; ++k)
+      for (size_t r = 0; r < chunks[k].size(); ++r) {
+        const Range& range = chunks[k][r];
+        if (range.first == 0) info = std::make_unique<io::FileWriter>(cell_info_path(prefix, level_ids[range.level]), kWriterBuffer);
+        for (const CellInfo& c : sums[k - round][r]) {
+          // The mean as the emit stage computes it (emit_stage.cpp, representatives), in the same operations.
+          double mean[3];
+          for (int a = 0; a < 3; ++a) mean[a] = c.sum[a] / static_cast<double>(c.vertices);
+          char* q = record.data();
+          if (info_kind == CellInfoKind::quadric) q = put_center(q, c.center, single_precision);
+          for (int a = 0; a < 3; ++a) {
+            const double m = info_kind == CellInfoKind::mean && c.weight > 0 ? c.weighted[a] / c.weight : mean[a];
+            std::memcpy(q + 8 * a, &m, 8);
+          }
+          info->write(record.data(), record.size());
+        }
+        std::vector<CellInfo>().swap(sums[k - round][r]);
+        if (range.end == cells_per_level[range.level]) info->commit();
+        done_cells += range.end - range.first;
+      }
+    progress.report("cluster", progress_from + (1 - progress_from) * static_cast<double>(done_cells) /
+                                                   static_cast<double>(std::max<uint64_t>(total_cells, 1)));
+  }
+}
 }  // namespace
 
 uint64_t estimated_cells(const AreaHistogram& areas, double cell_size, uint64_t records) {
@@ -227,7 +380,6 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
     state[l].cells.open(cells_path(prefix, l), kWriterBuffer);
     if (info_kind == CellInfoKind::center) state[l].centers.open(cell_info_path(prefix, l), kWriterBuffer);
   }
-  const size_t n_threads = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
   const size_t n_groups = thread_groups(levels);
   std::vector<Group> groups(n_groups);
   {
@@ -292,22 +444,6 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   constexpr double kClusterShare = 0.75;
   ClusterSummary summary;
   summary.cells.resize(levels);
-  // The ids of records [at, at + size) and their positions as plain arrays, widened to double (exact for
-  // float): the read way's shared batch, or a group's own block (mapped).
-  struct Batch {
-    uint64_t at = 0;
-    std::vector<uint32_t> ids;
-    std::vector<double> xyz;
-    PositionGather::Scratch scratch;
-    void load(const io::MappedFile& order, const PositionGather& positions, uint64_t first, uint64_t n) {
-      at = first;
-      const io::Window w = order.map(first * 4, (first + n) * 4);
-      ids.resize(n);
-      xyz.resize(3 * n);
-      std::memcpy(ids.data(), w.data(), n * 4);
-      positions.gather(ids, xyz.data(), scratch);
-    }
-  };
   // Runs records [lo, hi) through group g's clusterer, block by block: positions from `shared` (the read
   // way), else fetched by the group itself.
   auto run_group = [&](size_t g, uint64_t lo, uint64_t hi, const Batch* shared) {
@@ -371,135 +507,32 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
     return summary;
   }
 
-  // The sums pass (mean and quadric representatives): each level's CellInfo records, from the cluster maps
-  // just written and the index, both read in order, so that every cell adds its vertices in weight order
-  // (as a running sum in the pass above would) and its first vertex, the one that created it, gives its
-  // center. The records are made in ranges of cell ids, packed into one chunk per thread that takes what
-  // the clusterers held at their peak divided among the threads (so the sums never raise the stage's
-  // peak), within the budget; a chunk costs one more sequential read of the index and of its levels'
-  // maps, where holding every record at once would cost 88 bytes a cell.
   constexpr uint64_t kMinSumBytes = 16 << 20;
   const uint64_t sum_bytes = std::min(std::max(peak.load(), kMinSumBytes), std::max<uint64_t>(cell_budget, 1));
-  uint64_t total_cells = 0;
-  for (uint64_t c : summary.cells) total_cells += c;
-  // As many chunks as that takes, rounded up to whole rounds of one per thread, and as even as can be.
-  const uint64_t most_per_chunk = std::max<uint64_t>(1, sum_bytes / n_threads / sizeof(CellInfo));
-  const uint64_t rounds = std::max<uint64_t>(1, (total_cells + most_per_chunk * n_threads - 1) / (most_per_chunk * n_threads));
-  const uint64_t per_chunk = std::max<uint64_t>(1, (total_cells + rounds * n_threads - 1) / (rounds * n_threads));
-  struct Range {
-    size_t level;
-    uint64_t first, end;  // cell ids
-  };
-  std::vector<std::vector<Range>> chunks(1);
-  uint64_t room = per_chunk;
-  for (size_t l = 0; l < levels; ++l) {
-    uint64_t first = 0;
-    do {
-      if (room == 0) chunks.emplace_back(), room = per_chunk;
-      const uint64_t end = std::min(summary.cells[l], first + room);
-      chunks.back().push_back({l, first, end});
-      room -= end - first;
-      first = end;
-    } while (first < summary.cells[l]);
-  }
-  std::unique_ptr<io::FileWriter> info;  // the level of the range being written
-  std::vector<char> record(cell_info_bytes(info_kind, single_precision));
-  uint64_t done_cells = 0;
-  for (size_t round = 0; round < chunks.size(); round += n_threads) {
-    const size_t round_end = std::min(chunks.size(), round + n_threads);
-    std::vector<std::vector<std::vector<CellInfo>>> sums(round_end - round);
-    std::vector<std::vector<std::unique_ptr<CellMapReader>>> chunk_maps(round_end - round);
-    for (size_t k = round; k < round_end; ++k)
-      for (const Range& range : chunks[k]) {
-        sums[k - round].emplace_back(range.end - range.first, CellInfo{});
-        chunk_maps[k - round].push_back(std::make_unique<CellMapReader>(cells_path(prefix, range.level)));
-      }
-    // Chunk k's sums over records [lo, hi): positions from `shared` (the read way), else fetched per block.
-    auto sum_records = [&](size_t k, uint64_t lo, uint64_t hi, const Batch* shared) {
-      const std::vector<Range>& chunk = chunks[k];
-      std::vector<std::vector<CellInfo>>& outs = sums[k - round];
-      std::vector<std::unique_ptr<CellMapReader>>& maps = chunk_maps[k - round];
-      constexpr uint64_t kAhead = 8;
-      std::vector<uint32_t> cells(block);
-      std::vector<double> grade(block, 0.0);
-      Batch own;
-      for (uint64_t first = lo; first < hi; first += block) {
-        progress.check();
-        if (tbb::is_current_task_group_canceling()) return;
-        const uint64_t n = std::min(block, hi - first);
-        if (!shared) own.load(index, positions, first, n);
-        const Batch& b = shared ? *shared : own;
-        const double* xyz = b.xyz.data() + 3 * (first - b.at);
-        if (grades) {
-          const io::Window w = grades->map(first * 8, (first + n) * 8);
-          std::memcpy(grade.data(), w.data(), n * 8);
-        }
-        for (size_t r = 0; r < chunk.size(); ++r) {
-          std::vector<CellInfo>& out = outs[r];
-          maps[r]->read(std::span<uint32_t>(cells.data(), n));
-          if (out.empty()) continue;
-          const uint64_t base = chunk[r].first;
-          for (uint64_t i = 0; i < n; ++i) {
-            if (i + kAhead < n) {
-              const uint64_t ahead = cells[i + kAhead] - base;  // wraps below the range
-              if (ahead < out.size()) {
-                __builtin_prefetch(&out[ahead]);
-                __builtin_prefetch(reinterpret_cast<const char*>(&out[ahead]) + sizeof(CellInfo) - 1);
-              }
-            }
-            const uint64_t cell = cells[i] - base;
-            if (cell >= out.size()) continue;
-            CellInfo& c = out[cell];
-            const double* p = &xyz[3 * i];
-            const double g = grade[i];
-            if (c.vertices == 0) std::copy(p, p + 3, c.center);
-            for (int a = 0; a < 3; ++a) {
-              c.weighted[a] += g * p[a];
-              c.sum[a] += p[a];
-            }
-            c.weight += g;
-            ++c.vertices;
-          }
-        }
-      }
-    };
-    if (positions.mapped()) {
-      tbb::parallel_for(round, round_end, [&](size_t k) { sum_records(k, 0, records, nullptr); });
-    } else {
-      Batch shared;
-      for (uint64_t at = 0; at < records; at += batch) {
-        progress.check();
-        shared.load(index, positions, at, std::min(batch, records - at));
-        tbb::parallel_for(round, round_end, [&](size_t k) { sum_records(k, at, shared.at + shared.ids.size(), &shared); });
-      }
-    }
-    progress.check();
-    for (size_t k = round; k < round_end; ++k)
-      for (size_t r = 0; r < chunks[k].size(); ++r) chunk_maps[k - round][r]->finish(records, summary.cells[chunks[k][r].level]);
-    for (size_t k = round; k < round_end; ++k)
-      for (size_t r = 0; r < chunks[k].size(); ++r) {
-        const Range& range = chunks[k][r];
-        if (range.first == 0) info = std::make_unique<io::FileWriter>(cell_info_path(prefix, range.level), kWriterBuffer);
-        for (const CellInfo& c : sums[k - round][r]) {
-          // The mean as the emit stage computes it (emit_stage.cpp, representatives), in the same operations.
-          double mean[3];
-          for (int a = 0; a < 3; ++a) mean[a] = c.sum[a] / static_cast<double>(c.vertices);
-          char* q = record.data();
-          if (info_kind == CellInfoKind::quadric) q = put_center(q, c.center, single_precision);
-          for (int a = 0; a < 3; ++a) {
-            const double m = info_kind == CellInfoKind::mean && c.weight > 0 ? c.weighted[a] / c.weight : mean[a];
-            std::memcpy(q + 8 * a, &m, 8);
-          }
-          info->write(record.data(), record.size());
-        }
-        std::vector<CellInfo>().swap(sums[k - round][r]);
-        if (range.end == summary.cells[range.level]) info->commit();
-        done_cells += range.end - range.first;
-      }
-    progress.report("cluster", kClusterShare + (1 - kClusterShare) * static_cast<double>(done_cells) /
-                                                   static_cast<double>(std::max<uint64_t>(total_cells, 1)));
-  }
+  std::vector<size_t> all(levels);
+  for (size_t l = 0; l < levels; ++l) all[l] = l;
+  sum_cells(index, positions, batch, grades.get(), records, all, summary.cells, info_kind, single_precision, sum_bytes,
+            progress, prefix, kClusterShare);
   return summary;
+}
+
+void sum_cell_info(const WeightIndex& weights, std::span<const size_t> levels, std::span<const uint64_t> cells,
+                   CellInfoKind info_kind, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,
+                   const std::string& prefix) {
+  if (info_kind == CellInfoKind::center || levels.empty()) return;
+  io::MappedFile index(weights.order_path);
+  if (index.size() != weights.records * 4) fail(Status::io_error, weights.order_path + ": size does not match");
+  std::unique_ptr<io::MappedFile> grades;
+  if (info_kind == CellInfoKind::mean) {
+    grades = std::make_unique<io::MappedFile>(weights.grades_path);
+    if (grades->size() != weights.records * 8) fail(Status::io_error, weights.grades_path + ": size does not match");
+  }
+  const bool mapped = map_positions_whole(positions_bytes(weights.vertices, weights.single_precision), memory_bytes, chunk_cap);
+  const PositionGather positions(weights.positions_path, weights.single_precision, weights.vertices, mapped);
+  // No clusterer is held here: the sums take what cluster_levels leaves its cells.
+  const uint64_t budget = std::max<uint64_t>(cell_budget(levels.size(), weights.vertices, weights.single_precision, memory_bytes, chunk_cap), 1);
+  sum_cells(index, positions, gather_batch(memory_bytes, chunk_cap, mapped), grades.get(), weights.records, levels, cells,
+            info_kind, weights.single_precision, budget, progress, prefix, 0);
 }
 
 }  // namespace lodstream::stream

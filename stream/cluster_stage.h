@@ -100,6 +100,13 @@ ClusterSummary cluster_levels(const WeightIndex& index, std::span<const double> 
                               const WorkDir& work, Progress& progress, const std::string& prefix,
                               const FineCells* fine = nullptr, uint64_t chunk_cap = 0);
 
+// The sums pass of cluster_levels on its own, for maps written another way (stream/cluster_shares.h): the
+// info files cells-L.info of `levels` (level numbers; cells[j] cells in levels[j]) from their cluster maps
+// under `prefix`, the index and the positions, the same bytes cluster_levels writes. Nothing to do for
+// CellInfoKind::center (the pass that makes the maps writes the centers).
+void sum_cell_info(const WeightIndex& index, std::span<const size_t> levels, std::span<const uint64_t> cells,
+                   CellInfoKind info, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress, const std::string& prefix);
+
 // The early estimate (before the stage runs, so that a run that cannot fit stops at once rather than
 // after minutes of clustering). Cells of a level of size c: a surface of area A cut into cells of side c
 // gives about kEstimatedCellsPerArea · A/c² cells (calibrated on the 48.6 M-triangle city: 1.07× the finest
