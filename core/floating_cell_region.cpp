@@ -3,6 +3,7 @@
 // See floating_cell_region.h for the rule and the proof of its invariant.
 #include "core/floating_cell_region.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/hash.h"
@@ -10,8 +11,39 @@
 
 namespace lodstream::core {
 
-size_t RegionClusterer::SquareHash::operator()(const std::array<int64_t, 3>& s) const {
-  return static_cast<size_t>(hash_square(s[0], s[1], s[2]));
+const RegionClusterer::Slot* RegionClusterer::find(const int64_t* square) const {
+  if (slots_.empty()) return nullptr;
+  const size_t mask = slots_.size() - 1;
+  for (size_t i = hash_square(square[0], square[1], square[2]) & mask;; i = (i + 1) & mask) {
+    const Slot& s = slots_[i];
+    if (s.head == kNone) return nullptr;
+    if (s.square[0] == square[0] && s.square[1] == square[1] && s.square[2] == square[2]) return &s;
+  }
+}
+
+void RegionClusterer::add(const int64_t* square, const Entry& e) {
+  if (entries_.size() >= kNone) fail(Status::internal, "RegionClusterer: more than 2^32 - 1 entries");
+  if (2 * (occupied_ + 1) > slots_.size()) {  // grow: at most half full
+    std::vector<Slot> old(std::max<size_t>(64, 2 * slots_.size()), Slot{{0, 0, 0}, kNone});
+    old.swap(slots_);
+    const size_t mask = slots_.size() - 1;
+    for (const Slot& s : old) {
+      if (s.head == kNone) continue;
+      size_t i = hash_square(s.square[0], s.square[1], s.square[2]) & mask;
+      while (slots_[i].head != kNone) i = (i + 1) & mask;
+      slots_[i] = s;
+    }
+  }
+  const size_t mask = slots_.size() - 1;
+  size_t i = hash_square(square[0], square[1], square[2]) & mask;
+  while (slots_[i].head != kNone &&
+         !(slots_[i].square[0] == square[0] && slots_[i].square[1] == square[1] && slots_[i].square[2] == square[2]))
+    i = (i + 1) & mask;
+  Slot& s = slots_[i];
+  if (s.head == kNone) s = Slot{{square[0], square[1], square[2]}, kNone}, ++occupied_;
+  entries_.push_back(e);
+  entries_.back().next = s.head;
+  s.head = static_cast<uint32_t>(entries_.size() - 1);
 }
 
 RegionClusterer::RegionClusterer(double cell_size, ClusterOptions options, std::span<const double, 6> held)
@@ -50,11 +82,11 @@ RegionDecision RegionClusterer::assign(std::span<const double, 3> position) {
   uint32_t settled = kNoCell, open = kNoCell;  // the best settled center, the best unsettled vertex holding p
   double settled_d2 = 0, open_d2 = 0;
   for (int i = 0; i < 8; ++i) {
-    const std::array<int64_t, 3> square = {(i & 1) ? side[0] : own[0], (i & 2) ? side[1] : own[1],
-                                           (i & 4) ? side[2] : own[2]};
-    const auto it = squares_.find(square);
-    if (it == squares_.end()) continue;
-    for (const Entry& e : it->second) {
+    const int64_t square[3] = {(i & 1) ? side[0] : own[0], (i & 2) ? side[1] : own[1], (i & 4) ? side[2] : own[2]};
+    const Slot* slot = find(square);
+    if (!slot) continue;
+    for (uint32_t k = slot->head; k != kNone; k = entries_[k].next) {
+      const Entry& e = entries_[k];
       double d2;
       if (!floating_cell_contains(p, e.position, half_, half_sq_, options_.shape, d2)) continue;
       if (e.settled) {
@@ -79,7 +111,7 @@ RegionDecision RegionClusterer::assign(std::span<const double, 3> position) {
   d.cell_settled = is_center;
   if (is_center) d.center = index;
   if (!is_center) ++unsettled_;
-  squares_[{own[0], own[1], own[2]}].push_back(Entry{{p[0], p[1], p[2]}, index, is_center});
+  add(own, Entry{{p[0], p[1], p[2]}, index, kNone, is_center});
   return d;
 }
 

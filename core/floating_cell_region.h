@@ -32,14 +32,14 @@
 // exposed vertex is caught).
 //
 // One grid of one cell size: a level with a fine grid (Mata et al.'s labels) is two such grids, each over
-// the vertices its mask sends it. Memory: one entry (its position and index, 32 bytes) per center and per
-// unsettled vertex, in a hash map of grid squares; members keep nothing.
+// the vertices its mask sends it. Memory: one entry (its position, index and list link, 40 bytes) per
+// center and per unsettled vertex, and a 32-byte slot per occupied grid square in a table at most half
+// full; members keep nothing.
 #pragma once
 
 #include <array>
 #include <cstdint>
 #include <span>
-#include <unordered_map>
 #include <vector>
 
 #include "core/floating_cell.h"
@@ -68,21 +68,31 @@ class RegionClusterer {
   uint64_t unsettled() const { return unsettled_; }
 
  private:
+  // A square's entries are a list through `entries_`, newest first (the choice is a total order on
+  // (distance, index), so the order they are read in does not matter).
   struct Entry {
     double position[3];
     uint32_t index;
-    bool settled;  // a settled center; else an unsettled vertex
+    uint32_t next;  // the square's next entry, or kNone
+    bool settled;   // a settled center; else an unsettled vertex
   };
-  struct SquareHash {
-    size_t operator()(const std::array<int64_t, 3>& s) const;
+  // A slot of the open-addressing table of occupied squares (linear probing, at most half full).
+  struct Slot {
+    int64_t square[3];
+    uint32_t head;  // the square's newest entry, or kNone for an empty slot
   };
+  static constexpr uint32_t kNone = UINT32_MAX;
 
   bool exposed(const double* p) const;
+  const Slot* find(const int64_t* square) const;
+  void add(const int64_t* square, const Entry& e);
 
   double half_, half_sq_;
   ClusterOptions options_;
   double lo_[3], hi_[3];
-  std::unordered_map<std::array<int64_t, 3>, std::vector<Entry>, SquareHash> squares_;
+  std::vector<Slot> slots_;
+  uint64_t occupied_ = 0;
+  std::vector<Entry> entries_;
   uint32_t next_ = 0;
   uint64_t unsettled_ = 0;
 };

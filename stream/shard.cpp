@@ -28,10 +28,10 @@ constexpr char kPartsMagic[8] = {'L', 'O', 'D', 'P', 'A', 'R', 'T', '3'};
 
 }  // namespace
 
-ShardLock::ShardLock(const std::string& work_dir) {
+ShardLock::ShardLock(const std::string& work_dir, const std::string& name) {
   std::error_code ec;
   std::filesystem::create_directories(work_dir, ec);
-  const std::string path = work_dir + "/shard.lock";
+  const std::string path = work_dir + "/" + name;
   fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd_ < 0) fail(Status::io_error, path + ": cannot open the work directory's lock: " + std::strerror(errno));
   int r;

@@ -54,7 +54,7 @@ namespace lodstream::stream {
 class ShardLock {
  public:
   ShardLock() = default;
-  explicit ShardLock(const std::string& work_dir);
+  explicit ShardLock(const std::string& work_dir, const std::string& name = "shard.lock");
   ShardLock(const ShardLock&) = delete;
   ShardLock& operator=(const ShardLock&) = delete;
   ~ShardLock() { release(); }

@@ -26,6 +26,7 @@
 #include "io/obj_writer.h"
 #include "io/ply_writer.h"
 #include "lodstream/lodstream.h"
+#include "stream/cluster_shares.h"
 #include "stream/cluster_stage.h"
 #include "stream/disk_space.h"
 #include "stream/emit_regions.h"
@@ -462,6 +463,9 @@ void check_shard_options(const SimplifyOptions& so, const Options& options) {
   if (so.shard_count > 0 && so.shard_index >= so.shard_count)
     fail(Status::usage, fmt::format("--shard {}/{}: the index must be below the count", so.shard_index, so.shard_count));
   if (so.max_error_px > 0) fail(Status::usage, "--max-error-px is not available with --shard");
+  if (so.cluster_share_count > 0 && so.cluster_share_index >= so.cluster_share_count)
+    fail(Status::usage, fmt::format("--shard-cluster {}/{}: the index must be below the count", so.cluster_share_index,
+                                    so.cluster_share_count));
 }
 
 // A range ingest task (stream/ingest_range.h): parses its byte range of the input into the work
@@ -514,12 +518,12 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     const stream::MemoryPlan plan = stream::plan_memory(options);
     stream::Progress progress(options);
     // A task of a sharded run (stream/shard.h) holds the work directory's lock through the shared stages.
-    const bool sharded = so.shard_count > 0 || so.shard_prepare;
+    const bool sharded = so.shard_count > 0 || so.shard_prepare || so.cluster_share_count > 0;
     if (sharded) check_shard_options(so, options);
     std::unique_ptr<stream::ShardLock> shard_lock;
     if (sharded) shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
     stream::WorkDir work(options.work_dir);
-    if (options.check_disk_space && !so.shard_prepare) stream::check_simplify_space(input, so, work.path());
+    if (options.check_disk_space && !so.shard_prepare && !so.cluster_share_count) stream::check_simplify_space(input, so, work.path());
     const std::string store_dir = work.subdir("store");
     const core::ClusterOptions copts = cluster_options(so);
     SimplifyReport report;
@@ -615,7 +619,39 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         }
         return f;
       };
-      auto cluster = [&](const std::vector<double>& sizes, StageStats* st) {
+      // The clustering as N shares (stream/cluster_shares.h): a share task runs its share and returns no
+      // cells (the run stops after the stage); the shared stage runs the shares no task ran and merges them.
+      const unsigned cluster_shares = so.cluster_share_count ? so.cluster_share_count : sharded ? so.cluster_shares : 0;
+      auto cluster_by_shares = [&](const ordered_json& key, const std::vector<double>& sizes, const stream::FineCells* fine,
+                                   const stream::WeightIndex& index, const std::vector<double>& bounds) {
+        const stream::ClusterShareInput in{index, bounds, sizes, copts, info_kind, fine, plan.stage_bytes, options.chunk_bytes,
+                                           prefix, &work};
+        const stream::ClusterShares shares = stream::plan_cluster_shares(in, cluster_shares, progress);
+        ordered_json share_key = key;
+        share_key["shares"] = shares.json();
+        const std::string dir = work.subdir("cluster-shares");
+        auto run_share = [&](unsigned s) {
+          const stream::ShardLock share_lock(dir, fmt::format("share-{}.lock", s));  // one process a share
+          const std::string stamp = stream::cluster_share_stamp(prefix, s);
+          ordered_json v;
+          if (stamp_matches(stamp, share_key, &v)) return v.at("levels");
+          std::filesystem::remove(stamp);
+          const ordered_json figures = stream::run_cluster_share(in, shares, s, progress);
+          // tests/slurm_test.sh: a share task killed before its stamp (the prepare job runs the share again)
+          if (so.cluster_share_count > 0) stream::kill_point(fmt::format("cluster-share-{}", s));
+          write_stamp(stamp, share_key, stream::cluster_share_files(in, shares, s), {{"levels", figures}});
+          return figures;
+        };
+        if (so.cluster_share_count > 0) {
+          shard_lock.reset();  // the stages before are done: the other shares may run now
+          report.cluster_share = run_share(so.cluster_share_index).dump();
+          return std::vector<uint64_t>();
+        }
+        std::vector<ordered_json> figures;
+        for (unsigned s = 0; s < shares.count; ++s) figures.push_back(run_share(s));
+        return stream::merge_cluster_shares(in, shares, figures, progress).cells;
+      };
+      auto cluster = [&](const std::vector<double>& sizes, StageStats* st, bool by_shares = false) {
         ordered_json key = cluster_base;
         std::vector<std::string> hex;
         for (double c : sizes) hex.push_back(exact(c));
@@ -640,17 +676,23 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           bounds.assign(meta.bbox.min.begin(), meta.bbox.min.end());
           bounds.insert(bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
         }
-        stream::check_cluster_estimate(grade.areas, grade.records, meta.vertices, meta.single_precision, bounds, sizes,
-                                       plan.stage_bytes, options.chunk_bytes);
+        if (!(by_shares && cluster_shares > 0))  // a share holds a share's cells; its whole levels check as they run
+          stream::check_cluster_estimate(grade.areas, grade.records, meta.vertices, meta.single_precision, bounds, sizes,
+                                         plan.stage_bytes, options.chunk_bytes);
         const stream::WeightIndex index{order_path,
                                         grades_path,
                                         store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"),
                                         grade.records,
                                         meta.vertices,
                                         meta.single_precision};
-        const stream::ClusterSummary cs =
-            stream::cluster_levels(index, bounds, sizes, copts, info_kind, plan.stage_bytes, work, progress, prefix,
-                                  fine.get(), options.chunk_bytes);
+        stream::ClusterSummary cs;
+        if (by_shares && cluster_shares > 0) {
+          cs.cells = cluster_by_shares(key, sizes, fine.get(), index, bounds);
+          if (so.cluster_share_count > 0) return cs.cells;  // a share task: no stamp of the whole stage
+        } else {
+          cs = stream::cluster_levels(index, bounds, sizes, copts, info_kind, plan.stage_bytes, work, progress, prefix,
+                                      fine.get(), options.chunk_bytes);
+        }
         std::vector<std::string> files;
         for (size_t l = 0; l < sizes.size(); ++l) {
           files.push_back(stream::cells_path(prefix, l));
@@ -881,7 +923,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                               });
         });
 
-      const std::vector<uint64_t> cells = run_stage(&report.stages, "cluster", [&](StageStats& st) { return cluster(sizes, &st); });
+      const std::vector<uint64_t> cells =
+          run_stage(&report.stages, "cluster", [&](StageStats& st) { return cluster(sizes, &st, true); });
+      if (so.cluster_share_count > 0) return;  // a share task (or a share whose stage another task finished)
       stream::ShardEmitInput shard_input;
       if (sharded) {
         shard_input = {store_dir, canonical, prefix, &meta, grade.records, copts,
@@ -1006,7 +1050,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           progress.report("tiles", 1);
         });
     });
-    if (so.shard_prepare) {
+    if (so.shard_prepare || so.cluster_share_count > 0) {
       *out = std::move(report);
       return;
     }

@@ -76,6 +76,11 @@ run_scene() {
       ls "$w"/ingest-ranges/*.seg >/dev/null 2>&1 && fail "$name: the prepare job did not join the ingest ranges"
       grep -q "range        0 of 3" "$out/slurm/logs/ingest-0.out" || fail "$name: ingest range 0 did not say what it parsed"
       echo "  3 ingest ranges joined by the prepare job: $(grep -h '^range' "$out"/slurm/logs/ingest-*.out | awk '{print $5}' | paste -sd+) bytes parsed"
+      for r in 0 1 2; do
+        [ "$(cat "$out/slurm/status/cluster-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: cluster share $r did not finish"
+        [ -f "$w/cluster-shares/share-$r.json" ] || fail "$name: cluster share $r left no stamp"
+      done
+      echo "  3 cluster shares: $(grep -h '^stage        cluster' "$out"/slurm/logs/cluster-*.out | awk '{print $3 " s"}' | paste -sd' ')"
     fi
     python3 -c 'import json,sys; m=json.load(open(sys.argv[1])); assert m["shards"]["count"]==int(sys.argv[2]) and len(m["shards"]["tasks"])==int(sys.argv[2])' \
       "$out/manifest.json" "$n" || fail "$name --shards $n: the manifest does not list every task"
@@ -105,6 +110,17 @@ grep -q "array 1 of 3" "$tmp/resubmit.log" || fail "resubmit did not submit task
 same_outputs "$tmp/room-one" "$out"
 
 # An ingest range killed just before its segment is complete, in a fresh work directory.
+# A cluster share killed: the prepare job (afterany) runs the share itself, and the run ends as one machine's.
+out=$tmp/room-kill-share
+LODSTREAM_TEST_KILL_AT=cluster-share-1 "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill-share" --shards 3 --wait \
+  --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/kill-share.log" 2>&1
+rc=$?
+[ $rc -eq 0 ] || { fail "a cluster share killed with SIGKILL: the run exited $rc, not 0"; cat "$tmp/kill-share.log"; }
+[ "$(cat "$out/slurm/status/cluster-1.rc" 2>/dev/null)" = 137 ] || fail "cluster share 1 was not killed"
+[ -f "$tmp/room-work-kill-share/cluster-shares/share-1.json" ] || fail "the prepare job did not run the killed share"
+same_outputs "$tmp/room-one" "$out"
+echo "killed cluster share: run exit $rc, the prepare job ran share 1"
+
 out=$tmp/room-kill-ingest
 LODSTREAM_TEST_KILL_AT=range-1-of-3.seg "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill" --shards 3 --wait \
   --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/kill-ingest.log" 2>&1

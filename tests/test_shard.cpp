@@ -19,6 +19,8 @@
 #include "cli_harness.h"
 #include "core/octree_regions.h"
 #include "stream/block_bounds.h"
+#include "stream/cluster_shares.h"
+#include "stream/scene_store.h"
 #include "stream/shard.h"
 #include "stream/vertex_cells.h"
 #include "test_util.h"
@@ -183,6 +185,132 @@ TEST(Shard, VertexCellsFromEitherWriterAgree) {
     SimplifyReport m;
     ASSERT_TRUE(merge(d.file("sharded"), Options{}, &m).ok());
     EXPECT_EQ(outputs(d.file("sharded")), outputs(d.file("one")));
+  }
+}
+
+// The clustering as N shares (stream/cluster_shares.h) through the library: shares run as share tasks
+// (one left out, which the prepare job runs itself), the prepare job merges them, N emit tasks and the
+// merge then give one machine's bytes, for any N and representative.
+TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
+  for (Representative rep : {Representative::center, Representative::mean, Representative::quadric}) {
+    SCOPED_TRACE(rep == Representative::center ? "center" : rep == Representative::mean ? "mean" : "quadric");
+    TempDir dir;
+    SimplifyOptions one_options = room_options(dir.file("one"));
+    one_options.representative = rep;
+    SimplifyReport one;
+    ASSERT_TRUE(simplify(sample_room(), one_options, shared_work(dir), &one).ok());
+    for (unsigned n : {1u, 2u, 4u}) {
+      SCOPED_TRACE("shares " + std::to_string(n));
+      const std::string work = dir.file("work-" + std::to_string(n)), out = dir.file("sharded-" + std::to_string(n));
+      Options o;
+      o.work_dir = work;
+      o.check_disk_space = false;
+      for (unsigned i = 0; i < n; ++i) {
+        if (n > 1 && i == 1) continue;  // a share no task ran
+        SimplifyOptions so = room_options(out);
+        so.representative = rep, so.cluster_share_index = i, so.cluster_share_count = n;
+        SimplifyReport r;
+        const Result res = simplify(sample_room(), so, o, &r);
+        ASSERT_TRUE(res.ok()) << res.message;
+        EXPECT_FALSE(r.cluster_share.empty());
+        EXPECT_TRUE(std::filesystem::exists(stream::cluster_share_stamp(work + "/", i)));
+        EXPECT_FALSE(std::filesystem::exists(work + "/cluster.json")) << "a share does not stamp the whole stage";
+      }
+      SimplifyOptions prepare = room_options(out);
+      prepare.representative = rep, prepare.shard_prepare = true, prepare.cluster_shares = n;
+      SimplifyReport pr;
+      const Result pres = simplify(sample_room(), prepare, o, &pr);
+      ASSERT_TRUE(pres.ok()) << pres.message;
+      for (unsigned i = 0; i < n; ++i) EXPECT_TRUE(std::filesystem::exists(stream::cluster_share_stamp(work + "/", i)));
+      for (size_t l = 0; l < one.levels.size(); ++l) {
+        EXPECT_TRUE(slurp(stream::cells_path(work + "/", l)) == slurp(stream::cells_path(dir.file("work") + "/", l))) << "level " << l;
+        EXPECT_TRUE(slurp(stream::cell_info_path(work + "/", l)) == slurp(stream::cell_info_path(dir.file("work") + "/", l))) << "level " << l;
+      }
+      // A share task after the stage is done does nothing.
+      SimplifyOptions late = room_options(out);
+      late.representative = rep, late.cluster_share_index = 0, late.cluster_share_count = n;
+      SimplifyReport lr;
+      ASSERT_TRUE(simplify(sample_room(), late, o, &lr).ok());
+      EXPECT_TRUE(lr.cluster_share.empty());
+      for (unsigned i = 0; i < n; ++i) {
+        SimplifyOptions so = room_options(out);
+        so.representative = rep, so.shard_index = i, so.shard_count = n;
+        SimplifyReport r;
+        const Result res = simplify(sample_room(), so, o, &r);
+        ASSERT_TRUE(res.ok()) << res.message;
+      }
+      SimplifyReport merged;
+      ASSERT_TRUE(merge(out, Options{}, &merged).ok());
+      EXPECT_EQ(outputs(out), outputs(dir.file("one")));
+    }
+  }
+  SimplifyOptions bad = room_options(test::TempDir().file("out"));
+  bad.cluster_share_index = 3, bad.cluster_share_count = 3;
+  TempDir d;
+  SimplifyReport r;
+  EXPECT_EQ(simplify(sample_room(), bad, shared_work(d), &r).status, Status::usage);
+}
+
+// The shares through the stream API with a first halo of a quarter cell, so that their own vertices near
+// the slabs' edges stay unsettled and the shares widen their halos: every level's map and info are still
+// one machine's, and the merge refuses shares that do not add up.
+TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
+  TempDir dir;
+  SimplifyOptions so = room_options(dir.file("one"));
+  so.representative = Representative::mean;
+  SimplifyReport one;
+  ASSERT_TRUE(simplify(sample_room(), so, shared_work(dir), &one).ok());
+  const std::string work = dir.file("work") + "/";
+  stream::StoreMeta meta;
+  ASSERT_TRUE(stream::read_store_meta(work + "store", &meta));
+  stream::ClusterShareInput in;
+  in.index = {stream::order_path(work), stream::grades_path(work), work + "store/positions.f32",
+              std::filesystem::file_size(stream::order_path(work)) / 4, meta.vertices, meta.single_precision};
+  ASSERT_TRUE(meta.single_precision);
+  in.bounds.assign(meta.bbox.min.begin(), meta.bbox.min.end());
+  in.bounds.insert(in.bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
+  for (const LevelStats& l : one.levels) in.sizes.push_back(l.cell_size);
+  in.info = stream::CellInfoKind::mean;
+  in.memory_bytes = 256 << 20;
+  const std::string prefix = dir.file("shares") + "/";
+  stream::WorkDir shares_work(dir.file("shares"));
+  in.prefix = prefix, in.work = &shares_work;
+  in.first_halo_cells = 0.25;
+  stream::Progress progress{Options{}};
+  stream::ClusterShares last_plan;
+  std::vector<nlohmann::ordered_json> last_figures;
+  for (unsigned n : {2u, 3u, 4u}) {
+    SCOPED_TRACE("shares " + std::to_string(n));
+    std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
+    const stream::ClusterShares plan = stream::plan_cluster_shares(in, n, progress);
+    ASSERT_EQ(plan.cuts.size(), n - 1);
+    EXPECT_TRUE(std::is_sorted(plan.cuts.begin(), plan.cuts.end()));
+    EXPECT_EQ(plan.whole_share.at(0), -1) << "the finest level splits";
+    std::vector<nlohmann::ordered_json> figures;
+    unsigned most_tries = 0;
+    for (unsigned s = 0; s < n; ++s) {
+      figures.push_back(stream::run_cluster_share(in, plan, s, progress));
+      for (const auto& f : figures.back())
+        if (f.contains("tries")) most_tries = std::max(most_tries, f.at("tries").get<unsigned>());
+    }
+    EXPECT_GT(most_tries, 1u) << "no share widened its halo";
+    const stream::ClusterSummary cs = stream::merge_cluster_shares(in, plan, figures, progress);
+    last_plan = plan, last_figures = figures;
+    for (size_t l = 0; l < one.levels.size(); ++l) {
+      EXPECT_EQ(cs.cells[l], one.levels[l].cells) << "level " << l;
+      EXPECT_TRUE(slurp(stream::cells_path(prefix, l)) == slurp(stream::cells_path(work, l))) << "level " << l;
+      EXPECT_TRUE(slurp(stream::cell_info_path(prefix, l)) == slurp(stream::cell_info_path(work, l))) << "level " << l;
+    }
+  }
+  // A share's decisions cut short: the merge fails naming the shares' directory (the last plan's files, 4 shares).
+  const std::string dec = stream::cluster_shares_dir(prefix) + "share-0-level-0.dec";
+  std::filesystem::resize_file(dec, std::filesystem::file_size(dec) - 8);
+  try {
+    stream::merge_cluster_shares(in, last_plan, last_figures, progress);
+    ADD_FAILURE() << "the merge took a share cut short";
+  } catch (const Failure& f) {
+    EXPECT_EQ(f.status(), Status::io_error);
+    EXPECT_NE(std::string(f.what()).find("cluster-shares"), std::string::npos) << f.what();
   }
 }
 

@@ -371,6 +371,13 @@ int main(int argc, char** argv) {
   std::string shard_ingest_text;
   simplify_cmd->add_option("--shard-ingest", shard_ingest_text,
                            "Parse byte range I of N of the input into --work DIR, then stop (--shard-prepare joins the N ranges)");
+  std::string shard_cluster_text;
+  simplify_cmd->add_option("--shard-cluster", shard_cluster_text,
+                           "Run share I of N of the clustering over --work DIR, then stop (the stages before it first, unless "
+                           "another task ran them; then --cluster-shards N merges the shares)");
+  simplify_cmd->add_option("--cluster-shards", so.cluster_shares,
+                           "With --shard or --shard-prepare: cluster by merging N --shard-cluster shares (running any no task ran)")
+      ->check(CLI::Range(1u, 100000u));
   add_common(simplify_cmd);
   add_space_check(simplify_cmd);
 
@@ -564,7 +571,14 @@ int main(int argc, char** argv) {
         return static_cast<int>(lodstream::Status::usage);
       }
     }
-    const bool sharded = so.shard_count > 0 || so.shard_prepare || so.ingest_count > 0;
+    if (!shard_cluster_text.empty()) {
+      std::string error;
+      if (!parse_shard(shard_cluster_text, false, &so.cluster_share_index, &so.cluster_share_count, &error)) {
+        std::fprintf(stderr, "lodstream: --shard-cluster%s\n", error.substr(error.find(':')).c_str());
+        return static_cast<int>(lodstream::Status::usage);
+      }
+    }
+    const bool sharded = so.shard_count > 0 || so.shard_prepare || so.ingest_count > 0 || so.cluster_share_count > 0;
     lodstream::SimplifyReport report;
     const lodstream::Result r = lodstream::simplify(input, so, options, &report);
     const int code = finish(r, progress, json && !sharded ? so.output_dir + "/manifest.json" : std::string(), [&] {
@@ -575,6 +589,10 @@ int main(int argc, char** argv) {
       if (so.ingest_count > 0)
         std::printf("range        %u of %u: %s bytes parsed into %s/ingest-ranges (then: --shard-prepare joins them)\n",
                     so.ingest_index, so.ingest_count, std::to_string(report.scene.file_bytes).c_str(), options.work_dir.c_str());
+      else if (so.cluster_share_count > 0)
+        std::printf("cluster      share %u of %u in %s/cluster-shares%s (then: --cluster-shards %u merges them)\n", so.cluster_share_index,
+                    so.cluster_share_count, options.work_dir.c_str(), report.cluster_share.empty() ? ", the stage already done" : "",
+                    so.cluster_share_count);
       else if (so.shard_prepare) std::printf("prepared     %s for the tasks\n", options.work_dir.c_str());
       else std::printf("task         %u of %u: parts in %s/shards (then: lodstream merge %s)\n", so.shard_index, so.shard_count,
                        so.output_dir.c_str(), so.output_dir.c_str());

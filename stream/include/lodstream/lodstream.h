@@ -206,6 +206,14 @@ struct SimplifyOptions {
   // first task) joins the N ranges into the scene store, the same bytes as one machine's ingest. The
   // report gets the stage "ingest-range" and, in scene.file_bytes, the bytes the task parsed.
   unsigned ingest_index = 0, ingest_count = 0;
+  // The clustering pass as N shares (stream/cluster_shares.h; README "Running on a cluster"). With
+  // cluster_share_count N > 0: run the stages before clustering unless another task did (under the work
+  // directory's lock), then share cluster_share_index of the clustering, then stop. With cluster_shares
+  // N > 0 on a sharded run (shard_count or shard_prepare): the shared clustering stage merges the N
+  // shares' files, first running any share no task ran, instead of clustering the whole scene itself.
+  // The outputs are the same bytes either way.
+  unsigned cluster_share_index = 0, cluster_share_count = 0;
+  unsigned cluster_shares = 0;
 };
 
 inline constexpr unsigned default_levels = 5;
@@ -246,6 +254,9 @@ struct SimplifyReport {
   TilesStats tiles;                // SimplifyOptions::write_tiles only
   unsigned search_iterations = 0;  // target search: clustering passes made
   double search_seconds = 0;
+  // SimplifyOptions::cluster_share_count: the share's figures per level, as JSON (stream/cluster_shares.h
+  // run_cluster_share); empty when the whole stage was already done.
+  std::string cluster_share;
   std::vector<StageStats> stages;
   double seconds = 0;
   uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)

@@ -1,0 +1,444 @@
+// The clustering pass as N shares, and their merge. This work is based on:
+// Kok-Lim Low and Tiow-Seng Tan. Model Simplification Using Vertex-Clustering. I3D 1997, §3.2
+// See cluster_shares.h for the plan, the passes and the invariant.
+#include "stream/cluster_shares.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <memory>
+#include <queue>
+
+#include <fmt/format.h>
+#include <tbb/parallel_for.h>
+
+#include "core/floating_cell_region.h"
+#include "core/status.h"
+#include "io/file_writer.h"
+#include "io/mapped_file.h"
+#include "stream/cell_map_file.h"
+
+namespace lodstream::stream {
+
+namespace {
+
+constexpr int kBins = 4096;
+constexpr uint64_t kWindowRecords = uint64_t{1} << 22;  // records a window of a column holds
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+std::string dec_path(const std::string& prefix, unsigned share, size_t level) {
+  return cluster_shares_dir(prefix) + fmt::format("share-{}-level-{}.dec", share, level);
+}
+std::string ctr_path(const std::string& prefix, unsigned share, size_t level) {
+  return cluster_shares_dir(prefix) + fmt::format("share-{}-level-{}.ctr", share, level);
+}
+// A whole level's map and info, as the share that clustered it leaves them.
+std::string whole_map_path(const std::string& prefix, size_t level) { return cluster_shares_dir(prefix) + fmt::format("level-{}.map", level); }
+std::string whole_info_path(const std::string& prefix, size_t level) { return cluster_shares_dir(prefix) + fmt::format("level-{}.info", level); }
+
+// Calls f(id, xyz) for every position of the store's column, in id order (read front to back).
+template <class F>
+void for_each_position(const WeightIndex& index, Progress& progress, F&& f) {
+  const io::MappedFile column(index.positions_path);
+  const uint64_t bytes = index.single_precision ? 12 : 24;
+  if (column.size() != index.vertices * bytes) fail(Status::io_error, index.positions_path + ": size does not match");
+  double p[3];
+  for (uint64_t first = 0; first < index.vertices; first += kWindowRecords) {
+    progress.check();
+    const uint64_t n = std::min(kWindowRecords, index.vertices - first);
+    const io::Window w = column.map(first * bytes, (first + n) * bytes);
+    for (uint64_t i = 0; i < n; ++i) {
+      if (index.single_precision) {
+        float q[3];
+        std::memcpy(q, w.data() + i * 12, 12);
+        p[0] = q[0], p[1] = q[1], p[2] = q[2];
+      } else {
+        std::memcpy(p, w.data() + i * 24, 24);
+      }
+      f(first + i, p);
+    }
+  }
+}
+
+// Calls f(record, id) for every record of the weight index, in weight order.
+template <class F>
+void for_each_record(const WeightIndex& index, Progress& progress, F&& f) {
+  const io::MappedFile order(index.order_path);
+  if (order.size() != index.records * 4) fail(Status::io_error, index.order_path + ": size does not match");
+  for (uint64_t first = 0; first < index.records; first += kWindowRecords) {
+    progress.check();
+    const uint64_t n = std::min(kWindowRecords, index.records - first);
+    const io::Window w = order.map(first * 4, (first + n) * 4);
+    const uint32_t* ids = reinterpret_cast<const uint32_t*>(w.data());
+    for (uint64_t i = 0; i < n; ++i) f(first + i, ids[i]);
+  }
+}
+
+// A set of vertex ids with their positions: a bit per store vertex and a running count per 64, so that
+// the k-th selected id's position is at slot k of a plain array.
+struct Selection {
+  std::vector<uint64_t> bits;
+  std::vector<uint32_t> before;  // selected ids in the words before
+  std::vector<double> xyz;       // widened to double (exact for a float store)
+  bool has(uint32_t id) const { return (bits[id >> 6] >> (id & 63)) & 1; }
+  uint32_t slot(uint32_t id) const {
+    return before[id >> 6] + static_cast<uint32_t>(std::popcount(bits[id >> 6] & ((uint64_t{1} << (id & 63)) - 1)));
+  }
+};
+
+// The held records of a share: the records whose vertex is selected and their positions, in weight order
+// (gathered once, so that every level and every try reads them front to back).
+struct Held {
+  std::vector<uint32_t> record;
+  std::vector<double> xyz;
+};
+
+// Pass 1 of a share: the vertices with lo <= p[axis] < hi, then their records.
+void select(const ClusterShareInput& in, int axis, double lo, double hi, Progress& progress, Held& held) {
+  Selection sel;
+  sel.bits.assign((in.index.vertices + 63) / 64, 0);
+  sel.xyz.clear();
+  for_each_position(in.index, progress, [&](uint64_t id, const double* p) {
+    if (!(lo <= p[axis] && p[axis] < hi)) return;
+    sel.bits[id >> 6] |= uint64_t{1} << (id & 63);
+    sel.xyz.insert(sel.xyz.end(), p, p + 3);
+  });
+  sel.before.resize(sel.bits.size());
+  uint32_t count = 0;
+  for (size_t w = 0; w < sel.bits.size(); ++w) sel.before[w] = count, count += static_cast<uint32_t>(std::popcount(sel.bits[w]));
+  held.record.clear();
+  held.xyz.clear();
+  for_each_record(in.index, progress, [&](uint64_t r, uint32_t id) {
+    if (id >= in.index.vertices) fail(Status::io_error, in.index.order_path + ": vertex id out of range");
+    if (!sel.has(id)) return;
+    held.record.push_back(static_cast<uint32_t>(r));
+    const double* p = &sel.xyz[3 * static_cast<size_t>(sel.slot(id))];
+    held.xyz.insert(held.xyz.end(), p, p + 3);
+  });
+}
+
+// Pass 2 of a share for one split level, with halo h: writes its .dec and .ctr files and returns true, or
+// returns false (writing nothing) when one of the share's own records did not settle.
+bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsigned share, size_t level, double h,
+                    const Held& held, Progress& progress, uint64_t* held_in_box, uint64_t* own) {
+  const int axis = plan.axis;
+  const double own_lo = plan.lo(share), own_hi = plan.hi(share);
+  double box[6] = {-kInf, -kInf, -kInf, kInf, kInf, kInf};
+  // A side past the scene's bounds holds everything on that side: infinite, so that nothing near it is
+  // exposed (core/floating_cell_region.h), and the widest halo settles every decision.
+  box[axis] = own_lo - h > in.bounds[axis] ? own_lo - h : -kInf;
+  box[3 + axis] = own_hi + h <= in.bounds[3 + axis] ? own_hi + h : kInf;
+  core::RegionClusterer rc(in.sizes[level], in.options, std::span<const double, 6>(box, 6));
+  io::FileWriter dec(dec_path(in.prefix, share, level), 1 << 20), ctr(ctr_path(in.prefix, share, level), 1 << 20);
+  std::vector<uint32_t> assigned;  // the record of each vertex assigned, in assign order
+  *held_in_box = *own = 0;
+  for (size_t k = 0; k < held.record.size(); ++k) {
+    if ((k & 0xfffff) == 0) progress.check();
+    const double* p = &held.xyz[3 * k];
+    if (!(box[axis] <= p[axis] && p[axis] < box[3 + axis])) continue;
+    const core::RegionDecision d = rc.assign(std::span<const double, 3>(p, 3));
+    assigned.push_back(held.record[k]);
+    ++*held_in_box;
+    if (!(own_lo <= p[axis] && p[axis] < own_hi)) continue;
+    if (d.status == core::RegionStatus::unsettled || !d.cell_settled) return false;  // the writers discard
+    const uint32_t pair[2] = {held.record[k], assigned[d.center]};
+    dec.write(pair, sizeof pair);
+    if (pair[0] == pair[1]) {
+      if (in.index.single_precision) {
+        const float f[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
+        ctr.write(f, sizeof f);
+      } else {
+        ctr.write(p, 24);
+      }
+    }
+    ++*own;
+  }
+  dec.commit();
+  ctr.commit();
+  return true;
+}
+
+// Links (or, across file systems, copies) `from` to `to`, replacing it.
+void link_file(const std::string& from, const std::string& to) {
+  std::error_code ec;
+  std::filesystem::remove(to, ec);
+  std::filesystem::create_hard_link(from, to, ec);
+  if (ec) std::filesystem::copy_file(from, to, std::filesystem::copy_options::overwrite_existing, ec);
+  if (ec) fail(Status::io_error, to + ": cannot write: " + ec.message());
+}
+
+// Reads a file of fixed-size items front to back.
+class ItemReader {
+ public:
+  ItemReader(const std::string& path, size_t item) : file_(path), item_(item) {
+    if (file_.size() % item) fail(Status::io_error, path + ": cut short");
+  }
+  uint64_t items() const { return file_.size() / item_; }
+  // The next item, or null after the last.
+  const char* next() {
+    if (at_ == end_) {
+      const uint64_t first = end_ / item_ * item_;
+      if (first >= file_.size()) return nullptr;
+      window_ = file_.map(first, std::min<uint64_t>(file_.size(), first + (uint64_t{1} << 24)));
+      at_ = first, end_ = first + window_.size();
+    }
+    const char* p = window_.data() + (at_ - (end_ - window_.size()));
+    at_ += item_;
+    return p;
+  }
+
+ private:
+  io::MappedFile file_;
+  size_t item_;
+  io::Window window_;
+  uint64_t at_ = 0, end_ = 0;
+};
+
+// The merge of one split level (see the header).
+uint64_t merge_level(const ClusterShareInput& in, const ClusterShares& plan, size_t level, Progress& progress) {
+  const uint64_t records = in.index.records;
+  // Centers: a bit per record, and the count before each word.
+  std::vector<uint64_t> center((records + 63) / 64, 0);
+  uint64_t total = 0;
+  for (unsigned s = 0; s < plan.count; ++s) {
+    ItemReader dec(dec_path(in.prefix, s, level), 8);
+    total += dec.items();
+    while (const char* p = dec.next()) {
+      uint32_t pair[2];
+      std::memcpy(pair, p, 8);
+      if (pair[0] >= records || pair[1] > pair[0]) fail(Status::io_error, dec_path(in.prefix, s, level) + ": not a share's decisions");
+      if (pair[0] == pair[1]) center[pair[0] >> 6] |= uint64_t{1} << (pair[0] & 63);
+    }
+  }
+  if (total != records)
+    fail(Status::io_error, fmt::format("{}: the shares' decisions of level {} cover {} records of {}", cluster_shares_dir(in.prefix),
+                                       level, total, records));
+  std::vector<uint32_t> before(center.size());
+  uint64_t cells = 0;
+  for (size_t w = 0; w < center.size(); ++w) before[w] = static_cast<uint32_t>(cells), cells += static_cast<uint64_t>(std::popcount(center[w]));
+  auto cell_of = [&](uint32_t c) {
+    return before[c >> 6] + static_cast<uint32_t>(std::popcount(center[c >> 6] & ((uint64_t{1} << (c & 63)) - 1)));
+  };
+
+  // Every record's cell, in weight order: the shares' files merged by record.
+  const size_t center_bytes = in.index.single_precision ? 12 : 24;
+  std::vector<std::unique_ptr<ItemReader>> decs, ctrs;
+  using Head = std::pair<uint32_t, unsigned>;  // (record, share)
+  std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heads;
+  for (unsigned s = 0; s < plan.count; ++s) {
+    decs.push_back(std::make_unique<ItemReader>(dec_path(in.prefix, s, level), 8));
+    ctrs.push_back(std::make_unique<ItemReader>(ctr_path(in.prefix, s, level), center_bytes));
+  }
+  std::vector<uint32_t> pending(plan.count);  // each share's next record's center
+  auto advance = [&](unsigned s) {
+    if (const char* p = decs[s]->next()) {
+      uint32_t pair[2];
+      std::memcpy(pair, p, 8);
+      pending[s] = pair[1];
+      heads.push({pair[0], s});
+    }
+  };
+  for (unsigned s = 0; s < plan.count; ++s) advance(s);
+  CellMapWriter map;
+  map.open(cells_path(in.prefix, level), 1 << 20);
+  io::FileWriter info;
+  if (in.info == CellInfoKind::center) info.open(cell_info_path(in.prefix, level), 1 << 20);
+  std::vector<uint32_t> buffer;
+  buffer.reserve(1 << 16);
+  for (uint64_t r = 0; r < records; ++r) {
+    if ((r & 0xfffff) == 0) progress.check();
+    const auto [record, s] = heads.top();
+    heads.pop();
+    if (record != r) fail(Status::io_error, fmt::format("{}: record {} of level {} is decided {}", cluster_shares_dir(in.prefix), r, level,
+                                                        record < r ? "twice" : "by no share"));
+    const uint32_t c = pending[s];
+    buffer.push_back(cell_of(c));
+    if (c == record && in.info == CellInfoKind::center) {
+      const char* q = ctrs[s]->next();
+      if (!q) fail(Status::io_error, ctr_path(in.prefix, s, level) + ": cut short");
+      info.write(q, center_bytes);
+    }
+    if (buffer.size() == buffer.capacity()) map.write(buffer), buffer.clear();
+    advance(s);
+  }
+  map.write(buffer);
+  map.commit();
+  if (in.info == CellInfoKind::center) info.commit();
+  return cells;
+}
+
+}  // namespace
+
+double ClusterShares::lo(unsigned s) const { return s == 0 ? -kInf : cuts[s - 1]; }
+double ClusterShares::hi(unsigned s) const { return s + 1 >= count ? kInf : cuts[s]; }
+
+nlohmann::ordered_json ClusterShares::json() const {
+  std::vector<std::string> c;
+  for (double x : cuts) c.push_back(fmt::format("{:a}", x));
+  return {{"count", count}, {"axis", axis}, {"cuts", c}, {"whole_share", whole_share}};
+}
+
+std::string cluster_shares_dir(const std::string& prefix) { return prefix + "cluster-shares/"; }
+std::string cluster_share_stamp(const std::string& prefix, unsigned index) {
+  return cluster_shares_dir(prefix) + fmt::format("share-{}.json", index);
+}
+
+ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, Progress& progress) {
+  ClusterShares plan;
+  plan.count = count;
+  const size_t levels = in.sizes.size();
+  plan.whole_share.assign(levels, -1);
+  bool can_split = count >= 2 && in.bounds.size() == 6 && in.options.clustering == core::Clustering::floating;
+  if (can_split) {
+    for (int a = 1; a < 3; ++a)
+      if (in.bounds[3 + a] - in.bounds[a] > in.bounds[3 + plan.axis] - in.bounds[plan.axis]) plan.axis = a;
+    can_split = in.bounds[3 + plan.axis] > in.bounds[plan.axis];
+  }
+  double min_width = 0;
+  if (can_split) {
+    const double lo = in.bounds[plan.axis], hi = in.bounds[3 + plan.axis];
+    // The cuts: bin edges where the store's vertices divide into `count` equal parts.
+    std::vector<uint64_t> hist(kBins, 0);
+    for_each_position(in.index, progress, [&](uint64_t, const double* p) {
+      const double t = (p[plan.axis] - lo) / (hi - lo) * kBins;
+      ++hist[static_cast<size_t>(std::clamp(t, 0.0, static_cast<double>(kBins - 1)))];
+    });
+    uint64_t seen = 0;
+    int bin = 0;
+    for (unsigned k = 1; k < count; ++k) {
+      const uint64_t want = (in.index.vertices * k + count - 1) / count;
+      while (bin < kBins && seen + hist[static_cast<size_t>(bin)] < want) seen += hist[static_cast<size_t>(bin++)];
+      // The edge after the bin that reaches the k-th part.
+      plan.cuts.push_back(lo + (hi - lo) * (std::min(bin + 1, kBins)) / kBins);
+    }
+    for (size_t k = 1; k < plan.cuts.size(); ++k) plan.cuts[k] = std::max(plan.cuts[k], plan.cuts[k - 1]);
+    min_width = kInf;
+    for (unsigned s = 0; s < count; ++s)
+      min_width = std::min(min_width, std::min(plan.hi(s), hi) - std::max(plan.lo(s), lo));
+  } else {
+    plan.cuts.assign(count ? count - 1 : 0, 0.0);
+  }
+  // Whole levels from the last share down, finest first.
+  unsigned next = count - 1;
+  for (size_t l = 0; l < levels; ++l) {
+    const bool fine = in.fine && in.fine->sizes.at(l) > 0;
+    if (can_split && !fine && in.sizes[l] * kSplitCells <= min_width) continue;
+    plan.whole_share[l] = static_cast<int>(next);
+    next = next == 0 ? count - 1 : next - 1;
+  }
+  return plan;
+}
+
+std::vector<std::string> cluster_share_files(const ClusterShareInput& in, const ClusterShares& plan, unsigned index) {
+  std::vector<std::string> files;
+  for (size_t l = 0; l < plan.whole_share.size(); ++l) {
+    if (plan.whole_share[l] < 0) files.push_back(dec_path(in.prefix, index, l)), files.push_back(ctr_path(in.prefix, index, l));
+    else if (plan.whole_share[l] == static_cast<int>(index))
+      files.push_back(whole_map_path(in.prefix, l)), files.push_back(whole_info_path(in.prefix, l));
+  }
+  return files;
+}
+
+nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const ClusterShares& plan, unsigned index,
+                                         Progress& progress) {
+  std::filesystem::create_directories(cluster_shares_dir(in.prefix));
+  nlohmann::ordered_json figures = nlohmann::ordered_json::array();
+  // The whole levels: cluster_levels over them alone, its files renamed to the level's.
+  std::vector<size_t> whole;
+  std::vector<double> whole_sizes;
+  FineCells whole_fine;
+  for (size_t l = 0; l < plan.whole_share.size(); ++l)
+    if (plan.whole_share[l] == static_cast<int>(index)) {
+      whole.push_back(l);
+      whole_sizes.push_back(in.sizes[l]);
+      if (in.fine) whole_fine.sizes.push_back(in.fine->sizes.at(l)), whole_fine.near.push_back(in.fine->near.at(l));
+    }
+  if (!whole.empty()) {
+    if (in.fine) whole_fine.labels_path = in.fine->labels_path;
+    const std::string stem = cluster_shares_dir(in.prefix) + fmt::format("share-{}-whole-", index);
+    const ClusterSummary cs = cluster_levels(in.index, in.bounds, whole_sizes, in.options, in.info, in.memory_bytes, *in.work,
+                                             progress, stem, in.fine ? &whole_fine : nullptr, in.chunk_cap);
+    for (size_t j = 0; j < whole.size(); ++j) {
+      std::filesystem::rename(cells_path(stem, j), whole_map_path(in.prefix, whole[j]));
+      std::filesystem::rename(cell_info_path(stem, j), whole_info_path(in.prefix, whole[j]));
+      figures.push_back({{"level", whole[j]}, {"cells", cs.cells[j]}});
+    }
+  }
+  // The split levels: select with the widest halo any of them needs, cluster each, widen the ones that did
+  // not settle, select again when a halo outgrows the selection.
+  std::vector<size_t> split;
+  std::vector<double> halo;
+  std::vector<unsigned> tries;
+  for (size_t l = 0; l < plan.whole_share.size(); ++l)
+    if (plan.whole_share[l] < 0) split.push_back(l), halo.push_back(in.first_halo_cells * in.sizes[l]), tries.push_back(0);
+  Held held;
+  double selected = -1;  // the halo of the selection
+  std::vector<char> done(split.size(), 0);
+  std::vector<nlohmann::ordered_json> split_figures(split.size());
+  for (;;) {
+    double widest = 0;
+    for (size_t j = 0; j < split.size(); ++j)
+      if (!done[j]) widest = std::max(widest, halo[j]);
+    if (widest == 0) break;
+    if (widest > selected) {
+      selected = widest;
+      for (size_t j = 0; j < split.size(); ++j)  // select once for every level still to do
+        if (!done[j]) selected = std::max(selected, halo[j]);
+      held = Held();
+      select(in, plan.axis, plan.lo(index) - selected, plan.hi(index) + selected, progress, held);
+    }
+    // The levels are independent: one task each.
+    std::vector<uint64_t> in_box(split.size()), own(split.size());
+    std::vector<char> settled(split.size(), 0);
+    tbb::parallel_for(size_t{0}, split.size(), [&](size_t j) {
+      if (!done[j]) settled[j] = cluster_region(in, plan, index, split[j], halo[j], held, progress, &in_box[j], &own[j]);
+    });
+    for (size_t j = 0; j < split.size(); ++j) {
+      if (done[j]) continue;
+      ++tries[j];
+      if (settled[j]) {
+        done[j] = true;
+        split_figures[j] = {{"level", split[j]}, {"halo_cells", halo[j] / in.sizes[split[j]]}, {"tries", tries[j]},
+                            {"held", in_box[j]}, {"own", own[j]}};
+      } else {
+        halo[j] *= 2;
+      }
+    }
+  }
+  for (auto& f : split_figures) figures.push_back(std::move(f));
+  return figures;
+}
+
+ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterShares& plan,
+                                    const std::vector<nlohmann::ordered_json>& figures, Progress& progress) {
+  ClusterSummary summary;
+  const size_t levels = plan.whole_share.size();
+  summary.cells.assign(levels, 0);
+  std::vector<size_t> split;
+  std::vector<uint64_t> split_cells;
+  for (size_t l = 0; l < levels; ++l) {
+    if (plan.whole_share[l] >= 0) {
+      link_file(whole_map_path(in.prefix, l), cells_path(in.prefix, l));
+      link_file(whole_info_path(in.prefix, l), cell_info_path(in.prefix, l));
+      bool found = false;
+      for (const auto& f : figures.at(static_cast<size_t>(plan.whole_share[l])))
+        if (f.at("level") == l) summary.cells[l] = f.at("cells"), found = true;
+      if (!found) fail(Status::io_error, cluster_share_stamp(in.prefix, static_cast<unsigned>(plan.whole_share[l])) + ": level " +
+                                             std::to_string(l) + " is missing");
+    } else {
+      summary.cells[l] = merge_level(in, plan, l, progress);
+      split.push_back(l);
+      split_cells.push_back(summary.cells[l]);
+    }
+    progress.report("cluster", 0.5 * static_cast<double>(l + 1) / static_cast<double>(levels));
+  }
+  sum_cell_info(in.index, split, split_cells, in.info, in.memory_bytes, in.chunk_cap, progress, in.prefix);
+  progress.report("cluster", 1);
+  return summary;
+}
+
+}  // namespace lodstream::stream

@@ -1,0 +1,104 @@
+// The clustering pass as N shares (issue 19, "clustering by region"): share I of N clusters the vertices of
+// its region of the scene, with a halo, in every level fine enough to split, and the levels too coarse to
+// split whole, one share each; a merge then writes the cluster maps and cell infos, the same bytes as the
+// one-machine pass (stream/cluster_stage.h).
+//
+// Low & Tan, "Model Simplification Using Vertex-Clustering", I3D 1997, §3.2: the floating-cell pass, which
+// is sequential in weight order. core/floating_cell_region.h proves which decisions a share can settle
+// from the vertices it holds; this file is the stage around it.
+//
+// The plan (plan_cluster_shares; every share and the merge compute the same one from the same files):
+// - Regions: slabs across the longest axis of the scene's bounds, cut where the store's vertices divide
+//   into N equal parts (a histogram of 4096 bins over the axis), so that share I owns the vertices with
+//   cuts[I-1] <= p[axis] < cuts[I] (no lower bound for share 0, no upper for share N-1).
+// - A level is split by region when its cells are floating, it has no fine grid (silhouette labels: two
+//   grids, not handled here), and every slab is at least kSplitCells cells wide; then each share clusters
+//   its own vertices. Otherwise the level is clustered whole by one share (cluster_levels over that level:
+//   exact by construction), the whole levels handed out from the last share down, finest first.
+// The share (run_cluster_share), per split level:
+// 1. Select: the vertex ids within the largest halo of the slab (one sequential read of the positions),
+//    then the records of the weight index that hold them (one sequential read of order.u32) and their
+//    positions, in weight order: the whole-scene order restricted to what the share holds.
+// 2. Cluster and widen: a core::RegionClusterer over the records within the level's halo H (first
+//    kFirstHaloCells cells). When one of the share's own records stays unsettled (its status or its cell),
+//    H doubles and the level runs again; a halo that reaches past the scene's bounds holds everything, where
+//    every decision settles, so the loop ends.
+// 3. Write, per level L, cluster-shares/share-I-level-L.dec: (record, record of its center) for every
+//    own record, in weight order; and .ctr, the own centers' positions at the store's precision.
+// The merge (merge_cluster_shares), per split level: a cell's id is the number of centers before its
+// center in weight order (the one-machine pass numbers cells in creation order, and a cell is created by
+// its center), counted with a bit per record and a running count per 64 records; the shares' .dec files,
+// merged by record, then give every record's cell, written as cells-L.map (stream/cell_map_file.h), and
+// the .ctr files the centers of a center-kind info. Mean and quadric infos are summed afterwards, as
+// cluster_levels sums them (sum_cell_info). Whole levels' files are linked from the share that made them.
+// Invariant: each record is owned by exactly one share (the slabs partition the axis), and every owned
+// decision written is settled, hence the whole-scene pass's (core/floating_cell_region.h); the merge checks
+// that the shares' records are each record exactly once.
+// Memory of a share: 28 bytes per record held (its record number and position, gathered in weight order
+// from a by-id copy of the selected positions, 24 bytes per vertex selected, freed after the gather), a
+// bit and a half per store vertex while selecting, and the RegionClusterers' entries and slots
+// (core/floating_cell_region.h; the split levels run at once, one thread each); of the merge, a bit and
+// a half per record (levels merged one after another).
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/floating_cell.h"
+#include "stream/cluster_stage.h"
+#include "stream/progress.h"
+
+namespace lodstream::stream {
+
+inline constexpr double kSplitCells = 64;      // a level splits when every slab is this many cells wide
+inline constexpr double kFirstHaloCells = 16;  // the first halo, in cells (README: 17 to 23 at most measured)
+
+struct ClusterShares {
+  unsigned count = 0;
+  int axis = 0;
+  std::vector<double> cuts;       // count - 1 planes across `axis`, non-decreasing
+  std::vector<int> whole_share;   // per level: the share that clusters the level whole, or -1 (split)
+  // Share s's slab on the axis: [lo, hi), infinite at the ends.
+  double lo(unsigned s) const;
+  double hi(unsigned s) const;
+  nlohmann::ordered_json json() const;
+};
+
+// What a share and the merge are given: the weight index, the scene's bounds (6 values, or empty), the
+// levels' cell sizes, the clustering, the info kind, the fine grids (or null), the memory budget, and the
+// work directory's prefix (cells-L.map etc. are written there; the shares' files in cluster-shares/).
+struct ClusterShareInput {
+  WeightIndex index;
+  std::vector<double> bounds, sizes;
+  core::ClusterOptions options;
+  CellInfoKind info = CellInfoKind::center;
+  const FineCells* fine = nullptr;
+  uint64_t memory_bytes = 0, chunk_cap = 0;
+  std::string prefix;
+  const WorkDir* work = nullptr;
+  double first_halo_cells = kFirstHaloCells;  // the tests start lower, to make shares widen
+};
+
+ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, Progress& progress);
+
+std::string cluster_shares_dir(const std::string& prefix);
+std::string cluster_share_stamp(const std::string& prefix, unsigned index);
+// The files share `index` writes (for its stamp).
+std::vector<std::string> cluster_share_files(const ClusterShareInput& in, const ClusterShares& plan, unsigned index);
+
+// Runs share `index`; returns its figures for the stamp and the manifest: per level {"level", "cells"
+// (whole levels), "halo_cells", "tries", "held", "own"}.
+nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const ClusterShares& plan, unsigned index,
+                                         Progress& progress);
+
+// Writes cells-L.map and cells-L.info for every level from the shares' files (every share must have run;
+// figures[s]: what run_cluster_share returned for share s); returns cells per level. Failure(io_error) when
+// the shares' files do not add up to the weight index.
+ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterShares& plan,
+                                    const std::vector<nlohmann::ordered_json>& figures, Progress& progress);
+
+}  // namespace lodstream::stream
