@@ -66,6 +66,10 @@ class RegionClusterer {
   RegionDecision assign(std::span<const double, 3> position);
 
   uint64_t unsettled() const { return unsettled_; }
+  // Bytes held now (the table's and the entries' capacity), and what the next growth step may briefly add
+  // (the table doubles while its old copy is held; the entries' vector doubles).
+  uint64_t memory_bytes() const { return slots_.capacity() * sizeof(Slot) + entries_.capacity() * sizeof(Entry); }
+  uint64_t growth_bytes() const { return 2 * slots_.capacity() * sizeof(Slot) + entries_.capacity() * sizeof(Entry); }
 
  private:
   // A square's entries are a list through `entries_`, newest first (the choice is a total order on

@@ -4,6 +4,7 @@
 #include "stream/cluster_shares.h"
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstdio>
@@ -39,6 +40,22 @@ std::string ctr_path(const std::string& prefix, unsigned share, size_t level) {
 // A whole level's map and info, as the share that clustered it leaves them.
 std::string whole_map_path(const std::string& prefix, size_t level) { return cluster_shares_dir(prefix) + fmt::format("level-{}.map", level); }
 std::string whole_info_path(const std::string& prefix, size_t level) { return cluster_shares_dir(prefix) + fmt::format("level-{}.info", level); }
+
+// Positions at the store's precision (floats for a float store: half the bytes; widened to double, exactly,
+// when read).
+struct Positions {
+  bool single = true;
+  std::vector<float> f;
+  std::vector<double> d;
+  void add(const double* p) {
+    if (single) f.insert(f.end(), {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])});
+    else d.insert(d.end(), p, p + 3);
+  }
+  void get(size_t k, double* p) const {
+    for (int a = 0; a < 3; ++a) p[a] = single ? static_cast<double>(f[3 * k + a]) : d[3 * k + a];
+  }
+  uint64_t bytes() const { return f.capacity() * sizeof(float) + d.capacity() * sizeof(double); }
+};
 
 // Calls f(id, xyz) for every position of the store's column, in id order (read front to back).
 template <class F>
@@ -83,7 +100,7 @@ void for_each_record(const WeightIndex& index, Progress& progress, F&& f) {
 struct Selection {
   std::vector<uint64_t> bits;
   std::vector<uint32_t> before;  // selected ids in the words before
-  std::vector<double> xyz;       // widened to double (exact for a float store)
+  Positions xyz;
   bool has(uint32_t id) const { return (bits[id >> 6] >> (id & 63)) & 1; }
   uint32_t slot(uint32_t id) const {
     return before[id >> 6] + static_cast<uint32_t>(std::popcount(bits[id >> 6] & ((uint64_t{1} << (id & 63)) - 1)));
@@ -94,37 +111,54 @@ struct Selection {
 // (gathered once, so that every level and every try reads them front to back).
 struct Held {
   std::vector<uint32_t> record;
-  std::vector<double> xyz;
+  Positions xyz;
+  uint64_t bytes() const { return record.capacity() * 4 + xyz.bytes(); }
 };
+
+// What a share holds past its budget: Failure(usage), naming what outgrew it.
+void check_share_memory(const ClusterShareInput& in, const std::string& what, uint64_t bytes) {
+  if (bytes <= in.memory_bytes) return;
+  fail(Status::usage, fmt::format("cluster share: {} take {} MiB, more than --memory allows ({} MiB): raise --memory, or run "
+                                  "more shares",
+                                  what, bytes >> 20, in.memory_bytes >> 20));
+}
 
 // Pass 1 of a share: the vertices with lo <= p[axis] < hi, then their records.
 void select(const ClusterShareInput& in, int axis, double lo, double hi, Progress& progress, Held& held) {
   Selection sel;
   sel.bits.assign((in.index.vertices + 63) / 64, 0);
-  sel.xyz.clear();
+  sel.xyz.single = held.xyz.single = in.index.single_precision;
   for_each_position(in.index, progress, [&](uint64_t id, const double* p) {
     if (!(lo <= p[axis] && p[axis] < hi)) return;
     sel.bits[id >> 6] |= uint64_t{1} << (id & 63);
-    sel.xyz.insert(sel.xyz.end(), p, p + 3);
+    sel.xyz.add(p);
   });
   sel.before.resize(sel.bits.size());
   uint32_t count = 0;
   for (size_t w = 0; w < sel.bits.size(); ++w) sel.before[w] = count, count += static_cast<uint32_t>(std::popcount(sel.bits[w]));
-  held.record.clear();
-  held.xyz.clear();
-  for_each_record(in.index, progress, [&](uint64_t r, uint32_t id) {
+  // The held arrays are sized first (a count pass over the index), so that they take no growth headroom.
+  uint64_t held_count = 0;
+  for_each_record(in.index, progress, [&](uint64_t, uint32_t id) {
     if (id >= in.index.vertices) fail(Status::io_error, in.index.order_path + ": vertex id out of range");
+    held_count += sel.has(id);
+  });
+  held.record.reserve(held_count);
+  (held.xyz.single ? held.xyz.f.reserve(3 * held_count) : held.xyz.d.reserve(3 * held_count));
+  check_share_memory(in, "its held vertices", sel.bits.capacity() * 8 + sel.before.capacity() * 4 + sel.xyz.bytes() + held.bytes());
+  double p[3];
+  for_each_record(in.index, progress, [&](uint64_t r, uint32_t id) {
     if (!sel.has(id)) return;
     held.record.push_back(static_cast<uint32_t>(r));
-    const double* p = &sel.xyz[3 * static_cast<size_t>(sel.slot(id))];
-    held.xyz.insert(held.xyz.end(), p, p + 3);
+    sel.xyz.get(sel.slot(id), p);
+    held.xyz.add(p);
   });
 }
 
 // Pass 2 of a share for one split level, with halo h: writes its .dec and .ctr files and returns true, or
 // returns false (writing nothing) when one of the share's own records did not settle.
 bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsigned share, size_t level, double h,
-                    const Held& held, Progress& progress, uint64_t* held_in_box, uint64_t* own) {
+                    const Held& held, std::atomic<uint64_t>& clusterers, Progress& progress, uint64_t* held_in_box,
+                    uint64_t* own) {
   const int axis = plan.axis;
   const double own_lo = plan.lo(share), own_hi = plan.hi(share);
   double box[6] = {-kInf, -kInf, -kInf, kInf, kInf, kInf};
@@ -135,10 +169,23 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
   core::RegionClusterer rc(in.sizes[level], in.options, std::span<const double, 6>(box, 6));
   io::FileWriter dec(dec_path(in.prefix, share, level), 1 << 20), ctr(ctr_path(in.prefix, share, level), 1 << 20);
   std::vector<uint32_t> assigned;  // the record of each vertex assigned, in assign order
+  uint64_t counted = 0;            // this level's share of `clusterers`
+  struct Uncount {                 // returned to `clusterers` however the level ends
+    std::atomic<uint64_t>& total;
+    uint64_t& n;
+    ~Uncount() { total.fetch_sub(n); }
+  } uncount{clusterers, counted};
   *held_in_box = *own = 0;
+  double p[3];
   for (size_t k = 0; k < held.record.size(); ++k) {
-    if ((k & 0xfffff) == 0) progress.check();
-    const double* p = &held.xyz[3 * k];
+    if ((k & 0xfffff) == 0) {
+      progress.check();
+      const uint64_t now = rc.memory_bytes() + rc.growth_bytes() + assigned.capacity() * 4;
+      clusterers.fetch_add(now - counted);  // wraps correctly: counted only grows
+      counted = now;
+      check_share_memory(in, fmt::format("level {}'s cells", level), held.bytes() + clusterers.load());
+    }
+    held.xyz.get(k, p);
     if (!(box[axis] <= p[axis] && p[axis] < box[3 + axis])) continue;
     const core::RegionDecision d = rc.assign(std::span<const double, 3>(p, 3));
     assigned.push_back(held.record[k]);
@@ -376,6 +423,7 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
   for (size_t l = 0; l < plan.whole_share.size(); ++l)
     if (plan.whole_share[l] < 0) split.push_back(l), halo.push_back(in.first_halo_cells * in.sizes[l]), tries.push_back(0);
   Held held;
+  std::atomic<uint64_t> clusterers{0};  // the running levels' RegionClusterers, with their growth headroom
   double selected = -1;  // the halo of the selection
   std::vector<char> done(split.size(), 0);
   std::vector<nlohmann::ordered_json> split_figures(split.size());
@@ -395,7 +443,7 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
     std::vector<uint64_t> in_box(split.size()), own(split.size());
     std::vector<char> settled(split.size(), 0);
     tbb::parallel_for(size_t{0}, split.size(), [&](size_t j) {
-      if (!done[j]) settled[j] = cluster_region(in, plan, index, split[j], halo[j], held, progress, &in_box[j], &own[j]);
+      if (!done[j]) settled[j] = cluster_region(in, plan, index, split[j], halo[j], held, clusterers, progress, &in_box[j], &own[j]);
     });
     for (size_t j = 0; j < split.size(); ++j) {
       if (done[j]) continue;
