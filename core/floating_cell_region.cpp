@@ -16,38 +16,76 @@ const RegionClusterer::Slot* RegionClusterer::find(const int64_t* square) const 
   const size_t mask = slots_.size() - 1;
   for (size_t i = hash_square(square[0], square[1], square[2]) & mask;; i = (i + 1) & mask) {
     const Slot& s = slots_[i];
-    if (s.head == kNone) return nullptr;
+    if (s.head == kNone && s.box == kNone) return nullptr;
     if (s.square[0] == square[0] && s.square[1] == square[1] && s.square[2] == square[2]) return &s;
   }
 }
 
-void RegionClusterer::add(const int64_t* square, const Entry& e) {
-  if (entries_.size() >= kNone) fail(Status::internal, "RegionClusterer: more than 2^32 - 1 entries");
+RegionClusterer::Slot& RegionClusterer::slot(const int64_t* square) {
   if (2 * (occupied_ + 1) > slots_.size()) {  // grow: at most half full
-    std::vector<Slot> old(std::max<size_t>(64, 2 * slots_.size()), Slot{{0, 0, 0}, kNone});
+    std::vector<Slot> old(std::max<size_t>(64, 2 * slots_.size()), Slot{{0, 0, 0}, kNone, 0, kNone});
     old.swap(slots_);
     const size_t mask = slots_.size() - 1;
     for (const Slot& s : old) {
-      if (s.head == kNone) continue;
+      if (s.head == kNone && s.box == kNone) continue;
       size_t i = hash_square(s.square[0], s.square[1], s.square[2]) & mask;
-      while (slots_[i].head != kNone) i = (i + 1) & mask;
+      while (slots_[i].head != kNone || slots_[i].box != kNone) i = (i + 1) & mask;
       slots_[i] = s;
     }
   }
   const size_t mask = slots_.size() - 1;
   size_t i = hash_square(square[0], square[1], square[2]) & mask;
-  while (slots_[i].head != kNone &&
-         !(slots_[i].square[0] == square[0] && slots_[i].square[1] == square[1] && slots_[i].square[2] == square[2]))
-    i = (i + 1) & mask;
-  Slot& s = slots_[i];
-  if (s.head == kNone) s = Slot{{square[0], square[1], square[2]}, kNone}, ++occupied_;
+  for (;; i = (i + 1) & mask) {
+    Slot& s = slots_[i];
+    if (s.head == kNone && s.box == kNone) {
+      s = Slot{{square[0], square[1], square[2]}, kNone, 0, kNone};
+      ++occupied_;
+      return s;
+    }
+    if (s.square[0] == square[0] && s.square[1] == square[1] && s.square[2] == square[2]) return s;
+  }
+}
+
+void RegionClusterer::add(const int64_t* square, const Entry& e) {
+  Slot& s = slot(square);
+  if (!e.settled && s.box != kNone) {  // a crowded square: its box widens
+    Box& b = boxes_[s.box];
+    for (int a = 0; a < 3; ++a) b.lo[a] = std::min(b.lo[a], e.position[a]), b.hi[a] = std::max(b.hi[a], e.position[a]);
+    return;
+  }
+  if (!e.settled && s.open == max_open_) {
+    // Crowded: the square's unsettled entries and e become its box; the list keeps its settled centers.
+    Box b{{e.position[0], e.position[1], e.position[2]}, {e.position[0], e.position[1], e.position[2]}};
+    uint32_t* link = &s.head;
+    while (*link != kNone) {
+      Entry& x = entries_[*link];
+      if (x.settled) {
+        link = &x.next;
+        continue;
+      }
+      for (int a = 0; a < 3; ++a) b.lo[a] = std::min(b.lo[a], x.position[a]), b.hi[a] = std::max(b.hi[a], x.position[a]);
+      *link = x.next;  // unlinked (its record stays unused in entries_)
+    }
+    s.open = 0;
+    s.box = static_cast<uint32_t>(boxes_.size());
+    boxes_.push_back(b);
+    return;
+  }
+  if (entries_.size() >= kNone) fail(Status::internal, "RegionClusterer: more than 2^32 - 1 entries");
   entries_.push_back(e);
   entries_.back().next = s.head;
   s.head = static_cast<uint32_t>(entries_.size() - 1);
+  s.open += !e.settled;
 }
 
-RegionClusterer::RegionClusterer(double cell_size, ClusterOptions options, std::span<const double, 6> held)
-    : half_(cell_size / 2), half_sq_(half_ * half_), options_(options) {
+bool RegionClusterer::box_holds(const Box& b, const double* p) const {
+  for (int a = 0; a < 3; ++a)
+    if (!(b.lo[a] - p[a] <= half_ && p[a] - b.hi[a] <= half_)) return false;
+  return true;
+}
+
+RegionClusterer::RegionClusterer(double cell_size, ClusterOptions options, std::span<const double, 6> held, uint32_t max_open)
+    : half_(cell_size / 2), half_sq_(half_ * half_), options_(options), max_open_(std::max<uint32_t>(max_open, 1)) {
   if (options.clustering != Clustering::floating)
     fail(Status::internal, "RegionClusterer: floating cells only (uniform cells need no halo)");
   if (!(cell_size >= kMinCellSize && cell_size <= kMaxCellSize))
@@ -81,10 +119,12 @@ RegionDecision RegionClusterer::assign(std::span<const double, 3> position) {
   }
   uint32_t settled = kNoCell, open = kNoCell;  // the best settled center, the best unsettled vertex holding p
   double settled_d2 = 0, open_d2 = 0;
+  bool crowded = false;  // a crowded square's box holds p: an unsettled vertex of unknown rank may
   for (int i = 0; i < 8; ++i) {
     const int64_t square[3] = {(i & 1) ? side[0] : own[0], (i & 2) ? side[1] : own[1], (i & 4) ? side[2] : own[2]};
     const Slot* slot = find(square);
     if (!slot) continue;
+    if (slot->box != kNone && !crowded) crowded = box_holds(boxes_[slot->box], p);
     for (uint32_t k = slot->head; k != kNone; k = entries_[k].next) {
       const Entry& e = entries_[k];
       double d2;
@@ -97,7 +137,8 @@ RegionDecision RegionClusterer::assign(std::span<const double, 3> position) {
     }
   }
 
-  const bool outside_may_hold = exposed(p);
+  // A vertex the task does not hold, or a crowded square's unsettled vertex, may hold p.
+  const bool outside_may_hold = exposed(p) || crowded;
   RegionDecision d;
   if (settled != kNoCell) {
     // invariant: a settled center's cell holds p, so p starts no cell in the whole-scene pass.

@@ -31,6 +31,16 @@
 // fl(v[a] − lo[a]) <= c/2 or fl(hi[a] − v[a]) <= c/2 on some axis (rounding is monotone, so every truly
 // exposed vertex is caught).
 //
+// Crowded squares. Unsettled vertices, unlike centers, may crowd a square (near the edge of what the task
+// holds, every vertex no settled cell holds is one), and every later vertex near it would test them all.
+// Once a square holds `max_open` unsettled entries, they are replaced by their bounding box: a vertex
+// within c/2 of the box (per axis, fl(lo − p) <= c/2 and fl(p − hi) <= c/2) counts as held by an
+// unsettled vertex of unknown rank. Every vertex an unsettled vertex's cell holds is within c/2 of it on
+// every axis (spheres lie inside cubes), hence within c/2 of the box (rounding is monotone and c/2 is
+// exact), so the box only adds doubt: the invariant holds as proved, with "unsettled vertex's cell"
+// read as "a crowded square's box, or an unsettled vertex's cell". Later unsettled vertices of that
+// square widen its box instead of being stored.
+//
 // One grid of one cell size: a level with a fine grid (Mata et al.'s labels) is two such grids, each over
 // the vertices its mask sends it. Memory: one entry (its position, index and list link, 40 bytes) per
 // center and per unsettled vertex, and a 32-byte slot per occupied grid square in a table at most half
@@ -59,7 +69,8 @@ class RegionClusterer {
   // held: {lo x, lo y, lo z, hi x, hi y, hi z}, the box whose vertices the caller holds and will assign
   // (lo <= p < hi per axis; ±infinity where the task holds everything on that side). Floating cells only:
   // options.clustering must be floating (uniform cells need no halo: a vertex's cell is its square).
-  RegionClusterer(double cell_size, ClusterOptions options, std::span<const double, 6> held);
+  // max_open: the unsettled entries a square keeps before they become its box (see "Crowded squares").
+  RegionClusterer(double cell_size, ClusterOptions options, std::span<const double, 6> held, uint32_t max_open = 16);
 
   // The next held vertex in weight order (the whole-scene pass's order restricted to the box); its index
   // is the number of calls before it.
@@ -68,8 +79,13 @@ class RegionClusterer {
   uint64_t unsettled() const { return unsettled_; }
   // Bytes held now (the table's and the entries' capacity), and what the next growth step may briefly add
   // (the table doubles while its old copy is held; the entries' vector doubles).
-  uint64_t memory_bytes() const { return slots_.capacity() * sizeof(Slot) + entries_.capacity() * sizeof(Entry); }
-  uint64_t growth_bytes() const { return 2 * slots_.capacity() * sizeof(Slot) + entries_.capacity() * sizeof(Entry); }
+  uint64_t memory_bytes() const {
+    return slots_.capacity() * sizeof(Slot) + entries_.capacity() * sizeof(Entry) + boxes_.capacity() * sizeof(Box);
+  }
+  uint64_t growth_bytes() const {
+    return 2 * slots_.capacity() * sizeof(Slot) + entries_.capacity() * sizeof(Entry) + boxes_.capacity() * sizeof(Box);
+  }
+  uint64_t crowded_squares() const { return boxes_.size(); }
 
  private:
   // A square's entries are a list through `entries_`, newest first (the choice is a total order on
@@ -84,12 +100,19 @@ class RegionClusterer {
   struct Slot {
     int64_t square[3];
     uint32_t head;  // the square's newest entry, or kNone for an empty slot
+    uint32_t open;  // unsettled entries in the list
+    uint32_t box;   // a crowded square's box in boxes_ (its unsettled entries are then off the list), or kNone
+  };
+  struct Box {
+    double lo[3], hi[3];
   };
   static constexpr uint32_t kNone = UINT32_MAX;
 
   bool exposed(const double* p) const;
   const Slot* find(const int64_t* square) const;
+  Slot& slot(const int64_t* square);  // the square's slot, made empty if new
   void add(const int64_t* square, const Entry& e);
+  bool box_holds(const Box& b, const double* p) const;
 
   double half_, half_sq_;
   ClusterOptions options_;
@@ -97,6 +120,8 @@ class RegionClusterer {
   std::vector<Slot> slots_;
   uint64_t occupied_ = 0;
   std::vector<Entry> entries_;
+  std::vector<Box> boxes_;
+  uint32_t max_open_;
   uint32_t next_ = 0;
   uint64_t unsettled_ = 0;
 };

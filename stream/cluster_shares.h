@@ -13,8 +13,8 @@
 //   cuts[I-1] <= p[axis] < cuts[I] (no lower bound for share 0, no upper for share N-1).
 // - A level is split by region when its cells are floating, it has no fine grid (silhouette labels: two
 //   grids, not handled here), and every slab is at least kSplitCells cells wide; then each share clusters
-//   its own vertices. Otherwise the level is clustered whole by one share (cluster_levels over that level:
-//   exact by construction), the whole levels handed out from the last share down, finest first.
+//   its own vertices. The other levels are clustered whole by the last share, in one cluster_levels pass
+//   (exact by construction; their cost is mostly fetching the positions by id, which one pass shares).
 // The share (run_cluster_share), per split level:
 // 1. Select: the vertex ids within the largest halo of the slab (one sequential read of the positions),
 //    then the records of the weight index that hold them (one sequential read of order.u32) and their
@@ -54,7 +54,7 @@
 
 namespace lodstream::stream {
 
-inline constexpr double kSplitCells = 64;      // a level splits when every slab is this many cells wide
+inline constexpr double kSplitCells = 32;      // a level splits when every slab is this many cells wide
 inline constexpr double kFirstHaloCells = 16;  // the first halo, in cells (README: 17 to 23 at most measured)
 
 struct ClusterShares {

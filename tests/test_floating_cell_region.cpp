@@ -47,8 +47,8 @@ struct Tally {
 
 // Runs a RegionClusterer over the vertices in `box` and checks each settled decision against `whole`.
 Tally check_box(const std::vector<P>& pts, const std::vector<uint32_t>& whole, double c, ClusterOptions o,
-                const std::array<double, 6>& box) {
-  RegionClusterer rc(c, o, box);
+                const std::array<double, 6>& box, uint32_t max_open = 16, uint64_t* crowded = nullptr) {
+  RegionClusterer rc(c, o, box, max_open);
   std::vector<uint32_t> held;  // task index -> whole-scene index
   Tally t;
   for (uint32_t i = 0; i < pts.size(); ++i) {
@@ -70,6 +70,7 @@ Tally check_box(const std::vector<P>& pts, const std::vector<uint32_t>& whole, d
     }
   }
   EXPECT_EQ(t.held - t.settled_status, rc.unsettled());
+  if (crowded) *crowded += rc.crowded_squares();
   return t;
 }
 
@@ -118,6 +119,34 @@ TEST(FloatingCellRegion, SettledDecisionsAreTheWholeScenePass) {
   // Not a vacuous check: most held vertices are settled.
   EXPECT_GT(held, 10000u);
   EXPECT_GT(settled, held / 4);
+}
+
+// Crowded squares (floating_cell_region.h): with one unsettled entry a square before its box takes over,
+// boxes are made everywhere doubt is, and every settled decision is still the whole-scene pass's; the
+// box only adds doubt, and not much of it where the doubt is thin.
+TEST(FloatingCellRegion, CrowdedSquaresBecomeBoxesAndStaySound) {
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> u(-1.0, 11.0);
+  uint64_t crowded = 0, settled_exact = 0, settled_boxed = 0;
+  for (int kind = 0; kind < 3; ++kind) {
+    const std::vector<P> pts = cloud(rng, kind, 6000);
+    for (const ClusterOptions& o : kVariants) {
+      const std::vector<uint32_t> whole = whole_scene_centers(pts, 1.0, o);
+      for (int b = 0; b < 4; ++b) {
+        std::array<double, 6> box;
+        for (int a = 0; a < 3; ++a) {
+          double x = u(rng), y = u(rng);
+          if (x > y) std::swap(x, y);
+          box[a] = x, box[3 + a] = y;
+        }
+        settled_exact += check_box(pts, whole, 1.0, o, box, UINT32_MAX).settled_status;
+        settled_boxed += check_box(pts, whole, 1.0, o, box, 1, &crowded).settled_status;
+      }
+    }
+  }
+  EXPECT_GT(crowded, 100u) << "no square was crowded";
+  EXPECT_LE(settled_boxed, settled_exact);
+  EXPECT_GT(settled_boxed, settled_exact / 2);
 }
 
 TEST(FloatingCellRegion, TheWholeSceneAsOneBoxSettlesEverything) {
