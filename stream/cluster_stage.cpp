@@ -155,6 +155,21 @@ struct Batch {
   }
 };
 
+// Calls f(first, n, batch) for the blocks of records [lo, hi), in order: positions from `shared` (the read
+// way), else fetched block by block. Stops early when the task group is cancelled.
+template <class F>
+void for_each_block(const io::MappedFile& index, const PositionGather& positions, uint64_t lo, uint64_t hi,
+                    const Batch* shared, Progress& progress, F&& f) {
+  Batch own;
+  for (uint64_t first = lo; first < hi; first += kBlock) {
+    progress.check();
+    if (tbb::is_current_task_group_canceling()) return;
+    const uint64_t n = std::min(kBlock, hi - first);
+    if (!shared) own.load(index, positions, first, n);
+    f(first, n, shared ? *shared : own);
+  }
+}
+
 // The sums pass (mean and quadric representatives) over the levels `level_ids` (their maps and info files
 // under `prefix`), of `cells_per_level` cells each. `sum_bytes`: what the sums may hold at once.
 void sum_cells(const io::MappedFile& index, const PositionGather& positions, uint64_t batch, const io::MappedFile* grades,
@@ -213,13 +228,7 @@ void sum_cells(const io::MappedFile& index, const PositionGather& positions, uin
       constexpr uint64_t kAhead = 8;
       std::vector<uint32_t> cells(block);
       std::vector<double> grade(block, 0.0);
-      Batch own;
-      for (uint64_t first = lo; first < hi; first += block) {
-        progress.check();
-        if (tbb::is_current_task_group_canceling()) return;
-        const uint64_t n = std::min(block, hi - first);
-        if (!shared) own.load(index, positions, first, n);
-        const Batch& b = shared ? *shared : own;
+      for_each_block(index, positions, lo, hi, shared, progress, [&](uint64_t first, uint64_t n, const Batch& b) {
         const double* xyz = b.xyz.data() + 3 * (first - b.at);
         if (grades) {
           const io::Window w = grades->map(first * 8, (first + n) * 8);
@@ -252,7 +261,7 @@ void sum_cells(const io::MappedFile& index, const PositionGather& positions, uin
             ++c.vertices;
           }
         }
-      }
+      });
     };
     if (positions.mapped()) {
       tbb::parallel_for(round, round_end, [&](size_t k) { sum_records(k, 0, records, nullptr); });
@@ -395,7 +404,6 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   // groups' clusterers (with the headroom of their next growth step); the fixed buffers (index windows,
   // the block's arrays, the writers' buffers) come off first, and the coarse levels' dense arrays (faster
   // than hashing, but 8 bytes a square of the bounds) take at most an eighth of the rest.
-  constexpr uint64_t block = kBlock;
   const uint64_t cell_budget = stream::cell_budget(levels, weights.vertices, single_precision, memory_bytes, chunk_cap);
   // Fine grids count as levels here: the dense arrays keep their eighth of the budget in all.
   size_t grids = levels;
@@ -449,13 +457,7 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   auto run_group = [&](size_t g, uint64_t lo, uint64_t hi, const Batch* shared) {
     Group& grp = groups[g];
     std::vector<uint32_t> masks;
-    Batch own;
-    for (uint64_t first = lo; first < hi; first += block) {
-      progress.check();
-      if (tbb::is_current_task_group_canceling()) return;
-      const uint64_t n = std::min(block, hi - first);
-      if (!shared) own.load(index, positions, first, n);
-      const Batch& b = shared ? *shared : own;
+    for_each_block(index, positions, lo, hi, shared, progress, [&](uint64_t first, uint64_t n, const Batch& b) {
       const std::span<const uint32_t> ids(b.ids.data() + (first - b.at), n);
       const std::span<const double> xyz(b.xyz.data() + 3 * (first - b.at), 3 * n);
       grp.cells.resize(grp.levels.size() * n);
@@ -471,7 +473,7 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
       }
       check_memory(grp, first, n);
       if (g == 0) progress.report("cluster", kClusterShare * static_cast<double>(first + n) / static_cast<double>(records));
-    }
+    });
   };
   auto finish_group = [&](size_t g) {
     Group& grp = groups[g];
