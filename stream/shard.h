@@ -3,7 +3,8 @@
 // directory, the same bytes as one machine's. The contract any engine can drive (Slurm job arrays,
 // Kubernetes Indexed Jobs, AWS Batch arrays): a task is given only I and N.
 //
-// - Shared stages (ingest, grade, labels, cluster, the store's block boxes (block_bounds.h), and every
+// - Shared stages (ingest, grade, labels, cluster (with --cluster-shards N: the merge of N shares run
+//   before, stream/cluster_shares.h), the store's block boxes (block_bounds.h), and every
 //   level's representatives written ahead (emit_regions.h) with its cells by vertex (vertex_cells.h)): whichever task comes first runs them, holding an exclusive lock on
 //   WORK/shard.lock (flock; taken before the work directory is opened, so that no task takes another's
 //   live scratch files for a dead process's); the others wait, then find their stamps and reuse them.
