@@ -699,6 +699,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           files.push_back(stream::cell_info_path(prefix, l));
         }
         write_stamp(work.file("cluster.json"), key, files, {{"cells", cs.cells}});
+        // The shares are spent once the stage is stamped (the whole levels' maps are links to their files).
+        if (by_shares && cluster_shares > 0) std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
         return cs.cells;
       };
 
