@@ -230,7 +230,8 @@ class ItemReader {
     if (at_ == end_) {
       const uint64_t first = end_ / item_ * item_;
       if (first >= file_.size()) return nullptr;
-      window_ = file_.map(first, std::min<uint64_t>(file_.size(), first + (uint64_t{1} << 24)));
+      // Whole items a window (16 MiB rounded down to them), so that no item straddles two.
+      window_ = file_.map(first, std::min<uint64_t>(file_.size(), first + (uint64_t{1} << 24) / item_ * item_));
       at_ = first, end_ = first + window_.size();
     }
     const char* p = window_.data() + (at_ - (end_ - window_.size()));

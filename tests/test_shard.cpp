@@ -314,6 +314,47 @@ TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
   }
 }
 
+// Every vertex of a 150 x 150 x 134 lattice (3.0 M, 1 apart, cells of 0.5) is a center: as 2 shares under
+// center representatives, each share's centers (1.5 M, 18 MB of floats) outrun the merge's 16 MiB read
+// window, and the map and info are still the whole pass's.
+TEST(ClusterShares, ManyCentersMergeAcrossReadWindows) {
+  TempDir dir;
+  const int nx = 150, ny = 150, nz = 134;
+  const uint32_t n = nx * ny * nz;
+  {
+    std::ofstream pos(dir.file("positions.f32"), std::ios::binary), order(dir.file("order.u32"), std::ios::binary);
+    uint32_t id = 0;
+    for (int x = 0; x < nx; ++x)
+      for (int y = 0; y < ny; ++y)
+        for (int z = 0; z < nz; ++z, ++id) {
+          const float p[3] = {float(x), float(y), float(z)};
+          pos.write(reinterpret_cast<const char*>(p), sizeof p);
+          order.write(reinterpret_cast<const char*>(&id), 4);
+        }
+  }
+  stream::ClusterShareInput in;
+  in.index = {dir.file("order.u32"), "", dir.file("positions.f32"), n, n, true};
+  in.bounds = {0, 0, 0, nx - 1.0, ny - 1.0, nz - 1.0};
+  in.sizes = {0.5};
+  in.info = stream::CellInfoKind::center;
+  in.memory_bytes = 512 << 20;
+  stream::WorkDir work(dir.file("shares"));
+  in.prefix = dir.file("shares") + "/", in.work = &work;
+  stream::Progress progress{Options{}};
+  const stream::ClusterSummary whole = stream::cluster_levels(in.index, in.bounds, in.sizes, in.options, in.info, in.memory_bytes,
+                                                              work, progress, dir.file("whole-"));
+  ASSERT_EQ(whole.cells.at(0), n);
+  const stream::ClusterShares plan = stream::plan_cluster_shares(in, 2, progress);
+  ASSERT_EQ(plan.whole_share.at(0), -1) << "the level splits";
+  std::vector<nlohmann::ordered_json> figures;
+  for (unsigned s = 0; s < 2; ++s) figures.push_back(stream::run_cluster_share(in, plan, s, progress));
+  EXPECT_GT(std::filesystem::file_size(stream::cluster_shares_dir(in.prefix) + "share-0-level-0.ctr"), uint64_t{16} << 20);
+  const stream::ClusterSummary cs = stream::merge_cluster_shares(in, plan, figures, progress);
+  EXPECT_EQ(cs.cells.at(0), n);
+  EXPECT_TRUE(slurp(stream::cells_path(in.prefix, 0)) == slurp(stream::cells_path(dir.file("whole-"), 0)));
+  EXPECT_TRUE(slurp(stream::cell_info_path(in.prefix, 0)) == slurp(stream::cell_info_path(dir.file("whole-"), 0)));
+}
+
 // Materials and colours travel through the tasks' parts and the merge: the KiCad board (a glTF scene of
 // instanced components, one material each) as 3 tasks gives one machine's bytes, tiles included.
 TEST(Shard, MaterialsGiveOneMachinesBytes) {
