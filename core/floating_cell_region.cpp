@@ -11,46 +11,37 @@
 
 namespace lodstream::core {
 
+size_t RegionClusterer::probe(const int64_t* square) const {
+  const size_t mask = slots_.size() - 1;
+  size_t i = hash_square(square[0], square[1], square[2]) & mask;
+  while (slots_[i].used() &&
+         !(slots_[i].square[0] == square[0] && slots_[i].square[1] == square[1] && slots_[i].square[2] == square[2]))
+    i = (i + 1) & mask;
+  return i;
+}
+
 const RegionClusterer::Slot* RegionClusterer::find(const int64_t* square) const {
   if (slots_.empty()) return nullptr;
-  const size_t mask = slots_.size() - 1;
-  for (size_t i = hash_square(square[0], square[1], square[2]) & mask;; i = (i + 1) & mask) {
-    const Slot& s = slots_[i];
-    if (s.head == kNone && s.box == kNone) return nullptr;
-    if (s.square[0] == square[0] && s.square[1] == square[1] && s.square[2] == square[2]) return &s;
-  }
+  const Slot& s = slots_[probe(square)];
+  return s.used() ? &s : nullptr;
 }
 
 RegionClusterer::Slot& RegionClusterer::slot(const int64_t* square) {
   if (2 * (occupied_ + 1) > slots_.size()) {  // grow: at most half full
     std::vector<Slot> old(std::max<size_t>(64, 2 * slots_.size()), Slot{{0, 0, 0}, kNone, 0, kNone});
     old.swap(slots_);
-    const size_t mask = slots_.size() - 1;
-    for (const Slot& s : old) {
-      if (s.head == kNone && s.box == kNone) continue;
-      size_t i = hash_square(s.square[0], s.square[1], s.square[2]) & mask;
-      while (slots_[i].head != kNone || slots_[i].box != kNone) i = (i + 1) & mask;
-      slots_[i] = s;
-    }
+    for (const Slot& s : old)
+      if (s.used()) slots_[probe(s.square)] = s;
   }
-  const size_t mask = slots_.size() - 1;
-  size_t i = hash_square(square[0], square[1], square[2]) & mask;
-  for (;; i = (i + 1) & mask) {
-    Slot& s = slots_[i];
-    if (s.head == kNone && s.box == kNone) {
-      s = Slot{{square[0], square[1], square[2]}, kNone, 0, kNone};
-      ++occupied_;
-      return s;
-    }
-    if (s.square[0] == square[0] && s.square[1] == square[1] && s.square[2] == square[2]) return s;
-  }
+  Slot& s = slots_[probe(square)];
+  if (!s.used()) s = Slot{{square[0], square[1], square[2]}, kNone, 0, kNone}, ++occupied_;
+  return s;
 }
 
 void RegionClusterer::add(const int64_t* square, const Entry& e) {
   Slot& s = slot(square);
   if (!e.settled && s.box != kNone) {  // a crowded square: its box widens
-    Box& b = boxes_[s.box];
-    for (int a = 0; a < 3; ++a) b.lo[a] = std::min(b.lo[a], e.position[a]), b.hi[a] = std::max(b.hi[a], e.position[a]);
+    boxes_[s.box].take(e.position);
     return;
   }
   if (!e.settled && s.open == max_open_) {
@@ -63,7 +54,7 @@ void RegionClusterer::add(const int64_t* square, const Entry& e) {
         link = &x.next;
         continue;
       }
-      for (int a = 0; a < 3; ++a) b.lo[a] = std::min(b.lo[a], x.position[a]), b.hi[a] = std::max(b.hi[a], x.position[a]);
+      b.take(x.position);
       *link = x.next;  // unlinked (its record stays unused in entries_)
     }
     s.open = 0;

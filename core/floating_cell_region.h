@@ -47,6 +47,7 @@
 // full; members keep nothing.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <span>
@@ -102,13 +103,19 @@ class RegionClusterer {
     uint32_t head;  // the square's newest entry, or kNone for an empty slot
     uint32_t open;  // unsettled entries in the list
     uint32_t box;   // a crowded square's box in boxes_ (its unsettled entries are then off the list), or kNone
+    // A crowded square may have no entry left, but it keeps its box.
+    bool used() const { return head != kNone || box != kNone; }
   };
   struct Box {
     double lo[3], hi[3];
+    void take(const double* p) {
+      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+    }
   };
   static constexpr uint32_t kNone = UINT32_MAX;
 
   bool exposed(const double* p) const;
+  size_t probe(const int64_t* square) const;  // the square's slot, or the empty one where it would go
   const Slot* find(const int64_t* square) const;
   Slot& slot(const int64_t* square);  // the square's slot, made empty if new
   void add(const int64_t* square, const Entry& e);

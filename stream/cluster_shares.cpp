@@ -8,6 +8,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -22,6 +23,7 @@
 #include "io/file_writer.h"
 #include "io/mapped_file.h"
 #include "stream/cell_map_file.h"
+#include "stream/store_access.h"
 
 namespace lodstream::stream {
 
@@ -84,27 +86,37 @@ void for_each_position(const WeightIndex& index, Progress& progress, F&& f) {
 // Calls f(record, id) for every record of the weight index, in weight order.
 template <class F>
 void for_each_record(const WeightIndex& index, Progress& progress, F&& f) {
-  const io::MappedFile order(index.order_path);
-  if (order.size() != index.records * 4) fail(Status::io_error, index.order_path + ": size does not match");
-  for (uint64_t first = 0; first < index.records; first += kWindowRecords) {
+  if (std::filesystem::file_size(index.order_path) != index.records * 4)
+    fail(Status::io_error, index.order_path + ": size does not match");
+  for_column_blocks(index.order_path, index.records, 1, kWindowRecords, [&](uint64_t first, std::span<const uint32_t> ids) {
     progress.check();
-    const uint64_t n = std::min(kWindowRecords, index.records - first);
-    const io::Window w = order.map(first * 4, (first + n) * 4);
-    const uint32_t* ids = reinterpret_cast<const uint32_t*>(w.data());
-    for (uint64_t i = 0; i < n; ++i) f(first + i, ids[i]);
-  }
+    for (size_t i = 0; i < ids.size(); ++i) f(first + i, ids[i]);
+  });
 }
 
-// A set of vertex ids with their positions: a bit per store vertex and a running count per 64, so that
-// the k-th selected id's position is at slot k of a plain array.
-struct Selection {
+// A bit per item, and the set bits in the words before each word: rank(i), the set bits below i, is a
+// lookup and a popcount. `before` is filled by count() once every bit is set, or word by word, in order,
+// by a caller that sets bits in increasing order (merge_level).
+struct RankedBits {
   std::vector<uint64_t> bits;
-  std::vector<uint32_t> before;  // selected ids in the words before
-  Positions xyz;
-  bool has(uint32_t id) const { return (bits[id >> 6] >> (id & 63)) & 1; }
-  uint32_t slot(uint32_t id) const {
-    return before[id >> 6] + static_cast<uint32_t>(std::popcount(bits[id >> 6] & ((uint64_t{1} << (id & 63)) - 1)));
+  std::vector<uint32_t> before;
+  explicit RankedBits(uint64_t n = 0) : bits((n + 63) / 64, 0), before(bits.size(), 0) {}
+  void set(uint64_t i) { bits[i >> 6] |= uint64_t{1} << (i & 63); }
+  bool has(uint64_t i) const { return (bits[i >> 6] >> (i & 63)) & 1; }
+  void count() {
+    uint32_t n = 0;
+    for (size_t w = 0; w < bits.size(); ++w) before[w] = n, n += static_cast<uint32_t>(std::popcount(bits[w]));
   }
+  uint32_t rank(uint64_t i) const {
+    return before[i >> 6] + static_cast<uint32_t>(std::popcount(bits[i >> 6] & ((uint64_t{1} << (i & 63)) - 1)));
+  }
+  uint64_t bytes() const { return bits.capacity() * 8 + before.capacity() * 4; }
+};
+
+// A set of vertex ids with their positions: the k-th selected id's position is at slot k (its rank).
+struct Selection {
+  RankedBits ids;
+  Positions xyz;
 };
 
 // The held records of a share: the records whose vertex is selected and their positions, in weight order
@@ -125,31 +137,28 @@ void check_share_memory(const ClusterShareInput& in, const std::string& what, ui
 
 // Pass 1 of a share: the vertices with lo <= p[axis] < hi, then their records.
 void select(const ClusterShareInput& in, int axis, double lo, double hi, Progress& progress, Held& held) {
-  Selection sel;
-  sel.bits.assign((in.index.vertices + 63) / 64, 0);
+  Selection sel{RankedBits(in.index.vertices), {}};
   sel.xyz.single = held.xyz.single = in.index.single_precision;
   for_each_position(in.index, progress, [&](uint64_t id, const double* p) {
     if (!(lo <= p[axis] && p[axis] < hi)) return;
-    sel.bits[id >> 6] |= uint64_t{1} << (id & 63);
+    sel.ids.set(id);
     sel.xyz.add(p);
   });
-  sel.before.resize(sel.bits.size());
-  uint32_t count = 0;
-  for (size_t w = 0; w < sel.bits.size(); ++w) sel.before[w] = count, count += static_cast<uint32_t>(std::popcount(sel.bits[w]));
+  sel.ids.count();
   // The held arrays are sized first (a count pass over the index), so that they take no growth headroom.
   uint64_t held_count = 0;
   for_each_record(in.index, progress, [&](uint64_t, uint32_t id) {
     if (id >= in.index.vertices) fail(Status::io_error, in.index.order_path + ": vertex id out of range");
-    held_count += sel.has(id);
+    held_count += sel.ids.has(id);
   });
   held.record.reserve(held_count);
   (held.xyz.single ? held.xyz.f.reserve(3 * held_count) : held.xyz.d.reserve(3 * held_count));
-  check_share_memory(in, "its held vertices", sel.bits.capacity() * 8 + sel.before.capacity() * 4 + sel.xyz.bytes() + held.bytes());
+  check_share_memory(in, "its held vertices", sel.ids.bytes() + sel.xyz.bytes() + held.bytes());
   double p[3];
   for_each_record(in.index, progress, [&](uint64_t r, uint32_t id) {
-    if (!sel.has(id)) return;
+    if (!sel.ids.has(id)) return;
     held.record.push_back(static_cast<uint32_t>(r));
-    sel.xyz.get(sel.slot(id), p);
+    sel.xyz.get(sel.ids.rank(id), p);
     held.xyz.add(p);
   });
 }
@@ -167,7 +176,9 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
   box[axis] = own_lo - h > in.bounds[axis] ? own_lo - h : -kInf;
   box[3 + axis] = own_hi + h <= in.bounds[3 + axis] ? own_hi + h : kInf;
   core::RegionClusterer rc(in.sizes[level], in.options, std::span<const double, 6>(box, 6));
-  io::FileWriter dec(dec_path(in.prefix, share, level), 1 << 20), ctr(ctr_path(in.prefix, share, level), 1 << 20);
+  const bool centers = in.info == CellInfoKind::center;  // the merge reads the centers' positions for this kind only
+  io::FileWriter dec(dec_path(in.prefix, share, level), 1 << 20), ctr;
+  if (centers) ctr.open(ctr_path(in.prefix, share, level), 1 << 20);
   std::vector<uint32_t> assigned;  // the record of each vertex assigned, in assign order
   uint64_t counted = 0;            // this level's share of `clusterers`
   struct Uncount {                 // returned to `clusterers` however the level ends
@@ -194,7 +205,7 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
     if (d.status == core::RegionStatus::unsettled || !d.cell_settled) return false;  // the writers discard
     const uint32_t pair[2] = {held.record[k], assigned[d.center]};
     dec.write(pair, sizeof pair);
-    if (pair[0] == pair[1]) {
+    if (centers && pair[0] == pair[1]) {
       if (in.index.single_precision) {
         const float f[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
         ctr.write(f, sizeof f);
@@ -205,7 +216,7 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
     ++*own;
   }
   dec.commit();
-  ctr.commit();
+  if (centers) ctr.commit();
   return true;
 }
 
@@ -246,76 +257,69 @@ class ItemReader {
   uint64_t at_ = 0, end_ = 0;
 };
 
-// The merge of one split level (see the header).
+// The merge of one split level (see the header), in one pass over the shares' files merged by record: a
+// record that is its own center makes the next cell; a member's center is an earlier record, so the rank
+// of its center bit among the bits set so far is its cell (every record below it has been seen).
 uint64_t merge_level(const ClusterShareInput& in, const ClusterShares& plan, size_t level, Progress& progress) {
   const uint64_t records = in.index.records;
-  // Centers: a bit per record, and the count before each word.
-  std::vector<uint64_t> center((records + 63) / 64, 0);
-  uint64_t total = 0;
-  for (unsigned s = 0; s < plan.count; ++s) {
-    ItemReader dec(dec_path(in.prefix, s, level), 8);
-    total += dec.items();
-    while (const char* p = dec.next()) {
-      uint32_t pair[2];
-      std::memcpy(pair, p, 8);
-      if (pair[0] >= records || pair[1] > pair[0]) fail(Status::io_error, dec_path(in.prefix, s, level) + ": not a share's decisions");
-      if (pair[0] == pair[1]) center[pair[0] >> 6] |= uint64_t{1} << (pair[0] & 63);
-    }
-  }
-  if (total != records)
-    fail(Status::io_error, fmt::format("{}: the shares' decisions of level {} cover {} records of {}", cluster_shares_dir(in.prefix),
-                                       level, total, records));
-  std::vector<uint32_t> before(center.size());
-  uint64_t cells = 0;
-  for (size_t w = 0; w < center.size(); ++w) before[w] = static_cast<uint32_t>(cells), cells += static_cast<uint64_t>(std::popcount(center[w]));
-  auto cell_of = [&](uint32_t c) {
-    return before[c >> 6] + static_cast<uint32_t>(std::popcount(center[c >> 6] & ((uint64_t{1} << (c & 63)) - 1)));
-  };
-
-  // Every record's cell, in weight order: the shares' files merged by record.
+  const bool centers = in.info == CellInfoKind::center;
   const size_t center_bytes = in.index.single_precision ? 12 : 24;
   std::vector<std::unique_ptr<ItemReader>> decs, ctrs;
   using Head = std::pair<uint32_t, unsigned>;  // (record, share)
   std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heads;
   for (unsigned s = 0; s < plan.count; ++s) {
     decs.push_back(std::make_unique<ItemReader>(dec_path(in.prefix, s, level), 8));
-    ctrs.push_back(std::make_unique<ItemReader>(ctr_path(in.prefix, s, level), center_bytes));
+    if (centers) ctrs.push_back(std::make_unique<ItemReader>(ctr_path(in.prefix, s, level), center_bytes));
   }
   std::vector<uint32_t> pending(plan.count);  // each share's next record's center
   auto advance = [&](unsigned s) {
     if (const char* p = decs[s]->next()) {
       uint32_t pair[2];
       std::memcpy(pair, p, 8);
+      if (pair[1] > pair[0]) fail(Status::io_error, dec_path(in.prefix, s, level) + ": not a share's decisions");
       pending[s] = pair[1];
       heads.push({pair[0], s});
     }
   };
   for (unsigned s = 0; s < plan.count; ++s) advance(s);
+  RankedBits center(records);
+  uint64_t cells = 0;
   CellMapWriter map;
   map.open(cells_path(in.prefix, level), 1 << 20);
   io::FileWriter info;
-  if (in.info == CellInfoKind::center) info.open(cell_info_path(in.prefix, level), 1 << 20);
+  if (centers) info.open(cell_info_path(in.prefix, level), 1 << 20);
   std::vector<uint32_t> buffer;
   buffer.reserve(1 << 16);
+  auto missing = [&](uint64_t r, const char* how) {
+    fail(Status::io_error, fmt::format("{}: record {} of level {} is decided {}", cluster_shares_dir(in.prefix), r, level, how));
+  };
   for (uint64_t r = 0; r < records; ++r) {
     if ((r & 0xfffff) == 0) progress.check();
+    if ((r & 63) == 0) center.before[r >> 6] = static_cast<uint32_t>(cells);
+    if (heads.empty()) missing(r, "by no share");
     const auto [record, s] = heads.top();
     heads.pop();
-    if (record != r) fail(Status::io_error, fmt::format("{}: record {} of level {} is decided {}", cluster_shares_dir(in.prefix), r, level,
-                                                        record < r ? "twice" : "by no share"));
+    if (record != r) missing(r, record < r ? "twice" : "by no share");
     const uint32_t c = pending[s];
-    buffer.push_back(cell_of(c));
-    if (c == record && in.info == CellInfoKind::center) {
-      const char* q = ctrs[s]->next();
-      if (!q) fail(Status::io_error, ctr_path(in.prefix, s, level) + ": cut short");
-      info.write(q, center_bytes);
+    if (c == record) {
+      center.set(c);
+      buffer.push_back(static_cast<uint32_t>(cells++));
+      if (centers) {
+        const char* q = ctrs[s]->next();
+        if (!q) fail(Status::io_error, ctr_path(in.prefix, s, level) + ": cut short");
+        info.write(q, center_bytes);
+      }
+    } else {
+      if (!center.has(c)) fail(Status::io_error, dec_path(in.prefix, s, level) + ": a member of a record that is no center");
+      buffer.push_back(center.rank(c));
     }
     if (buffer.size() == buffer.capacity()) map.write(buffer), buffer.clear();
     advance(s);
   }
+  if (!heads.empty()) missing(heads.top().first, "past the weight index's records");
   map.write(buffer);
   map.commit();
-  if (in.info == CellInfoKind::center) info.commit();
+  if (centers) info.commit();
   return cells;
 }
 
@@ -381,11 +385,39 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
   return plan;
 }
 
+ClusterShares shared_cluster_plan(const ClusterShareInput& in, unsigned count, const nlohmann::ordered_json& key,
+                                  Progress& progress) {
+  const std::string path = cluster_shares_dir(in.prefix) + "plan.json";
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec)) {
+    try {
+      const nlohmann::ordered_json j = nlohmann::ordered_json::parse(io::read_small_file(path));
+      const nlohmann::ordered_json& p = j.at("plan");
+      if (j.at("key") == key && p.at("count") == count && p.at("whole_share").size() == in.sizes.size()) {
+        ClusterShares plan;
+        plan.count = count;
+        plan.axis = p.at("axis");
+        for (const auto& c : p.at("cuts")) plan.cuts.push_back(std::strtod(c.get<std::string>().c_str(), nullptr));  // hex: exact
+        plan.whole_share = p.at("whole_share").get<std::vector<int>>();
+        if (plan.cuts.size() + 1 == count) return plan;
+      }
+    } catch (const std::exception&) {
+      // unreadable: made again below
+    }
+  }
+  const ClusterShares plan = plan_cluster_shares(in, count, progress);
+  std::filesystem::create_directories(cluster_shares_dir(in.prefix));
+  io::write_file_atomic(path, nlohmann::ordered_json{{"key", key}, {"plan", plan.json()}}.dump(1) + "\n");
+  return plan;
+}
+
 std::vector<std::string> cluster_share_files(const ClusterShareInput& in, const ClusterShares& plan, unsigned index) {
   std::vector<std::string> files;
   for (size_t l = 0; l < plan.whole_share.size(); ++l) {
-    if (plan.whole_share[l] < 0) files.push_back(dec_path(in.prefix, index, l)), files.push_back(ctr_path(in.prefix, index, l));
-    else if (plan.whole_share[l] == static_cast<int>(index))
+    if (plan.whole_share[l] < 0) {
+      files.push_back(dec_path(in.prefix, index, l));
+      if (in.info == CellInfoKind::center) files.push_back(ctr_path(in.prefix, index, l));
+    } else if (plan.whole_share[l] == static_cast<int>(index))
       files.push_back(whole_map_path(in.prefix, l)), files.push_back(whole_info_path(in.prefix, l));
   }
   return files;

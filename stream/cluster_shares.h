@@ -84,6 +84,12 @@ struct ClusterShareInput {
 };
 
 ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, Progress& progress);
+// The plan as every process of a run sees it, made once: read from cluster-shares/plan.json when that was
+// written for `key` (the cluster stage's) and `count`, else made by plan_cluster_shares (a pass over the
+// store's positions) and written there. The caller holds the work directory's lock, so that the N shares
+// and the merge make it once between them.
+ClusterShares shared_cluster_plan(const ClusterShareInput& in, unsigned count, const nlohmann::ordered_json& key,
+                                  Progress& progress);
 
 std::string cluster_shares_dir(const std::string& prefix);
 std::string cluster_share_stamp(const std::string& prefix, unsigned index);

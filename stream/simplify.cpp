@@ -626,7 +626,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                    const stream::WeightIndex& index, const std::vector<double>& bounds) {
         const stream::ClusterShareInput in{index, bounds, sizes, copts, info_kind, fine, plan.stage_bytes, options.chunk_bytes,
                                            prefix, &work};
-        const stream::ClusterShares shares = stream::plan_cluster_shares(in, cluster_shares, progress);
+        const stream::ClusterShares shares = stream::shared_cluster_plan(in, cluster_shares, key, progress);  // under the lock
         ordered_json share_key = key;
         share_key["shares"] = shares.json();
         const std::string dir = work.subdir("cluster-shares");
@@ -651,7 +651,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         for (unsigned s = 0; s < shares.count; ++s) figures.push_back(run_share(s));
         return stream::merge_cluster_shares(in, shares, figures, progress).cells;
       };
+      // by_shares: the stage of the final sizes, which a sharded run with cluster shares clusters by them.
       auto cluster = [&](const std::vector<double>& sizes, StageStats* st, bool by_shares = false) {
+        const bool in_shares = by_shares && cluster_shares > 0;
         ordered_json key = cluster_base;
         std::vector<std::string> hex;
         for (double c : sizes) hex.push_back(exact(c));
@@ -676,7 +678,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           bounds.assign(meta.bbox.min.begin(), meta.bbox.min.end());
           bounds.insert(bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
         }
-        if (!(by_shares && cluster_shares > 0))  // a share holds a share's cells; its whole levels check as they run
+        if (!in_shares)  // a share holds a share's cells; its whole levels check as they run
           stream::check_cluster_estimate(grade.areas, grade.records, meta.vertices, meta.single_precision, bounds, sizes,
                                          plan.stage_bytes, options.chunk_bytes);
         const stream::WeightIndex index{order_path,
@@ -686,7 +688,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                         meta.vertices,
                                         meta.single_precision};
         stream::ClusterSummary cs;
-        if (by_shares && cluster_shares > 0) {
+        if (in_shares) {
           cs.cells = cluster_by_shares(key, sizes, fine.get(), index, bounds);
           if (so.cluster_share_count > 0) return cs.cells;  // a share task: no stamp of the whole stage
         } else {
@@ -700,7 +702,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         }
         write_stamp(work.file("cluster.json"), key, files, {{"cells", cs.cells}});
         // The shares are spent once the stage is stamped (the whole levels' maps are links to their files).
-        if (by_shares && cluster_shares > 0) std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
+        if (in_shares) std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
         return cs.cells;
       };
 

@@ -42,6 +42,8 @@ done
 for i in $(seq 0 $((n - 1))); do
   timed "share-$i" "$bin" simplify "$input" -o "$out/sh" --work "$out/w2" --shard-cluster "$i/$n" --no-space-check "${opts[@]}"
 done
+# The shares' stamps (their figures), kept: the merge removes the spent shares.
+cp "$out"/w2/cluster-shares/share-*.json "$out/logs/"
 timed merge "$bin" simplify "$input" -o "$out/sh" --work "$out/w2" --shard-prepare --cluster-shards "$n" --no-space-check "${opts[@]}"
 grep -h "stage        cluster" "$out/logs/merge.out" | sed 's/^/  merge /' | tee -a "$out/bench.txt"
 same=1
@@ -55,7 +57,7 @@ walls, cpus = [], []
 for i in range(n):
     w, u, s, kb = open(os.path.join(out, "logs", "share-%d.time" % i)).read().split()[:4]
     walls.append(float(w)); cpus.append(float(u) + float(s))
-    levels = json.load(open(os.path.join(out, "w2", "cluster-shares", "share-%d.json" % i)))["value"]["levels"]
+    levels = json.load(open(os.path.join(out, "logs", "share-%d.json" % i)))["value"]["levels"]
     print("  share %d: %s" % (i, "; ".join(
         ("level %d whole: %d cells" % (l["level"], l["cells"])) if "cells" in l else
         ("level %d: halo %.0f cells, %d tries, held %d, own %d (%.3f)" % (l["level"], l["halo_cells"], l["tries"], l["held"], l["own"], l["held"] / max(l["own"], 1)))
