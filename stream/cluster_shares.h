@@ -7,7 +7,8 @@
 // is sequential in weight order. core/floating_cell_region.h proves which decisions a share can settle
 // from the vertices it holds; this file is the stage around it.
 //
-// The plan (plan_cluster_shares; every share and the merge compute the same one from the same files):
+// The plan (plan_cluster_shares; made once a run, by the first process that needs it, under the work
+// directory's lock, and read by the others from cluster-shares/plan.json: shared_cluster_plan):
 // - Regions: slabs across the longest axis of the scene's bounds, cut where the store's vertices divide
 //   into N equal parts (a histogram of 4096 bins over the axis), so that share I owns the vertices with
 //   cuts[I-1] <= p[axis] < cuts[I] (no lower bound for share 0, no upper for share N-1).
@@ -24,12 +25,14 @@
 //    H doubles and the level runs again; a halo that reaches past the scene's bounds holds everything, where
 //    every decision settles, so the loop ends.
 // 3. Write, per level L, cluster-shares/share-I-level-L.dec: (record, record of its center) for every
-//    own record, in weight order; and .ctr, the own centers' positions at the store's precision.
+//    own record, in weight order; and, for center representatives, .ctr: the own centers' positions at
+//    the store's precision.
 // The merge (merge_cluster_shares), per split level: a cell's id is the number of centers before its
 // center in weight order (the one-machine pass numbers cells in creation order, and a cell is created by
-// its center), counted with a bit per record and a running count per 64 records; the shares' .dec files,
-// merged by record, then give every record's cell, written as cells-L.map (stream/cell_map_file.h), and
-// the .ctr files the centers of a center-kind info. Mean and quadric infos are summed afterwards, as
+// its center). One pass over the shares' .dec files merged by record makes them: a record that is its own
+// center takes the next id; a member's center is an earlier record, whose id is the rank of its bit
+// among the centers seen so far. The ids go to cells-L.map (stream/cell_map_file.h), and the .ctr
+// files to a center-kind info. Mean and quadric infos are summed afterwards, as
 // cluster_levels sums them (sum_cell_info). Whole levels' files are linked from the share that made them.
 // Invariant: each record is owned by exactly one share (the slabs partition the axis), and every owned
 // decision written is settled, hence the whole-scene pass's (core/floating_cell_region.h); the merge checks
