@@ -220,15 +220,6 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
   return true;
 }
 
-// Links (or, across file systems, copies) `from` to `to`, replacing it.
-void link_file(const std::string& from, const std::string& to) {
-  std::error_code ec;
-  std::filesystem::remove(to, ec);
-  std::filesystem::create_hard_link(from, to, ec);
-  if (ec) std::filesystem::copy_file(from, to, std::filesystem::copy_options::overwrite_existing, ec);
-  if (ec) fail(Status::io_error, to + ": cannot write: " + ec.message());
-}
-
 // Reads a file of fixed-size items front to back.
 class ItemReader {
  public:

@@ -46,7 +46,8 @@ class ExternalSorter {
   ExternalSorter(const ExternalSorter&) = delete;
   ExternalSorter& operator=(const ExternalSorter&) = delete;
   ~ExternalSorter() {
-    for (const Run& r : runs_) ::unlink(r.path.c_str());
+    for (const Run& r : runs_)
+      if (!r.kept) ::unlink(r.path.c_str());
   }
 
   // Hint: about `total` records will be pushed (an upper bound is best). The first run is then cut short so
@@ -72,6 +73,9 @@ class ExternalSorter {
   void push(std::span<const Rec> records) {
     for (const Rec& r : records) push(r);
   }
+  // A run sorted elsewhere (another process's records, written as raw records in `less` order), merged
+  // with the others. Merging reads it and leaves it as it is: its owner removes it.
+  void add_sorted_run(const std::string& path, uint64_t records) { runs_.push_back({path, records, true}); }
   size_t runs() const { return runs_.size(); }
   uint64_t spilled_records() const {
     uint64_t n = 0;
@@ -128,6 +132,7 @@ class ExternalSorter {
   struct Run {
     std::string path;
     uint64_t records = 0;
+    bool kept = false;  // add_sorted_run's: read, never punched or removed
   };
 
   // Reads one run sequentially through a buffer of `records` records and deletes it when done.
@@ -137,8 +142,9 @@ class ExternalSorter {
     void open(const Run& run, uint64_t records) {
       path_ = run.path;
       left_ = run.records;
+      kept_ = run.kept;
       // Read-write only to release what has been read (refill()).
-      fd_ = ::open(path_.c_str(), O_RDWR | O_CLOEXEC);
+      fd_ = ::open(path_.c_str(), (kept_ ? O_RDONLY : O_RDWR) | O_CLOEXEC);
       if (fd_ < 0) fail(Status::io_error, path_ + ": cannot open sort run: " + std::strerror(errno));
       buf_.resize(static_cast<size_t>(std::min<uint64_t>(records, std::max<uint64_t>(left_, 1))));
       refill();
@@ -159,7 +165,7 @@ class ExternalSorter {
     void close() {
       if (fd_ >= 0) {
         ::close(fd_);
-        ::unlink(path_.c_str());
+        if (!kept_) ::unlink(path_.c_str());
         fd_ = -1;
       }
       release(buf_);
@@ -171,7 +177,7 @@ class ExternalSorter {
       // Every record read so far has been visited: give its blocks back to the file system, so that the
       // runs shrink while the merged output grows and the merge needs little more disk than its output.
       // Where the file system cannot punch holes the run is freed at the end, as before.
-      if (read_bytes_ > punched_bytes_) {
+      if (!kept_ && read_bytes_ > punched_bytes_) {
         fallocate(fd_, FALLOC_FL_PUNCH_HOLE | FALLOC_FL_KEEP_SIZE, static_cast<off_t>(punched_bytes_),
                   static_cast<off_t>(read_bytes_ - punched_bytes_));
         punched_bytes_ = read_bytes_;
@@ -193,6 +199,7 @@ class ExternalSorter {
     }
     std::string path_;
     int fd_ = -1;
+    bool kept_ = false;
     uint64_t left_ = 0;
     uint64_t read_bytes_ = 0, punched_bytes_ = 0;
     std::vector<Rec> buf_;

@@ -19,10 +19,13 @@
 // can neither start a cell nor appear in an output.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "core/grade.h"
+#include "stream/external_sort.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/scene_store.h"
@@ -70,9 +73,39 @@ struct GradeSummary {
 // vertices in WeightLess order, their ids in `order_path` (uint32 each) and, unless `grades_path` is
 // empty, their grades in `grades_path` (double each). `max_range_vertices` caps the range size
 // (0 = from the budget; tests force small ranges to exercise the seams). Throws Failure.
+// It runs the passes below in order: plan_grading, grade_ranges over every range, write_weight_index.
 GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta, core::Grading mode,
                             const MemoryPlan& plan, const WorkDir& work, Progress& progress,
                             const std::string& canonical_path, const std::string& order_path,
                             const std::string& grades_path, uint64_t max_range_vertices);
+
+// The passes of grade_and_sort, which the grading shares (stream/grade_shares.h) run in different processes.
+inline constexpr uint64_t kGradeBlock = 1 << 18;      // primitives per block of the store's columns
+inline constexpr uint64_t kMaxGradeRanges = 256;      // id ranges at most
+using RangeMask = std::array<uint64_t, kMaxGradeRanges / 64>;  // the ranges a block's corners fall in, a bit each
+using GradeSorter = ExternalSorter<GradeRecord, WeightLess>;
+
+struct GradePlan {
+  uint64_t distinct_positions = 0;
+  bool welded = false;          // the weld map was written (some positions repeat)
+  uint64_t range = 0;           // canonical ids per range: range r is [r·range, (r+1)·range)
+  uint64_t ranges = 0;
+  bool areas_summed = false;    // `areas` holds the whole store's triangles
+  AreaHistogram areas;
+  std::vector<RangeMask> block_ranges[3];  // per block of triangles, segments, points (more than one range)
+};
+// Pass 1: the weld (writes `canonical_path` when positions repeat), the range size (from the budget, at
+// most `max_range_vertices` when non-zero, and small enough for `min_ranges` ranges), and, with more
+// than one range or `sum_areas`, the block pass: every block's ranges, and the area histogram.
+GradePlan plan_grading(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan, Progress& progress,
+                       const std::string& canonical_path, uint64_t max_range_vertices, uint64_t min_ranges, bool sum_areas);
+// Pass 2: grades the vertices of ranges [first, end), pushing a record for every used one into `sorter`;
+// returns the records pushed. A plan without its areas (one range, no block pass) gets them here.
+uint64_t grade_ranges(const std::string& store_dir, const StoreMeta& meta, core::Grading mode, GradePlan& plan,
+                      const std::string& canonical_path, uint64_t first, uint64_t end, GradeSorter& sorter, Progress& progress);
+// Pass 3: the sorter's records, `records` of them, in order into `order_path` and, unless empty, `grades_path`.
+void write_weight_index(GradeSorter& sorter, uint64_t records, const std::string& order_path, const std::string& grades_path,
+                        Progress& progress);
+GradeSummary summary_of(const GradePlan& plan, uint64_t records);
 
 }  // namespace lodstream::stream

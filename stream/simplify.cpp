@@ -31,6 +31,7 @@
 #include "stream/disk_space.h"
 #include "stream/emit_regions.h"
 #include "stream/emit_stage.h"
+#include "stream/grade_shares.h"
 #include "stream/grade_stage.h"
 #include "stream/ingest.h"
 #include "stream/job.h"
@@ -457,6 +458,99 @@ ordered_json run_labels_stage(const SimplifyOptions& so, const std::string& stor
   return key;
 }
 
+// Stages 2 and 3, grade and sort (stream/grade_stage.h), unless the stamp says they are done. In a sharded
+// run they may run as N shares (stream/grade_shares.h): a grading share task (--shard-grade I/N) makes the
+// shares' plan (under the work directory's lock, which `lock` holds), releases the lock and runs its
+// share; any later process of the run finds the plan, runs the shares no task ran (each under its own
+// lock) and merges them. Returns false for a share task, whose run ends after its share.
+struct GradeStageInput {
+  const SimplifyOptions& so;
+  const stream::StoreMeta& meta;
+  const stream::MemoryPlan& plan;
+  const stream::WorkDir& work;
+  std::string store_dir, prefix, canonical_path, order_path, grades_path;
+  ordered_json key;
+  bool sharded;
+};
+
+stream::GradeSummary grade_from_stamp(const ordered_json& v) {
+  stream::GradeSummary g;
+  g.records = v.at("records");
+  g.distinct_positions = v.at("distinct_positions");
+  g.surface_area = v.at("surface_area");
+  g.ranges = v.at("ranges");
+  g.areas.count = v.at("area_counts").get<std::vector<uint64_t>>();
+  g.areas.area = v.at("area_sums").get<std::vector<double>>();
+  return g;
+}
+
+bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::unique_ptr<stream::ShardLock>& lock, StageStats& st,
+                 stream::GradeSummary* out, SimplifyReport* report) {
+  const SimplifyOptions& so = in.so;
+  const std::string stamp = in.work.file("grade.json");
+  ordered_json v;
+  if (stamp_matches(stamp, in.key, &v)) {
+    st.reused = true;
+    *out = grade_from_stamp(v);
+    return so.grade_share_count == 0;
+  }
+  std::filesystem::remove(stamp);
+  std::filesystem::remove(in.canonical_path);
+  std::filesystem::remove(stream::grades_path(in.prefix));
+  for (const char* old : {"weights.idx", "weld.u32"}) std::filesystem::remove(in.work.file(old));  // an older version's
+  const core::Grading mode = so.grading == Grading::lowtan ? core::Grading::lowtan : core::Grading::rossignac;
+  const bool keep_grades = !in.grades_path.empty();
+  auto write_grade_stamp = [&](const stream::GradeSummary& g) {
+    std::vector<std::string> files{in.order_path};
+    if (keep_grades) files.push_back(in.grades_path);
+    if (g.distinct_positions < in.meta.vertices) files.push_back(in.canonical_path);
+    write_stamp(stamp, in.key, files,
+                {{"records", g.records}, {"distinct_positions", g.distinct_positions}, {"surface_area", g.surface_area},
+                 {"ranges", g.ranges}, {"area_counts", g.areas.count}, {"area_sums", g.areas.area}});
+  };
+  const unsigned count = so.grade_share_count ? so.grade_share_count
+                         : in.sharded         ? stream::grade_shares_planned(in.prefix, in.key)
+                                              : 0;
+  if (count == 0) {
+    *out = stream::grade_and_sort(in.store_dir, in.meta, mode, in.plan, in.work, progress, in.canonical_path, in.order_path,
+                                  in.grades_path, so.grade_range_vertices);
+    write_grade_stamp(*out);
+    return true;
+  }
+  const stream::GradeShareInput gs{in.store_dir, &in.meta, mode, in.plan, in.prefix, &in.work, so.grade_range_vertices};
+  const stream::GradePlan gp = stream::shared_grade_plan(gs, count, in.key, progress);  // under the lock
+  ordered_json share_key = in.key;
+  share_key["count"] = count;
+  auto run_share = [&](unsigned s) -> uint64_t {
+    const stream::ShardLock share_lock(stream::grade_shares_dir(in.prefix), fmt::format("share-{}.lock", s));  // one process a share
+    const std::string share_stamp = stream::grade_share_stamp(in.prefix, s);
+    ordered_json sv;
+    if (stamp_matches(share_stamp, share_key, &sv)) return sv.at("records");
+    std::filesystem::remove(share_stamp);
+    const uint64_t records = stream::run_grade_share(gs, gp, s, count, progress);
+    // tests/slurm_test.sh: a share task killed before its stamp (a later process runs the share again)
+    if (so.grade_share_count > 0) stream::kill_point(fmt::format("grade-share-{}", s));
+    const auto [first, end] = stream::grade_share_ranges(gp, s, count);
+    write_stamp(share_stamp, share_key, {stream::grade_share_run(in.prefix, s)},
+                {{"ranges", {first, end}}, {"records", records}});
+    return records;
+  };
+  if (so.grade_share_count > 0) {
+    lock.reset();  // the stages before are done: the other shares may run now
+    const uint64_t records = run_share(so.grade_share_index);
+    const auto [first, end] = stream::grade_share_ranges(gp, so.grade_share_index, count);
+    report->grade_share = ordered_json{{"ranges", {first, end}}, {"records", records}}.dump();
+    return false;
+  }
+  std::vector<uint64_t> records;
+  for (unsigned s = 0; s < count; ++s) records.push_back(run_share(s));
+  *out = stream::merge_grade_shares(gs, gp, records, in.order_path, in.grades_path, in.canonical_path, progress);
+  write_grade_stamp(*out);
+  // The shares are spent once the stage is stamped (the weld map is a link to the plan's).
+  std::filesystem::remove_all(stream::grade_shares_dir(in.prefix));
+  return true;
+}
+
 // A sharded run's options (stream/shard.h).
 void check_shard_options(const SimplifyOptions& so, const Options& options) {
   if (options.work_dir.empty()) fail(Status::usage, "--shard and --shard-prepare need --work DIR, a directory every task shares");
@@ -466,6 +560,11 @@ void check_shard_options(const SimplifyOptions& so, const Options& options) {
   if (so.cluster_share_count > 0 && so.cluster_share_index >= so.cluster_share_count)
     fail(Status::usage, fmt::format("--shard-cluster {}/{}: the index must be below the count", so.cluster_share_index,
                                     so.cluster_share_count));
+  if (so.grade_share_count > 0 && so.grade_share_index >= so.grade_share_count)
+    fail(Status::usage, fmt::format("--shard-grade {}/{}: the index must be below the count", so.grade_share_index,
+                                    so.grade_share_count));
+  if (so.grade_share_count > 0 && (so.cluster_share_count > 0 || so.shard_count > 0 || so.shard_prepare))
+    fail(Status::usage, "--shard-grade runs a grading share alone: not with --shard, --shard-prepare or --shard-cluster");
 }
 
 // A range ingest task (stream/ingest_range.h): parses its byte range of the input into the work
@@ -518,12 +617,13 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     const stream::MemoryPlan plan = stream::plan_memory(options);
     stream::Progress progress(options);
     // A task of a sharded run (stream/shard.h) holds the work directory's lock through the shared stages.
-    const bool sharded = so.shard_count > 0 || so.shard_prepare || so.cluster_share_count > 0;
+    const bool sharded = so.shard_count > 0 || so.shard_prepare || so.cluster_share_count > 0 || so.grade_share_count > 0;
     if (sharded) check_shard_options(so, options);
     std::unique_ptr<stream::ShardLock> shard_lock;
     if (sharded) shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
     stream::WorkDir work(options.work_dir);
-    if (options.check_disk_space && !so.shard_prepare && !so.cluster_share_count) stream::check_simplify_space(input, so, work.path());
+    if (options.check_disk_space && !so.shard_prepare && !so.cluster_share_count && !so.grade_share_count)
+      stream::check_simplify_space(input, so, work.path());
     const std::string store_dir = work.subdir("store");
     const core::ClusterOptions copts = cluster_options(so);
     SimplifyReport report;
@@ -554,35 +654,10 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                    {"source", source_json(meta)},
                                    {"grading", name(so.grading)},
                                    {"grades", keep_grades}};
-      const stream::GradeSummary grade = run_stage(&report.stages, "grade", [&](StageStats& st) {
-        ordered_json v;
-        if (stamp_matches(work.file("grade.json"), grade_key, &v)) {
-          st.reused = true;
-          stream::GradeSummary g;
-          g.records = v.at("records");
-          g.distinct_positions = v.at("distinct_positions");
-          g.surface_area = v.at("surface_area");
-          g.ranges = v.at("ranges");
-          g.areas.count = v.at("area_counts").get<std::vector<uint64_t>>();
-          g.areas.area = v.at("area_sums").get<std::vector<double>>();
-          return g;
-        }
-        std::filesystem::remove(work.file("grade.json"));
-        std::filesystem::remove(canonical_path);
-        std::filesystem::remove(stream::grades_path(prefix));
-        for (const char* old : {"weights.idx", "weld.u32"}) std::filesystem::remove(work.file(old));  // an older version's
-        const stream::GradeSummary g = stream::grade_and_sort(
-            store_dir, meta, so.grading == Grading::lowtan ? core::Grading::lowtan : core::Grading::rossignac, plan,
-            work, progress, canonical_path, order_path, grades_path, so.grade_range_vertices);
-        std::vector<std::string> files{order_path};
-        if (keep_grades) files.push_back(grades_path);
-        if (g.distinct_positions < meta.vertices) files.push_back(canonical_path);
-        write_stamp(work.file("grade.json"), grade_key, files,
-                    {{"records", g.records}, {"distinct_positions", g.distinct_positions},
-                     {"surface_area", g.surface_area}, {"ranges", g.ranges},
-                     {"area_counts", g.areas.count}, {"area_sums", g.areas.area}});
-        return g;
-      });
+      const GradeStageInput gin{so, meta, plan, work, store_dir, prefix, canonical_path, order_path, grades_path, grade_key, sharded};
+      stream::GradeSummary grade;
+      if (!run_stage(&report.stages, "grade", [&](StageStats& st) { return grade_stage(gin, progress, shard_lock, st, &grade, &report); }))
+        return;  // a grading share task: done
       report.vertices_graded = grade.records;
       report.distinct_positions = grade.distinct_positions;
       report.surface_area = grade.surface_area;
@@ -1054,7 +1129,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           progress.report("tiles", 1);
         });
     });
-    if (so.shard_prepare || so.cluster_share_count > 0) {
+    if (so.shard_prepare || so.cluster_share_count > 0 || so.grade_share_count > 0) {
       *out = std::move(report);
       return;
     }

@@ -90,4 +90,12 @@ void remove_summary(const std::string& path) {
   if (ec) fail(Status::io_error, path + ": cannot remove the previous run's file: " + ec.message());
 }
 
+void link_file(const std::string& from, const std::string& to) {
+  std::error_code ec;
+  std::filesystem::remove(to, ec);
+  std::filesystem::create_hard_link(from, to, ec);
+  if (ec) std::filesystem::copy_file(from, to, std::filesystem::copy_options::overwrite_existing, ec);
+  if (ec) fail(Status::io_error, to + ": cannot write: " + ec.message());
+}
+
 }  // namespace lodstream::stream

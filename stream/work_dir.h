@@ -42,4 +42,8 @@ void make_output_dir(const std::string& path);
 // Failure(io_error) naming it when it exists and cannot be removed.
 void remove_summary(const std::string& path);
 
+// Links (or, across file systems, copies) `from` to `to`, replacing it: a stage's file that another
+// stage's file already holds. Throws Failure(io_error) naming `to`.
+void link_file(const std::string& from, const std::string& to);
+
 }  // namespace lodstream::stream

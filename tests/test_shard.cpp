@@ -20,6 +20,7 @@
 #include "core/octree_regions.h"
 #include "stream/block_bounds.h"
 #include "stream/cluster_shares.h"
+#include "stream/grade_shares.h"
 #include "stream/scene_store.h"
 #include "stream/shard.h"
 #include "stream/vertex_cells.h"
@@ -249,6 +250,116 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
   TempDir d;
   SimplifyReport r;
   EXPECT_EQ(simplify(sample_room(), bad, shared_work(d), &r).status, Status::usage);
+}
+
+// Grade and sort as N shares (stream/grade_shares.h), with ranges small enough that a share grades
+// several, each from the blocks that touch it: the weight index, the weld map and the grades are one
+// machine's bytes, and so is every output after them. A share no task ran is run by the next step; a
+// share task after the stage is done does nothing.
+TEST(GradeShares, ShareTasksThenTasksGiveOneMachinesBytes) {
+  for (Representative rep : {Representative::center, Representative::mean}) {
+    SCOPED_TRACE(rep == Representative::center ? "center" : "mean");
+    TempDir dir;
+    SimplifyOptions one_options = room_options(dir.file("one"));
+    one_options.representative = rep;
+    SimplifyReport one;
+    ASSERT_TRUE(simplify(sample_room(), one_options, shared_work(dir), &one).ok());
+    const std::string one_work = dir.file("work") + "/";
+    for (unsigned n : {1u, 3u, 5u}) {
+      SCOPED_TRACE("shares " + std::to_string(n));
+      const std::string work = dir.file("work-" + std::to_string(n)), out = dir.file("sharded-" + std::to_string(n));
+      Options o;
+      o.work_dir = work;
+      o.check_disk_space = false;
+      uint64_t records = 0;
+      for (unsigned i = 0; i < n; ++i) {
+        if (n > 1 && i == 1) continue;  // a share no task ran
+        SimplifyOptions so = room_options(out);
+        so.representative = rep, so.grade_share_index = i, so.grade_share_count = n, so.grade_range_vertices = 1000;
+        SimplifyReport r;
+        const Result res = simplify(sample_room(), so, o, &r);
+        ASSERT_TRUE(res.ok()) << res.message;
+        ASSERT_FALSE(r.grade_share.empty());
+        records += nlohmann::json::parse(r.grade_share).at("records").get<uint64_t>();
+        EXPECT_TRUE(std::filesystem::exists(stream::grade_share_stamp(work + "/", i)));
+        EXPECT_FALSE(std::filesystem::exists(work + "/grade.json")) << "a share does not stamp the whole stage";
+        EXPECT_FALSE(std::filesystem::exists(work + "/order.u32"));
+      }
+      EXPECT_GT(records, 0u);
+      EXPECT_LE(records, one.vertices_graded);
+      // The shares' plan has more ranges than shares (several a share).
+      const nlohmann::json plan = nlohmann::json::parse(slurp(stream::grade_shares_dir(work + "/") + "plan.json"));
+      EXPECT_GT(plan.at("plan").at("ranges").get<uint64_t>(), 2 * n);
+      SimplifyOptions prepare = room_options(out);
+      prepare.representative = rep, prepare.shard_prepare = true;
+      SimplifyReport pr;
+      const Result pres = simplify(sample_room(), prepare, o, &pr);
+      ASSERT_TRUE(pres.ok()) << pres.message;
+      EXPECT_EQ(pr.vertices_graded, one.vertices_graded);
+      EXPECT_EQ(pr.distinct_positions, one.distinct_positions);
+      EXPECT_EQ(pr.surface_area, one.surface_area) << "the areas are summed in the one machine's order";
+      EXPECT_FALSE(std::filesystem::exists(stream::grade_shares_dir(work + "/"))) << "the merge removes the spent shares";
+      EXPECT_TRUE(slurp(work + "/order.u32") == slurp(one_work + "order.u32"));
+      EXPECT_TRUE(slurp(work + "/weld.map") == slurp(one_work + "weld.map"));
+      EXPECT_FALSE(slurp(work + "/weld.map").empty());
+      if (rep == Representative::mean) EXPECT_TRUE(slurp(work + "/grades.f64") == slurp(one_work + "grades.f64"));
+      SimplifyOptions late = room_options(out);
+      late.representative = rep, late.grade_share_index = 0, late.grade_share_count = n;
+      SimplifyReport lr;
+      ASSERT_TRUE(simplify(sample_room(), late, o, &lr).ok());
+      EXPECT_TRUE(lr.grade_share.empty());
+      for (unsigned i = 0; i < n; ++i) {
+        SimplifyOptions so = room_options(out);
+        so.representative = rep, so.shard_index = i, so.shard_count = n;
+        SimplifyReport r;
+        const Result res = simplify(sample_room(), so, o, &r);
+        ASSERT_TRUE(res.ok()) << res.message;
+      }
+      SimplifyReport merged;
+      ASSERT_TRUE(merge(out, Options{}, &merged).ok());
+      EXPECT_EQ(outputs(out), outputs(dir.file("one")));
+    }
+  }
+  SimplifyOptions bad = room_options(test::TempDir().file("out"));
+  bad.grade_share_index = 2, bad.grade_share_count = 2;
+  TempDir d;
+  SimplifyReport r;
+  EXPECT_EQ(simplify(sample_room(), bad, shared_work(d), &r).status, Status::usage);
+  bad.grade_share_index = 0, bad.shard_prepare = true;
+  EXPECT_EQ(simplify(sample_room(), bad, shared_work(d), &r).status, Status::usage);
+}
+
+// A share's run cut short after its stamp: the merge refuses with an I/O error naming the run, leaves
+// no weight index and removes the share's stamp, so that the next step runs the share again.
+TEST(GradeShares, MergeRefusesARunCutShort) {
+  TempDir dir;
+  SimplifyOptions one_options = room_options(dir.file("one"));
+  SimplifyReport one;
+  ASSERT_TRUE(simplify(sample_room(), one_options, shared_work(dir), &one).ok());
+  const std::string work = dir.file("work-2");
+  Options o;
+  o.work_dir = work;
+  o.check_disk_space = false;
+  for (unsigned i = 0; i < 2; ++i) {
+    SimplifyOptions so = room_options(dir.file("out"));
+    so.grade_share_index = i, so.grade_share_count = 2;
+    SimplifyReport r;
+    ASSERT_TRUE(simplify(sample_room(), so, o, &r).ok());
+  }
+  const std::string run = stream::grade_share_run(work + "/", 1);
+  std::filesystem::resize_file(run, std::filesystem::file_size(run) - 12);
+  SimplifyOptions prepare = room_options(dir.file("out"));
+  prepare.shard_prepare = true;
+  SimplifyReport pr;
+  const Result bad = simplify(sample_room(), prepare, o, &pr);
+  EXPECT_EQ(bad.status, Status::io_error);
+  EXPECT_NE(bad.message.find("share-1.run"), std::string::npos) << bad.message;
+  EXPECT_FALSE(std::filesystem::exists(work + "/order.u32"));
+  EXPECT_FALSE(std::filesystem::exists(work + "/grade.json"));
+  EXPECT_FALSE(std::filesystem::exists(stream::grade_share_stamp(work + "/", 1)));
+  EXPECT_TRUE(std::filesystem::exists(stream::grade_share_stamp(work + "/", 0)));
+  ASSERT_TRUE(simplify(sample_room(), prepare, o, &pr).ok()) << "the next step runs the share again";
+  EXPECT_TRUE(slurp(work + "/order.u32") == slurp(dir.file("work") + "/order.u32"));
 }
 
 // The shares through the stream API with a first halo of a quarter cell, so that their own vertices near

@@ -371,6 +371,10 @@ int main(int argc, char** argv) {
   std::string shard_ingest_text;
   simplify_cmd->add_option("--shard-ingest", shard_ingest_text,
                            "Parse byte range I of N of the input into --work DIR, then stop (--shard-prepare joins the N ranges)");
+  std::string shard_grade_text;
+  simplify_cmd->add_option("--shard-grade", shard_grade_text,
+                           "Run share I of N of the grading and the weight index's sort over --work DIR, then stop (the stages "
+                           "before it first, unless another task ran them; any later step merges the shares)");
   std::string shard_cluster_text;
   simplify_cmd->add_option("--shard-cluster", shard_cluster_text,
                            "Run share I of N of the clustering over --work DIR, then stop (the stages before it first, unless "
@@ -571,6 +575,13 @@ int main(int argc, char** argv) {
         return static_cast<int>(lodstream::Status::usage);
       }
     }
+    if (!shard_grade_text.empty()) {
+      std::string error;
+      if (!parse_shard(shard_grade_text, false, &so.grade_share_index, &so.grade_share_count, &error)) {
+        std::fprintf(stderr, "lodstream: --shard-grade%s\n", error.substr(error.find(':')).c_str());
+        return static_cast<int>(lodstream::Status::usage);
+      }
+    }
     if (!shard_cluster_text.empty()) {
       std::string error;
       if (!parse_shard(shard_cluster_text, false, &so.cluster_share_index, &so.cluster_share_count, &error)) {
@@ -578,7 +589,8 @@ int main(int argc, char** argv) {
         return static_cast<int>(lodstream::Status::usage);
       }
     }
-    const bool sharded = so.shard_count > 0 || so.shard_prepare || so.ingest_count > 0 || so.cluster_share_count > 0;
+    const bool sharded =
+        so.shard_count > 0 || so.shard_prepare || so.ingest_count > 0 || so.cluster_share_count > 0 || so.grade_share_count > 0;
     lodstream::SimplifyReport report;
     const lodstream::Result r = lodstream::simplify(input, so, options, &report);
     const int code = finish(r, progress, json && !sharded ? so.output_dir + "/manifest.json" : std::string(), [&] {
@@ -589,6 +601,9 @@ int main(int argc, char** argv) {
       if (so.ingest_count > 0)
         std::printf("range        %u of %u: %s bytes parsed into %s/ingest-ranges (then: --shard-prepare joins them)\n",
                     so.ingest_index, so.ingest_count, std::to_string(report.scene.file_bytes).c_str(), options.work_dir.c_str());
+      else if (so.grade_share_count > 0)
+        std::printf("grade        share %u of %u in %s/grade-shares%s (then: the next step merges them)\n", so.grade_share_index,
+                    so.grade_share_count, options.work_dir.c_str(), report.grade_share.empty() ? ", the stage already done" : "");
       else if (so.cluster_share_count > 0)
         std::printf("cluster      share %u of %u in %s/cluster-shares%s (then: --cluster-shards %u merges them)\n", so.cluster_share_index,
                     so.cluster_share_count, options.work_dir.c_str(), report.cluster_share.empty() ? ", the stage already done" : "",

@@ -214,6 +214,12 @@ struct SimplifyOptions {
   // The outputs are the same bytes either way.
   unsigned cluster_share_index = 0, cluster_share_count = 0;
   unsigned cluster_shares = 0;
+  // Grade and the weight index's sort as N shares (stream/grade_shares.h). With grade_share_count N > 0:
+  // run the stages before grading unless another task did (under the work directory's lock), then share
+  // grade_share_index of the grading, then stop. Any later process of the run (a clustering share, the
+  // prepare job, a task) finds the shares' plan in the work directory, runs any share no task ran and
+  // merges them into the weight index: the same bytes as one machine's.
+  unsigned grade_share_index = 0, grade_share_count = 0;
 };
 
 inline constexpr unsigned default_levels = 5;
@@ -257,6 +263,9 @@ struct SimplifyReport {
   // SimplifyOptions::cluster_share_count: the share's figures per level, as JSON (stream/cluster_shares.h
   // run_cluster_share); empty when the whole stage was already done.
   std::string cluster_share;
+  // SimplifyOptions::grade_share_count: the share's figures ({"ranges": [first, end), "records"}), as
+  // JSON; empty when the whole stage was already done.
+  std::string grade_share;
   std::vector<StageStats> stages;
   double seconds = 0;
   uint64_t peak_rss_bytes = 0;  // the process's VmHWM at the end (see StageStats)

@@ -1,0 +1,70 @@
+// Grade and the weight index's sort as N shares (issue 19): share I of N grades its part of the canonical
+// vertex ids and sorts its records; a merge of the N sorted runs then writes the weight index, the same
+// bytes as one machine's grade stage (stream/grade_stage.h).
+//
+// Low & Tan, "Model Simplification Using Vertex-Clustering", I3D 1997, §3.1: a vertex's grade depends on
+// its position and its neighbours' (one ring), never on the order they are visited in; the weight order is
+// non-increasing grade, ties by id (WeightLess), a total order, so any partition of the records sorted
+// apart and merged gives the one order.
+//
+// The plan (shared_grade_plan; made once a run, by the first process that needs it, under the work
+// directory's lock, and read by the others from grade-shares/plan.json): plan_grading's weld (its map in
+// grade-shares/weld.map), the range size (at least N ranges, where the vertices allow), and the block
+// pass over the store (each block's ranges in grade-shares/blocks.bin, 32 bytes a block of 2^18
+// primitives; the area histogram in plan.json).
+// The share (run_grade_share): ranges [I·R/N, (I+1)·R/N) of the R ranges, each graded from the blocks that
+// touch it (grade_ranges), its records sorted under the budget (stream/external_sort.h) into one run,
+// grade-shares/share-I.run (12 bytes a record).
+// The merge (merge_grade_shares): one k-way merge of the N runs into order.u32 (and the grades), checking
+// that they hold the records the shares counted; then the weld map is linked into the work directory.
+// Invariant: the ranges partition the ids, so every used canonical vertex is graded by exactly one share,
+// from all of its primitives (the block pass found every block that touches its range).
+// Memory of a share: grade_ranges' (the range's incidence lists, sized from the budget) and the sort's
+// buffer (a third of the stage's budget); of the merge, one read buffer a run within a third of it.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "stream/grade_stage.h"
+
+namespace lodstream::stream {
+
+struct GradeShareInput {
+  std::string store_dir;
+  const StoreMeta* meta = nullptr;
+  core::Grading mode = core::Grading::lowtan;
+  MemoryPlan plan;
+  std::string prefix;  // the work directory's (grade-shares/ is made there)
+  const WorkDir* work = nullptr;
+  uint64_t max_range_vertices = 0;  // tests force small ranges
+};
+
+std::string grade_shares_dir(const std::string& prefix);
+std::string grade_share_stamp(const std::string& prefix, unsigned index);
+std::string grade_share_run(const std::string& prefix, unsigned index);
+std::string grade_shares_weld_path(const std::string& prefix);  // the plan's weld map, until the merge moves it
+
+// The count of the shares' plan written for `key`, or 0 when there is none (no grading share has run).
+unsigned grade_shares_planned(const std::string& prefix, const nlohmann::ordered_json& key);
+// The plan as every process of a run sees it, made once: read from grade-shares/ when written there for
+// `key` and `count`, else made by plan_grading (the weld and a pass over the store) and written there.
+// The caller holds the work directory's lock.
+GradePlan shared_grade_plan(const GradeShareInput& in, unsigned count, const nlohmann::ordered_json& key, Progress& progress);
+
+// The ranges [first, end) of share `index` of `count`.
+std::pair<uint64_t, uint64_t> grade_share_ranges(const GradePlan& plan, unsigned index, unsigned count);
+
+// Runs share `index`: grades its ranges and writes its sorted run; returns its records.
+uint64_t run_grade_share(const GradeShareInput& in, GradePlan plan, unsigned index, unsigned count, Progress& progress);
+
+// Merges the shares' runs (share s holds records[s]) into `order_path` and, unless empty, `grades_path`,
+// and links the weld map (if any) to `canonical_path`; returns the stage's summary. Failure(io_error) when
+// a run does not hold its records.
+GradeSummary merge_grade_shares(const GradeShareInput& in, const GradePlan& plan, const std::vector<uint64_t>& records,
+                                const std::string& order_path, const std::string& grades_path,
+                                const std::string& canonical_path, Progress& progress);
+
+}  // namespace lodstream::stream
