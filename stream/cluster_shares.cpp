@@ -365,13 +365,16 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
   } else {
     plan.cuts.assign(count ? count - 1 : 0, 0.0);
   }
-  // Whole levels, all by the last share: one cluster_levels pass over the index for all of them, whose
-  // cost is mostly fetching the positions by id, shared by its levels (193 M-triangle city, 8 shares at
-  // --memory 1G: 35 s for a whole level in a share of its own, 11.5 s for a share of the finest level's).
+  // Whole levels, all by one share: one cluster_levels pass over the index for all of them, whose cost is
+  // mostly fetching the positions by id, shared by its levels (193 M-triangle city, 8 shares at --memory
+  // 1G: 35 s for a whole level in a share of its own, 11.5 s for a share of the finest level's). It is
+  // share 1, the longest share started first: the first share to start (share 0, as schedulers start an
+  // array) runs the stages before the clustering under the lock while share 1 waits for it, then both
+  // start, and on fewer nodes than shares the rest queue behind them.
   for (size_t l = 0; l < levels; ++l) {
     const bool fine = in.fine && in.fine->sizes.at(l) > 0;
     if (can_split && !fine && in.sizes[l] * kSplitCells <= min_width) continue;
-    plan.whole_share[l] = static_cast<int>(count - 1);
+    plan.whole_share[l] = static_cast<int>(std::min(1u, count - 1));
   }
   return plan;
 }

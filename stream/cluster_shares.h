@@ -14,7 +14,7 @@
 //   cuts[I-1] <= p[axis] < cuts[I] (no lower bound for share 0, no upper for share N-1).
 // - A level is split by region when its cells are floating, it has no fine grid (silhouette labels: two
 //   grids, not handled here), and every slab is at least kSplitCells cells wide; then each share clusters
-//   its own vertices. The other levels are clustered whole by the last share, in one cluster_levels pass
+//   its own vertices. The other levels are clustered whole by share 1 (share 0 if N = 1), in one cluster_levels pass
 //   (exact by construction; their cost is mostly fetching the positions by id, which one pass shares).
 // The share (run_cluster_share), per split level:
 // 1. Select: the vertex ids within the largest halo of the slab (one sequential read of the positions),

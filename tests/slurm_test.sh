@@ -9,6 +9,9 @@
 # then refuses naming it (exit 66), and `lodstream slurm resubmit` reruns it alone to the same bytes;
 # likewise an ingest range killed before its segment is complete: the prepare job does not run, a prepare
 # by hand refuses naming the range (exit 66), and resubmitting reruns that range alone, then the chain.
+# The 3 tasks' run checks the grade and cluster arrays' shares; a grade share or a cluster share killed
+# with SIGKILL is run by the next step (a cluster share, the prepare job), and the run ends with exit 0
+# and one machine's bytes.
 # `lodstream slurm report` as 3 tasks on the room's levels (and the city's) must give report.html and the
 # CSVs byte for byte as one machine's report, and report.json equal but for timings and counters.
 # Prints "skipped:" and exits 77 when a cluster cannot start here (not root, Slurm or MUNGE missing).
@@ -77,6 +80,12 @@ run_scene() {
       grep -q "range        0 of 3" "$out/slurm/logs/ingest-0.out" || fail "$name: ingest range 0 did not say what it parsed"
       echo "  3 ingest ranges joined by the prepare job: $(grep -h '^range' "$out"/slurm/logs/ingest-*.out | awk '{print $5}' | paste -sd+) bytes parsed"
       for r in 0 1 2; do
+        [ "$(cat "$out/slurm/status/grade-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: grade share $r did not finish"
+        grep -q "^grade        share $r of 3 in [^,]* (then" "$out/slurm/logs/grade-$r.out" || fail "$name: grade share $r did not grade its share"
+      done
+      [ -e "$w/grade-shares" ] && fail "$name: the cluster array left the spent grade shares"
+      echo "  3 grade shares: $(grep -h '^stage        grade' "$out"/slurm/logs/grade-*.out | awk '{print $3 " s"}' | paste -sd' ')"
+      for r in 0 1 2; do
         [ "$(cat "$out/slurm/status/cluster-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: cluster share $r did not finish"
         grep -q "^cluster      share $r of 3 in [^,]* (then" "$out/slurm/logs/cluster-$r.out" || fail "$name: cluster share $r did not cluster its share"
       done
@@ -110,7 +119,19 @@ rc=$?
 grep -q "array 1 of 3" "$tmp/resubmit.log" || fail "resubmit did not submit task 1 alone: $(cat "$tmp/resubmit.log")"
 same_outputs "$tmp/room-one" "$out"
 
-# An ingest range killed just before its segment is complete, in a fresh work directory.
+# A grade share killed: the first cluster share (afterany) runs it under the lock before it merges the
+# grading shares, and the run ends as one machine's.
+out=$tmp/room-kill-grade
+LODSTREAM_TEST_KILL_AT=grade-share-1 "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill-grade" --shards 3 --wait \
+  --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/kill-grade.log" 2>&1
+rc=$?
+[ $rc -eq 0 ] || { fail "a grade share killed with SIGKILL: the run exited $rc, not 0"; cat "$tmp/kill-grade.log"; }
+[ "$(cat "$out/slurm/status/grade-1.rc" 2>/dev/null)" = 137 ] || fail "grade share 1 was not killed"
+[ "$(grep -h '^stage        grade' "$out"/slurm/logs/cluster-*.out | grep -vc reused)" = 1 ] ||
+  fail "no cluster share (or more than one) graded: $(grep -h '^stage        grade' "$out"/slurm/logs/cluster-*.out)"
+same_outputs "$tmp/room-one" "$out"
+echo "killed grade share: run exit $rc, a cluster share ran grade share 1 and merged"
+
 # A cluster share killed: the prepare job (afterany) runs the share itself, and the run ends as one machine's.
 out=$tmp/room-kill-share
 LODSTREAM_TEST_KILL_AT=cluster-share-1 "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill-share" --shards 3 --wait \
@@ -122,6 +143,7 @@ grep -q "^stage        cluster .*(reused" "$out/slurm/logs/prepare.out" && fail 
 same_outputs "$tmp/room-one" "$out"
 echo "killed cluster share: run exit $rc, the prepare job ran share 1 itself"
 
+# An ingest range killed just before its segment is complete, in a fresh work directory.
 out=$tmp/room-kill-ingest
 LODSTREAM_TEST_KILL_AT=range-1-of-3.seg "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill" --shards 3 --wait \
   --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/kill-ingest.log" 2>&1

@@ -2,12 +2,14 @@
 // cluster. It only writes sbatch
 // scripts (readable, resubmittable by hand) under OUT/slurm/ and submits them with sbatch: an ingest
 // array job of N range tasks (each parses an N-th of the input's bytes, a report's of every original's,
-// stream/ingest_range.h); for simplify, a cluster array job of N shares (the first joins the ranges and
-// grades, under the work directory's lock, then each clusters its share: stream/cluster_shares.h); then a
-// prepare job (the shared stages: for simplify the shares' merge and the representatives, for a report the
-// join alone), an array job of N tasks after it (--dependency=afterok), and the merge after the array.
-// The prepare job waits for the cluster array to end, not to succeed (afterany): it runs any share that
-// did not finish itself. The scheduler is Slurm's; lodstream adds none of its own. Each script records its command's exit
+// stream/ingest_range.h); for simplify, a grade array job of N shares (the first joins the ranges and
+// welds, under the work directory's lock, then each grades and sorts its share: stream/grade_shares.h)
+// and a cluster array job of N shares (the first merges the grading shares, under the lock, then each
+// clusters its share: stream/cluster_shares.h); then a prepare job (the shared stages: for simplify the
+// clustering shares' merge and the representatives, for a report the join alone), an array job of N tasks
+// after it (--dependency=afterok), and the merge after the array. The cluster array and the prepare job
+// wait for the array before them to end, not to succeed (afterany): the share that did not finish is run
+// by the next step. The scheduler is Slurm's; lodstream adds none of its own. Each script records its command's exit
 // status in OUT/slurm/status/NAME.rc (and the command's pid in NAME.pid while it runs), which is how
 // --wait tells a failed task's one-machine exit code from the merge's.
 #include "tools/slurm_cli.h"
@@ -40,7 +42,7 @@ const char* const kUsageText =
     "usage: lodstream slurm simplify INPUT -o OUTDIR --shards N [--work DIR] [--wait] [--sbatch-arg ARG]... [simplify options]\n"
     "       lodstream slurm report RUNDIR -o REPORTDIR --shards N [--work DIR] [--wait] [--sbatch-arg ARG]... [report options]\n"
     "       lodstream slurm resubmit OUTDIR [--wait]\n"
-    "  simplify  writes OUTDIR/slurm/{ingest,cluster,prepare,tasks,merge}.sbatch and submits them (afterok dependencies);\n"
+    "  simplify  writes OUTDIR/slurm/{ingest,grade,cluster,prepare,tasks,merge}.sbatch and submits them (afterok dependencies);\n"
     "            --work: the work directory every task shares (default OUTDIR/slurm/work; on a shared file system)\n"
     "  report    the same for `lodstream report RUNDIR -o REPORTDIR` (scripts in REPORTDIR/slurm/; more report\n"
     "            arguments go to every job as given, relative paths from the current directory)\n"
@@ -130,12 +132,18 @@ struct Submission {
   std::vector<std::string> sbatch_args;
   bool ranges = false;  // the chain starts with the ingest array (ingest.sbatch); false: a submission of older code
   bool clusters = false;  // the cluster array (cluster.sbatch) runs before the prepare job (simplify)
-  std::string ingest, cluster, prepare, tasks, merge;  // job ids
+  bool grades = false;    // the grade array (grade.sbatch) runs before the cluster array (simplify)
+  std::string ingest, grade, cluster, prepare, tasks, merge;  // job ids
 };
 
 bool save(const Submission& s) {
-  const ordered_json j{{"shards", s.shards}, {"sbatch_args", s.sbatch_args}, {"ingest_ranges", s.ranges}, {"cluster_shares", s.clusters},
-                       {"jobs", {{"ingest", s.ingest}, {"cluster", s.cluster}, {"prepare", s.prepare}, {"tasks", s.tasks}, {"merge", s.merge}}}};
+  const ordered_json j{{"shards", s.shards},
+                       {"sbatch_args", s.sbatch_args},
+                       {"ingest_ranges", s.ranges},
+                       {"grade_shares", s.grades},
+                       {"cluster_shares", s.clusters},
+                       {"jobs",
+                        {{"ingest", s.ingest}, {"grade", s.grade}, {"cluster", s.cluster}, {"prepare", s.prepare}, {"tasks", s.tasks}, {"merge", s.merge}}}};
   return write_text(s.slurm_dir + "/submit.json", j.dump(2) + "\n", false);
 }
 
@@ -145,13 +153,21 @@ int submit_chain(Submission& s, bool from_prepare, const std::string& array, con
   const std::string dep_args = "--kill-on-invalid-dep=yes --dependency=afterok:";
   std::string after;
   s.ingest.clear();
+  s.grade.clear();
   s.cluster.clear();
   if (from_prepare && !ingest_array.empty()) {
     s.ingest = submit("--array=" + ingest_array, s.slurm_dir + "/ingest.sbatch");
     if (s.ingest.empty()) return kIoError;
   }
+  const std::string all_shares = fmt::format(" --array=0-{}", s.shards - 1);
+  if (from_prepare && s.grades) {
+    s.grade = submit((s.ingest.empty() ? std::string() : dep_args + s.ingest) + all_shares, s.slurm_dir + "/grade.sbatch");
+    if (s.grade.empty()) return kIoError;
+  }
   if (from_prepare && s.clusters) {
-    s.cluster = submit((s.ingest.empty() ? std::string() : dep_args + s.ingest) + fmt::format(" --array=0-{}", s.shards - 1),
+    std::string deps = s.ingest.empty() ? std::string() : "afterok:" + s.ingest;
+    if (!s.grade.empty()) deps += (deps.empty() ? "" : ",") + std::string("afterany:") + s.grade;
+    s.cluster = submit((deps.empty() ? std::string() : "--kill-on-invalid-dep=yes --dependency=" + deps) + all_shares,
                        s.slurm_dir + "/cluster.sbatch");
     if (s.cluster.empty()) return kIoError;
   }
@@ -171,6 +187,7 @@ int submit_chain(Submission& s, bool from_prepare, const std::string& array, con
     return kIoError;
   }
   if (!s.ingest.empty()) std::printf("ingest  job %s (array %s of %u)\n", s.ingest.c_str(), ingest_array.c_str(), s.shards);
+  if (!s.grade.empty()) std::printf("grade   job %s (array 0-%u of %u)\n", s.grade.c_str(), s.shards - 1, s.shards);
   if (!s.cluster.empty()) std::printf("cluster job %s (array 0-%u of %u)\n", s.cluster.c_str(), s.shards - 1, s.shards);
   if (from_prepare) std::printf("prepare job %s\n", s.prepare.c_str());
   std::printf("tasks   job %s (array %s of %u)\nmerge   job %s\n", s.tasks.c_str(), array.c_str(), s.shards, s.merge.c_str());
@@ -187,6 +204,7 @@ int wait_chain(const Submission& s, const std::vector<unsigned>& tasks, const st
   const std::string st = s.slurm_dir + "/status/";
   std::string ids = s.prepare.empty() ? (s.tasks.empty() ? s.merge : s.tasks + "," + s.merge) : s.prepare + "," + s.tasks + "," + s.merge;
   if (!s.cluster.empty()) ids = s.cluster + "," + ids;
+  if (!s.grade.empty()) ids = s.grade + "," + ids;
   if (!s.ingest.empty()) ids = s.ingest + "," + ids;
   for (;;) {
     const int merge_rc = read_rc(st + "merge.rc");
@@ -267,7 +285,8 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
     } else if (a == "--wait") wait = true;
     else if (a == "--shard" || a == "--shard-from-env" || a == "--shard-prepare" || a.rfind("--shard=", 0) == 0 ||
              a == "--shard-ingest" || a.rfind("--shard-ingest=", 0) == 0 || a == "--shard-cluster" ||
-             a.rfind("--shard-cluster=", 0) == 0 || a == "--cluster-shards" || a.rfind("--cluster-shards=", 0) == 0) {
+             a.rfind("--shard-cluster=", 0) == 0 || a == "--cluster-shards" || a.rfind("--cluster-shards=", 0) == 0 ||
+             a == "--shard-grade" || a.rfind("--shard-grade=", 0) == 0) {
       std::fprintf(stderr, "lodstream slurm: %s is for the tasks; give --shards N\n", a.c_str());
       return kUsage;
     } else passthrough.push_back(a);
@@ -288,6 +307,7 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
   s.sbatch_args = sbatch_args;
   s.ranges = true;  // both commands ingest by byte ranges first
   s.clusters = command == "simplify";
+  s.grades = command == "simplify";
   work = work.empty() ? s.slurm_dir + "/work" : absolute(work);
   for (const char* d : {"", "/logs", "/status"}) fs::create_directories(s.slurm_dir + d, ec);
   if (ec) {
@@ -303,6 +323,11 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
        write_text(s.slurm_dir + "/ingest.sbatch",
                   script(s.slurm_dir, "lodstream-ingest", "ingest-%a.out", tasks_array, sbatch_args, "ingest-${SLURM_ARRAY_TASK_ID}",
                          common + fmt::format(" --shard-ingest \"${{SLURM_ARRAY_TASK_ID}}/{}\"", shards)),
+                  true)) &&
+      (!s.grades ||
+       write_text(s.slurm_dir + "/grade.sbatch",
+                  script(s.slurm_dir, "lodstream-grade", "grade-%a.out", tasks_array, sbatch_args, "grade-${SLURM_ARRAY_TASK_ID}",
+                         common + fmt::format(" --shard-grade \"${{SLURM_ARRAY_TASK_ID}}/{}\"", shards)),
                   true)) &&
       (!s.clusters ||
        write_text(s.slurm_dir + "/cluster.sbatch",
@@ -323,7 +348,8 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
     std::fprintf(stderr, "lodstream slurm: cannot write the scripts in %s\n", s.slurm_dir.c_str());
     return kIoError;
   }
-  std::printf("scripts %s/{%s%sprepare,tasks,merge}.sbatch\n", s.slurm_dir.c_str(), s.ranges ? "ingest," : "", s.clusters ? "cluster," : "");
+  std::printf("scripts %s/{%s%s%sprepare,tasks,merge}.sbatch\n", s.slurm_dir.c_str(), s.ranges ? "ingest," : "", s.grades ? "grade," : "",
+              s.clusters ? "cluster," : "");
   if (const int rc = submit_chain(s, true, tasks_array, s.ranges ? tasks_array : std::string())) return rc;
   if (!wait) return 0;
   std::vector<unsigned> all(shards);
@@ -356,13 +382,14 @@ int resubmit(const std::vector<std::string>& args) {
     s.sbatch_args = j.at("sbatch_args").get<std::vector<std::string>>();
     s.ranges = j.value("ingest_ranges", false);
     s.clusters = j.value("cluster_shares", false);
+    s.grades = j.value("grade_shares", false);
   } catch (const std::exception&) {
     std::fprintf(stderr, "lodstream slurm: %s/submit.json: no submission to resubmit (run `lodstream slurm simplify` first)\n",
                  s.slurm_dir.c_str());
     return kNoInput;
   }
   std::string old;
-  for (const char* job : {"ingest", "cluster", "prepare", "tasks", "merge"})
+  for (const char* job : {"ingest", "grade", "cluster", "prepare", "tasks", "merge"})
     if (const std::string id = j["jobs"].value(job, ""); !id.empty()) old += (old.empty() ? "" : ",") + id;
   int status = 0;
   const std::string queued = run("squeue -h -o %i -j " + old + " 2>/dev/null", &status);
@@ -396,7 +423,8 @@ int resubmit(const std::vector<std::string>& args) {
   std::error_code ec;
   fs::remove(st + "merge.rc", ec);
   if (from_prepare) fs::remove(st + "prepare.rc", ec);
-  for (unsigned t = 0; t < s.shards && from_prepare; ++t) fs::remove(st + fmt::format("cluster-{}.rc", t), ec);
+  for (unsigned t = 0; t < s.shards && from_prepare; ++t)
+    fs::remove(st + fmt::format("cluster-{}.rc", t), ec), fs::remove(st + fmt::format("grade-{}.rc", t), ec);
   if (tasks.empty()) {
     std::printf("every task finished; resubmitting the merge\n");
     s.prepare.clear();
