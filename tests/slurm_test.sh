@@ -79,18 +79,15 @@ run_scene() {
       ls "$w"/ingest-ranges/*.seg >/dev/null 2>&1 && fail "$name: the prepare job did not join the ingest ranges"
       grep -q "range        0 of 3" "$out/slurm/logs/ingest-0.out" || fail "$name: ingest range 0 did not say what it parsed"
       echo "  3 ingest ranges joined by the prepare job: $(grep -h '^range' "$out"/slurm/logs/ingest-*.out | awk '{print $5}' | paste -sd+) bytes parsed"
-      for r in 0 1 2; do
-        [ "$(cat "$out/slurm/status/grade-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: grade share $r did not finish"
-        grep -q "^grade        share $r of 3 in [^,]* (then" "$out/slurm/logs/grade-$r.out" || fail "$name: grade share $r did not grade its share"
+      # The grade and cluster arrays: every share finished, did its share, and the next step removed them.
+      for kind in grade cluster; do
+        for r in 0 1 2; do
+          [ "$(cat "$out/slurm/status/$kind-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: $kind share $r did not finish"
+          grep -q "^$kind *share $r of 3 in [^,]* (then" "$out/slurm/logs/$kind-$r.out" || fail "$name: $kind share $r did not run its share"
+        done
+        [ -e "$w/$kind-shares" ] && fail "$name: the step after the $kind array left its spent shares"
+        echo "  3 $kind shares: $(grep -h "^stage        $kind " "$out"/slurm/logs/$kind-*.out | awk '{print $3 " s"}' | paste -sd' ')"
       done
-      [ -e "$w/grade-shares" ] && fail "$name: the cluster array left the spent grade shares"
-      echo "  3 grade shares: $(grep -h '^stage        grade' "$out"/slurm/logs/grade-*.out | awk '{print $3 " s"}' | paste -sd' ')"
-      for r in 0 1 2; do
-        [ "$(cat "$out/slurm/status/cluster-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: cluster share $r did not finish"
-        grep -q "^cluster      share $r of 3 in [^,]* (then" "$out/slurm/logs/cluster-$r.out" || fail "$name: cluster share $r did not cluster its share"
-      done
-      [ -e "$w/cluster-shares" ] && fail "$name: the prepare job left the spent cluster shares"
-      echo "  3 cluster shares: $(grep -h '^stage        cluster' "$out"/slurm/logs/cluster-*.out | awk '{print $3 " s"}' | paste -sd' ')"
     fi
     python3 -c 'import json,sys; m=json.load(open(sys.argv[1])); assert m["shards"]["count"]==int(sys.argv[2]) and len(m["shards"]["tasks"])==int(sys.argv[2])' \
       "$out/manifest.json" "$n" || fail "$name --shards $n: the manifest does not list every task"

@@ -74,10 +74,11 @@ std::string sample_room() { return test::source_dir() + "/tests/data/sample-room
 
 // Runs tasks `tasks` of `count` (then merge when `merge`) on `work`.
 Result run_tasks(const std::string& out, const std::string& work, unsigned count, const std::vector<unsigned>& tasks,
-                 uint64_t memory, bool merge_after, SimplifyReport* merged, const std::string& input = sample_room()) {
+                 uint64_t memory, bool merge_after, SimplifyReport* merged, const std::string& input = sample_room(),
+                 Representative rep = SimplifyOptions().representative) {
   for (unsigned i : tasks) {
     SimplifyOptions so = room_options(out);
-    so.shard_index = i, so.shard_count = count;
+    so.shard_index = i, so.shard_count = count, so.representative = rep;
     Options o;
     o.work_dir = work;
     o.memory_bytes = memory;
@@ -233,15 +234,11 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       SimplifyReport lr;
       ASSERT_TRUE(simplify(sample_room(), late, o, &lr).ok());
       EXPECT_TRUE(lr.cluster_share.empty());
-      for (unsigned i = 0; i < n; ++i) {
-        SimplifyOptions so = room_options(out);
-        so.representative = rep, so.shard_index = i, so.shard_count = n;
-        SimplifyReport r;
-        const Result res = simplify(sample_room(), so, o, &r);
-        ASSERT_TRUE(res.ok()) << res.message;
-      }
+      std::vector<unsigned> tasks(n);
+      for (unsigned i = 0; i < n; ++i) tasks[i] = i;
       SimplifyReport merged;
-      ASSERT_TRUE(merge(out, Options{}, &merged).ok());
+      const Result res = run_tasks(out, work, n, tasks, 0, true, &merged, sample_room(), rep);
+      ASSERT_TRUE(res.ok()) << res.message;
       EXPECT_EQ(outputs(out), outputs(dir.file("one")));
     }
   }
@@ -308,15 +305,11 @@ TEST(GradeShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       SimplifyReport lr;
       ASSERT_TRUE(simplify(sample_room(), late, o, &lr).ok());
       EXPECT_TRUE(lr.grade_share.empty());
-      for (unsigned i = 0; i < n; ++i) {
-        SimplifyOptions so = room_options(out);
-        so.representative = rep, so.shard_index = i, so.shard_count = n;
-        SimplifyReport r;
-        const Result res = simplify(sample_room(), so, o, &r);
-        ASSERT_TRUE(res.ok()) << res.message;
-      }
+      std::vector<unsigned> tasks(n);
+      for (unsigned i = 0; i < n; ++i) tasks[i] = i;
       SimplifyReport merged;
-      ASSERT_TRUE(merge(out, Options{}, &merged).ok());
+      const Result res = run_tasks(out, work, n, tasks, 0, true, &merged, sample_room(), rep);
+      ASSERT_TRUE(res.ok()) << res.message;
       EXPECT_EQ(outputs(out), outputs(dir.file("one")));
     }
   }
