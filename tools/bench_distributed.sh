@@ -3,7 +3,8 @@
 #
 # --slurm (the benchmark): one machine's whole run from an empty work directory, then the same
 #   input through `lodstream slurm simplify --shards N --wait` on a one-node Slurm cluster started for the
-#   run (tools/slurm_local_cluster.sh; as root) from another empty work directory: ingest array, prepare,
+#   run (tools/slurm_local_cluster.sh; as root) from another empty work directory: ingest array, grade
+#   array, cluster array, prepare,
 #   task array, merge, the jobs sharing this machine's cores as Slurm schedules them. Prints both wall
 #   times and their ratio, every job's peak (the largest stage peak in its log) against the cap, the input
 #   primitives each task's emit read, and the largest size of the shared directories (work and output,
