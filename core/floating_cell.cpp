@@ -75,19 +75,6 @@ inline int64_t half_index(double x, double h, double size) {
   return static_cast<int64_t>(q);
 }
 
-// |x − cx| <= h on the exact difference, given d = fl(x − cx). Rounding is monotone and h is a double, so
-// |d| < h and |d| > h already decide; only |d| == h needs the rounding error, which TwoSum gives exactly.
-// This matters beyond the boundary points themselves: the 2×2×2 query relies on every accepted center
-// being truly within h per axis.
-inline bool within(double x, double cx, double d, double h) {
-  const double a = std::fabs(d);
-  if (a != h) return a < h;
-  const double b = -cx;
-  const double bv = d - x;
-  const double err = (x - (d - bv)) + (b - bv);  // exact: (x − cx) − d
-  return d > 0 ? err <= 0 : err >= 0;
-}
-
 // Squares hash by hash_square (core/hash.h).
 
 // The two kinds of hash-table slot, with their keys: a Slot keys a square by its three coordinates; a
@@ -344,17 +331,6 @@ uint64_t GrowableBuffer::resident_bytes() const {
   return (size_ + page - 1) / page * page;
 }
 
-bool floating_cell_contains(const double* p, const double* center, double half, double half_sq, CellShape shape,
-                            double& d2) {
-  const double dx = p[0] - center[0], dy = p[1] - center[1], dz = p[2] - center[2];
-  d2 = dx * dx + dy * dy + dz * dz;
-  const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
-  if (m > half) return false;
-  if (m == half && !(within(p[0], center[0], dx, half) && within(p[1], center[1], dy, half) &&
-                     within(p[2], center[2], dz, half)))
-    return false;
-  return shape != CellShape::sphere || d2 <= half_sq;
-}
 
 int64_t grid_square(double x, double size) {
   if (!(size >= kMinCellSize && size <= kMaxCellSize))

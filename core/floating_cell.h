@@ -75,6 +75,8 @@
 // (about 5.6e14 half-squares: a 1 km scene at 1 nm cells). NaN and infinities fail the same check.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -126,8 +128,31 @@ int64_t grid_square(double x, double size);
 // `half_sq` = fl((c/2)²) centred on `center`, as Clusterer decides it; d2 receives fl(dx² + dy² + dz²),
 // the key of the nearest choice. For callers that must reach the same decisions as a Clusterer
 // (core/floating_cell_region.h).
-bool floating_cell_contains(const double* p, const double* center, double half, double half_sq, CellShape shape,
-                            double& d2);
+// |x − cx| <= h on the exact difference, given d = fl(x − cx). Rounding is monotone and h is a double, so
+// |d| < h and |d| > h already decide; only |d| == h needs the rounding error, which TwoSum gives exactly.
+// This matters beyond the boundary points themselves: the 2×2×2 query relies on every accepted center
+// being truly within h per axis.
+inline bool exactly_within(double x, double cx, double d, double h) {
+  const double a = std::fabs(d);
+  if (a != h) return a < h;
+  const double b = -cx;
+  const double bv = d - x;
+  const double err = (x - (d - bv)) + (b - bv);  // exact: (x − cx) − d
+  return d > 0 ? err <= 0 : err >= 0;
+}
+
+// Inline: every query of every pass runs it on each candidate.
+inline bool floating_cell_contains(const double* p, const double* center, double half, double half_sq, CellShape shape,
+                                   double& d2) {
+  const double dx = p[0] - center[0], dy = p[1] - center[1], dz = p[2] - center[2];
+  d2 = dx * dx + dy * dy + dz * dz;
+  const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
+  if (m > half) return false;
+  if (m == half && !(exactly_within(p[0], center[0], dx, half) && exactly_within(p[1], center[1], dy, half) &&
+                     exactly_within(p[2], center[2], dz, half)))
+    return false;
+  return shape != CellShape::sphere || d2 <= half_sq;
+}
 
 // One clustering pass, all levels at once. Not thread-safe (one pass is inherently sequential: each
 // vertex's cell depends on every heavier vertex). Levels are independent, though: a Clusterer per level

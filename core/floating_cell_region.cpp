@@ -11,19 +11,17 @@
 
 namespace lodstream::core {
 
-size_t RegionClusterer::probe(const int64_t* square) const {
+size_t RegionClusterer::home(const int64_t* square) const {
+  return hash_square(square[0], square[1], square[2]) & (slots_.size() - 1);
+}
+
+size_t RegionClusterer::probe(const int64_t* square, size_t from) const {
   const size_t mask = slots_.size() - 1;
-  size_t i = hash_square(square[0], square[1], square[2]) & mask;
+  size_t i = from;
   while (slots_[i].used() &&
          !(slots_[i].square[0] == square[0] && slots_[i].square[1] == square[1] && slots_[i].square[2] == square[2]))
     i = (i + 1) & mask;
   return i;
-}
-
-const RegionClusterer::Slot* RegionClusterer::find(const int64_t* square) const {
-  if (slots_.empty()) return nullptr;
-  const Slot& s = slots_[probe(square)];
-  return s.used() ? &s : nullptr;
 }
 
 RegionClusterer::Slot& RegionClusterer::slot(const int64_t* square) {
@@ -111,9 +109,25 @@ RegionDecision RegionClusterer::assign(std::span<const double, 3> position) {
   uint32_t settled = kNoCell, open = kNoCell;  // the best settled center, the best unsettled vertex holding p
   double settled_d2 = 0, open_d2 = 0;
   bool crowded = false;  // a crowded square's box holds p: an unsettled vertex of unknown rank may
-  for (int i = 0; i < 8; ++i) {
-    const int64_t square[3] = {(i & 1) ? side[0] : own[0], (i & 2) ? side[1] : own[1], (i & 4) ? side[2] : own[2]};
-    const Slot* slot = find(square);
+  // The 8 squares' slots, then their first entries, are fetched before any is read, so that their cache
+  // misses overlap (the probes do not depend on each other).
+  const Slot* slots[8] = {};
+  if (!slots_.empty()) {
+    int64_t squares[8][3];
+    size_t from[8];
+    for (int i = 0; i < 8; ++i) {
+      squares[i][0] = (i & 1) ? side[0] : own[0], squares[i][1] = (i & 2) ? side[1] : own[1], squares[i][2] = (i & 4) ? side[2] : own[2];
+      from[i] = home(squares[i]);
+      __builtin_prefetch(&slots_[from[i]]);
+    }
+    for (int i = 0; i < 8; ++i) {
+      const Slot& s = slots_[probe(squares[i], from[i])];
+      if (!s.used()) continue;
+      slots[i] = &s;
+      if (s.head != kNone) __builtin_prefetch(&entries_[s.head]);
+    }
+  }
+  for (const Slot* slot : slots) {
     if (!slot) continue;
     if (slot->box != kNone && !crowded) crowded = box_holds(boxes_[slot->box], p);
     for (uint32_t k = slot->head; k != kNone; k = entries_[k].next) {

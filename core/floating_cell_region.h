@@ -115,8 +115,9 @@ class RegionClusterer {
   static constexpr uint32_t kNone = UINT32_MAX;
 
   bool exposed(const double* p) const;
-  size_t probe(const int64_t* square) const;  // the square's slot, or the empty one where it would go
-  const Slot* find(const int64_t* square) const;
+  size_t home(const int64_t* square) const;   // where the square's probe starts (slots_ not empty)
+  size_t probe(const int64_t* square, size_t from) const;  // the square's slot, or the empty one where it would go
+  size_t probe(const int64_t* square) const { return probe(square, home(square)); }
   Slot& slot(const int64_t* square);  // the square's slot, made empty if new
   void add(const int64_t* square, const Entry& e);
   bool box_holds(const Box& b, const double* p) const;
