@@ -91,6 +91,17 @@ Result run_tasks(const std::string& out, const std::string& work, unsigned count
   return merge(out, Options{}, merged);
 }
 
+// All `count` tasks, then the merge, on `work`: the outputs must be one machine's (in `one`).
+void expect_all_tasks_give(const std::string& out, const std::string& work, unsigned count, Representative rep,
+                           const std::string& one) {
+  std::vector<unsigned> tasks(count);
+  for (unsigned i = 0; i < count; ++i) tasks[i] = i;
+  SimplifyReport merged;
+  const Result res = run_tasks(out, work, count, tasks, 0, true, &merged, sample_room(), rep);
+  ASSERT_TRUE(res.ok()) << res.message;
+  EXPECT_EQ(outputs(out), outputs(one));
+}
+
 TEST(Shard, AnyTaskCountGivesOneMachinesBytes) {
   TempDir dir;
   const Options o = shared_work(dir);
@@ -234,12 +245,7 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       SimplifyReport lr;
       ASSERT_TRUE(simplify(sample_room(), late, o, &lr).ok());
       EXPECT_TRUE(lr.cluster_share.empty());
-      std::vector<unsigned> tasks(n);
-      for (unsigned i = 0; i < n; ++i) tasks[i] = i;
-      SimplifyReport merged;
-      const Result res = run_tasks(out, work, n, tasks, 0, true, &merged, sample_room(), rep);
-      ASSERT_TRUE(res.ok()) << res.message;
-      EXPECT_EQ(outputs(out), outputs(dir.file("one")));
+      expect_all_tasks_give(out, work, n, rep, dir.file("one"));
     }
   }
   SimplifyOptions bad = room_options(test::TempDir().file("out"));
@@ -305,12 +311,7 @@ TEST(GradeShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       SimplifyReport lr;
       ASSERT_TRUE(simplify(sample_room(), late, o, &lr).ok());
       EXPECT_TRUE(lr.grade_share.empty());
-      std::vector<unsigned> tasks(n);
-      for (unsigned i = 0; i < n; ++i) tasks[i] = i;
-      SimplifyReport merged;
-      const Result res = run_tasks(out, work, n, tasks, 0, true, &merged, sample_room(), rep);
-      ASSERT_TRUE(res.ok()) << res.message;
-      EXPECT_EQ(outputs(out), outputs(dir.file("one")));
+      expect_all_tasks_give(out, work, n, rep, dir.file("one"));
     }
   }
   SimplifyOptions bad = room_options(test::TempDir().file("out"));
