@@ -322,6 +322,23 @@ void write_stamp(const std::string& path, const ordered_json& key, const std::ve
   io::write_file_atomic(path, ordered_json{{"key", key}, {"files", files}, {"value", value}}.dump(1) + "\n");
 }
 
+// One share of a stage run as N shares (grading, clustering): under its own lock in `dir` (one process a
+// share), reused when its stamp is there, else run, then stamped. run() returns the stamp's files and
+// value; `kill` is the test kill point just before the stamp (empty: none). Returns the stamp's value.
+template <class Run>
+ordered_json stamped_share(const std::string& dir, unsigned share, const std::string& stamp, const ordered_json& key,
+                           const std::string& kill, Run&& run) {
+  const stream::ShardLock share_lock(dir, fmt::format("share-{}.lock", share));
+  ordered_json v;
+  if (stamp_matches(stamp, key, &v)) return v;
+  std::filesystem::remove(stamp);
+  const auto [files, value] = run();
+  // tests/slurm_test.sh: a share task killed before its stamp (a later process runs the share again)
+  if (!kill.empty()) stream::kill_point(kill);
+  write_stamp(stamp, key, files, value);
+  return value;
+}
+
 // Silhouette p95 (pixels) of each level file seen from its switching distance, by `report`'s own rule on
 // `views` views: the one place simplify measures a level, so that it always agrees with report.
 std::vector<double> measure_silhouette_p95(const std::string& original, const std::vector<std::string>& files,
@@ -521,29 +538,23 @@ bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::uni
   const stream::GradePlan gp = stream::shared_grade_plan(gs, count, in.key, progress);  // under the lock
   ordered_json share_key = in.key;
   share_key["count"] = count;
-  auto run_share = [&](unsigned s) -> uint64_t {
-    const stream::ShardLock share_lock(stream::grade_shares_dir(in.prefix), fmt::format("share-{}.lock", s));  // one process a share
-    const std::string share_stamp = stream::grade_share_stamp(in.prefix, s);
-    ordered_json sv;
-    if (stamp_matches(share_stamp, share_key, &sv)) return sv.at("records");
-    std::filesystem::remove(share_stamp);
-    const uint64_t records = stream::run_grade_share(gs, gp, s, count, progress);
-    // tests/slurm_test.sh: a share task killed before its stamp (a later process runs the share again)
-    if (so.grade_share_count > 0) stream::kill_point(fmt::format("grade-share-{}", s));
-    const auto [first, end] = stream::grade_share_ranges(gp, s, count);
-    write_stamp(share_stamp, share_key, {stream::grade_share_run(in.prefix, s)},
-                {{"ranges", {first, end}}, {"records", records}});
-    return records;
+  // A share's stamp: its ranges and records.
+  auto run_share = [&](unsigned s) {
+    return stamped_share(stream::grade_shares_dir(in.prefix), s, stream::grade_share_stamp(in.prefix, s), share_key,
+                         so.grade_share_count > 0 ? fmt::format("grade-share-{}", s) : std::string(), [&] {
+                           const uint64_t records = stream::run_grade_share(gs, gp, s, count, progress);
+                           const auto [first, end] = stream::grade_share_ranges(gp, s, count);
+                           return std::pair(std::vector<std::string>{stream::grade_share_run(in.prefix, s)},
+                                            ordered_json{{"ranges", {first, end}}, {"records", records}});
+                         });
   };
   if (so.grade_share_count > 0) {
     lock.reset();  // the stages before are done: the other shares may run now
-    const uint64_t records = run_share(so.grade_share_index);
-    const auto [first, end] = stream::grade_share_ranges(gp, so.grade_share_index, count);
-    report->grade_share = ordered_json{{"ranges", {first, end}}, {"records", records}}.dump();
+    report->grade_share = run_share(so.grade_share_index).dump();
     return false;
   }
   std::vector<uint64_t> records;
-  for (unsigned s = 0; s < count; ++s) records.push_back(run_share(s));
+  for (unsigned s = 0; s < count; ++s) records.push_back(run_share(s).at("records"));
   *out = stream::merge_grade_shares(gs, gp, records, in.order_path, in.grades_path, in.canonical_path, progress);
   write_grade_stamp(*out);
   // The shares are spent once the stage is stamped (the weld map is a link to the plan's).
@@ -706,16 +717,12 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         share_key["shares"] = shares.json();
         const std::string dir = work.subdir("cluster-shares");
         auto run_share = [&](unsigned s) {
-          const stream::ShardLock share_lock(dir, fmt::format("share-{}.lock", s));  // one process a share
-          const std::string stamp = stream::cluster_share_stamp(prefix, s);
-          ordered_json v;
-          if (stamp_matches(stamp, share_key, &v)) return v.at("levels");
-          std::filesystem::remove(stamp);
-          const ordered_json figures = stream::run_cluster_share(in, shares, s, progress);
-          // tests/slurm_test.sh: a share task killed before its stamp (the prepare job runs the share again)
-          if (so.cluster_share_count > 0) stream::kill_point(fmt::format("cluster-share-{}", s));
-          write_stamp(stamp, share_key, stream::cluster_share_files(in, shares, s), {{"levels", figures}});
-          return figures;
+          return stamped_share(dir, s, stream::cluster_share_stamp(prefix, s), share_key,
+                               so.cluster_share_count > 0 ? fmt::format("cluster-share-{}", s) : std::string(), [&] {
+                                 return std::pair(stream::cluster_share_files(in, shares, s),
+                                                  ordered_json{{"levels", stream::run_cluster_share(in, shares, s, progress)}});
+                               })
+              .at("levels");
         };
         if (so.cluster_share_count > 0) {
           shard_lock.reset();  // the stages before are done: the other shares may run now

@@ -198,15 +198,20 @@ void print_grid(const lodstream::GridReport& r, const std::string& out_dir) {
               out_dir.c_str());
 }
 
-// --shard I/N or --shard-from-env (report's; simplify parses its own).
-bool parse_shard(const std::string& text, bool from_env, unsigned* index, unsigned* count, std::string* error) {
-  if (from_env) return lodstream::shard_from_env(index, count, error);
-  char slash = 0, extra = 0;
-  if (std::sscanf(text.c_str(), "%u%c%u%c", index, &slash, count, &extra) != 3 || slash != '/' || *count == 0 || *index >= *count) {
-    *error = "--shard: '" + text + "' is not I/N with 0 <= I < N";
-    return false;
+// An index option I/N (`name`: its flag: --shard, --shard-ingest, --shard-grade, --shard-cluster), or I and N
+// from the environment (--shard-from-env); prints the error and returns false when it cannot be read.
+bool read_index_option(const char* name, const std::string& text, bool from_env, unsigned* index, unsigned* count) {
+  std::string error;
+  if (from_env) {
+    if (lodstream::shard_from_env(index, count, &error)) return true;
+  } else {
+    char slash = 0, extra = 0;
+    if (std::sscanf(text.c_str(), "%u%c%u%c", index, &slash, count, &extra) == 3 && slash == '/' && *count > 0 && *index < *count)
+      return true;
+    error = std::string(name) + ": '" + text + "' is not I/N with 0 <= I < N";
   }
-  return true;
+  std::fprintf(stderr, "lodstream: %s\n", error.c_str());
+  return false;
 }
 
 void print_report(const lodstream::Report& r, const std::string& out_dir) {
@@ -557,38 +562,18 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "lodstream: --tiles-transform: cannot read '%s' as a list of numbers\n", tiles_transform_text.c_str());
       return static_cast<int>(lodstream::Status::usage);
     }
-    if (!shard_text.empty() || shard_from_env) {
-      std::string error;
-      unsigned i = 0, n = 0;
-      char slash = 0, extra = 0;
-      if (shard_from_env ? !lodstream::shard_from_env(&i, &n, &error)
-                         : std::sscanf(shard_text.c_str(), "%u%c%u%c", &i, &slash, &n, &extra) != 3 || slash != '/' || n == 0 || i >= n) {
-        std::fprintf(stderr, "lodstream: %s\n", error.empty() ? ("--shard: '" + shard_text + "' is not I/N with 0 <= I < N").c_str() : error.c_str());
-        return static_cast<int>(lodstream::Status::usage);
-      }
-      so.shard_index = i, so.shard_count = n;
-    }
-    if (!shard_ingest_text.empty()) {
-      std::string error;
-      if (!parse_shard(shard_ingest_text, false, &so.ingest_index, &so.ingest_count, &error)) {
-        std::fprintf(stderr, "lodstream: --shard-ingest%s\n", error.substr(error.find(':')).c_str());
-        return static_cast<int>(lodstream::Status::usage);
-      }
-    }
-    if (!shard_grade_text.empty()) {
-      std::string error;
-      if (!parse_shard(shard_grade_text, false, &so.grade_share_index, &so.grade_share_count, &error)) {
-        std::fprintf(stderr, "lodstream: --shard-grade%s\n", error.substr(error.find(':')).c_str());
-        return static_cast<int>(lodstream::Status::usage);
-      }
-    }
-    if (!shard_cluster_text.empty()) {
-      std::string error;
-      if (!parse_shard(shard_cluster_text, false, &so.cluster_share_index, &so.cluster_share_count, &error)) {
-        std::fprintf(stderr, "lodstream: --shard-cluster%s\n", error.substr(error.find(':')).c_str());
-        return static_cast<int>(lodstream::Status::usage);
-      }
-    }
+    const int usage = static_cast<int>(lodstream::Status::usage);
+    if ((!shard_text.empty() || shard_from_env) &&
+        !read_index_option("--shard", shard_text, shard_from_env, &so.shard_index, &so.shard_count))
+      return usage;
+    if (!shard_ingest_text.empty() && !read_index_option("--shard-ingest", shard_ingest_text, false, &so.ingest_index, &so.ingest_count))
+      return usage;
+    if (!shard_grade_text.empty() &&
+        !read_index_option("--shard-grade", shard_grade_text, false, &so.grade_share_index, &so.grade_share_count))
+      return usage;
+    if (!shard_cluster_text.empty() &&
+        !read_index_option("--shard-cluster", shard_cluster_text, false, &so.cluster_share_index, &so.cluster_share_count))
+      return usage;
     const bool sharded =
         so.shard_count > 0 || so.shard_prepare || so.ingest_count > 0 || so.cluster_share_count > 0 || so.grade_share_count > 0;
     lodstream::SimplifyReport report;
@@ -661,20 +646,12 @@ int main(int argc, char** argv) {
       }
       ro.output_dir = ro.runs[0];
     }
-    if (!report_shard_text.empty() || report_shard_from_env) {
-      std::string error;
-      if (!parse_shard(report_shard_text, report_shard_from_env, &ro.shard_index, &ro.shard_count, &error)) {
-        std::fprintf(stderr, "lodstream: %s\n", error.c_str());
-        return static_cast<int>(lodstream::Status::usage);
-      }
-    }
-    if (!report_shard_ingest_text.empty()) {
-      std::string error;
-      if (!parse_shard(report_shard_ingest_text, false, &ro.ingest_index, &ro.ingest_count, &error)) {
-        std::fprintf(stderr, "lodstream: --shard-ingest%s\n", error.substr(error.find(':')).c_str());
-        return static_cast<int>(lodstream::Status::usage);
-      }
-    }
+    if ((!report_shard_text.empty() || report_shard_from_env) &&
+        !read_index_option("--shard", report_shard_text, report_shard_from_env, &ro.shard_index, &ro.shard_count))
+      return static_cast<int>(lodstream::Status::usage);
+    if (!report_shard_ingest_text.empty() &&
+        !read_index_option("--shard-ingest", report_shard_ingest_text, false, &ro.ingest_index, &ro.ingest_count))
+      return static_cast<int>(lodstream::Status::usage);
     const bool sharded = ro.shard_count > 0 || ro.shard_prepare || ro.ingest_count > 0;
     lodstream::Report report;
     const lodstream::Result r = lodstream::report(ro, options, &report);

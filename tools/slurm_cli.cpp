@@ -149,8 +149,15 @@ bool save(const Submission& s) {
 
 // Submits the chain from `from_prepare` (else the tasks in `array`, then the merge); from the prepare job,
 // the ingest ranges in `ingest_array` first when it is not empty.
+// sbatch's dependency options: after `ok` succeeded and `any` ended (job ids; empty: no such job), or
+// nothing when both are empty.
+std::string dependency(const std::string& ok, const std::string& any = {}) {
+  std::string deps = ok.empty() ? std::string() : "afterok:" + ok;
+  if (!any.empty()) deps += (deps.empty() ? "" : ",") + std::string("afterany:") + any;
+  return deps.empty() ? std::string() : "--kill-on-invalid-dep=yes --dependency=" + deps + " ";
+}
+
 int submit_chain(Submission& s, bool from_prepare, const std::string& array, const std::string& ingest_array) {
-  const std::string dep_args = "--kill-on-invalid-dep=yes --dependency=afterok:";
   std::string after;
   s.ingest.clear();
   s.grade.clear();
@@ -159,28 +166,23 @@ int submit_chain(Submission& s, bool from_prepare, const std::string& array, con
     s.ingest = submit("--array=" + ingest_array, s.slurm_dir + "/ingest.sbatch");
     if (s.ingest.empty()) return kIoError;
   }
-  const std::string all_shares = fmt::format(" --array=0-{}", s.shards - 1);
+  const std::string all_shares = fmt::format("--array=0-{}", s.shards - 1);
   if (from_prepare && s.grades) {
-    s.grade = submit((s.ingest.empty() ? std::string() : dep_args + s.ingest) + all_shares, s.slurm_dir + "/grade.sbatch");
+    s.grade = submit(dependency(s.ingest) + all_shares, s.slurm_dir + "/grade.sbatch");
     if (s.grade.empty()) return kIoError;
   }
   if (from_prepare && s.clusters) {
-    std::string deps = s.ingest.empty() ? std::string() : "afterok:" + s.ingest;
-    if (!s.grade.empty()) deps += (deps.empty() ? "" : ",") + std::string("afterany:") + s.grade;
-    s.cluster = submit((deps.empty() ? std::string() : "--kill-on-invalid-dep=yes --dependency=" + deps) + all_shares,
-                       s.slurm_dir + "/cluster.sbatch");
+    s.cluster = submit(dependency(s.ingest, s.grade) + all_shares, s.slurm_dir + "/cluster.sbatch");
     if (s.cluster.empty()) return kIoError;
   }
   if (from_prepare) {
-    std::string deps = s.ingest.empty() ? std::string() : "afterok:" + s.ingest;
-    if (!s.cluster.empty()) deps += (deps.empty() ? "" : ",") + std::string("afterany:") + s.cluster;
-    s.prepare = submit(deps.empty() ? std::string() : "--kill-on-invalid-dep=yes --dependency=" + deps, s.slurm_dir + "/prepare.sbatch");
+    s.prepare = submit(dependency(s.ingest, s.cluster), s.slurm_dir + "/prepare.sbatch");
     if (s.prepare.empty()) return kIoError;
     after = s.prepare;
   }
-  s.tasks = submit((after.empty() ? std::string() : dep_args + after) + " --array=" + array, s.slurm_dir + "/tasks.sbatch");
+  s.tasks = submit(dependency(after) + "--array=" + array, s.slurm_dir + "/tasks.sbatch");
   if (s.tasks.empty()) return kIoError;
-  s.merge = submit(dep_args + s.tasks, s.slurm_dir + "/merge.sbatch");
+  s.merge = submit(dependency(s.tasks), s.slurm_dir + "/merge.sbatch");
   if (s.merge.empty()) return kIoError;
   if (!save(s)) {
     std::fprintf(stderr, "lodstream slurm: cannot write %s/submit.json\n", s.slurm_dir.c_str());
