@@ -305,6 +305,8 @@ void find_halos(std::vector<LevelState>& levels, RunBlocks& run_blocks, RecordOf
         if (L.role[c] != kOwned && (L.in.routes->halo[c] & bit)) L.role[c] = kHalo;
       continue;
     }
+    // A batch of every cell (a sharded task's wide level, stream/shard.h) has no halo: no pass for it.
+    if (std::find(L.role.begin(), L.role.end(), uint8_t{0}) == L.role.end()) continue;
     any = true;
   }
   if (!any) return;
@@ -793,20 +795,18 @@ std::vector<Block> bounded_blocks(const BlockBounds& bounds, const ReachGrid& re
   return blocks;
 }
 
-// Marks where a bounded group's passes must read: every level's own regions' boxes, widened by its cell size
-// (block_bounds.h), and with `halo`, the representatives of its halo cells, widened the same.
-void mark_reach(const std::vector<LevelState>& levels, const core::SceneCube& cube, const std::string& prefix, bool halo,
-                ReachGrid& reach) {
+// Marks where a bounded group's passes must read: the representatives of every level's own cells (those of
+// its regions) and, with `halo`, of its halo cells, each widened by the level's cell size (block_bounds.h).
+// The cells, not their regions' boxes: a region of the octree cut is as large as its cells are sparse (on the
+// 193 M-triangle city at N = 8, the first task's boxes reached 63% of the input for an eighth of the cells).
+void mark_reach(const std::vector<LevelState>& levels, const std::string& prefix, bool halo, ReachGrid& reach) {
   for (const LevelState& L : levels) {
     // A hair more than the cell size, so that the rounding of a box's corners never matters.
     const double r = L.in.cell_size * (1 + 0x1p-20);
-    double lo[3], hi[3];
-    for (uint32_t region = L.in.first_region; region < L.in.end_region; ++region) {
-      core::region_box(cube, L.in.cut->regions[region], lo, hi);
-      for (int k = 0; k < 3; ++k) lo[k] -= r, hi[k] += r;
-      reach.mark(lo, hi);
-    }
-    if (!halo) continue;
+    auto marked = [&](uint64_t c) {
+      const uint32_t region = L.in.region_of[c];
+      return (region >= L.in.first_region && region < L.in.end_region) || (halo && L.role[c] == kHalo);
+    };
     io::MappedFile reps(representatives_path(prefix, L.in.level));
     constexpr uint64_t record = 3 * sizeof(double);
     if (reps.size() != L.in.cells * record) fail(Status::io_error, reps.path() + ": size does not match");
@@ -815,9 +815,9 @@ void mark_reach(const std::vector<LevelState>& levels, const core::SceneCube& cu
       const uint64_t end = std::min(L.in.cells, first + window_cells);
       io::Window w;
       for (uint64_t c = first; c < end; ++c) {
-        if (L.role[c] != kHalo) continue;
+        if (!marked(c)) continue;
         if (!w.data()) w = reps.map(first * record, end * record);
-        double p[3];
+        double p[3], lo[3], hi[3];
         std::memcpy(p, w.data() + (c - first) * record, record);
         for (int k = 0; k < 3; ++k) lo[k] = p[k] - r, hi[k] = p[k] + r;
         reach.mark(lo, hi);
@@ -956,10 +956,14 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   const core::SceneCube cube = scene_cube_of(meta);
   if (bounded) {
     reach = std::make_unique<ReachGrid>(cube);
-    mark_reach(levels, cube, prefix, false, *reach);
+    mark_reach(levels, prefix, false, *reach);
     blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
   }
-  const bool quadric = options.representative == Representative::quadric && !options.count_only;
+  // Quadrics are summed for the levels that form their own representatives: a batched level reads them
+  // (emit_regions.h), so a group of batched levels (a task's, or one machine's largest level) forms no
+  // quadric and fetches no position in pass A.
+  const bool quadric = options.representative == Representative::quadric && !options.count_only &&
+                       std::any_of(levels.begin(), levels.end(), [](const LevelState& L) { return !L.in.batched; });
   const bool materials = !meta.materials.empty() && !options.count_only && !options.representatives_only;
   std::vector<ObjectRun> material_runs[3];
   if (materials)
@@ -1039,7 +1043,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   }
   find_halos(levels, run_blocks, record_of, cell);
   if (bounded) {
-    mark_reach(levels, cube, prefix, true, *reach);
+    mark_reach(levels, prefix, true, *reach);
     blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
   }
   auto classify = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
