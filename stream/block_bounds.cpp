@@ -86,19 +86,19 @@ BlockBounds read_block_bounds(const std::string& path, const StoreMeta& meta) {
 ReachGrid::ReachGrid(const core::SceneCube& cube)
     : cube_(cube), marked_(static_cast<size_t>(kSide) * kSide * kSide, 0) {}
 
-void ReachGrid::range(const double* lo, const double* hi, int* a, int* b) const {
+void ReachGrid::range(const double* lo, const double* hi, int widen, int* a, int* b) const {
   const double scale = kSide / cube_.side;
   for (int k = 0; k < 3; ++k) {
     // A coordinate outside the cube (or NaN: every comparison with it is false) widens to the border.
     const double v0 = std::floor((lo[k] - cube_.min[k]) * scale), v1 = std::floor((hi[k] - cube_.min[k]) * scale);
-    a[k] = v0 >= 1 ? static_cast<int>(std::min(v0, double{kSide})) - 1 : 0;
-    b[k] = v1 < kSide - 2 && v1 >= -1 ? static_cast<int>(v1) + 1 : v1 < -1 ? 0 : kSide - 1;
+    a[k] = v0 >= widen ? static_cast<int>(std::min(v0 - widen, double{kSide - 1})) : 0;
+    b[k] = v1 < kSide - 1 - widen && v1 >= -widen ? static_cast<int>(v1) + widen : v1 < -widen ? 0 : kSide - 1;
   }
 }
 
 void ReachGrid::mark(const double* lo, const double* hi) {
   int a[3], b[3];
-  range(lo, hi, a, b);
+  range(lo, hi, 1, a, b);
   for (int z = a[2]; z <= b[2]; ++z)
     for (int y = a[1]; y <= b[1]; ++y)
       std::fill_n(&marked_[(static_cast<size_t>(z) * kSide + y) * kSide + a[0]], b[0] - a[0] + 1, uint8_t{1});
@@ -117,7 +117,7 @@ void ReachGrid::finish() {
 
 bool ReachGrid::reaches(const double* lo, const double* hi) const {
   int a[3], b[3];
-  range(lo, hi, a, b);
+  range(lo, hi, 0, a, b);
   constexpr size_t S = kSide + 1;
   auto at = [&](int x, int y, int z) { return int64_t{sums_[(static_cast<size_t>(z) * S + y) * S + x]}; };
   const int x0 = a[0], y0 = a[1], z0 = a[2], x1 = b[0] + 1, y1 = b[1] + 1, z1 = b[2] + 1;
