@@ -105,20 +105,16 @@ std::vector<std::pair<uint32_t, uint32_t>> shard_runs(const std::vector<LevelCut
   std::vector<std::pair<uint32_t, uint32_t>> runs(n);
   if (n == 0) return runs;
   const std::vector<uint64_t> bounds = shard_bounds(cuts[0], count);
-  uint64_t handed = 0;  // coarse regions of the coarser levels, handed out already
-  for (size_t l = n; l-- > 0;) {
+  for (size_t l = 0; l < n; ++l) {
     const uint32_t regions = static_cast<uint32_t>(cuts[l].regions.size());
-    if (l == 0 || regions >= count) {
-      runs[l] = shard_regions_in(cuts[l], bounds, index);
-      continue;
-    }
-    // Region j goes to task N - 1 - (handed + j) mod N: the one j of this task, if the level has it.
-    const uint64_t j = ((count - 1 - index) + count - handed % count) % count;
-    runs[l] = j < regions ? std::pair<uint32_t, uint32_t>{static_cast<uint32_t>(j), static_cast<uint32_t>(j + 1)}
-                          : std::pair<uint32_t, uint32_t>{regions, regions};
-    handed += regions;
+    if (!wide_level(cuts, l, count)) runs[l] = shard_regions_in(cuts[l], bounds, index);
+    else runs[l] = index == kWideTask ? std::pair<uint32_t, uint32_t>{0, regions} : std::pair<uint32_t, uint32_t>{regions, regions};
   }
   return runs;
+}
+
+bool wide_level(const std::vector<LevelCut>& cuts, size_t level, unsigned count) {
+  return level > 0 && cuts[level].regions.size() < count;
 }
 
 std::string shards_dir(const std::string& output_dir) { return output_dir + "/shards"; }
@@ -338,48 +334,14 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     counts[l].triangles += c.triangles, counts[l].edges += c.edges, counts[l].points += c.points;
     counts[l].edges_on_triangles += c.edges_on_triangles, counts[l].points_covered += c.points_covered;
   };
-  // Levels whose share fits one batch share a pass over the input (as one machine's groups do); a level
-  // whose share does not is emitted alone, in batches of consecutive regions. Neither changes a byte.
-  for (size_t first = 0; first < n;) {
-    if (runs[first].first == runs[first].second) {
-      ++first;
-      continue;
-    }
-    const uint64_t alone = emit_map_bytes(meta.vertices, emit_bits(in.cells[first])) + level_bytes(first, largest[first]);
-    if (alone > in.budget)
-      fail(Status::usage, fmt::format("task {} of {}: emitting level {} ({} cells) region by region needs about {} MiB, "
-                                      "more than --memory allows ({} MiB for the stage): raise --memory",
-                                      index, count, first, in.cells[first], alone >> 20, in.budget >> 20));
-    std::vector<size_t> group{first};
-    unsigned bits = emit_bits(in.cells[first]);
-    uint64_t bytes = level_bytes(first, share[first]);
-    size_t end = first + 1;
-    if (emit_map_bytes(meta.vertices, bits) + bytes <= in.budget) {
-      for (; end < n; ++end) {
-        if (runs[end].first == runs[end].second) continue;
-        const unsigned b = bits + emit_bits(in.cells[end]);
-        const uint64_t w = bytes + level_bytes(end, share[end]);
-        if (b > 64 || emit_map_bytes(meta.vertices, b) + w > in.budget) break;
-        group.push_back(end), bits = b, bytes = w;
-      }
-    }
+  // Emits `group` (levels whose shares fit one batch together) in one pass, or its one level in batches of
+  // consecutive regions while they fit.
+  auto emit_group = [&](const std::vector<size_t>& group, unsigned bits, uint64_t bytes) {
+    const size_t first = group[0];
     std::vector<std::vector<uint32_t>> region_of;
     for (size_t l : group)
       region_of.push_back(load_region_of(in.prefix, l, in.cells[l], cube, cuts[l], in.options.representative, meta.single_precision));
-    std::vector<std::pair<uint32_t, uint32_t>> batches;
-    if (group.size() == 1 && emit_map_bytes(meta.vertices, bits) + bytes > in.budget) {
-      // The share alone is too large for one batch: consecutive regions while they fit.
-      const uint64_t room = in.budget - emit_map_bytes(meta.vertices, bits) - level_bytes(first, 0);
-      const uint64_t batch_cells = std::max<uint64_t>(1, room / per_cell);
-      for (uint32_t r = runs[first].first; r < runs[first].second;) {
-        uint64_t held = cuts[first].cells[r];
-        uint32_t e = r + 1;
-        while (e < runs[first].second && held + cuts[first].cells[e] <= batch_cells) held += cuts[first].cells[e++];
-        batches.emplace_back(r, e);
-        r = e;
-      }
-    }
-    if (batches.empty()) {
+    if (group.size() > 1 || emit_map_bytes(meta.vertices, bits) + bytes <= in.budget) {
       std::vector<EmitLevel> levels;
       for (size_t i = 0; i < group.size(); ++i) {
         const size_t l = group[i];
@@ -391,16 +353,52 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
                                                       writers[l]->add(info(l, part.region), part);
                                                     });
       for (size_t i = 0; i < group.size(); ++i) add(group[i], c[i]);
-    } else {
-      for (const auto& [r0, r1] : batches) {
-        const EmitLevel level{first, in.cells[first], in.sizes[first], &cuts[first], region_of[0].data(), r0, r1, true};
-        const std::vector<EmitCounts> c = emit_levels(in.store_dir, meta, in.canonical, in.prefix, std::span<const EmitLevel>(&level, 1),
-                                                      in.records, in.cluster, emit, progress, scratch,
-                                                      [&](size_t, RegionPart& part) { writers[first]->add(info(first, part.region), part); });
-        add(first, c[0]);
-      }
+      return;
     }
-    first = group.back() + 1;
+    const uint64_t room = in.budget - emit_map_bytes(meta.vertices, bits) - level_bytes(first, 0);
+    const uint64_t batch_cells = std::max<uint64_t>(1, room / per_cell);
+    for (uint32_t r = runs[first].first; r < runs[first].second;) {
+      uint64_t held = cuts[first].cells[r];
+      uint32_t e = r + 1;
+      while (e < runs[first].second && held + cuts[first].cells[e] <= batch_cells) held += cuts[first].cells[e++];
+      const EmitLevel level{first, in.cells[first], in.sizes[first], &cuts[first], region_of[0].data(), r, e, true};
+      const std::vector<EmitCounts> c = emit_levels(in.store_dir, meta, in.canonical, in.prefix, std::span<const EmitLevel>(&level, 1),
+                                                    in.records, in.cluster, emit, progress, scratch,
+                                                    [&](size_t, RegionPart& part) { writers[first]->add(info(first, part.region), part); });
+      add(first, c[0]);
+      r = e;
+    }
+  };
+  // The task's levels in groups that share a pass over the input, as far as the memory plan allows (as one
+  // machine's groups do): first its runs of codes, then apart from them its wide levels (shard_runs), whose
+  // regions read about the whole input whatever they are grouped with, so that they take one pass between
+  // them rather than a share level's bits taking their room. Neither the groups nor the batches change a byte.
+  for (const bool wide : {false, true}) {
+    std::vector<size_t> levels;  // the task's levels of this kind with regions, in level order
+    for (size_t l = 0; l < n; ++l)
+      if (runs[l].first < runs[l].second && wide_level(cuts, l, count) == wide) levels.push_back(l);
+    for (size_t i = 0; i < levels.size();) {
+      const size_t first = levels[i];
+      const uint64_t alone = emit_map_bytes(meta.vertices, emit_bits(in.cells[first])) + level_bytes(first, largest[first]);
+      if (alone > in.budget)
+        fail(Status::usage, fmt::format("task {} of {}: emitting level {} ({} cells) region by region needs about {} MiB, "
+                                        "more than --memory allows ({} MiB for the stage): raise --memory",
+                                        index, count, first, in.cells[first], alone >> 20, in.budget >> 20));
+      std::vector<size_t> group{first};
+      unsigned bits = emit_bits(in.cells[first]);
+      uint64_t bytes = level_bytes(first, share[first]);
+      size_t j = i + 1;
+      if (emit_map_bytes(meta.vertices, bits) + bytes <= in.budget)
+        for (; j < levels.size(); ++j) {
+          const size_t l = levels[j];
+          const unsigned b = bits + emit_bits(in.cells[l]);
+          const uint64_t w = bytes + level_bytes(l, share[l]);
+          if (b > 64 || emit_map_bytes(meta.vertices, b) + w > in.budget) break;
+          group.push_back(l), bits = b, bytes = w;
+        }
+      emit_group(group, bits, bytes);
+      i = j;
+    }
   }
   for (auto& w : writers) w->commit();
   if (primitives_read) *primitives_read = read.load();

@@ -14,8 +14,8 @@
 // - A task's share: one run of the Morton codes (shard_bounds), the codes of the finest level's regions
 //   that hold an N-th of its cells (shard_regions); in every level, the regions whose code falls in it, a
 //   contiguous run (region order is octree Morton order, so whole subtrees but at its two ends). So a
-//   task's levels cover about the same place, and its passes read about the same blocks. A coarse level
-//   of fewer regions than tasks is handed out a region a task from the last task down (shard_runs).
+//   task's levels cover about the same place, and its passes read about the same blocks. The levels of
+//   fewer regions than tasks go whole to one task (shard_runs), which emits them in one pass.
 //   It emits them as the batched emit does (each batch with its halo, representatives
 //   read from the work directory), which gives every part the bytes it has in one machine's run
 //   (stream/emit_stage.h), and writes the parts, in region order, to OUTDIR/shards/task-I-lodL.parts;
@@ -82,14 +82,18 @@ std::vector<uint64_t> shard_bounds(const LevelCut& finest, unsigned count);
 std::pair<uint32_t, uint32_t> shard_regions_in(const LevelCut& cut, const std::vector<uint64_t>& bounds, unsigned index);
 
 // The regions [first, end) of every level's cut (finest first) that task `index` of `count` emits. The
-// finest level, and every level of at least `count` regions: its run of codes (shard_regions_in). A
-// coarser level of fewer regions than tasks: at most one region a task, handed out one by one from the
-// last task down, coarsest level first, wrapping around. Such a region costs a pass over the place it
-// covers (every input primitive there maps to its cells) however few its cells; by its code it would
-// go, with the coarser levels' other few regions, to task 0 (on the 193 M-triangle city at N = 8 that
-// task read 7.9 times the input, the others 1.3 to 2.6). For each level the tasks' runs are disjoint and
-// cover the cut; the merge orders them by their first region.
+// finest level, and every level of at least `count` regions: its run of codes (shard_regions_in). A wide
+// level (wide_level: coarser, of fewer regions than tasks): all its regions to task kWideTask. A wide
+// region costs a pass over the place it covers (every input primitive there maps to its cells) however
+// few its cells, and the wide levels' regions together cover about the whole scene; given to one task,
+// they share one pass over the input (emit_shard groups them apart from the task's runs of codes). On the
+// 193 M-triangle city at N = 8 the three wide levels (one region each) went, a region a task, to three
+// tasks that each read the whole input for theirs. Task 0 is the one a scheduler's array starts first, so
+// the longest task does not run alone at the end. For each level the tasks' runs are disjoint and cover
+// the cut; the merge orders them by their first region.
+inline constexpr unsigned kWideTask = 0;
 std::vector<std::pair<uint32_t, uint32_t>> shard_runs(const std::vector<LevelCut>& cuts, unsigned index, unsigned count);
+bool wide_level(const std::vector<LevelCut>& cuts, size_t level, unsigned count);
 
 std::string shards_dir(const std::string& output_dir);
 std::string shard_parts_path(const std::string& output_dir, unsigned index, size_t level);

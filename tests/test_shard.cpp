@@ -109,8 +109,8 @@ TEST(Shard, AnyTaskCountGivesOneMachinesBytes) {
   ASSERT_TRUE(simplify(sample_room(), room_options(dir.file("one")), o, &one).ok());
   const auto want = outputs(dir.file("one"));
   uint64_t read_by_one = 0;  // the input primitives one task's passes read
-  // 9 tasks: the level of 8 regions is coarse (stream/shard.h shard_runs), handed out from task 8 down, so
-  // the merge must order its tasks by their runs.
+  // 9 tasks: the level of 8 regions is wide (stream/shard.h shard_runs), all of it task 0's while task 0
+  // also has the first run of the finer levels' codes: the merge orders each level's tasks by their runs.
   for (unsigned n : {1u, 2u, 5u, 9u}) {
     SCOPED_TRACE("tasks " + std::to_string(n));
     const std::string out = dir.file("sharded-" + std::to_string(n));
@@ -552,10 +552,10 @@ TEST(Shard, LevelsShareTheFinestLevelsRunsOfCodes) {
   }
 }
 
-// shard_runs: levels of at least N regions by the runs of codes (as above); a coarser level of fewer
-// regions than tasks a region a task, from the last task down, coarsest level first, wrapping around;
-// every level's runs cover its regions once.
-TEST(Shard, CoarseLevelsAreHandedOutFromTheLastTaskDown) {
+// shard_runs: levels of at least N regions by the runs of codes (as above); a wide level (coarser, of fewer
+// regions than tasks) whole to task kWideTask, so that the wide levels share one pass; every level's runs
+// cover its regions once.
+TEST(Shard, WideLevelsGoWholeToOneTask) {
   auto morton_sorted = [](unsigned depth) {
     std::vector<core::RegionKey> keys;
     const uint32_t side = 1u << depth;
@@ -584,31 +584,19 @@ TEST(Shard, CoarseLevelsAreHandedOutFromTheLastTaskDown) {
           owner[r] = static_cast<int>(t);
         }
       for (size_t r = 0; r < owner.size(); ++r) EXPECT_GE(owner[r], 0) << "level " << l << " region " << r;
-      const bool coarse = l > 0 && cuts[l].regions.size() < n;
+      const bool wide = l > 0 && cuts[l].regions.size() < n;
+      EXPECT_EQ(stream::wide_level(cuts, l, n), wide) << "level " << l;
+      const uint32_t regions = static_cast<uint32_t>(cuts[l].regions.size());
       for (unsigned t = 0; t < n; ++t) {
-        if (!coarse) EXPECT_EQ(runs[t][l], stream::shard_regions_in(cuts[l], bounds, t)) << "level " << l;
-        else EXPECT_LE(runs[t][l].second - runs[t][l].first, 1u) << "level " << l;
+        if (!wide) EXPECT_EQ(runs[t][l], stream::shard_regions_in(cuts[l], bounds, t)) << "level " << l;
+        else if (t == stream::kWideTask) EXPECT_EQ(runs[t][l], (std::pair<uint32_t, uint32_t>{0, regions})) << "level " << l;
+        else EXPECT_EQ(runs[t][l].first, runs[t][l].second) << "level " << l;
       }
     }
-    if (n == 8) {  // the root to task 7; the 3 regions of level 2 to tasks 6, 5, 4
-      EXPECT_EQ(runs[7][3], (std::pair<uint32_t, uint32_t>{0, 1}));
-      EXPECT_EQ(runs[6][2], (std::pair<uint32_t, uint32_t>{0, 1}));
-      EXPECT_EQ(runs[4][2], (std::pair<uint32_t, uint32_t>{2, 3}));
-      EXPECT_EQ(runs[0][3].first, runs[0][3].second);
-    }
-    if (n == 4) {  // the root to task 3; level 2's 3 regions to tasks 2, 1, 0
-      EXPECT_EQ(runs[3][3], (std::pair<uint32_t, uint32_t>{0, 1}));
-      EXPECT_EQ(runs[2][2], (std::pair<uint32_t, uint32_t>{0, 1}));
-      EXPECT_EQ(runs[0][2], (std::pair<uint32_t, uint32_t>{2, 3}));
-      EXPECT_EQ(runs[3][2].first, runs[3][2].second);
-    }
-    if (n == 9) {  // the root to task 8, level 2 to 7, 6, 5, and level 1's 8 regions to 4, 3, 2, 1, 0, 8, 7, 6
-      EXPECT_EQ(runs[8][3], (std::pair<uint32_t, uint32_t>{0, 1}));
-      EXPECT_EQ(runs[5][2], (std::pair<uint32_t, uint32_t>{2, 3}));
-      EXPECT_EQ(runs[4][1], (std::pair<uint32_t, uint32_t>{0, 1}));
-      EXPECT_EQ(runs[8][1], (std::pair<uint32_t, uint32_t>{5, 6}));
-      EXPECT_EQ(runs[5][1].first, runs[5][1].second);
-    }
+    // 4 tasks: levels 2 (3 regions) and 3 (the root) are wide; 9 tasks: level 1 (8 regions) too.
+    EXPECT_EQ(stream::wide_level(cuts, 1, n), n == 9);
+    EXPECT_EQ(stream::wide_level(cuts, 2, n), n >= 4);
+    EXPECT_EQ(stream::wide_level(cuts, 3, n), n >= 2);
   }
 }
 
@@ -900,7 +888,7 @@ TEST(ReportShard, ShardFromEnvironmentThroughTheCli) {
 // away does not, and a coordinate outside the cube or NaN widens to the border rather than being lost.
 TEST(BlockBounds, ReachGridMarksConservatively) {
   core::SceneCube cube;
-  cube.min[0] = cube.min[1] = cube.min[2] = 0, cube.side = 64;  // one unit a voxel
+  cube.min[0] = cube.min[1] = cube.min[2] = 0, cube.side = stream::ReachGrid::kSide;  // one unit a voxel
   stream::ReachGrid g(cube);
   const double lo[3] = {10.2, 10.2, 10.2}, hi[3] = {11.8, 11.8, 11.8};
   g.mark(lo, hi);
@@ -911,10 +899,13 @@ TEST(BlockBounds, ReachGridMarksConservatively) {
   };
   EXPECT_TRUE(reaches(11, 11, 11, 11, 11, 11));           // inside
   EXPECT_TRUE(reaches(12.9, 12.9, 12.9, 13, 13, 13));     // in the voxel next to a marked one
+  EXPECT_FALSE(reaches(13.1, 11, 11, 13.5, 11, 11));      // one voxel farther
+  EXPECT_TRUE(reaches(11.8, 11.8, 11.8, 11.8, 11.8, 11.8)); // the marked box's corner, a point
   EXPECT_TRUE(reaches(0, 0, 0, 63, 63, 63));              // a box around it
   EXPECT_FALSE(reaches(30, 30, 30, 40, 40, 40));          // far away
   EXPECT_FALSE(reaches(10, 30, 10, 11, 31, 11));          // far on one axis
   EXPECT_TRUE(reaches(-100, -100, -100, 10, 10, 10));     // outside the cube: its border voxel on
+  EXPECT_FALSE(reaches(1e9, 1e9, 1e9, 2e9, 2e9, 2e9));    // beyond the cube's far corner: its last voxel
   const double nan = std::nan("");
   EXPECT_TRUE(reaches(nan, 11, 11, nan, 11, 11));         // NaN: the whole axis
   stream::ReachGrid empty(cube);
