@@ -85,6 +85,14 @@ std::vector<uint32_t> load_region_of(const std::string& prefix, size_t level, ui
   return region_of;
 }
 
+void for_cell_anchors(const std::string& prefix, size_t level, uint64_t cells, Representative representative, bool single_precision,
+                      const std::function<bool(uint64_t)>& wanted, const std::function<void(uint64_t, const double*)>& visit) {
+  for_cell_infos(prefix, level, cells, 0, cells, representative, single_precision, [&](uint64_t first, std::span<const CellInfo> infos) {
+    for (size_t i = 0; i < infos.size(); ++i)
+      if (wanted(first + i)) visit(first + i, cell_anchor(infos[i], representative));
+  });
+}
+
 std::vector<std::pair<uint32_t, uint32_t>> region_batches(const LevelCut& cut, uint64_t batch_cells) {
   std::vector<std::pair<uint32_t, uint32_t>> batches;
   const uint32_t n = static_cast<uint32_t>(cut.regions.size());
@@ -151,7 +159,7 @@ void write_representative_range(const std::string& prefix, size_t level, uint64_
 void write_representatives(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
                            const std::string& prefix, size_t level, uint64_t cells, double cell_size, uint64_t records,
                            const core::ClusterOptions& cluster, Representative representative, uint64_t range_cells,
-                           Progress& progress, EmitScratch& scratch, bool vertex_cells) {
+                           Progress& progress, EmitScratch& scratch) {
   std::filesystem::remove(representatives_path(prefix, level));
   if (representative != Representative::quadric) {
     write_representative_range(prefix, level, cells, 0, cells, {}, representative, cluster, cell_size, meta.single_precision);
@@ -160,7 +168,6 @@ void write_representatives(const std::string& store_dir, const StoreMeta& meta, 
   EmitOptions options;
   options.representative = representative;
   options.representatives_only = true;
-  options.write_vertex_cells = vertex_cells;
   range_cells = std::max<uint64_t>(range_cells, 1);
   for (uint64_t first = 0; first < cells; first += range_cells) {
     EmitLevel l;

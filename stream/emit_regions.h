@@ -58,6 +58,12 @@ std::vector<LevelCut> cut_levels(const std::string& prefix, std::span<const uint
 std::vector<uint32_t> load_region_of(const std::string& prefix, size_t level, uint64_t cells, const core::SceneCube& cube,
                                      const LevelCut& cut, Representative representative, bool single_precision);
 
+// Calls visit(cell, anchor) for each cell c of level `level` with wanted(c), in cell order: the position by
+// which the cell is placed in a region, its center vertex's (the mean for the mean representative). Every
+// vertex of the cell is within one cell size of it on every axis (block_bounds.h).
+void for_cell_anchors(const std::string& prefix, size_t level, uint64_t cells, Representative representative, bool single_precision,
+                      const std::function<bool(uint64_t)>& wanted, const std::function<void(uint64_t, const double*)>& visit);
+
 // Batches: consecutive regions in region order whose cells together are at most `batch_cells` (a region
 // larger than that is a batch alone), as [first, end) pairs.
 std::vector<std::pair<uint32_t, uint32_t>> region_batches(const LevelCut& cut, uint64_t batch_cells);
@@ -74,12 +80,11 @@ std::string representatives_path(const std::string& prefix, size_t level);
 // input triangle touching the cell (summed per fixed store block in primitive order, blocks merged in
 // order, as the emit stage does), minimised around the cell's mean and clamped into its box. Quadrics are
 // summed for ranges of cells of at most `range_cells` cells, one pass over the triangles each (emit_levels
-// with EmitOptions::representatives_only, which calls write_representative_range). `vertex_cells`: also
-// the level's cells by vertex (EmitOptions::write_vertex_cells), for quadric representatives.
+// with EmitOptions::representatives_only, which calls write_representative_range).
 void write_representatives(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
                            const std::string& prefix, size_t level, uint64_t cells, double cell_size,
                            uint64_t records, const core::ClusterOptions& cluster, Representative representative,
-                           uint64_t range_cells, Progress& progress, EmitScratch& scratch, bool vertex_cells = false);
+                           uint64_t range_cells, Progress& progress, EmitScratch& scratch);
 
 // Writes the representatives of cells [first, first + count) of the level; quadrics: one per cell, or empty.
 void write_representative_range(const std::string& prefix, size_t level, uint64_t cells, uint64_t first, uint64_t count,

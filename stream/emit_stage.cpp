@@ -218,6 +218,11 @@ struct LevelState {
   // Batched levels: per cell 0 (not visited), kOwned (a cell of the batch's regions) or kHalo.
   std::vector<uint8_t> role;
   uint64_t quadric_base = 0;  // representatives_only: the first cell of the range summed
+  // The level sums quadrics in pass A (quadric representatives, unless it is batched and reads them).
+  bool sums_quadrics = false;
+  // A batched level that sums them (EmitOptions::own_representatives): per cell, its index in `quadrics`
+  // (its own and halo cells, in cell order), else UINT32_MAX.
+  std::vector<uint32_t> quadric_slot;
   unsigned shift = 0;
   uint64_t mask = 0;  // field mask after the shift; all ones is "no cell"
   // Pass A.
@@ -250,6 +255,11 @@ constexpr uint8_t kOwned = 1, kHalo = 2;
 constexpr uint8_t kByTriangle = 1, kByKeptEdge = 2;
 
 bool owned(const LevelState& L, uint32_t c) { return !L.in.batched || L.role[c] == kOwned; }
+
+// Where cell c's quadric is in L.quadrics.
+uint64_t quadric_index(const LevelState& L, uint32_t c) {
+  return L.quadric_slot.empty() ? c - L.quadric_base : L.quadric_slot[c];
+}
 
 // A point's size (core/mesh.h) is measured as an edge's thickness is: kept point p joins passes B and C as
 // the edge {c, c} with id E + p, after the E kept edges. Every corner of a primitive that collapsed to it
@@ -368,7 +378,8 @@ void load_representatives(const LevelState& L, const std::string& prefix, const 
   constexpr size_t record = 3 * sizeof(double);
   std::unique_ptr<io::MappedFile> reps;
   std::unique_ptr<CellInfoReader> table;
-  if (L.in.batched) {
+  const bool from_file = L.in.batched && !options.own_representatives;
+  if (from_file) {
     reps = std::make_unique<io::MappedFile>(representatives_path(prefix, L.in.level));
     if (reps->size() != cells * record) fail(Status::io_error, reps->path() + ": size does not match");
   } else {
@@ -382,14 +393,16 @@ void load_representatives(const LevelState& L, const std::string& prefix, const 
     for (uint64_t c = first; c < end; ++c) {
       const uint32_t slot = s.slot_of[c];
       if (slot == UINT32_MAX) continue;
-      if (L.in.batched) {
+      if (from_file) {
         if (!w.data()) w = reps->map(first * record, end * record);
         std::memcpy(&s.rep[3 * slot], w.data() + (c - first) * record, record);
         continue;
       }
       if (!w.data()) w = table->map(first, end);
       const CellInfo ci = table->get(w, c - first);
-      cell_representative(ci, L.quadrics.empty() ? nullptr : &L.quadrics[c], options.representative, cluster,
+      if (L.sums_quadrics && quadric_index(L, static_cast<uint32_t>(c)) >= L.quadrics.size())
+        fail(Status::internal, "emit: a cell the batch needs is neither its own nor in its halo");
+      cell_representative(ci, L.sums_quadrics ? &L.quadrics[quadric_index(L, static_cast<uint32_t>(c))] : nullptr, options.representative, cluster,
                           L.in.cell_size, &s.rep[3 * slot]);
     }
   });
@@ -458,6 +471,7 @@ void build_parts(LevelState& L, const std::vector<float>& thickness, const std::
   number_cells(L, s);
   load_representatives(L, prefix, cluster, options, single_precision, s);
   std::vector<core::Quadric>().swap(L.quadrics);
+  std::vector<uint32_t>().swap(L.quadric_slot);
   BatchVertices v;
   make_vertices(s, options, v);
   std::vector<uint32_t>().swap(s.triangles);
@@ -771,58 +785,48 @@ std::vector<Block> routed_blocks(const BatchRoutes& routes, unsigned bit, const 
   return blocks;
 }
 
-// The blocks of a bounded batch (block_bounds.h): runs of the boxes that reach a marked voxel of `reach`,
-// cut at kEmitBlock primitives (every block starts at a multiple of kBoundsBlock, so of 64).
+// The blocks of a bounded batch (block_bounds.h): within each block of kEmitBlock primitives (the blocks of a
+// pass over the whole input), the span from its first box that reaches a marked voxel of `reach` to its last
+// (every span starts at a multiple of kBoundsBlock, so of 64). One span per whole block, so that a cell's
+// quadric, summed per block and merged in block order (pass A), adds what the whole input's pass adds in the
+// same order: the boxes a span skips or spans over hold no triangle touching the batch's cells.
 std::vector<Block> bounded_blocks(const BlockBounds& bounds, const ReachGrid& reach, const uint64_t* column_count) {
   static_assert(kEmitBlock % kBoundsBlock == 0 && kBoundsBlock % 64 == 0);
+  constexpr uint64_t per_block = kEmitBlock / kBoundsBlock;
   std::vector<Block> blocks;
   for (int kind = 0; kind < 3; ++kind) {
     if (bounds.count[kind] != column_count[kind]) fail(Status::internal, "emit: block bounds of another input");
     const uint64_t n = bounds.blocks(kind);
     const double* box = bounds.box[kind].data();
-    for (uint64_t b = 0; b < n;) {
-      if (!reach.reaches(&box[6 * b], &box[6 * b + 3])) {
-        ++b;
-        continue;
-      }
-      uint64_t end = b + 1;
-      while (end < n && reach.reaches(&box[6 * end], &box[6 * end + 3]) && (end - b) * kBoundsBlock < kEmitBlock) ++end;
-      const uint64_t first = b * kBoundsBlock;
-      blocks.push_back({kind, first, std::min(end * kBoundsBlock, column_count[kind]) - first});
-      b = end;
+    for (uint64_t b0 = 0; b0 < n; b0 += per_block) {
+      uint64_t first = UINT64_MAX, last = 0;
+      for (uint64_t b = b0; b < std::min(n, b0 + per_block); ++b)
+        if (reach.reaches(&box[6 * b], &box[6 * b + 3])) first = std::min(first, b), last = b;
+      if (first == UINT64_MAX) continue;
+      blocks.push_back({kind, first * kBoundsBlock, std::min((last + 1) * kBoundsBlock, column_count[kind]) - first * kBoundsBlock});
     }
   }
   return blocks;
 }
 
-// Marks where a bounded group's passes must read: the representatives of every level's own cells (those of
-// its regions) and, with `halo`, of its halo cells, each widened by the level's cell size (block_bounds.h).
-// The cells, not their regions' boxes: a region of the octree cut is as large as its cells are sparse (on the
-// 193 M-triangle city at N = 8, the first task's boxes reached 63% of the input for an eighth of the cells).
-void mark_reach(const std::vector<LevelState>& levels, const std::string& prefix, bool halo, ReachGrid& reach) {
+// Marks where a bounded group's passes must read: the anchors (emit_regions.h for_cell_anchors) of the cells
+// of each level L with wanted(L, cell) (its own, those of its regions; then its halo's too; or, for pass Q,
+// its ring's), each widened by the level's cell size (block_bounds.h). The cells, not their regions' boxes: a region of the octree cut is as large as
+// its cells are sparse (on the 193 M-triangle city at N = 8, the first task's boxes reached 63% of the input
+// for an eighth of the cells).
+template <class Wanted>
+void mark_reach(const std::vector<LevelState>& levels, const std::string& prefix, Representative representative,
+                bool single_precision, Wanted&& wanted, ReachGrid& reach) {
   for (const LevelState& L : levels) {
     // A hair more than the cell size, so that the rounding of a box's corners never matters.
     const double r = L.in.cell_size * (1 + 0x1p-20);
-    auto marked = [&](uint64_t c) {
-      const uint32_t region = L.in.region_of[c];
-      return (region >= L.in.first_region && region < L.in.end_region) || (halo && L.role[c] == kHalo);
-    };
-    io::MappedFile reps(representatives_path(prefix, L.in.level));
-    constexpr uint64_t record = 3 * sizeof(double);
-    if (reps.size() != L.in.cells * record) fail(Status::io_error, reps.path() + ": size does not match");
-    constexpr uint64_t window_cells = 1 << 16;
-    for (uint64_t first = 0; first < L.in.cells; first += window_cells) {
-      const uint64_t end = std::min(L.in.cells, first + window_cells);
-      io::Window w;
-      for (uint64_t c = first; c < end; ++c) {
-        if (!marked(c)) continue;
-        if (!w.data()) w = reps.map(first * record, end * record);
-        double p[3], lo[3], hi[3];
-        std::memcpy(p, w.data() + (c - first) * record, record);
-        for (int k = 0; k < 3; ++k) lo[k] = p[k] - r, hi[k] = p[k] + r;
-        reach.mark(lo, hi);
-      }
-    }
+    for_cell_anchors(
+        prefix, L.in.level, L.in.cells, representative, single_precision, [&](uint64_t c) { return wanted(L, c); },
+        [&](uint64_t, const double* p) {
+          double lo[3], hi[3];
+          for (int k = 0; k < 3; ++k) lo[k] = p[k] - r, hi[k] = p[k] + r;
+          reach.mark(lo, hi);
+        });
   }
   reach.finish();
 }
@@ -924,13 +928,6 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       WeldFile(canonical_path, meta.vertices).for_each_welded([&](uint64_t v, uint32_t canon) { map.set(v, map.get(canon)); });
   }
   emit_scratch.map_key = map_key;
-  if (options.write_vertex_cells && options.representatives_only)
-    for (const LevelState& L : levels)
-      if (!reuse || !std::filesystem::exists(vertex_cells_path(prefix, L.in.level)))
-        write_vertex_cells_by(prefix, L.in.level, meta.vertices, [&](uint64_t v) {
-          const uint64_t c = (map.get(v) >> L.shift) & L.mask;
-          return c == L.mask ? kNoCell : static_cast<uint32_t>(c);
-        });
 
   StorePositions positions(store_dir, meta);
   positions.acquire();
@@ -954,16 +951,21 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   for (const LevelState& L : levels) bounded = bounded && L.in.batched && !L.in.routes;
   std::unique_ptr<ReachGrid> reach;
   const core::SceneCube cube = scene_cube_of(meta);
+  auto own_cell = [](const LevelState& L, uint64_t c) {
+    return L.in.region_of[c] >= L.in.first_region && L.in.region_of[c] < L.in.end_region;
+  };
   if (bounded) {
     reach = std::make_unique<ReachGrid>(cube);
-    mark_reach(levels, prefix, false, *reach);
+    mark_reach(levels, prefix, options.representative, meta.single_precision, own_cell, *reach);
     blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
   }
   // Quadrics are summed for the levels that form their own representatives: a batched level reads them
   // (emit_regions.h), so a group of batched levels (a task's, or one machine's largest level) forms no
   // quadric and fetches no position in pass A.
-  const bool quadric = options.representative == Representative::quadric && !options.count_only &&
-                       std::any_of(levels.begin(), levels.end(), [](const LevelState& L) { return !L.in.batched; });
+  for (LevelState& L : levels)
+    L.sums_quadrics = options.representative == Representative::quadric && !options.count_only &&
+                      (!L.in.batched || options.own_representatives);
+  const bool quadric = std::any_of(levels.begin(), levels.end(), [](const LevelState& L) { return L.sums_quadrics; });
   const bool materials = !meta.materials.empty() && !options.count_only && !options.representatives_only;
   std::vector<ObjectRun> material_runs[3];
   if (materials)
@@ -1034,7 +1036,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // hence one thread.
   static_assert(kEmitBlock % 64 == 0);
   for (LevelState& L : levels) {
-    if (quadric && !L.in.batched) {
+    if (L.sums_quadrics && !L.in.batched) {
       L.quadric_base = options.representatives_only ? L.in.first_cell : 0;
       L.quadrics.resize(options.representatives_only ? L.in.end_cell - L.in.first_cell : L.in.cells);
     }
@@ -1042,8 +1044,18 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       if (!options.count_only && !options.representatives_only) L.collapsed[kind].assign((column_count[kind] + 63) / 64, 0);
   }
   find_halos(levels, run_blocks, record_of, cell);
+  // A batched level's quadrics: its own and halo cells', which are all it outputs or uses.
+  for (LevelState& L : levels) {
+    if (!L.sums_quadrics || !L.in.batched) continue;
+    L.quadric_slot.assign(L.in.cells, UINT32_MAX);
+    uint32_t n = 0;
+    for (uint64_t c = 0; c < L.in.cells; ++c)
+      if (L.role[c]) L.quadric_slot[c] = n++;
+    L.quadrics.resize(n);
+  }
   if (bounded) {
-    mark_reach(levels, prefix, true, *reach);
+    mark_reach(levels, prefix, options.representative, meta.single_precision,
+               [&](const LevelState& L, uint64_t c) { return own_cell(L, c) || L.role[c] == kHalo; }, *reach);
     blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
   }
   auto classify = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
@@ -1087,10 +1099,11 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
           Scratch& s = scratch_l[l];
           const uint32_t c[3] = {cell(L, r[0]), cell(L, r[1]), cell(L, r[2])};
           if (!visited(L, c, 3)) continue;
-          if (quadric && !L.in.batched) {
+          if (L.sums_quadrics) {
             for (int k = 0; k < 3; ++k) {
               if ((k > 0 && c[k] == c[0]) || (k > 1 && c[k] == c[1])) continue;
               if (options.representatives_only && (c[k] < L.in.first_cell || c[k] >= L.in.end_cell)) continue;
+              if (L.in.batched && !L.role[c[k]]) continue;  // neither its own nor in its halo
               if (c[k] == s.last_cell) {
                 o.quadrics[s.last_slot].add(q);
                 continue;
@@ -1161,7 +1174,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
         L.points.push_back(o.points[i]);
         if (materials) L.point_materials.push_back(o.point_materials[i]);
       }
-      for (size_t i = 0; i < o.quadric_cells.size(); ++i) L.quadrics[o.quadric_cells[i] - L.quadric_base].add(o.quadrics[i]);
+      for (size_t i = 0; i < o.quadric_cells.size(); ++i) L.quadrics[quadric_index(L, o.quadric_cells[i])].add(o.quadrics[i]);
     }
   });
   if (options.representatives_only) {
@@ -1179,6 +1192,67 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       counts[l].points = levels[l].points.size();
     }
     return counts;
+  }
+
+  // Pass Q (batched levels that form their own quadric representatives): the quadrics of the batch's ring,
+  // the cells beyond its halo that corners of its triangles fall in. Their representatives place those
+  // corners, which shape the normals of the halo's vertices; pass A saw only the triangles touching its own
+  // cells and its halo, so a ring cell's quadric is summed here, alone, over every triangle touching it,
+  // per block in store order and merged in block order, as for any other cell.
+  bool any_ring = false;
+  for (LevelState& L : levels) {
+    if (!L.sums_quadrics || !L.in.batched) continue;
+    uint32_t n = static_cast<uint32_t>(L.quadrics.size());
+    for (const auto& t : L.triangles)
+      for (uint32_t c : t)
+        if (L.quadric_slot[c] == UINT32_MAX) L.quadric_slot[c] = n++, any_ring = true;
+    L.quadrics.resize(n);
+  }
+  if (any_ring) {
+    auto ring_cell = [](const LevelState& L, uint64_t c) { return !L.quadric_slot.empty() && !L.role[c] && L.quadric_slot[c] != UINT32_MAX; };
+    const std::vector<Block> classified = blocks;
+    if (bounded) {
+      reach = std::make_unique<ReachGrid>(cube);
+      mark_reach(levels, prefix, options.representative, meta.single_precision, ring_cell, *reach);
+      blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
+    }
+    run_blocks(
+        "emit", true,
+        [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
+          if (b.kind != 0) return;
+          for (size_t i = 0; i < ids.size(); i += 3) {
+            const uint32_t v[3] = {ids[i], ids[i + 1], ids[i + 2]};
+            const uint64_t r[3] = {record_of(v[0]), record_of(v[1]), record_of(v[2])};
+            bool formed = false;
+            core::Quadric q;
+            for (size_t l = 0; l < nl; ++l) {
+              LevelState& L = levels[l];
+              if (L.quadric_slot.empty()) continue;
+              const uint32_t c[3] = {cell(L, r[0]), cell(L, r[1]), cell(L, r[2])};
+              for (int k = 0; k < 3; ++k) {
+                if ((k > 0 && c[k] == c[0]) || (k > 1 && c[k] == c[1]) || !ring_cell(L, c[k])) continue;
+                if (!formed) {
+                  double p[3][3];
+                  for (int j = 0; j < 3; ++j) positions.get(v[j], p[j]);
+                  q.add_triangle(p[0], p[1], p[2]);
+                  formed = true;
+                }
+                BlockOut& o = outs_l[l];
+                Scratch& s = scratch_l[l];
+                const auto [slot, fresh] = s.cells.insert({c[k]}, static_cast<uint32_t>(o.quadrics.size()));
+                if (fresh) o.quadric_cells.push_back(c[k]), o.quadrics.push_back(q);
+                else o.quadrics[slot].add(q);
+              }
+            }
+          }
+        },
+        [&](BlockOut* outs_l) {
+          for (size_t l = 0; l < nl; ++l) {
+            const BlockOut& o = outs_l[l];
+            for (size_t i = 0; i < o.quadric_cells.size(); ++i) levels[l].quadrics[quadric_index(levels[l], o.quadric_cells[i])].add(o.quadrics[i]);
+          }
+        });
+    blocks = classified;
   }
 
   // Elimination, before the thickness passes, which then measure the kept edges only. Edges are few next to

@@ -84,9 +84,13 @@ struct EmitOptions {
   // shared stages, stream/vertex_cells.h) instead of decoding every record of the cluster maps. The same
   // map.
   bool vertex_cells = false;
-  // representatives_only: also write each level's cells by vertex (vertex_cells.h) from the group's packed
-  // map, when it builds one (a lone level's later ranges reuse it: the file is written with the first).
-  bool write_vertex_cells = false;
+  // Batched levels only (a sharded task's, stream/shard.h): form the representatives of the batch's own and
+  // halo cells from the cell table and, for quadric representatives, quadrics summed in pass A, instead of
+  // reading them from the level's representatives file. The same bytes: pass A visits every triangle that
+  // touches such a cell, and a bounded batch's blocks are spans of the whole input's blocks
+  // (bounded_blocks), so each cell's quadric is summed per block in store order and merged in block order
+  // as a pass over the whole input sums it.
+  bool own_representatives = false;
   // When set, the primitives the passes read are added to it (the blocks' sizes, pass by pass).
   std::atomic<uint64_t>* primitives_read = nullptr;
 };

@@ -199,9 +199,8 @@ bool PartsReader::next(StoredPart* out) {
   return true;
 }
 
-bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress,
-                                 EmitScratch& scratch) {
-  const std::string stamp = in.prefix + "shard-reps.json";
+bool write_shard_vertex_cells(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress) {
+  const std::string stamp = in.prefix + "shard-vertex-cells.json";
   std::error_code ec;
   bool reused = std::filesystem::exists(stamp, ec);
   if (reused) {
@@ -211,54 +210,16 @@ bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::order
       reused = false;
     }
   }
-  for (size_t l = 0; reused && l < in.cells.size(); ++l)
-    reused = std::filesystem::exists(representatives_path(in.prefix, l), ec) &&
-             std::filesystem::exists(vertex_cells_path(in.prefix, l), ec);
+  for (size_t l = 0; reused && l < in.cells.size(); ++l) reused = std::filesystem::exists(vertex_cells_path(in.prefix, l), ec);
   if (reused) return true;
   std::filesystem::remove(stamp, ec);
-  for (size_t l = 0; l < in.cells.size(); ++l) std::filesystem::remove(vertex_cells_path(in.prefix, l), ec);
-  const StoreMeta& meta = *in.meta;
-  const size_t n = in.cells.size();
-  // Quadric representatives: the levels whose quadrics fit together are summed in one pass over the input
-  // (emit_levels with representatives_only, a group's levels each as when alone); a level that does not
-  // fit alone in ranges of cells, as write_representatives does. Either way the same bytes.
-  const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), in.options);
-  constexpr uint64_t kQuadricBytes = sizeof(core::Quadric) + 8;
-  for (size_t first = 0; first < n;) {
-    unsigned bits = emit_bits(in.cells[first]);
-    uint64_t bytes = in_flight + kQuadricBytes * in.cells[first];
-    size_t end = first + 1;
-    if (in.options.representative == Representative::quadric && emit_map_bytes(meta.vertices, bits) + bytes <= in.budget)
-      for (; end < n; ++end) {
-        const unsigned b = bits + emit_bits(in.cells[end]);
-        const uint64_t w = bytes + in_flight + kQuadricBytes * in.cells[end];
-        if (b > 64 || emit_map_bytes(meta.vertices, b) + w > in.budget) break;
-        bits = b, bytes = w;
-      }
-    if (end - first > 1) {
-      std::vector<EmitLevel> group;
-      for (size_t l = first; l < end; ++l) {
-        std::filesystem::remove(representatives_path(in.prefix, l), ec);
-        EmitLevel g;
-        g.level = l, g.cells = in.cells[l], g.cell_size = in.sizes[l], g.first_cell = 0, g.end_cell = in.cells[l];
-        group.push_back(g);
-      }
-      EmitOptions options = in.options;
-      options.representatives_only = true, options.write_vertex_cells = true;
-      emit_levels(in.store_dir, meta, in.canonical, in.prefix, group, in.records, in.cluster, options, progress, scratch,
-                  [](size_t, RegionPart&) {});
-    } else {
-      // As plan_emit_level sizes a batched level's ranges: what its map and tables leave of the budget.
-      const uint64_t held = emit_map_bytes(meta.vertices, emit_bits(in.cells[first])) + kLevelBytesPerCell * in.cells[first] + in_flight;
-      const uint64_t range = in.budget > held ? (in.budget - held) / kQuadricBytes : 1;
-      write_representatives(in.store_dir, meta, in.canonical, in.prefix, first, in.cells[first], in.sizes[first], in.records,
-                            in.cluster, in.options.representative, range, progress, scratch, true);
-      // Center and mean representatives make no pass over the input, hence no packed map to write from.
-      if (in.options.representative != Representative::quadric)
-        write_vertex_cells(in.prefix, in.canonical, meta.vertices, in.records, first, in.cells[first], in.budget, progress);
-    }
-    first = end;
+  for (size_t l = 0; l < in.cells.size(); ++l) {
+    std::filesystem::remove(vertex_cells_path(in.prefix, l), ec);
+    std::filesystem::remove(representatives_path(in.prefix, l), ec);  // written ahead by older versions
   }
+  std::filesystem::remove(in.prefix + "shard-reps.json", ec);
+  for (size_t l = 0; l < in.cells.size(); ++l)
+    write_vertex_cells(in.prefix, in.canonical, in.meta->vertices, in.records, l, in.cells[l], in.budget, progress);
   io::write_file_atomic(stamp, key.dump(1) + "\n");
   return false;
 }
@@ -307,16 +268,15 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
       share[l] += cuts[l].cells[r], largest[l] = std::max(largest[l], cuts[l].cells[r]);
   }
   // Memory of a batched level (as plan_emit_level counts it): pass A's tables for the batch's cells and its
-  // halo (half as many again), without quadrics (representatives are read), its per-cell tables and its
-  // share of the blocks in flight; and the group's packed cluster map (read from the vertex-cells files,
-  // stream/vertex_cells.h).
-  EmitOptions no_quadric = in.options;
-  no_quadric.representative = Representative::center;
-  const uint64_t per_cell = emit_level_bytes(1, 0, no_quadric) * 3 / 2;
-  const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), no_quadric) + emit_corner_bytes(in.budget);
-  auto level_bytes = [&](size_t l, uint64_t batch) { return kLevelBytesPerCell * in.cells[l] + in_flight + per_cell * batch; };
+  // halo (half as many again), with their quadrics (the task sums its cells' own), its per-cell tables (and
+  // the quadrics' index, 4 bytes a cell) and its share of the blocks in flight; and the group's packed
+  // cluster map (read from the vertex-cells files, stream/vertex_cells.h).
+  const uint64_t per_cell = emit_level_bytes(1, 0, in.options) * 3 / 2;
+  const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), in.options) + emit_corner_bytes(in.budget);
+  auto level_bytes = [&](size_t l, uint64_t batch) { return (kLevelBytesPerCell + 4) * in.cells[l] + in_flight + per_cell * batch; };
   EmitOptions emit = in.options;  // its thickness passes hold what in_flight counts for them
   emit.corner_bytes = emit_corner_bytes(in.budget);
+  emit.own_representatives = true;
   const BlockBounds bounds = read_block_bounds(block_bounds_path(in.prefix), meta);
   std::atomic<uint64_t> read{0};
   emit.block_bounds = &bounds, emit.primitives_read = &read, emit.vertex_cells = true;

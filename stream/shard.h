@@ -4,27 +4,28 @@
 // Kubernetes Indexed Jobs, AWS Batch arrays): a task is given only I and N.
 //
 // - Shared stages (ingest, grade, labels, cluster (with --cluster-shards N: the merge of N shares run
-//   before, stream/cluster_shares.h), the store's block boxes (block_bounds.h), and every
-//   level's representatives written ahead (emit_regions.h) with its cells by vertex (vertex_cells.h)): whichever task comes first runs them, holding an exclusive lock on
+//   before, stream/cluster_shares.h), the store's block boxes (block_bounds.h), and every level's cells by
+//   vertex (vertex_cells.h)): whichever task comes first runs them, holding an exclusive lock on
 //   WORK/shard.lock (flock; taken before the work directory is opened, so that no task takes another's
 //   live scratch files for a dead process's); the others wait, then find their stamps and reuse them.
 //   `--shard-prepare` runs them alone (a scheduler's first job). They do not scale with N: they are what
-//   one machine runs before its emit stage, plus the representatives (which one machine's emit sums in
-//   its own passes unless a level is batched).
+//   one machine runs before its emit stage, plus the block boxes and the cells by vertex.
 // - A task's share: one run of the Morton codes (shard_bounds), the codes of the finest level's regions
 //   that hold an N-th of its cells (shard_regions); in every level, the regions whose code falls in it, a
 //   contiguous run (region order is octree Morton order, so whole subtrees but at its two ends). So a
 //   task's levels cover about the same place, and its passes read about the same blocks. The levels of
 //   fewer regions than tasks go whole to one task (shard_runs), which emits them in one pass.
-//   It emits them as the batched emit does (each batch with its halo, representatives
-//   read from the work directory), which gives every part the bytes it has in one machine's run
+//   It emits them as the batched emit does, each batch with its halo, forming the representatives of its
+//   own cells, its halo's and the ring beyond it from their quadrics (EmitOptions::own_representatives;
+//   no stage writes them ahead, so none is run once for all tasks), which gives every part the bytes it has
+//   in one machine's run
 //   (stream/emit_stage.h), and writes the parts, in region order, to OUTDIR/shards/task-I-lodL.parts;
 //   then OUTDIR/shards/task-I.json (last: its presence means the task is complete) with the manifest as
 //   the task saw it (its own counts), its stages, and the key of what it was made from.
 // - A task run again (resubmitted, or killed and rerun) removes its task-I.json and redoes its emit from
 //   the start, reusing the shared stages; its parts files are written under .partial names and renamed.
 //   Its passes read only the store's blocks whose boxes (written by the shared stages, block_bounds.h) come
-//   near its regions and their halos; building its levels' cluster maps still reads the whole weight index.
+//   near its cells, their halos and rings; its packed maps read every vertex's cells (vertex_cells.h).
 #pragma once
 
 #include <array>
@@ -170,12 +171,11 @@ struct ShardEmitInput {
   bool tiles = false;  // the run writes 3D Tiles: regions are cut with the tiles' side bounds, as one machine cuts them
 };
 
-// Writes every level's representatives and its cells by vertex (vertex_cells.h) to the work directory
-// (the tasks' emit reads both), unless a stamp there (shard-reps.json) says they were written for `key`.
-// Quadrics of the levels that fit together are summed in one pass over the input, whose packed map gives
-// the cells by vertex. Returns true when reused.
-bool write_shard_representatives(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress,
-                                 EmitScratch& scratch);
+// Writes every level's cells by vertex (vertex_cells.h) to the work directory (the tasks' packed maps),
+// unless a stamp there (shard-vertex-cells.json) says they were written for `key`. The representatives are
+// not written ahead: a task forms its own and its halo cells' in its pass A (EmitOptions::
+// own_representatives). Returns true when reused.
+bool write_shard_vertex_cells(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress);
 
 // Writes the store's block boxes to the work directory (stream/block_bounds.h), unless a stamp there
 // (block-bounds.json) says they were written for `key`. Returns true when reused.

@@ -1017,16 +1017,14 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         shard_input = {store_dir, canonical, prefix, &meta, grade.records, copts,
                        {so.representative, so.crease_degrees, true, false}, plan.stage_bytes, so.tile_triangles, sizes, cells, so.write_tiles};
         shard_input.options.work = &work, shard_input.options.chunk_bytes = options.chunk_bytes;
-        // Bounds first: the representatives leave each level's cell map in `scratch` for this process's
-        // emit, and the bounds pass's mapped positions would count on top of it.
         run_stage(&report.stages, "bounds", [&](StageStats& st) {
           st.reused = stream::write_shard_bounds(shard_input, {{"version", kStampVersion}, {"source", source_json(meta)}}, progress);
         });
-        run_stage(&report.stages, "representatives", [&](StageStats& st) {
+        run_stage(&report.stages, "vertex-cells", [&](StageStats& st) {
           ordered_json key = cluster_base;
           key["cells"] = cells;
           for (double c : sizes) key["cell_sizes"].push_back(exact(c));
-          st.reused = stream::write_shard_representatives(shard_input, key, progress, scratch);
+          st.reused = stream::write_shard_vertex_cells(shard_input, key, progress);
         });
         shard_lock.reset();
         if (so.shard_prepare) return;

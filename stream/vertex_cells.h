@@ -5,8 +5,7 @@
 // bit streams in weight order, readable only whole, so a task that built its group's packed map from them
 // decoded every record of the scene whatever its share (3.1 and 2.9 s for the two groups of one task of
 // eight on the 193 M-triangle city: a third of the task); from these files it reads the packed map in
-// vertex order, sequentially. They are written once by the shared stages, from the packed maps their
-// representatives pass builds anyway.
+// vertex order, sequentially. They are written once by the shared stages (write_vertex_cells).
 // (Looking the cells up in the mapped files instead of packing the map did not hold the memory cap: a
 // group of blocks whose primitives reach all over the vertex ids, as the 193 M-triangle city's 484 K
 // segments, stored after its triangles, do, maps every page of every level's file: a task of eight at
@@ -14,19 +13,12 @@
 //
 // Invariant: vertex-cells-L.u32[v] is the cell that the packed map of the emit stage (emit_stage.cpp)
 // gives v for level L, so a task that reads these emits the same bytes.
-// Memory: writing from a packed map holds a 4 MiB buffer; decoding (write_vertex_cells) one range of
-// vertices at 4 bytes each, as many as `budget` allows.
+// Memory: one range of vertices at 4 bytes each, as many as `budget` allows.
 #pragma once
 
-#include <algorithm>
 #include <cstdint>
 #include <string>
-#include <vector>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
-#include "io/file_writer.h"
 #include "stream/progress.h"
 
 namespace lodstream::stream {
@@ -35,26 +27,8 @@ inline constexpr uint32_t kNoCell = UINT32_MAX;
 
 std::string vertex_cells_path(const std::string& prefix, size_t level);
 
-// Writes level `level`'s file from `cell_of(v)` (kNoCell: none) for every stored vertex, in id order: the
-// emit stage's packed map of a level, once built (the representatives pass of the shared stages builds
-// it anyway, so the file costs one sequential write). Throws Failure(io_error).
-template <class CellOf>
-void write_vertex_cells_by(const std::string& prefix, size_t level, uint64_t vertices, CellOf&& cell_of) {
-  io::FileWriter out(vertex_cells_path(prefix, level), 4 << 20);
-  std::vector<uint32_t> buf(1 << 20);
-  for (uint64_t first = 0; first < vertices; first += buf.size()) {
-    const uint64_t n = std::min<uint64_t>(buf.size(), vertices - first);
-    tbb::parallel_for(tbb::blocked_range<uint64_t>(0, n, 1 << 14), [&](const tbb::blocked_range<uint64_t>& r) {
-      for (uint64_t i = r.begin(); i < r.end(); ++i) buf[i] = cell_of(first + i);
-    });
-    out.write(buf.data(), 4 * n);
-  }
-  out.commit();
-}
-
 // Writes level `level`'s file from the cluster stage's files under `prefix` (its cell map and the weight
-// index's order) and the weld map at `canonical_path` (empty: none), for a level whose packed map is not
-// built (center and mean representatives: no pass over the input). Throws Failure(io_error) on a map
+// index's order) and the weld map at `canonical_path` (empty: none). Throws Failure(io_error) on a map
 // that does not match `records` records of `cells` cells.
 void write_vertex_cells(const std::string& prefix, const std::string& canonical_path, uint64_t vertices, uint64_t records,
                         size_t level, uint64_t cells, uint64_t budget, Progress& progress);

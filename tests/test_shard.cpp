@@ -154,12 +154,12 @@ TEST(Shard, TasksInBatchesUnderASmallBudgetGiveTheSameBytes) {
   EXPECT_EQ(outputs(dir.file("small")), outputs(dir.file("one")));
 }
 
-// The tasks look their vertices' cells up in the vertex-cells files (stream/vertex_cells.h). Under quadric
-// representatives the shared stages write them from the packed maps their representatives pass builds;
-// under the others, by decoding the cluster maps. Both writers give the same bytes (here with ranges of
-// 4096 vertices, so that welded vertices find their canonical vertex's cell in an earlier range), and
-// tasks under center representatives give one machine's bytes.
-TEST(Shard, VertexCellsFromEitherWriterAgree) {
+// The tasks look their vertices' cells up in the vertex-cells files (stream/vertex_cells.h), which the
+// shared stages write by decoding the cluster maps. Written again in ranges of 4096 vertices (so that welded
+// vertices find their canonical vertex's cell in an earlier range) they hold the same bytes; and tasks under
+// center and mean representatives give one machine's bytes. No representative is written ahead: the tasks
+// form their own (EmitOptions::own_representatives).
+TEST(Shard, VertexCellsInRangesAgree) {
   TempDir dir;
   const Options o = shared_work(dir);
   SimplifyReport merged;
@@ -172,6 +172,7 @@ TEST(Shard, VertexCellsFromEitherWriterAgree) {
   stream::Progress progress{Options{}};
   for (size_t l = 0; l < merged.levels.size(); ++l) {
     SCOPED_TRACE("level " + std::to_string(l));
+    EXPECT_FALSE(std::filesystem::exists(stream::representatives_path(prefix, l)));
     const std::string path = stream::vertex_cells_path(prefix, l);
     const std::string from_map = slurp(path);
     const uint64_t vertices = from_map.size() / 4;
