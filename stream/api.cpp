@@ -9,6 +9,8 @@
 
 #include "core/status.h"
 #include "io/file_writer.h"
+#include "io/mapped_file.h"
+#include "io/reader.h"
 #include "lodstream/lodstream.h"
 #include "stream/disk_space.h"
 #include "stream/ingest.h"
@@ -24,6 +26,15 @@ using stream::guarded;
 using stream::run_stage;
 
 uint64_t peak_rss_bytes() { return stream::peak_rss_bytes(); }
+
+Result input_format(const std::string& path, std::string* format) {
+  return guarded([&] {
+    const io::MappedFile file(path);
+    const std::unique_ptr<io::Reader> reader = io::open_reader(file);
+    reader->open();
+    *format = reader->format();
+  });
+}
 
 Result info(const std::string& path, const Options& options, SceneInfo* out) {
   return guarded([&] {

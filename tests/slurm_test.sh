@@ -1,9 +1,11 @@
 #!/bin/bash
 # `lodstream slurm` on a one-node Slurm cluster started here (tools/slurm_local_cluster.sh: munged,
 # slurmctld and slurmd as root, in a temporary directory): the sample room and, with ../shared/data, a
-# 2 M-triangle city from make-scene.sh, simplified as 1, 3 and 4 tasks (ingest array job, prepare job,
-# array job, merge job; the 3 tasks' run in a fresh work directory, so that its prepare job joins the 3
-# ingest ranges into the scene store) must give every output file byte for byte as one machine's run (manifest.json: equal but for timings,
+# 2 M-triangle city from make-scene.sh, simplified as 1, 3 and 4 tasks (grade, cluster, prepare, task and
+# merge jobs; the 3 tasks' run with --ingest-ranges yes, in a fresh work directory, so that an ingest array
+# parses 3 byte ranges and the first grade share joins them into the scene store; the others with the
+# default, auto, which for these binary inputs submits no ingest array) must give every output file byte
+# for byte as one machine's run (manifest.json: equal but for timings,
 # peaks and the tasks' list); the tileset passes the 3D Tiles validator when it is installed; a task killed
 # with SIGKILL (LODSTREAM_TEST_KILL_AT, just before its summary) fails the run with 137, `lodstream merge`
 # then refuses naming it (exit 66), and `lodstream slurm resubmit` reruns it alone to the same bytes;
@@ -65,15 +67,22 @@ run_scene() {
   t1=$(date +%s.%N)
   echo "$name: one machine $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
   for n in 1 3 4; do
-    local out=$tmp/$name-$n w=$work
-    [ "$n" = 3 ] && w=$tmp/$name-work-ranges
+    local out=$tmp/$name-$n w=$work ranges=auto
+    # 3 tasks: the input parsed as 3 byte ranges (--ingest-ranges yes); else auto, which for these binary
+    # PLY inputs is no range array: the first grade share ingests the input as one machine does.
+    [ "$n" = 3 ] && w=$tmp/$name-work-ranges ranges=yes
     t0=$(date +%s.%N)
-    "$cli" slurm simplify "$scene" -o "$out" --work "$w" --shards "$n" --wait --no-space-check "$@" >"$tmp/$name-$n.log" 2>&1
+    "$cli" slurm simplify "$scene" -o "$out" --work "$w" --shards "$n" --wait --no-space-check --ingest-ranges "$ranges" "$@" \
+      >"$tmp/$name-$n.log" 2>&1
     rc=$?
     t1=$(date +%s.%N)
     echo "$name: $n task(s) through Slurm: exit $rc, $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
     [ $rc -eq 0 ] || { fail "$name --shards $n: exit $rc"; cat "$tmp/$name-$n.log" "$out"/slurm/logs/* 2>/dev/null | tail -30; continue; }
     same_outputs "$one" "$out"
+    if [ "$n" = 4 ]; then
+      [ -e "$out/slurm/ingest.sbatch" ] && fail "$name: --ingest-ranges auto wrote an ingest array for a binary input"
+      grep -q "^ingest  job" "$tmp/$name-$n.log" && fail "$name: --ingest-ranges auto submitted an ingest array for a binary input"
+    fi
     if [ "$n" = 3 ]; then
       for r in 0 1 2; do [ "$(cat "$out/slurm/status/ingest-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: ingest range $r did not finish"; done
       ls "$w"/ingest-ranges/*.seg >/dev/null 2>&1 && fail "$name: the prepare job did not join the ingest ranges"
@@ -134,7 +143,7 @@ echo "killed grade and cluster shares: run exit $rc, a cluster share graded shar
 # An ingest range killed just before its segment is complete, in a fresh work directory.
 out=$tmp/room-kill-ingest
 LODSTREAM_TEST_KILL_AT=range-1-of-3.seg "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill" --shards 3 --wait \
-  --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/kill-ingest.log" 2>&1
+  --no-space-check --ingest-ranges yes --tiles --tile-triangles 10000 --obj >"$tmp/kill-ingest.log" 2>&1
 rc=$?
 [ $rc -eq 137 ] || fail "an ingest range killed with SIGKILL: the run exited $rc, not 137"
 grep -q "ingest range 1 failed with exit 137" "$tmp/kill-ingest.log" || fail "the run does not name the killed range: $(cat "$tmp/kill-ingest.log")"

@@ -123,6 +123,10 @@ struct SceneInfo {
 // Ingests `path` into the scene store of the work directory and reports its statistics.
 Result info(const std::string& path, const Options& options, SceneInfo* out);
 
+// The format of the input file `path` as info() names it (SceneInfo::format), from its header alone (no
+// ingest). Fails as ingest would: no_input (cannot open), usage (unrecognised), bad_data (a broken header).
+Result input_format(const std::string& path, std::string* format);
+
 // ---- simplify: the LOD pipeline (grade -> sort -> cluster -> emit -> write) ----
 
 enum class Grading { lowtan, rossignac };           // cos(θ/2)·Lmax (Low & Tan) or Lmax/θ (Rossignac & Borrel)
