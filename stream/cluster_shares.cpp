@@ -341,41 +341,70 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
       if (in.bounds[3 + a] - in.bounds[a] > in.bounds[3 + plan.axis] - in.bounds[plan.axis]) plan.axis = a;
     can_split = in.bounds[3 + plan.axis] > in.bounds[plan.axis];
   }
-  double min_width = 0;
+  // The slabs: `slabs` parts of equal vertex counts across the axis, as count - 1 cuts; with fewer slabs than
+  // shares, the whole levels' share gets an empty slab [c, c) (a repeated cut) and clusters its whole levels
+  // only: on the 193 M-triangle city at 8 shares its slab of the split levels had added 13 s to the whole
+  // levels' 46 s, where the other shares took 12-15 s, so the array ended on it.
+  std::vector<uint64_t> hist;
+  double lo = 0, hi = 0;
   if (can_split) {
-    const double lo = in.bounds[plan.axis], hi = in.bounds[3 + plan.axis];
-    // The cuts: bin edges where the store's vertices divide into `count` equal parts.
-    std::vector<uint64_t> hist(kBins, 0);
+    lo = in.bounds[plan.axis], hi = in.bounds[3 + plan.axis];
+    hist.assign(kBins, 0);
     for_each_position(in.index, progress, [&](uint64_t, const double* p) {
       const double t = (p[plan.axis] - lo) / (hi - lo) * kBins;
       ++hist[static_cast<size_t>(std::clamp(t, 0.0, static_cast<double>(kBins - 1)))];
     });
+  }
+  const unsigned whole = std::min(1u, count - 1);  // the share of the whole levels
+  // Cuts for `slabs` slabs, the empty one (if slabs < count) at share `whole`; and the narrowest slab's width.
+  auto cut = [&](unsigned slabs, double* min_width) {
+    std::vector<double> cuts;
     uint64_t seen = 0;
     int bin = 0;
-    for (unsigned k = 1; k < count; ++k) {
-      const uint64_t want = (in.index.vertices * k + count - 1) / count;
+    for (unsigned k = 1; k < slabs; ++k) {
+      const uint64_t want = (in.index.vertices * k + slabs - 1) / slabs;
       while (bin < kBins && seen + hist[static_cast<size_t>(bin)] < want) seen += hist[static_cast<size_t>(bin++)];
       // The edge after the bin that reaches the k-th part.
-      plan.cuts.push_back(lo + (hi - lo) * (std::min(bin + 1, kBins)) / kBins);
+      cuts.push_back(lo + (hi - lo) * (std::min(bin + 1, kBins)) / kBins);
     }
-    for (size_t k = 1; k < plan.cuts.size(); ++k) plan.cuts[k] = std::max(plan.cuts[k], plan.cuts[k - 1]);
-    min_width = kInf;
+    for (size_t k = 1; k < cuts.size(); ++k) cuts[k] = std::max(cuts[k], cuts[k - 1]);
+    if (slabs < count) cuts.insert(cuts.begin() + whole, cuts.empty() ? lo : cuts[whole == 0 ? 0 : whole - 1]);
+    ClusterShares p;
+    p.count = count, p.cuts = cuts;
+    *min_width = kInf;
     for (unsigned s = 0; s < count; ++s)
-      min_width = std::min(min_width, std::min(plan.hi(s), hi) - std::max(plan.lo(s), lo));
-  } else {
-    plan.cuts.assign(count ? count - 1 : 0, 0.0);
-  }
+      if (slabs == count || s != whole) *min_width = std::min(*min_width, std::min(p.hi(s), hi) - std::max(p.lo(s), lo));
+    return cuts;
+  };
   // Whole levels, all by one share: one cluster_levels pass over the index for all of them, whose cost is
   // mostly fetching the positions by id, shared by its levels (193 M-triangle city, 8 shares at --memory
   // 1G: 35 s for a whole level in a share of its own, 11.5 s for a share of the finest level's). It is
   // share 1, the longest share started first: the first share to start (share 0, as schedulers start an
   // array) runs the stages before the clustering under the lock while share 1 waits for it, then both
   // start, and on fewer nodes than shares the rest queue behind them.
-  for (size_t l = 0; l < levels; ++l) {
-    const bool fine = in.fine && in.fine->sizes.at(l) > 0;
-    if (can_split && !fine && in.sizes[l] * kSplitCells <= min_width) continue;
-    plan.whole_share[l] = static_cast<int>(std::min(1u, count - 1));
+  auto whole_levels = [&](double min_width) {
+    std::vector<int> w(levels, -1);
+    for (size_t l = 0; l < levels; ++l) {
+      const bool fine = in.fine && in.fine->sizes.at(l) > 0;
+      if (can_split && !fine && in.sizes[l] * kSplitCells <= min_width) continue;
+      w[l] = static_cast<int>(whole);
+    }
+    return w;
+  };
+  if (!can_split) {
+    plan.cuts.assign(count ? count - 1 : 0, 0.0);
+    plan.whole_share = whole_levels(0);
+    return plan;
   }
+  // With N - 1 slabs first (N >= 3): kept when some level is whole, else N slabs.
+  double min_width = 0;
+  if (count >= 3) {
+    plan.cuts = cut(count - 1, &min_width);
+    plan.whole_share = whole_levels(min_width);
+    if (std::any_of(plan.whole_share.begin(), plan.whole_share.end(), [](int w) { return w >= 0; })) return plan;
+  }
+  plan.cuts = cut(count, &min_width);
+  plan.whole_share = whole_levels(min_width);
   return plan;
 }
 
@@ -449,6 +478,20 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
   std::vector<unsigned> tries;
   for (size_t l = 0; l < plan.whole_share.size(); ++l)
     if (plan.whole_share[l] < 0) split.push_back(l), halo.push_back(in.first_halo_cells * in.sizes[l]), tries.push_back(0);
+  if (!(plan.lo(index) < plan.hi(index))) {
+    // An empty slab (the whole levels' share, plan_cluster_shares): no record of a split level is its own,
+    // and its decision files are empty.
+    for (size_t l : split) {
+      io::FileWriter dec(dec_path(in.prefix, index, l), 1 << 12);
+      dec.commit();
+      if (in.info == CellInfoKind::center) {
+        io::FileWriter ctr(ctr_path(in.prefix, index, l), 1 << 12);
+        ctr.commit();
+      }
+      figures.push_back({{"level", l}, {"halo_cells", 0}, {"tries", 0}, {"held", 0}, {"own", 0}});
+    }
+    return figures;
+  }
   Held held;
   std::atomic<uint64_t> clusterers{0};  // the running levels' RegionClusterers, with their growth headroom
   double selected = -1;  // the halo of the selection

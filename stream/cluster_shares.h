@@ -16,6 +16,8 @@
 //   grids, not handled here), and every slab is at least kSplitCells cells wide; then each share clusters
 //   its own vertices. The other levels are clustered whole by share 1 (share 0 if N = 1), in one cluster_levels pass
 //   (exact by construction; their cost is mostly fetching the positions by id, which one pass shares).
+//   With N >= 3 and such levels, the slabs are N - 1 and share 1's is empty (a repeated cut): it clusters
+//   the whole levels only, and its split levels' decision files are empty.
 // The share (run_cluster_share), per split level:
 // 1. Select: the vertex ids within the largest halo of the slab (one sequential read of the positions),
 //    then the records of the weight index that hold them (one sequential read of order.u32) and their

@@ -230,6 +230,14 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
         EXPECT_TRUE(std::filesystem::exists(stream::cluster_share_stamp(work + "/", i)));
         EXPECT_FALSE(std::filesystem::exists(work + "/cluster.json")) << "a share does not stamp the whole stage";
       }
+      if (n >= 3) {  // the whole levels' share (share 1) has an empty slab: a repeated cut (plan_cluster_shares)
+        const nlohmann::json plan = nlohmann::json::parse(slurp(stream::cluster_shares_dir(work + "/") + "plan.json")).at("plan");
+        bool any_whole = false;
+        for (int w : plan.at("whole_share")) any_whole = any_whole || w == 1;
+        EXPECT_TRUE(any_whole) << "the room's coarsest levels are too coarse to split";
+        EXPECT_EQ(plan.at("cuts").at(0), plan.at("cuts").at(1));
+        EXPECT_NE(plan.at("cuts").at(1), plan.at("cuts").at(2));
+      }
       SimplifyOptions prepare = room_options(out);
       prepare.representative = rep, prepare.shard_prepare = true, prepare.cluster_shares = n;
       SimplifyReport pr;
