@@ -268,10 +268,12 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
       share[l] += cuts[l].cells[r], largest[l] = std::max(largest[l], cuts[l].cells[r]);
   }
   // Memory of a batched level (as plan_emit_level counts it): pass A's tables for the batch's cells and its
-  // halo (half as many again), with their quadrics (the task sums its cells' own), its per-cell tables (and
-  // the quadrics' index, 4 bytes a cell) and its share of the blocks in flight; and the group's packed
-  // cluster map (read from the vertex-cells files, stream/vertex_cells.h).
-  const uint64_t per_cell = emit_level_bytes(1, 0, in.options) * 3 / 2;
+  // halo (half as many again), with their quadrics (the task sums its cells' own), the quadrics of the ring
+  // beyond the halo (pass Q: half as many again), its per-cell tables (and the quadrics' index, 4 bytes a
+  // cell) and its share of the blocks in flight; and the group's packed cluster map (read from the
+  // vertex-cells files, stream/vertex_cells.h).
+  const bool quadrics = in.options.representative == Representative::quadric;
+  const uint64_t per_cell = emit_level_bytes(1, 0, in.options) * 3 / 2 + (quadrics ? sizeof(core::Quadric) / 2 : 0);
   const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), in.options) + emit_corner_bytes(in.budget);
   auto level_bytes = [&](size_t l, uint64_t batch) { return (kLevelBytesPerCell + 4) * in.cells[l] + in_flight + per_cell * batch; };
   EmitOptions emit = in.options;  // its thickness passes hold what in_flight counts for them
