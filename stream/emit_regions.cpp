@@ -87,10 +87,17 @@ std::vector<uint32_t> load_region_of(const std::string& prefix, size_t level, ui
 
 void for_cell_anchors(const std::string& prefix, size_t level, uint64_t cells, Representative representative, bool single_precision,
                       const std::function<bool(uint64_t)>& wanted, const std::function<void(uint64_t, const double*)>& visit) {
-  for_cell_infos(prefix, level, cells, 0, cells, representative, single_precision, [&](uint64_t first, std::span<const CellInfo> infos) {
-    for (size_t i = 0; i < infos.size(); ++i)
-      if (wanted(first + i)) visit(first + i, cell_anchor(infos[i], representative));
-  });
+  // Only the wanted cells are decoded (a task's batch wants a few of a level's cells, three times a group).
+  const CellInfoReader f(cell_info_path(prefix, level), cells, cell_info_kind(representative), single_precision);
+  for (uint64_t first = 0; first < cells; first += kWindowCells) {
+    const uint64_t end = std::min(cells, first + kWindowCells);
+    io::Window w;
+    for (uint64_t c = first; c < end; ++c) {
+      if (!wanted(c)) continue;
+      if (!w.data()) w = f.map(first, end);
+      visit(c, cell_anchor(f.get(w, c - first), representative));
+    }
+  }
 }
 
 std::vector<std::pair<uint32_t, uint32_t>> region_batches(const LevelCut& cut, uint64_t batch_cells) {

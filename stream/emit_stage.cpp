@@ -261,6 +261,28 @@ uint64_t quadric_index(const LevelState& L, uint32_t c) {
   return L.quadric_slot.empty() ? c - L.quadric_base : L.quadric_slot[c];
 }
 
+// A cell of the batch's own regions (the others of a batched level are its halo, its ring, or none of its).
+bool in_batch_regions(const LevelState& L, uint64_t c) {
+  return L.in.region_of[c] >= L.in.first_region && L.in.region_of[c] < L.in.end_region;
+}
+
+// Adds triangle quadric q to cell c's sum in the block (passes A and Q): a block's sums are formed in store
+// order, and merged in block order (merge_quadrics), so a cell's quadric does not depend on the threads.
+void add_quadric(BlockOut& o, Scratch& s, uint32_t c, const core::Quadric& q) {
+  if (c == s.last_cell) {
+    o.quadrics[s.last_slot].add(q);
+    return;
+  }
+  const auto [slot, fresh] = s.cells.insert({c}, static_cast<uint32_t>(o.quadrics.size()));
+  if (fresh) o.quadric_cells.push_back(c), o.quadrics.push_back(q);
+  else o.quadrics[slot].add(q);
+  s.last_cell = c, s.last_slot = slot;
+}
+
+void merge_quadrics(LevelState& L, const BlockOut& o) {
+  for (size_t i = 0; i < o.quadric_cells.size(); ++i) L.quadrics[quadric_index(L, o.quadric_cells[i])].add(o.quadrics[i]);
+}
+
 // A point's size (core/mesh.h) is measured as an edge's thickness is: kept point p joins passes B and C as
 // the edge {c, c} with id E + p, after the E kept edges. Every corner of a primitive that collapsed to it
 // falls in its cell, hence in A; pass B collects its distinct corners (by canonical id, as an edge's), pass C
@@ -307,7 +329,7 @@ void find_halos(std::vector<LevelState>& levels, RunBlocks& run_blocks, RecordOf
     if (!L.in.batched) continue;
     L.role.assign(L.in.cells, 0);
     for (uint64_t c = 0; c < L.in.cells; ++c)
-      if (L.in.region_of[c] >= L.in.first_region && L.in.region_of[c] < L.in.end_region) L.role[c] = kOwned;
+      if (in_batch_regions(L, c)) L.role[c] = kOwned;
     // A routed batch: its halo was found while routing (the same rule, over the whole input).
     if (L.in.routes && L.in.routes->halo.size() == L.in.cells) {
       const uint8_t bit = static_cast<uint8_t>(1u << L.in.route_bit);
@@ -400,10 +422,10 @@ void load_representatives(const LevelState& L, const std::string& prefix, const 
       }
       if (!w.data()) w = table->map(first, end);
       const CellInfo ci = table->get(w, c - first);
-      if (L.sums_quadrics && quadric_index(L, static_cast<uint32_t>(c)) >= L.quadrics.size())
-        fail(Status::internal, "emit: a cell the batch needs is neither its own nor in its halo");
-      cell_representative(ci, L.sums_quadrics ? &L.quadrics[quadric_index(L, static_cast<uint32_t>(c))] : nullptr, options.representative, cluster,
-                          L.in.cell_size, &s.rep[3 * slot]);
+      const uint64_t q = L.sums_quadrics ? quadric_index(L, static_cast<uint32_t>(c)) : 0;
+      if (L.sums_quadrics && q >= L.quadrics.size()) fail(Status::internal, "emit: a cell the batch needs has no quadric");
+      cell_representative(ci, L.sums_quadrics ? &L.quadrics[q] : nullptr, options.representative, cluster, L.in.cell_size,
+                          &s.rep[3 * slot]);
     }
   });
 }
@@ -951,12 +973,9 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   for (const LevelState& L : levels) bounded = bounded && L.in.batched && !L.in.routes;
   std::unique_ptr<ReachGrid> reach;
   const core::SceneCube cube = scene_cube_of(meta);
-  auto own_cell = [](const LevelState& L, uint64_t c) {
-    return L.in.region_of[c] >= L.in.first_region && L.in.region_of[c] < L.in.end_region;
-  };
   if (bounded) {
     reach = std::make_unique<ReachGrid>(cube);
-    mark_reach(levels, prefix, options.representative, meta.single_precision, own_cell, *reach);
+    mark_reach(levels, prefix, options.representative, meta.single_precision, in_batch_regions, *reach);
     blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
   }
   // Quadrics are summed for the levels that form their own representatives: a batched level reads them
@@ -1055,7 +1074,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   }
   if (bounded) {
     mark_reach(levels, prefix, options.representative, meta.single_precision,
-               [&](const LevelState& L, uint64_t c) { return own_cell(L, c) || L.role[c] == kHalo; }, *reach);
+               [](const LevelState& L, uint64_t c) { return L.role[c] != 0; }, *reach);
     blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
   }
   auto classify = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
@@ -1104,14 +1123,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
               if ((k > 0 && c[k] == c[0]) || (k > 1 && c[k] == c[1])) continue;
               if (options.representatives_only && (c[k] < L.in.first_cell || c[k] >= L.in.end_cell)) continue;
               if (L.in.batched && !L.role[c[k]]) continue;  // neither its own nor in its halo
-              if (c[k] == s.last_cell) {
-                o.quadrics[s.last_slot].add(q);
-                continue;
-              }
-              const auto [slot, fresh] = s.cells.insert({c[k]}, static_cast<uint32_t>(o.quadrics.size()));
-              if (fresh) o.quadric_cells.push_back(c[k]), o.quadrics.push_back(q);
-              else o.quadrics[slot].add(q);
-              s.last_cell = c[k], s.last_slot = slot;
+              add_quadric(o, s, c[k], q);
             }
           }
           if (options.representatives_only) continue;
@@ -1174,7 +1186,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
         L.points.push_back(o.points[i]);
         if (materials) L.point_materials.push_back(o.point_materials[i]);
       }
-      for (size_t i = 0; i < o.quadric_cells.size(); ++i) L.quadrics[quadric_index(L, o.quadric_cells[i])].add(o.quadrics[i]);
+      merge_quadrics(L, o);
     }
   });
   if (options.representatives_only) {
@@ -1209,11 +1221,12 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     L.quadrics.resize(n);
   }
   if (any_ring) {
-    auto ring_cell = [](const LevelState& L, uint64_t c) { return !L.quadric_slot.empty() && !L.role[c] && L.quadric_slot[c] != UINT32_MAX; };
+    auto ring_cell = [](const LevelState& L, uint64_t c) { return !L.role[c] && L.quadric_slot[c] != UINT32_MAX; };
     const std::vector<Block> classified = blocks;
     if (bounded) {
       reach = std::make_unique<ReachGrid>(cube);
-      mark_reach(levels, prefix, options.representative, meta.single_precision, ring_cell, *reach);
+      mark_reach(levels, prefix, options.representative, meta.single_precision,
+                 [&](const LevelState& L, uint64_t c) { return !L.quadric_slot.empty() && ring_cell(L, c); }, *reach);
       blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
     }
     run_blocks(
@@ -1237,20 +1250,13 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
                   q.add_triangle(p[0], p[1], p[2]);
                   formed = true;
                 }
-                BlockOut& o = outs_l[l];
-                Scratch& s = scratch_l[l];
-                const auto [slot, fresh] = s.cells.insert({c[k]}, static_cast<uint32_t>(o.quadrics.size()));
-                if (fresh) o.quadric_cells.push_back(c[k]), o.quadrics.push_back(q);
-                else o.quadrics[slot].add(q);
+                add_quadric(outs_l[l], scratch_l[l], c[k], q);
               }
             }
           }
         },
         [&](BlockOut* outs_l) {
-          for (size_t l = 0; l < nl; ++l) {
-            const BlockOut& o = outs_l[l];
-            for (size_t i = 0; i < o.quadric_cells.size(); ++i) levels[l].quadrics[quadric_index(levels[l], o.quadric_cells[i])].add(o.quadrics[i]);
-          }
+          for (size_t l = 0; l < nl; ++l) merge_quadrics(levels[l], outs_l[l]);
         });
     blocks = classified;
   }

@@ -18,7 +18,6 @@
 #include "io/file_writer.h"
 #include "stream/kill_point.h"
 #include "stream/tiles.h"
-#include "stream/vertex_cells.h"
 
 namespace lodstream::stream {
 
@@ -197,46 +196,6 @@ bool PartsReader::next(StoredPart* out) {
   array(m.triangle_materials), array(m.edge_materials), array(m.point_materials), array(m.colors), array(part.owned_colors);
   array(m.point_size);
   return true;
-}
-
-bool write_shard_vertex_cells(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress) {
-  const std::string stamp = in.prefix + "shard-vertex-cells.json";
-  std::error_code ec;
-  bool reused = std::filesystem::exists(stamp, ec);
-  if (reused) {
-    try {
-      reused = nlohmann::ordered_json::parse(io::read_small_file(stamp)) == key;
-    } catch (const std::exception&) {
-      reused = false;
-    }
-  }
-  for (size_t l = 0; reused && l < in.cells.size(); ++l) reused = std::filesystem::exists(vertex_cells_path(in.prefix, l), ec);
-  if (reused) return true;
-  std::filesystem::remove(stamp, ec);
-  for (size_t l = 0; l < in.cells.size(); ++l) {
-    std::filesystem::remove(vertex_cells_path(in.prefix, l), ec);
-    std::filesystem::remove(representatives_path(in.prefix, l), ec);  // written ahead by older versions
-  }
-  std::filesystem::remove(in.prefix + "shard-reps.json", ec);
-  for (size_t l = 0; l < in.cells.size(); ++l)
-    write_vertex_cells(in.prefix, in.canonical, in.meta->vertices, in.records, l, in.cells[l], in.budget, progress);
-  io::write_file_atomic(stamp, key.dump(1) + "\n");
-  return false;
-}
-
-bool write_shard_bounds(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress) {
-  const std::string stamp = in.prefix + "block-bounds.json", path = block_bounds_path(in.prefix);
-  std::error_code ec;
-  if (std::filesystem::exists(stamp, ec) && std::filesystem::exists(path, ec)) {
-    try {
-      if (nlohmann::ordered_json::parse(io::read_small_file(stamp)) == key) return true;
-    } catch (const std::exception&) {
-    }
-  }
-  std::filesystem::remove(stamp, ec);
-  write_block_bounds(in.store_dir, *in.meta, path, progress);
-  io::write_file_atomic(stamp, key.dump(1) + "\n");
-  return false;
 }
 
 std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, unsigned count, const std::string& output_dir,

@@ -171,16 +171,6 @@ struct ShardEmitInput {
   bool tiles = false;  // the run writes 3D Tiles: regions are cut with the tiles' side bounds, as one machine cuts them
 };
 
-// Writes every level's cells by vertex (vertex_cells.h) to the work directory (the tasks' packed maps),
-// unless a stamp there (shard-vertex-cells.json) says they were written for `key`. The representatives are
-// not written ahead: a task forms its own and its halo cells' in its pass A (EmitOptions::
-// own_representatives). Returns true when reused.
-bool write_shard_vertex_cells(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress);
-
-// Writes the store's block boxes to the work directory (stream/block_bounds.h), unless a stamp there
-// (block-bounds.json) says they were written for `key`. Returns true when reused.
-bool write_shard_bounds(const ShardEmitInput& in, const nlohmann::ordered_json& key, Progress& progress);
-
 // Emits task `index` of `count`'s regions of every level and writes their parts (see above). Returns the
 // task's counts per level; `primitives_read`, when given, is set to the input primitives its passes read;
 // `runs`, when given, to its run of each level {first, end, regions in the level} (shard_runs).

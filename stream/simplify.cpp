@@ -41,7 +41,9 @@
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/ingest_range.h"
+#include "stream/block_bounds.h"
 #include "stream/shard.h"
+#include "stream/vertex_cells.h"
 #include "stream/tiles.h"
 #include "stream/work_dir.h"
 
@@ -320,6 +322,18 @@ void write_stamp(const std::string& path, const ordered_json& key, const std::ve
                  const ordered_json& value) {
   stream::kill_point(std::filesystem::path(path).filename().string());
   io::write_file_atomic(path, ordered_json{{"key", key}, {"files", files}, {"value", value}}.dump(1) + "\n");
+}
+
+// A stage whose outputs are `files`: reused when its stamp holds `key` and the files exist, else run and
+// stamped. Returns true when reused.
+template <class Run>
+bool stamped_stage(const std::string& stamp, const ordered_json& key, const std::vector<std::string>& files, Run&& run) {
+  ordered_json v;
+  if (stamp_matches(stamp, key, &v)) return true;
+  std::filesystem::remove(stamp);
+  run();
+  write_stamp(stamp, key, files, nullptr);
+  return false;
 }
 
 // One share of a stage run as N shares (grading, clustering): under its own lock in `dir` (one process a
@@ -1017,14 +1031,24 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         shard_input = {store_dir, canonical, prefix, &meta, grade.records, copts,
                        {so.representative, so.crease_degrees, true, false}, plan.stage_bytes, so.tile_triangles, sizes, cells, so.write_tiles};
         shard_input.options.work = &work, shard_input.options.chunk_bytes = options.chunk_bytes;
+        // The store's block boxes (stream/block_bounds.h) and every level's cells by vertex
+        // (stream/vertex_cells.h: the tasks' packed maps). No representative is written ahead: a task forms
+        // its cells' own (stream::EmitOptions::own_representatives).
         run_stage(&report.stages, "bounds", [&](StageStats& st) {
-          st.reused = stream::write_shard_bounds(shard_input, {{"version", kStampVersion}, {"source", source_json(meta)}}, progress);
+          const std::string path = stream::block_bounds_path(prefix);
+          st.reused = stamped_stage(work.file("block-bounds.json"), {{"version", kStampVersion}, {"source", source_json(meta)}},
+                                    {path}, [&] { stream::write_block_bounds(store_dir, meta, path, progress); });
         });
         run_stage(&report.stages, "vertex-cells", [&](StageStats& st) {
           ordered_json key = cluster_base;
           key["cells"] = cells;
           for (double c : sizes) key["cell_sizes"].push_back(exact(c));
-          st.reused = stream::write_shard_vertex_cells(shard_input, key, progress);
+          std::vector<std::string> files;
+          for (size_t l = 0; l < cells.size(); ++l) files.push_back(stream::vertex_cells_path(prefix, l));
+          st.reused = stamped_stage(work.file("shard-vertex-cells.json"), key, files, [&] {
+            for (size_t l = 0; l < cells.size(); ++l)
+              stream::write_vertex_cells(prefix, canonical, meta.vertices, grade.records, l, cells[l], plan.stage_bytes, progress);
+          });
         });
         shard_lock.reset();
         if (so.shard_prepare) return;

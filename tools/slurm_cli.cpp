@@ -1,12 +1,13 @@
 // `lodstream slurm`: runs a sharded simplify (stream/shard.h) or report (stream/report_shard.h) on a Slurm
 // cluster. It only writes sbatch
-// scripts (readable, resubmittable by hand) under OUT/slurm/ and submits them with sbatch: an ingest
-// array job of N range tasks (each parses an N-th of the input's bytes, a report's of every original's,
-// stream/ingest_range.h); for simplify, a grade array job of N shares (the first joins the ranges and
-// welds, under the work directory's lock, then each grades and sorts its share: stream/grade_shares.h)
+// scripts (readable, resubmittable by hand) under OUT/slurm/ and submits them with sbatch: for a text
+// input (--ingest-ranges, ranges_pay), an ingest array job of N range tasks (each parses an N-th of the
+// input's bytes, a report's of every original's, stream/ingest_range.h); for simplify, a grade array job of
+// N shares (the first joins the ranges, or ingests the input, and welds, under the work directory's lock,
+// then each grades and sorts its share: stream/grade_shares.h)
 // and a cluster array job of N shares (the first merges the grading shares, under the lock, then each
 // clusters its share: stream/cluster_shares.h); then a prepare job (the shared stages: for simplify the
-// clustering shares' merge and the representatives, for a report the join alone), an array job of N tasks
+// clustering shares' merge, the block boxes and the cells by vertex, for a report the join alone), an array job of N tasks
 // after it (--dependency=afterok), and the merge after the array. The cluster array and the prepare job
 // wait for the array before them to end, not to succeed (afterany): the share that did not finish is run
 // by the next step. The scheduler is Slurm's; lodstream adds none of its own. Each script records its command's exit
