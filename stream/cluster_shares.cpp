@@ -342,9 +342,9 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
     can_split = in.bounds[3 + plan.axis] > in.bounds[plan.axis];
   }
   // The slabs: `slabs` parts of equal vertex counts across the axis, as count - 1 cuts; with fewer slabs than
-  // shares, the whole levels' share gets an empty slab [c, c) (a repeated cut) and clusters its whole levels
-  // only: on the 193 M-triangle city at 8 shares its slab of the split levels had added 13 s to the whole
-  // levels' 46 s, where the other shares took 12-15 s, so the array ended on it.
+  // shares, the whole levels' shares (1 to count - slabs) get empty slabs [c, c) (repeated cuts) and cluster
+  // their whole levels only: on the 193 M-triangle city at 8 shares a slab of the split levels had added 13 s
+  // to a whole levels' share's 46 s, where the other shares took 12-15 s, so the array ended on it.
   std::vector<uint64_t> hist;
   double lo = 0, hi = 0;
   if (can_split) {
@@ -355,8 +355,8 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
       ++hist[static_cast<size_t>(std::clamp(t, 0.0, static_cast<double>(kBins - 1)))];
     });
   }
-  const unsigned whole = std::min(1u, count - 1);  // the share of the whole levels
-  // Cuts for `slabs` slabs, the empty one (if slabs < count) at share `whole`; and the narrowest slab's width.
+  // Cuts for `slabs` slabs (at least 2 when slabs < count), the empty ones after share 0's; and the narrowest
+  // non-empty slab's width.
   auto cut = [&](unsigned slabs, double* min_width) {
     std::vector<double> cuts;
     uint64_t seen = 0;
@@ -368,43 +368,58 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
       cuts.push_back(lo + (hi - lo) * (std::min(bin + 1, kBins)) / kBins);
     }
     for (size_t k = 1; k < cuts.size(); ++k) cuts[k] = std::max(cuts[k], cuts[k - 1]);
-    if (slabs < count) cuts.insert(cuts.begin() + whole, cuts.empty() ? lo : cuts[whole == 0 ? 0 : whole - 1]);
+    if (slabs < count) cuts.insert(cuts.begin() + 1, count - slabs, cuts.front());
     ClusterShares p;
     p.count = count, p.cuts = cuts;
     *min_width = kInf;
     for (unsigned s = 0; s < count; ++s)
-      if (slabs == count || s != whole) *min_width = std::min(*min_width, std::min(p.hi(s), hi) - std::max(p.lo(s), lo));
+      if (s == 0 || s > count - slabs) *min_width = std::min(*min_width, std::min(p.hi(s), hi) - std::max(p.lo(s), lo));
     return cuts;
   };
-  // Whole levels, all by one share: one cluster_levels pass over the index for all of them, whose cost is
-  // mostly fetching the positions by id, shared by its levels (193 M-triangle city, 8 shares at --memory
-  // 1G: 35 s for a whole level in a share of its own, 11.5 s for a share of the finest level's). It is
-  // share 1, the longest share started first: the first share to start (share 0, as schedulers start an
-  // array) runs the stages before the clustering under the lock while share 1 waits for it, then both
-  // start, and on fewer nodes than shares the rest queue behind them.
+  // The levels too coarse to split at slabs of min_width (all of them when nothing splits).
   auto whole_levels = [&](double min_width) {
-    std::vector<int> w(levels, -1);
+    std::vector<size_t> w;
     for (size_t l = 0; l < levels; ++l) {
       const bool fine = in.fine && in.fine->sizes.at(l) > 0;
       if (can_split && !fine && in.sizes[l] * kSplitCells <= min_width) continue;
-      w[l] = static_cast<int>(whole);
+      w.push_back(l);
     }
     return w;
   };
+  // The whole levels to `shares` shares from share `first` on, in level order, as even runs: a share's levels
+  // run in one cluster_levels pass over the index, whose cost is mostly fetching every position by id (the
+  // column read once per batch), shared by its levels; a level in a share of its own costs that fetch again,
+  // but the shares run at once (193 M-triangle city, 8 shares at --memory 1G: levels 2-4 in one share
+  // 44.6 s).
+  auto assign = [&](const std::vector<size_t>& whole, unsigned first, unsigned shares) {
+    plan.whole_share.assign(levels, -1);
+    for (size_t j = 0; j < whole.size(); ++j)
+      plan.whole_share[whole[j]] = static_cast<int>(first + j * shares / whole.size());
+  };
+  double min_width = 0;
   if (!can_split) {
     plan.cuts.assign(count ? count - 1 : 0, 0.0);
-    plan.whole_share = whole_levels(0);
+    assign(whole_levels(0), std::min(1u, count - 1), 1);
     return plan;
   }
-  // With N - 1 slabs first (N >= 3): kept when some level is whole, else N slabs.
-  double min_width = 0;
+  // With N >= 3 and whole levels, the whole levels go to shares 1 to K of their own (no slab), K as many as
+  // there are whole levels while at least two slabs remain: fewer slabs are wider, so fewer levels may be
+  // whole, and K steps down until every one of the K shares has a level. Shares 1 to K are the first that a
+  // scheduler starts after share 0 (which runs the stages before the clustering under the lock while the
+  // others wait for it), so the longest shares do not run alone at the end.
   if (count >= 3) {
-    plan.cuts = cut(count - 1, &min_width);
-    plan.whole_share = whole_levels(min_width);
-    if (std::any_of(plan.whole_share.begin(), plan.whole_share.end(), [](int w) { return w >= 0; })) return plan;
+    const size_t most = whole_levels((cut(count - 1, &min_width), min_width)).size();
+    for (unsigned k = static_cast<unsigned>(std::min<size_t>(most, count - 2)); k >= 1; --k) {
+      plan.cuts = cut(count - k, &min_width);
+      const std::vector<size_t> whole = whole_levels(min_width);
+      if (whole.size() >= k) {
+        assign(whole, 1, k);
+        return plan;
+      }
+    }
   }
   plan.cuts = cut(count, &min_width);
-  plan.whole_share = whole_levels(min_width);
+  assign(whole_levels(min_width), std::min(1u, count - 1), 1);
   return plan;
 }
 

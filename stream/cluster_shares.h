@@ -10,14 +10,16 @@
 // The plan (plan_cluster_shares; made once a run, by the first process that needs it, under the work
 // directory's lock, and read by the others from cluster-shares/plan.json: shared_cluster_plan):
 // - Regions: slabs across the longest axis of the scene's bounds, cut where the store's vertices divide
-//   into N equal parts (a histogram of 4096 bins over the axis), so that share I owns the vertices with
+//   into equal parts, one a slab (a histogram of 4096 bins over the axis), so that share I owns the vertices with
 //   cuts[I-1] <= p[axis] < cuts[I] (no lower bound for share 0, no upper for share N-1).
 // - A level is split by region when its cells are floating, it has no fine grid (silhouette labels: two
 //   grids, not handled here), and every slab is at least kSplitCells cells wide; then each share clusters
-//   its own vertices. The other levels are clustered whole by share 1 (share 0 if N = 1), in one cluster_levels pass
-//   (exact by construction; their cost is mostly fetching the positions by id, which one pass shares).
-//   With N >= 3 and such levels, the slabs are N - 1 and share 1's is empty (a repeated cut): it clusters
-//   the whole levels only, and its split levels' decision files are empty.
+//   its own vertices. The other levels are clustered whole (exact by construction), a share's whole levels
+//   in one cluster_levels pass, whose cost is mostly fetching the positions by id. With N >= 3 and such
+//   levels, shares 1 to K cluster the whole levels only, in even runs of levels (K as many as there are
+//   whole levels, while two slabs remain), and have empty slabs (repeated cuts: their split levels'
+//   decision files are empty); the other N - K shares own the slabs. With N <= 2, share 1 (share 0 if
+//   N = 1) clusters every whole level beside its slab.
 // The share (run_cluster_share), per split level:
 // 1. Select: the vertex ids within the largest halo of the slab (one sequential read of the positions),
 //    then the records of the weight index that hold them (one sequential read of order.u32) and their
@@ -66,7 +68,8 @@ struct ClusterShares {
   unsigned count = 0;
   int axis = 0;
   std::vector<double> cuts;       // count - 1 planes across `axis`, non-decreasing
-  std::vector<int> whole_share;   // per level: the share that clusters the level whole, or -1 (split)
+  std::vector<int> whole_share;   // per level: the share that clusters the level whole, or -1 (split);
+                                  // non-decreasing over the whole levels
   // Share s's slab on the axis: [lo, hi), infinite at the ends.
   double lo(unsigned s) const;
   double hi(unsigned s) const;

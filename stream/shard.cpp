@@ -103,11 +103,19 @@ std::vector<std::pair<uint32_t, uint32_t>> shard_runs(const std::vector<LevelCut
   const size_t n = cuts.size();
   std::vector<std::pair<uint32_t, uint32_t>> runs(n);
   if (n == 0) return runs;
-  const std::vector<uint64_t> bounds = shard_bounds(cuts[0], count);
+  bool any_wide = false;
+  for (size_t l = 0; l < n; ++l) any_wide = any_wide || wide_level(cuts, l, count);
+  // With N >= 3 and wide levels, task kWideTask has those only, and the others the runs of codes.
+  const bool wide_alone = any_wide && count >= 3;
+  const unsigned code_runs = wide_alone ? count - 1 : count;
+  const bool has_codes = !(wide_alone && index == kWideTask);
+  const unsigned code_run = wide_alone && index > kWideTask ? index - 1 : index;  // this task's run of codes
+  const std::vector<uint64_t> bounds = shard_bounds(cuts[0], code_runs);
   for (size_t l = 0; l < n; ++l) {
     const uint32_t regions = static_cast<uint32_t>(cuts[l].regions.size());
-    if (!wide_level(cuts, l, count)) runs[l] = shard_regions_in(cuts[l], bounds, index);
-    else runs[l] = index == kWideTask ? std::pair<uint32_t, uint32_t>{0, regions} : std::pair<uint32_t, uint32_t>{regions, regions};
+    const std::pair<uint32_t, uint32_t> all{0, regions}, none{regions, regions};
+    if (wide_level(cuts, l, count)) runs[l] = index == kWideTask ? all : none;
+    else runs[l] = has_codes ? shard_regions_in(cuts[l], bounds, code_run) : none;
   }
   return runs;
 }

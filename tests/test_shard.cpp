@@ -109,8 +109,8 @@ TEST(Shard, AnyTaskCountGivesOneMachinesBytes) {
   ASSERT_TRUE(simplify(sample_room(), room_options(dir.file("one")), o, &one).ok());
   const auto want = outputs(dir.file("one"));
   uint64_t read_by_one = 0;  // the input primitives one task's passes read
-  // 9 tasks: the level of 8 regions is wide (stream/shard.h shard_runs), all of it task 0's while task 0
-  // also has the first run of the finer levels' codes: the merge orders each level's tasks by their runs.
+  // 9 tasks: the level of 8 regions is wide (stream/shard.h shard_runs), all of it task 0's, which has no
+  // run of the finer levels' codes, so task 1 has the first: the merge orders each level's tasks by their runs.
   for (unsigned n : {1u, 2u, 5u, 9u}) {
     SCOPED_TRACE("tasks " + std::to_string(n));
     const std::string out = dir.file("sharded-" + std::to_string(n));
@@ -230,13 +230,23 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
         EXPECT_TRUE(std::filesystem::exists(stream::cluster_share_stamp(work + "/", i)));
         EXPECT_FALSE(std::filesystem::exists(work + "/cluster.json")) << "a share does not stamp the whole stage";
       }
-      if (n >= 3) {  // the whole levels' share (share 1) has an empty slab: a repeated cut (plan_cluster_shares)
+      if (n >= 3) {  // the whole levels go to shares 1 to K, whose slabs are empty: repeated cuts (plan_cluster_shares)
         const nlohmann::json plan = nlohmann::json::parse(slurp(stream::cluster_shares_dir(work + "/") + "plan.json")).at("plan");
-        bool any_whole = false;
-        for (int w : plan.at("whole_share")) any_whole = any_whole || w == 1;
-        EXPECT_TRUE(any_whole) << "the room's coarsest levels are too coarse to split";
-        EXPECT_EQ(plan.at("cuts").at(0), plan.at("cuts").at(1));
-        EXPECT_NE(plan.at("cuts").at(1), plan.at("cuts").at(2));
+        std::vector<int> shares;
+        for (int w : plan.at("whole_share"))
+          if (w >= 0) shares.push_back(w);
+        ASSERT_FALSE(shares.empty()) << "the room's coarsest levels are too coarse to split";
+        EXPECT_TRUE(std::is_sorted(shares.begin(), shares.end()));
+        const int k = shares.back();
+        EXPECT_EQ(shares.front(), 1);
+        EXPECT_EQ(k, std::min<int>(static_cast<int>(shares.size()), static_cast<int>(n) - 2)) << "one share a whole level, two slabs left";
+        for (int s = 1; s <= k; ++s) {
+          EXPECT_EQ(plan.at("cuts").at(s - 1), plan.at("cuts").at(s)) << "share " << s << "'s slab is empty";
+          EXPECT_NE(std::find(shares.begin(), shares.end(), s), shares.end()) << "share " << s << " has a whole level";
+        }
+        if (k + 1 < static_cast<int>(n) - 1) {
+          EXPECT_NE(plan.at("cuts").at(k), plan.at("cuts").at(k + 1));
+        }
       }
       SimplifyOptions prepare = room_options(out);
       prepare.representative = rep, prepare.shard_prepare = true, prepare.cluster_shares = n;
@@ -562,8 +572,8 @@ TEST(Shard, LevelsShareTheFinestLevelsRunsOfCodes) {
 }
 
 // shard_runs: levels of at least N regions by the runs of codes (as above); a wide level (coarser, of fewer
-// regions than tasks) whole to task kWideTask, so that the wide levels share one pass; every level's runs
-// cover its regions once.
+// regions than tasks) whole to task kWideTask, so that the wide levels share one pass, and with 3 tasks or
+// more that task has no run of codes; every level's runs cover its regions once.
 TEST(Shard, WideLevelsGoWholeToOneTask) {
   auto morton_sorted = [](unsigned depth) {
     std::vector<core::RegionKey> keys;
@@ -584,7 +594,9 @@ TEST(Shard, WideLevelsGoWholeToOneTask) {
     SCOPED_TRACE(std::to_string(n) + " tasks");
     std::vector<std::vector<std::pair<uint32_t, uint32_t>>> runs;
     for (unsigned t = 0; t < n; ++t) runs.push_back(stream::shard_runs(cuts, t, n));
-    const std::vector<uint64_t> bounds = stream::shard_bounds(cuts[0], n);
+    // With 3 or more tasks and a wide level, task 0 has the wide levels only, the others a run of codes each.
+    const bool wide_alone = n >= 3 && stream::wide_level(cuts, cuts.size() - 1, n);
+    const std::vector<uint64_t> bounds = stream::shard_bounds(cuts[0], wide_alone ? n - 1 : n);
     for (size_t l = 0; l < cuts.size(); ++l) {
       std::vector<int> owner(cuts[l].regions.size(), -1);
       for (unsigned t = 0; t < n; ++t)
@@ -597,7 +609,8 @@ TEST(Shard, WideLevelsGoWholeToOneTask) {
       EXPECT_EQ(stream::wide_level(cuts, l, n), wide) << "level " << l;
       const uint32_t regions = static_cast<uint32_t>(cuts[l].regions.size());
       for (unsigned t = 0; t < n; ++t) {
-        if (!wide) EXPECT_EQ(runs[t][l], stream::shard_regions_in(cuts[l], bounds, t)) << "level " << l;
+        if (!wide && wide_alone && t == stream::kWideTask) EXPECT_EQ(runs[t][l].first, runs[t][l].second) << "level " << l;
+        else if (!wide) EXPECT_EQ(runs[t][l], stream::shard_regions_in(cuts[l], bounds, wide_alone ? t - 1 : t)) << "level " << l;
         else if (t == stream::kWideTask) EXPECT_EQ(runs[t][l], (std::pair<uint32_t, uint32_t>{0, regions})) << "level " << l;
         else EXPECT_EQ(runs[t][l].first, runs[t][l].second) << "level " << l;
       }
