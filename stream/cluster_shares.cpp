@@ -396,6 +396,26 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
     for (size_t j = 0; j < whole.size(); ++j)
       plan.whole_share[whole[j]] = static_cast<int>(first + j * shares / whole.size());
   };
+  // Whether every slab's share would hold its selection under the budget, estimated from the histogram as
+  // select() counts it (at the largest capacity its positions' growth can reach): the vertices within the
+  // widest first halo of the split levels, twice their positions and once their records and positions, and
+  // the bit and a half per store vertex. Fewer slabs hold more each: the 193 M-triangle city at 1 GiB a
+  // share held up to 1.2 GiB in 5 slabs, where 7 peaked at 735 MiB.
+  auto slabs_fit = [&](const std::vector<size_t>& whole) {
+    if (in.memory_bytes == 0) return true;
+    double widest = 0;
+    for (size_t l = 0; l < levels; ++l)
+      if (std::find(whole.begin(), whole.end(), l) == whole.end()) widest = std::max(widest, in.first_halo_cells * in.sizes[l]);
+    const uint64_t position = in.index.single_precision ? 12 : 24;
+    const auto bin = [&](double x) { return static_cast<int>(std::clamp((x - lo) / (hi - lo) * kBins, 0.0, kBins - 1.0)); };
+    for (unsigned s = 0; s < count; ++s) {
+      if (!(plan.lo(s) < plan.hi(s))) continue;
+      uint64_t n = 0;  // the vertices of the bins the slab and its halo meet
+      for (int k = bin(plan.lo(s) - widest); k <= bin(plan.hi(s) + widest); ++k) n += hist[static_cast<size_t>(k)];
+      if (in.index.vertices * 3 / 16 + n * (3 * position + 4) > in.memory_bytes) return false;
+    }
+    return true;
+  };
   double min_width = 0;
   if (!can_split) {
     plan.cuts.assign(count ? count - 1 : 0, 0.0);
@@ -404,15 +424,17 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
   }
   // With N >= 3 and whole levels, the whole levels go to shares 1 to K of their own (no slab), K as many as
   // there are whole levels while at least two slabs remain: fewer slabs are wider, so fewer levels may be
-  // whole, and K steps down until every one of the K shares has a level. Shares 1 to K are the first that a
-  // scheduler starts after share 0 (which runs the stages before the clustering under the lock while the
-  // others wait for it), so the longest shares do not run alone at the end.
+  // whole, and hold more, so K steps down until every one of the K shares has a level and every slab's
+  // selection fits the budget (slabs_fit; at K = 1, as before, a share over it stops with exit 64).
+  // Shares 1 to K are the first that a scheduler starts after share 0 (which runs the stages before the
+  // clustering under the lock while the others wait for it), so the longest shares do not run alone at
+  // the end.
   if (count >= 3) {
     const size_t most = whole_levels((cut(count - 1, &min_width), min_width)).size();
     for (unsigned k = static_cast<unsigned>(std::min<size_t>(most, count - 2)); k >= 1; --k) {
       plan.cuts = cut(count - k, &min_width);
       const std::vector<size_t> whole = whole_levels(min_width);
-      if (whole.size() >= k) {
+      if (whole.size() >= k && (k == 1 || slabs_fit(whole))) {
         assign(whole, 1, k);
         return plan;
       }

@@ -39,7 +39,7 @@ std::vector<ordered_json> read_tasks(const std::string& output_dir) {
 }
 
 // The tasks in the order of their runs of level `level`'s regions (stream/shard.h shard_runs: a wide level
-// is task 0's whole), which is the order one machine writes the regions in.
+// is one task's whole), which is the order one machine writes the regions in.
 // Tasks with no region of the level come anywhere (their parts are empty). Throws Failure(internal) unless
 // the runs cover the level's regions once.
 std::vector<unsigned> tasks_in_region_order(const std::vector<ordered_json>& tasks, size_t level, const std::string& output_dir) {

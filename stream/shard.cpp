@@ -103,21 +103,33 @@ std::vector<std::pair<uint32_t, uint32_t>> shard_runs(const std::vector<LevelCut
   const size_t n = cuts.size();
   std::vector<std::pair<uint32_t, uint32_t>> runs(n);
   if (n == 0) return runs;
-  bool any_wide = false;
-  for (size_t l = 0; l < n; ++l) any_wide = any_wide || wide_level(cuts, l, count);
-  // With N >= 3 and wide levels, task kWideTask has those only, and the others the runs of codes.
-  const bool wide_alone = any_wide && count >= 3;
-  const unsigned code_runs = wide_alone ? count - 1 : count;
-  const bool has_codes = !(wide_alone && index == kWideTask);
-  const unsigned code_run = wide_alone && index > kWideTask ? index - 1 : index;  // this task's run of codes
-  const std::vector<uint64_t> bounds = shard_bounds(cuts[0], code_runs);
+  const std::vector<int> wide = wide_tasks(cuts, count);
+  const unsigned first = wide_task_count(cuts, count);  // the runs of codes go to tasks first to count - 1
+  const bool has_codes = index >= first;
+  const std::vector<uint64_t> bounds = shard_bounds(cuts[0], count - first);
   for (size_t l = 0; l < n; ++l) {
     const uint32_t regions = static_cast<uint32_t>(cuts[l].regions.size());
     const std::pair<uint32_t, uint32_t> all{0, regions}, none{regions, regions};
-    if (wide_level(cuts, l, count)) runs[l] = index == kWideTask ? all : none;
-    else runs[l] = has_codes ? shard_regions_in(cuts[l], bounds, code_run) : none;
+    if (wide[l] >= 0) runs[l] = wide[l] == static_cast<int>(index) ? all : none;
+    else runs[l] = has_codes ? shard_regions_in(cuts[l], bounds, index - first) : none;
   }
   return runs;
+}
+
+unsigned wide_task_count(const std::vector<LevelCut>& cuts, unsigned count) {
+  size_t w = 0;
+  for (size_t l = 0; l < cuts.size(); ++l) w += wide_level(cuts, l, count);
+  return count >= 3 ? static_cast<unsigned>(std::min<size_t>(w, count - 2)) : 0;
+}
+
+std::vector<int> wide_tasks(const std::vector<LevelCut>& cuts, unsigned count) {
+  std::vector<size_t> wide;
+  for (size_t l = 0; l < cuts.size(); ++l)
+    if (wide_level(cuts, l, count)) wide.push_back(l);
+  const unsigned k = std::max(1u, wide_task_count(cuts, count));
+  std::vector<int> task(cuts.size(), -1);
+  for (size_t j = 0; j < wide.size(); ++j) task[wide[j]] = static_cast<int>(j * k / wide.size());
+  return task;
 }
 
 bool wide_level(const std::vector<LevelCut>& cuts, size_t level, unsigned count) {

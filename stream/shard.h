@@ -84,19 +84,23 @@ std::pair<uint32_t, uint32_t> shard_regions_in(const LevelCut& cut, const std::v
 
 // The regions [first, end) of every level's cut (finest first) that task `index` of `count` emits. The
 // finest level, and every level of at least `count` regions: its run of codes (shard_regions_in). A wide
-// level (wide_level: coarser, of fewer regions than tasks): all its regions to task kWideTask. A wide
-// region costs a pass over the place it covers (every input primitive there maps to its cells) however
-// few its cells, and the wide levels' regions together cover about the whole scene; given to one task,
-// they share one pass over the input (emit_shard groups them apart from the task's runs of codes). On the
-// 193 M-triangle city at N = 8 the three wide levels (one region each) went, a region a task, to three
-// tasks that each read the whole input for theirs. With N >= 3 and wide levels, task kWideTask has the
-// wide levels only and the other N - 1 tasks the runs of codes (shard_bounds for N - 1 runs, in task
-// order): the wide levels' pass took about 40 s of task 0's 54 s at 193 M, where the other tasks took
-// 12-21 s. Task 0 is the one a scheduler's array starts first, so the longest task does not run alone at
-// the end. For each level the tasks' runs are disjoint and cover the cut; the merge orders them by their
-// first region.
-inline constexpr unsigned kWideTask = 0;
+// level (wide_level: coarser, of fewer regions than tasks): all its regions to one task (wide_tasks). A
+// wide region costs a pass over the place it covers (every input primitive there maps to its cells)
+// however few its cells, and the wide levels' regions together cover about the whole scene; a task's wide
+// levels share one pass over the input (emit_shard groups them apart from its runs of codes).
+// - N <= 2: the wide levels go to task 0, beside its run of codes.
+// - N >= 3: the wide levels go to tasks 0 to K - 1 (wide_task_count), which have no run of codes, in even
+//   runs of levels, one a task while two tasks remain for the runs of codes; tasks K to N - 1 split the
+//   runs of codes (shard_bounds for N - K runs, in task order). On the 193 M-triangle city at N = 8 the
+//   three wide levels in one pass took about 40 s of task 0's 54 s, where the tasks of codes took 12-21 s.
+// Tasks 0 to K - 1 are the first a scheduler's array starts, so the longest tasks do not run alone at the
+// end. For each level the tasks' runs are disjoint and cover the cut; the merge orders them by their first
+// region.
 std::vector<std::pair<uint32_t, uint32_t>> shard_runs(const std::vector<LevelCut>& cuts, unsigned index, unsigned count);
+// K: the tasks that have wide levels and no run of codes (0 when N <= 2 or no level is wide).
+unsigned wide_task_count(const std::vector<LevelCut>& cuts, unsigned count);
+// Per level: the task that emits it whole, or -1 (not wide).
+std::vector<int> wide_tasks(const std::vector<LevelCut>& cuts, unsigned count);
 bool wide_level(const std::vector<LevelCut>& cuts, size_t level, unsigned count);
 
 std::string shards_dir(const std::string& output_dir);

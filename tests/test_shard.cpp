@@ -109,8 +109,8 @@ TEST(Shard, AnyTaskCountGivesOneMachinesBytes) {
   ASSERT_TRUE(simplify(sample_room(), room_options(dir.file("one")), o, &one).ok());
   const auto want = outputs(dir.file("one"));
   uint64_t read_by_one = 0;  // the input primitives one task's passes read
-  // 9 tasks: the level of 8 regions is wide (stream/shard.h shard_runs), all of it task 0's, which has no
-  // run of the finer levels' codes, so task 1 has the first: the merge orders each level's tasks by their runs.
+  // 9 tasks: the levels of 8 regions or fewer are wide (stream/shard.h shard_runs), each whole in a task
+  // of its own with no run of the finer levels' codes: the merge orders each level's tasks by their runs.
   for (unsigned n : {1u, 2u, 5u, 9u}) {
     SCOPED_TRACE("tasks " + std::to_string(n));
     const std::string out = dir.file("sharded-" + std::to_string(n));
@@ -426,6 +426,21 @@ TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
       EXPECT_TRUE(slurp(stream::cell_info_path(prefix, l)) == slurp(stream::cell_info_path(work, l))) << "level " << l;
     }
   }
+  // The whole levels' shares (4 shares): levels 3 and 4 one a share when two slabs' selections fit the
+  // budget; else share 1 has every whole level and three slabs remain, narrower, so level 2 is whole too
+  // (plan_cluster_shares, slabs_fit).
+  {
+    stream::ClusterShareInput ample = in, scarce = in;
+    ample.memory_bytes = uint64_t{1} << 40;
+    scarce.memory_bytes = in.index.vertices * 3 / 16 + in.index.vertices;  // a fortieth of the vertices each
+    const stream::ClusterShares one_a_share = stream::plan_cluster_shares(ample, 4, progress);
+    const stream::ClusterShares together = stream::plan_cluster_shares(scarce, 4, progress);
+    EXPECT_EQ(one_a_share.whole_share, (std::vector<int>{-1, -1, -1, 1, 2}));
+    EXPECT_EQ(together.whole_share, (std::vector<int>{-1, -1, 1, 1, 1})) << "level 2 is whole too in three slabs";
+    EXPECT_EQ(one_a_share.cuts.at(0), one_a_share.cuts.at(2)) << "shares 1 and 2 have no slab";
+    EXPECT_EQ(together.cuts.at(0), together.cuts.at(1)) << "share 1 has no slab";
+    EXPECT_NE(together.cuts.at(1), together.cuts.at(2)) << "three slabs";
+  }
   // A share's decisions cut short: the merge fails naming the shares' directory (the last plan's files, 4 shares).
   const std::string dec = stream::cluster_shares_dir(prefix) + "share-0-level-0.dec";
   std::filesystem::resize_file(dec, std::filesystem::file_size(dec) - 8);
@@ -572,9 +587,10 @@ TEST(Shard, LevelsShareTheFinestLevelsRunsOfCodes) {
 }
 
 // shard_runs: levels of at least N regions by the runs of codes (as above); a wide level (coarser, of fewer
-// regions than tasks) whole to task kWideTask, so that the wide levels share one pass, and with 3 tasks or
-// more that task has no run of codes; every level's runs cover its regions once.
-TEST(Shard, WideLevelsGoWholeToOneTask) {
+// regions than tasks) whole to one task, so that a task's wide levels share one pass. With 3 tasks or more
+// the wide levels go to tasks 0 to K - 1, one a task while two tasks remain, and those tasks have no run of
+// codes; every level's runs cover its regions once.
+TEST(Shard, WideLevelsGoWholeToTasksOfTheirOwn) {
   auto morton_sorted = [](unsigned depth) {
     std::vector<core::RegionKey> keys;
     const uint32_t side = 1u << depth;
@@ -590,13 +606,16 @@ TEST(Shard, WideLevelsGoWholeToOneTask) {
   cuts[1].regions = morton_sorted(1), cuts[1].cells.assign(8, 4);
   cuts[2].regions = {cuts[1].regions[0], cuts[1].regions[3], cuts[1].regions[6]}, cuts[2].cells.assign(3, 2);
   cuts[3].regions = morton_sorted(0), cuts[3].cells.assign(1, 1);
-  for (unsigned n : {1u, 2u, 4u, 8u, 9u}) {
+  for (unsigned n : {1u, 2u, 3u, 4u, 8u, 9u}) {
     SCOPED_TRACE(std::to_string(n) + " tasks");
     std::vector<std::vector<std::pair<uint32_t, uint32_t>>> runs;
     for (unsigned t = 0; t < n; ++t) runs.push_back(stream::shard_runs(cuts, t, n));
-    // With 3 or more tasks and a wide level, task 0 has the wide levels only, the others a run of codes each.
-    const bool wide_alone = n >= 3 && stream::wide_level(cuts, cuts.size() - 1, n);
-    const std::vector<uint64_t> bounds = stream::shard_bounds(cuts[0], wide_alone ? n - 1 : n);
+    std::vector<size_t> wide_levels;
+    for (size_t l = 1; l < cuts.size(); ++l)
+      if (cuts[l].regions.size() < n) wide_levels.push_back(l);
+    const unsigned k = n >= 3 ? std::min<unsigned>(static_cast<unsigned>(wide_levels.size()), n - 2) : 0;
+    EXPECT_EQ(stream::wide_task_count(cuts, n), k);
+    const std::vector<uint64_t> bounds = stream::shard_bounds(cuts[0], n - k);
     for (size_t l = 0; l < cuts.size(); ++l) {
       std::vector<int> owner(cuts[l].regions.size(), -1);
       for (unsigned t = 0; t < n; ++t)
@@ -605,14 +624,19 @@ TEST(Shard, WideLevelsGoWholeToOneTask) {
           owner[r] = static_cast<int>(t);
         }
       for (size_t r = 0; r < owner.size(); ++r) EXPECT_GE(owner[r], 0) << "level " << l << " region " << r;
-      const bool wide = l > 0 && cuts[l].regions.size() < n;
+      const auto j = std::find(wide_levels.begin(), wide_levels.end(), l);
+      const bool wide = j != wide_levels.end();
       EXPECT_EQ(stream::wide_level(cuts, l, n), wide) << "level " << l;
+      const unsigned wide_task = wide ? static_cast<unsigned>((j - wide_levels.begin()) * std::max(k, 1u) / wide_levels.size()) : 0;
       const uint32_t regions = static_cast<uint32_t>(cuts[l].regions.size());
       for (unsigned t = 0; t < n; ++t) {
-        if (!wide && wide_alone && t == stream::kWideTask) EXPECT_EQ(runs[t][l].first, runs[t][l].second) << "level " << l;
-        else if (!wide) EXPECT_EQ(runs[t][l], stream::shard_regions_in(cuts[l], bounds, wide_alone ? t - 1 : t)) << "level " << l;
-        else if (t == stream::kWideTask) EXPECT_EQ(runs[t][l], (std::pair<uint32_t, uint32_t>{0, regions})) << "level " << l;
-        else EXPECT_EQ(runs[t][l].first, runs[t][l].second) << "level " << l;
+        if (wide && t == wide_task) {
+          EXPECT_EQ(runs[t][l], (std::pair<uint32_t, uint32_t>{0, regions})) << "level " << l;
+        } else if (wide || t < k) {
+          EXPECT_EQ(runs[t][l].first, runs[t][l].second) << "level " << l << ": task " << t << " has none of it";
+        } else {
+          EXPECT_EQ(runs[t][l], stream::shard_regions_in(cuts[l], bounds, t - k)) << "level " << l;
+        }
       }
     }
     // 4 tasks: levels 2 (3 regions) and 3 (the root) are wide; 9 tasks: level 1 (8 regions) too.
@@ -620,6 +644,11 @@ TEST(Shard, WideLevelsGoWholeToOneTask) {
     EXPECT_EQ(stream::wide_level(cuts, 2, n), n >= 4);
     EXPECT_EQ(stream::wide_level(cuts, 3, n), n >= 2);
   }
+  // 9 tasks: the three wide levels one a task, tasks 0 to 2; 4 tasks: levels 2 and 3 one a task, 2 runs of codes.
+  EXPECT_EQ(stream::wide_tasks(cuts, 9), (std::vector<int>{-1, 0, 1, 2}));
+  EXPECT_EQ(stream::wide_tasks(cuts, 4), (std::vector<int>{-1, -1, 0, 1}));
+  EXPECT_EQ(stream::wide_tasks(cuts, 2), (std::vector<int>{-1, -1, -1, 0}));
+  EXPECT_EQ(stream::shard_runs(cuts, 2, 4).at(0).first, 0u) << "task 2 of 4 has the first run of codes";
 }
 
 TEST(Shard, OptionsAndEnvironment) {
