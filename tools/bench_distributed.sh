@@ -89,6 +89,8 @@ if [ $slurm -eq 1 ]; then
   # The shared directories' size, sampled while the jobs run.
   ( while :; do du -sb "$work" "$out/sharded" 2>/dev/null | awk '{s += $1} END {printf "%.0f\n", s}' || true; sleep 5; done ) >"$logs/shared-bytes.txt" &
   sampler=$!
+  # Stopped also when a step fails and the script exits (as the cluster is).
+  trap 'kill $sampler 2>/dev/null || true; "$root/tools/slurm_local_cluster.sh" stop "$cluster"' EXIT
   timed slurm "$bin" slurm simplify "$input" -o "$out/sharded" --shards "$shards" --work "$work" --wait --no-space-check "${opts[@]}"
   kill $sampler 2>/dev/null || true
   python3 - "$out" "$shards" "$logs/shared-bytes.txt" <<'PY' | tee -a "$out/bench.txt"
