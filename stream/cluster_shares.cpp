@@ -24,6 +24,7 @@
 #include "io/mapped_file.h"
 #include "stream/cell_map_file.h"
 #include "stream/store_access.h"
+#include "stream/vertex_cells.h"
 
 namespace lodstream::stream {
 
@@ -42,6 +43,9 @@ std::string ctr_path(const std::string& prefix, unsigned share, size_t level) {
 // A whole level's map and info, as the share that clustered it leaves them.
 std::string whole_map_path(const std::string& prefix, size_t level) { return cluster_shares_dir(prefix) + fmt::format("level-{}.map", level); }
 std::string whole_info_path(const std::string& prefix, size_t level) { return cluster_shares_dir(prefix) + fmt::format("level-{}.info", level); }
+std::string whole_vertex_cells_path(const std::string& prefix, size_t level) {
+  return cluster_shares_dir(prefix) + fmt::format("level-{}.vcells", level);
+}
 
 // Positions at the store's precision (floats for a float store: half the bytes; widened to double, exactly,
 // when read).
@@ -477,8 +481,10 @@ std::vector<std::string> cluster_share_files(const ClusterShareInput& in, const 
     if (plan.whole_share[l] < 0) {
       files.push_back(dec_path(in.prefix, index, l));
       if (in.info == CellInfoKind::center) files.push_back(ctr_path(in.prefix, index, l));
-    } else if (plan.whole_share[l] == static_cast<int>(index))
+    } else if (plan.whole_share[l] == static_cast<int>(index)) {
       files.push_back(whole_map_path(in.prefix, l)), files.push_back(whole_info_path(in.prefix, l));
+      if (in.vertex_cells) files.push_back(whole_vertex_cells_path(in.prefix, l));
+    }
   }
   return files;
 }
@@ -507,6 +513,12 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
       std::filesystem::rename(cell_info_path(stem, j), whole_info_path(in.prefix, whole[j]));
       figures.push_back({{"level", whole[j]}, {"cells", cs.cells[j]}});
     }
+    // Their cells by vertex, which the prepare job would otherwise decode level by level after the merge.
+    if (in.vertex_cells)
+      for (size_t j = 0; j < whole.size(); ++j)
+        write_vertex_cells_of(whole_map_path(in.prefix, whole[j]), in.index.order_path, in.canonical_path,
+                              whole_vertex_cells_path(in.prefix, whole[j]), in.index.vertices, in.index.records, cs.cells[j],
+                              in.memory_bytes, progress);
   }
   // The split levels: select with the widest halo any of them needs, cluster each, widen the ones that did
   // not settle, select again when a halo outgrows the selection.
@@ -579,6 +591,11 @@ ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterSh
     if (plan.whole_share[l] >= 0) {
       link_file(whole_map_path(in.prefix, l), cells_path(in.prefix, l));
       link_file(whole_info_path(in.prefix, l), cell_info_path(in.prefix, l));
+      if (in.vertex_cells) {
+        link_file(whole_vertex_cells_path(in.prefix, l), vertex_cells_path(in.prefix, l));
+        summary.vertex_cells.resize(levels, 0);
+        summary.vertex_cells[l] = 1;
+      }
       bool found = false;
       for (const auto& f : figures.at(static_cast<size_t>(plan.whole_share[l])))
         if (f.at("level") == l) summary.cells[l] = f.at("cells"), found = true;

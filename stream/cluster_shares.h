@@ -37,7 +37,10 @@
 // center takes the next id; a member's center is an earlier record, whose id is the rank of its bit
 // among the centers seen so far. The ids go to cells-L.map (stream/cell_map_file.h), and the .ctr
 // files to a center-kind info. Mean and quadric infos are summed afterwards, as
-// cluster_levels sums them (sum_cell_info). Whole levels' files are linked from the share that made them.
+// cluster_levels sums them (sum_cell_info). Whole levels' files are linked from the share that made them:
+// their map and info, and for a sharded run (ClusterShareInput::vertex_cells) their cells by vertex, which
+// the share writes after clustering them (stream/vertex_cells.h), so that the prepare job decodes only the
+// split levels' maps (193 M-triangle city: about 2.5 s a level).
 // Invariant: each record is owned by exactly one share (the slabs partition the axis), and every owned
 // decision written is settled, hence the whole-scene pass's (core/floating_cell_region.h); the merge checks
 // that the shares' records are each record exactly once.
@@ -89,6 +92,11 @@ struct ClusterShareInput {
   std::string prefix;
   const WorkDir* work = nullptr;
   double first_halo_cells = kFirstHaloCells;  // the tests start lower, to make shares widen
+  // When set, a share also writes its whole levels' cells by vertex (stream/vertex_cells.h; the weld map at
+  // canonical_path, empty when none), which the merge links into the work directory: the sharded tasks
+  // read them, and the shares write them at once where the prepare job would decode the levels one by one.
+  bool vertex_cells = false;
+  std::string canonical_path;
 };
 
 ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, Progress& progress);
@@ -110,7 +118,8 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
                                          Progress& progress);
 
 // Writes cells-L.map and cells-L.info for every level from the shares' files (every share must have run;
-// figures[s]: what run_cluster_share returned for share s); returns cells per level. Failure(io_error) when
+// figures[s]: what run_cluster_share returned for share s), and with `vertex_cells` the whole levels'
+// vertex-cells-L.u32; returns cells per level and the levels whose cells by vertex it wrote. Failure(io_error) when
 // the shares' files do not add up to the weight index.
 ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterShares& plan,
                                     const std::vector<nlohmann::ordered_json>& figures, Progress& progress);

@@ -71,7 +71,8 @@ class CellInfoReader {
 };
 
 struct ClusterSummary {
-  std::vector<uint64_t> cells;  // per level
+  std::vector<uint64_t> cells;       // per level
+  std::vector<char> vertex_cells;    // per level: its cells by vertex are written (merge_cluster_shares), or empty
 };
 
 // Cells of two sizes in a level (simplify's silhouette labels, core/silhouette_labels.h): a record whose

@@ -722,13 +722,16 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       // The clustering as N shares (stream/cluster_shares.h): a share task runs its share and returns no
       // cells (the run stops after the stage); the shared stage runs the shares no task ran and merges them.
       const unsigned cluster_shares = so.cluster_share_count ? so.cluster_share_count : sharded ? so.cluster_shares : 0;
+      std::vector<char> vertex_cells_written;  // per level: its cells by vertex came with the cluster shares' merge
       auto cluster_by_shares = [&](const ordered_json& key, const std::vector<double>& sizes, const stream::FineCells* fine,
                                    const stream::WeightIndex& index, const std::vector<double>& bounds) {
-        const stream::ClusterShareInput in{index, bounds, sizes, copts, info_kind, fine, plan.stage_bytes, options.chunk_bytes,
-                                           prefix, &work};
+        stream::ClusterShareInput in{index, bounds, sizes, copts, info_kind, fine, plan.stage_bytes, options.chunk_bytes,
+                                     prefix, &work};
+        in.vertex_cells = true, in.canonical_path = canonical;  // the tasks read them (stream/vertex_cells.h)
         const stream::ClusterShares shares = stream::shared_cluster_plan(in, cluster_shares, key, progress);  // under the lock
         ordered_json share_key = key;
         share_key["shares"] = shares.json();
+        share_key["vertex_cells"] = in.vertex_cells;
         const std::string dir = work.subdir("cluster-shares");
         auto run_share = [&](unsigned s) {
           return stamped_share(dir, s, stream::cluster_share_stamp(prefix, s), share_key,
@@ -745,7 +748,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         }
         std::vector<ordered_json> figures;
         for (unsigned s = 0; s < shares.count; ++s) figures.push_back(run_share(s));
-        return stream::merge_cluster_shares(in, shares, figures, progress).cells;
+        stream::ClusterSummary cs = stream::merge_cluster_shares(in, shares, figures, progress);
+        vertex_cells_written = cs.vertex_cells;
+        return cs.cells;
       };
       // by_shares: the stage of the final sizes, which a sharded run with cluster shares clusters by them.
       auto cluster = [&](const std::vector<double>& sizes, StageStats* st, bool by_shares = false) {
@@ -1047,7 +1052,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           for (size_t l = 0; l < cells.size(); ++l) files.push_back(stream::vertex_cells_path(prefix, l));
           st.reused = stamped_stage(work.file("shard-vertex-cells.json"), key, files, [&] {
             for (size_t l = 0; l < cells.size(); ++l)
-              stream::write_vertex_cells(prefix, canonical, meta.vertices, grade.records, l, cells[l], plan.stage_bytes, progress);
+              if (l >= vertex_cells_written.size() || !vertex_cells_written[l])  // else written by its cluster share
+                stream::write_vertex_cells(prefix, canonical, meta.vertices, grade.records, l, cells[l], plan.stage_bytes, progress);
           });
         });
         shard_lock.reset();

@@ -71,8 +71,14 @@ std::string vertex_cells_path(const std::string& prefix, size_t level) {
 
 void write_vertex_cells(const std::string& prefix, const std::string& canonical_path, uint64_t vertices, uint64_t records,
                         size_t level, uint64_t cells, uint64_t budget, Progress& progress) {
-  const std::string path = vertex_cells_path(prefix, level);
-  io::MappedFile order(order_path(prefix));
+  write_vertex_cells_of(cells_path(prefix, level), order_path(prefix), canonical_path, vertex_cells_path(prefix, level), vertices,
+                        records, cells, budget, progress);
+}
+
+void write_vertex_cells_of(const std::string& map_path, const std::string& order_path, const std::string& canonical_path,
+                           const std::string& path, uint64_t vertices, uint64_t records, uint64_t cells, uint64_t budget,
+                           Progress& progress) {
+  io::MappedFile order(order_path);
   if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
   std::unique_ptr<WeldFile> weld;
   if (!canonical_path.empty()) weld = std::make_unique<WeldFile>(canonical_path, vertices);
@@ -91,7 +97,7 @@ void write_vertex_cells(const std::string& prefix, const std::string& canonical_
     tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
       const uint64_t plo = lo + part * per_part, pn = std::min(n, (part + 1) * per_part) - std::min(n, part * per_part);
       if (pn == 0) return;
-      CellMapReader map(cells_path(prefix, level));
+      CellMapReader map(map_path);
       std::vector<uint32_t> cs(kChunk);
       for (uint64_t first = 0; first < records; first += kChunk) {
         progress.check();
@@ -100,7 +106,7 @@ void write_vertex_cells(const std::string& prefix, const std::string& canonical_
         const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
         map.read(std::span<uint32_t>(cs.data(), k));
         for (uint64_t i = 0; i < k; ++i) {
-          if (cs[i] >= cells) fail(Status::io_error, cells_path(prefix, level) + ": cell id out of range");
+          if (cs[i] >= cells) fail(Status::io_error, map_path + ": cell id out of range");
           if (ids[i] >= vertices) fail(Status::io_error, order.path() + ": vertex id out of range");
           if (ids[i] - plo < pn) buf[ids[i] - lo] = cs[i];  // unsigned: below plo wraps around
         }

@@ -5,7 +5,8 @@
 // bit streams in weight order, readable only whole, so a task that built its group's packed map from them
 // decoded every record of the scene whatever its share (3.1 and 2.9 s for the two groups of one task of
 // eight on the 193 M-triangle city: a third of the task); from these files it reads the packed map in
-// vertex order, sequentially. They are written once by the shared stages (write_vertex_cells).
+// vertex order, sequentially. They are written once by the shared stages (write_vertex_cells); a level
+// clustered whole by a cluster share, by that share (stream/cluster_shares.h).
 // (Looking the cells up in the mapped files instead of packing the map did not hold the memory cap: a
 // group of blocks whose primitives reach all over the vertex ids, as the 193 M-triangle city's 484 K
 // segments, stored after its triangles, do, maps every page of every level's file: a task of eight at
@@ -32,5 +33,10 @@ std::string vertex_cells_path(const std::string& prefix, size_t level);
 // that does not match `records` records of `cells` cells.
 void write_vertex_cells(const std::string& prefix, const std::string& canonical_path, uint64_t vertices, uint64_t records,
                         size_t level, uint64_t cells, uint64_t budget, Progress& progress);
+// The same from a map at `map_path` and an order at `order_path`, into `path` (a cluster share's whole
+// level: stream/cluster_shares.h).
+void write_vertex_cells_of(const std::string& map_path, const std::string& order_path, const std::string& canonical_path,
+                           const std::string& path, uint64_t vertices, uint64_t records, uint64_t cells, uint64_t budget,
+                           Progress& progress);
 
 }  // namespace lodstream::stream

@@ -13,6 +13,7 @@
 #include <sstream>
 #include <thread>
 
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "lodstream/lodstream.h"
@@ -230,11 +231,17 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
         EXPECT_TRUE(std::filesystem::exists(stream::cluster_share_stamp(work + "/", i)));
         EXPECT_FALSE(std::filesystem::exists(work + "/cluster.json")) << "a share does not stamp the whole stage";
       }
+      std::vector<size_t> whole_levels;  // and their cells by vertex, which their shares write
       if (n >= 3) {  // the whole levels go to shares 1 to K, whose slabs are empty: repeated cuts (plan_cluster_shares)
         const nlohmann::json plan = nlohmann::json::parse(slurp(stream::cluster_shares_dir(work + "/") + "plan.json")).at("plan");
         std::vector<int> shares;
-        for (int w : plan.at("whole_share"))
-          if (w >= 0) shares.push_back(w);
+        for (size_t l = 0; l < plan.at("whole_share").size(); ++l) {
+          const int w = plan.at("whole_share").at(l);
+          if (w < 0) continue;
+          shares.push_back(w), whole_levels.push_back(l);
+          if (w != 1)  // share 1 is the one no task ran
+            EXPECT_TRUE(std::filesystem::exists(stream::cluster_shares_dir(work + "/") + fmt::format("level-{}.vcells", l))) << l;
+        }
         ASSERT_FALSE(shares.empty()) << "the room's coarsest levels are too coarse to split";
         EXPECT_TRUE(std::is_sorted(shares.begin(), shares.end()));
         const int k = shares.back();
@@ -254,6 +261,16 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       const Result pres = simplify(sample_room(), prepare, o, &pr);
       ASSERT_TRUE(pres.ok()) << pres.message;
       EXPECT_FALSE(std::filesystem::exists(stream::cluster_shares_dir(work + "/"))) << "the merge removes the spent shares";
+      // The whole levels' cells by vertex, as their shares wrote them, are the prepare job's own.
+      for (size_t l : whole_levels) {
+        const std::string path = stream::vertex_cells_path(work + "/", l), weld = work + "/weld.map";
+        const std::string shares_made = slurp(path);
+        std::filesystem::remove(path);
+        stream::Progress progress{Options{}};
+        stream::write_vertex_cells(work + "/", std::filesystem::exists(weld) ? weld : std::string(), shares_made.size() / 4,
+                                   std::filesystem::file_size(work + "/order.u32") / 4, l, one.levels[l].cells, 1 << 20, progress);
+        EXPECT_TRUE(slurp(path) == shares_made) << "level " << l;
+      }
       for (size_t l = 0; l < one.levels.size(); ++l) {
         EXPECT_TRUE(slurp(stream::cells_path(work + "/", l)) == slurp(stream::cells_path(dir.file("work") + "/", l))) << "level " << l;
         EXPECT_TRUE(slurp(stream::cell_info_path(work + "/", l)) == slurp(stream::cell_info_path(dir.file("work") + "/", l))) << "level " << l;
