@@ -48,7 +48,8 @@
 // from a by-id copy of the selected positions, 24 bytes per vertex selected, freed after the gather), a
 // bit and a half per store vertex while selecting, and the RegionClusterers' entries and slots
 // (core/floating_cell_region.h; the split levels run at once, one thread each); of the merge, a bit and
-// a half per record (levels merged one after another).
+// a half per record and a 16 MiB window of each share's files, per split level (merged at once when the
+// budget holds them all, else one after another).
 #pragma once
 
 #include <cstdint>
