@@ -8,7 +8,8 @@
 #   task array, merge, the jobs sharing this machine's cores as Slurm schedules them. Prints both wall
 #   times and their ratio, every job's peak (the largest stage peak in its log) against the cap, the input
 #   primitives each task's emit read, and the largest size of the shared directories (work and output,
-#   sampled every 5 s), then compares the outputs byte for byte.
+#   sampled every 5 s), when each step ended, and the slowest job of each step one after another (what N
+#   nodes would take when no job waits for another's core), then compares the outputs byte for byte.
 # default (tasks one after another): one machine's run, then on the same work directory the prepare step,
 #   the N tasks one after the other and the merge, each timed (wall, CPU, peak RSS from /usr/bin/time -v),
 #   so that each task's figures are its own on this shared machine; the wall time N machines would take is
@@ -102,11 +103,25 @@ for line in open(os.path.join(out, "bench.txt")):
     if len(f) == 5 and f[0] in ("one", "slurm"): walls[f[0]] = float(f[1])
 print("wall: one machine %.1f s, %d tasks through Slurm %.1f s: %.2fx" % (walls["one"], n, walls["slurm"], walls["slurm"] / walls["one"]))
 logs = os.path.join(out, "sharded", "slurm", "logs")
+slowest = {}  # per step (ingest, grade, cluster, prepare, task, merge): its slowest job's stage seconds
 for name in sorted(os.listdir(logs)):
     unit = {"B": 2**-20, "KiB": 2**-10, "MiB": 1, "GiB": 2**10}
     peaks = [float(v) * unit[u] for v, u in re.findall(r"peak ([0-9.]+) (B|KiB|MiB|GiB)\b", open(os.path.join(logs, name)).read())]
     stages = re.findall(r"^stage\s+(\S+)\s+([0-9.]+) s", open(os.path.join(logs, name)).read(), re.M)
     print("  job %-14s peak %7.1f MiB  %s" % (name[:-4], max(peaks, default=0), ", ".join("%s %s s" % s for s in stages)))
+    step = name[:-4].split("-")[0]
+    slowest[step] = max(slowest.get(step, 0.0), sum(float(v) for _, v in stages))
+# The steps as the status files' times mark their ends (seconds from the submission), and the slowest job of
+# each step one after another: what N nodes would take when no job waits for another's core.
+status = os.path.join(out, "sharded", "slurm", "status")
+t0 = os.path.getmtime(os.path.join(out, "sharded", "slurm", "submit.json"))
+ends = {}
+for f in os.listdir(status):
+    if f.endswith(".rc"): ends[f.split("-")[0].split(".")[0]] = max(ends.get(f.split("-")[0].split(".")[0], 0.0), os.path.getmtime(os.path.join(status, f)) - t0)
+order = [k for k in ("ingest", "grade", "cluster", "prepare", "task", "merge") if k in slowest]
+print("  steps end at (s from the submission): " + ", ".join("%s %.0f" % (k, ends[k]) for k in order if k in ends))
+print("  slowest job of each step, one after another: " + " + ".join("%s %.1f" % (k, slowest[k]) for k in order) +
+      " = %.1f s (one machine %.1f s)" % (sum(slowest[k] for k in order), walls["one"]))
 m = json.load(open(os.path.join(out, "sharded", "manifest.json")))
 for t in m["shards"]["tasks"]:
     print("  task %2d: %.1f s, peak %.1f MiB, input primitives read by its emit %d" %
@@ -114,7 +129,7 @@ for t in m["shards"]["tasks"]:
 total = m["input"]["triangles"] + m["input"]["lines"] + m["input"]["points"]
 reads = [t["input_primitives_read"] for t in m["shards"]["tasks"]]
 print("  input primitives %d; tasks' reads: sum %.2fx the input, largest %.2fx" % (total, sum(reads) / total, max(reads) / total))
-s = [int(float(x)) for x in open(sizes).read().split() if x.strip()]
+s = [int(float(x)) for x in open(sizes).read().replace("\0", " ").split() if x.strip()]
 print("  shared directories (work + output), largest sample: %.2f GB (input %.2f GB)" % (max(s, default=0) / 1e9, m["input"]["bytes"] / 1e9))
 PY
   same_outputs "$out/one" "$out/sharded"
