@@ -352,13 +352,12 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
   // to a whole levels' share's 46 s, where the other shares took 12-15 s, so the array ended on it.
   std::vector<uint64_t> hist;
   double lo = 0, hi = 0;
+  // The histogram's bin of a coordinate on the axis (the ends' bins hold what lies past them).
+  const auto bin_of = [&](double x) { return static_cast<size_t>(std::clamp((x - lo) / (hi - lo) * kBins, 0.0, kBins - 1.0)); };
   if (can_split) {
     lo = in.bounds[plan.axis], hi = in.bounds[3 + plan.axis];
     hist.assign(kBins, 0);
-    for_each_position(in.index, progress, [&](uint64_t, const double* p) {
-      const double t = (p[plan.axis] - lo) / (hi - lo) * kBins;
-      ++hist[static_cast<size_t>(std::clamp(t, 0.0, static_cast<double>(kBins - 1)))];
-    });
+    for_each_position(in.index, progress, [&](uint64_t, const double* p) { ++hist[bin_of(p[plan.axis])]; });
   }
   // Cuts for `slabs` slabs (at least 2 when slabs < count), the empty ones after share 0's; and the narrowest
   // non-empty slab's width.
@@ -412,11 +411,10 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
     for (size_t l = 0; l < levels; ++l)
       if (std::find(whole.begin(), whole.end(), l) == whole.end()) widest = std::max(widest, in.first_halo_cells * in.sizes[l]);
     const uint64_t position = in.index.single_precision ? 12 : 24;
-    const auto bin = [&](double x) { return static_cast<int>(std::clamp((x - lo) / (hi - lo) * kBins, 0.0, kBins - 1.0)); };
     for (unsigned s = 0; s < count; ++s) {
       if (!(plan.lo(s) < plan.hi(s))) continue;
       uint64_t n = 0;  // the vertices of the bins the slab and its halo meet
-      for (int k = bin(plan.lo(s) - widest); k <= bin(plan.hi(s) + widest); ++k) n += hist[static_cast<size_t>(k)];
+      for (size_t k = bin_of(plan.lo(s) - widest), end = bin_of(plan.hi(s) + widest); k <= end; ++k) n += hist[k];
       if (in.index.vertices * 3 / 16 + n * (3 * position + 4) > in.memory_bytes) return false;
     }
     return true;
@@ -435,7 +433,8 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
   // clustering under the lock while the others wait for it), so the longest shares do not run alone at
   // the end.
   if (count >= 3) {
-    const size_t most = whole_levels((cut(count - 1, &min_width), min_width)).size();
+    plan.cuts = cut(count - 1, &min_width);
+    const size_t most = whole_levels(min_width).size();  // the most levels any K leaves whole (the most slabs)
     for (unsigned k = static_cast<unsigned>(std::min<size_t>(most, count - 2)); k >= 1; --k) {
       plan.cuts = cut(count - k, &min_width);
       const std::vector<size_t> whole = whole_levels(min_width);
@@ -600,13 +599,13 @@ ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterSh
   else for (size_t j = 0; j < split.size(); ++j) merge(j);
   for (size_t j = 0; j < split.size(); ++j) summary.cells[split[j]] = split_cells[j];
   progress.report("cluster", 0.4);
+  if (in.vertex_cells) summary.vertex_cells.assign(levels, 0);
   for (size_t l = 0; l < levels; ++l) {
     if (plan.whole_share[l] < 0) continue;
     link_file(whole_map_path(in.prefix, l), cells_path(in.prefix, l));
     link_file(whole_info_path(in.prefix, l), cell_info_path(in.prefix, l));
     if (in.vertex_cells) {
       link_file(whole_vertex_cells_path(in.prefix, l), vertex_cells_path(in.prefix, l));
-      summary.vertex_cells.resize(levels, 0);
       summary.vertex_cells[l] = 1;
     }
     bool found = false;

@@ -116,17 +116,25 @@ std::vector<std::pair<uint32_t, uint32_t>> shard_runs(const std::vector<LevelCut
   return runs;
 }
 
-unsigned wide_task_count(const std::vector<LevelCut>& cuts, unsigned count) {
-  size_t w = 0;
-  for (size_t l = 0; l < cuts.size(); ++l) w += wide_level(cuts, l, count);
-  return count >= 3 ? static_cast<unsigned>(std::min<size_t>(w, count - 2)) : 0;
-}
-
-std::vector<int> wide_tasks(const std::vector<LevelCut>& cuts, unsigned count) {
+namespace {
+std::vector<size_t> wide_levels(const std::vector<LevelCut>& cuts, unsigned count) {
   std::vector<size_t> wide;
   for (size_t l = 0; l < cuts.size(); ++l)
     if (wide_level(cuts, l, count)) wide.push_back(l);
-  const unsigned k = std::max(1u, wide_task_count(cuts, count));
+  return wide;
+}
+unsigned wide_task_count_of(size_t wide, unsigned count) {
+  return count >= 3 ? static_cast<unsigned>(std::min<size_t>(wide, count - 2)) : 0;
+}
+}  // namespace
+
+unsigned wide_task_count(const std::vector<LevelCut>& cuts, unsigned count) {
+  return wide_task_count_of(wide_levels(cuts, count).size(), count);
+}
+
+std::vector<int> wide_tasks(const std::vector<LevelCut>& cuts, unsigned count) {
+  const std::vector<size_t> wide = wide_levels(cuts, count);
+  const unsigned k = std::max(1u, wide_task_count_of(wide.size(), count));
   std::vector<int> task(cuts.size(), -1);
   for (size_t j = 0; j < wide.size(); ++j) task[wide[j]] = static_cast<int>(j * k / wide.size());
   return task;

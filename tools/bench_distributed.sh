@@ -117,7 +117,9 @@ status = os.path.join(out, "sharded", "slurm", "status")
 t0 = os.path.getmtime(os.path.join(out, "sharded", "slurm", "submit.json"))
 ends = {}
 for f in os.listdir(status):
-    if f.endswith(".rc"): ends[f.split("-")[0].split(".")[0]] = max(ends.get(f.split("-")[0].split(".")[0], 0.0), os.path.getmtime(os.path.join(status, f)) - t0)
+    if f.endswith(".rc"):
+        step = f[:-3].split("-")[0]  # grade-3.rc -> grade, merge.rc -> merge
+        ends[step] = max(ends.get(step, 0.0), os.path.getmtime(os.path.join(status, f)) - t0)
 order = [k for k in ("ingest", "grade", "cluster", "prepare", "task", "merge") if k in slowest]
 print("  steps end at (s from the submission): " + ", ".join("%s %.0f" % (k, ends[k]) for k in order if k in ends))
 print("  slowest job of each step, one after another: " + " + ".join("%s %.1f" % (k, slowest[k]) for k in order) +
