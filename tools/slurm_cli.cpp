@@ -7,7 +7,8 @@
 // then each grades and sorts its share: stream/grade_shares.h)
 // and a cluster array job of N shares (the first merges the grading shares, under the lock, then each
 // clusters its share: stream/cluster_shares.h); then a prepare job (the shared stages: for simplify the
-// clustering shares' merge, the block boxes and the cells by vertex, for a report the join alone), an array job of N tasks
+// clustering shares' merge, the block boxes and the split levels' cells by vertex (a whole level's come from its
+// cluster share), for a report the join alone), an array job of N tasks
 // after it (--dependency=afterok), and the merge after the array. The cluster array and the prepare job
 // wait for the array before them to end, not to succeed (afterany): the share that did not finish is run
 // by the next step. The scheduler is Slurm's; lodstream adds none of its own. Each script records its command's exit
