@@ -1,10 +1,13 @@
 #include "stream/distinct_count.h"
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cstring>
-#include <atomic>
+#include <functional>
+#include <limits>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include <tbb/enumerable_thread_specific.h>
@@ -14,59 +17,65 @@
 #include "core/hash.h"
 #include "core/status.h"
 #include "io/mapped_file.h"
-#include "stream/scene_store.h"
+#include "stream/external_sort.h"
+#include "stream/weld_file.h"
 
 namespace lodstream::stream {
 
 namespace {
 
-// W words of coordinate bits. All-ones in word 0 is a NaN pattern, which no stored coordinate has
-// (ingest rejects non-finite input), so it marks an empty table slot.
-template <int W>
+// A position's coordinate bits: three 32-bit words (floats) or three 64-bit words (doubles). All-ones in
+// word 0 is a NaN pattern, which no stored coordinate has (ingest rejects non-finite input), so it marks
+// an empty table slot.
+template <class U>
 struct Key {
-  uint64_t w[W];
+  using Word = U;
+  Word w[3];
   bool operator==(const Key&) const = default;
 };
-constexpr uint64_t empty_word = ~uint64_t{0};
+using FloatKey = Key<uint32_t>;
+using DoubleKey = Key<uint64_t>;
+template <class U>
+constexpr U kEmpty = std::numeric_limits<U>::max();
 
 using core::fmix64;
 
-template <int W>
-inline uint64_t hash(const Key<W>& k) {
+inline uint64_t mix(uint64_t h, uint64_t word, uint64_t i) { return fmix64(h ^ word) + 0x9E3779B97F4A7C15ULL * (i + 1); }
+inline uint64_t hash(const FloatKey& k) {
+  return mix(mix(0x9E3779B97F4A7C15ULL, uint64_t{k.w[0]} << 32 | k.w[1], 0), k.w[2], 1);
+}
+inline uint64_t hash(const DoubleKey& k) {
   uint64_t h = 0x9E3779B97F4A7C15ULL;
-  for (int i = 0; i < W; ++i) h = fmix64(h ^ k.w[i]) + 0x9E3779B97F4A7C15ULL * static_cast<uint64_t>(i + 1);
+  for (uint64_t i = 0; i < 3; ++i) h = mix(h, k.w[i], i);
   return h;
 }
 
 inline uint32_t bits(float v) { return std::bit_cast<uint32_t>(v == 0 ? 0.0f : v); }
 inline uint64_t bits(double v) { return std::bit_cast<uint64_t>(v == 0 ? 0.0 : v); }
-
-inline Key<2> make_key(const float* p) {
-  return {{uint64_t{bits(p[0])} << 32 | bits(p[1]), uint64_t{bits(p[2])}}};
-}
-inline Key<3> make_key(const double* p) { return {{bits(p[0]), bits(p[1]), bits(p[2])}}; }
+inline FloatKey make_key(const float* p) { return {{bits(p[0]), bits(p[1]), bits(p[2])}}; }
+inline DoubleKey make_key(const double* p) { return {{bits(p[0]), bits(p[1]), bits(p[2])}}; }
 
 // Open addressing with linear probing, sized for `keys` at load <= 1/2; counts keys on first insertion
 // and keeps the value given with a key's first insertion.
-template <int W>
+template <class K>
 class Table {
  public:
   void reset(uint64_t keys) {
     const uint64_t slots = std::bit_ceil(std::max<uint64_t>(2 * keys, 16));
     if (slots > capacity_) {
-      slots_ = std::make_unique_for_overwrite<Key<W>[]>(slots);
+      slots_ = std::make_unique_for_overwrite<K[]>(slots);
       values_ = std::make_unique_for_overwrite<uint32_t[]>(slots);
       capacity_ = slots;
     }
     mask_ = slots - 1;
-    for (uint64_t i = 0; i < slots; ++i) slots_[i].w[0] = empty_word;
+    for (uint64_t i = 0; i < slots; ++i) slots_[i].w[0] = kEmpty<typename K::Word>;
     count_ = 0;
   }
   // Returns the value stored with the key: `value` if it is new.
-  uint32_t insert(const Key<W>& k, uint64_t h, uint32_t value) {
+  uint32_t insert(const K& k, uint64_t h, uint32_t value) {
     for (uint64_t i = h & mask_;; i = (i + 1) & mask_) {
-      Key<W>& s = slots_[i];
-      if (s.w[0] == empty_word) {
+      K& s = slots_[i];
+      if (s.w[0] == kEmpty<typename K::Word>) {
         s = k;
         values_[i] = value;
         ++count_;
@@ -78,20 +87,99 @@ class Table {
   uint64_t count() const { return count_; }
 
  private:
-  std::unique_ptr<Key<W>[]> slots_;
+  std::unique_ptr<K[]> slots_;
   std::unique_ptr<uint32_t[]> values_;
   uint64_t capacity_ = 0, mask_ = 0, count_ = 0;
 };
 
-// 256 buckets by the top 8 bits of the hash; a bucket's table indexes by the low bits.
+// 256 buckets by the top 8 bits of the hash; sub-buckets of about kSubKeys keys by the bits below.
 constexpr int bucket_bits = 8;
 constexpr uint64_t buckets = uint64_t{1} << bucket_bits;
+constexpr uint64_t kSubKeys = 8192;
+// Sub-buckets of a bucket of n keys: 2^sub_bits(n) of them.
+inline int sub_bits(uint64_t n) { return n > kSubKeys ? static_cast<int>(std::bit_width((n - 1) / kSubKeys)) : 0; }
+// What a thread holds besides the batch (dedupe_bucket's copies, sub-bucket numbers and pairs) per key of
+// the largest bucket, and its table (a sub-bucket of up to twice kSubKeys keys, at load 1/2, rounded up).
+template <class K>
+constexpr uint64_t kScratchPerKey = sizeof(K) + 4 + 4 + 8;
+template <class K>
+constexpr uint64_t kTableBytes = 8 * kSubKeys * (sizeof(K) + 4);
 
-// Counts distinct keys; when `canonical` is given (count entries), also writes for every vertex the
-// smallest vertex id with the same key.
-template <class T, int W>
+// A bucket's keys on their way from the scan to the batch (count_keys).
+constexpr uint32_t kStaged = 16;
+template <class K>
+struct Staged {
+  K keys[kStaged];
+  uint32_t ids[kStaged];
+  uint32_t n = 0;
+};
+
+// Welded vertices, as (id << 32 | canonical id), in any order.
+using PairSink = std::function<void(std::span<const uint64_t>)>;
+
+template <class K>
+struct Scratch {
+  Table<K> table;
+  std::vector<K> keys;
+  std::vector<uint32_t> ids, sub;
+  std::vector<uint64_t> start, fill, pairs;
+};
+
+// Inserts keys[i] with ids[i] (file order) into a fresh table; with `weld`, appends every key's pair that
+// an earlier id already holds. Returns the distinct keys.
+template <class K>
+uint64_t insert_run(std::span<const K> keys, const uint32_t* ids, Scratch<K>& s, bool weld) {
+  s.table.reset(keys.size());
+  if (weld) {
+    for (size_t i = 0; i < keys.size(); ++i) {
+      const uint32_t c = s.table.insert(keys[i], hash(keys[i]), ids[i]);
+      if (c != ids[i]) s.pairs.push_back(uint64_t{ids[i]} << 32 | c);
+    }
+  } else {
+    for (size_t i = 0; i < keys.size(); ++i) s.table.insert(keys[i], hash(keys[i]), 0);
+  }
+  return s.table.count();
+}
+
+// One bucket's distinct keys (and with `ids`, its pairs in s.pairs). Invariant: every sub-bucket gets its
+// keys in the order the bucket holds them (file order), since the counting sort is stable.
+template <class K>
+uint64_t dedupe_bucket(std::span<const K> keys, const uint32_t* ids, Scratch<K>& s) {
+  s.pairs.clear();
+  const uint64_t n = keys.size();
+  const int sb = sub_bits(n);
+  if (sb == 0) return insert_run(keys, ids, s, ids != nullptr);
+  const uint64_t subs = uint64_t{1} << sb;
+  const int shift = 64 - bucket_bits - sb;
+  s.start.assign(subs + 1, 0);
+  s.sub.resize(n);
+  for (uint64_t i = 0; i < n; ++i) {
+    s.sub[i] = static_cast<uint32_t>((hash(keys[i]) >> shift) & (subs - 1));
+    ++s.start[s.sub[i] + 1];
+  }
+  for (uint64_t j = 0; j < subs; ++j) s.start[j + 1] += s.start[j];
+  s.keys.resize(n);
+  if (ids) s.ids.resize(n);
+  s.fill.assign(s.start.begin(), s.start.end() - 1);
+  for (uint64_t i = 0; i < n; ++i) {
+    const uint64_t to = s.fill[s.sub[i]]++;
+    s.keys[to] = keys[i];
+    if (ids) s.ids[to] = ids[i];
+  }
+  uint64_t distinct = 0;
+  for (uint64_t j = 0; j < subs; ++j) {
+    const uint64_t first = s.start[j], end = s.start[j + 1];
+    distinct += insert_run(std::span<const K>(s.keys.data() + first, end - first), ids ? s.ids.data() + first : nullptr, s,
+                           ids != nullptr);
+  }
+  return distinct;
+}
+
+// Counts the distinct keys of buckets [first_bucket, end_bucket); with `sink`, also hands it every welded
+// vertex's pair.
+template <class T, class K>
 uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_bytes, Progress& progress,
-                    const char* stage, uint32_t* canonical) {
+                    const char* stage, const PairSink* sink, uint64_t first_bucket = 0, uint64_t end_bucket = buckets) {
   io::MappedFile file(path);
   const uint64_t stride = 3 * sizeof(T);
   if (file.size() != count * stride) fail(Status::io_error, path + ": size does not match store.json");
@@ -109,7 +197,7 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
       const T* xyz = reinterpret_cast<const T*>(w.data());
       const uint64_t first = at / stride;
       for (uint64_t i = 0, n = w.size() / stride; i < n; ++i) {
-        const Key<W> k = make_key(xyz + 3 * i);
+        const K k = make_key(xyz + 3 * i);
         visit(k, hash(k), static_cast<uint32_t>(first + i));
       }
     }
@@ -119,26 +207,39 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
   std::vector<uint64_t> slice_size(slices * buckets, 0);
   tbb::parallel_for(uint64_t{0}, slices, [&](uint64_t sl) {
     uint64_t* sz = &slice_size[sl * buckets];
-    scan_slice(sl, [&](const Key<W>&, uint64_t h, uint32_t) { ++sz[h >> (64 - bucket_bits)]; });
+    scan_slice(sl, [&](const K&, uint64_t h, uint32_t) { ++sz[h >> (64 - bucket_bits)]; });
   });
   std::vector<uint64_t> size(buckets, 0);
   for (uint64_t sl = 0; sl < slices; ++sl)
     for (uint64_t b = 0; b < buckets; ++b) size[b] += slice_size[sl * buckets + b];
   progress.report(stage, 0.2);
 
-  // Then, for as many consecutive buckets as the budget holds at a time (keys plus one table per
-  // thread, each at most 4 slots per key of the largest bucket): scatter their keys into one array at
-  // bucket offsets, and count each bucket's distinct keys in its own small table, in parallel.
-  const unsigned threads = static_cast<unsigned>(std::max(1, tbb::this_task_arena::max_concurrency()));
-  const uint64_t largest = *std::max_element(size.begin(), size.end());
-  const uint64_t per_key = sizeof(Key<W>) + (canonical ? sizeof(uint32_t) : 0);
-  const uint64_t tables = threads * 4 * largest * per_key;
-  const uint64_t key_budget = std::max<uint64_t>(memory_bytes > tables + threads * step ? memory_bytes - tables - threads * step : 0,
+  // Then, for as many consecutive buckets as the budget holds at a time (keys and ids, beside each
+  // thread's scratch and table and its window of the file): scatter their keys into one array at bucket
+  // offsets, and count each bucket's distinct keys, buckets in parallel.
+  const uint64_t threads = static_cast<uint64_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  const uint64_t largest = *std::max_element(size.begin() + first_bucket, size.begin() + end_bucket);
+  const uint64_t per_key = sizeof(K) + (sink ? sizeof(uint32_t) : 0);
+  const uint64_t per_thread = largest * kScratchPerKey<K> + kTableBytes<K> + step;
+  const uint64_t key_budget = std::max<uint64_t>(memory_bytes > threads * per_thread ? memory_bytes - threads * per_thread : 0,
                                                  largest * per_key);
   uint64_t distinct = 0;
-  for (uint64_t first = 0; first < buckets;) {
+  // The batch's keys and ids, allocated for the largest batch so far and reused: fresh pages for every
+  // batch would be faulted in again.
+  uint64_t capacity = 0;
+  std::unique_ptr<K[]> keys;
+  std::unique_ptr<uint32_t[]> ids;
+  std::vector<uint64_t> bounce(sink ? 1 << 16 : 0);  // pairs, 8-byte aligned for the sink
+  tbb::enumerable_thread_specific<Scratch<K>> scratch;
+  for (uint64_t first = first_bucket; first < end_bucket;) {
+    // As few batches as the budget allows, of about equal sizes (a last batch of a few keys would cost a
+    // whole scan of the column).
+    uint64_t rest = 0;
+    for (uint64_t b = first; b < end_bucket; ++b) rest += size[b] * per_key;
+    const uint64_t batches_left = std::max<uint64_t>((rest + key_budget - 1) / key_budget, 1);
+    const uint64_t limit = std::min(key_budget, rest / batches_left + largest * per_key);
     uint64_t last = first, bytes = 0;
-    while (last < buckets && (last == first || bytes + size[last] * per_key <= key_budget))
+    while (last < end_bucket && (last == first || bytes + size[last] * per_key <= limit))
       bytes += size[last++] * per_key;
     std::vector<uint64_t> offset(buckets + 1, 0);
     for (uint64_t b = first; b < last; ++b) offset[b + 1] = offset[b] + size[b];
@@ -149,54 +250,201 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
         fill[sl * buckets + b] = at;
         at += slice_size[sl * buckets + b];
       }
-    auto keys = std::make_unique_for_overwrite<Key<W>[]>(std::max<uint64_t>(offset[last], 1));
-    std::unique_ptr<uint32_t[]> ids;
-    if (canonical) ids = std::make_unique_for_overwrite<uint32_t[]>(std::max<uint64_t>(offset[last], 1));
+    if (offset[last] > capacity) {
+      capacity = offset[last];
+      keys.reset(), ids.reset();
+      keys = std::make_unique_for_overwrite<K[]>(capacity);
+      if (sink) ids = std::make_unique_for_overwrite<uint32_t[]>(capacity);
+    }
     tbb::parallel_for(uint64_t{0}, slices, [&](uint64_t sl) {
-      uint64_t* at = &fill[sl * buckets];
-      scan_slice(sl, [&](const Key<W>& k, uint64_t h, uint32_t id) {
-        const uint64_t b = h >> (64 - bucket_bits);
-        if (b >= first && b < last) {
-          if (canonical) ids[at[b]] = id;
-          keys[at[b]++] = k;
+      // Keys are staged a few at a time per bucket and copied out together (software write combining:
+      // a bucket's destination is then written in whole cache lines).
+      std::vector<Staged<K>> staged(last - first + 1);  // and one for the keys of other batches
+      uint64_t* const at = &fill[sl * buckets];
+      K* const to_keys = keys.get();
+      uint32_t* const to_ids = ids.get();
+      const uint64_t lo = first, span = last - first;
+      auto flush = [&](uint64_t i) {
+        Staged<K>& st = staged[i];
+        if (i == last - first) {
+          st.n = 0;
+          return;
         }
+        const uint64_t to = at[lo + i];
+        std::memcpy(to_keys + to, st.keys, st.n * sizeof(K));
+        if (to_ids) std::memcpy(to_ids + to, st.ids, st.n * sizeof(uint32_t));
+        at[lo + i] += st.n;
+        st.n = 0;
+      };
+      // Without a branch on the bucket (taken at random, it was mispredicted for about one key in three):
+      // the keys of other batches go to a last staging area that is never copied out.
+      scan_slice(sl, [&staged, &flush, lo, span](const K& k, uint64_t h, uint32_t id) {
+        const uint64_t raw = (h >> (64 - bucket_bits)) - lo;
+        const uint64_t i = raw < span ? raw : span;
+        Staged<K>& st = staged[i];
+        st.keys[st.n] = k;
+        st.ids[st.n] = id;
+        if (++st.n == kStaged) flush(i);
       });
+      for (uint64_t i = 0; i < span; ++i) flush(i);
     });
+    // Each bucket's pairs go where its keys were (8 bytes a pair, fewer pairs than keys), and to the sink
+    // after the batch, in bucket order, with every thread free for the sink's sort.
     std::atomic<uint64_t> found{0};
-    tbb::enumerable_thread_specific<Table<W>> table;
+    std::vector<uint64_t> pairs(buckets, 0);
     tbb::parallel_for(first, last, [&](uint64_t b) {
-      Table<W>& t = table.local();
-      t.reset(size[b]);
-      // Ids within a bucket come in file order, so a key's first id is its smallest.
-      if (canonical) {
-        for (uint64_t i = offset[b]; i < offset[b + 1]; ++i) canonical[ids[i]] = t.insert(keys[i], hash(keys[i]), ids[i]);
-      } else {
-        for (uint64_t i = offset[b]; i < offset[b + 1]; ++i) t.insert(keys[i], hash(keys[i]), 0);
-      }
-      found += t.count();
+      Scratch<K>& s = scratch.local();
+      found += dedupe_bucket(std::span<const K>(keys.get() + offset[b], size[b]), sink ? ids.get() + offset[b] : nullptr, s);
+      pairs[b] = s.pairs.size();
+      std::memcpy(keys.get() + offset[b], s.pairs.data(), s.pairs.size() * sizeof(uint64_t));
     });
+    for (uint64_t b = first; b < last; ++b) {
+      const char* from = reinterpret_cast<const char*>(keys.get() + offset[b]);
+      for (uint64_t done = 0; done < pairs[b];) {
+        const uint64_t n = std::min<uint64_t>(pairs[b] - done, bounce.size());
+        std::memcpy(bounce.data(), from + done * sizeof(uint64_t), n * sizeof(uint64_t));
+        (*sink)(std::span<const uint64_t>(bounce.data(), n));
+        done += n;
+      }
+    }
     distinct += found;
     first = last;
-    progress.report(stage, 0.2 + 0.8 * static_cast<double>(first) / static_cast<double>(buckets));
+    progress.report(stage, 0.2 + 0.8 * static_cast<double>(first - first_bucket) / static_cast<double>(end_bucket - first_bucket));
   }
   return distinct;
 }
+
+// Bytes of one key in a batch and in a thread's scratch.
+uint64_t key_bytes(bool single_precision) { return single_precision ? sizeof(FloatKey) : sizeof(DoubleKey); }
 
 }  // namespace
 
 uint64_t count_distinct_positions(const std::string& path, uint64_t count, bool single_precision,
                                   uint64_t memory_bytes, Progress& progress) {
   if (count == 0) return 0;
-  return single_precision ? count_keys<float, 2>(path, count, memory_bytes, progress, "census", nullptr)
-                          : count_keys<double, 3>(path, count, memory_bytes, progress, "census", nullptr);
+  return single_precision ? count_keys<float, FloatKey>(path, count, memory_bytes, progress, "census", nullptr)
+                          : count_keys<double, DoubleKey>(path, count, memory_bytes, progress, "census", nullptr);
 }
 
+uint64_t weld_memory_floor(uint64_t count, bool single_precision) {
+  const uint64_t threads = static_cast<uint64_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  const uint64_t bucket = 2 * count / buckets + 1;
+  const uint64_t key = key_bytes(single_precision);
+  return weld_detail::words(count) * 12 + (4 << 20) + bucket * (key + 4) +
+         threads * (bucket * (key + 16) + 8 * kSubKeys * (key + 4) + key * 65536);
+}
+
+namespace {
+
+using PairSorter = ExternalSorter<uint64_t, std::less<uint64_t>>;
+
+// The weld's share of the budget for sorting its pairs: an eighth, at least 4 MiB, at most all pairs.
+uint64_t pair_sort_bytes(uint64_t memory_bytes, uint64_t count) {
+  return std::clamp<uint64_t>(memory_bytes / 8, 4 << 20, std::max<uint64_t>(8 * count, 4 << 20));
+}
+
+void check_floor(uint64_t count, bool single_precision, uint64_t memory_bytes) {
+  const uint64_t floor = weld_memory_floor(count, single_precision);
+  if (memory_bytes < floor)
+    fail(Status::usage, "welding " + std::to_string(count) + " stored vertices needs at least " + std::to_string(floor >> 20) +
+                            " MiB, more than --memory allows (" + std::to_string(memory_bytes >> 20) + " MiB for the stage): raise --memory");
+}
+
+// The welded vertices of buckets [first_bucket, end_bucket) into `sorter`, their bits into `bits` (when
+// given); `held` bytes of the budget are taken already. Returns the buckets' distinct positions; adds
+// their welded vertices to *welded.
+uint64_t sort_welded(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes, uint64_t held,
+                     Progress& progress, uint64_t first_bucket, uint64_t end_bucket, PairSorter& sorter,
+                     std::vector<uint64_t>* bits, uint64_t* welded) {
+  const PairSink sink = [&](std::span<const uint64_t> pairs) {
+    if (bits)
+      for (uint64_t p : pairs) (*bits)[p >> 38] |= uint64_t{1} << ((p >> 32) % 64);
+    sorter.push(pairs);
+    *welded += pairs.size();
+  };
+  const uint64_t rest = memory_bytes - std::min(memory_bytes, held);
+  return single_precision
+             ? count_keys<float, FloatKey>(path, count, rest, progress, "weld", &sink, first_bucket, end_bucket)
+             : count_keys<double, DoubleKey>(path, count, rest, progress, "weld", &sink, first_bucket, end_bucket);
+}
+
+}  // namespace
+
 uint64_t weld_positions(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes,
-                        Progress& progress, std::span<uint32_t> canonical) {
-  if (canonical.size() != count) fail(Status::internal, "weld_positions: canonical has the wrong size");
+                        const WorkDir& work, Progress& progress, const std::string& weld_path) {
   if (count == 0) return 0;
-  return single_precision ? count_keys<float, 2>(path, count, memory_bytes, progress, "weld", canonical.data())
-                          : count_keys<double, 3>(path, count, memory_bytes, progress, "weld", canonical.data());
+  check_floor(count, single_precision, memory_bytes);
+  // Held throughout: the map's bits (and, when it is written, its ranks: 4 bytes a word), the sort's buffer.
+  std::vector<uint64_t> bits(weld_detail::words(count), 0);
+  const uint64_t sort_bytes = pair_sort_bytes(memory_bytes, count);
+  PairSorter sorter(work, "weld", sort_bytes);
+  uint64_t welded = 0;
+  const uint64_t distinct = sort_welded(path, count, single_precision, memory_bytes, bits.size() * 12 + sort_bytes, progress,
+                                        0, buckets, sorter, &bits, &welded);
+  if (distinct + welded != count)
+    fail(Status::internal, path + ": the weld found " + std::to_string(distinct) + " positions and " + std::to_string(welded) +
+                               " welded vertices among " + std::to_string(count));
+  if (welded == 0) return distinct;
+  // The pairs in id order: the welded vertices' canonical ids as the map lists them.
+  WeldFileWriter out(weld_path, count, bits);
+  sorter.merge([&](uint64_t p) { out.add(static_cast<uint32_t>(p)); });
+  out.commit();
+  return distinct;
+}
+
+std::pair<unsigned, unsigned> weld_unit_buckets(unsigned unit, unsigned units) {
+  return {static_cast<unsigned>(buckets * unit / units), static_cast<unsigned>(buckets * (unit + 1) / units)};
+}
+
+WeldUnitResult weld_unit(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes,
+                         const WorkDir& work, Progress& progress, unsigned unit, unsigned units, const std::string& run_path) {
+  if (units == 0 || units > kMaxWeldUnits || unit >= units) fail(Status::internal, "weld_unit: unit out of range");
+  WeldUnitResult r;
+  io::FileWriter out(run_path, 4 << 20);
+  if (count > 0) {
+    check_floor(count, single_precision, memory_bytes);
+    const uint64_t sort_bytes = pair_sort_bytes(memory_bytes, count);
+    PairSorter sorter(work, "weld-unit", sort_bytes);
+    const auto [first, end] = weld_unit_buckets(unit, units);
+    r.distinct = sort_welded(path, count, single_precision, memory_bytes, sort_bytes, progress, first, end, sorter, nullptr, &r.welded);
+    std::vector<uint64_t> block;
+    block.reserve(1 << 16);
+    sorter.merge([&](uint64_t p) {
+      block.push_back(p);
+      if (block.size() == block.capacity()) out.write_array(std::span<const uint64_t>(block)), block.clear();
+    });
+    out.write_array(std::span<const uint64_t>(block));
+  }
+  out.commit();
+  return r;
+}
+
+void write_weld_map(const std::vector<std::pair<std::string, uint64_t>>& runs, uint64_t count, uint64_t memory_bytes,
+                    const WorkDir& work, const std::string& weld_path) {
+  // The bits first (one read of every run), since the map lists them before the canonical ids; then one
+  // merge of the runs, which are sorted and hold disjoint ids, in id order.
+  std::vector<uint64_t> bits(weld_detail::words(count), 0);
+  const uint64_t sort_bytes = pair_sort_bytes(memory_bytes, count);
+  PairSorter sorter(work, "weld-map", sort_bytes);
+  for (const auto& [run, pairs] : runs) {
+    io::MappedFile file(run);
+    if (file.size() != 8 * pairs) fail(Status::io_error, run + ": does not hold " + std::to_string(pairs) + " welded vertices (weld unit)");
+    constexpr uint64_t kWindow = 8 << 20;
+    for (uint64_t at = 0; at < file.size(); at += kWindow) {
+      const io::Window w = file.map(at, std::min(file.size(), at + kWindow));
+      for (uint64_t i = 0; i < w.size() / 8; ++i) {
+        uint64_t p;
+        std::memcpy(&p, w.data() + 8 * i, 8);
+        const uint64_t v = p >> 32;
+        if (v >= count || static_cast<uint32_t>(p) >= v) fail(Status::io_error, run + ": not a weld unit's run");
+        bits[v / 64] |= uint64_t{1} << (v % 64);
+      }
+    }
+    sorter.add_sorted_run(run, pairs);
+  }
+  WeldFileWriter out(weld_path, count, bits);
+  sorter.merge([&](uint64_t p) { out.add(static_cast<uint32_t>(p)); });
+  out.commit();
 }
 
 }  // namespace lodstream::stream

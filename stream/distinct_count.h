@@ -1,29 +1,57 @@
-// Exact count of distinct positions in a store's position column, under a memory budget.
+// Exact count of distinct positions in a store's position column, and the weld, under a memory budget.
 //
 // Positions become fixed-width bit keys (-0 normalised to +0, so exact equality of coordinates is
 // equality of keys). One pass counts the keys of each of 256 buckets (top bits of the key's hash); then,
 // as many consecutive buckets as `memory_bytes` holds at a time are scattered into one array and each
-// bucket's distinct keys are counted in its own small, cache-friendly hash table, buckets in parallel (in
-// the calling task arena). Equal keys always share a bucket, so the sum is exact and does not depend on
-// the budget, which only decides how many read-only passes over the column are made. Nothing is written.
+// bucket's distinct keys are counted, buckets in parallel (in the calling task arena). A bucket is first
+// split by its next hash bits (a stable counting sort) into sub-buckets of about 8 K keys, each counted in
+// its own hash table, small enough to stay in a core's cache: one table for the whole bucket missed the
+// cache at nearly every probe. Equal keys always share a sub-bucket, so the sum is exact and does not
+// depend on the budget, which only decides how many read-only passes over the column are made.
 #pragma once
 
 #include <cstdint>
-#include <span>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "stream/progress.h"
+#include "stream/work_dir.h"
 
 namespace lodstream::stream {
 
-// `path` holds `count` positions as 3 floats (single_precision) or 3 doubles each.
+// `path` holds `count` positions as 3 floats (single_precision) or 3 doubles each. Nothing is written.
 uint64_t count_distinct_positions(const std::string& path, uint64_t count, bool single_precision,
                                   uint64_t memory_bytes, Progress& progress);
 
-// The same pass, welding: writes canonical[v] = the smallest vertex id whose position equals v's (so
-// canonical[v] <= v, and canonical[v] == v for the first vertex at each position). `canonical` has `count`
-// entries and is held in memory by the caller (4 bytes per vertex). Returns the distinct count.
+// The same passes, welding: every vertex's canonical id is the smallest vertex id whose position equals
+// its own. Each sub-bucket's keys come in file order, so a key's first id is its canonical id; the welded
+// vertices' (id, canonical id) pairs go to an external sort (scratch files in `work`, an eighth of the
+// budget) and, in id order, into the weld map at `weld_path` (stream/weld_file.h), which is written only
+// when some positions repeat. Nothing is held per vertex but the map's bits (1/8 byte a vertex). Returns
+// the distinct count. Throws Failure(usage) when `memory_bytes` is below weld_memory_floor.
 uint64_t weld_positions(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes,
-                        Progress& progress, std::span<uint32_t> canonical);
+                        const WorkDir& work, Progress& progress, const std::string& weld_path);
+
+// The weld shared out among processes (stream/grade_shares.h): unit `unit` of `units` (at most
+// kMaxWeldUnits) welds the positions of its hash buckets alone, each position's canonical id being
+// settled in the one unit that holds its bucket, and writes its welded vertices' pairs (id << 32 |
+// canonical id, u64) in id order to `run_path`; write_weld_map then writes the map from every unit's run
+// (path, pairs), the same bytes as weld_positions. A unit's distinct positions and welded vertices add up
+// over the units to the store's.
+inline constexpr unsigned kMaxWeldUnits = 256;
+struct WeldUnitResult {
+  uint64_t distinct = 0, welded = 0;
+};
+WeldUnitResult weld_unit(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes,
+                         const WorkDir& work, Progress& progress, unsigned unit, unsigned units, const std::string& run_path);
+void write_weld_map(const std::vector<std::pair<std::string, uint64_t>>& runs, uint64_t count, uint64_t memory_bytes,
+                    const WorkDir& work, const std::string& weld_path);
+// The hash buckets [first, end) of 256 that unit `unit` of `units` welds.
+std::pair<unsigned, unsigned> weld_unit_buckets(unsigned unit, unsigned units);
+
+// The least budget weld_positions works in for `count` positions: the map's bits and ranks, the sort's
+// smallest buffer, and one bucket's keys with each thread's scratch for it (buckets twice the mean size).
+uint64_t weld_memory_floor(uint64_t count, bool single_precision);
 
 }  // namespace lodstream::stream

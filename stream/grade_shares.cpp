@@ -73,20 +73,33 @@ std::string grade_share_run(const std::string& prefix, unsigned index) {
   return grade_shares_dir(prefix) + fmt::format("share-{}.run", index);
 }
 std::string grade_shares_weld_path(const std::string& prefix) { return grade_shares_dir(prefix) + "weld.map"; }
+std::string weld_units_dir(const std::string& prefix) { return prefix + "weld-units/"; }
+std::string weld_unit_stamp(const std::string& prefix, unsigned unit) { return weld_units_dir(prefix) + fmt::format("unit-{}.json", unit); }
+std::string weld_unit_run(const std::string& prefix, unsigned unit) { return weld_units_dir(prefix) + fmt::format("unit-{}.pairs", unit); }
+
+bool store_needs_weld(const StoreMeta& meta) { return meta.vertices > 0 && meta.format.rfind("stl", 0) != 0; }
+
+WeldUnitResult run_weld_unit(const GradeShareInput& in, unsigned unit, unsigned units, Progress& progress) {
+  const StoreMeta& meta = *in.meta;
+  return weld_unit(in.store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), meta.vertices,
+                   meta.single_precision, in.plan.stage_bytes, *in.work, progress, unit, units, weld_unit_run(in.prefix, unit));
+}
 
 unsigned grade_shares_planned(const std::string& prefix, const ordered_json& key) {
   const ordered_json j = read_plan(prefix, key);
   return j.is_null() ? 0 : j.value("count", 0u);
 }
 
-GradePlan shared_grade_plan(const GradeShareInput& in, unsigned count, const ordered_json& key, Progress& progress) {
+GradePlan shared_grade_plan(const GradeShareInput& in, unsigned count, const ordered_json& key, Progress& progress,
+                            const std::vector<std::pair<std::string, uint64_t>>& weld_runs) {
   GradePlan gp;
   const ordered_json j = read_plan(in.prefix, key);
   if (!j.is_null() && j.value("count", 0u) == count && parse_plan(in.prefix, j, &gp)) return gp;
   // Made afresh: the shares of an older plan are void.
   std::filesystem::remove_all(grade_shares_dir(in.prefix));
   std::filesystem::create_directories(grade_shares_dir(in.prefix));
-  gp = plan_grading(in.store_dir, *in.meta, in.plan, progress, grade_shares_weld_path(in.prefix), in.max_range_vertices, count, true);
+  gp = plan_grading(in.store_dir, *in.meta, in.plan, *in.work, progress, grade_shares_weld_path(in.prefix), in.max_range_vertices, count,
+                    true, weld_runs);
   io::FileWriter blocks(blocks_path(in.prefix));
   ordered_json counts = ordered_json::array();
   for (int kind = 0; kind < 3; ++kind) {

@@ -21,6 +21,14 @@
 // from all of its primitives (the block pass found every block that touches its range).
 // Memory of a share: grade_ranges' (the range's incidence lists, sized from the budget) and the sort's
 // buffer (a third of the stage's budget); of the merge, one read buffer a run within a third of it.
+//
+// The weld as units (run_weld_unit; stream/distinct_count.h): when grading shares run as their own
+// processes, the weld is not made by the plan's maker alone. Unit u of U = min(N, 256) welds the hash
+// buckets of weld_unit_buckets(u, U) into weld-units/unit-u.pairs; every grading share, once the store is
+// ingested, runs the units no other process holds (claimed by a lock each, its own index first), then
+// waits for the others' (a unit whose holder died is run by the waiting process); the plan's maker then
+// writes the weld map from the units' runs (write_weld_map: the same bytes as one process's weld). The
+// units go with the grading shares' directory when the stage is stamped.
 #pragma once
 
 #include <cstdint>
@@ -28,6 +36,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "stream/distinct_count.h"
 #include "stream/grade_stage.h"
 
 namespace lodstream::stream {
@@ -47,12 +56,22 @@ std::string grade_share_stamp(const std::string& prefix, unsigned index);
 std::string grade_share_run(const std::string& prefix, unsigned index);
 std::string grade_shares_weld_path(const std::string& prefix);  // the plan's weld map, until the merge moves it
 
+std::string weld_units_dir(const std::string& prefix);                       // WORK/weld-units/
+std::string weld_unit_stamp(const std::string& prefix, unsigned unit);       // unit-U.json
+std::string weld_unit_run(const std::string& prefix, unsigned unit);         // unit-U.pairs
+// Whether grading welds the store (not an STL store, welded at ingest, nor an empty one).
+bool store_needs_weld(const StoreMeta& meta);
+// Runs weld unit `unit` of `units` into weld_unit_run.
+WeldUnitResult run_weld_unit(const GradeShareInput& in, unsigned unit, unsigned units, Progress& progress);
+
 // The count of the shares' plan written for `key`, or 0 when there is none (no grading share has run).
 unsigned grade_shares_planned(const std::string& prefix, const nlohmann::ordered_json& key);
 // The plan as every process of a run sees it, made once: read from grade-shares/ when written there for
 // `key` and `count`, else made by plan_grading (the weld and a pass over the store) and written there.
 // The caller holds the work directory's lock.
-GradePlan shared_grade_plan(const GradeShareInput& in, unsigned count, const nlohmann::ordered_json& key, Progress& progress);
+// With `weld_runs` (every weld unit's run and pairs), the weld map is written from them.
+GradePlan shared_grade_plan(const GradeShareInput& in, unsigned count, const nlohmann::ordered_json& key, Progress& progress,
+                            const std::vector<std::pair<std::string, uint64_t>>& weld_runs = {});
 
 // The ranges [first, end) of share `index` of `count`.
 std::pair<uint64_t, uint64_t> grade_share_ranges(const GradePlan& plan, unsigned index, unsigned count);

@@ -130,31 +130,25 @@ void block_area(std::span<const uint32_t> tris, const StorePositions& pos, AreaH
 }  // namespace
 
 // Pass 1: weld, then the range size; with more than one range (or `sum_areas`), the block pass.
-GradePlan plan_grading(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan, Progress& progress,
-                       const std::string& canonical_path, uint64_t max_range_vertices, uint64_t min_ranges, bool sum_areas) {
+GradePlan plan_grading(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan, const WorkDir& work,
+                       Progress& progress, const std::string& canonical_path, uint64_t max_range_vertices, uint64_t min_ranges,
+                       bool sum_areas, const std::vector<std::pair<std::string, uint64_t>>& weld_runs) {
   GradePlan gp;
   const uint64_t n_vertices = meta.vertices;
 
   // Weld. STL stores are welded at ingest already.
   if (meta.format.rfind("stl", 0) == 0 || n_vertices == 0) {
     gp.distinct_positions = n_vertices;
+  } else if (!weld_runs.empty()) {
+    uint64_t welded = 0;
+    for (const auto& run : weld_runs) welded += run.second;
+    gp.distinct_positions = n_vertices - welded;
+    gp.welded = welded > 0;
+    if (gp.welded) write_weld_map(weld_runs, n_vertices, plan.stage_bytes, work, canonical_path);
   } else {
-    // The weld map is the one array per stored vertex held whole (4 bytes each): with the smallest key
-    // batches beside it (one of the 256 hash buckets and a table per thread), about 4.7 bytes a vertex.
-    const uint64_t held = n_vertices * 4;
-    const uint64_t least = held + n_vertices * 3 / 4 + (16 << 20);
-    if (least > plan.stage_bytes)
-      fail(Status::usage, "welding " + std::to_string(n_vertices) + " stored vertices needs at least " +
-                              std::to_string(least >> 20) + " MiB, more than --memory allows (" +
-                              std::to_string(plan.stage_bytes >> 20) + " MiB for the stage): raise --memory");
-    std::vector<uint32_t> canonical(n_vertices);
-    gp.distinct_positions = weld_positions(
-        store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), n_vertices, meta.single_precision,
-        plan.stage_bytes > held + (16 << 20) ? plan.stage_bytes - held : (16 << 20), progress, canonical);
-    if (gp.distinct_positions < n_vertices) {
-      write_weld_file(canonical_path, canonical);
-      gp.welded = true;
-    }
+    gp.distinct_positions = weld_positions(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), n_vertices,
+                                           meta.single_precision, plan.stage_bytes, work, progress, canonical_path);
+    gp.welded = gp.distinct_positions < n_vertices;
   }
 
   // Range size from the budget: per vertex its offsets, counters, a record, and its share of incidence
@@ -337,7 +331,7 @@ GradeSummary grade_and_sort(const std::string& store_dir, const StoreMeta& meta,
                             const MemoryPlan& plan, const WorkDir& work, Progress& progress,
                             const std::string& canonical_path, const std::string& order_path,
                             const std::string& grades_path, uint64_t max_range_vertices) {
-  GradePlan gp = plan_grading(store_dir, meta, plan, progress, canonical_path, max_range_vertices, 1, false);
+  GradePlan gp = plan_grading(store_dir, meta, plan, work, progress, canonical_path, max_range_vertices, 1, false);
   GradeSorter sorter(work, "weights", std::max<uint64_t>(plan.stage_bytes / 3, 4 << 20));
   sorter.expect(gp.distinct_positions);  // at least the records: one per used canonical vertex
   const uint64_t records = grade_ranges(store_dir, meta, mode, gp, canonical_path, 0, gp.ranges, sorter, progress);

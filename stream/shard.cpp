@@ -27,19 +27,20 @@ constexpr char kPartsMagic[8] = {'L', 'O', 'D', 'P', 'A', 'R', 'T', '3'};
 
 }  // namespace
 
-ShardLock::ShardLock(const std::string& work_dir, const std::string& name) {
+ShardLock::ShardLock(const std::string& work_dir, const std::string& name, bool wait) {
   std::error_code ec;
   std::filesystem::create_directories(work_dir, ec);
   const std::string path = work_dir + "/" + name;
   fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd_ < 0) fail(Status::io_error, path + ": cannot open the work directory's lock: " + std::strerror(errno));
   int r;
-  while ((r = ::flock(fd_, LOCK_EX)) != 0 && errno == EINTR) {
+  while ((r = ::flock(fd_, wait ? LOCK_EX : LOCK_EX | LOCK_NB)) != 0 && errno == EINTR) {
   }
   if (r != 0) {
     const int e = errno;
     ::close(fd_);
     fd_ = -1;
+    if (!wait && e == EWOULDBLOCK) return;
     fail(Status::io_error, path + ": cannot lock the work directory: " + std::strerror(e));
   }
 }

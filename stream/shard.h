@@ -52,11 +52,13 @@
 namespace lodstream::stream {
 
 // The exclusive lock on WORK/shard.lock, held while a task runs the shared stages; released by release()
-// or the destructor. A default-constructed lock holds nothing.
+// or the destructor. A default-constructed lock holds nothing. With `wait` false it is taken only if no
+// other process holds it (held() tells).
 class ShardLock {
  public:
   ShardLock() = default;
-  explicit ShardLock(const std::string& work_dir, const std::string& name = "shard.lock");
+  explicit ShardLock(const std::string& work_dir, const std::string& name = "shard.lock", bool wait = true);
+  bool held() const { return fd_ >= 0; }
   ShardLock(const ShardLock&) = delete;
   ShardLock& operator=(const ShardLock&) = delete;
   ~ShardLock() { release(); }

@@ -504,6 +504,40 @@ struct GradeStageInput {
   bool sharded;
 };
 
+// The weld's units (stream/grade_shares.h), as one grading share takes part: first every unit that no
+// other process holds (from its own index on, so that shares starting together take different units),
+// then every unit in turn, waiting for those another process holds; a unit whose holder died is run
+// here. Returns every unit's run and its pairs.
+std::vector<std::pair<std::string, uint64_t>> run_weld_units(const stream::GradeShareInput& gs, unsigned count, unsigned index,
+                                                             const ordered_json& key, stream::Progress& progress) {
+  const unsigned units = std::min(count, stream::kMaxWeldUnits);
+  const std::string dir = stream::weld_units_dir(gs.prefix);
+  std::filesystem::create_directories(dir);
+  ordered_json unit_key = key;
+  unit_key["weld_units"] = units;
+  auto run = [&](unsigned u) {
+    const stream::WeldUnitResult r = stream::run_weld_unit(gs, u, units, progress);
+    return std::pair(std::vector<std::string>{stream::weld_unit_run(gs.prefix, u)},
+                     ordered_json{{"distinct", r.distinct}, {"welded", r.welded}});
+  };
+  auto lock_name = [](unsigned u) { return fmt::format("share-{}.lock", u); };  // stamped_share's
+  for (unsigned k = 0; k < units; ++k) {
+    const unsigned u = (index + k) % units;
+    const stream::ShardLock claim(dir, lock_name(u), false);
+    ordered_json v;
+    if (!claim.held() || stamp_matches(stream::weld_unit_stamp(gs.prefix, u), unit_key, &v)) continue;
+    std::filesystem::remove(stream::weld_unit_stamp(gs.prefix, u));
+    const auto [files, value] = run(u);
+    write_stamp(stream::weld_unit_stamp(gs.prefix, u), unit_key, files, value);
+  }
+  std::vector<std::pair<std::string, uint64_t>> runs;
+  for (unsigned u = 0; u < units; ++u) {
+    const ordered_json v = stamped_share(dir, u, stream::weld_unit_stamp(gs.prefix, u), unit_key, "", [&] { return run(u); });
+    runs.emplace_back(stream::weld_unit_run(gs.prefix, u), v.at("welded").get<uint64_t>());
+  }
+  return runs;
+}
+
 stream::GradeSummary grade_from_stamp(const ordered_json& v) {
   stream::GradeSummary g;
   g.records = v.at("records");
@@ -549,7 +583,14 @@ bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::uni
     return true;
   }
   const stream::GradeShareInput gs{in.store_dir, &in.meta, mode, in.plan, in.prefix, &in.work, so.grade_range_vertices};
-  const stream::GradePlan gp = stream::shared_grade_plan(gs, count, in.key, progress);  // under the lock
+  std::vector<std::pair<std::string, uint64_t>> weld_runs;
+  if (so.grade_share_count > 0 && stream::store_needs_weld(in.meta) && stream::grade_shares_planned(in.prefix, in.key) != count) {
+    // The weld as units every grading share takes part in (stream/grade_shares.h), the lock let go meanwhile.
+    lock.reset();
+    weld_runs = run_weld_units(gs, count, so.grade_share_index, in.key, progress);
+    lock = std::make_unique<stream::ShardLock>(in.work.path());
+  }
+  const stream::GradePlan gp = stream::shared_grade_plan(gs, count, in.key, progress, weld_runs);  // under the lock
   ordered_json share_key = in.key;
   share_key["count"] = count;
   // A share's stamp: its ranges and records.
@@ -573,6 +614,7 @@ bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::uni
   write_grade_stamp(*out);
   // The shares are spent once the stage is stamped (the weld map is a link to the plan's).
   std::filesystem::remove_all(stream::grade_shares_dir(in.prefix));
+  std::filesystem::remove_all(stream::weld_units_dir(in.prefix));
   return true;
 }
 

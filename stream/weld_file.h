@@ -27,28 +27,56 @@ inline uint64_t ranks_offset(uint64_t vertices) { return 16 + 8 * words(vertices
 inline uint64_t targets_offset(uint64_t vertices) { return ranks_offset(vertices) + (4 * words(vertices) + 7) / 8 * 8; }
 }  // namespace weld_detail
 
+// Writes a weld map in one sequential pass: the header, the bits (bit v set: vertex v is welded) and
+// their ranks first, then, by add() in increasing vertex order, every welded vertex's canonical id.
+// commit() checks that there were as many as bits. Throws Failure(io_error), Failure(internal) on a
+// count that does not match.
+class WeldFileWriter {
+ public:
+  WeldFileWriter(const std::string& path, uint64_t vertices, std::span<const uint64_t> bits) : out_(path, 4 << 20) {
+    const uint64_t w = weld_detail::words(vertices);
+    if (bits.size() != w) fail(Status::internal, path + ": weld map bits for the wrong vertex count");
+    std::vector<uint32_t> ranks(w + (w & 1), 0);
+    for (uint64_t i = 0, r = 0; i < w; ++i) ranks[i] = static_cast<uint32_t>(r), r += static_cast<uint64_t>(std::popcount(bits[i]));
+    for (uint64_t b : bits) welded_ += static_cast<uint64_t>(std::popcount(b));
+    const uint64_t header[2] = {vertices, welded_};
+    out_.write(header, sizeof header);
+    out_.write_array(bits);
+    out_.write_array(std::span<const uint32_t>(ranks));
+    targets_.reserve(1 << 16);
+  }
+  void add(uint32_t target) {
+    targets_.push_back(target);
+    if (targets_.size() == targets_.capacity()) flush();
+  }
+  void commit() {
+    flush();
+    if (added_ != welded_)
+      fail(Status::internal, out_.path() + ": " + std::to_string(added_) + " canonical ids for " + std::to_string(welded_) +
+                                 " welded vertices (weld map)");
+    out_.commit();
+  }
+
+ private:
+  void flush() {
+    out_.write_array(std::span<const uint32_t>(targets_));
+    added_ += targets_.size();
+    targets_.clear();
+  }
+  io::FileWriter out_;
+  uint64_t welded_ = 0, added_ = 0;
+  std::vector<uint32_t> targets_;
+};
+
 // Writes `canonical` (canonical[v] <= v for every v) to `path`. Throws Failure(io_error).
 inline void write_weld_file(const std::string& path, std::span<const uint32_t> canonical) {
-  const uint64_t n = canonical.size(), w = weld_detail::words(n);
-  std::vector<uint64_t> bits(w, 0);
-  std::vector<uint32_t> ranks(w + (w & 1), 0);
-  uint64_t welded = 0;
+  const uint64_t n = canonical.size();
+  std::vector<uint64_t> bits(weld_detail::words(n), 0);
   for (uint64_t v = 0; v < n; ++v)
-    if (canonical[v] != v) bits[v / 64] |= uint64_t{1} << (v % 64), ++welded;
-  for (uint64_t i = 0, r = 0; i < w; ++i) ranks[i] = static_cast<uint32_t>(r), r += static_cast<uint64_t>(std::popcount(bits[i]));
-  io::FileWriter out(path, 4 << 20);
-  const uint64_t header[2] = {n, welded};
-  out.write(header, sizeof header);
-  out.write_array(std::span<const uint64_t>(bits));
-  out.write_array(std::span<const uint32_t>(ranks));
-  std::vector<uint32_t> targets;
-  targets.reserve(1 << 16);
-  for (uint64_t v = 0; v < n; ++v) {
-    if (canonical[v] == v) continue;
-    targets.push_back(canonical[v]);
-    if (targets.size() == targets.capacity()) out.write_array(std::span<const uint32_t>(targets)), targets.clear();
-  }
-  out.write_array(std::span<const uint32_t>(targets));
+    if (canonical[v] != v) bits[v / 64] |= uint64_t{1} << (v % 64);
+  WeldFileWriter out(path, n, bits);
+  for (uint64_t v = 0; v < n; ++v)
+    if (canonical[v] != v) out.add(canonical[v]);
   out.commit();
 }
 

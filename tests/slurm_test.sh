@@ -140,6 +140,18 @@ grep -q "^stage        cluster .*(reused" "$out/slurm/logs/prepare.out" && fail 
 same_outputs "$tmp/room-one" "$out"
 echo "killed grade and cluster shares: run exit $rc, a cluster share graded share 1 and merged, the prepare job ran cluster share 1"
 
+# A weld unit's holder killed just before the unit's stamp (every grading share that runs unit 1 dies
+# there, SIGKILL releasing its claim): a share waiting for the unit runs it in turn, and when none is left
+# the next step welds under the lock; the run ends with exit 0 and one machine's bytes.
+out=$tmp/room-kill-unit
+LODSTREAM_TEST_KILL_AT=unit-1.json "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill-unit" \
+  --shards 3 --wait --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/kill-unit.log" 2>&1
+rc=$?
+[ $rc -eq 0 ] || { fail "a weld unit's holder killed with SIGKILL: the run exited $rc, not 0"; cat "$tmp/kill-unit.log"; }
+grep -qx 137 "$out"/slurm/status/grade-*.rc || fail "no grading share was killed at weld unit 1"
+same_outputs "$tmp/room-one" "$out"
+echo "killed weld unit: run exit $rc, grading shares' exits $(cat "$out"/slurm/status/grade-*.rc | tr '\n' ' ')"
+
 # An ingest range killed just before its segment is complete, in a fresh work directory.
 out=$tmp/room-kill-ingest
 LODSTREAM_TEST_KILL_AT=range-1-of-3.seg "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill" --shards 3 --wait \

@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
+#include <filesystem>
 #include <fstream>
 #include <random>
 #include <set>
@@ -38,6 +40,115 @@ void check(uint64_t n) {
 
 TEST(DistinctCount, FloatKeysInMemoryAndPartitioned) { check<float>(200000); }
 TEST(DistinctCount, DoubleKeysInMemoryAndPartitioned) { check<double>(200000); }
+
+// Positions where about half the vertices repeat an earlier one (a few with -0 for +0), for the weld.
+template <class T>
+std::vector<T> positions_with_repeats(uint64_t n) {
+  std::mt19937_64 rng(7);
+  std::vector<T> xyz;
+  xyz.reserve(3 * n);
+  for (uint64_t i = 0; i < n; ++i) {
+    if (i > 0 && rng() % 2 == 0) {
+      const uint64_t j = rng() % i;
+      for (int a = 0; a < 3; ++a) xyz.push_back(xyz[3 * j + a]);
+      if (rng() % 9 == 0)
+        for (int a = 0; a < 3; ++a) xyz[3 * i + a] = xyz[3 * i + a] == 0 ? T(-0.0) : xyz[3 * i + a];
+    } else {
+      for (int a = 0; a < 3; ++a) xyz.push_back(rng() % 5 == 0 ? T(0) : static_cast<T>(rng() % (1 << 20)) / 64);
+    }
+  }
+  return xyz;
+}
+
+// canonical[v]: the smallest id at v's exact position (-0 = +0), by sorting the ids by position.
+template <class T>
+std::vector<uint32_t> canonical_by_sorting(const std::vector<T>& xyz) {
+  const uint64_t n = xyz.size() / 3;
+  auto key = [&](uint64_t v) {
+    std::array<T, 3> k;
+    for (int a = 0; a < 3; ++a) k[a] = xyz[3 * v + a] == 0 ? T(0) : xyz[3 * v + a];
+    return k;
+  };
+  std::vector<uint32_t> order(n);
+  for (uint32_t v = 0; v < n; ++v) order[v] = v;
+  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+  std::vector<uint32_t> canonical(n);
+  for (uint64_t i = 0; i < n; ++i) canonical[order[i]] = i > 0 && key(order[i]) == key(order[i - 1]) ? canonical[order[i - 1]] : order[i];
+  return canonical;
+}
+
+// The weld (weld_positions) writes the map of the smallest id at each position, the same bytes in one batch
+// with no spill as in many batches, sub-buckets and sort runs, and as 1, 3 or 7 units whose runs are
+// written into one map (weld_unit, write_weld_map); it refuses a budget below its floor.
+template <class T>
+void check_weld(uint64_t n) {
+  test::TempDir tmp;
+  const std::vector<T> xyz = positions_with_repeats<T>(n);
+  const std::vector<uint32_t> expect = canonical_by_sorting(xyz);
+  const std::string path = tmp.file("positions");
+  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(xyz.data()), static_cast<std::streamsize>(xyz.size() * sizeof(T)));
+  stream::Progress progress{Options{}};
+  stream::WorkDir work(tmp.file("work"));
+  const bool single = sizeof(T) == 4;
+  uint64_t distinct = 0;
+  for (uint32_t v = 0; v < n; ++v) distinct += expect[v] == v;
+  const uint64_t floor = stream::weld_memory_floor(n, single);
+  std::string first_bytes;
+  for (uint64_t memory : {uint64_t{1} << 30, floor}) {
+    const std::string map = tmp.file("weld-" + std::to_string(memory));
+    ASSERT_EQ(stream::weld_positions(path, n, single, memory, work, progress, map), distinct) << memory;
+    std::vector<uint32_t> got(n);
+    for (uint32_t v = 0; v < n; ++v) got[v] = v;
+    stream::WeldFile(map, n).for_each_welded([&](uint64_t v, uint32_t c) { got[v] = c; });
+    ASSERT_EQ(got, expect) << memory;
+    const std::string bytes = io::read_small_file(map);
+    if (first_bytes.empty()) first_bytes = bytes;
+    EXPECT_EQ(bytes, first_bytes) << memory;
+  }
+  // As units (one process each), their runs written into one map: the same bytes.
+  for (unsigned units : {1u, 3u, 7u}) {
+    std::vector<std::pair<std::string, uint64_t>> runs;
+    uint64_t unit_distinct = 0, welded = 0;
+    for (unsigned u = 0; u < units; ++u) {
+      const std::string run = tmp.file("unit-" + std::to_string(units) + "-" + std::to_string(u));
+      const stream::WeldUnitResult r = stream::weld_unit(path, n, single, floor, work, progress, u, units, run);
+      EXPECT_EQ(std::filesystem::file_size(run), 8 * r.welded);
+      runs.emplace_back(run, r.welded);
+      unit_distinct += r.distinct, welded += r.welded;
+    }
+    EXPECT_EQ(unit_distinct, distinct) << units;
+    EXPECT_EQ(welded, n - distinct) << units;
+    const std::string map = tmp.file("units-" + std::to_string(units));
+    stream::write_weld_map(runs, n, floor, work, map);
+    EXPECT_EQ(io::read_small_file(map), first_bytes) << units << " units";
+  }
+  try {
+    stream::weld_positions(path, n, single, floor - 1, work, progress, tmp.file("refused"));
+    ADD_FAILURE() << "a budget below the floor was accepted";
+  } catch (const Failure& e) {
+    EXPECT_EQ(e.status(), Status::usage);
+    EXPECT_NE(std::string(e.what()).find("welding " + std::to_string(n) + " stored vertices needs at least"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(tmp.file("refused")));
+}
+
+// 3 M floats: buckets of about 12 K keys, so sub-buckets; 1.5 M welded pairs, more than the floor's
+// sort buffer holds, so runs spill.
+TEST(Weld, FloatPositionsInOneBatchAndInManyGiveTheSameMap) { check_weld<float>(3'000'000); }
+TEST(Weld, DoublePositionsInOneBatchAndInManyGiveTheSameMap) { check_weld<double>(600'000); }
+
+// A store whose positions are all distinct gets no map.
+TEST(Weld, DistinctPositionsWriteNoMap) {
+  test::TempDir tmp;
+  std::vector<float> xyz;
+  for (int i = 0; i < 3000; ++i) xyz.insert(xyz.end(), {static_cast<float>(i), 1.0f, 2.0f});
+  const std::string path = tmp.file("positions");
+  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(xyz.data()), static_cast<std::streamsize>(xyz.size() * sizeof(float)));
+  stream::Progress progress{Options{}};
+  stream::WorkDir work(tmp.file("work"));
+  EXPECT_EQ(stream::weld_positions(path, 3000, true, 1 << 30, work, progress, tmp.file("map")), 3000u);
+  EXPECT_FALSE(std::filesystem::exists(tmp.file("map")));
+}
 
 // The compact weld map (stream/weld_file.h) gives back every canonical id, by lookup and in order, for
 // vertex counts on and off a word boundary, and refuses a file of another store.

@@ -326,6 +326,10 @@ TEST(GradeShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       }
       EXPECT_GT(records, 0u);
       EXPECT_LE(records, one.vertices_graded);
+      // The weld was made as units (one a share), whose runs the plan's maker wrote into the map.
+      for (unsigned u = 0; u < n; ++u) {
+        EXPECT_TRUE(std::filesystem::exists(stream::weld_unit_stamp(work + "/", u))) << u;
+      }
       // The shares' plan has more ranges than shares (several a share).
       const nlohmann::json plan = nlohmann::json::parse(slurp(stream::grade_shares_dir(work + "/") + "plan.json"));
       EXPECT_GT(plan.at("plan").at("ranges").get<uint64_t>(), 2 * n);
@@ -338,6 +342,7 @@ TEST(GradeShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       EXPECT_EQ(pr.distinct_positions, one.distinct_positions);
       EXPECT_EQ(pr.surface_area, one.surface_area) << "the areas are summed in the one machine's order";
       EXPECT_FALSE(std::filesystem::exists(stream::grade_shares_dir(work + "/"))) << "the merge removes the spent shares";
+      EXPECT_FALSE(std::filesystem::exists(stream::weld_units_dir(work + "/"))) << "and the weld's units";
       EXPECT_TRUE(slurp(work + "/order.u32") == slurp(one_work + "order.u32"));
       EXPECT_TRUE(slurp(work + "/weld.map") == slurp(one_work + "weld.map"));
       EXPECT_FALSE(slurp(work + "/weld.map").empty());
