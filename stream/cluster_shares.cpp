@@ -144,12 +144,18 @@ void check_share_memory(const ClusterShareInput& in, const std::string& what, ui
 void select(const ClusterShareInput& in, int axis, double lo, double hi, Progress& progress, Held& held) {
   Selection sel{RankedBits(in.index.vertices), {}};
   sel.xyz.single = held.xyz.single = in.index.single_precision;
+  // The ids first, then their positions into arrays of their exact size: grown by doubling, the positions
+  // took up to twice their bytes, and three times while a growth copied them (one more read of the column
+  // costs less than that headroom, which decided how many slabs fit a budget).
   for_each_position(in.index, progress, [&](uint64_t id, const double* p) {
-    if (!(lo <= p[axis] && p[axis] < hi)) return;
-    sel.ids.set(id);
-    sel.xyz.add(p);
+    if (lo <= p[axis] && p[axis] < hi) sel.ids.set(id);
   });
   sel.ids.count();
+  const uint64_t selected = sel.ids.bits.empty() ? 0 : sel.ids.before.back() + std::popcount(sel.ids.bits.back());
+  (sel.xyz.single ? sel.xyz.f.reserve(3 * selected) : sel.xyz.d.reserve(3 * selected));
+  for_each_position(in.index, progress, [&](uint64_t id, const double* p) {
+    if (sel.ids.has(id)) sel.xyz.add(p);
+  });
   // The held arrays are sized first (a count pass over the index), so that they take no growth headroom.
   uint64_t held_count = 0;
   for_each_record(in.index, progress, [&](uint64_t, uint32_t id) {
@@ -401,10 +407,11 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
       plan.whole_share[whole[j]] = static_cast<int>(first + j * shares / whole.size());
   };
   // Whether every slab's share would hold its selection under the budget, estimated from the histogram as
-  // select() counts it (at the largest capacity its positions' growth can reach): the vertices within the
-  // widest first halo of the split levels, twice their positions and once their records and positions, and
-  // the bit and a half per store vertex. Fewer slabs hold more each: the 193 M-triangle city at 1 GiB a
-  // share held up to 1.2 GiB in 5 slabs, where 7 peaked at 735 MiB.
+  // select() counts it: the vertices within the widest first halo of the split levels, their positions by
+  // id and their records and positions in weight order (each array of its exact size), and the bit and a
+  // half per store vertex. Fewer slabs hold more each: the 193 M-triangle city at 1 GiB a share held up to
+  // 1.2 GiB in 5 slabs while the selection's positions grew by doubling (counted then at 3 positions and a
+  // record a vertex), where 7 peaked at 735 MiB.
   auto slabs_fit = [&](const std::vector<size_t>& whole) {
     if (in.memory_bytes == 0) return true;
     double widest = 0;
@@ -415,7 +422,7 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
       if (!(plan.lo(s) < plan.hi(s))) continue;
       uint64_t n = 0;  // the vertices of the bins the slab and its halo meet
       for (size_t k = bin_of(plan.lo(s) - widest), end = bin_of(plan.hi(s) + widest); k <= end; ++k) n += hist[k];
-      if (in.index.vertices * 3 / 16 + n * (3 * position + 4) > in.memory_bytes) return false;
+      if (in.index.vertices * 3 / 16 + n * (2 * position + 4) > in.memory_bytes) return false;
     }
     return true;
   };

@@ -9,7 +9,12 @@
 // first-seen order, gives that id directly). The peer tells -0 from +0 and lodstream does not, so a
 // scene with both zeros would show mismatches. Also prints lodstream's peak resident memory (VmHWM).
 //
-// usage: bench_weld [--runs R] [--memory SIZE_BYTES] [--threads T] [--no-peer] [--work DIR] STORE_DIR
+// With --units U, also the weld as U units (stream/grade_shares.h): each unit alone, one after another (as U
+// machines would run them at once), then the map written from their runs; prints every unit's time, the
+// slowest unit plus the map's writing (the weld's wall time on U machines) and the sum (its CPU cost on
+// one), and checks that the map is the same bytes as weld_positions'.
+//
+// usage: bench_weld [--runs R] [--memory SIZE_BYTES] [--threads T] [--no-peer] [--units U] [--work DIR] STORE_DIR
 // DIR (default: a temporary directory) gets the weld map and the sort's scratch files.
 #include <sys/resource.h>
 
@@ -32,6 +37,7 @@
 #endif
 
 #include "core/status.h"
+#include "io/file_writer.h"
 #include "lodstream/lodstream.h"
 #include "stream/distinct_count.h"
 #include "stream/memory.h"
@@ -73,6 +79,7 @@ int main(int argc, char** argv) {
   uint64_t memory = 512ull << 20;
   int threads = 0;
   bool peer = true;
+  unsigned units = 0;
   std::string store, work_path;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -81,10 +88,11 @@ int main(int argc, char** argv) {
     else if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
     else if (a == "--no-peer") peer = false;
     else if (a == "--work" && i + 1 < argc) work_path = argv[++i];
+    else if (a == "--units" && i + 1 < argc) units = static_cast<unsigned>(std::atoi(argv[++i]));
     else store = a;
   }
   if (store.empty()) {
-    std::fprintf(stderr, "usage: bench_weld [--runs R] [--memory SIZE_BYTES] [--threads T] [--no-peer] [--work DIR] STORE_DIR\n");
+    std::fprintf(stderr, "usage: bench_weld [--runs R] [--memory SIZE_BYTES] [--threads T] [--no-peer] [--units U] [--work DIR] STORE_DIR\n");
     return 2;
   }
   std::unique_ptr<tbb::global_control> limit;
@@ -137,6 +145,27 @@ int main(int argc, char** argv) {
     if (peer) fmt::print("; meshoptimizer {:.2f} s wall, {:.2f} s CPU; wall ratio {:.2f}", median(peer_wall), median(peer_cpu),
                          median(ours_wall) / median(peer_wall));
     fmt::print("\n");
+    if (units > 0) {
+      std::vector<std::pair<std::string, uint64_t>> runs;
+      double slowest = 0, sum_cpu = 0;
+      for (unsigned u = 0; u < units; ++u) {
+        const std::string run = work.file("unit-" + std::to_string(u) + ".pairs");
+        stream::WeldUnitResult r;
+        const Timing t = timed([&] { r = stream::weld_unit(path, n, single, memory, work, progress, u, units, run); });
+        fmt::print("unit {} of {}: {:7.2f} s wall {:7.2f} s CPU  {} distinct, {} welded\n", u, units, t.wall, t.cpu, r.distinct, r.welded);
+        runs.emplace_back(run, r.welded);
+        slowest = std::max(slowest, t.wall);
+        sum_cpu += t.cpu;
+      }
+      const std::string map = work.file("units.map");
+      const Timing m = timed([&] { stream::write_weld_map(runs, n, memory, work, map); });
+      fmt::print("map from {} units' runs: {:.2f} s wall {:.2f} s CPU\n", units, m.wall, m.cpu);
+      fmt::print("units: slowest unit + map {:.2f} s wall (one process: median {:.2f} s); CPU of all units + map {:.2f} s\n",
+                 slowest + m.wall, median(ours_wall), sum_cpu + m.cpu);
+      const bool same = ours_distinct == n || io::read_small_file(map) == io::read_small_file(weld_path);
+      fmt::print("check: the units' map is {} weld_positions' map\n", same ? "the same bytes as" : "NOT the same as");
+      if (!same) return 1;
+    }
 #ifdef LODSTREAM_BENCH_MESHOPT
     if (peer) {
       std::vector<uint32_t> canonical(n);
