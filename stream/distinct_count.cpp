@@ -55,30 +55,24 @@ inline uint64_t bits(double v) { return std::bit_cast<uint64_t>(v == 0 ? 0.0 : v
 inline FloatKey make_key(const float* p) { return {{bits(p[0]), bits(p[1]), bits(p[2])}}; }
 inline DoubleKey make_key(const double* p) { return {{bits(p[0]), bits(p[1]), bits(p[2])}}; }
 
-// Open addressing with linear probing, sized for `keys` at load <= 1/2; counts keys on first insertion
-// and keeps the value given with a key's first insertion.
+// Open addressing with linear probing at load <= 1/2: sized for `keys` distinct keys, and doubled (its
+// keys placed again) when more come, so that it grows with the distinct keys, never with their copies.
+// Counts keys on first insertion and keeps the value given with a key's first insertion.
 template <class K>
 class Table {
  public:
   void reset(uint64_t keys) {
-    const uint64_t slots = std::bit_ceil(std::max<uint64_t>(2 * keys, 16));
-    if (slots > capacity_) {
-      slots_ = std::make_unique_for_overwrite<K[]>(slots);
-      values_ = std::make_unique_for_overwrite<uint32_t[]>(slots);
-      capacity_ = slots;
-    }
-    mask_ = slots - 1;
-    for (uint64_t i = 0; i < slots; ++i) slots_[i].w[0] = kEmpty<typename K::Word>;
+    allocate(std::bit_ceil(std::max<uint64_t>(2 * keys, 16)));
     count_ = 0;
   }
-  // Returns the value stored with the key: `value` if it is new.
+  // Returns the value stored with the key: `value` if it is new. `h` is hash(k).
   uint32_t insert(const K& k, uint64_t h, uint32_t value) {
     for (uint64_t i = h & mask_;; i = (i + 1) & mask_) {
       K& s = slots_[i];
       if (s.w[0] == kEmpty<typename K::Word>) {
         s = k;
         values_[i] = value;
-        ++count_;
+        if (2 * ++count_ > mask_ + 1) grow();
         return value;
       }
       if (s == k) return values_[i];
@@ -87,6 +81,29 @@ class Table {
   uint64_t count() const { return count_; }
 
  private:
+  void allocate(uint64_t slots) {
+    if (slots > capacity_) {
+      slots_ = std::make_unique_for_overwrite<K[]>(slots);
+      values_ = std::make_unique_for_overwrite<uint32_t[]>(slots);
+      capacity_ = slots;
+    }
+    mask_ = slots - 1;
+    for (uint64_t i = 0; i < slots; ++i) slots_[i].w[0] = kEmpty<typename K::Word>;
+  }
+  void grow() {
+    const uint64_t old = mask_ + 1;
+    std::unique_ptr<K[]> keys = std::move(slots_);
+    std::unique_ptr<uint32_t[]> values = std::move(values_);
+    capacity_ = 0;
+    allocate(2 * old);
+    for (uint64_t j = 0; j < old; ++j) {
+      if (keys[j].w[0] == kEmpty<typename K::Word>) continue;
+      uint64_t i = hash(keys[j]) & mask_;
+      while (slots_[i].w[0] != kEmpty<typename K::Word>) i = (i + 1) & mask_;
+      slots_[i] = keys[j];
+      values_[i] = values[j];
+    }
+  }
   std::unique_ptr<K[]> slots_;
   std::unique_ptr<uint32_t[]> values_;
   uint64_t capacity_ = 0, mask_ = 0, count_ = 0;
@@ -129,7 +146,9 @@ struct Scratch {
 // an earlier id already holds. Returns the distinct keys.
 template <class K>
 uint64_t insert_run(std::span<const K> keys, const uint32_t* ids, Scratch<K>& s, bool weld) {
-  s.table.reset(keys.size());
+  // A sub-bucket far over kSubKeys keys holds copies of a few positions (its keys' hashes are spread
+  // otherwise): its table starts small and grows with the distinct keys, not with the copies.
+  s.table.reset(keys.size() <= 2 * kSubKeys ? keys.size() : kSubKeys / 8);
   if (weld) {
     for (size_t i = 0; i < keys.size(); ++i) {
       const uint32_t c = s.table.insert(keys[i], hash(keys[i]), ids[i]);

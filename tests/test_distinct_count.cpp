@@ -81,9 +81,9 @@ std::vector<uint32_t> canonical_by_sorting(const std::vector<T>& xyz) {
 // with no spill as in many batches, sub-buckets and sort runs, and as 1, 3 or 7 units whose runs are
 // written into one map (weld_unit, write_weld_map); it refuses a budget below its floor.
 template <class T>
-void check_weld(uint64_t n) {
+void check_weld(const std::vector<T>& xyz) {
   test::TempDir tmp;
-  const std::vector<T> xyz = positions_with_repeats<T>(n);
+  const uint64_t n = xyz.size() / 3;
   const std::vector<uint32_t> expect = canonical_by_sorting(xyz);
   const std::string path = tmp.file("positions");
   std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(xyz.data()), static_cast<std::streamsize>(xyz.size() * sizeof(T)));
@@ -134,8 +134,27 @@ void check_weld(uint64_t n) {
 
 // 3 M floats: buckets of about 12 K keys, so sub-buckets; 1.5 M welded pairs, more than the floor's
 // sort buffer holds, so runs spill.
-TEST(Weld, FloatPositionsInOneBatchAndInManyGiveTheSameMap) { check_weld<float>(3'000'000); }
-TEST(Weld, DoublePositionsInOneBatchAndInManyGiveTheSameMap) { check_weld<double>(600'000); }
+TEST(Weld, FloatPositionsInOneBatchAndInManyGiveTheSameMap) { check_weld(positions_with_repeats<float>(3'000'000)); }
+TEST(Weld, DoublePositionsInOneBatchAndInManyGiveTheSameMap) { check_weld(positions_with_repeats<double>(600'000)); }
+
+// 5.12 M distinct positions (about 20 K a bucket) and 20 K copies of one more, scattered among them: the
+// copies' bucket holds about 40 K keys, so its sub-bucket with the copies holds about 22 K keys of which
+// some 2.5 K distinct, more than the 1 K its table starts with, so the table grows twice (its keys placed
+// again each time).
+TEST(Weld, ManyCopiesOfOnePositionGrowTheirSubBucketsTable) {
+  std::mt19937_64 rng(5);
+  std::vector<float> xyz;
+  constexpr uint64_t kDistinct = 5'120'000, kCopies = 20'000;
+  xyz.reserve(3 * (kDistinct + kCopies));
+  for (uint64_t i = 0; i < kDistinct + kCopies; ++i) {
+    if (rng() % ((kDistinct + kCopies) / kCopies) == 0) {
+      xyz.insert(xyz.end(), {1.0f, 2.0f, 3.0f});
+    } else {
+      for (int a = 0; a < 3; ++a) xyz.push_back(static_cast<float>(rng() % (1 << 22)) / 64 + 100);
+    }
+  }
+  check_weld(xyz);
+}
 
 // A store whose positions are all distinct gets no map.
 TEST(Weld, DistinctPositionsWriteNoMap) {
