@@ -118,7 +118,10 @@ uint64_t report_work_bytes(const SceneCounts& c) { return store_bytes(c) + inges
 // if none shared a position): the store and the weld map (a bit a stored vertex, and 4 bytes for each one
 // welded to another: taken as 3 in 10, as on the city scene) throughout, and then the larger of
 // - the grade stage's sort: 12-byte runs a record, released as they are merged into the order (4 bytes a
-//   record) and, for the mean representative, the grades (8);
+//   record) and, for the mean representative, the grades (8); the weld's pairs (8 bytes a welded vertex:
+//   its sort's runs, or, as units, their runs kept through the grading shares) fit in that count, which
+//   takes every stored vertex as a record where only the distinct positions are (12 · distinct + 8 ·
+//   welded <= 12 · vertices);
 // - the end of the cluster stage: the order (and grades), one bit-packed cell map per level (at most
 //   bit_width(records) bits a record; 22 bits or less on the city scene's levels) and the cell info by
 //   representative (12 to 48 bytes a cell, about 12 cells per 100 vertices over all levels on the city),

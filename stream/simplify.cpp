@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <optional>
 #include <functional>
 #include <map>
 #include <memory>
@@ -336,13 +337,15 @@ bool stamped_stage(const std::string& stamp, const ordered_json& key, const std:
   return false;
 }
 
-// One share of a stage run as N shares (grading, clustering): under its own lock in `dir` (one process a
-// share), reused when its stamp is there, else run, then stamped. run() returns the stamp's files and
-// value; `kill` is the test kill point just before the stamp (empty: none). Returns the stamp's value.
+// One share of a stage run as N shares (grading, clustering, the weld's units): under its own lock in
+// `dir` (one process a share), reused when its stamp is there, else run, then stamped. run() returns the
+// stamp's files and value; `kill` is the test kill point just before the stamp (empty: none). Returns the
+// stamp's value; with `wait` false, nothing when another process holds the share's lock.
 template <class Run>
-ordered_json stamped_share(const std::string& dir, unsigned share, const std::string& stamp, const ordered_json& key,
-                           const std::string& kill, Run&& run) {
-  const stream::ShardLock share_lock(dir, fmt::format("share-{}.lock", share));
+std::optional<ordered_json> share_unless_held(const std::string& dir, unsigned share, const std::string& stamp,
+                                              const ordered_json& key, const std::string& kill, bool wait, Run&& run) {
+  const stream::ShardLock share_lock(dir, fmt::format("share-{}.lock", share), wait);
+  if (!share_lock.held()) return std::nullopt;
   ordered_json v;
   if (stamp_matches(stamp, key, &v)) return v;
   std::filesystem::remove(stamp);
@@ -351,6 +354,11 @@ ordered_json stamped_share(const std::string& dir, unsigned share, const std::st
   if (!kill.empty()) stream::kill_point(kill);
   write_stamp(stamp, key, files, value);
   return value;
+}
+template <class Run>
+ordered_json stamped_share(const std::string& dir, unsigned share, const std::string& stamp, const ordered_json& key,
+                           const std::string& kill, Run&& run) {
+  return *share_unless_held(dir, share, stamp, key, kill, true, std::forward<Run>(run));
 }
 
 // Silhouette p95 (pixels) of each level file seen from its switching distance, by `report`'s own rule on
@@ -520,15 +528,9 @@ std::vector<std::pair<std::string, uint64_t>> run_weld_units(const stream::Grade
     return std::pair(std::vector<std::string>{stream::weld_unit_run(gs.prefix, u)},
                      ordered_json{{"distinct", r.distinct}, {"welded", r.welded}});
   };
-  auto lock_name = [](unsigned u) { return fmt::format("share-{}.lock", u); };  // stamped_share's
   for (unsigned k = 0; k < units; ++k) {
     const unsigned u = (index + k) % units;
-    const stream::ShardLock claim(dir, lock_name(u), false);
-    ordered_json v;
-    if (!claim.held() || stamp_matches(stream::weld_unit_stamp(gs.prefix, u), unit_key, &v)) continue;
-    std::filesystem::remove(stream::weld_unit_stamp(gs.prefix, u));
-    const auto [files, value] = run(u);
-    write_stamp(stream::weld_unit_stamp(gs.prefix, u), unit_key, files, value);
+    share_unless_held(dir, u, stream::weld_unit_stamp(gs.prefix, u), unit_key, "", false, [&] { return run(u); });
   }
   std::vector<std::pair<std::string, uint64_t>> runs;
   for (unsigned u = 0; u < units; ++u) {
