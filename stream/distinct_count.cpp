@@ -241,7 +241,7 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
   const uint64_t per_key = sizeof(K) + (sink ? sizeof(uint32_t) : 0);
   const uint64_t per_thread = largest * kScratchPerKey<K> + kTableBytes<K> + step;
   const uint64_t key_budget = std::max<uint64_t>(memory_bytes > threads * per_thread ? memory_bytes - threads * per_thread : 0,
-                                                 largest * per_key);
+                                                 std::max<uint64_t>(largest, 1) * per_key);
   uint64_t distinct = 0;
   // The batch's keys and ids, allocated for the largest batch so far and reused: fresh pages for every
   // batch would be faulted in again.
@@ -285,6 +285,7 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
       const uint64_t lo = first, span = last - first;
       auto flush = [&](uint64_t i) {
         Staged<K>& st = staged[i];
+        if (st.n == 0) return;
         if (i == last - first) {
           st.n = 0;
           return;
@@ -315,7 +316,7 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
       Scratch<K>& s = scratch.local();
       found += dedupe_bucket(std::span<const K>(keys.get() + offset[b], size[b]), sink ? ids.get() + offset[b] : nullptr, s);
       pairs[b] = s.pairs.size();
-      std::memcpy(keys.get() + offset[b], s.pairs.data(), s.pairs.size() * sizeof(uint64_t));
+      if (!s.pairs.empty()) std::memcpy(keys.get() + offset[b], s.pairs.data(), s.pairs.size() * sizeof(uint64_t));
     });
     for (uint64_t b = first; b < last; ++b) {
       const char* from = reinterpret_cast<const char*>(keys.get() + offset[b]);
@@ -369,23 +370,17 @@ void check_floor(uint64_t count, bool single_precision, uint64_t memory_bytes) {
                             " MiB, more than --memory allows (" + std::to_string(memory_bytes >> 20) + " MiB for the stage): raise --memory");
 }
 
-// The welded vertices of buckets [first_bucket, end_bucket) into `sorter`, their bits into `bits` (when
-// given); `held` bytes of the budget are taken already. Returns the buckets' distinct positions; adds
-// their welded vertices to *welded.
-uint64_t sort_welded(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes, uint64_t held,
-                     Progress& progress, uint64_t first_bucket, uint64_t end_bucket, PairSorter& sorter,
-                     std::vector<uint64_t>* bits, uint64_t* welded) {
-  const PairSink sink = [&](std::span<const uint64_t> pairs) {
-    if (bits)
-      for (uint64_t p : pairs) (*bits)[p >> 38] |= uint64_t{1} << ((p >> 32) % 64);
-    sorter.push(pairs);
-    *welded += pairs.size();
-  };
+// The weld of buckets [first_bucket, end_bucket), its welded vertices' pairs to `sink`; `held` bytes of
+// the budget are taken already. Returns the buckets' distinct positions.
+uint64_t weld_buckets(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes, uint64_t held,
+                      Progress& progress, uint64_t first_bucket, uint64_t end_bucket, const PairSink& sink) {
   const uint64_t rest = memory_bytes - std::min(memory_bytes, held);
   return single_precision
              ? count_keys<float, FloatKey>(path, count, rest, progress, "weld", &sink, first_bucket, end_bucket)
              : count_keys<double, DoubleKey>(path, count, rest, progress, "weld", &sink, first_bucket, end_bucket);
 }
+
+void set_bit(std::vector<uint64_t>& bits, uint64_t pair) { bits[pair >> 38] |= uint64_t{1} << ((pair >> 32) % 64); }
 
 }  // namespace
 
@@ -393,16 +388,40 @@ uint64_t weld_positions(const std::string& path, uint64_t count, bool single_pre
                         const WorkDir& work, Progress& progress, const std::string& weld_path) {
   if (count == 0) return 0;
   check_floor(count, single_precision, memory_bytes);
-  // Held throughout: the map's bits (and, when it is written, its ranks: 4 bytes a word), the sort's buffer.
+  // Held throughout: the map's bits (and, when it is written, its ranks: 4 bytes a word). The welded
+  // vertices' canonical ids go straight to their places in an array of a u32 a vertex where that takes at
+  // most half the budget (the sort costs more than the array's pages), else through an external sort.
   std::vector<uint64_t> bits(weld_detail::words(count), 0);
+  uint64_t welded = 0, distinct = 0;
+  auto check = [&] {
+    if (distinct + welded != count)
+      fail(Status::internal, path + ": the weld found " + std::to_string(distinct) + " positions and " +
+                                 std::to_string(welded) + " welded vertices among " + std::to_string(count));
+  };
+  if (4 * count <= memory_bytes / 2) {
+    const auto canonical = std::make_unique_for_overwrite<uint32_t[]>(count);  // read only where a bit is set
+    const PairSink sink = [&](std::span<const uint64_t> pairs) {
+      for (uint64_t p : pairs) set_bit(bits, p), canonical[p >> 32] = static_cast<uint32_t>(p);
+      welded += pairs.size();
+    };
+    distinct = weld_buckets(path, count, single_precision, memory_bytes, bits.size() * 12 + 4 * count, progress, 0, buckets, sink);
+    check();
+    if (welded == 0) return distinct;
+    WeldFileWriter out(weld_path, count, bits);
+    for (uint64_t w = 0; w < bits.size(); ++w)
+      for (uint64_t b = bits[w]; b; b &= b - 1) out.add(canonical[64 * w + static_cast<uint64_t>(std::countr_zero(b))]);
+    out.commit();
+    return distinct;
+  }
   const uint64_t sort_bytes = pair_sort_bytes(memory_bytes, count);
   PairSorter sorter(work, "weld", sort_bytes);
-  uint64_t welded = 0;
-  const uint64_t distinct = sort_welded(path, count, single_precision, memory_bytes, bits.size() * 12 + sort_bytes, progress,
-                                        0, buckets, sorter, &bits, &welded);
-  if (distinct + welded != count)
-    fail(Status::internal, path + ": the weld found " + std::to_string(distinct) + " positions and " + std::to_string(welded) +
-                               " welded vertices among " + std::to_string(count));
+  const PairSink sink = [&](std::span<const uint64_t> pairs) {
+    for (uint64_t p : pairs) set_bit(bits, p);
+    sorter.push(pairs);
+    welded += pairs.size();
+  };
+  distinct = weld_buckets(path, count, single_precision, memory_bytes, bits.size() * 12 + sort_bytes, progress, 0, buckets, sink);
+  check();
   if (welded == 0) return distinct;
   // The pairs in id order: the welded vertices' canonical ids as the map lists them.
   WeldFileWriter out(weld_path, count, bits);
@@ -425,7 +444,11 @@ WeldUnitResult weld_unit(const std::string& path, uint64_t count, bool single_pr
     const uint64_t sort_bytes = pair_sort_bytes(memory_bytes, count);
     PairSorter sorter(work, "weld-unit", sort_bytes);
     const auto [first, end] = weld_unit_buckets(unit, units);
-    r.distinct = sort_welded(path, count, single_precision, memory_bytes, sort_bytes, progress, first, end, sorter, nullptr, &r.welded);
+    const PairSink sink = [&](std::span<const uint64_t> pairs) {
+      sorter.push(pairs);
+      r.welded += pairs.size();
+    };
+    r.distinct = weld_buckets(path, count, single_precision, memory_bytes, sort_bytes, progress, first, end, sink);
     std::vector<uint64_t> block;
     block.reserve(1 << 16);
     sorter.merge([&](uint64_t p) {

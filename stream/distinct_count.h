@@ -26,10 +26,12 @@ uint64_t count_distinct_positions(const std::string& path, uint64_t count, bool 
 
 // The same passes, welding: every vertex's canonical id is the smallest vertex id whose position equals
 // its own. Each sub-bucket's keys come in file order, so a key's first id is its canonical id; the welded
-// vertices' (id, canonical id) pairs go to an external sort (scratch files in `work`, an eighth of the
-// budget) and, in id order, into the weld map at `weld_path` (stream/weld_file.h), which is written only
-// when some positions repeat. Nothing is held per vertex but the map's bits (1/8 byte a vertex). Returns
-// the distinct count. Throws Failure(usage) when `memory_bytes` is below weld_memory_floor.
+// vertices' canonical ids go, in id order, into the weld map at `weld_path` (stream/weld_file.h), which is
+// written only when some positions repeat: through an array of a u32 a vertex where that takes at most
+// half the budget, else as (id, canonical id) pairs through an external sort (scratch files in `work`, an
+// eighth of the budget), so that nothing is held per vertex but the map's bits (1/8 byte a vertex). The
+// map's bytes do not depend on the way. Returns the distinct count. Throws Failure(usage) when
+// `memory_bytes` is below weld_memory_floor.
 uint64_t weld_positions(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes,
                         const WorkDir& work, Progress& progress, const std::string& weld_path);
 

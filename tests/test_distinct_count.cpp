@@ -64,16 +64,19 @@ std::vector<T> positions_with_repeats(uint64_t n) {
 template <class T>
 std::vector<uint32_t> canonical_by_sorting(const std::vector<T>& xyz) {
   const uint64_t n = xyz.size() / 3;
-  auto key = [&](uint64_t v) {
-    std::array<T, 3> k;
-    for (int a = 0; a < 3; ++a) k[a] = xyz[3 * v + a] == 0 ? T(0) : xyz[3 * v + a];
-    return k;
+  struct Entry {
+    std::array<T, 3> key;
+    uint32_t id;
   };
-  std::vector<uint32_t> order(n);
-  for (uint32_t v = 0; v < n; ++v) order[v] = v;
-  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+  std::vector<Entry> order(n);
+  for (uint32_t v = 0; v < n; ++v) {
+    order[v].id = v;
+    for (int a = 0; a < 3; ++a) order[v].key[a] = xyz[3 * v + a] == 0 ? T(0) : xyz[3 * v + a];
+  }
+  std::sort(order.begin(), order.end(), [](const Entry& a, const Entry& b) { return a.key != b.key ? a.key < b.key : a.id < b.id; });
   std::vector<uint32_t> canonical(n);
-  for (uint64_t i = 0; i < n; ++i) canonical[order[i]] = i > 0 && key(order[i]) == key(order[i - 1]) ? canonical[order[i - 1]] : order[i];
+  for (uint64_t i = 0; i < n; ++i)
+    canonical[order[i].id] = i > 0 && order[i].key == order[i - 1].key ? canonical[order[i - 1].id] : order[i].id;
   return canonical;
 }
 
@@ -105,13 +108,14 @@ void check_weld(const std::vector<T>& xyz) {
     if (first_bytes.empty()) first_bytes = bytes;
     EXPECT_EQ(bytes, first_bytes) << memory;
   }
-  // As units (one process each), their runs written into one map: the same bytes.
+  // As units (one process each; at twice the floor: a few batches each), their runs written into one map:
+  // the same bytes.
   for (unsigned units : {1u, 3u, 7u}) {
     std::vector<std::pair<std::string, uint64_t>> runs;
     uint64_t unit_distinct = 0, welded = 0;
     for (unsigned u = 0; u < units; ++u) {
       const std::string run = tmp.file("unit-" + std::to_string(units) + "-" + std::to_string(u));
-      const stream::WeldUnitResult r = stream::weld_unit(path, n, single, floor, work, progress, u, units, run);
+      const stream::WeldUnitResult r = stream::weld_unit(path, n, single, 2 * floor, work, progress, u, units, run);
       EXPECT_EQ(std::filesystem::file_size(run), 8 * r.welded);
       runs.emplace_back(run, r.welded);
       unit_distinct += r.distinct, welded += r.welded;
@@ -119,7 +123,7 @@ void check_weld(const std::vector<T>& xyz) {
     EXPECT_EQ(unit_distinct, distinct) << units;
     EXPECT_EQ(welded, n - distinct) << units;
     const std::string map = tmp.file("units-" + std::to_string(units));
-    stream::write_weld_map(runs, n, floor, work, map);
+    stream::write_weld_map(runs, n, 2 * floor, work, map);
     EXPECT_EQ(io::read_small_file(map), first_bytes) << units << " units";
   }
   try {
@@ -136,6 +140,11 @@ void check_weld(const std::vector<T>& xyz) {
 // sort buffer holds, so runs spill.
 TEST(Weld, FloatPositionsInOneBatchAndInManyGiveTheSameMap) { check_weld(positions_with_repeats<float>(3'000'000)); }
 TEST(Weld, DoublePositionsInOneBatchAndInManyGiveTheSameMap) { check_weld(positions_with_repeats<double>(600'000)); }
+
+// Five positions, two of them repeated: most of 3 or 7 units hold no key at all.
+TEST(Weld, AFewPositionsLeaveUnitsEmpty) {
+  check_weld(std::vector<float>{0, 0, 0, 1, 2, 3, -0.0f, 0, 0, 4, 5, 6, 1, 2, 3});
+}
 
 // 5.12 M distinct positions (about 20 K a bucket) and 20 K copies of one more, scattered among them: the
 // copies' bucket holds about 40 K keys, so its sub-bucket with the copies holds about 22 K keys of which
