@@ -45,7 +45,9 @@
 // decision written is settled, hence the whole-scene pass's (core/floating_cell_region.h); the merge checks
 // that the shares' records are each record exactly once.
 // Memory of a share: 28 bytes per record held (its record number and position, gathered in weight order
-// from a by-id copy of the selected positions, 24 bytes per vertex selected, freed after the gather), a
+// from a by-id copy of the selected positions, 24 bytes per vertex selected (12 for a float store; sized
+// exactly: the ids are selected in one read of the column, their positions copied in a second), freed
+// after the gather), a
 // bit and a half per store vertex while selecting, and the RegionClusterers' entries and slots
 // (core/floating_cell_region.h; the split levels run at once, one thread each); of the merge, a bit and
 // a half per record and a 16 MiB window of each share's files, per split level (merged at once when the
