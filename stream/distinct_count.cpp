@@ -4,6 +4,7 @@
 #include <atomic>
 #include <bit>
 #include <cstring>
+#include <filesystem>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -16,6 +17,7 @@
 
 #include "core/hash.h"
 #include "core/status.h"
+#include "io/file_writer.h"
 #include "io/mapped_file.h"
 #include "stream/external_sort.h"
 #include "stream/weld_file.h"
@@ -196,9 +198,12 @@ uint64_t dedupe_bucket(std::span<const K> keys, const uint32_t* ids, Scratch<K>&
 
 // Counts the distinct keys of buckets [first_bucket, end_bucket); with `sink`, also hands it every welded
 // vertex's pair.
+// `known_sizes`, when it holds them, gives pass 1's sizes (weld units share them: sizes_file); else they
+// are counted and, when it is given, kept there.
 template <class T, class K>
 uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_bytes, Progress& progress,
-                    const char* stage, const PairSink* sink, uint64_t first_bucket = 0, uint64_t end_bucket = buckets) {
+                    const char* stage, const PairSink* sink, uint64_t first_bucket = 0, uint64_t end_bucket = buckets,
+                    std::vector<uint64_t>* known_sizes = nullptr) {
   io::MappedFile file(path);
   const uint64_t stride = 3 * sizeof(T);
   if (file.size() != count * stride) fail(Status::io_error, path + ": size does not match store.json");
@@ -224,10 +229,15 @@ uint64_t count_keys(const std::string& path, uint64_t count, uint64_t memory_byt
 
   // Pass 1: the exact size of every bucket, per slice.
   std::vector<uint64_t> slice_size(slices * buckets, 0);
-  tbb::parallel_for(uint64_t{0}, slices, [&](uint64_t sl) {
-    uint64_t* sz = &slice_size[sl * buckets];
-    scan_slice(sl, [&](const K&, uint64_t h, uint32_t) { ++sz[h >> (64 - bucket_bits)]; });
-  });
+  if (known_sizes && known_sizes->size() == slice_size.size()) {
+    slice_size = *known_sizes;
+  } else {
+    tbb::parallel_for(uint64_t{0}, slices, [&](uint64_t sl) {
+      uint64_t* sz = &slice_size[sl * buckets];
+      scan_slice(sl, [&](const K&, uint64_t h, uint32_t) { ++sz[h >> (64 - bucket_bits)]; });
+    });
+    if (known_sizes) *known_sizes = slice_size;
+  }
   std::vector<uint64_t> size(buckets, 0);
   for (uint64_t sl = 0; sl < slices; ++sl)
     for (uint64_t b = 0; b < buckets; ++b) size[b] += slice_size[sl * buckets + b];
@@ -373,11 +383,42 @@ void check_floor(uint64_t count, bool single_precision, uint64_t memory_bytes) {
 // The weld of buckets [first_bucket, end_bucket), its welded vertices' pairs to `sink`; `held` bytes of
 // the budget are taken already. Returns the buckets' distinct positions.
 uint64_t weld_buckets(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes, uint64_t held,
-                      Progress& progress, uint64_t first_bucket, uint64_t end_bucket, const PairSink& sink) {
+                      Progress& progress, uint64_t first_bucket, uint64_t end_bucket, const PairSink& sink,
+                      std::vector<uint64_t>* known_sizes = nullptr) {
   const uint64_t rest = memory_bytes - std::min(memory_bytes, held);
   return single_precision
-             ? count_keys<float, FloatKey>(path, count, rest, progress, "weld", &sink, first_bucket, end_bucket)
-             : count_keys<double, DoubleKey>(path, count, rest, progress, "weld", &sink, first_bucket, end_bucket);
+             ? count_keys<float, FloatKey>(path, count, rest, progress, "weld", &sink, first_bucket, end_bucket, known_sizes)
+             : count_keys<double, DoubleKey>(path, count, rest, progress, "weld", &sink, first_bucket, end_bucket, known_sizes);
+}
+
+// The bucket sizes per slice that weld units share: a header (vertices, the positions file's bytes and
+// mtime in ns) and the sizes. Read only when the header matches the column and every slice's sizes add up
+// to its vertices; else empty.
+std::vector<uint64_t> read_sizes_file(const std::string& sizes_path, const io::MappedFile& column, uint64_t count) {
+  constexpr uint64_t kSlice = uint64_t{1} << 20;  // count_keys'
+  const uint64_t slices = (count + kSlice - 1) / kSlice;
+  std::error_code ec;
+  if (sizes_path.empty() || std::filesystem::file_size(sizes_path, ec) != 24 + 8 * slices * buckets || ec) return {};
+  const std::string bytes = io::read_small_file(sizes_path);
+  uint64_t header[3];
+  std::memcpy(header, bytes.data(), sizeof header);
+  if (header[0] != count || header[1] != column.size() || header[2] != static_cast<uint64_t>(column.mtime_ns())) return {};
+  std::vector<uint64_t> sizes(slices * buckets);
+  std::memcpy(sizes.data(), bytes.data() + 24, 8 * sizes.size());
+  for (uint64_t sl = 0; sl < slices; ++sl) {
+    uint64_t sum = 0;
+    for (uint64_t b = 0; b < buckets; ++b) sum += sizes[sl * buckets + b];
+    if (sum != std::min(count, (sl + 1) * kSlice) - sl * kSlice) return {};
+  }
+  return sizes;
+}
+
+void write_sizes_file(const std::string& sizes_path, const io::MappedFile& column, uint64_t count, const std::vector<uint64_t>& sizes) {
+  std::string bytes(24 + 8 * sizes.size(), '\0');
+  const uint64_t header[3] = {count, column.size(), static_cast<uint64_t>(column.mtime_ns())};
+  std::memcpy(bytes.data(), header, sizeof header);
+  std::memcpy(bytes.data() + 24, sizes.data(), 8 * sizes.size());
+  io::write_file_atomic(sizes_path, bytes);
 }
 
 void set_bit(std::vector<uint64_t>& bits, uint64_t pair) { bits[pair >> 38] |= uint64_t{1} << ((pair >> 32) % 64); }
@@ -435,7 +476,8 @@ std::pair<unsigned, unsigned> weld_unit_buckets(unsigned unit, unsigned units) {
 }
 
 WeldUnitResult weld_unit(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes,
-                         const WorkDir& work, Progress& progress, unsigned unit, unsigned units, const std::string& run_path) {
+                         const WorkDir& work, Progress& progress, unsigned unit, unsigned units, const std::string& run_path,
+                         const std::string& sizes_path) {
   if (units == 0 || units > kMaxWeldUnits || unit >= units) fail(Status::internal, "weld_unit: unit out of range");
   WeldUnitResult r;
   io::FileWriter out(run_path, 4 << 20);
@@ -448,7 +490,12 @@ WeldUnitResult weld_unit(const std::string& path, uint64_t count, bool single_pr
       sorter.push(pairs);
       r.welded += pairs.size();
     };
-    r.distinct = weld_buckets(path, count, single_precision, memory_bytes, sort_bytes, progress, first, end, sink);
+    // The bucket sizes: another unit's, or counted here and left for the others.
+    const io::MappedFile column(path);
+    std::vector<uint64_t> sizes = read_sizes_file(sizes_path, column, count);
+    const bool counted = sizes.empty();
+    r.distinct = weld_buckets(path, count, single_precision, memory_bytes, sort_bytes, progress, first, end, sink, &sizes);
+    if (counted && !sizes_path.empty()) write_sizes_file(sizes_path, column, count, sizes);
     std::vector<uint64_t> block;
     block.reserve(1 << 16);
     sorter.merge([&](uint64_t p) {

@@ -45,8 +45,13 @@ inline constexpr unsigned kMaxWeldUnits = 256;
 struct WeldUnitResult {
   uint64_t distinct = 0, welded = 0;
 };
+// `sizes_path` (empty: none) is where the units share their first pass, the bucket sizes of every slice
+// of the column: a unit reads them from there when another unit of the same column wrote them (checked
+// against the column's size and time, and the slices' counts), else counts them and writes them there,
+// so that most units read the column once, not twice.
 WeldUnitResult weld_unit(const std::string& path, uint64_t count, bool single_precision, uint64_t memory_bytes,
-                         const WorkDir& work, Progress& progress, unsigned unit, unsigned units, const std::string& run_path);
+                         const WorkDir& work, Progress& progress, unsigned unit, unsigned units, const std::string& run_path,
+                         const std::string& sizes_path = {});
 void write_weld_map(const std::vector<std::pair<std::string, uint64_t>>& runs, uint64_t count, uint64_t memory_bytes,
                     const WorkDir& work, const std::string& weld_path);
 // The hash buckets [first, end) of 256 that unit `unit` of `units` welds.

@@ -82,7 +82,8 @@ bool store_needs_weld(const StoreMeta& meta) { return meta.vertices > 0 && meta.
 WeldUnitResult run_weld_unit(const GradeShareInput& in, unsigned unit, unsigned units, Progress& progress) {
   const StoreMeta& meta = *in.meta;
   return weld_unit(in.store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), meta.vertices,
-                   meta.single_precision, in.plan.stage_bytes, *in.work, progress, unit, units, weld_unit_run(in.prefix, unit));
+                   meta.single_precision, in.plan.stage_bytes, *in.work, progress, unit, units, weld_unit_run(in.prefix, unit),
+                   weld_units_dir(in.prefix) + "sizes.bin");
 }
 
 unsigned grade_shares_planned(const std::string& prefix, const ordered_json& key) {

@@ -24,7 +24,8 @@
 //
 // The weld as units (run_weld_unit; stream/distinct_count.h): when grading shares run as their own
 // processes, the weld is not made by the plan's maker alone. Unit u of U = min(N, 256) welds the hash
-// buckets of weld_unit_buckets(u, U) into weld-units/unit-u.pairs; every grading share, once the store is
+// buckets of weld_unit_buckets(u, U) into weld-units/unit-u.pairs (the bucket sizes counted by the first
+// unit shared in weld-units/sizes.bin); every grading share, once the store is
 // ingested, runs the units no other process holds (claimed by a lock each, its own index first), then
 // waits for the others' (a unit whose holder died is run by the waiting process); the plan's maker then
 // writes the weld map from the units' runs (write_weld_map: the same bytes as one process's weld). The

@@ -110,12 +110,17 @@ void check_weld(const std::vector<T>& xyz) {
   }
   // As units (one process each; at twice the floor: a few batches each), their runs written into one map:
   // the same bytes.
+  // The first unit counts the bucket sizes and leaves them for the others (a file of another column, or
+  // a damaged one, is counted again: the 7 units start from a garbage file).
   for (unsigned units : {1u, 3u, 7u}) {
     std::vector<std::pair<std::string, uint64_t>> runs;
     uint64_t unit_distinct = 0, welded = 0;
+    const std::string sizes = tmp.file("sizes-" + std::to_string(units));
+    if (units == 7) std::ofstream(sizes) << std::string(24 + 8 * 256 * ((n + (1 << 20) - 1) >> 20), 'x');
     for (unsigned u = 0; u < units; ++u) {
       const std::string run = tmp.file("unit-" + std::to_string(units) + "-" + std::to_string(u));
-      const stream::WeldUnitResult r = stream::weld_unit(path, n, single, 2 * floor, work, progress, u, units, run);
+      const stream::WeldUnitResult r = stream::weld_unit(path, n, single, 2 * floor, work, progress, u, units, run, sizes);
+      EXPECT_TRUE(std::filesystem::exists(sizes));
       EXPECT_EQ(std::filesystem::file_size(run), 8 * r.welded);
       runs.emplace_back(run, r.welded);
       unit_distinct += r.distinct, welded += r.welded;

@@ -23,6 +23,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -148,10 +149,12 @@ int main(int argc, char** argv) {
     if (units > 0) {
       std::vector<std::pair<std::string, uint64_t>> runs;
       double slowest = 0, sum_cpu = 0;
+      const std::string sizes = work.file("sizes.bin");  // the bucket sizes the first unit counts for the others
+      std::filesystem::remove(sizes);
       for (unsigned u = 0; u < units; ++u) {
         const std::string run = work.file("unit-" + std::to_string(u) + ".pairs");
         stream::WeldUnitResult r;
-        const Timing t = timed([&] { r = stream::weld_unit(path, n, single, memory, work, progress, u, units, run); });
+        const Timing t = timed([&] { r = stream::weld_unit(path, n, single, memory, work, progress, u, units, run, sizes); });
         fmt::print("unit {} of {}: {:7.2f} s wall {:7.2f} s CPU  {} distinct, {} welded\n", u, units, t.wall, t.cpu, r.distinct, r.welded);
         runs.emplace_back(run, r.welded);
         slowest = std::max(slowest, t.wall);
