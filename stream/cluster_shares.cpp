@@ -108,6 +108,8 @@ struct RankedBits {
   explicit RankedBits(uint64_t n = 0) : bits((n + 63) / 64, 0), before(bits.size(), 0) {}
   void set(uint64_t i) { bits[i >> 6] |= uint64_t{1} << (i & 63); }
   bool has(uint64_t i) const { return (bits[i >> 6] >> (i & 63)) & 1; }
+  // The set bits (after count()).
+  uint64_t ones() const { return bits.empty() ? 0 : before.back() + static_cast<uint64_t>(std::popcount(bits.back())); }
   void count() {
     uint32_t n = 0;
     for (size_t w = 0; w < bits.size(); ++w) before[w] = n, n += static_cast<uint32_t>(std::popcount(bits[w]));
@@ -151,8 +153,7 @@ void select(const ClusterShareInput& in, int axis, double lo, double hi, Progres
     if (lo <= p[axis] && p[axis] < hi) sel.ids.set(id);
   });
   sel.ids.count();
-  const uint64_t selected = sel.ids.bits.empty() ? 0 : sel.ids.before.back() + std::popcount(sel.ids.bits.back());
-  (sel.xyz.single ? sel.xyz.f.reserve(3 * selected) : sel.xyz.d.reserve(3 * selected));
+  (sel.xyz.single ? sel.xyz.f.reserve(3 * sel.ids.ones()) : sel.xyz.d.reserve(3 * sel.ids.ones()));
   for_each_position(in.index, progress, [&](uint64_t id, const double* p) {
     if (sel.ids.has(id)) sel.xyz.add(p);
   });

@@ -47,8 +47,7 @@
 // Memory of a share: 28 bytes per record held (its record number and position, gathered in weight order
 // from a by-id copy of the selected positions, 24 bytes per vertex selected (12 for a float store; sized
 // exactly: the ids are selected in one read of the column, their positions copied in a second), freed
-// after the gather), a
-// bit and a half per store vertex while selecting, and the RegionClusterers' entries and slots
+// after the gather), a bit and a half per store vertex while selecting, and the RegionClusterers' entries and slots
 // (core/floating_cell_region.h; the split levels run at once, one thread each); of the merge, a bit and
 // a half per record and a 16 MiB window of each share's files, per split level (merged at once when the
 // budget holds them all, else one after another).

@@ -5,7 +5,6 @@
 //
 // usage: bench_ingest_ranges [--threads T] [--memory SIZE_BYTES] --work DIR FILE N...
 // DIR gets DIR/whole and DIR/nN (removed at the end). Prints one line per task and per join.
-#include <sys/resource.h>
 
 #include <chrono>
 #include <cstdio>
@@ -22,6 +21,7 @@
 #include "lodstream/lodstream.h"
 #include "stream/ingest.h"
 #include "stream/ingest_range.h"
+#include "stream/job.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
@@ -31,17 +31,11 @@ namespace {
 namespace fs = std::filesystem;
 using namespace lodstream;
 
-double cpu_seconds() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return static_cast<double>(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * static_cast<double>(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
-}
-
 struct Clock {
   std::chrono::steady_clock::time_point t0 = std::chrono::steady_clock::now();
-  double cpu0 = cpu_seconds();
+  double cpu0 = stream::process_cpu_seconds();
   double wall() const { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); }
-  double cpu() const { return cpu_seconds() - cpu0; }
+  double cpu() const { return stream::process_cpu_seconds() - cpu0; }
 };
 
 bool same_file(const fs::path& a, const fs::path& b) {

@@ -16,7 +16,6 @@
 //
 // usage: bench_weld [--runs R] [--memory SIZE_BYTES] [--threads T] [--no-peer] [--units U] [--work DIR] STORE_DIR
 // DIR (default: a temporary directory) gets the weld map and the sort's scratch files.
-#include <sys/resource.h>
 
 #include <algorithm>
 #include <chrono>
@@ -41,6 +40,7 @@
 #include "io/file_writer.h"
 #include "lodstream/lodstream.h"
 #include "stream/distinct_count.h"
+#include "stream/job.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/weld_file.h"
@@ -50,12 +50,6 @@ namespace {
 
 using namespace lodstream;
 
-double cpu_seconds() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return static_cast<double>(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * static_cast<double>(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
-}
-
 struct Timing {
   double wall = 0, cpu = 0;
 };
@@ -63,9 +57,9 @@ struct Timing {
 template <class F>
 Timing timed(F&& f) {
   const auto t0 = std::chrono::steady_clock::now();
-  const double c0 = cpu_seconds();
+  const double c0 = stream::process_cpu_seconds();
   f();
-  return {std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), cpu_seconds() - c0};
+  return {std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), stream::process_cpu_seconds() - c0};
 }
 
 double median(std::vector<double> v) {
@@ -186,7 +180,7 @@ int main(int argc, char** argv) {
       if (mismatches || ours_distinct != peer_distinct) return 1;
     }
 #endif
-  } catch (const Failure& e) {
+  } catch (const std::exception& e) {  // Failure, or a store.json that does not parse
     std::fprintf(stderr, "bench_weld: %s\n", e.what());
     return 1;
   }

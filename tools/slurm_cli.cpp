@@ -3,8 +3,9 @@
 // scripts (readable, resubmittable by hand) under OUT/slurm/ and submits them with sbatch: for a text
 // input (--ingest-ranges, ranges_pay), an ingest array job of N range tasks (each parses an N-th of the
 // input's bytes, a report's of every original's, stream/ingest_range.h); for simplify, a grade array job of
-// N shares (the first joins the ranges, or ingests the input, and welds, under the work directory's lock,
-// then each grades and sorts its share: stream/grade_shares.h)
+// N shares (the first joins the ranges, or ingests the input, under the work directory's lock; then every
+// share takes up weld units until the weld is done, the first back under the lock writes the weld map and
+// the grading plan, and each grades and sorts its share: stream/grade_shares.h)
 // and a cluster array job of N shares (the first merges the grading shares, under the lock, then each
 // clusters its share: stream/cluster_shares.h); then a prepare job (the shared stages: for simplify the
 // clustering shares' merge, the block boxes and the split levels' cells by vertex (a whole level's come from its
