@@ -1,5 +1,7 @@
 #include "stream/distinct_count.h"
 
+#include <fcntl.h>
+
 #include <algorithm>
 #include <atomic>
 #include <bit>
@@ -11,6 +13,7 @@
 #include <span>
 #include <vector>
 
+#include <fmt/format.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -19,6 +22,7 @@
 #include "core/status.h"
 #include "io/file_writer.h"
 #include "io/mapped_file.h"
+#include "io/offset_file.h"
 #include "stream/external_sort.h"
 #include "stream/weld_file.h"
 
@@ -508,32 +512,93 @@ WeldUnitResult weld_unit(const std::string& path, uint64_t count, bool single_pr
   return r;
 }
 
-void write_weld_map(const std::vector<std::pair<std::string, uint64_t>>& runs, uint64_t count, uint64_t memory_bytes,
-                    const WorkDir& work, const std::string& weld_path) {
-  // The bits first (one read of every run), since the map lists them before the canonical ids; then one
-  // merge of the runs, which are sorted and hold disjoint ids, in id order.
-  std::vector<uint64_t> bits(weld_detail::words(count), 0);
-  const uint64_t sort_bytes = pair_sort_bytes(memory_bytes, count);
-  PairSorter sorter(work, "weld-map", sort_bytes);
+void start_weld_map(const std::string& path, uint64_t count, uint64_t welded) {
+  const io::OffsetFile file(path, O_WRONLY | O_CREAT | O_TRUNC);
+  const uint64_t header[2] = {count, welded};
+  file.write(header, sizeof header, 0);
+  file.resize(weld_detail::targets_offset(count) + 4 * welded);  // the ranks' padding reads as zeros
+}
+
+std::pair<uint64_t, uint64_t> weld_map_unit_words(uint64_t count, unsigned unit, unsigned units) {
+  const uint64_t words = weld_detail::words(count);
+  return {words * unit / units, words * (unit + 1) / units};
+}
+
+void write_weld_map_unit(const std::vector<std::pair<std::string, uint64_t>>& runs, uint64_t count, uint64_t memory_bytes,
+                         const WorkDir& work, const std::string& path, unsigned unit, unsigned units) {
+  const auto [w0, w1] = weld_map_unit_words(count, unit, units);
+  const uint64_t v0 = 64 * w0, v1 = std::min(count, 64 * w1);
+  // Each run is sorted by id: the unit's pairs are one stretch of it, found by binary search; the pairs
+  // before the stretches are the welded vertices before the unit's (its ranks' and canonical ids' offset).
+  std::vector<uint64_t> bits(w1 - w0, 0);
+  PairSorter sorter(work, fmt::format("weld-map-{}", unit), pair_sort_bytes(memory_bytes, v1 - v0));
+  uint64_t before = 0, held = 0;
+  std::vector<uint64_t> window(1 << 20);
   for (const auto& [run, pairs] : runs) {
-    io::MappedFile file(run);
-    if (file.size() != 8 * pairs) fail(Status::io_error, run + ": does not hold " + std::to_string(pairs) + " welded vertices (weld unit)");
-    constexpr uint64_t kWindow = 8 << 20;
-    for (uint64_t at = 0; at < file.size(); at += kWindow) {
-      const io::Window w = file.map(at, std::min(file.size(), at + kWindow));
-      for (uint64_t i = 0; i < w.size() / 8; ++i) {
-        uint64_t p;
-        std::memcpy(&p, w.data() + 8 * i, 8);
-        const uint64_t v = p >> 32;
-        if (v >= count || static_cast<uint32_t>(p) >= v) fail(Status::io_error, run + ": not a weld unit's run");
-        bits[v / 64] |= uint64_t{1} << (v % 64);
+    const io::OffsetFile file(run, O_RDONLY);
+    std::error_code ec;
+    if (std::filesystem::file_size(run, ec) != 8 * pairs || ec)
+      fail(Status::io_error, run + ": does not hold " + std::to_string(pairs) + " welded vertices (weld unit)");
+    auto id_at = [&](uint64_t i) {
+      uint64_t p;
+      file.read(&p, 8, 8 * i);
+      return p >> 32;
+    };
+    auto first_at_least = [&](uint64_t v) {
+      uint64_t lo = 0, hi = pairs;
+      while (lo < hi) {
+        const uint64_t mid = lo + (hi - lo) / 2;
+        if (id_at(mid) < v) lo = mid + 1;
+        else hi = mid;
+      }
+      return lo;
+    };
+    const uint64_t lo = first_at_least(v0), hi = first_at_least(v1);
+    before += lo, held += hi - lo;
+    for (uint64_t at = lo; at < hi; at += window.size()) {
+      const uint64_t n = std::min<uint64_t>(window.size(), hi - at);
+      file.read(window.data(), 8 * n, 8 * at);
+      for (uint64_t i = 0; i < n; ++i) {
+        const uint64_t v = window[i] >> 32;
+        if (v < v0 || v >= v1 || static_cast<uint32_t>(window[i]) >= v || (i && window[i - 1] >> 32 >= v))
+          fail(Status::io_error, run + ": not a weld unit's run");
+        bits[v / 64 - w0] |= uint64_t{1} << (v % 64);
       }
     }
-    sorter.add_sorted_run(run, pairs);
+    if (hi > lo) sorter.add_sorted_run(run, hi - lo, lo);
   }
-  WeldFileWriter out(weld_path, count, bits);
-  sorter.merge([&](uint64_t p) { out.add(static_cast<uint32_t>(p)); });
-  out.commit();
+  // The unit's words of the map: bits, ranks (the welded vertices before each word), canonical ids.
+  const io::OffsetFile out(path, O_WRONLY);
+  out.write(bits.data(), 8 * bits.size(), 16 + 8 * w0);
+  std::vector<uint32_t> ranks(bits.size());
+  for (uint64_t i = 0, r = before; i < bits.size(); ++i) ranks[i] = static_cast<uint32_t>(r), r += static_cast<uint64_t>(std::popcount(bits[i]));
+  out.write(ranks.data(), 4 * ranks.size(), weld_detail::ranks_offset(count) + 4 * w0);
+  std::vector<uint64_t>().swap(bits);
+  std::vector<uint32_t>().swap(ranks);
+  std::vector<uint32_t> targets;
+  targets.reserve(1 << 16);
+  uint64_t written = 0;
+  auto flush = [&] {
+    out.write(targets.data(), 4 * targets.size(), weld_detail::targets_offset(count) + 4 * (before + written));
+    written += targets.size();
+    targets.clear();
+  };
+  sorter.merge([&](uint64_t p) {
+    targets.push_back(static_cast<uint32_t>(p));
+    if (targets.size() == targets.capacity()) flush();
+  });
+  flush();
+  if (written != held) fail(Status::internal, path + ": weld map unit " + std::to_string(unit) + " lost canonical ids");
+}
+
+void write_weld_map(const std::vector<std::pair<std::string, uint64_t>>& runs, uint64_t count, uint64_t memory_bytes,
+                    const WorkDir& work, const std::string& weld_path) {
+  uint64_t welded = 0;
+  for (const auto& run : runs) welded += run.second;
+  const std::string partial = weld_path + ".partial";
+  start_weld_map(partial, count, welded);
+  write_weld_map_unit(runs, count, memory_bytes, work, partial, 0, 1);
+  std::filesystem::rename(partial, weld_path);
 }
 
 }  // namespace lodstream::stream

@@ -54,6 +54,17 @@ WeldUnitResult weld_unit(const std::string& path, uint64_t count, bool single_pr
                          const std::string& sizes_path = {});
 void write_weld_map(const std::vector<std::pair<std::string, uint64_t>>& runs, uint64_t count, uint64_t memory_bytes,
                     const WorkDir& work, const std::string& weld_path);
+// write_weld_map as units, which different processes may run: start_weld_map writes the map's header at
+// `path` and sizes the file for `welded` welded vertices; unit `unit` of `units` (write_weld_map_unit)
+// then writes the map's words weld_map_unit_words(count, unit, units) (64 vertices a word) in place: their
+// bits, their ranks and their welded vertices' canonical ids, read from the stretch of every run that holds
+// them (binary search: a run is sorted by id) at the offset that the runs' pairs before them give. The
+// units write disjoint bytes; once all have run the file is write_weld_map's bytes. Memory: a unit's bits
+// and ranks (12 bytes a word of its own) and the pairs' merge (pair_sort_bytes).
+void start_weld_map(const std::string& path, uint64_t count, uint64_t welded);
+std::pair<uint64_t, uint64_t> weld_map_unit_words(uint64_t count, unsigned unit, unsigned units);
+void write_weld_map_unit(const std::vector<std::pair<std::string, uint64_t>>& runs, uint64_t count, uint64_t memory_bytes,
+                         const WorkDir& work, const std::string& path, unsigned unit, unsigned units);
 // The hash buckets [first, end) of 256 that unit `unit` of `units` welds.
 std::pair<unsigned, unsigned> weld_unit_buckets(unsigned unit, unsigned units);
 

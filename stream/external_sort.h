@@ -74,8 +74,11 @@ class ExternalSorter {
     for (const Rec& r : records) push(r);
   }
   // A run sorted elsewhere (another process's records, written as raw records in `less` order), merged
-  // with the others. Merging reads it and leaves it as it is: its owner removes it.
-  void add_sorted_run(const std::string& path, uint64_t records) { runs_.push_back({path, records, true}); }
+  // with the others: `records` records from record `first` of the file. Merging reads it and leaves it as
+  // it is: its owner removes it.
+  void add_sorted_run(const std::string& path, uint64_t records, uint64_t first = 0) {
+    runs_.push_back({path, records, true, first});
+  }
   size_t runs() const { return runs_.size(); }
   uint64_t spilled_records() const {
     uint64_t n = 0;
@@ -133,6 +136,7 @@ class ExternalSorter {
     std::string path;
     uint64_t records = 0;
     bool kept = false;  // add_sorted_run's: read, never punched or removed
+    uint64_t first = 0;  // the run's first record in the file
   };
 
   // Reads one run sequentially through a buffer of `records` records and deletes it when done.
@@ -146,6 +150,8 @@ class ExternalSorter {
       // Read-write only to release what has been read (refill()).
       fd_ = ::open(path_.c_str(), (kept_ ? O_RDONLY : O_RDWR) | O_CLOEXEC);
       if (fd_ < 0) fail(Status::io_error, path_ + ": cannot open sort run: " + std::strerror(errno));
+      if (run.first && ::lseek(fd_, static_cast<off_t>(run.first * sizeof(Rec)), SEEK_SET) < 0)
+        fail(Status::io_error, path_ + ": cannot seek in sort run: " + std::strerror(errno));
       buf_.resize(static_cast<size_t>(std::min<uint64_t>(records, std::max<uint64_t>(left_, 1))));
       refill();
     }

@@ -2,14 +2,19 @@
 // See grade_shares.h for the contract.
 #include "stream/grade_shares.h"
 
+#include <fcntl.h>
+
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <memory>
 
 #include <fmt/format.h>
 
 #include "core/status.h"
 #include "io/file_writer.h"
+#include "io/offset_file.h"
+#include "stream/shard.h"
 #include "stream/work_dir.h"
 
 namespace lodstream::stream {
@@ -86,13 +91,42 @@ WeldUnitResult run_weld_unit(const GradeShareInput& in, unsigned unit, unsigned 
                    weld_units_dir(in.prefix) + "sizes.bin");
 }
 
+std::string weld_map_units_dir(const std::string& prefix) { return weld_units_dir(prefix) + "map/"; }
+std::string weld_map_unit_stamp(const std::string& prefix, unsigned unit) {
+  return weld_map_units_dir(prefix) + fmt::format("map-{}.json", unit);
+}
+
+std::string start_weld_map_once(const GradeShareInput& in, uint64_t welded, const ordered_json& key) {
+  const std::string dir = weld_map_units_dir(in.prefix), path = dir + "weld.map", stamp = dir + "start.json";
+  std::filesystem::create_directories(dir);
+  const ShardLock lock(dir, "start.lock");
+  try {
+    std::error_code ec;
+    if (ordered_json::parse(io::read_small_file(stamp)).at("key") == key && std::filesystem::exists(path, ec)) return path;
+  } catch (const std::exception&) {
+    // none yet, or unreadable: started below
+  }
+  // Started afresh: the units of an older start are void.
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    if (e.path().filename().string().rfind("map-", 0) == 0) std::filesystem::remove(e.path());
+  start_weld_map(path, in.meta->vertices, welded);
+  io::write_file_atomic(stamp, ordered_json{{"key", key}}.dump() + "\n");
+  return path;
+}
+
+void run_weld_map_unit(const GradeShareInput& in, const std::vector<std::pair<std::string, uint64_t>>& weld_runs, unsigned unit,
+                       unsigned units) {
+  write_weld_map_unit(weld_runs, in.meta->vertices, in.plan.stage_bytes, *in.work, weld_map_units_dir(in.prefix) + "weld.map",
+                      unit, units);
+}
+
 unsigned grade_shares_planned(const std::string& prefix, const ordered_json& key) {
   const ordered_json j = read_plan(prefix, key);
   return j.is_null() ? 0 : j.value("count", 0u);
 }
 
 GradePlan shared_grade_plan(const GradeShareInput& in, unsigned count, const ordered_json& key, Progress& progress,
-                            const std::vector<std::pair<std::string, uint64_t>>& weld_runs) {
+                            const std::vector<std::pair<std::string, uint64_t>>& weld_runs, const std::string& weld_map_made) {
   GradePlan gp;
   const ordered_json j = read_plan(in.prefix, key);
   if (!j.is_null() && j.value("count", 0u) == count && parse_plan(in.prefix, j, &gp)) return gp;
@@ -100,7 +134,7 @@ GradePlan shared_grade_plan(const GradeShareInput& in, unsigned count, const ord
   std::filesystem::remove_all(grade_shares_dir(in.prefix));
   std::filesystem::create_directories(grade_shares_dir(in.prefix));
   gp = plan_grading(in.store_dir, *in.meta, in.plan, *in.work, progress, grade_shares_weld_path(in.prefix), in.max_range_vertices, count,
-                    true, weld_runs);
+                    true, weld_runs, weld_map_made);
   io::FileWriter blocks(blocks_path(in.prefix));
   ordered_json counts = ordered_json::array();
   for (int kind = 0; kind < 3; ++kind) {
@@ -131,11 +165,81 @@ uint64_t run_grade_share(const GradeShareInput& in, GradePlan plan, unsigned ind
   return records;
 }
 
-GradeSummary merge_grade_shares(const GradeShareInput& in, const GradePlan& plan, const std::vector<uint64_t>& records,
-                                const std::string& order_path, const std::string& grades_path,
-                                const std::string& canonical_path, Progress& progress) {
-  GradeSorter sorter(*in.work, "grade-merge", std::max<uint64_t>(in.plan.stage_bytes / 3, 4 << 20));
-  uint64_t total = 0;
+uint64_t GradeMergePlan::first(unsigned u) const {
+  uint64_t n = 0;
+  for (uint64_t c : cut.at(u)) n += c;
+  return n;
+}
+
+std::string grade_merge_dir(const std::string& prefix) { return prefix + "grade-merge/"; }
+std::string grade_merge_stamp(const std::string& prefix, unsigned unit) {
+  return grade_merge_dir(prefix) + fmt::format("merge-{}.json", unit);
+}
+
+namespace {
+
+std::string merged_order_path(const std::string& prefix) { return grade_merge_dir(prefix) + "order.u32"; }
+std::string merged_grades_path(const std::string& prefix) { return grade_merge_dir(prefix) + "grades.f64"; }
+
+using io::OffsetFile;
+
+GradeRecord record_at(const OffsetFile& run, uint64_t i) {
+  GradeRecord r;
+  run.read(&r, sizeof r, i * sizeof r);
+  return r;
+}
+
+// The first of a run's `n` records (sorted by WeightLess) that is not less than `key`.
+uint64_t lower_bound_in(const OffsetFile& run, uint64_t n, const GradeRecord& key) {
+  uint64_t lo = 0, hi = n;
+  while (lo < hi) {
+    const uint64_t mid = lo + (hi - lo) / 2;
+    if (WeightLess()(record_at(run, mid), key)) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo;
+}
+
+nlohmann::ordered_json merge_plan_key(const nlohmann::ordered_json& key, const std::vector<uint64_t>& records, unsigned units,
+                                      bool grades) {
+  return {{"shares", key}, {"records", records}, {"units", units}, {"grades", grades}};
+}
+
+// The plan in grade-merge/plan.json made for `key`, with its files at their full size; false when there is none.
+bool read_merge_plan(const std::string& prefix, const nlohmann::ordered_json& key, GradeMergePlan* mp) {
+  const std::string path = grade_merge_dir(prefix) + "plan.json";
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) return false;
+  try {
+    const ordered_json j = ordered_json::parse(io::read_small_file(path));
+    if (j.at("key") != key) return false;
+    mp->units = j.at("key").at("units");
+    mp->grades = j.at("key").at("grades");
+    mp->records = j.at("key").at("records").get<std::vector<uint64_t>>();
+    mp->cut = j.at("cut").get<std::vector<std::vector<uint64_t>>>();
+    if (mp->cut.size() != mp->units + 1) return false;
+    for (const auto& row : mp->cut)
+      if (row.size() != mp->records.size()) return false;
+    if (std::filesystem::file_size(merged_order_path(prefix), ec) != mp->total() * 4 || ec) return false;
+    if (mp->grades && (std::filesystem::file_size(merged_grades_path(prefix), ec) != mp->total() * 8 || ec)) return false;
+    return true;
+  } catch (const std::exception&) {
+    return false;  // unreadable: made again
+  }
+}
+
+}  // namespace
+
+GradeMergePlan shared_grade_merge_plan(const GradeShareInput& in, const std::vector<uint64_t>& records, unsigned units,
+                                       bool grades, const ordered_json& key) {
+  const ordered_json plan_key = merge_plan_key(key, records, units, grades);
+  GradeMergePlan mp;
+  if (read_merge_plan(in.prefix, plan_key, &mp)) return mp;
+  // Made afresh: the units of an older plan are void.
+  std::filesystem::remove_all(grade_merge_dir(in.prefix));
+  std::filesystem::create_directories(grade_merge_dir(in.prefix));
+  mp = GradeMergePlan{units, grades, records, {}};
+  std::vector<std::unique_ptr<OffsetFile>> runs;
   for (unsigned s = 0; s < records.size(); ++s) {
     const std::string run = grade_share_run(in.prefix, s);
     std::error_code ec;
@@ -147,12 +251,71 @@ GradeSummary merge_grade_shares(const GradeShareInput& in, const GradePlan& plan
                                          "runs share {} again",
                                          run, ec ? 0 : bytes, records[s], s));
     }
-    if (records[s]) sorter.add_sorted_run(run, records[s]);
-    total += records[s];
+    runs.push_back(std::make_unique<OffsetFile>(run, O_RDONLY));
   }
-  write_weight_index(sorter, total, order_path, grades_path, progress);
+  // The splitters: evenly spaced records of every run (64 a unit), sorted; the u-th U-quantile cuts unit u-1
+  // from unit u in every run at the same key.
+  std::vector<GradeRecord> samples;
+  for (unsigned s = 0; s < records.size(); ++s) {
+    const uint64_t k = std::min<uint64_t>(records[s], uint64_t{64} * units);
+    for (uint64_t i = 0; i < k; ++i) samples.push_back(record_at(*runs[s], i * records[s] / k));
+  }
+  std::sort(samples.begin(), samples.end(), WeightLess());
+  mp.cut.assign(units + 1, std::vector<uint64_t>(records.size(), 0));
+  mp.cut[units] = records;
+  for (unsigned u = 1; u < units; ++u)
+    for (unsigned s = 0; s < records.size(); ++s)
+      mp.cut[u][s] = samples.empty() ? 0 : lower_bound_in(*runs[s], records[s], samples[samples.size() * u / units]);
+  // The index's files at their full size; the units write their parts in place.
+  OffsetFile(merged_order_path(in.prefix), O_WRONLY | O_CREAT | O_TRUNC).resize(mp.total() * 4);
+  if (grades) OffsetFile(merged_grades_path(in.prefix), O_WRONLY | O_CREAT | O_TRUNC).resize(mp.total() * 8);
+  io::write_file_atomic(grade_merge_dir(in.prefix) + "plan.json", ordered_json{{"key", plan_key}, {"cut", mp.cut}}.dump() + "\n");
+  return mp;
+}
+
+uint64_t run_grade_merge_unit(const GradeShareInput& in, const GradeMergePlan& mp, unsigned unit, Progress& progress) {
+  GradeSorter sorter(*in.work, fmt::format("grade-merge-{}", unit), std::max<uint64_t>(in.plan.stage_bytes / 3, 4 << 20));
+  uint64_t records = 0;
+  for (unsigned s = 0; s < mp.records.size(); ++s) {
+    const uint64_t n = mp.cut[unit + 1][s] - mp.cut[unit][s];
+    if (n) sorter.add_sorted_run(grade_share_run(in.prefix, s), n, mp.cut[unit][s]);
+    records += n;
+  }
+  OffsetFile order(merged_order_path(in.prefix), O_WRONLY);
+  std::unique_ptr<OffsetFile> grades;
+  if (mp.grades) grades = std::make_unique<OffsetFile>(merged_grades_path(in.prefix), O_WRONLY);
+  constexpr size_t kBatch = 1 << 20;  // records a write
+  std::vector<uint32_t> ids;
+  std::vector<double> values;
+  ids.reserve(kBatch);
+  if (grades) values.reserve(kBatch);
+  uint64_t at = mp.first(unit), written = 0;
+  auto flush = [&] {
+    order.write(ids.data(), ids.size() * 4, at * 4);
+    if (grades) grades->write(values.data(), values.size() * 8, at * 8);
+    at += ids.size(), written += ids.size();
+    ids.clear(), values.clear();
+    progress.report("sort", static_cast<double>(written) / static_cast<double>(std::max<uint64_t>(records, 1)));
+  };
+  sorter.merge([&](const GradeRecord& r) {
+    ids.push_back(r.id);
+    if (grades) values.push_back(r.grade);
+    if (ids.size() == kBatch) flush();
+  });
+  flush();
+  if (written != records) fail(Status::internal, "grade merge: unit " + std::to_string(unit) + " lost records");
+  order.close();
+  if (grades) grades->close();
+  return records;
+}
+
+GradeSummary finish_grade_merge(const GradeShareInput& in, const GradePlan& plan, const GradeMergePlan& mp,
+                                const std::string& order_path, const std::string& grades_path,
+                                const std::string& canonical_path) {
+  std::filesystem::rename(merged_order_path(in.prefix), order_path);
+  if (mp.grades) std::filesystem::rename(merged_grades_path(in.prefix), grades_path);
   if (plan.welded) link_file(grade_shares_weld_path(in.prefix), canonical_path);
-  return summary_of(plan, total);
+  return summary_of(plan, mp.total());
 }
 
 }  // namespace lodstream::stream

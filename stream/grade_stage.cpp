@@ -132,7 +132,8 @@ void block_area(std::span<const uint32_t> tris, const StorePositions& pos, AreaH
 // Pass 1: weld, then the range size; with more than one range (or `sum_areas`), the block pass.
 GradePlan plan_grading(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan, const WorkDir& work,
                        Progress& progress, const std::string& canonical_path, uint64_t max_range_vertices, uint64_t min_ranges,
-                       bool sum_areas, const std::vector<std::pair<std::string, uint64_t>>& weld_runs) {
+                       bool sum_areas, const std::vector<std::pair<std::string, uint64_t>>& weld_runs,
+                       const std::string& weld_map_made) {
   GradePlan gp;
   const uint64_t n_vertices = meta.vertices;
 
@@ -144,7 +145,8 @@ GradePlan plan_grading(const std::string& store_dir, const StoreMeta& meta, cons
     for (const auto& run : weld_runs) welded += run.second;
     gp.distinct_positions = n_vertices - welded;
     gp.welded = welded > 0;
-    if (gp.welded) write_weld_map(weld_runs, n_vertices, plan.stage_bytes, work, canonical_path);
+    if (gp.welded && !weld_map_made.empty()) link_file(weld_map_made, canonical_path);
+    else if (gp.welded) write_weld_map(weld_runs, n_vertices, plan.stage_bytes, work, canonical_path);
   } else {
     gp.distinct_positions = weld_positions(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), n_vertices,
                                            meta.single_precision, plan.stage_bytes, work, progress, canonical_path);

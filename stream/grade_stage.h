@@ -96,12 +96,13 @@ struct GradePlan {
   std::vector<RangeMask> block_ranges[3];  // per block of triangles, segments, points (more than one range)
 };
 // Pass 1: the weld (writes `canonical_path` when positions repeat; from the weld units' runs, path and
-// pairs, when given: stream/grade_shares.h), the range size (from the budget, at most
+// pairs, when given: stream/grade_shares.h; linked from `weld_map_made` when the map's units wrote it), the range size (from the budget, at most
 // `max_range_vertices` when non-zero, and small enough for `min_ranges` ranges), and, with more than one
 // range or `sum_areas`, the block pass: every block's ranges, and the area histogram.
 GradePlan plan_grading(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan, const WorkDir& work,
                        Progress& progress, const std::string& canonical_path, uint64_t max_range_vertices, uint64_t min_ranges,
-                       bool sum_areas, const std::vector<std::pair<std::string, uint64_t>>& weld_runs = {});
+                       bool sum_areas, const std::vector<std::pair<std::string, uint64_t>>& weld_runs = {},
+                       const std::string& weld_map_made = {});
 // Pass 2: grades the vertices of ranges [first, end), pushing a record for every used one into `sorter`;
 // returns the records pushed. A plan without its areas (one range, no block pass) gets them here.
 uint64_t grade_ranges(const std::string& store_dir, const StoreMeta& meta, core::Grading mode, GradePlan& plan,

@@ -498,10 +498,12 @@ ordered_json run_labels_stage(const SimplifyOptions& so, const std::string& stor
 }
 
 // Stages 2 and 3, grade and sort (stream/grade_stage.h), unless the stamp says they are done. In a sharded
-// run they may run as N shares (stream/grade_shares.h): a grading share task (--shard-grade I/N) makes the
-// shares' plan (under the work directory's lock, which `lock` holds), releases the lock and runs its
-// share; any later process of the run finds the plan, runs the shares no task ran (each under its own
-// lock) and merges them. Returns false for a share task, whose run ends after its share.
+// run they may run as N shares (stream/grade_shares.h): a grading share task (--shard-grade I/N) takes
+// part in the weld's units and the weld map's (the lock released), makes the shares' plan (under the work
+// directory's lock, which `lock` holds), releases the lock and runs its share; any later process of the
+// run finds the plan, runs the shares no task ran (each under its own lock) and takes part in their
+// merge's units (the lock released again); the first back under the lock stamps the stage. Returns false
+// for a share task, whose run ends after its share.
 struct GradeStageInput {
   const SimplifyOptions& so;
   const stream::StoreMeta& meta;
@@ -512,32 +514,61 @@ struct GradeStageInput {
   bool sharded;
 };
 
-// The weld's units (stream/grade_shares.h), as one grading share takes part: first every unit that no
-// other process holds (from its own index on, so that shares starting together take different units),
-// then every unit in turn, waiting for those another process holds; a unit whose holder died is run
-// here. Returns every unit's run and its pairs.
+// Units of a stage that every process of a sharded run takes part in (the weld's and the grading merge's,
+// stream/grade_shares.h), in `dir`, unit u stamped at stamp(u) with `key`: first every unit that no other
+// process holds (from `index` on, so that processes starting together take different units), then every
+// unit in turn, waiting for those another process holds; a unit whose holder died is run here. run(u)
+// returns the unit's stamp's files and value. Returns every unit's stamp value.
+template <class Stamp, class Run>
+std::vector<ordered_json> take_units(const std::string& dir, unsigned units, unsigned index, const Stamp& stamp,
+                                     const ordered_json& key, const Run& run) {
+  std::filesystem::create_directories(dir);
+  for (unsigned k = 0; k < units; ++k) {
+    const unsigned u = (index + k) % units;
+    share_unless_held(dir, u, stamp(u), key, "", false, [&] { return run(u); });
+  }
+  std::vector<ordered_json> values;
+  for (unsigned u = 0; u < units; ++u) values.push_back(stamped_share(dir, u, stamp(u), key, "", [&] { return run(u); }));
+  return values;
+}
+
+// The weld's units, as one grading share takes part (take_units). Returns every unit's run and its pairs.
 std::vector<std::pair<std::string, uint64_t>> run_weld_units(const stream::GradeShareInput& gs, unsigned count, unsigned index,
                                                              const ordered_json& key, stream::Progress& progress) {
   const unsigned units = std::min(count, stream::kMaxWeldUnits);
-  const std::string dir = stream::weld_units_dir(gs.prefix);
-  std::filesystem::create_directories(dir);
   ordered_json unit_key = key;
   unit_key["weld_units"] = units;
-  auto run = [&](unsigned u) {
-    const stream::WeldUnitResult r = stream::run_weld_unit(gs, u, units, progress);
-    return std::pair(std::vector<std::string>{stream::weld_unit_run(gs.prefix, u)},
-                     ordered_json{{"distinct", r.distinct}, {"welded", r.welded}});
-  };
-  for (unsigned k = 0; k < units; ++k) {
-    const unsigned u = (index + k) % units;
-    share_unless_held(dir, u, stream::weld_unit_stamp(gs.prefix, u), unit_key, "", false, [&] { return run(u); });
-  }
+  const std::vector<ordered_json> values = take_units(
+      stream::weld_units_dir(gs.prefix), units, index, [&](unsigned u) { return stream::weld_unit_stamp(gs.prefix, u); },
+      unit_key, [&](unsigned u) {
+        const stream::WeldUnitResult r = stream::run_weld_unit(gs, u, units, progress);
+        return std::pair(std::vector<std::string>{stream::weld_unit_run(gs.prefix, u)},
+                         ordered_json{{"distinct", r.distinct}, {"welded", r.welded}});
+      });
   std::vector<std::pair<std::string, uint64_t>> runs;
-  for (unsigned u = 0; u < units; ++u) {
-    const ordered_json v = stamped_share(dir, u, stream::weld_unit_stamp(gs.prefix, u), unit_key, "", [&] { return run(u); });
-    runs.emplace_back(stream::weld_unit_run(gs.prefix, u), v.at("welded").get<uint64_t>());
-  }
+  for (unsigned u = 0; u < units; ++u) runs.emplace_back(stream::weld_unit_run(gs.prefix, u), values[u].at("welded").get<uint64_t>());
   return runs;
+}
+
+// The weld map's units, as one grading share takes part (take_units) once every weld unit has run (the
+// map started once); returns the map's path, or nothing when no vertex is welded.
+std::string run_weld_map_units(const stream::GradeShareInput& gs, unsigned count, unsigned index, const ordered_json& key,
+                               const std::vector<std::pair<std::string, uint64_t>>& weld_runs) {
+  uint64_t welded = 0;
+  for (const auto& run : weld_runs) welded += run.second;
+  if (welded == 0) return {};
+  const unsigned units = std::min(count, stream::kMaxWeldUnits);
+  ordered_json unit_key = key;
+  unit_key["weld_map_units"] = units;
+  unit_key["welded"] = welded;
+  const std::string path = stream::start_weld_map_once(gs, welded, unit_key);
+  take_units(
+      stream::weld_map_units_dir(gs.prefix), units, index, [&](unsigned u) { return stream::weld_map_unit_stamp(gs.prefix, u); },
+      unit_key, [&](unsigned u) {
+        stream::run_weld_map_unit(gs, weld_runs, u, units);
+        return std::pair(std::vector<std::string>{path}, ordered_json{});
+      });
+  return path;
 }
 
 stream::GradeSummary grade_from_stamp(const ordered_json& v) {
@@ -586,13 +617,15 @@ bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::uni
   }
   const stream::GradeShareInput gs{in.store_dir, &in.meta, mode, in.plan, in.prefix, &in.work, so.grade_range_vertices};
   std::vector<std::pair<std::string, uint64_t>> weld_runs;
+  std::string weld_map;
   if (so.grade_share_count > 0 && stream::store_needs_weld(in.meta) && stream::grade_shares_planned(in.prefix, in.key) != count) {
     // The weld as units every grading share takes part in (stream/grade_shares.h), the lock let go meanwhile.
     lock.reset();
     weld_runs = run_weld_units(gs, count, so.grade_share_index, in.key, progress);
+    weld_map = run_weld_map_units(gs, count, so.grade_share_index, in.key, weld_runs);
     lock = std::make_unique<stream::ShardLock>(in.work.path());
   }
-  const stream::GradePlan gp = stream::shared_grade_plan(gs, count, in.key, progress, weld_runs);  // under the lock
+  const stream::GradePlan gp = stream::shared_grade_plan(gs, count, in.key, progress, weld_runs, weld_map);  // under the lock
   ordered_json share_key = in.key;
   share_key["count"] = count;
   // A share's stamp: its ranges and records.
@@ -612,9 +645,34 @@ bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::uni
   }
   std::vector<uint64_t> records;
   for (unsigned s = 0; s < count; ++s) records.push_back(run_share(s).at("records"));
-  *out = stream::merge_grade_shares(gs, gp, records, in.order_path, in.grades_path, in.canonical_path, progress);
+  // The merge of the shares' runs as units (stream/grade_shares.h), which every process that needs the
+  // index takes part in, the lock let go meanwhile (its own index first: a clustering share's or a task's).
+  const unsigned units = std::min(count, stream::kMaxGradeMergeUnits);
+  const ordered_json unit_key{{"shares", share_key}, {"records", records}, {"units", units}};
+  const unsigned index = so.cluster_share_count > 0 ? so.cluster_share_index : so.shard_count > 0 ? so.shard_index : 0;
+  auto take_merge_units = [&](const stream::GradeMergePlan& mp) {
+    take_units(stream::grade_merge_dir(in.prefix), units, index, [&](unsigned u) { return stream::grade_merge_stamp(in.prefix, u); },
+               unit_key, [&](unsigned u) {
+                 return std::pair(std::vector<std::string>{},
+                                  ordered_json{{"records", stream::run_grade_merge_unit(gs, mp, u, progress)}});
+               });
+  };
+  // The plan is made once, under the lock, from the runs alone: every process that reads it sees the same cuts.
+  const stream::GradeMergePlan merge_plan = stream::shared_grade_merge_plan(gs, records, units, keep_grades, share_key);
+  lock.reset();
+  take_merge_units(merge_plan);
+  lock = std::make_unique<stream::ShardLock>(in.work.path());
+  if (stamp_matches(stamp, in.key, &v)) {  // another process finished the merge
+    *out = grade_from_stamp(v);
+    return true;
+  }
+  // Again under the lock: a plan made afresh, and its units run here, when a process died finishing the last one.
+  const stream::GradeMergePlan mp = stream::shared_grade_merge_plan(gs, records, units, keep_grades, share_key);
+  take_merge_units(mp);
+  *out = stream::finish_grade_merge(gs, gp, mp, in.order_path, in.grades_path, in.canonical_path);
   write_grade_stamp(*out);
-  // The shares are spent once the stage is stamped (the weld map is a link to the plan's).
+  // The shares are spent once the stage is stamped (the weld map is a link to the plan's). The merge's
+  // units' stamps stay until the cluster stage is stamped: a process may still be reading them.
   std::filesystem::remove_all(stream::grade_shares_dir(in.prefix));
   std::filesystem::remove_all(stream::weld_units_dir(in.prefix));
   return true;
@@ -848,6 +906,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         write_stamp(work.file("cluster.json"), key, files, {{"cells", cs.cells}});
         // The shares are spent once the stage is stamped (the whole levels' maps are links to their files).
         if (in_shares) std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
+        std::filesystem::remove_all(stream::grade_merge_dir(prefix));  // the grading merge's units' stamps (grade_stage)
         return cs.cells;
       };
 

@@ -152,6 +152,27 @@ grep -qx 137 "$out"/slurm/status/grade-*.rc || fail "no grading share was killed
 same_outputs "$tmp/room-one" "$out"
 echo "killed weld unit: run exit $rc, grading shares' exits $(cat "$out"/slurm/status/grade-*.rc | tr '\n' ' ')"
 
+# A grading merge unit's holder killed just before the unit's stamp: every clustering share that runs
+# unit 1 dies there (SIGKILL releasing its claim), and so does the prepare job, which runs it in turn; the
+# run exits 137 with the other units stamped, and `slurm resubmit` (no kill point now) runs unit 1 alone
+# and ends with one machine's bytes.
+out=$tmp/room-kill-merge
+LODSTREAM_TEST_KILL_AT=merge-1.json "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill-merge" \
+  --shards 3 --wait --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/kill-merge.log" 2>&1
+rc=$?
+[ $rc -eq 137 ] || { fail "a grading merge unit's holder killed with SIGKILL: the run exited $rc, not 137"; cat "$tmp/kill-merge.log"; }
+grep -qx 137 "$out"/slurm/status/cluster-*.rc || fail "no clustering share was killed at merge unit 1"
+exits=$(cat "$out"/slurm/status/cluster-*.rc "$out"/slurm/status/prepare.rc | tr '\n' ' ')
+units=$(ls "$tmp/room-work-kill-merge/grade-merge/" 2>/dev/null | grep -c '^merge-[0-9]*\.json$')
+[ -e "$tmp/room-work-kill-merge/grade-merge/merge-1.json" ] && fail "merge unit 1 was stamped"
+[ "$units" -eq 2 ] || fail "not the two other merge units stamped: $units"
+"$cli" slurm resubmit "$out" --wait >"$tmp/resubmit-merge.log" 2>&1
+rc=$?
+[ $rc -eq 0 ] || { fail "resubmit after a killed merge unit: exit $rc"; cat "$tmp/resubmit-merge.log"; }
+same_outputs "$tmp/room-one" "$out"
+[ -e "$tmp/room-work-kill-merge/grade-merge" ] && fail "the grading merge's units outlived the cluster stage"
+echo "killed grading merge unit: run exit 137 with $units units stamped, clustering shares' and prepare's exits $exits; resubmitted: exit $rc"
+
 # An ingest range killed just before its segment is complete, in a fresh work directory.
 out=$tmp/room-kill-ingest
 LODSTREAM_TEST_KILL_AT=range-1-of-3.seg "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill" --shards 3 --wait \

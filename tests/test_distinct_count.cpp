@@ -82,7 +82,8 @@ std::vector<uint32_t> canonical_by_sorting(const std::vector<T>& xyz) {
 
 // The weld (weld_positions) writes the map of the smallest id at each position, the same bytes in one batch
 // with no spill as in many batches, sub-buckets and sort runs, and as 1, 3 or 7 units whose runs are
-// written into one map (weld_unit, write_weld_map); it refuses a budget below its floor.
+// written into one map (weld_unit, write_weld_map, or the map's own units in place: write_weld_map_unit);
+// it refuses a budget below its floor.
 template <class T>
 void check_weld(const std::vector<T>& xyz) {
   test::TempDir tmp;
@@ -130,6 +131,14 @@ void check_weld(const std::vector<T>& xyz) {
     const std::string map = tmp.file("units-" + std::to_string(units));
     stream::write_weld_map(runs, n, 2 * floor, work, map);
     EXPECT_EQ(io::read_small_file(map), first_bytes) << units << " units";
+    // The map itself as units (write_weld_map_unit), in reverse order, into one file started beforehand:
+    // the same bytes, with 2 and 5 map units (word ranges cut unevenly against the runs' buckets).
+    for (unsigned map_units : {2u, 5u}) {
+      const std::string in_place = tmp.file("map-units-" + std::to_string(units) + "-" + std::to_string(map_units));
+      stream::start_weld_map(in_place, n, welded);
+      for (unsigned k = map_units; k-- > 0;) stream::write_weld_map_unit(runs, n, 2 * floor, work, in_place, k, map_units);
+      EXPECT_EQ(io::read_small_file(in_place), first_bytes) << units << " units, " << map_units << " map units";
+    }
   }
   try {
     stream::weld_positions(path, n, single, floor - 1, work, progress, tmp.file("refused"));

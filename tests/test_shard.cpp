@@ -397,6 +397,78 @@ TEST(GradeShares, MergeRefusesARunCutShort) {
   EXPECT_TRUE(slurp(work + "/order.u32") == slurp(dir.file("work") + "/order.u32"));
 }
 
+// The grading merge as units (stream/grade_shares.h) on runs of many tied grades, one of them empty: any
+// number of units, run in any order, write the bytes of a one-unit merge (the order and the grades), some
+// units are empty (splitters repeat where a grade is shared by many records), and a plan already made is
+// read back rather than made again.
+TEST(GradeShares, MergeUnitsInAnyOrderWriteOneMergesBytes) {
+  TempDir dir;
+  stream::WorkDir work(dir.file("work"));
+  const std::string prefix = work.path() + "/";
+  std::filesystem::create_directories(stream::grade_shares_dir(prefix));
+  stream::StoreMeta meta;
+  stream::MemoryPlan plan;
+  plan.stage_bytes = 16 << 20;
+  const stream::GradeShareInput in{"", &meta, core::Grading::lowtan, plan, prefix, &work, 0};
+  stream::Progress progress{Options()};
+  const stream::GradePlan gp;
+  for (uint32_t n : {200000u, 100u}) {
+    SCOPED_TRACE(fmt::format("{} records", n));
+    // 4 runs of ids dealt round-robin (run 2 gets none); grades of a few values, so ties are broken by id.
+    std::vector<std::vector<stream::GradeRecord>> records(4);
+    uint32_t seed = 12345;
+    for (uint32_t id = 0; id < n; ++id) {
+      seed = seed * 1664525u + 1013904223u;
+      records[id % 3 == 2 ? 3 : id % 3].push_back({(seed >> 28) < 10 ? 0.25 * (seed >> 28) : 1e-3 * (seed >> 16), id});
+    }
+    std::vector<uint64_t> counts;
+    for (unsigned s = 0; s < records.size(); ++s) {
+      std::sort(records[s].begin(), records[s].end(), stream::WeightLess());
+      std::ofstream(stream::grade_share_run(prefix, s), std::ios::binary)
+          .write(reinterpret_cast<const char*>(records[s].data()), static_cast<std::streamsize>(records[s].size() * 12));
+      counts.push_back(records[s].size());
+    }
+    ASSERT_EQ(counts[2], 0u);
+    auto merged = [&](unsigned units, bool reverse, std::string* grades) {
+      const nlohmann::ordered_json key{{"test", units}, {"n", n}};
+      const stream::GradeMergePlan mp = stream::shared_grade_merge_plan(in, counts, units, true, key);
+      EXPECT_EQ(mp.units, units);
+      EXPECT_EQ(mp.total(), n);
+      unsigned empty = 0;
+      for (unsigned u = 0; u < units; ++u) empty += mp.first(u + 1) == mp.first(u);
+      if (units > n) EXPECT_GT(empty, 0u) << "fewer samples than units: splitters repeat, units are empty";
+      if (units < n / 100) EXPECT_EQ(empty, 0u);
+      for (unsigned k = 0; k < units; ++k) {
+        const unsigned u = reverse ? units - 1 - k : k;
+        EXPECT_EQ(stream::run_grade_merge_unit(in, mp, u, progress), mp.first(u + 1) - mp.first(u));
+      }
+      // Made once: read back from plan.json (its files untouched) while it is for the same key.
+      EXPECT_EQ(stream::shared_grade_merge_plan(in, counts, units, true, key).cut, mp.cut);
+      const std::string order = dir.file(fmt::format("order-{}.u32", units));
+      const std::string grade_file = dir.file(fmt::format("grades-{}.f64", units));
+      EXPECT_EQ(stream::finish_grade_merge(in, gp, mp, order, grade_file, "").records, n);
+      *grades = slurp(grade_file);
+      return slurp(order);
+    };
+    std::string one_grades, grades;
+    const std::string one = merged(1, false, &one_grades);
+    std::vector<stream::GradeRecord> all;
+    for (const auto& r : records) all.insert(all.end(), r.begin(), r.end());
+    std::sort(all.begin(), all.end(), stream::WeightLess());
+    ASSERT_EQ(one.size(), all.size() * 4);
+    for (size_t i = 0; i < all.size(); ++i) {
+      uint32_t id;
+      std::memcpy(&id, one.data() + i * 4, 4);
+      ASSERT_EQ(id, all[i].id) << i;
+    }
+    for (unsigned units : {2u, 7u, 256u}) {
+      SCOPED_TRACE(units);
+      EXPECT_TRUE(merged(units, units != 2, &grades) == one);
+      EXPECT_TRUE(grades == one_grades);
+    }
+  }
+}
+
 // The shares through the stream API with a first halo of a quarter cell, so that their own vertices near
 // the slabs' edges stay unsettled and the shares widen their halos: every level's map and info are still
 // one machine's, and the merge refuses shares that do not add up.

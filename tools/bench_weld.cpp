@@ -10,9 +10,10 @@
 // scene with both zeros would show mismatches. Also prints lodstream's peak resident memory (VmHWM).
 //
 // With --units U, also the weld as U units (stream/grade_shares.h): each unit alone, one after another (as U
-// machines would run them at once), then the map written from their runs; prints every unit's time, the
-// slowest unit plus the map's writing (the weld's wall time on U machines) and the sum (its CPU cost on
-// one), and checks that the map is the same bytes as weld_positions'.
+// machines would run them at once), then the map written from their runs by one process, and again as U
+// map units in place (write_weld_map_unit, as the grading shares write it); prints every unit's time, the
+// slowest unit plus the map's writing (the weld's wall time on U machines, either way) and the sum (its
+// CPU cost on one), and checks that both maps are the same bytes as weld_positions'.
 //
 // usage: bench_weld [--runs R] [--memory SIZE_BYTES] [--threads T] [--no-peer] [--units U] [--work DIR] STORE_DIR
 // DIR (default: a temporary directory) gets the weld map and the sort's scratch files.
@@ -157,10 +158,24 @@ int main(int argc, char** argv) {
       const std::string map = work.file("units.map");
       const Timing m = timed([&] { stream::write_weld_map(runs, n, memory, work, map); });
       fmt::print("map from {} units' runs: {:.2f} s wall {:.2f} s CPU\n", units, m.wall, m.cpu);
-      fmt::print("units: slowest unit + map {:.2f} s wall (one process: median {:.2f} s); CPU of all units + map {:.2f} s\n",
-                 slowest + m.wall, median(ours_wall), sum_cpu + m.cpu);
-      const bool same = ours_distinct == n || io::read_small_file(map) == io::read_small_file(weld_path);
-      fmt::print("check: the units' map is {} weld_positions' map\n", same ? "the same bytes as" : "NOT the same as");
+      // The map as units too (write_weld_map_unit, one process each on a cluster), in place.
+      const std::string in_place = work.file("map-units.map");
+      uint64_t welded = 0;
+      for (const auto& run : runs) welded += run.second;
+      const Timing start = timed([&] { stream::start_weld_map(in_place, n, welded); });
+      double slowest_map = 0, map_cpu = start.cpu;
+      for (unsigned u = 0; u < units; ++u) {
+        const Timing t = timed([&] { stream::write_weld_map_unit(runs, n, memory, work, in_place, u, units); });
+        fmt::print("map unit {} of {}: {:7.2f} s wall {:7.2f} s CPU\n", u, units, t.wall, t.cpu);
+        slowest_map = std::max(slowest_map, t.wall);
+        map_cpu += t.cpu;
+      }
+      fmt::print("units: slowest unit + map {:.2f} s wall, slowest unit + slowest map unit {:.2f} s (one process: median {:.2f} s); "
+                 "CPU of all units + map {:.2f} s, + map units {:.2f} s\n",
+                 slowest + m.wall, slowest + start.wall + slowest_map, median(ours_wall), sum_cpu + m.cpu, sum_cpu + map_cpu);
+      const std::string one = ours_distinct == n ? std::string() : io::read_small_file(weld_path);
+      const bool same = ours_distinct == n || (io::read_small_file(map) == one && io::read_small_file(in_place) == one);
+      fmt::print("check: the units' maps (one writer, map units) are {} weld_positions' map\n", same ? "the same bytes as" : "NOT the same as");
       if (!same) return 1;
     }
 #ifdef LODSTREAM_BENCH_MESHOPT

@@ -4,9 +4,9 @@
 // input (--ingest-ranges, ranges_pay), an ingest array job of N range tasks (each parses an N-th of the
 // input's bytes, a report's of every original's, stream/ingest_range.h); for simplify, a grade array job of
 // N shares (the first joins the ranges, or ingests the input, under the work directory's lock; then every
-// share takes up weld units until the weld is done, the first back under the lock writes the weld map and
-// the grading plan, and each grades and sorts its share: stream/grade_shares.h)
-// and a cluster array job of N shares (the first merges the grading shares, under the lock, then each
+// share takes up weld units until the weld is done, then the weld map's units, the first back under the
+// lock makes the grading plan, and each grades and sorts its share: stream/grade_shares.h)
+// and a cluster array job of N shares (they take up the grading shares' merge as units, then each
 // clusters its share: stream/cluster_shares.h); then a prepare job (the shared stages: for simplify the
 // clustering shares' merge, the block boxes and the split levels' cells by vertex (a whole level's come from its
 // cluster share), for a report the join alone), an array job of N tasks

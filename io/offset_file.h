@@ -1,0 +1,65 @@
+// A file read and written at offsets (pread, pwrite): what several processes fill in place, each its own
+// byte ranges of a file sized beforehand (stream/grade_shares.h's merge units, the weld map's units).
+// Every failure throws Failure(io_error) naming the file.
+#pragma once
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdint>
+#include <cstring>
+#include <string>
+
+#include "core/status.h"
+
+namespace lodstream::io {
+
+class OffsetFile {
+ public:
+  // `flags` as open(2)'s (O_RDONLY; O_WRONLY, with O_CREAT | O_TRUNC for a new file).
+  OffsetFile(const std::string& path, int flags) : path_(path), fd_(::open(path.c_str(), flags | O_CLOEXEC, 0644)) {
+    if (fd_ < 0) fail(Status::io_error, path_ + ": cannot open: " + std::strerror(errno));
+  }
+  OffsetFile(const OffsetFile&) = delete;
+  OffsetFile& operator=(const OffsetFile&) = delete;
+  ~OffsetFile() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  const std::string& path() const { return path_; }
+  void read(void* data, size_t bytes, uint64_t offset) const {
+    char* p = static_cast<char*>(data);
+    while (bytes > 0) {
+      const ssize_t n = ::pread(fd_, p, std::min<size_t>(bytes, 1 << 30), static_cast<off_t>(offset));
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) fail(Status::io_error, path_ + ": cannot read at byte " + std::to_string(offset));
+      p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
+    }
+  }
+  void write(const void* data, size_t bytes, uint64_t offset) const {
+    const char* p = static_cast<const char*>(data);
+    while (bytes > 0) {
+      const ssize_t n = ::pwrite(fd_, p, std::min<size_t>(bytes, 1 << 30), static_cast<off_t>(offset));
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) fail(Status::io_error, path_ + ": cannot write: " + std::strerror(n < 0 ? errno : ENOSPC));
+      p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
+    }
+  }
+  // Sets the file's size (new bytes read as zeros).
+  void resize(uint64_t bytes) const {
+    if (::ftruncate(fd_, static_cast<off_t>(bytes)) != 0) fail(Status::io_error, path_ + ": cannot size: " + std::strerror(errno));
+  }
+  // Closes the file, reporting a write error the close reveals (a file system that writes back late).
+  void close() {
+    const int r = ::close(fd_);
+    fd_ = -1;
+    if (r != 0) fail(Status::io_error, path_ + ": cannot write: " + std::strerror(errno));
+  }
+
+ private:
+  std::string path_;
+  int fd_;
+};
+
+}  // namespace lodstream::io
