@@ -120,13 +120,45 @@ void run_weld_map_unit(const GradeShareInput& in, const std::vector<std::pair<st
                       unit, units);
 }
 
+std::string block_units_dir(const std::string& prefix) { return prefix + "block-units/"; }
+std::string block_unit_stamp(const std::string& prefix, unsigned unit) {
+  return block_units_dir(prefix) + fmt::format("block-{}.json", unit);
+}
+
+void start_block_units_once(const GradeShareInput& in, const ordered_json& key) {
+  const std::string dir = block_units_dir(in.prefix), path = dir + "blocks.bin", stamp = dir + "start.json";
+  std::filesystem::create_directories(dir);
+  const ShardLock lock(dir, "start.lock");
+  try {
+    std::error_code ec;
+    if (ordered_json::parse(io::read_small_file(stamp)).at("key") == key && std::filesystem::exists(path, ec)) return;
+  } catch (const std::exception&) {
+    // none yet, or unreadable: started below
+  }
+  // Started afresh: the units of an older start are void.
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    if (e.path().filename().string().rfind("block-", 0) == 0 || e.path().filename().string().rfind("areas-", 0) == 0)
+      std::filesystem::remove(e.path());
+  const std::array<uint64_t, 3> blocks = grade_blocks(*in.meta);
+  io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize((blocks[0] + blocks[1] + blocks[2]) * sizeof(RangeMask));
+  io::write_file_atomic(stamp, ordered_json{{"key", key}}.dump() + "\n");
+}
+
+std::string run_block_unit(const GradeShareInput& in, const std::string& weld_map, unsigned count, unsigned unit, unsigned units,
+                           Progress& progress) {
+  const std::string dir = block_units_dir(in.prefix), areas = dir + fmt::format("areas-{}.bin", unit);
+  block_pass_unit(in.store_dir, *in.meta, weld_map, grade_range_size(*in.meta, in.plan, in.max_range_vertices, count), unit, units,
+                  dir + "blocks.bin", areas, progress);
+  return areas;
+}
+
 unsigned grade_shares_planned(const std::string& prefix, const ordered_json& key) {
   const ordered_json j = read_plan(prefix, key);
   return j.is_null() ? 0 : j.value("count", 0u);
 }
 
 GradePlan shared_grade_plan(const GradeShareInput& in, unsigned count, const ordered_json& key, Progress& progress,
-                            const std::vector<std::pair<std::string, uint64_t>>& weld_runs, const std::string& weld_map_made) {
+                            const PlanUnits& units) {
   GradePlan gp;
   const ordered_json j = read_plan(in.prefix, key);
   if (!j.is_null() && j.value("count", 0u) == count && parse_plan(in.prefix, j, &gp)) return gp;
@@ -134,7 +166,7 @@ GradePlan shared_grade_plan(const GradeShareInput& in, unsigned count, const ord
   std::filesystem::remove_all(grade_shares_dir(in.prefix));
   std::filesystem::create_directories(grade_shares_dir(in.prefix));
   gp = plan_grading(in.store_dir, *in.meta, in.plan, *in.work, progress, grade_shares_weld_path(in.prefix), in.max_range_vertices, count,
-                    true, weld_runs, weld_map_made);
+                    true, units);
   io::FileWriter blocks(blocks_path(in.prefix));
   ordered_json counts = ordered_json::array();
   for (int kind = 0; kind < 3; ++kind) {

@@ -11,7 +11,9 @@
 // directory's lock, and read by the others from grade-shares/plan.json): plan_grading's weld (its map in
 // grade-shares/weld.map), the range size (at least N ranges, where the vertices allow), and the block
 // pass over the store (each block's ranges in grade-shares/blocks.bin, 32 bytes a block of 2^18
-// primitives; the area histogram in plan.json).
+// primitives; the area histogram in plan.json). When grading shares run as their own processes, the
+// weld, its map and the block pass are made by units they all take part in (below), and the plan's
+// maker only reads what the units wrote.
 // The share (run_grade_share): ranges [I·R/N, (I+1)·R/N) of the R ranges, each graded from the blocks that
 // touch it (grade_ranges), its records sorted under the budget (stream/external_sort.h) into one run,
 // grade-shares/share-I.run (12 bytes a record).
@@ -36,8 +38,11 @@
 // waits for the others' (a unit whose holder died is run by the waiting process); then the map's units
 // (run_weld_map_unit, write_weld_map_unit), claimed and waited for likewise, write its words in place into
 // weld-units/map/weld.map, which the first of them started (start_weld_map_once); the plan's maker links
-// it (the same bytes as one process's weld). The units go with the grading shares' directory when the
-// stage is stamped.
+// it (the same bytes as one process's weld). The block pass likewise (run_block_unit, block_pass_unit):
+// block unit u of U writes the ranges of the u-th U-th of each kind's blocks in place into
+// block-units/blocks.bin (sized by start_block_units_once) and its blocks' area sums by bin to
+// block-units/areas-u.bin, which the plan's maker adds in store order (the one-process pass's bits). The
+// units go when the stage is stamped.
 #pragma once
 
 #include <cstdint>
@@ -81,17 +86,26 @@ std::string weld_map_unit_stamp(const std::string& prefix, unsigned unit);
 std::string start_weld_map_once(const GradeShareInput& in, uint64_t welded, const nlohmann::ordered_json& key);
 void run_weld_map_unit(const GradeShareInput& in, const std::vector<std::pair<std::string, uint64_t>>& weld_runs, unsigned unit,
                        unsigned units);
+// The block pass's units (stream/grade_stage.h, block_pass_unit), once the weld map is whole (`weld_map`,
+// empty: none): block-units/blocks.bin sized once (start_block_units_once, under a lock of its own, for
+// `key`), then filled by units stamped block-units/block-U.json, each also writing areas-U.bin.
+std::string block_units_dir(const std::string& prefix);  // WORK/block-units/
+std::string block_unit_stamp(const std::string& prefix, unsigned unit);
+void start_block_units_once(const GradeShareInput& in, const nlohmann::ordered_json& key);
+// Runs block unit `unit` of `units` for `count` grading shares; returns its areas file.
+std::string run_block_unit(const GradeShareInput& in, const std::string& weld_map, unsigned count, unsigned unit, unsigned units,
+                           Progress& progress);
 
 // The count of the shares' plan written for `key`, or 0 when there is none (no grading share has run).
 unsigned grade_shares_planned(const std::string& prefix, const nlohmann::ordered_json& key);
 // The plan as every process of a run sees it, made once: read from grade-shares/ when written there for
 // `key` and `count`, else made by plan_grading (the weld and a pass over the store) and written there.
 // The caller holds the work directory's lock.
-// With `weld_runs` (every weld unit's run and pairs), the weld map is written from them, or linked from
-// `weld_map_made` when the map's units (run_weld_map_unit) wrote it there.
+// With `units` (what the grading shares' units made: stream/grade_stage.h, PlanUnits), the weld map is
+// written from the weld units' runs or linked from the map's units' file, and the block pass is read
+// from the block units' files.
 GradePlan shared_grade_plan(const GradeShareInput& in, unsigned count, const nlohmann::ordered_json& key, Progress& progress,
-                            const std::vector<std::pair<std::string, uint64_t>>& weld_runs = {},
-                            const std::string& weld_map_made = {});
+                            const PlanUnits& units = {});
 
 // The ranges [first, end) of share `index` of `count`.
 std::pair<uint64_t, uint64_t> grade_share_ranges(const GradePlan& plan, unsigned index, unsigned count);

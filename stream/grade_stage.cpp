@@ -2,14 +2,18 @@
 // it), sort into the weight index. See grade_stage.h for the contract.
 #include "stream/grade_stage.h"
 
+#include <fcntl.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <memory>
 #include <type_traits>
 #include <vector>
 
+#include <fmt/format.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -18,10 +22,12 @@
 #include "core/status.h"
 #include "io/file_writer.h"
 #include "io/mapped_file.h"
+#include "io/offset_file.h"
 #include "stream/distinct_count.h"
 #include "stream/external_sort.h"
 #include "stream/store_access.h"
 #include "stream/weld_file.h"
+#include "stream/work_dir.h"
 
 namespace lodstream::stream {
 
@@ -105,93 +111,201 @@ struct BinnedArea {
   int bin;
 };
 
-// Adds a block of triangles to the area histogram, in triangle order (a fixed order: the same bits every
-// run, since blocks are fixed and come in store order). The areas and their bins are computed in parallel
-// into `scratch`; only the sums run serially, in triangle order.
-void block_area(std::span<const uint32_t> tris, const StorePositions& pos, AreaHistogram& h,
-                std::vector<BinnedArea>& scratch) {
-  scratch.resize(tris.size() / 3);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, scratch.size(), 1 << 12), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t t = r.begin(); t < r.end(); ++t) {
+// A block's triangle areas by bin (block_area), added to the histogram block after block in store order
+// (add_block_areas), by whichever process computed them: the block pass, a block unit, or a single
+// range's grading. The sums are the same bits every run and every way: a block's in triangle order, the
+// blocks' in block order.
+struct AreaScratch {
+  std::vector<BinnedArea> triangles;
+  std::vector<uint32_t> count = std::vector<uint32_t>(kAreaBins, 0);
+  std::vector<double> area = std::vector<double>(kAreaBins, 0.0);
+};
+
+// The areas and their bins are computed in parallel; only the sums run serially, in triangle order.
+// Returns the block's bins with triangles, in bin order, in `out`.
+void block_area(std::span<const uint32_t> tris, const StorePositions& pos, AreaScratch& scratch, std::vector<BlockAreaBin>& out) {
+  std::vector<BinnedArea>& t = scratch.triangles;
+  t.resize(tris.size() / 3);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, t.size(), 1 << 12), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) {
       double a[3], b[3], c[3];
-      pos.get(tris[3 * t], a), pos.get(tris[3 * t + 1], b), pos.get(tris[3 * t + 2], c);
+      pos.get(tris[3 * i], a), pos.get(tris[3 * i + 1], b), pos.get(tris[3 * i + 2], c);
       const double area = triangle_area(a, b, c);
       int bin = 0;
       if (area > 0) bin = std::clamp(static_cast<int>(std::floor(4 * std::log2(area))) + kAreaBias, 0, kAreaBins - 1);
-      scratch[t] = {area, bin};
+      t[i] = {area, bin};
     }
   });
-  for (const BinnedArea& x : scratch) {
-    ++h.count[x.bin];
-    h.area[x.bin] += x.area;
+  for (const BinnedArea& x : t) {
+    ++scratch.count[static_cast<size_t>(x.bin)];
+    scratch.area[static_cast<size_t>(x.bin)] += x.area;
   }
+  out.clear();
+  for (uint32_t bin = 0; bin < kAreaBins; ++bin)
+    if (scratch.count[bin]) {
+      out.push_back({bin, scratch.count[bin], scratch.area[bin]});
+      scratch.count[bin] = 0, scratch.area[bin] = 0;
+    }
+}
+
+void add_block_areas(AreaHistogram& h, std::span<const BlockAreaBin> bins) {
+  for (const BlockAreaBin& b : bins) h.count[b.bin] += b.count, h.area[b.bin] += b.area;
+}
+
+// The ranges of `range` ids each that a block's canonical ids fall in.
+RangeMask block_mask(std::span<const uint32_t> ids, uint64_t range) {
+  return tbb::parallel_reduce(
+      tbb::blocked_range<size_t>(0, ids.size(), 1 << 14), RangeMask{},
+      [&](const tbb::blocked_range<size_t>& r, RangeMask m) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          const uint64_t range_of = ids[i] / range;
+          m[range_of / 64] |= uint64_t{1} << (range_of % 64);
+        }
+        return m;
+      },
+      [](RangeMask a, const RangeMask& b2) {
+        for (size_t k = 0; k < a.size(); ++k) a[k] |= b2[k];
+        return a;
+      });
 }
 
 }  // namespace
 
-// Pass 1: weld, then the range size; with more than one range (or `sum_areas`), the block pass.
-GradePlan plan_grading(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan, const WorkDir& work,
-                       Progress& progress, const std::string& canonical_path, uint64_t max_range_vertices, uint64_t min_ranges,
-                       bool sum_areas, const std::vector<std::pair<std::string, uint64_t>>& weld_runs,
-                       const std::string& weld_map_made) {
-  GradePlan gp;
+uint64_t grade_range_size(const StoreMeta& meta, const MemoryPlan& plan, uint64_t max_range_vertices, uint64_t min_ranges) {
+  // Per vertex its offsets, counters, a record, and its share of incidence entries (two per triangle
+  // corner, one per segment end). At least `min_ranges` ranges (the shares').
   const uint64_t n_vertices = meta.vertices;
-
-  // Weld. STL stores are welded at ingest already.
-  if (meta.format.rfind("stl", 0) == 0 || n_vertices == 0) {
-    gp.distinct_positions = n_vertices;
-  } else if (!weld_runs.empty()) {
-    uint64_t welded = 0;
-    for (const auto& run : weld_runs) welded += run.second;
-    gp.distinct_positions = n_vertices - welded;
-    gp.welded = welded > 0;
-    if (gp.welded && !weld_map_made.empty()) link_file(weld_map_made, canonical_path);
-    else if (gp.welded) write_weld_map(weld_runs, n_vertices, plan.stage_bytes, work, canonical_path);
-  } else {
-    gp.distinct_positions = weld_positions(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), n_vertices,
-                                           meta.single_precision, plan.stage_bytes, work, progress, canonical_path);
-    gp.welded = gp.distinct_positions < n_vertices;
-  }
-
-  // Range size from the budget: per vertex its offsets, counters, a record, and its share of incidence
-  // entries (two per triangle corner, one per segment end). At least `min_ranges` ranges (the shares').
   const double incidences = n_vertices ? static_cast<double>(6 * meta.triangles + 2 * meta.lines) / static_cast<double>(n_vertices) : 0;
   const uint64_t per_vertex = 8 + 4 + 8 + sizeof(GradeRecord) + static_cast<uint64_t>(std::ceil(4 * incidences));
   const uint64_t range_budget = std::max<uint64_t>(plan.stage_bytes / 3, 16 << 20);
   uint64_t range = std::max<uint64_t>(range_budget / per_vertex, 4096);
   if (max_range_vertices) range = std::min(range, max_range_vertices);
   if (min_ranges > 1) range = std::min(range, (n_vertices + min_ranges - 1) / min_ranges);
-  range = std::max<uint64_t>({range, (n_vertices + kMaxGradeRanges - 1) / kMaxGradeRanges, 1});
-  gp.range = range;
-  gp.ranges = std::max<uint64_t>((n_vertices + range - 1) / range, 1);
+  return std::max<uint64_t>({range, (n_vertices + kMaxGradeRanges - 1) / kMaxGradeRanges, 1});
+}
+
+std::array<uint64_t, 3> grade_blocks(const StoreMeta& meta) {
+  auto blocks = [](uint64_t n) { return (n + kGradeBlock - 1) / kGradeBlock; };
+  return {blocks(meta.triangles), blocks(meta.lines), blocks(meta.points)};
+}
+
+std::pair<uint64_t, uint64_t> block_unit_blocks(uint64_t blocks, unsigned unit, unsigned units) {
+  return {blocks * unit / units, blocks * (unit + 1) / units};
+}
+
+void block_pass_unit(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path, uint64_t range,
+                     unsigned unit, unsigned units, const std::string& masks_path, const std::string& areas_path,
+                     Progress& progress) {
+  const Columns columns = store_columns(store_dir, meta);
+  Canonical canonical(canonical_path, meta.vertices);
+  StorePositions positions(store_dir, meta);
+  canonical.acquire();
+  positions.acquire();
+  const std::array<uint64_t, 3> blocks = grade_blocks(meta);
+  const io::OffsetFile masks(masks_path, O_WRONLY);
+  io::FileWriter areas(areas_path, 1 << 20);
+  AreaScratch scratch;
+  std::vector<BlockAreaBin> bins;
+  auto in_unit = [&](int kind, uint64_t b) {
+    const auto [first, end] = block_unit_blocks(blocks[kind], unit, units);
+    return b >= first && b < end;
+  };
+  visit_store(columns, canonical, in_unit, [&](int kind, uint64_t b, std::span<const uint32_t> ids) {
+    progress.check();
+    uint64_t at = b;
+    for (int k = 0; k < kind; ++k) at += blocks[k];
+    const RangeMask mask = block_mask(ids, range);
+    masks.write(&mask, sizeof mask, at * sizeof mask);
+    if (kind == 0) {
+      block_area(ids, positions, scratch, bins);
+      const uint32_t n = static_cast<uint32_t>(bins.size());
+      areas.write(&n, sizeof n);
+      areas.write_array(std::span<const BlockAreaBin>(bins));
+    }
+    drop_mapped_pages(positions, canonical);
+  });
+  areas.commit();
+  positions.release();
+  canonical.release();
+}
+
+// Pass 1: weld, then the range size; with more than one range (or `sum_areas`), the block pass.
+GradePlan plan_grading(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan, const WorkDir& work,
+                       Progress& progress, const std::string& canonical_path, uint64_t max_range_vertices, uint64_t min_ranges,
+                       bool sum_areas, const PlanUnits& units) {
+  GradePlan gp;
+  const uint64_t n_vertices = meta.vertices;
+
+  // Weld. STL stores are welded at ingest already.
+  if (meta.format.rfind("stl", 0) == 0 || n_vertices == 0) {
+    gp.distinct_positions = n_vertices;
+  } else if (!units.weld_runs.empty()) {
+    uint64_t welded = 0;
+    for (const auto& run : units.weld_runs) welded += run.second;
+    gp.distinct_positions = n_vertices - welded;
+    gp.welded = welded > 0;
+    if (gp.welded && !units.weld_map.empty()) link_file(units.weld_map, canonical_path);
+    else if (gp.welded) write_weld_map(units.weld_runs, n_vertices, plan.stage_bytes, work, canonical_path);
+  } else {
+    gp.distinct_positions = weld_positions(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), n_vertices,
+                                           meta.single_precision, plan.stage_bytes, work, progress, canonical_path);
+    gp.welded = gp.distinct_positions < n_vertices;
+  }
+
+  gp.range = grade_range_size(meta, plan, max_range_vertices, min_ranges);
+  gp.ranges = std::max<uint64_t>((n_vertices + gp.range - 1) / gp.range, 1);
   if (gp.ranges == 1 && !sum_areas) return gp;  // the single range's pass sums the areas
 
-  // The block pass: the ranges each block touches, and the area.
+  // The block pass: the ranges each block touches, and the area; from the block units' files when they ran.
+  const std::array<uint64_t, 3> blocks = grade_blocks(meta);
+  if (units.block_units > 0) {
+    const std::string masks = io::read_small_file(units.block_dir + "blocks.bin");
+    if (masks.size() != (blocks[0] + blocks[1] + blocks[2]) * sizeof(RangeMask))
+      fail(Status::io_error, units.block_dir + "blocks.bin: not the store's blocks (block units)");
+    const char* at = masks.data();
+    for (int kind = 0; kind < 3; ++kind) {
+      gp.block_ranges[kind].resize(blocks[kind]);
+      std::memcpy(gp.block_ranges[kind].data(), at, blocks[kind] * sizeof(RangeMask));
+      at += blocks[kind] * sizeof(RangeMask);
+    }
+    // Each unit's blocks of triangles in order, the units in order: the store's block order.
+    std::vector<BlockAreaBin> bins;
+    for (unsigned u = 0; u < units.block_units; ++u) {
+      const std::string path = units.block_dir + fmt::format("areas-{}.bin", u);
+      const std::string bytes = io::read_small_file(path);
+      const auto [first, end] = block_unit_blocks(blocks[0], u, units.block_units);
+      size_t pos = 0;
+      for (uint64_t b = first; b < end; ++b) {
+        uint32_t n = 0;
+        if (pos + 4 > bytes.size()) fail(Status::io_error, path + ": cut short (block units)");
+        std::memcpy(&n, bytes.data() + pos, 4);
+        pos += 4;
+        if (n > kAreaBins || pos + n * sizeof(BlockAreaBin) > bytes.size()) fail(Status::io_error, path + ": not a block unit's areas");
+        bins.resize(n);
+        std::memcpy(bins.data(), bytes.data() + pos, n * sizeof(BlockAreaBin));
+        pos += n * sizeof(BlockAreaBin);
+        for (const BlockAreaBin& x : bins)
+          if (x.bin >= kAreaBins) fail(Status::io_error, path + ": not a block unit's areas");
+        add_block_areas(gp.areas, bins);
+      }
+      if (pos != bytes.size()) fail(Status::io_error, path + ": not a block unit's areas");
+    }
+    gp.areas_summed = true;
+    return gp;
+  }
   Columns columns = store_columns(store_dir, meta);
   Canonical canonical(gp.welded ? canonical_path : std::string(), n_vertices);
   StorePositions positions(store_dir, meta);
   canonical.acquire();
   positions.acquire();
-  std::vector<BinnedArea> area_scratch;
+  AreaScratch scratch;
+  std::vector<BlockAreaBin> bins;
   uint64_t done = 0;
   const uint64_t total = meta.primitives();
   visit_store(columns, canonical, [](int, uint64_t) { return true; }, [&](int kind, uint64_t b, std::span<const uint32_t> ids) {
-    if (kind == 0) block_area(ids, positions, gp.areas, area_scratch);
-    RangeMask mask = tbb::parallel_reduce(
-        tbb::blocked_range<size_t>(0, ids.size(), 1 << 14), RangeMask{},
-        [&](const tbb::blocked_range<size_t>& r, RangeMask m) {
-          for (size_t i = r.begin(); i < r.end(); ++i) {
-            const uint64_t range_of = ids[i] / range;
-            m[range_of / 64] |= uint64_t{1} << (range_of % 64);
-          }
-          return m;
-        },
-        [](RangeMask a, const RangeMask& b2) {
-          for (size_t k = 0; k < a.size(); ++k) a[k] |= b2[k];
-          return a;
-        });
+    if (kind == 0) block_area(ids, positions, scratch, bins), add_block_areas(gp.areas, bins);
     gp.block_ranges[kind].resize(b + 1);
-    gp.block_ranges[kind][b] = mask;
+    gp.block_ranges[kind][b] = block_mask(ids, gp.range);
     done += ids.size() / static_cast<size_t>(Columns::arity[kind]);
     drop_mapped_pages(positions, canonical);
     progress.report("grade", 0.3 * static_cast<double>(done) / static_cast<double>(std::max<uint64_t>(total, 1)));
@@ -213,7 +327,8 @@ uint64_t grade_ranges(const std::string& store_dir, const StoreMeta& meta, core:
   canonical.acquire();
   positions.acquire();
   uint64_t records = 0;
-  std::vector<BinnedArea> area_scratch;
+  AreaScratch area_scratch;
+  std::vector<BlockAreaBin> area_bins;
   std::vector<uint32_t> count;
   std::vector<uint64_t> offset;
   std::vector<uint32_t> neighbours;
@@ -254,7 +369,7 @@ uint64_t grade_ranges(const std::string& store_dir, const StoreMeta& meta, core:
     count.assign(n, 0);
     used.assign(n, 0);
     visit([&](int kind, std::span<const uint32_t> ids) {
-      if (kind == 0 && sum_areas) block_area(ids, positions, gp.areas, area_scratch);
+      if (kind == 0 && sum_areas) block_area(ids, positions, area_scratch, area_bins), add_block_areas(gp.areas, area_bins);
       for_range_corners(ids, static_cast<size_t>(Columns::arity[kind]), [&](uint64_t l, const uint32_t* p, size_t arity, size_t k) {
         used[l] = 1;
         uint32_t others = 0;

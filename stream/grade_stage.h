@@ -95,14 +95,44 @@ struct GradePlan {
   AreaHistogram areas;
   std::vector<RangeMask> block_ranges[3];  // per block of triangles, segments, points (more than one range)
 };
-// Pass 1: the weld (writes `canonical_path` when positions repeat; from the weld units' runs, path and
-// pairs, when given: stream/grade_shares.h; linked from `weld_map_made` when the map's units wrote it), the range size (from the budget, at most
+// What the grading shares' units made before the plan (stream/grade_shares.h): the weld units' runs (path,
+// pairs), the map the weld map's units wrote (empty: write it from the runs), and the block units'
+// directory (blocks.bin and areas-U.bin; block_units 0: none ran).
+struct PlanUnits {
+  std::vector<std::pair<std::string, uint64_t>> weld_runs;
+  std::string weld_map;
+  std::string block_dir;
+  unsigned block_units = 0;
+};
+// A block of triangles' areas in one bin of the histogram, summed in triangle order: what the block pass
+// adds to the histogram, block after block in store order, so that a block computed by another process
+// (a block unit) adds the same bits.
+struct BlockAreaBin {
+  uint32_t bin, count;
+  double area;
+};
+static_assert(sizeof(BlockAreaBin) == 16);
+// The range size plan_grading picks (ids per range).
+uint64_t grade_range_size(const StoreMeta& meta, const MemoryPlan& plan, uint64_t max_range_vertices, uint64_t min_ranges);
+// The store's blocks of kGradeBlock triangles, segments and points.
+std::array<uint64_t, 3> grade_blocks(const StoreMeta& meta);
+// The blocks [first, end) of a kind of `blocks` that block unit `unit` of `units` visits.
+std::pair<uint64_t, uint64_t> block_unit_blocks(uint64_t blocks, unsigned unit, unsigned units);
+// The block pass as units (the grading shares', stream/grade_shares.h): unit `unit` of `units` visits its
+// blocks of each kind (ids mapped by the weld map at `canonical_path`, empty: none), writes each block's
+// ranges (RangeMask of `range` ids a range) in place at its index in `masks_path` (the kinds' blocks one
+// after another, the file sized beforehand) and, per block of triangles in order, its bins' areas to
+// `areas_path` (a u32 count, then that many BlockAreaBin).
+void block_pass_unit(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path, uint64_t range,
+                     unsigned unit, unsigned units, const std::string& masks_path, const std::string& areas_path,
+                     Progress& progress);
+// Pass 1: the weld (writes `canonical_path` when positions repeat; from the weld units' runs when given,
+// linked from the map the weld map's units wrote when given: stream/grade_shares.h), the range size (from the budget, at most
 // `max_range_vertices` when non-zero, and small enough for `min_ranges` ranges), and, with more than one
 // range or `sum_areas`, the block pass: every block's ranges, and the area histogram.
 GradePlan plan_grading(const std::string& store_dir, const StoreMeta& meta, const MemoryPlan& plan, const WorkDir& work,
                        Progress& progress, const std::string& canonical_path, uint64_t max_range_vertices, uint64_t min_ranges,
-                       bool sum_areas, const std::vector<std::pair<std::string, uint64_t>>& weld_runs = {},
-                       const std::string& weld_map_made = {});
+                       bool sum_areas, const PlanUnits& units = {});
 // Pass 2: grades the vertices of ranges [first, end), pushing a record for every used one into `sorter`;
 // returns the records pushed. A plan without its areas (one range, no block pass) gets them here.
 uint64_t grade_ranges(const std::string& store_dir, const StoreMeta& meta, core::Grading mode, GradePlan& plan,

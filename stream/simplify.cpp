@@ -58,8 +58,9 @@ using stream::run_stage;
 
 // Part of every stage stamp; bumped when a work file changes format (2: the weight index keeps the store's
 // precision; 3: the weight index is the order and, for the mean, the grades; bit-packed cluster maps; cell
-// info by representative), so that a work directory from an older build is redone rather than misread.
-constexpr int kStampVersion = 3;
+// info by representative; 4: the grade stage's area histogram summed block by block, as its units sum it),
+// so that a work directory from an older build is redone rather than misread.
+constexpr int kStampVersion = 4;
 constexpr uint64_t kCoarsestTarget = 4000;  // "a few thousand" triangles at the coarsest default level
 constexpr unsigned kMaxLevels = 32;
 constexpr unsigned kMaxSearchPasses = 12;
@@ -571,6 +572,24 @@ std::string run_weld_map_units(const stream::GradeShareInput& gs, unsigned count
   return path;
 }
 
+// The block pass's units, as one grading share takes part (take_units) once the weld map is whole (the
+// masks' file sized once); returns their count.
+unsigned run_block_units(const stream::GradeShareInput& gs, unsigned count, unsigned index, const ordered_json& key,
+                         const std::string& weld_map, stream::Progress& progress) {
+  const unsigned units = std::min(count, stream::kMaxWeldUnits);
+  ordered_json unit_key = key;
+  unit_key["block_units"] = units;
+  unit_key["count"] = count;
+  stream::start_block_units_once(gs, unit_key);
+  take_units(
+      stream::block_units_dir(gs.prefix), units, index, [&](unsigned u) { return stream::block_unit_stamp(gs.prefix, u); }, unit_key,
+      [&](unsigned u) {
+        const std::string areas = stream::run_block_unit(gs, weld_map, count, u, units, progress);
+        return std::pair(std::vector<std::string>{areas}, ordered_json{});
+      });
+  return units;
+}
+
 stream::GradeSummary grade_from_stamp(const ordered_json& v) {
   stream::GradeSummary g;
   g.records = v.at("records");
@@ -616,16 +635,20 @@ bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::uni
     return true;
   }
   const stream::GradeShareInput gs{in.store_dir, &in.meta, mode, in.plan, in.prefix, &in.work, so.grade_range_vertices};
-  std::vector<std::pair<std::string, uint64_t>> weld_runs;
-  std::string weld_map;
-  if (so.grade_share_count > 0 && stream::store_needs_weld(in.meta) && stream::grade_shares_planned(in.prefix, in.key) != count) {
-    // The weld as units every grading share takes part in (stream/grade_shares.h), the lock let go meanwhile.
+  stream::PlanUnits plan_units;
+  if (so.grade_share_count > 0 && stream::grade_shares_planned(in.prefix, in.key) != count) {
+    // The weld, its map and the block pass as units every grading share takes part in (stream/grade_shares.h),
+    // the lock let go meanwhile.
     lock.reset();
-    weld_runs = run_weld_units(gs, count, so.grade_share_index, in.key, progress);
-    weld_map = run_weld_map_units(gs, count, so.grade_share_index, in.key, weld_runs);
+    if (stream::store_needs_weld(in.meta)) {
+      plan_units.weld_runs = run_weld_units(gs, count, so.grade_share_index, in.key, progress);
+      plan_units.weld_map = run_weld_map_units(gs, count, so.grade_share_index, in.key, plan_units.weld_runs);
+    }
+    plan_units.block_units = run_block_units(gs, count, so.grade_share_index, in.key, plan_units.weld_map, progress);
+    plan_units.block_dir = stream::block_units_dir(in.prefix);
     lock = std::make_unique<stream::ShardLock>(in.work.path());
   }
-  const stream::GradePlan gp = stream::shared_grade_plan(gs, count, in.key, progress, weld_runs, weld_map);  // under the lock
+  const stream::GradePlan gp = stream::shared_grade_plan(gs, count, in.key, progress, plan_units);  // under the lock
   ordered_json share_key = in.key;
   share_key["count"] = count;
   // A share's stamp: its ranges and records.
@@ -675,6 +698,7 @@ bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::uni
   // units' stamps stay until the cluster stage is stamped: a process may still be reading them.
   std::filesystem::remove_all(stream::grade_shares_dir(in.prefix));
   std::filesystem::remove_all(stream::weld_units_dir(in.prefix));
+  std::filesystem::remove_all(stream::block_units_dir(in.prefix));
   return true;
 }
 

@@ -4,9 +4,12 @@
 // task ranges must cover every region once. tests/slurm_test.sh runs the same through Slurm.
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -19,6 +22,7 @@
 #include "lodstream/lodstream.h"
 #include "cli_harness.h"
 #include "core/octree_regions.h"
+#include "io/offset_file.h"
 #include "stream/block_bounds.h"
 #include "stream/cluster_shares.h"
 #include "stream/grade_shares.h"
@@ -467,6 +471,75 @@ TEST(GradeShares, MergeUnitsInAnyOrderWriteOneMergesBytes) {
       EXPECT_TRUE(grades == one_grades);
     }
   }
+}
+
+// The grading plan's block pass as units (stream/grade_stage.h, block_pass_unit) on a store of three
+// blocks of triangles (sizes spread over many bins), two of segments and one of points: 2 and 5 units run
+// backwards give plan_grading's own pass, every block's ranges and the area histogram to the bit (a
+// block's areas are summed in triangle order, the blocks' in store order, whoever summed them); a unit's
+// areas file cut short is refused.
+TEST(GradeShares, BlockUnitsGiveTheBlockPassBits) {
+  TempDir dir;
+  const std::string store = dir.file("store");
+  std::filesystem::create_directories(store);
+  stream::StoreWriter w(store, false);
+  const uint32_t side = 600;  // (side - 1)^2 * 2 triangles: about 717 K, three blocks
+  std::vector<double> xyz;
+  for (uint32_t y = 0; y < side; ++y)
+    for (uint32_t x = 0; x < side; ++x) xyz.insert(xyz.end(), {x * (1 + 1e-3 * y), y + 1e-4 * x * x, std::sin(0.01 * x * y)});
+  w.add_vertices(xyz);
+  std::vector<uint32_t> tris, lines, points;
+  for (uint32_t y = 0; y + 1 < side; ++y)
+    for (uint32_t x = 0; x + 1 < side; ++x) {
+      const uint32_t v = y * side + x;
+      tris.insert(tris.end(), {v, v + 1, v + side, v + 1, v + side + 1, v + side});
+    }
+  for (uint32_t i = 0; i + 1 < 300000; ++i) lines.insert(lines.end(), {i, (i * 7919u) % (side * side)});
+  for (uint32_t i = 0; i < 10; ++i) points.push_back(i * 1000);
+  w.add_triangles(tris, {});
+  w.add_lines(lines, {});
+  w.add_points(points, {});
+  const stream::StoreMeta meta = w.commit(stream::StoreMeta{});
+  const std::array<uint64_t, 3> blocks = stream::grade_blocks(meta);
+  ASSERT_EQ(blocks[0], 3u);
+  ASSERT_EQ(blocks[1], 2u);
+  stream::MemoryPlan plan;
+  plan.stage_bytes = 64 << 20;
+  stream::WorkDir work(dir.file("work"));
+  stream::Progress progress{Options()};
+  const stream::GradePlan one = stream::plan_grading(store, meta, plan, work, progress, dir.file("weld.map"), 0, 40, true);
+  ASSERT_GT(one.ranges, 16u);
+  EXPECT_FALSE(one.welded);
+  for (unsigned units : {2u, 5u}) {
+    SCOPED_TRACE(fmt::format("{} units", units));
+    const std::string units_dir = dir.file(fmt::format("units-{}", units)) + "/";
+    std::filesystem::create_directories(units_dir);
+    io::OffsetFile(units_dir + "blocks.bin", O_WRONLY | O_CREAT | O_TRUNC)
+        .resize((blocks[0] + blocks[1] + blocks[2]) * sizeof(stream::RangeMask));
+    for (unsigned u = units; u-- > 0;)
+      stream::block_pass_unit(store, meta, "", one.range, u, units, units_dir + "blocks.bin", units_dir + fmt::format("areas-{}.bin", u),
+                              progress);
+    stream::PlanUnits pu;
+    pu.block_dir = units_dir, pu.block_units = units;
+    const stream::GradePlan got = stream::plan_grading(store, meta, plan, work, progress, dir.file("weld.map"), 0, 40, true, pu);
+    EXPECT_EQ(got.range, one.range);
+    for (int kind = 0; kind < 3; ++kind) EXPECT_TRUE(got.block_ranges[kind] == one.block_ranges[kind]) << kind;
+    EXPECT_EQ(got.areas.count, one.areas.count);
+    EXPECT_EQ(0, std::memcmp(got.areas.area.data(), one.areas.area.data(), one.areas.area.size() * sizeof(double)));
+  }
+  // One range and no block pass: the grading's own sums, block by block, are the same bits.
+  stream::MemoryPlan ample;
+  ample.stage_bytes = uint64_t{1} << 30;
+  stream::GradePlan single = stream::plan_grading(store, meta, ample, work, progress, dir.file("weld.map"), 0, 1, false);
+  ASSERT_EQ(single.ranges, 1u);
+  stream::GradeSorter sorter(work, "test", 16 << 20);
+  stream::grade_ranges(store, meta, core::Grading::lowtan, single, dir.file("weld.map"), 0, 1, sorter, progress);
+  EXPECT_EQ(0, std::memcmp(single.areas.area.data(), one.areas.area.data(), one.areas.area.size() * sizeof(double)));
+  const std::string cut = dir.file("units-5/areas-1.bin");
+  std::filesystem::resize_file(cut, std::filesystem::file_size(cut) - 16);
+  stream::PlanUnits pu;
+  pu.block_dir = dir.file("units-5") + "/", pu.block_units = 5;
+  EXPECT_THROW(stream::plan_grading(store, meta, plan, work, progress, dir.file("weld.map"), 0, 40, true, pu), Failure);
 }
 
 // The shares through the stream API with a first halo of a quarter cell, so that their own vertices near
