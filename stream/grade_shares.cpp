@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <initializer_list>
 #include <memory>
 
 #include <fmt/format.h>
@@ -68,6 +69,29 @@ bool parse_plan(const std::string& prefix, const ordered_json& j, GradePlan* gp)
   }
 }
 
+// The file that a set of units fills in place (`path`, in `dir`), made once for `key` under a lock of its
+// own (dir/start.lock), whichever process comes first: unless dir/start.json holds `key` and `path`
+// exists, the files of an older start (names beginning with one of `stale`: its units' stamps and
+// outputs) are removed, make() makes `path`, and start.json is written.
+template <class Make>
+void start_once(const std::string& dir, const std::string& path, const ordered_json& key, std::initializer_list<const char*> stale,
+                Make&& make) {
+  std::filesystem::create_directories(dir);
+  const ShardLock lock(dir, "start.lock");
+  const std::string stamp = dir + "start.json";
+  try {
+    std::error_code ec;
+    if (ordered_json::parse(io::read_small_file(stamp)).at("key") == key && std::filesystem::exists(path, ec)) return;
+  } catch (const std::exception&) {
+    // none yet, or unreadable: started below
+  }
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    for (const char* name : stale)
+      if (e.path().filename().string().rfind(name, 0) == 0) std::filesystem::remove(e.path());
+  make();
+  io::write_file_atomic(stamp, ordered_json{{"key", key}}.dump() + "\n");
+}
+
 }  // namespace
 
 std::string grade_shares_dir(const std::string& prefix) { return prefix + "grade-shares/"; }
@@ -97,20 +121,8 @@ std::string weld_map_unit_stamp(const std::string& prefix, unsigned unit) {
 }
 
 std::string start_weld_map_once(const GradeShareInput& in, uint64_t welded, const ordered_json& key) {
-  const std::string dir = weld_map_units_dir(in.prefix), path = dir + "weld.map", stamp = dir + "start.json";
-  std::filesystem::create_directories(dir);
-  const ShardLock lock(dir, "start.lock");
-  try {
-    std::error_code ec;
-    if (ordered_json::parse(io::read_small_file(stamp)).at("key") == key && std::filesystem::exists(path, ec)) return path;
-  } catch (const std::exception&) {
-    // none yet, or unreadable: started below
-  }
-  // Started afresh: the units of an older start are void.
-  for (const auto& e : std::filesystem::directory_iterator(dir))
-    if (e.path().filename().string().rfind("map-", 0) == 0) std::filesystem::remove(e.path());
-  start_weld_map(path, in.meta->vertices, welded);
-  io::write_file_atomic(stamp, ordered_json{{"key", key}}.dump() + "\n");
+  const std::string path = weld_map_units_dir(in.prefix) + "weld.map";
+  start_once(weld_map_units_dir(in.prefix), path, key, {"map-"}, [&] { start_weld_map(path, in.meta->vertices, welded); });
   return path;
 }
 
@@ -126,22 +138,11 @@ std::string block_unit_stamp(const std::string& prefix, unsigned unit) {
 }
 
 void start_block_units_once(const GradeShareInput& in, const ordered_json& key) {
-  const std::string dir = block_units_dir(in.prefix), path = dir + "blocks.bin", stamp = dir + "start.json";
-  std::filesystem::create_directories(dir);
-  const ShardLock lock(dir, "start.lock");
-  try {
-    std::error_code ec;
-    if (ordered_json::parse(io::read_small_file(stamp)).at("key") == key && std::filesystem::exists(path, ec)) return;
-  } catch (const std::exception&) {
-    // none yet, or unreadable: started below
-  }
-  // Started afresh: the units of an older start are void.
-  for (const auto& e : std::filesystem::directory_iterator(dir))
-    if (e.path().filename().string().rfind("block-", 0) == 0 || e.path().filename().string().rfind("areas-", 0) == 0)
-      std::filesystem::remove(e.path());
-  const std::array<uint64_t, 3> blocks = grade_blocks(*in.meta);
-  io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize((blocks[0] + blocks[1] + blocks[2]) * sizeof(RangeMask));
-  io::write_file_atomic(stamp, ordered_json{{"key", key}}.dump() + "\n");
+  const std::string path = block_units_dir(in.prefix) + "blocks.bin";
+  start_once(block_units_dir(in.prefix), path, key, {"block-", "areas-"}, [&] {
+    const std::array<uint64_t, 3> blocks = grade_blocks(*in.meta);
+    io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize((blocks[0] + blocks[1] + blocks[2]) * sizeof(RangeMask));
+  });
 }
 
 std::string run_block_unit(const GradeShareInput& in, const std::string& weld_map, unsigned count, unsigned unit, unsigned units,

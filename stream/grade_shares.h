@@ -89,6 +89,7 @@ void run_weld_map_unit(const GradeShareInput& in, const std::vector<std::pair<st
 // The block pass's units (stream/grade_stage.h, block_pass_unit), once the weld map is whole (`weld_map`,
 // empty: none): block-units/blocks.bin sized once (start_block_units_once, under a lock of its own, for
 // `key`), then filled by units stamped block-units/block-U.json, each also writing areas-U.bin.
+inline constexpr unsigned kMaxBlockUnits = 256;
 std::string block_units_dir(const std::string& prefix);  // WORK/block-units/
 std::string block_unit_stamp(const std::string& prefix, unsigned unit);
 void start_block_units_once(const GradeShareInput& in, const nlohmann::ordered_json& key);

@@ -576,7 +576,7 @@ std::string run_weld_map_units(const stream::GradeShareInput& gs, unsigned count
 // masks' file sized once); returns their count.
 unsigned run_block_units(const stream::GradeShareInput& gs, unsigned count, unsigned index, const ordered_json& key,
                          const std::string& weld_map, stream::Progress& progress) {
-  const unsigned units = std::min(count, stream::kMaxWeldUnits);
+  const unsigned units = std::min(count, stream::kMaxBlockUnits);
   ordered_json unit_key = key;
   unit_key["block_units"] = units;
   unit_key["count"] = count;
