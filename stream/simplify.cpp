@@ -515,8 +515,8 @@ struct GradeStageInput {
   bool sharded;
 };
 
-// Units of a stage that every process of a sharded run takes part in (the weld's and the grading merge's,
-// stream/grade_shares.h), in `dir`, unit u stamped at stamp(u) with `key`: first every unit that no other
+// Units of a stage that every process of a sharded run takes part in (the weld's, the weld map's, the
+// block pass's and the grading merge's: stream/grade_shares.h), in `dir`, unit u stamped at stamp(u) with `key`: first every unit that no other
 // process holds (from `index` on, so that processes starting together take different units), then every
 // unit in turn, waiting for those another process holds; a unit whose holder died is run here. run(u)
 // returns the unit's stamp's files and value. Returns every unit's stamp value.
@@ -601,6 +601,38 @@ stream::GradeSummary grade_from_stamp(const ordered_json& v) {
   return g;
 }
 
+// The merge of the grading shares' runs (share s holds records[s]) as units (stream/grade_shares.h), which
+// every process that needs the weight index takes part in (from `index` on: a clustering share's or a
+// task's), the work directory's lock (`lock`) let go meanwhile. The merge's plan is made once, under the
+// lock, from the runs alone, so every process that reads it sees the same cuts. Returns, under the lock
+// again, the plan whose units have all run, or nothing when another process has stamped the stage
+// meanwhile.
+std::optional<stream::GradeMergePlan> run_grade_merge_units(const GradeStageInput& in, const stream::GradeShareInput& gs,
+                                                            const ordered_json& share_key, const std::vector<uint64_t>& records,
+                                                            unsigned index, std::unique_ptr<stream::ShardLock>& lock,
+                                                            stream::Progress& progress) {
+  const unsigned units = std::min(static_cast<unsigned>(records.size()), stream::kMaxGradeMergeUnits);
+  const bool grades = !in.grades_path.empty();
+  const ordered_json unit_key{{"shares", share_key}, {"records", records}, {"units", units}};
+  auto take_merge_units = [&](const stream::GradeMergePlan& mp) {
+    take_units(stream::grade_merge_dir(in.prefix), units, index, [&](unsigned u) { return stream::grade_merge_stamp(in.prefix, u); },
+               unit_key, [&](unsigned u) {
+                 return std::pair(std::vector<std::string>{},
+                                  ordered_json{{"records", stream::run_grade_merge_unit(gs, mp, u, progress)}});
+               });
+  };
+  const stream::GradeMergePlan first = stream::shared_grade_merge_plan(gs, records, units, grades, share_key);
+  lock.reset();
+  take_merge_units(first);
+  lock = std::make_unique<stream::ShardLock>(in.work.path());
+  ordered_json v;
+  if (stamp_matches(in.work.file("grade.json"), in.key, &v)) return std::nullopt;
+  // Again under the lock: a plan made afresh, and its units run here, when a process died finishing the last one.
+  const stream::GradeMergePlan mp = stream::shared_grade_merge_plan(gs, records, units, grades, share_key);
+  take_merge_units(mp);
+  return mp;
+}
+
 bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::unique_ptr<stream::ShardLock>& lock, StageStats& st,
                  stream::GradeSummary* out, SimplifyReport* report) {
   const SimplifyOptions& so = in.so;
@@ -668,31 +700,14 @@ bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::uni
   }
   std::vector<uint64_t> records;
   for (unsigned s = 0; s < count; ++s) records.push_back(run_share(s).at("records"));
-  // The merge of the shares' runs as units (stream/grade_shares.h), which every process that needs the
-  // index takes part in, the lock let go meanwhile (its own index first: a clustering share's or a task's).
-  const unsigned units = std::min(count, stream::kMaxGradeMergeUnits);
-  const ordered_json unit_key{{"shares", share_key}, {"records", records}, {"units", units}};
   const unsigned index = so.cluster_share_count > 0 ? so.cluster_share_index : so.shard_count > 0 ? so.shard_index : 0;
-  auto take_merge_units = [&](const stream::GradeMergePlan& mp) {
-    take_units(stream::grade_merge_dir(in.prefix), units, index, [&](unsigned u) { return stream::grade_merge_stamp(in.prefix, u); },
-               unit_key, [&](unsigned u) {
-                 return std::pair(std::vector<std::string>{},
-                                  ordered_json{{"records", stream::run_grade_merge_unit(gs, mp, u, progress)}});
-               });
-  };
-  // The plan is made once, under the lock, from the runs alone: every process that reads it sees the same cuts.
-  const stream::GradeMergePlan merge_plan = stream::shared_grade_merge_plan(gs, records, units, keep_grades, share_key);
-  lock.reset();
-  take_merge_units(merge_plan);
-  lock = std::make_unique<stream::ShardLock>(in.work.path());
-  if (stamp_matches(stamp, in.key, &v)) {  // another process finished the merge
+  const std::optional<stream::GradeMergePlan> mp = run_grade_merge_units(in, gs, share_key, records, index, lock, progress);
+  if (!mp) {  // another process finished the merge
+    if (!stamp_matches(stamp, in.key, &v)) fail(Status::internal, stamp + ": the grading merge's units are done, the stage is not");
     *out = grade_from_stamp(v);
     return true;
   }
-  // Again under the lock: a plan made afresh, and its units run here, when a process died finishing the last one.
-  const stream::GradeMergePlan mp = stream::shared_grade_merge_plan(gs, records, units, keep_grades, share_key);
-  take_merge_units(mp);
-  *out = stream::finish_grade_merge(gs, gp, mp, in.order_path, in.grades_path, in.canonical_path);
+  *out = stream::finish_grade_merge(gs, gp, *mp, in.order_path, in.grades_path, in.canonical_path);
   write_grade_stamp(*out);
   // The shares are spent once the stage is stamped (the weld map is a link to the plan's). The merge's
   // units' stamps stay until the cluster stage is stamped: a process may still be reading them.
