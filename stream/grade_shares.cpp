@@ -286,11 +286,14 @@ GradeMergePlan shared_grade_merge_plan(const GradeShareInput& in, const std::vec
     }
     runs.push_back(std::make_unique<OffsetFile>(run, O_RDONLY));
   }
-  // The splitters: evenly spaced records of every run (64 a unit), sorted; the u-th U-quantile cuts unit u-1
-  // from unit u in every run at the same key.
+  // The splitters: about 512 records a unit in all, drawn evenly from every run in proportion to its
+  // records (so that the samples' quantiles are the records'; their number grows with U, not with N·U),
+  // sorted; the u-th U-quantile cuts unit u-1 from unit u in every run at the same key.
+  uint64_t total = 0;
+  for (uint64_t r : records) total += r;
   std::vector<GradeRecord> samples;
-  for (unsigned s = 0; s < records.size(); ++s) {
-    const uint64_t k = std::min<uint64_t>(records[s], uint64_t{64} * units);
+  for (unsigned s = 0; s < records.size() && total; ++s) {
+    const uint64_t k = std::min<uint64_t>(records[s], (uint64_t{512} * units * records[s] + total - 1) / total);
     for (uint64_t i = 0; i < k; ++i) samples.push_back(record_at(*runs[s], i * records[s] / k));
   }
   std::sort(samples.begin(), samples.end(), WeightLess());

@@ -129,9 +129,10 @@ struct GradeMergePlan {
 std::string grade_merge_dir(const std::string& prefix);                  // WORK/grade-merge/
 std::string grade_merge_stamp(const std::string& prefix, unsigned unit);  // merge-U.json
 // The merge's plan for shares holding `records` each, as every process of a run sees it: read from
-// grade-merge/plan.json when written there for `key`, else made (`units` units; the runs sampled, 64 records
-// a unit from each, and the splitters found in every run by binary search) with the index's files, at their
-// full size, in grade-merge/, which the units fill. The caller holds the work directory's lock.
+// grade-merge/plan.json when written there for `key`, else made (`units` units; the runs sampled, about
+// 512 records a unit in all, from each run in proportion to its records, and the splitters found in
+// every run by binary search) with the index's files, at their full size, in grade-merge/, which the
+// units fill. The caller holds the work directory's lock.
 // Failure(io_error) when a run does not hold its records (its share's stamp is then removed, so that the
 // next step runs the share again).
 GradeMergePlan shared_grade_merge_plan(const GradeShareInput& in, const std::vector<uint64_t>& records, unsigned units,
