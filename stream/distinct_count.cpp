@@ -554,6 +554,7 @@ void write_weld_map_unit(const std::vector<std::pair<std::string, uint64_t>>& ru
       return lo;
     };
     const uint64_t lo = first_at_least(v0), hi = first_at_least(v1);
+    if (v1 == count && hi != pairs) fail(Status::io_error, run + ": not a weld unit's run (an id past the store's vertices)");
     before += lo, held += hi - lo;
     for (uint64_t at = lo; at < hi; at += window.size()) {
       const uint64_t n = std::min<uint64_t>(window.size(), hi - at);
@@ -596,8 +597,14 @@ void write_weld_map(const std::vector<std::pair<std::string, uint64_t>>& runs, u
   uint64_t welded = 0;
   for (const auto& run : runs) welded += run.second;
   const std::string partial = weld_path + ".partial";
-  start_weld_map(partial, count, welded);
-  write_weld_map_unit(runs, count, memory_bytes, work, partial, 0, 1);
+  try {
+    start_weld_map(partial, count, welded);
+    write_weld_map_unit(runs, count, memory_bytes, work, partial, 0, 1);
+  } catch (...) {
+    std::error_code ec;
+    std::filesystem::remove(partial, ec);  // no partial map left behind
+    throw;
+  }
   std::filesystem::rename(partial, weld_path);
 }
 

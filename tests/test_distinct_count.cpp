@@ -11,6 +11,7 @@
 #include "io/file_writer.h"
 #include "stream/distinct_count.h"
 #include "stream/weld_file.h"
+#include "stream/work_dir.h"
 #include "test_util.h"
 
 namespace lodstream {
@@ -194,6 +195,32 @@ TEST(Weld, DistinctPositionsWriteNoMap) {
 
 // The compact weld map (stream/weld_file.h) gives back every canonical id, by lookup and in order, for
 // vertex counts on and off a word boundary, and refuses a file of another store.
+// The map from weld units' runs refuses a run that names a vertex past the store's (a damaged or foreign
+// run) with an I/O error and leaves no map, not even a partial one; a sound run gives the map its pairs say.
+TEST(Weld, MapFromRunsRefusesAnIdPastTheStore) {
+  test::TempDir tmp;
+  stream::WorkDir work(tmp.file("work"));
+  auto run_of = [&](const std::string& name, std::vector<uint64_t> pairs) {
+    const std::string path = tmp.file(name);
+    std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(pairs.data()), static_cast<std::streamsize>(8 * pairs.size()));
+    return std::vector<std::pair<std::string, uint64_t>>{{path, pairs.size()}};
+  };
+  const std::string map = tmp.file("weld.map");
+  try {
+    stream::write_weld_map(run_of("bad", {uint64_t{5} << 32 | 1, uint64_t{12} << 32 | 2}), 10, 64 << 20, work, map);
+    ADD_FAILURE() << "a run with vertex 12 of 10 was accepted";
+  } catch (const Failure& e) {
+    EXPECT_EQ(e.status(), Status::io_error);
+    EXPECT_NE(std::string(e.what()).find("not a weld unit's run"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(map));
+  EXPECT_FALSE(std::filesystem::exists(map + ".partial"));
+  stream::write_weld_map(run_of("good", {uint64_t{5} << 32 | 1, uint64_t{9} << 32 | 2}), 10, 64 << 20, work, map);
+  stream::WeldFile f(map, 10);
+  f.acquire();
+  for (uint32_t v = 0; v < 10; ++v) EXPECT_EQ(f(v), v == 5 ? 1u : v == 9 ? 2u : v) << v;
+}
+
 TEST(WeldFile, LookupsAndTheOrderedVisitGiveEveryCanonicalId) {
   test::TempDir tmp;
   std::mt19937_64 rng(3);
