@@ -50,6 +50,25 @@ class OffsetFile {
   void resize(uint64_t bytes) const {
     if (::ftruncate(fd_, static_cast<off_t>(bytes)) != 0) fail(Status::io_error, path_ + ": cannot size: " + std::strerror(errno));
   }
+  // Record i of a file of fixed-size records.
+  template <class Rec>
+  Rec record(uint64_t i) const {
+    Rec r;
+    read(&r, sizeof r, i * sizeof r);
+    return r;
+  }
+  // The first of the file's first `n` records (of type Rec) for which below(record) is false, where it is
+  // true for a prefix of them and false after (a binary search: about log2(n) reads).
+  template <class Rec, class Below>
+  uint64_t partition_point(uint64_t n, Below&& below) const {
+    uint64_t lo = 0, hi = n;
+    while (lo < hi) {
+      const uint64_t mid = lo + (hi - lo) / 2;
+      if (below(record<Rec>(mid))) lo = mid + 1;
+      else hi = mid;
+    }
+    return lo;
+  }
   // Closes the file, reporting a write error the close reveals (a file system that writes back late).
   void close() {
     const int r = ::close(fd_);

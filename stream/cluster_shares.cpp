@@ -153,7 +153,8 @@ void select(const ClusterShareInput& in, int axis, double lo, double hi, Progres
     if (lo <= p[axis] && p[axis] < hi) sel.ids.set(id);
   });
   sel.ids.count();
-  (sel.xyz.single ? sel.xyz.f.reserve(3 * sel.ids.ones()) : sel.xyz.d.reserve(3 * sel.ids.ones()));
+  if (sel.xyz.single) sel.xyz.f.reserve(3 * sel.ids.ones());
+  else sel.xyz.d.reserve(3 * sel.ids.ones());
   for_each_position(in.index, progress, [&](uint64_t id, const double* p) {
     if (sel.ids.has(id)) sel.xyz.add(p);
   });

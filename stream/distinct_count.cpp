@@ -539,20 +539,7 @@ void write_weld_map_unit(const std::vector<std::pair<std::string, uint64_t>>& ru
     std::error_code ec;
     if (std::filesystem::file_size(run, ec) != 8 * pairs || ec)
       fail(Status::io_error, run + ": does not hold " + std::to_string(pairs) + " welded vertices (weld unit)");
-    auto id_at = [&](uint64_t i) {
-      uint64_t p;
-      file.read(&p, 8, 8 * i);
-      return p >> 32;
-    };
-    auto first_at_least = [&](uint64_t v) {
-      uint64_t lo = 0, hi = pairs;
-      while (lo < hi) {
-        const uint64_t mid = lo + (hi - lo) / 2;
-        if (id_at(mid) < v) lo = mid + 1;
-        else hi = mid;
-      }
-      return lo;
-    };
+    auto first_at_least = [&](uint64_t v) { return file.partition_point<uint64_t>(pairs, [&](uint64_t p) { return (p >> 32) < v; }); };
     const uint64_t lo = first_at_least(v0), hi = first_at_least(v1);
     if (v1 == count && hi != pairs) fail(Status::io_error, run + ": not a weld unit's run (an id past the store's vertices)");
     before += lo, held += hi - lo;

@@ -216,39 +216,20 @@ std::string merged_grades_path(const std::string& prefix) { return grade_merge_d
 
 using io::OffsetFile;
 
-GradeRecord record_at(const OffsetFile& run, uint64_t i) {
-  GradeRecord r;
-  run.read(&r, sizeof r, i * sizeof r);
-  return r;
-}
-
-// The first of a run's `n` records (sorted by WeightLess) that is not less than `key`.
-uint64_t lower_bound_in(const OffsetFile& run, uint64_t n, const GradeRecord& key) {
-  uint64_t lo = 0, hi = n;
-  while (lo < hi) {
-    const uint64_t mid = lo + (hi - lo) / 2;
-    if (WeightLess()(record_at(run, mid), key)) lo = mid + 1;
-    else hi = mid;
-  }
-  return lo;
-}
-
 nlohmann::ordered_json merge_plan_key(const nlohmann::ordered_json& key, const std::vector<uint64_t>& records, unsigned units,
                                       bool grades) {
   return {{"shares", key}, {"records", records}, {"units", units}, {"grades", grades}};
 }
 
-// The plan in grade-merge/plan.json made for `key`, with its files at their full size; false when there is none.
-bool read_merge_plan(const std::string& prefix, const nlohmann::ordered_json& key, GradeMergePlan* mp) {
+// The cuts of the plan in grade-merge/plan.json made for `key` (which holds mp's units, grades and records),
+// with its files at their full size; false when there is none.
+bool read_merge_cuts(const std::string& prefix, const nlohmann::ordered_json& key, GradeMergePlan* mp) {
   const std::string path = grade_merge_dir(prefix) + "plan.json";
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) return false;
   try {
     const ordered_json j = ordered_json::parse(io::read_small_file(path));
     if (j.at("key") != key) return false;
-    mp->units = j.at("key").at("units");
-    mp->grades = j.at("key").at("grades");
-    mp->records = j.at("key").at("records").get<std::vector<uint64_t>>();
     mp->cut = j.at("cut").get<std::vector<std::vector<uint64_t>>>();
     if (mp->cut.size() != mp->units + 1) return false;
     for (const auto& row : mp->cut)
@@ -266,12 +247,11 @@ bool read_merge_plan(const std::string& prefix, const nlohmann::ordered_json& ke
 GradeMergePlan shared_grade_merge_plan(const GradeShareInput& in, const std::vector<uint64_t>& records, unsigned units,
                                        bool grades, const ordered_json& key) {
   const ordered_json plan_key = merge_plan_key(key, records, units, grades);
-  GradeMergePlan mp;
-  if (read_merge_plan(in.prefix, plan_key, &mp)) return mp;
+  GradeMergePlan mp{units, grades, records, {}};
+  if (read_merge_cuts(in.prefix, plan_key, &mp)) return mp;
   // Made afresh: the units of an older plan are void.
   std::filesystem::remove_all(grade_merge_dir(in.prefix));
   std::filesystem::create_directories(grade_merge_dir(in.prefix));
-  mp = GradeMergePlan{units, grades, records, {}};
   std::vector<std::unique_ptr<OffsetFile>> runs;
   for (unsigned s = 0; s < records.size(); ++s) {
     const std::string run = grade_share_run(in.prefix, s);
@@ -294,14 +274,16 @@ GradeMergePlan shared_grade_merge_plan(const GradeShareInput& in, const std::vec
   std::vector<GradeRecord> samples;
   for (unsigned s = 0; s < records.size() && total; ++s) {
     const uint64_t k = std::min<uint64_t>(records[s], (uint64_t{512} * units * records[s] + total - 1) / total);
-    for (uint64_t i = 0; i < k; ++i) samples.push_back(record_at(*runs[s], i * records[s] / k));
+    for (uint64_t i = 0; i < k; ++i) samples.push_back(runs[s]->record<GradeRecord>(i * records[s] / k));
   }
   std::sort(samples.begin(), samples.end(), WeightLess());
   mp.cut.assign(units + 1, std::vector<uint64_t>(records.size(), 0));
   mp.cut[units] = records;
-  for (unsigned u = 1; u < units; ++u)
-    for (unsigned s = 0; s < records.size(); ++s)
-      mp.cut[u][s] = samples.empty() ? 0 : lower_bound_in(*runs[s], records[s], samples[samples.size() * u / units]);
+  for (unsigned u = 1; u < units && !samples.empty(); ++u) {
+    const GradeRecord& key = samples[samples.size() * u / units];  // unit u starts at the first record not below it
+    auto below = [&](const GradeRecord& r) { return WeightLess()(r, key); };
+    for (unsigned s = 0; s < records.size(); ++s) mp.cut[u][s] = runs[s]->partition_point<GradeRecord>(records[s], below);
+  }
   // The index's files at their full size; the units write their parts in place.
   OffsetFile(merged_order_path(in.prefix), O_WRONLY | O_CREAT | O_TRUNC).resize(mp.total() * 4);
   if (grades) OffsetFile(merged_grades_path(in.prefix), O_WRONLY | O_CREAT | O_TRUNC).resize(mp.total() * 8);

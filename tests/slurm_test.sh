@@ -125,13 +125,19 @@ rc=$?
 grep -q "array 1 of 3" "$tmp/resubmit.log" || fail "resubmit did not submit task 1 alone: $(cat "$tmp/resubmit.log")"
 same_outputs "$tmp/room-one" "$out"
 
+# The room as 3 tasks through Slurm with LODSTREAM_TEST_KILL_AT=$2, into $tmp/room-$1 (work directory
+# $tmp/room-work-$1, output in $tmp/$1.log); sets out and rc.
+run_room_killed() {
+  out=$tmp/room-$1
+  LODSTREAM_TEST_KILL_AT=$2 "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-$1" \
+    --shards 3 --wait --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/$1.log" 2>&1
+  rc=$?
+}
+
 # A grade share and a cluster share killed in one run (both kill points set): the first cluster share
 # (afterany) grades share 1 under the lock before it merges the grading shares, the prepare job (afterany)
 # runs cluster share 1 itself, and the run ends with exit 0 and one machine's bytes.
-out=$tmp/room-kill-shares
-LODSTREAM_TEST_KILL_AT=grade-share-1,cluster-share-1 "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill-shares" \
-  --shards 3 --wait --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/kill-shares.log" 2>&1
-rc=$?
+run_room_killed kill-shares grade-share-1,cluster-share-1
 [ $rc -eq 0 ] || { fail "a grade and a cluster share killed with SIGKILL: the run exited $rc, not 0"; cat "$tmp/kill-shares.log"; }
 [ "$(cat "$out/slurm/status/grade-1.rc" 2>/dev/null)" = 137 ] || fail "grade share 1 was not killed"
 [ "$(cat "$out/slurm/status/cluster-1.rc" 2>/dev/null)" = 137 ] || fail "cluster share 1 was not killed"
@@ -143,10 +149,7 @@ echo "killed grade and cluster shares: run exit $rc, a cluster share graded shar
 # A weld unit's holder killed just before the unit's stamp (every grading share that runs unit 1 dies
 # there, SIGKILL releasing its claim): a share waiting for the unit runs it in turn, and when none is left
 # the next step welds under the lock; the run ends with exit 0 and one machine's bytes.
-out=$tmp/room-kill-unit
-LODSTREAM_TEST_KILL_AT=unit-1.json "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill-unit" \
-  --shards 3 --wait --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/kill-unit.log" 2>&1
-rc=$?
+run_room_killed kill-unit unit-1.json
 [ $rc -eq 0 ] || { fail "a weld unit's holder killed with SIGKILL: the run exited $rc, not 0"; cat "$tmp/kill-unit.log"; }
 grep -qx 137 "$out"/slurm/status/grade-*.rc || fail "no grading share was killed at weld unit 1"
 same_outputs "$tmp/room-one" "$out"
@@ -156,10 +159,7 @@ echo "killed weld unit: run exit $rc, grading shares' exits $(cat "$out"/slurm/s
 # unit 1 dies there (SIGKILL releasing its claim), and so does the prepare job, which runs it in turn; the
 # run exits 137 with the other units stamped, and `slurm resubmit` (no kill point now) runs unit 1 alone
 # and ends with one machine's bytes.
-out=$tmp/room-kill-merge
-LODSTREAM_TEST_KILL_AT=merge-1.json "$cli" slurm simplify "$room" -o "$out" --work "$tmp/room-work-kill-merge" \
-  --shards 3 --wait --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/kill-merge.log" 2>&1
-rc=$?
+run_room_killed kill-merge merge-1.json
 [ $rc -eq 137 ] || { fail "a grading merge unit's holder killed with SIGKILL: the run exited $rc, not 137"; cat "$tmp/kill-merge.log"; }
 grep -qx 137 "$out"/slurm/status/cluster-*.rc || fail "no clustering share was killed at merge unit 1"
 exits=$(cat "$out"/slurm/status/cluster-*.rc "$out"/slurm/status/prepare.rc | tr '\n' ' ')

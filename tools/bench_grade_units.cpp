@@ -10,8 +10,9 @@
 // WORK_DIR holds store/ and (when positions repeat) weld.map, as `simplify --work WORK_DIR` leaves them;
 // DIR (default: a temporary directory) gets the units' files, the runs and the indexes.
 
+#include <fcntl.h>
+
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -19,7 +20,6 @@
 #include <string>
 #include <vector>
 
-#include <fcntl.h>
 #include <fmt/format.h>
 
 #include "core/status.h"
@@ -29,27 +29,18 @@
 #include "lodstream/lodstream.h"
 #include "stream/grade_shares.h"
 #include "stream/grade_stage.h"
-#include "stream/job.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/scene_store.h"
 #include "stream/work_dir.h"
+#include "tools/bench_timing.h"
 
 namespace {
 
 using namespace lodstream;
 
-struct Timing {
-  double wall = 0, cpu = 0;
-};
-
-template <class F>
-Timing timed(F&& f) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const double c0 = stream::process_cpu_seconds();
-  f();
-  return {std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), stream::process_cpu_seconds() - c0};
-}
+using bench::Timing;
+using bench::timed;
 
 // Prints the units' times; returns the slowest unit's wall and adds their CPU to `cpu`.
 double print_units(const char* what, const std::vector<Timing>& units, double* cpu) {

@@ -19,7 +19,6 @@
 // DIR (default: a temporary directory) gets the weld map and the sort's scratch files.
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -41,27 +40,18 @@
 #include "io/file_writer.h"
 #include "lodstream/lodstream.h"
 #include "stream/distinct_count.h"
-#include "stream/job.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
 #include "stream/weld_file.h"
 #include "stream/work_dir.h"
+#include "tools/bench_timing.h"
 
 namespace {
 
 using namespace lodstream;
 
-struct Timing {
-  double wall = 0, cpu = 0;
-};
-
-template <class F>
-Timing timed(F&& f) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const double c0 = stream::process_cpu_seconds();
-  f();
-  return {std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), stream::process_cpu_seconds() - c0};
-}
+using bench::Timing;
+using bench::timed;
 
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
