@@ -15,7 +15,8 @@
 // - A level is split by region when its cells are floating, it has no fine grid (silhouette labels: two
 //   grids, not handled here), and every slab is at least kSplitCells cells wide; then each share clusters
 //   its own vertices. The other levels are clustered whole (exact by construction), a share's whole levels
-//   in one cluster_levels pass, whose cost is mostly fetching the positions by id. With N >= 3 and such
+//   in one cluster_levels pass, which reads the records' positions in weight order (position_gather.h;
+//   fetching them by id had been a third of such a share's CPU). With N >= 3 and such
 //   levels, shares 1 to K cluster the whole levels only, in even runs of levels (K as many as there are
 //   whole levels, while two slabs remain), and have empty slabs (repeated cuts: their split levels'
 //   decision files are empty); the other N - K shares own the slabs. With N <= 2, share 1 (share 0 if

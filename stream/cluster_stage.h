@@ -3,15 +3,18 @@
 // over the same blocks of records; the result does not depend on how the levels are spread over threads.
 //
 // Input: the weight index (grade stage: `order.u32`, the canonical ids in weight order, and `grades.f64`
-// when the mean representative needs them) and the store's positions, read by id.
+// when the mean representative needs them) and the records' positions: in weight order from
+// `positions-w.f32` (or .f64; position_gather.h), read sequentially, or, when the index names no such file,
+// the store's positions read by id.
 // Output, in the work directory:
 //   cells-L.map          per level L: the cell of each record, in weight order, bit-packed (cell_map_file.h)
 //   cells-L.info         per level L: per cell, in cell-id order, what the emit stage's representative reads
 //                        (CellInfoKind): its center's position (written during the pass), its mean, or both
 // Memory: the clusterers' tables and cell records (about 46 bytes a cell: kClusterBytesPerCell; it grows
-// with the cells, not the vertices), and the store's positions: mapped whole where the column takes at most
-// half the budget, else read by id through the page cache, one batch of records (a quarter of the budget)
-// at a time for every clusterer (position_gather.h; the same bytes either way). The sums for a mean are
+// with the cells, not the vertices), and the positions: a block of records at a time per clusterer from
+// the weight-ordered file; without it, the store's column mapped whole where it takes at most half the
+// budget, else read by id through the page cache, one batch of records (a quarter of the budget) at a time
+// for every clusterer (position_gather.h; the same bytes every way). The sums for a mean are
 // made afterwards, from the maps and the index read again, in ranges of cells that fit in what the
 // clusterers held. When the clusterers would outgrow `memory_bytes` (what the process may add to its
 // resident set while the stage runs), the stage stops with Failure(Status::usage) naming the cells so far,
@@ -86,12 +89,15 @@ struct FineCells {
 };
 
 // The weight index and where its positions are: `order_path` holds `records` canonical ids (uint32) in
-// weight order, `grades_path` their grades (double; read for CellInfoKind::mean only), and
-// `positions_path` the store's positions of `vertices` vertices (float if single_precision, else double).
+// weight order, `grades_path` their grades (double; read for CellInfoKind::mean only),
+// `positions_path` the store's positions of `vertices` vertices (float if single_precision, else double),
+// and `ordered_positions_path`, unless empty, the records' positions in weight order (position_gather.h:
+// the passes in weight order read them sequentially instead of by id; the same values, the same bytes out).
 struct WeightIndex {
   std::string order_path, grades_path, positions_path;
   uint64_t records = 0, vertices = 0;
   bool single_precision = true;
+  std::string ordered_positions_path;
 };
 // bounds: empty, or the min and max corners (6 values) of a box holding every position in the index,
 // which lets the coarse levels index their squares directly (core::Clusterer); the result is the same

@@ -118,21 +118,24 @@ uint64_t report_work_bytes(const SceneCounts& c) { return store_bytes(c) + inges
 // if none shared a position): the store and the weld map (a bit a stored vertex, and 4 bytes for each one
 // welded to another: taken as 3 in 10, as on the city scene) throughout, and then the larger of
 // - the grade stage's sort: 12-byte runs a record, released as they are merged into the order (4 bytes a
-//   record) and, for the mean representative, the grades (8); the weld's pairs (8 bytes a welded vertex:
+//   record) and, for the mean representative, the grades (8), and, in a run that grades in shares, the
+//   records' positions in weight order (12 or 24 bytes a record: stream/position_gather.h; one machine does
+//   not write them, keeping its work directory within 1.5x the input); the weld's pairs (8 bytes a welded vertex:
 //   its sort's runs, or, as units, their runs kept through the grading shares) fit in that count, which
 //   takes every stored vertex as a record where only the distinct positions are (12 · distinct + 8 ·
 //   welded <= 12 · vertices);
-// - the end of the cluster stage: the order (and grades), one bit-packed cell map per level (at most
+// - the end of the cluster stage: the order (and grades, and positions), one bit-packed cell map per level (at most
 //   bit_width(records) bits a record; 22 bits or less on the city scene's levels) and the cell info by
 //   representative (12 to 48 bytes a cell, about 12 cells per 100 vertices over all levels on the city),
 //   and during emit a level emitted in batches' representatives (24 bytes a cell of the finest level,
 //   taken as half the cells).
 // The GLB's binary data and the levels' scratch files are in the output directory (simplify_output_bytes),
 // not here.
-uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative representative) {
+uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative representative, bool ordered_positions) {
   const uint64_t v = c.vertices;
   const uint64_t weld = v / 8 + 4 * v * 3 / 10;
-  const uint64_t index = 4 * v + (representative == Representative::mean ? 8 * v : 0);
+  const uint64_t index = 4 * v + (ordered_positions ? (c.single_precision ? 12 : 24) * v : 0) +
+                         (representative == Representative::mean ? 8 * v : 0);
   const uint64_t maps = static_cast<uint64_t>(levels) * ((v * static_cast<uint64_t>(std::bit_width(v)) + 7) / 8);
   const uint64_t info = v * 12 / 100 * cell_info_bytes(cell_info_kind(representative), c.single_precision);
   const uint64_t reps = v * 6 / 100 * 24;
@@ -211,7 +214,9 @@ void check_simplify_space(const std::string& input, const SimplifyOptions& o, co
     for (size_t l = 0; l < levels; ++l) out += static_cast<uint64_t>(t0 * std::pow(ratio, static_cast<double>(l + 1)));
   }
   const SpaceNeed needs[2] = {
-      {work_dir, "work directory", beyond(simplify_work_bytes(c, levels, o.representative), directory_bytes(work_dir))},
+      {work_dir, "work directory",
+       beyond(simplify_work_bytes(c, levels, o.representative, o.shard_count > 0 || o.grade_share_count > 0 || o.cluster_share_count > 0 || o.shard_prepare),
+              directory_bytes(work_dir))},
       {o.output_dir, "outputs", simplify_output_bytes(out, o)}};
   check_free_space(needs);
 }

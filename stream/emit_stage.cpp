@@ -1392,7 +1392,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     });
     weld.reset();
     positions.release();
-    const std::string column = store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64");
+    const std::string column = positions_column_path(store_dir, meta);
     const PositionGather gather(column, meta.single_precision, meta.vertices, false);
     PositionGather::Scratch gs;
     std::vector<uint64_t> batch;

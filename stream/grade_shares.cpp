@@ -15,6 +15,7 @@
 #include "core/status.h"
 #include "io/file_writer.h"
 #include "io/offset_file.h"
+#include "stream/position_gather.h"
 #include "stream/shard.h"
 #include "stream/work_dir.h"
 
@@ -110,7 +111,7 @@ bool store_needs_weld(const StoreMeta& meta) { return meta.vertices > 0 && meta.
 
 WeldUnitResult run_weld_unit(const GradeShareInput& in, unsigned unit, unsigned units, Progress& progress) {
   const StoreMeta& meta = *in.meta;
-  return weld_unit(in.store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), meta.vertices,
+  return weld_unit(positions_column_path(in.store_dir, meta), meta.vertices,
                    meta.single_precision, in.plan.stage_bytes, *in.work, progress, unit, units, weld_unit_run(in.prefix, unit),
                    weld_units_dir(in.prefix) + "sizes.bin");
 }
@@ -213,6 +214,10 @@ namespace {
 
 std::string merged_order_path(const std::string& prefix) { return grade_merge_dir(prefix) + "order.u32"; }
 std::string merged_grades_path(const std::string& prefix) { return grade_merge_dir(prefix) + "grades.f64"; }
+std::string merged_positions_path(const std::string& prefix, const StoreMeta& meta) {
+  return ordered_positions_path(grade_merge_dir(prefix), meta.single_precision);
+}
+uint64_t position_bytes(const StoreMeta& meta) { return meta.single_precision ? 12 : 24; }
 
 using io::OffsetFile;
 
@@ -223,7 +228,7 @@ nlohmann::ordered_json merge_plan_key(const nlohmann::ordered_json& key, const s
 
 // The cuts of the plan in grade-merge/plan.json made for `key` (which holds mp's units, grades and records),
 // with its files at their full size; false when there is none.
-bool read_merge_cuts(const std::string& prefix, const nlohmann::ordered_json& key, GradeMergePlan* mp) {
+bool read_merge_cuts(const std::string& prefix, const StoreMeta& meta, const nlohmann::ordered_json& key, GradeMergePlan* mp) {
   const std::string path = grade_merge_dir(prefix) + "plan.json";
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) return false;
@@ -236,6 +241,8 @@ bool read_merge_cuts(const std::string& prefix, const nlohmann::ordered_json& ke
       if (row.size() != mp->records.size()) return false;
     if (std::filesystem::file_size(merged_order_path(prefix), ec) != mp->total() * 4 || ec) return false;
     if (mp->grades && (std::filesystem::file_size(merged_grades_path(prefix), ec) != mp->total() * 8 || ec)) return false;
+    if (std::filesystem::file_size(merged_positions_path(prefix, meta), ec) != mp->total() * position_bytes(meta) || ec)
+      return false;
     return true;
   } catch (const std::exception&) {
     return false;  // unreadable: made again
@@ -248,7 +255,7 @@ GradeMergePlan shared_grade_merge_plan(const GradeShareInput& in, const std::vec
                                        bool grades, const ordered_json& key) {
   const ordered_json plan_key = merge_plan_key(key, records, units, grades);
   GradeMergePlan mp{units, grades, records, {}};
-  if (read_merge_cuts(in.prefix, plan_key, &mp)) return mp;
+  if (read_merge_cuts(in.prefix, *in.meta, plan_key, &mp)) return mp;
   // Made afresh: the units of an older plan are void.
   std::filesystem::remove_all(grade_merge_dir(in.prefix));
   std::filesystem::create_directories(grade_merge_dir(in.prefix));
@@ -287,16 +294,17 @@ GradeMergePlan shared_grade_merge_plan(const GradeShareInput& in, const std::vec
   // The index's files at their full size; the units write their parts in place.
   OffsetFile(merged_order_path(in.prefix), O_WRONLY | O_CREAT | O_TRUNC).resize(mp.total() * 4);
   if (grades) OffsetFile(merged_grades_path(in.prefix), O_WRONLY | O_CREAT | O_TRUNC).resize(mp.total() * 8);
+  OffsetFile(merged_positions_path(in.prefix, *in.meta), O_WRONLY | O_CREAT | O_TRUNC).resize(mp.total() * position_bytes(*in.meta));
   io::write_file_atomic(grade_merge_dir(in.prefix) + "plan.json", ordered_json{{"key", plan_key}, {"cut", mp.cut}}.dump() + "\n");
   return mp;
 }
 
 uint64_t run_grade_merge_unit(const GradeShareInput& in, const GradeMergePlan& mp, unsigned unit, Progress& progress) {
-  GradeSorter sorter(*in.work, fmt::format("grade-merge-{}", unit), std::max<uint64_t>(in.plan.stage_bytes / 3, 4 << 20));
+  auto sorter = std::make_unique<GradeSorter>(*in.work, fmt::format("grade-merge-{}", unit), std::max<uint64_t>(in.plan.stage_bytes / 3, 4 << 20));
   uint64_t records = 0;
   for (unsigned s = 0; s < mp.records.size(); ++s) {
     const uint64_t n = mp.cut[unit + 1][s] - mp.cut[unit][s];
-    if (n) sorter.add_sorted_run(grade_share_run(in.prefix, s), n, mp.cut[unit][s]);
+    if (n) sorter->add_sorted_run(grade_share_run(in.prefix, s), n, mp.cut[unit][s]);
     records += n;
   }
   OffsetFile order(merged_order_path(in.prefix), O_WRONLY);
@@ -315,7 +323,7 @@ uint64_t run_grade_merge_unit(const GradeShareInput& in, const GradeMergePlan& m
     ids.clear(), values.clear();
     progress.report("sort", static_cast<double>(written) / static_cast<double>(std::max<uint64_t>(records, 1)));
   };
-  sorter.merge([&](const GradeRecord& r) {
+  sorter->merge([&](const GradeRecord& r) {
     ids.push_back(r.id);
     if (grades) values.push_back(r.grade);
     if (ids.size() == kBatch) flush();
@@ -324,16 +332,27 @@ uint64_t run_grade_merge_unit(const GradeShareInput& in, const GradeMergePlan& m
   if (written != records) fail(Status::internal, "grade merge: unit " + std::to_string(unit) + " lost records");
   order.close();
   if (grades) grades->close();
+  // The unit's records' positions in weight order (position_gather.h), in place too, once its sorter's
+  // buffers are gone: a gather by id of a U-th of the records, which every pass in weight order after it
+  // then reads in order.
+  sorter.reset();
+  OffsetFile positions(merged_positions_path(in.prefix, *in.meta), O_WRONLY);
+  write_ordered_positions(positions_column_path(in.store_dir, *in.meta), *in.meta, merged_order_path(in.prefix), mp.first(unit),
+                          records, positions, in.plan.stage_bytes, progress);
+  positions.close();
   return records;
 }
 
 GradeSummary finish_grade_merge(const GradeShareInput& in, const GradePlan& plan, const GradeMergePlan& mp,
                                 const std::string& order_path, const std::string& grades_path,
-                                const std::string& canonical_path) {
+                                const std::string& positions_path, const std::string& canonical_path) {
   std::filesystem::rename(merged_order_path(in.prefix), order_path);
   if (mp.grades) std::filesystem::rename(merged_grades_path(in.prefix), grades_path);
+  std::filesystem::rename(merged_positions_path(in.prefix, *in.meta), positions_path);
   if (plan.welded) link_file(grade_shares_weld_path(in.prefix), canonical_path);
-  return summary_of(plan, mp.total());
+  GradeSummary summary = summary_of(plan, mp.total());
+  summary.ordered_positions = true;
+  return summary;
 }
 
 }  // namespace lodstream::stream

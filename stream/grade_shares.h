@@ -18,7 +18,8 @@
 // touch it (grade_ranges), its records sorted under the budget (stream/external_sort.h) into one run,
 // grade-shares/share-I.run (12 bytes a record).
 // The merge (shared_grade_merge_plan, run_grade_merge_unit, finish_grade_merge): U = min(N, 256) units, each a
-// k-way merge of a key range of the N runs written at its place in order.u32 (and the grades); the
+// k-way merge of a key range of the N runs written at its place in order.u32 (and the grades), then its
+// records' positions gathered into the weight-ordered positions (stream/position_gather.h) in place; the
 // processes that need the index (a sharded run's clustering shares or tasks) take the units up as they do
 // the weld's (its lock released; its own index first, then waiting for the units others hold), and the
 // first back under the lock moves the files into place and links the weld map into the work directory.
@@ -137,12 +138,14 @@ std::string grade_merge_stamp(const std::string& prefix, unsigned unit);  // mer
 // next step runs the share again).
 GradeMergePlan shared_grade_merge_plan(const GradeShareInput& in, const std::vector<uint64_t>& records, unsigned units,
                                        bool grades, const nlohmann::ordered_json& key);
-// Runs merge unit `unit`: its records, in weight order, at their place in grade-merge/'s files; returns them.
+// Runs merge unit `unit`: its records, in weight order, at their place in grade-merge/'s files (their ids,
+// grades when kept, then their positions); returns them. Memory: the merge's (a third of the stage's budget),
+// then the positions' gather (write_ordered_positions within the stage's budget).
 uint64_t run_grade_merge_unit(const GradeShareInput& in, const GradeMergePlan& mp, unsigned unit, Progress& progress);
-// Once every unit has run: moves the index's files to `order_path` and (when kept) `grades_path`, and links the weld
+// Once every unit has run: moves the index's files to `order_path`, `positions_path` and (when kept) `grades_path`, and links the weld
 // map (if any) to `canonical_path`; returns the stage's summary.
 GradeSummary finish_grade_merge(const GradeShareInput& in, const GradePlan& plan, const GradeMergePlan& mp,
                                 const std::string& order_path, const std::string& grades_path,
-                                const std::string& canonical_path);
+                                const std::string& positions_path, const std::string& canonical_path);
 
 }  // namespace lodstream::stream

@@ -247,7 +247,7 @@ GradePlan plan_grading(const std::string& store_dir, const StoreMeta& meta, cons
     if (gp.welded && !units.weld_map.empty()) link_file(units.weld_map, canonical_path);
     else if (gp.welded) write_weld_map(units.weld_runs, n_vertices, plan.stage_bytes, work, canonical_path);
   } else {
-    gp.distinct_positions = weld_positions(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), n_vertices,
+    gp.distinct_positions = weld_positions(positions_column_path(store_dir, meta), n_vertices,
                                            meta.single_precision, plan.stage_bytes, work, progress, canonical_path);
     gp.welded = gp.distinct_positions < n_vertices;
   }

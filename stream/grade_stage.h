@@ -67,6 +67,7 @@ struct GradeSummary {
   double surface_area = 0;          // sum of triangle areas, scene units²
   uint64_t ranges = 0;              // id ranges graded one after another (1 = everything at once)
   AreaHistogram areas;
+  bool ordered_positions = false;   // the records' positions in weight order were written (position_gather.h)
 };
 
 // Writes `canonical_path` (the weld map: every stored vertex's canonical id, stream/weld_file.h) unless every position is distinct

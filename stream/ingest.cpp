@@ -669,7 +669,7 @@ Census census(const std::string& store_dir, const StoreMeta& meta, const MemoryP
     return c;
   }
   c.vertices_welded = count_distinct_positions(
-      store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"), meta.vertices, meta.single_precision,
+      positions_column_path(store_dir, meta), meta.vertices, meta.single_precision,
       plan.stage_bytes, progress);
   progress.report("census", 1);
   return c;

@@ -115,7 +115,7 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
     // pass over the column's segments that hold its ids.
     const uint64_t column = meta.vertices * (meta.single_precision ? 12 : 24);
     const bool mapped = map_positions_whole(column, memory_bytes / 4, chunk_cap);
-    const PositionGather positions(store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"),
+    const PositionGather positions(positions_column_path(store_dir, meta),
                                    meta.single_precision, meta.vertices, mapped);
     PositionGather::Scratch scratch;
     const uint64_t block = mapped ? kBlock : std::max<uint64_t>(std::min(memory_bytes / 16, chunk_cap ? chunk_cap : UINT64_MAX) / 36 / kBlock, 1) * kBlock;

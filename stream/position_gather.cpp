@@ -114,4 +114,71 @@ void PositionGather::gather_read(std::span<const uint32_t> ids, double* xyz, Scr
   });
 }
 
+std::string ordered_positions_path(const std::string& prefix, bool single_precision) {
+  return prefix + (single_precision ? "positions-w.f32" : "positions-w.f64");
+}
+
+uint64_t ordered_positions_batch(uint64_t memory_bytes) {
+  constexpr uint64_t per_record = 4 + 24 + kGatherBytesPerId;  // id, position as doubles (narrowed in place), slot
+  // Half the budget: each batch costs a copy of most of the column, and the callers hold little else then.
+  return std::max<uint64_t>(memory_bytes / 2 / per_record, 1);
+}
+
+void write_ordered_positions(const std::string& column_path, const StoreMeta& meta, const std::string& order_path,
+                             uint64_t first, uint64_t n, const io::OffsetFile& out, uint64_t memory_bytes, Progress& progress) {
+  const io::MappedFile order(order_path);
+  if (order.size() < (first + n) * 4) fail(Status::io_error, order.path() + ": shorter than its records");
+  const bool mapped = map_positions_whole(meta.vertices * (meta.single_precision ? 12 : 24), memory_bytes, 0);
+  const PositionGather column(column_path, meta.single_precision, meta.vertices, mapped);
+  const uint64_t batch = std::min(ordered_positions_batch(mapped ? memory_bytes / 2 : memory_bytes), std::max<uint64_t>(n, 1));
+  const uint64_t stride = column.single_precision() ? 12 : 24;
+  std::vector<uint32_t> ids(batch);
+  std::vector<double> xyz(3 * batch);
+  PositionGather::Scratch scratch;
+  for (uint64_t at = first; at < first + n; at += batch) {
+    progress.check();
+    const uint64_t k = std::min(batch, first + n - at);
+    {
+      const io::Window w = order.map(at * 4, (at + k) * 4);
+      std::memcpy(ids.data(), w.data(), k * 4);
+    }
+    column.gather(std::span<const uint32_t>(ids.data(), k), xyz.data(), scratch);
+    if (column.single_precision()) {
+      // Narrowed back to the store's floats (exact: they were widened from them), in place from the front:
+      // float i goes to bytes [4i, 4i + 4), never past double i, which is read first.
+      char* bytes = reinterpret_cast<char*>(xyz.data());
+      for (uint64_t i = 0; i < 3 * k; ++i) {
+        const float f = static_cast<float>(xyz[i]);
+        std::memcpy(bytes + 4 * i, &f, 4);
+      }
+      out.write(bytes, stride * k, at * stride);
+    } else {
+      out.write(xyz.data(), stride * k, at * stride);
+    }
+    progress.report("positions", static_cast<double>(at + k - first) / static_cast<double>(n));
+  }
+}
+
+OrderedPositions::OrderedPositions(const std::string& path, bool single_precision, uint64_t records)
+    : file_(path), single_(single_precision), records_(records) {
+  if (file_.size() != records * (single_precision ? 12 : 24))
+    fail(Status::io_error, path + ": size does not match the weight index");
+}
+
+void OrderedPositions::read(uint64_t first, uint64_t n, double* xyz) const {
+  if (first + n > records_) fail(Status::internal, file_.path() + ": record past the index");
+  const uint64_t stride = single_ ? 12 : 24;
+  const io::Window w = file_.map(first * stride, (first + n) * stride);
+  if (!single_) {
+    std::memcpy(xyz, w.data(), n * stride);
+    return;
+  }
+  const char* p = w.data();
+  for (uint64_t i = 0; i < 3 * n; ++i) {
+    float f;
+    std::memcpy(&f, p + 4 * i, 4);
+    xyz[i] = f;
+  }
+}
+
 }  // namespace lodstream::stream

@@ -19,6 +19,8 @@
 #include <vector>
 
 #include "io/mapped_file.h"
+#include "io/offset_file.h"
+#include "stream/progress.h"
 #include "stream/scene_store.h"
 
 namespace lodstream::stream {
@@ -56,6 +58,7 @@ class PositionGather {
   void gather(std::span<const uint32_t> ids, double* xyz, Scratch& scratch) const;
 
   bool mapped() const { return mapped_; }
+  bool single_precision() const { return single_; }
   uint64_t column_bytes() const { return vertices_ * stride_; }
 
  private:
@@ -68,6 +71,43 @@ class PositionGather {
   uint64_t vertices_, stride_, segment_vertices_;
   io::Window window_;  // mapped: the whole column
   int fd_ = -1;        // read: the column, opened for pread
+};
+
+// The weight index's positions in weight order (issue 19): WORK/positions-w.f32 (or .f64) holds, for record
+// i of order.u32, the position of its vertex at the store's precision (12 or 24 bytes a record). The grade
+// stage writes it once after the sort (a sharded run's merge units each their records' part, in place), so
+// that the passes that read positions in weight order (the cluster stage's clustering and sums passes, a
+// whole level's cluster share, the prepare job's sums) read them sequentially, where gathering them by id
+// the read way costs a copy of most of the column per batch: on the 193 M-triangle city at --memory 1G
+// about 40 GB through pread for one whole level's share (its two passes), a third of its CPU.
+// Invariant: record i holds exactly the bytes the store's column holds for vertex order[i].
+std::string ordered_positions_path(const std::string& prefix, bool single_precision);
+
+// Records a gathering batch of write_ordered_positions holds under `memory_bytes` (at least 1): half of it.
+uint64_t ordered_positions_batch(uint64_t memory_bytes);
+
+// Writes the positions of records [first, first + n) of the weight index at `order_path` (uint32 ids) into
+// `out`, sized beforehand to the whole index, at their records' offsets: gathered from the store's column
+// (`meta`'s, at `column_path`), mapped whole where it takes at most half of `memory_bytes`, else in
+// batches of ordered_positions_batch(memory_bytes) records (each a copy of the column's segments that hold
+// its ids; the 193 M-triangle city's merge units at --memory 1G, 12.2 M records each, take one). Memory:
+// within `memory_bytes`. Throws Failure(io_error) on a read or write error.
+void write_ordered_positions(const std::string& column_path, const StoreMeta& meta, const std::string& order_path,
+                             uint64_t first, uint64_t n, const io::OffsetFile& out, uint64_t memory_bytes, Progress& progress);
+
+// Reads a file written by write_ordered_positions, sequentially, through mapped windows.
+class OrderedPositions {
+ public:
+  // Throws Failure(io_error) unless `path` holds `records` positions at the given precision.
+  OrderedPositions(const std::string& path, bool single_precision, uint64_t records);
+  // xyz[3i .. 3i + 2] = the position of record first + i, widened to double (exact for a float store), for i < n.
+  // Thread-safe.
+  void read(uint64_t first, uint64_t n, double* xyz) const;
+
+ private:
+  io::MappedFile file_;
+  bool single_;
+  uint64_t records_;
 };
 
 }  // namespace lodstream::stream

@@ -167,4 +167,9 @@ bool read_store_meta(const std::string& dir, StoreMeta* meta);
 
 std::string store_meta_json(const StoreMeta& meta);
 
+// The store's position column: DIR/positions.f32, or .f64 for a double store.
+inline std::string positions_column_path(const std::string& dir, const StoreMeta& meta) {
+  return dir + (meta.single_precision ? "/positions.f32" : "/positions.f64");
+}
+
 }  // namespace lodstream::stream

@@ -40,6 +40,7 @@
 #include "stream/labels_stage.h"
 #include "stream/level_files.h"
 #include "stream/memory.h"
+#include "stream/position_gather.h"
 #include "stream/progress.h"
 #include "stream/ingest_range.h"
 #include "stream/block_bounds.h"
@@ -58,9 +59,11 @@ using stream::run_stage;
 
 // Part of every stage stamp; bumped when a work file changes format (2: the weight index keeps the store's
 // precision; 3: the weight index is the order and, for the mean, the grades; bit-packed cluster maps; cell
-// info by representative; 4: the grade stage's area histogram summed block by block, as its units sum it),
-// so that a work directory from an older build is redone rather than misread.
-constexpr int kStampVersion = 4;
+// info by representative; 4: the grade stage's area histogram summed block by block, as its units sum it;
+// 5: the grade stamp says whether the records' positions in weight order were written, as the grading
+// shares' merge writes them: stream/position_gather.h), so that a work directory from an older build is
+// redone rather than misread.
+constexpr int kStampVersion = 5;
 constexpr uint64_t kCoarsestTarget = 4000;  // "a few thousand" triangles at the coarsest default level
 constexpr unsigned kMaxLevels = 32;
 constexpr unsigned kMaxSearchPasses = 12;
@@ -510,7 +513,7 @@ struct GradeStageInput {
   const stream::StoreMeta& meta;
   const stream::MemoryPlan& plan;
   const stream::WorkDir& work;
-  std::string store_dir, prefix, canonical_path, order_path, grades_path;
+  std::string store_dir, prefix, canonical_path, order_path, grades_path, positions_path;
   ordered_json key;
   bool sharded;
 };
@@ -598,6 +601,7 @@ stream::GradeSummary grade_from_stamp(const ordered_json& v) {
   g.ranges = v.at("ranges");
   g.areas.count = v.at("area_counts").get<std::vector<uint64_t>>();
   g.areas.area = v.at("area_sums").get<std::vector<double>>();
+  g.ordered_positions = v.at("ordered_positions");
   return g;
 }
 
@@ -646,16 +650,19 @@ bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::uni
   std::filesystem::remove(stamp);
   std::filesystem::remove(in.canonical_path);
   std::filesystem::remove(stream::grades_path(in.prefix));
+  std::filesystem::remove(in.positions_path);
   for (const char* old : {"weights.idx", "weld.u32"}) std::filesystem::remove(in.work.file(old));  // an older version's
   const core::Grading mode = so.grading == Grading::lowtan ? core::Grading::lowtan : core::Grading::rossignac;
   const bool keep_grades = !in.grades_path.empty();
   auto write_grade_stamp = [&](const stream::GradeSummary& g) {
     std::vector<std::string> files{in.order_path};
+    if (g.ordered_positions) files.push_back(in.positions_path);
     if (keep_grades) files.push_back(in.grades_path);
     if (g.distinct_positions < in.meta.vertices) files.push_back(in.canonical_path);
     write_stamp(stamp, in.key, files,
                 {{"records", g.records}, {"distinct_positions", g.distinct_positions}, {"surface_area", g.surface_area},
-                 {"ranges", g.ranges}, {"area_counts", g.areas.count}, {"area_sums", g.areas.area}});
+                 {"ranges", g.ranges}, {"area_counts", g.areas.count}, {"area_sums", g.areas.area},
+                 {"ordered_positions", g.ordered_positions}});
   };
   const unsigned count = so.grade_share_count ? so.grade_share_count
                          : in.sharded         ? stream::grade_shares_planned(in.prefix, in.key)
@@ -707,7 +714,7 @@ bool grade_stage(const GradeStageInput& in, stream::Progress& progress, std::uni
     *out = grade_from_stamp(v);
     return true;
   }
-  *out = stream::finish_grade_merge(gs, gp, *mp, in.order_path, in.grades_path, in.canonical_path);
+  *out = stream::finish_grade_merge(gs, gp, *mp, in.order_path, in.grades_path, in.positions_path, in.canonical_path);
   write_grade_stamp(*out);
   // The shares are spent once the stage is stamped (the weld map is a link to the plan's). The merge's
   // units' stamps stay until the cluster stage is stamped: a process may still be reading them.
@@ -816,11 +823,13 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       const bool keep_grades = so.representative == Representative::mean;
       const std::string order_path = stream::order_path(prefix);
       const std::string grades_path = keep_grades ? stream::grades_path(prefix) : std::string();
+      const std::string positions_path = stream::ordered_positions_path(prefix, meta.single_precision);
       const ordered_json grade_key{{"version", kStampVersion},
                                    {"source", source_json(meta)},
                                    {"grading", name(so.grading)},
                                    {"grades", keep_grades}};
-      const GradeStageInput gin{so, meta, plan, work, store_dir, prefix, canonical_path, order_path, grades_path, grade_key, sharded};
+      const GradeStageInput gin{so,           meta,        plan,           work,      store_dir, prefix, canonical_path,
+                                order_path,   grades_path, positions_path, grade_key, sharded};
       stream::GradeSummary grade;
       if (!run_stage(&report.stages, "grade", [&](StageStats& st) { return grade_stage(gin, progress, shard_lock, st, &grade, &report); }))
         return;  // a grading share task: done
@@ -925,10 +934,11 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                          plan.stage_bytes, options.chunk_bytes);
         const stream::WeightIndex index{order_path,
                                         grades_path,
-                                        store_dir + (meta.single_precision ? "/positions.f32" : "/positions.f64"),
+                                        stream::positions_column_path(store_dir, meta),
                                         grade.records,
                                         meta.vertices,
-                                        meta.single_precision};
+                                        meta.single_precision,
+                                        grade.ordered_positions ? positions_path : std::string()};
         stream::ClusterSummary cs;
         if (in_shares) {
           cs.cells = cluster_by_shares(key, sizes, fine.get(), index, bounds);

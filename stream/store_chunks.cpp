@@ -106,7 +106,7 @@ void StoreChunks::read_positions(std::span<const uint64_t> bits, uint64_t word0,
                                  std::vector<float>& xyz) const {
   xyz.resize(3 * count);
   if (count == 0) return;
-  io::MappedFile file(dir_ + (meta_.single_precision ? "/positions.f32" : "/positions.f64"));
+  io::MappedFile file(positions_column_path(dir_, meta_));
   const uint64_t stride = meta_.single_precision ? 12 : 24;
   if (file.size() != meta_.vertices * stride) fail(Status::io_error, file.path() + ": size does not match store.json");
   io::Window w;

@@ -13,11 +13,15 @@
 #include <string>
 #include <vector>
 
+#include <fcntl.h>
+
+#include <fmt/format.h>
 #include <tbb/task_arena.h>
 
 #include "core/floating_cell.h"
 #include "core/status.h"
 #include "io/file_writer.h"
+#include "io/offset_file.h"
 #include "lodstream/lodstream.h"
 #include "stream/cell_map_file.h"
 #include "stream/cluster_stage.h"
@@ -211,32 +215,141 @@ TEST(PositionGather, ReadByIdGivesTheMappedValuesForSparseAndDenseBatches) {
 TEST(ClusterStage, PositionsReadByIdGiveTheMappedBytes) {
   // 150,000 float positions (1.8 MB): mapped under a 1 GiB budget; read by id through the page cache when
   // --chunk-bytes is below the column (batches of one block of 16,384 records here), or when the budget is
-  // less than twice the column.
+  // less than twice the column; or read in weight order from the records' positions
+  // (WeightIndex::ordered_positions_path, position_gather.h). The three write the same maps and infos.
   EXPECT_TRUE(stream::map_positions_whole(1'800'000, uint64_t{1} << 30, 0));
   EXPECT_FALSE(stream::map_positions_whole(1'800'000, uint64_t{1} << 30, 64 << 10));
   EXPECT_FALSE(stream::map_positions_whole(1'800'000, 3'000'000, 0));
   test::TempDir tmp;
   constexpr uint32_t n = 150'000;
   const TestIndex t = make_index(n, tmp.path().string());
+  std::vector<float> ordered;
+  for (uint32_t v : t.order) ordered.insert(ordered.end(), {t.position[3 * v], t.position[3 * v + 1], t.position[3 * v + 2]});
+  {
+    io::FileWriter out(tmp.file("positions-w.f32"));
+    out.write(ordered.data(), ordered.size() * 4);
+    out.commit();
+  }
   const std::vector<double> sizes = {0.5, 3, 9};
   const std::vector<double> bounds = {-1, -1, -1, 101, 101, 41};
   Options options;
   stream::Progress progress(options);
   for (stream::CellInfoKind kind : {stream::CellInfoKind::center, stream::CellInfoKind::mean, stream::CellInfoKind::quadric}) {
-    std::string runs[2];
-    for (int r = 0; r < 2; ++r) {
+    std::string runs[3];
+    for (int r = 0; r < 3; ++r) {
+      stream::WeightIndex files = t.files;
+      if (r == 2) files.ordered_positions_path = tmp.file("positions-w.f32");
       stream::WorkDir work(tmp.file("work" + std::to_string(r) + "-" + std::to_string(static_cast<int>(kind))));
       const std::string prefix = work.file("");
       tbb::task_arena(2).execute([&] {
-        stream::cluster_levels(t.files, bounds, sizes, {}, kind, uint64_t{1} << 30, work, progress, prefix, nullptr,
-                               r == 0 ? 0 : 64 << 10);
+        stream::cluster_levels(files, bounds, sizes, {}, kind, uint64_t{1} << 30, work, progress, prefix, nullptr,
+                               r == 1 ? 64 << 10 : 0);
       });
       for (size_t l = 0; l < sizes.size(); ++l)
         runs[r] += io::read_small_file(stream::cells_path(prefix, l)) + io::read_small_file(stream::cell_info_path(prefix, l));
     }
     EXPECT_FALSE(runs[0].empty());
     EXPECT_TRUE(runs[0] == runs[1]) << "kind " << static_cast<int>(kind);
+    EXPECT_TRUE(runs[0] == runs[2]) << "kind " << static_cast<int>(kind);
   }
+  // A file of weight-ordered positions that does not hold the index's records is refused.
+  stream::WeightIndex bad = t.files;
+  bad.ordered_positions_path = tmp.file("order.u32");
+  stream::WorkDir work(tmp.file("bad"));
+  EXPECT_THROW(stream::cluster_levels(bad, bounds, sizes, {}, stream::CellInfoKind::quadric, uint64_t{1} << 30, work, progress,
+                                      work.file(""), nullptr, 0),
+               Failure);
+}
+
+TEST(PositionGather, WeightOrderedPositionsAreTheColumnsBytesInAnyRanges) {
+  // A weight index of 100,000 records over 130,000 vertices (some never used): written whole, and as 7
+  // ranges in reverse order into one file sized beforehand, under a budget that maps the column and one
+  // that reads it by id in many batches; every way gives record i the column's bytes for vertex order[i].
+  test::TempDir tmp;
+  constexpr uint32_t vertices = 130'000, records = 100'000;
+  std::mt19937_64 rng(11);
+  std::vector<uint32_t> order(vertices);
+  for (uint32_t v = 0; v < vertices; ++v) order[v] = v;
+  std::shuffle(order.begin(), order.end(), rng);
+  order.resize(records);
+  {
+    io::FileWriter out(tmp.file("order.u32"));
+    out.write(order.data(), order.size() * 4);
+    out.commit();
+  }
+  Options options;
+  stream::Progress progress(options);
+  for (bool single : {true, false}) {
+    SCOPED_TRACE(single ? "float store" : "double store");
+    stream::StoreMeta meta;
+    meta.single_precision = single;
+    meta.vertices = vertices;
+    const uint64_t stride = single ? 12 : 24;
+    std::string column(vertices * stride, '\0');
+    for (size_t i = 0; i < 3 * size_t{vertices}; ++i) {
+      const double x = static_cast<double>(static_cast<int64_t>(rng() % 2000001) - 1000000) / 7.0;
+      if (single) {
+        const float f = static_cast<float>(x);
+        std::memcpy(column.data() + 4 * i, &f, 4);
+      } else {
+        std::memcpy(column.data() + 8 * i, &x, 8);
+      }
+    }
+    const std::string column_path = stream::positions_column_path(tmp.path().string(), meta);
+    {
+      io::FileWriter out(column_path);
+      out.write(column.data(), column.size());
+      out.commit();
+    }
+    std::string want(records * stride, '\0');
+    for (uint32_t i = 0; i < records; ++i) std::memcpy(want.data() + i * stride, column.data() + order[i] * stride, stride);
+    // 1 GiB maps the column; 512 KiB reads it by id, in batches of 8,192 records (7 ranges: more than one
+    // batch a range).
+    EXPECT_TRUE(stream::map_positions_whole(column.size(), uint64_t{1} << 30, 0));
+    EXPECT_FALSE(stream::map_positions_whole(column.size(), 1 << 19, 0));
+    EXPECT_LT(stream::ordered_positions_batch(1 << 19), records / 7);
+    for (uint64_t memory : {uint64_t{1} << 30, uint64_t{1} << 19}) {
+      for (unsigned ranges : {1u, 7u}) {
+        SCOPED_TRACE(fmt::format("{} bytes, {} ranges", memory, ranges));
+        const std::string path = tmp.file(fmt::format("w-{}-{}-{}", single, memory, ranges));
+        {
+          io::OffsetFile out(path, O_WRONLY | O_CREAT | O_TRUNC);
+          out.resize(records * stride);
+          for (unsigned k = ranges; k-- > 0;) {
+            const uint64_t first = uint64_t{records} * k / ranges, end = uint64_t{records} * (k + 1) / ranges;
+            stream::write_ordered_positions(column_path, meta, tmp.file("order.u32"), first, end - first, out, memory, progress);
+          }
+          out.close();
+        }
+        ASSERT_TRUE(io::read_small_file(path) == want);
+        // Read back widened to double, from any record on.
+        const stream::OrderedPositions back(path, single, records);
+        std::vector<double> xyz(3 * 1000);
+        back.read(records - 1000, 1000, xyz.data());
+        for (uint32_t i = 0; i < 1000; ++i)
+          for (int a = 0; a < 3; ++a) {
+            double expect;
+            if (single) {
+              float f;
+              std::memcpy(&f, want.data() + (records - 1000 + i) * stride + 4 * a, 4);
+              expect = f;
+            } else {
+              std::memcpy(&expect, want.data() + (records - 1000 + i) * stride + 8 * a, 8);
+            }
+            ASSERT_EQ(xyz[3 * i + a], expect);
+          }
+        EXPECT_THROW(back.read(records - 10, 11, xyz.data()), Failure);
+      }
+    }
+    EXPECT_THROW(stream::OrderedPositions(tmp.file(fmt::format("w-{}-{}-1", single, 1 << 19)), single, records + 1), Failure);
+  }
+  // An order past the index's records is refused.
+  io::OffsetFile out(tmp.file("short"), O_WRONLY | O_CREAT | O_TRUNC);
+  stream::StoreMeta meta;
+  meta.single_precision = true, meta.vertices = vertices;
+  EXPECT_THROW(stream::write_ordered_positions(stream::positions_column_path(tmp.path().string(), meta), meta,
+                                               tmp.file("order.u32"), records - 5, 6, out, 1 << 19, progress),
+               Failure);
 }
 
 TEST(ClusterStage, ClusterersBeyondTheBudgetStopWithTheCells) {

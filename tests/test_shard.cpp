@@ -402,7 +402,8 @@ TEST(GradeShares, MergeRefusesARunCutShort) {
 }
 
 // The grading merge as units (stream/grade_shares.h) on runs of many tied grades, one of them empty: any
-// number of units, run in any order, write the bytes of a one-unit merge (the order and the grades), some
+// number of units, run in any order, write the bytes of a one-unit merge (the order, the grades and the
+// records' positions in weight order, checked against the store's column), some
 // units are empty (splitters repeat where a grade is shared by many records), and a plan already made is
 // read back rather than made again.
 TEST(GradeShares, MergeUnitsInAnyOrderWriteOneMergesBytes) {
@@ -410,14 +411,23 @@ TEST(GradeShares, MergeUnitsInAnyOrderWriteOneMergesBytes) {
   stream::WorkDir work(dir.file("work"));
   const std::string prefix = work.path() + "/";
   std::filesystem::create_directories(stream::grade_shares_dir(prefix));
+  const std::string store = dir.file("store");
+  std::filesystem::create_directories(store);
   stream::StoreMeta meta;
+  meta.single_precision = true;
   stream::MemoryPlan plan;
   plan.stage_bytes = 16 << 20;
-  const stream::GradeShareInput in{"", &meta, core::Grading::lowtan, plan, prefix, &work, 0};
+  const stream::GradeShareInput in{store, &meta, core::Grading::lowtan, plan, prefix, &work, 0};
   stream::Progress progress{Options()};
   const stream::GradePlan gp;
   for (uint32_t n : {200000u, 100u}) {
     SCOPED_TRACE(fmt::format("{} records", n));
+    // The store's column: vertex v at (v, v / 8, -v), floats.
+    meta.vertices = n;
+    std::vector<float> column;
+    for (uint32_t v = 0; v < n; ++v) column.insert(column.end(), {float(v), float(v) / 8, -float(v)});
+    std::ofstream(stream::positions_column_path(store, meta), std::ios::binary)
+        .write(reinterpret_cast<const char*>(column.data()), static_cast<std::streamsize>(column.size() * 4));
     // 4 runs of ids dealt round-robin (run 2 gets none); grades of a few values, so ties are broken by id.
     std::vector<std::vector<stream::GradeRecord>> records(4);
     uint32_t seed = 12345;
@@ -433,7 +443,7 @@ TEST(GradeShares, MergeUnitsInAnyOrderWriteOneMergesBytes) {
       counts.push_back(records[s].size());
     }
     ASSERT_EQ(counts[2], 0u);
-    auto merged = [&](unsigned units, bool reverse, std::string* grades) {
+    auto merged = [&](unsigned units, bool reverse, std::string* grades, std::string* positions) {
       const nlohmann::ordered_json key{{"test", units}, {"n", n}};
       const stream::GradeMergePlan mp = stream::shared_grade_merge_plan(in, counts, units, true, key);
       EXPECT_EQ(mp.units, units);
@@ -450,25 +460,34 @@ TEST(GradeShares, MergeUnitsInAnyOrderWriteOneMergesBytes) {
       EXPECT_EQ(stream::shared_grade_merge_plan(in, counts, units, true, key).cut, mp.cut);
       const std::string order = dir.file(fmt::format("order-{}.u32", units));
       const std::string grade_file = dir.file(fmt::format("grades-{}.f64", units));
-      EXPECT_EQ(stream::finish_grade_merge(in, gp, mp, order, grade_file, "").records, n);
+      const std::string positions_file = dir.file(fmt::format("positions-{}.f32", units));
+      EXPECT_EQ(stream::finish_grade_merge(in, gp, mp, order, grade_file, positions_file, "").records, n);
       *grades = slurp(grade_file);
+      *positions = slurp(positions_file);
       return slurp(order);
     };
-    std::string one_grades, grades;
-    const std::string one = merged(1, false, &one_grades);
+    std::string one_grades, grades, one_positions, positions;
+    const std::string one = merged(1, false, &one_grades, &one_positions);
     std::vector<stream::GradeRecord> all;
     for (const auto& r : records) all.insert(all.end(), r.begin(), r.end());
     std::sort(all.begin(), all.end(), stream::WeightLess());
     ASSERT_EQ(one.size(), all.size() * 4);
+    ASSERT_EQ(one_positions.size(), all.size() * 12);
     for (size_t i = 0; i < all.size(); ++i) {
       uint32_t id;
       std::memcpy(&id, one.data() + i * 4, 4);
       ASSERT_EQ(id, all[i].id) << i;
+      float p[3];
+      std::memcpy(p, one_positions.data() + i * 12, 12);
+      ASSERT_EQ(p[0], float(id)) << i;
+      ASSERT_EQ(p[1], float(id) / 8) << i;
+      ASSERT_EQ(p[2], -float(id)) << i;
     }
     for (unsigned units : {2u, 7u, 256u}) {
       SCOPED_TRACE(units);
-      EXPECT_TRUE(merged(units, units != 2, &grades) == one);
+      EXPECT_TRUE(merged(units, units != 2, &grades, &positions) == one);
       EXPECT_TRUE(grades == one_grades);
+      EXPECT_TRUE(positions == one_positions) << "each unit's records' positions, in place";
     }
   }
 }

@@ -28,6 +28,7 @@
 #include "io/offset_file.h"
 #include "lodstream/lodstream.h"
 #include "stream/grade_shares.h"
+#include "stream/position_gather.h"
 #include "stream/grade_stage.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
@@ -140,18 +141,18 @@ int main(int argc, char** argv) {
       records.push_back(r);
     }
     fmt::print("{} grading shares: slowest {:.2f} s\n", units, share_slowest);
-    auto merge = [&](unsigned merge_units, const std::string& order, std::vector<Timing>* unit_times) {
+    auto merge = [&](unsigned merge_units, const std::string& order, const std::string& positions, std::vector<Timing>* unit_times) {
       const nlohmann::ordered_json key{{"bench", merge_units}};
       stream::GradeMergePlan mp;
       const Timing t_plan = timed([&] { mp = stream::shared_grade_merge_plan(in, records, merge_units, false, key); });
       for (unsigned u = 0; u < merge_units; ++u)
         unit_times->push_back(timed([&] { stream::run_grade_merge_unit(in, mp, u, progress); }));
-      stream::finish_grade_merge(in, one, mp, order, "", work.file("weld-linked.map"));
+      stream::finish_grade_merge(in, one, mp, order, "", positions, work.file("weld-linked.map"));
       return t_plan;
     };
     std::vector<Timing> single, merge_units;
-    const Timing single_plan = merge(1, work.file("order-one.u32"), &single);
-    const Timing units_plan = merge(units, work.file("order-units.u32"), &merge_units);
+    const Timing single_plan = merge(1, work.file("order-one.u32"), work.file("positions-one.w"), &single);
+    const Timing units_plan = merge(units, work.file("order-units.u32"), work.file("positions-units.w"), &merge_units);
     double merge_cpu = units_plan.cpu;
     const double slowest_merge = print_units("merge", merge_units, &merge_cpu);
     fmt::print("merge, one process: {:.2f} s wall {:.2f} s CPU; as {} units: plan {:.2f} s + slowest unit {:.2f} s = {:.2f} s wall; "
@@ -164,7 +165,14 @@ int main(int argc, char** argv) {
                a.size() / 4);
     if (std::filesystem::exists(dir + "/order.u32"))
       fmt::print("check: and {} {}/order.u32\n", io::read_small_file(dir + "/order.u32") == a ? "the same bytes as" : "differs from", dir);
-    return same_blocks && same_index ? 0 : 1;
+    const std::string pa = io::read_small_file(work.file("positions-one.w")), pb = io::read_small_file(work.file("positions-units.w"));
+    const bool same_positions = pa == pb;
+    fmt::print("check: the units' positions in weight order are {} the one process's ({} bytes)\n",
+               same_positions ? "the same bytes as" : "NOT the same as", pa.size());
+    const std::string ordered = stream::ordered_positions_path(dir + "/", meta.single_precision);
+    if (std::filesystem::exists(ordered))
+      fmt::print("check: and {} {}\n", io::read_small_file(ordered) == pa ? "the same bytes as" : "differs from", ordered);
+    return same_blocks && same_index && same_positions ? 0 : 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_grade_units: %s\n", e.what());
     return 1;
