@@ -333,8 +333,8 @@ uint64_t run_grade_merge_unit(const GradeShareInput& in, const GradeMergePlan& m
   order.close();
   if (grades) grades->close();
   // The unit's records' positions in weight order (position_gather.h), in place too, once its sorter's
-  // buffers are gone: a gather by id of a U-th of the records, which every pass in weight order after it
-  // then reads in order.
+  // buffers are gone: a gather by id of a U-th of the records, which a whole level's cluster share and
+  // the prepare job's sums then read in order.
   sorter.reset();
   OffsetFile positions(merged_positions_path(in.prefix, *in.meta), O_WRONLY);
   write_ordered_positions(positions_column_path(in.store_dir, *in.meta), *in.meta, merged_order_path(in.prefix), mp.first(unit),
