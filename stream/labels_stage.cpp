@@ -32,7 +32,8 @@ constexpr uint64_t kMinSceneBytes = 16 << 20;  // the chunk scene's share is at 
 
 LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta, const std::string& order_path,
                             uint64_t records, const LabelOptions& options, uint64_t memory_bytes,
-                            uint64_t chunk_cap, Progress& progress, const std::string& out_path) {
+                            uint64_t chunk_cap, Progress& progress, const std::string& out_path,
+                            const std::string& ordered_positions_path) {
   if (options.views == 0 || options.resolution < 8 || options.resolution > 8192)
     fail(Status::usage, "silhouette labels: views must be at least 1 and the resolution within 8 .. 8192");
   LabelSummary summary;
@@ -113,12 +114,16 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
     // leave), else read by id through the page cache (position_gather.h), a block taking a sixteenth of the
     // budget (its labels, positions, slots and index window: 36 bytes a record), since each block costs a
     // pass over the column's segments that hold its ids.
+    // With the records' positions in weight order (a sharded run's), they are read in order, block by block.
     const uint64_t column = meta.vertices * (meta.single_precision ? 12 : 24);
-    const bool mapped = map_positions_whole(column, memory_bytes / 4, chunk_cap);
+    std::unique_ptr<OrderedPositions> ordered;
+    if (!ordered_positions_path.empty())
+      ordered = std::make_unique<OrderedPositions>(ordered_positions_path, meta.single_precision, records);
+    const bool mapped = !ordered && map_positions_whole(column, memory_bytes / 4, chunk_cap);
     const PositionGather positions(positions_column_path(store_dir, meta),
                                    meta.single_precision, meta.vertices, mapped);
     PositionGather::Scratch scratch;
-    const uint64_t block = mapped ? kBlock : std::max<uint64_t>(std::min(memory_bytes / 16, chunk_cap ? chunk_cap : UINT64_MAX) / 36 / kBlock, 1) * kBlock;
+    const uint64_t block = mapped || ordered ? kBlock : std::max<uint64_t>(std::min(memory_bytes / 16, chunk_cap ? chunk_cap : UINT64_MAX) / 36 / kBlock, 1) * kBlock;
     for (uint64_t b = 0; b < records; b += block) {
       progress.check();
       const uint64_t n = std::min(block, records - b);
@@ -128,7 +133,9 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
         std::copy_n(reinterpret_cast<const float*>(w.data()), n, labels.data());
       }
       xyz.resize(3 * n);
-      {
+      if (ordered) {
+        ordered->read(b, n, xyz.data());
+      } else {
         const io::Window w = order.map(b * 4, (b + n) * 4);
         positions.gather(std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), n), xyz.data(), scratch);
       }

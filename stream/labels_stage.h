@@ -37,9 +37,11 @@ struct LabelSummary {
 };
 
 // chunk_cap: at most this many bytes a chunk of the original (0 = from memory_bytes alone), as report's
-// --chunk-bytes, for tests that cut a small original into many chunks.
+// --chunk-bytes, for tests that cut a small original into many chunks. ordered_positions_path: the
+// records' positions in weight order (stream/position_gather.h), read in order, or empty: read by id.
 LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta, const std::string& order_path,
                             uint64_t records, const LabelOptions& options, uint64_t memory_bytes,
-                            uint64_t chunk_cap, Progress& progress, const std::string& out_path);
+                            uint64_t chunk_cap, Progress& progress, const std::string& out_path,
+                            const std::string& ordered_positions_path = {});
 
 }  // namespace lodstream::stream

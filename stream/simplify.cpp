@@ -474,9 +474,10 @@ ordered_json bound_silhouette_error(const std::string& input, const SimplifyOpti
 // The silhouette labels stage (stream/labels_stage.h), when labels are on: reused when its stamp matches.
 // Returns its stamp key (null when labels are off), part of the cluster stage's key.
 ordered_json run_labels_stage(const SimplifyOptions& so, const std::string& store_dir, const stream::StoreMeta& meta,
-                              uint64_t records, const std::string& order_path, const std::string& labels_path,
-                              const ordered_json& grade_key, const stream::MemoryPlan& plan, uint64_t chunk_cap,
-                              stream::Progress& progress, const stream::WorkDir& work, SimplifyReport* report) {
+                              uint64_t records, const std::string& order_path, const std::string& ordered_positions_path,
+                              const std::string& labels_path, const ordered_json& grade_key, const stream::MemoryPlan& plan,
+                              uint64_t chunk_cap, stream::Progress& progress, const stream::WorkDir& work,
+                              SimplifyReport* report) {
   if (so.silhouette_interval <= 0) return nullptr;
   const ordered_json key{{"grade", grade_key},
                          {"views", so.silhouette_views},
@@ -492,7 +493,8 @@ ordered_json run_labels_stage(const SimplifyOptions& so, const std::string& stor
     std::filesystem::remove(work.file("labels.json"));
     const stream::LabelSummary sum = stream::compute_labels(
         store_dir, meta, order_path, records,
-        {so.silhouette_views, so.silhouette_resolution, so.fov_degrees}, plan.stage_bytes, chunk_cap, progress, labels_path);
+        {so.silhouette_views, so.silhouette_resolution, so.fov_degrees}, plan.stage_bytes, chunk_cap, progress, labels_path,
+        ordered_positions_path);
     report->labelled_vertices = sum.labelled;
     report->label_chunks = sum.chunks;
     report->label_view_groups = sum.view_groups;
@@ -839,8 +841,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       report.grade_ranges = grade.ranges;
       const std::string canonical = grade.distinct_positions < meta.vertices ? canonical_path : std::string();
       const std::string labels_path = work.file("labels.f32");
-      const ordered_json labels_key = run_labels_stage(so, store_dir, meta, grade.records, order_path, labels_path,
-                                                       grade_key, plan, options.chunk_bytes, progress, work, &report);
+      const std::string ordered_positions = grade.ordered_positions ? positions_path : std::string();
+      const ordered_json labels_key = run_labels_stage(so, store_dir, meta, grade.records, order_path, ordered_positions,
+                                                       labels_path, grade_key, plan, options.chunk_bytes, progress, work, &report);
 
       const stream::EmitOptions count_only{so.representative, so.crease_degrees, true, true};
       stream::EmitScratch scratch;
@@ -938,7 +941,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                         grade.records,
                                         meta.vertices,
                                         meta.single_precision,
-                                        grade.ordered_positions ? positions_path : std::string()};
+                                        ordered_positions};
         stream::ClusterSummary cs;
         if (in_shares) {
           cs.cells = cluster_by_shares(key, sizes, fine.get(), index, bounds);

@@ -25,7 +25,9 @@
 #include "io/offset_file.h"
 #include "stream/block_bounds.h"
 #include "stream/cluster_shares.h"
+#include "stream/cluster_stage.h"
 #include "stream/grade_shares.h"
+#include "stream/position_gather.h"
 #include "stream/scene_store.h"
 #include "stream/shard.h"
 #include "stream/vertex_cells.h"
@@ -299,6 +301,23 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
 // several, each from the blocks that touch it: the weight index, the weld map and the grades are one
 // machine's bytes, and so is every output after them. A share no task ran is run by the next step; a
 // share task after the stage is done does nothing.
+// The records' positions in weight order that the grading shares' merge wrote in `work`
+// (stream/position_gather.h): record i holds the store's bytes for vertex order[i]; one machine writes none.
+void expect_ordered_positions(const std::string& work) {
+  stream::StoreMeta meta;
+  ASSERT_TRUE(stream::read_store_meta(work + "/store", &meta));
+  const std::string column = slurp(stream::positions_column_path(work + "/store", meta)), order = slurp(work + "/order.u32");
+  const std::string ordered = slurp(stream::ordered_positions_path(work + "/", meta.single_precision));
+  const size_t stride = meta.single_precision ? 12 : 24;
+  ASSERT_EQ(ordered.size(), order.size() / 4 * stride);
+  ASSERT_FALSE(ordered.empty());
+  for (size_t i = 0; i < order.size() / 4; ++i) {
+    uint32_t v;
+    std::memcpy(&v, order.data() + 4 * i, 4);
+    ASSERT_EQ(ordered.compare(i * stride, stride, column, v * stride, stride), 0) << "record " << i;
+  }
+}
+
 TEST(GradeShares, ShareTasksThenTasksGiveOneMachinesBytes) {
   for (Representative rep : {Representative::center, Representative::mean}) {
     SCOPED_TRACE(rep == Representative::center ? "center" : "mean");
@@ -351,6 +370,7 @@ TEST(GradeShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       EXPECT_TRUE(slurp(work + "/weld.map") == slurp(one_work + "weld.map"));
       EXPECT_FALSE(slurp(work + "/weld.map").empty());
       if (rep == Representative::mean) EXPECT_TRUE(slurp(work + "/grades.f64") == slurp(one_work + "grades.f64"));
+      expect_ordered_positions(work);
       SimplifyOptions late = room_options(out);
       late.representative = rep, late.grade_share_index = 0, late.grade_share_count = n;
       SimplifyReport lr;
@@ -366,6 +386,47 @@ TEST(GradeShares, ShareTasksThenTasksGiveOneMachinesBytes) {
   EXPECT_EQ(simplify(sample_room(), bad, shared_work(d), &r).status, Status::usage);
   bad.grade_share_index = 0, bad.shard_prepare = true;
   EXPECT_EQ(simplify(sample_room(), bad, shared_work(d), &r).status, Status::usage);
+}
+
+// With silhouette labels (Mata et al.; every level then has a fine grid and is clustered whole), 3 grading
+// shares and the prepare step give one machine's labels, cluster maps and cell infos: the labels stage and
+// the whole levels read the records' positions in weight order, one machine reads them by id.
+TEST(GradeShares, LabelsAndWholeLevelsFromTheOrderedPositionsAreOneMachines) {
+  TempDir dir;
+  auto with_labels = [](SimplifyOptions so) {
+    so.silhouette_interval = 2;
+    so.silhouette_views = 4;
+    so.silhouette_resolution = 64;
+    so.levels = 3;
+    return so;
+  };
+  SimplifyReport one;
+  ASSERT_TRUE(simplify(sample_room(), with_labels(room_options(dir.file("one"))), shared_work(dir), &one).ok());
+  EXPECT_GT(one.labelled_vertices, 0u);
+  const std::string one_work = dir.file("work") + "/", work = dir.file("work-3");
+  EXPECT_FALSE(std::filesystem::exists(one_work + "positions-w.f32") || std::filesystem::exists(one_work + "positions-w.f64"));
+  Options o;
+  o.work_dir = work;
+  o.check_disk_space = false;
+  for (unsigned i = 0; i < 3; ++i) {
+    SimplifyOptions so = with_labels(room_options(dir.file("sharded")));
+    so.grade_share_index = i, so.grade_share_count = 3, so.grade_range_vertices = 1000;
+    SimplifyReport r;
+    const Result res = simplify(sample_room(), so, o, &r);
+    ASSERT_TRUE(res.ok()) << res.message;
+  }
+  SimplifyOptions prepare = with_labels(room_options(dir.file("sharded")));
+  prepare.shard_prepare = true;
+  SimplifyReport pr;
+  const Result pres = simplify(sample_room(), prepare, o, &pr);
+  ASSERT_TRUE(pres.ok()) << pres.message;
+  expect_ordered_positions(work);
+  EXPECT_EQ(pr.labelled_vertices, one.labelled_vertices);
+  EXPECT_TRUE(slurp(work + "/labels.f32") == slurp(one_work + "labels.f32"));
+  for (size_t l = 0; l < 3; ++l) {
+    EXPECT_TRUE(slurp(stream::cells_path(work + "/", l)) == slurp(stream::cells_path(one_work, l))) << l;
+    EXPECT_TRUE(slurp(stream::cell_info_path(work + "/", l)) == slurp(stream::cell_info_path(one_work, l))) << l;
+  }
 }
 
 // A share's run cut short after its stamp: the merge refuses with an I/O error naming the run, leaves
