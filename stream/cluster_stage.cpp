@@ -138,31 +138,14 @@ void fine_masks(const io::MappedFile& labels, const FineCells& fine, const std::
   }
 }
 
-// Where a pass's positions come from: the index's weight-ordered file (position_gather.h), read in order
-// block by block, when it names one; else the store's column by id, mapped whole where it takes at most
-// half the budget (and no --chunk-bytes asks for small reads), else read the read way.
-class PositionSource {
- public:
-  PositionSource(const WeightIndex& weights, uint64_t memory_bytes, uint64_t chunk_cap) {
-    if (!weights.ordered_positions_path.empty())
-      ordered_ = std::make_unique<OrderedPositions>(weights.ordered_positions_path, weights.single_precision, weights.records);
-    const bool mapped =
-        !ordered_ && map_positions_whole(positions_bytes(weights.vertices, weights.single_precision), memory_bytes, chunk_cap);
-    column_ = std::make_unique<PositionGather>(weights.positions_path, weights.single_precision, weights.vertices, mapped);
-  }
-  // Whether each group (or sums chunk) loads its own blocks (the ordered file, or the column mapped whole),
-  // else one batch read the read way, shared by all of them.
-  bool per_block() const { return ordered_ || column_->mapped(); }
-  // xyz = the positions of records [first, first + ids.size()), whose ids are `ids`.
-  void load(uint64_t first, std::span<const uint32_t> ids, double* xyz, PositionGather::Scratch& scratch) const {
-    if (ordered_) ordered_->read(first, ids.size(), xyz);
-    else column_->gather(ids, xyz, scratch);
-  }
-
- private:
-  std::unique_ptr<OrderedPositions> ordered_;
-  std::unique_ptr<PositionGather> column_;
-};
+// Where a pass's positions come from (position_gather.h): the index's weight-ordered file when it names
+// one, else the store's column by id, mapped whole where it takes at most half the budget (and no
+// --chunk-bytes asks for small reads), else read the read way.
+RecordPositions record_positions(const WeightIndex& weights, uint64_t memory_bytes, uint64_t chunk_cap) {
+  return RecordPositions(weights.positions_path, weights.single_precision, weights.vertices, weights.ordered_positions_path,
+                         weights.records,
+                         map_positions_whole(positions_bytes(weights.vertices, weights.single_precision), memory_bytes, chunk_cap));
+}
 
 // The ids of records [at, at + size) and their positions as plain arrays, widened to double (exact for
 // float): the read way's shared batch, or a group's own block.
@@ -171,7 +154,7 @@ struct Batch {
   std::vector<uint32_t> ids;
   std::vector<double> xyz;
   PositionGather::Scratch scratch;
-  void load(const io::MappedFile& order, const PositionSource& positions, uint64_t first, uint64_t n) {
+  void load(const io::MappedFile& order, const RecordPositions& positions, uint64_t first, uint64_t n) {
     at = first;
     const io::Window w = order.map(first * 4, (first + n) * 4);
     ids.resize(n);
@@ -184,7 +167,7 @@ struct Batch {
 // Calls f(first, n, batch) for the blocks of records [lo, hi), in order: positions from `shared` (the read
 // way), else loaded block by block. Stops early when the task group is cancelled.
 template <class F>
-void for_each_block(const io::MappedFile& index, const PositionSource& positions, uint64_t lo, uint64_t hi,
+void for_each_block(const io::MappedFile& index, const RecordPositions& positions, uint64_t lo, uint64_t hi,
                     const Batch* shared, Progress& progress, F&& f) {
   Batch own;
   for (uint64_t first = lo; first < hi; first += kBlock) {
@@ -198,7 +181,7 @@ void for_each_block(const io::MappedFile& index, const PositionSource& positions
 
 // The sums pass (mean and quadric representatives) over the levels `level_ids` (their maps and info files
 // under `prefix`), of `cells_per_level` cells each. `sum_bytes`: what the sums may hold at once.
-void sum_cells(const io::MappedFile& index, const PositionSource& positions, uint64_t batch, const io::MappedFile* grades,
+void sum_cells(const io::MappedFile& index, const RecordPositions& positions, uint64_t batch, const io::MappedFile* grades,
                uint64_t records, std::span<const size_t> level_ids, std::span<const uint64_t> cells_per_level,
                CellInfoKind info_kind, bool single_precision, uint64_t sum_bytes, Progress& progress, const std::string& prefix,
                double progress_from) {
@@ -385,7 +368,7 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
     grades = std::make_unique<io::MappedFile>(weights.grades_path);
     if (grades->size() != records * 8) fail(Status::io_error, weights.grades_path + ": size does not match");
   }
-  const PositionSource positions(weights, memory_bytes, chunk_cap);
+  const RecordPositions positions = record_positions(weights, memory_bytes, chunk_cap);
   const uint64_t batch = gather_batch(memory_bytes, chunk_cap, positions.per_block());
   // A float store's positions are all floats: the clusterer keeps its centers as floats (same ids).
   core::ClusterOptions options = cluster_options;
@@ -554,7 +537,7 @@ void sum_cell_info(const WeightIndex& weights, std::span<const size_t> levels, s
     grades = std::make_unique<io::MappedFile>(weights.grades_path);
     if (grades->size() != weights.records * 8) fail(Status::io_error, weights.grades_path + ": size does not match");
   }
-  const PositionSource positions(weights, memory_bytes, chunk_cap);
+  const RecordPositions positions = record_positions(weights, memory_bytes, chunk_cap);
   // No clusterer is held here: the sums take what cluster_levels leaves its cells.
   const uint64_t budget = std::max<uint64_t>(cell_budget(levels.size(), weights.vertices, weights.single_precision, memory_bytes, chunk_cap), 1);
   sum_cells(index, positions, gather_batch(memory_bytes, chunk_cap, positions.per_block()), grades.get(), weights.records, levels, cells,

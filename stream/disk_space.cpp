@@ -134,7 +134,7 @@ uint64_t report_work_bytes(const SceneCounts& c) { return store_bytes(c) + inges
 uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative representative, bool ordered_positions) {
   const uint64_t v = c.vertices;
   const uint64_t weld = v / 8 + 4 * v * 3 / 10;
-  const uint64_t index = 4 * v + (ordered_positions ? (c.single_precision ? 12 : 24) * v : 0) +
+  const uint64_t index = 4 * v + (ordered_positions ? position_bytes(c.single_precision) * v : 0) +
                          (representative == Representative::mean ? 8 * v : 0);
   const uint64_t maps = static_cast<uint64_t>(levels) * ((v * static_cast<uint64_t>(std::bit_width(v)) + 7) / 8);
   const uint64_t info = v * 12 / 100 * cell_info_bytes(cell_info_kind(representative), c.single_precision);
@@ -199,7 +199,7 @@ void check_info_space(const std::string& input, const std::string& work_dir) {
   check_free_space(std::span(&need, 1));
 }
 
-void check_simplify_space(const std::string& input, const SimplifyOptions& o, const std::string& work_dir) {
+void check_simplify_space(const std::string& input, const SimplifyOptions& o, const std::string& work_dir, bool sharded) {
   const SceneCounts c = guess_input_counts(input);
   const size_t levels = !o.cell_sizes.empty() ? o.cell_sizes.size() : !o.target_triangles.empty() ? o.target_triangles.size() : o.levels;
   // Output triangles: the targets, or the default levels' (counts falling geometrically from the input's
@@ -215,8 +215,7 @@ void check_simplify_space(const std::string& input, const SimplifyOptions& o, co
   }
   const SpaceNeed needs[2] = {
       {work_dir, "work directory",
-       beyond(simplify_work_bytes(c, levels, o.representative, o.shard_count > 0 || o.grade_share_count > 0 || o.cluster_share_count > 0 || o.shard_prepare),
-              directory_bytes(work_dir))},
+       beyond(simplify_work_bytes(c, levels, o.representative, sharded), directory_bytes(work_dir))},
       {o.output_dir, "outputs", simplify_output_bytes(out, o)}};
   check_free_space(needs);
 }

@@ -38,8 +38,8 @@ SceneCounts guess_counts(uint64_t bytes, const std::string& format);
 // Most bytes each job has in its work directory at once (see disk_space.cpp for the terms).
 uint64_t info_work_bytes(const SceneCounts& c);
 uint64_t report_work_bytes(const SceneCounts& c);
-// ordered_positions: the run grades in shares, whose merge also writes the records' positions in weight order.
-uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative representative, bool ordered_positions = false);
+// ordered_positions: a sharded run, whose grading shares' merge also writes the records' positions in weight order.
+uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative representative, bool ordered_positions);
 // Bytes of simplify's outputs for `output_triangles` triangles over all levels.
 uint64_t simplify_output_bytes(uint64_t output_triangles, const SimplifyOptions& options);
 
@@ -47,7 +47,9 @@ uint64_t simplify_output_bytes(uint64_t output_triangles, const SimplifyOptions&
 // estimate less what it already holds (a rerun resumes from it), and the outputs'. Sniffs each input's
 // format, so a missing or unrecognised input fails here as it would in ingest.
 void check_info_space(const std::string& input, const std::string& work_dir);
-void check_simplify_space(const std::string& input, const SimplifyOptions& options, const std::string& work_dir);
+// sharded: a task of a sharded run (its work directory may hold the records' positions in weight order).
+void check_simplify_space(const std::string& input, const SimplifyOptions& options, const std::string& work_dir,
+                          bool sharded);
 void check_report_space(std::span<const std::string> originals, const std::string& work_dir);
 
 // {"path", "bytes", "input_bytes", "ratio", "entries": {name: bytes}}, for the JSON files jobs write.

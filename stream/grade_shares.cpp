@@ -217,7 +217,6 @@ std::string merged_grades_path(const std::string& prefix) { return grade_merge_d
 std::string merged_positions_path(const std::string& prefix, const StoreMeta& meta) {
   return ordered_positions_path(grade_merge_dir(prefix), meta.single_precision);
 }
-uint64_t position_bytes(const StoreMeta& meta) { return meta.single_precision ? 12 : 24; }
 
 using io::OffsetFile;
 
@@ -241,7 +240,7 @@ bool read_merge_cuts(const std::string& prefix, const StoreMeta& meta, const nlo
       if (row.size() != mp->records.size()) return false;
     if (std::filesystem::file_size(merged_order_path(prefix), ec) != mp->total() * 4 || ec) return false;
     if (mp->grades && (std::filesystem::file_size(merged_grades_path(prefix), ec) != mp->total() * 8 || ec)) return false;
-    if (std::filesystem::file_size(merged_positions_path(prefix, meta), ec) != mp->total() * position_bytes(meta) || ec)
+    if (std::filesystem::file_size(merged_positions_path(prefix, meta), ec) != mp->total() * position_bytes(meta.single_precision) || ec)
       return false;
     return true;
   } catch (const std::exception&) {
@@ -294,7 +293,7 @@ GradeMergePlan shared_grade_merge_plan(const GradeShareInput& in, const std::vec
   // The index's files at their full size; the units write their parts in place.
   OffsetFile(merged_order_path(in.prefix), O_WRONLY | O_CREAT | O_TRUNC).resize(mp.total() * 4);
   if (grades) OffsetFile(merged_grades_path(in.prefix), O_WRONLY | O_CREAT | O_TRUNC).resize(mp.total() * 8);
-  OffsetFile(merged_positions_path(in.prefix, *in.meta), O_WRONLY | O_CREAT | O_TRUNC).resize(mp.total() * position_bytes(*in.meta));
+  OffsetFile(merged_positions_path(in.prefix, *in.meta), O_WRONLY | O_CREAT | O_TRUNC).resize(mp.total() * position_bytes(in.meta->single_precision));
   io::write_file_atomic(grade_merge_dir(in.prefix) + "plan.json", ordered_json{{"key", plan_key}, {"cut", mp.cut}}.dump() + "\n");
   return mp;
 }
@@ -337,8 +336,8 @@ uint64_t run_grade_merge_unit(const GradeShareInput& in, const GradeMergePlan& m
   // the prepare job's sums then read in order.
   sorter.reset();
   OffsetFile positions(merged_positions_path(in.prefix, *in.meta), O_WRONLY);
-  write_ordered_positions(positions_column_path(in.store_dir, *in.meta), *in.meta, merged_order_path(in.prefix), mp.first(unit),
-                          records, positions, in.plan.stage_bytes, progress);
+  write_ordered_positions(in.store_dir, *in.meta, merged_order_path(in.prefix), mp.first(unit), records, positions,
+                          in.plan.stage_bytes, progress);
   positions.close();
   return records;
 }

@@ -115,15 +115,11 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
     // budget (its labels, positions, slots and index window: 36 bytes a record), since each block costs a
     // pass over the column's segments that hold its ids.
     // With the records' positions in weight order (a sharded run's), they are read in order, block by block.
-    const uint64_t column = meta.vertices * (meta.single_precision ? 12 : 24);
-    std::unique_ptr<OrderedPositions> ordered;
-    if (!ordered_positions_path.empty())
-      ordered = std::make_unique<OrderedPositions>(ordered_positions_path, meta.single_precision, records);
-    const bool mapped = !ordered && map_positions_whole(column, memory_bytes / 4, chunk_cap);
-    const PositionGather positions(positions_column_path(store_dir, meta),
-                                   meta.single_precision, meta.vertices, mapped);
+    const uint64_t column = meta.vertices * position_bytes(meta.single_precision);
+    const RecordPositions positions(positions_column_path(store_dir, meta), meta.single_precision, meta.vertices,
+                                    ordered_positions_path, records, map_positions_whole(column, memory_bytes / 4, chunk_cap));
     PositionGather::Scratch scratch;
-    const uint64_t block = mapped || ordered ? kBlock : std::max<uint64_t>(std::min(memory_bytes / 16, chunk_cap ? chunk_cap : UINT64_MAX) / 36 / kBlock, 1) * kBlock;
+    const uint64_t block = positions.per_block() ? kBlock : std::max<uint64_t>(std::min(memory_bytes / 16, chunk_cap ? chunk_cap : UINT64_MAX) / 36 / kBlock, 1) * kBlock;
     for (uint64_t b = 0; b < records; b += block) {
       progress.check();
       const uint64_t n = std::min(block, records - b);
@@ -133,11 +129,9 @@ LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta,
         std::copy_n(reinterpret_cast<const float*>(w.data()), n, labels.data());
       }
       xyz.resize(3 * n);
-      if (ordered) {
-        ordered->read(b, n, xyz.data());
-      } else {
+      {
         const io::Window w = order.map(b * 4, (b + n) * 4);
-        positions.gather(std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), n), xyz.data(), scratch);
+        positions.load(b, std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), n), xyz.data(), scratch);
       }
       tbb::parallel_for(tbb::blocked_range<uint64_t>(0, n, 4096), [&](const tbb::blocked_range<uint64_t>& r) {
         const std::span<const double> part(xyz.data() + 3 * r.begin(), 3 * (r.end() - r.begin()));

@@ -42,6 +42,6 @@ struct LabelSummary {
 LabelSummary compute_labels(const std::string& store_dir, const StoreMeta& meta, const std::string& order_path,
                             uint64_t records, const LabelOptions& options, uint64_t memory_bytes,
                             uint64_t chunk_cap, Progress& progress, const std::string& out_path,
-                            const std::string& ordered_positions_path = {});
+                            const std::string& ordered_positions_path);
 
 }  // namespace lodstream::stream

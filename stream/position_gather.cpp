@@ -124,14 +124,14 @@ uint64_t ordered_positions_batch(uint64_t memory_bytes) {
   return std::max<uint64_t>(memory_bytes / 2 / per_record, 1);
 }
 
-void write_ordered_positions(const std::string& column_path, const StoreMeta& meta, const std::string& order_path,
+void write_ordered_positions(const std::string& store_dir, const StoreMeta& meta, const std::string& order_path,
                              uint64_t first, uint64_t n, const io::OffsetFile& out, uint64_t memory_bytes, Progress& progress) {
   const io::MappedFile order(order_path);
   if (order.size() < (first + n) * 4) fail(Status::io_error, order.path() + ": shorter than its records");
-  const bool mapped = map_positions_whole(meta.vertices * (meta.single_precision ? 12 : 24), memory_bytes, 0);
-  const PositionGather column(column_path, meta.single_precision, meta.vertices, mapped);
+  const uint64_t stride = position_bytes(meta.single_precision);
+  const bool mapped = map_positions_whole(meta.vertices * stride, memory_bytes, 0);
+  const PositionGather column(positions_column_path(store_dir, meta), meta.single_precision, meta.vertices, mapped);
   const uint64_t batch = std::min(ordered_positions_batch(mapped ? memory_bytes / 2 : memory_bytes), std::max<uint64_t>(n, 1));
-  const uint64_t stride = column.single_precision() ? 12 : 24;
   std::vector<uint32_t> ids(batch);
   std::vector<double> xyz(3 * batch);
   PositionGather::Scratch scratch;
@@ -143,7 +143,7 @@ void write_ordered_positions(const std::string& column_path, const StoreMeta& me
       std::memcpy(ids.data(), w.data(), k * 4);
     }
     column.gather(std::span<const uint32_t>(ids.data(), k), xyz.data(), scratch);
-    if (column.single_precision()) {
+    if (meta.single_precision) {
       // Narrowed back to the store's floats (exact: they were widened from them), in place from the front:
       // float i goes to bytes [4i, 4i + 4), never past double i, which is read first.
       char* bytes = reinterpret_cast<char*>(xyz.data());
@@ -161,13 +161,13 @@ void write_ordered_positions(const std::string& column_path, const StoreMeta& me
 
 OrderedPositions::OrderedPositions(const std::string& path, bool single_precision, uint64_t records)
     : file_(path), single_(single_precision), records_(records) {
-  if (file_.size() != records * (single_precision ? 12 : 24))
+  if (file_.size() != records * position_bytes(single_precision))
     fail(Status::io_error, path + ": size does not match the weight index");
 }
 
 void OrderedPositions::read(uint64_t first, uint64_t n, double* xyz) const {
   if (first + n > records_) fail(Status::internal, file_.path() + ": record past the index");
-  const uint64_t stride = single_ ? 12 : 24;
+  const uint64_t stride = position_bytes(single_);
   const io::Window w = file_.map(first * stride, (first + n) * stride);
   if (!single_) {
     std::memcpy(xyz, w.data(), n * stride);
@@ -179,6 +179,16 @@ void OrderedPositions::read(uint64_t first, uint64_t n, double* xyz) const {
     std::memcpy(&f, p + 4 * i, 4);
     xyz[i] = f;
   }
+}
+
+RecordPositions::RecordPositions(const std::string& column_path, bool single_precision, uint64_t vertices,
+                                 const std::string& ordered_path, uint64_t records, bool map_whole)
+    : ordered_(ordered_path.empty() ? nullptr : std::make_unique<OrderedPositions>(ordered_path, single_precision, records)),
+      column_(column_path, single_precision, vertices, !ordered_ && map_whole) {}
+
+void RecordPositions::load(uint64_t first, std::span<const uint32_t> ids, double* xyz, PositionGather::Scratch& scratch) const {
+  if (ordered_) ordered_->read(first, ids.size(), xyz);
+  else column_.gather(ids, xyz, scratch);
 }
 
 }  // namespace lodstream::stream

@@ -14,6 +14,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -58,7 +59,6 @@ class PositionGather {
   void gather(std::span<const uint32_t> ids, double* xyz, Scratch& scratch) const;
 
   bool mapped() const { return mapped_; }
-  bool single_precision() const { return single_; }
   uint64_t column_bytes() const { return vertices_ * stride_; }
 
  private:
@@ -74,12 +74,13 @@ class PositionGather {
 };
 
 // The weight index's positions in weight order (issue 19): WORK/positions-w.f32 (or .f64) holds, for record
-// i of order.u32, the position of its vertex at the store's precision (12 or 24 bytes a record). The grade
-// stage writes it once after the sort (a sharded run's merge units each their records' part, in place), so
-// that the passes that read positions in weight order (the cluster stage's clustering and sums passes, a
-// whole level's cluster share, the prepare job's sums) read them sequentially, where gathering them by id
-// the read way costs a copy of most of the column per batch: on the 193 M-triangle city at --memory 1G
-// about 40 GB through pread for one whole level's share (its two passes), a third of its CPU.
+// i of order.u32, the position of its vertex at the store's precision (12 or 24 bytes a record). A sharded
+// run's grading merge units write it, each its records' part in place (one machine does not: its work
+// directory stays within 1.5x the input), so that the passes that read positions in weight order (a whole
+// level's cluster share and its sums, the prepare job's sums, the labels stage) read them sequentially
+// (RecordPositions), where gathering them by id the read way costs a copy of most of the column per batch:
+// on the 193 M-triangle city at --memory 1G about 40 GB through pread for one whole level's share (its two
+// passes), a third of its CPU.
 // Invariant: record i holds exactly the bytes the store's column holds for vertex order[i].
 std::string ordered_positions_path(const std::string& prefix, bool single_precision);
 
@@ -87,12 +88,12 @@ std::string ordered_positions_path(const std::string& prefix, bool single_precis
 uint64_t ordered_positions_batch(uint64_t memory_bytes);
 
 // Writes the positions of records [first, first + n) of the weight index at `order_path` (uint32 ids) into
-// `out`, sized beforehand to the whole index, at their records' offsets: gathered from the store's column
-// (`meta`'s, at `column_path`), mapped whole where it takes at most half of `memory_bytes`, else in
+// `out`, sized beforehand to the whole index, at their records' offsets: gathered from the column of the
+// store in `store_dir` (`meta`'s), mapped whole where it takes at most half of `memory_bytes`, else in
 // batches of ordered_positions_batch(memory_bytes) records (each a copy of the column's segments that hold
 // its ids; the 193 M-triangle city's merge units at --memory 1G, 12.2 M records each, take one). Memory:
 // within `memory_bytes`. Throws Failure(io_error) on a read or write error.
-void write_ordered_positions(const std::string& column_path, const StoreMeta& meta, const std::string& order_path,
+void write_ordered_positions(const std::string& store_dir, const StoreMeta& meta, const std::string& order_path,
                              uint64_t first, uint64_t n, const io::OffsetFile& out, uint64_t memory_bytes, Progress& progress);
 
 // Reads a file written by write_ordered_positions, sequentially, through mapped windows.
@@ -108,6 +109,25 @@ class OrderedPositions {
   io::MappedFile file_;
   bool single_;
   uint64_t records_;
+};
+
+// The positions of the weight index's records, block by block in weight order, as the passes in weight
+// order read them: from the ordered file when `ordered_path` names one, else from the store's column at
+// `column_path` by id, mapped whole when `map_whole` (the caller's budget rule), else the read way.
+class RecordPositions {
+ public:
+  RecordPositions(const std::string& column_path, bool single_precision, uint64_t vertices, const std::string& ordered_path,
+                  uint64_t records, bool map_whole);
+  // Whether a small block costs no more than a large one (the ordered file, or the column mapped whole);
+  // else blocks should be large, since each costs a copy of the column's segments that hold its ids.
+  bool per_block() const { return ordered_ || column_.mapped(); }
+  // xyz = the positions of records [first, first + ids.size()), whose ids are `ids`. Thread-safe with one
+  // Scratch per thread.
+  void load(uint64_t first, std::span<const uint32_t> ids, double* xyz, PositionGather::Scratch& scratch) const;
+
+ private:
+  std::unique_ptr<OrderedPositions> ordered_;
+  PositionGather column_;
 };
 
 }  // namespace lodstream::stream

@@ -167,9 +167,10 @@ bool read_store_meta(const std::string& dir, StoreMeta* meta);
 
 std::string store_meta_json(const StoreMeta& meta);
 
-// The store's position column: DIR/positions.f32, or .f64 for a double store.
+// The store's position column: DIR/positions.f32, or .f64 for a double store; a position's bytes there.
 inline std::string positions_column_path(const std::string& dir, const StoreMeta& meta) {
   return dir + (meta.single_precision ? "/positions.f32" : "/positions.f64");
 }
+inline uint64_t position_bytes(bool single_precision) { return single_precision ? 12 : 24; }
 
 }  // namespace lodstream::stream

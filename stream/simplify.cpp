@@ -798,7 +798,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     if (sharded) shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
     stream::WorkDir work(options.work_dir);
     if (options.check_disk_space && !so.shard_prepare && !so.cluster_share_count && !so.grade_share_count)
-      stream::check_simplify_space(input, so, work.path());
+      stream::check_simplify_space(input, so, work.path(), sharded);
     const std::string store_dir = work.subdir("store");
     const core::ClusterOptions copts = cluster_options(so);
     SimplifyReport report;

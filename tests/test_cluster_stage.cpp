@@ -317,7 +317,7 @@ TEST(PositionGather, WeightOrderedPositionsAreTheColumnsBytesInAnyRanges) {
           out.resize(records * stride);
           for (unsigned k = ranges; k-- > 0;) {
             const uint64_t first = uint64_t{records} * k / ranges, end = uint64_t{records} * (k + 1) / ranges;
-            stream::write_ordered_positions(column_path, meta, tmp.file("order.u32"), first, end - first, out, memory, progress);
+            stream::write_ordered_positions(tmp.path().string(), meta, tmp.file("order.u32"), first, end - first, out, memory, progress);
           }
           out.close();
         }
@@ -347,7 +347,7 @@ TEST(PositionGather, WeightOrderedPositionsAreTheColumnsBytesInAnyRanges) {
   io::OffsetFile out(tmp.file("short"), O_WRONLY | O_CREAT | O_TRUNC);
   stream::StoreMeta meta;
   meta.single_precision = true, meta.vertices = vertices;
-  EXPECT_THROW(stream::write_ordered_positions(stream::positions_column_path(tmp.path().string(), meta), meta,
+  EXPECT_THROW(stream::write_ordered_positions(tmp.path().string(), meta,
                                                tmp.file("order.u32"), records - 5, 6, out, 1 << 19, progress),
                Failure);
 }
