@@ -10,12 +10,14 @@
 // rtcIntersect16 in place of a plain RTCIntersectContext (its first member), indexed by the ray's id (0..15:
 // its lane).
 //
-// Canonical distances: a triangle's t is recomputed by the filter from its corners (RayScene::triangle_hit,
-// in double), not taken from Embree. Embree's packet intersector and its single-ray one (which its packet
-// traversal falls back to where few rays of a packet remain, at places that depend on the BVH) can round
-// the same hit differently, so Embree's own t would make an image depend on the chunking. Curves and discs
-// keep Embree's t: a ray that hits them is traced again alone (core/view_cast.cpp), so their hits always
-// come from the single-ray intersector.
+// Canonical distances: every hit's t is recomputed by the filter from the primitive's stored vertices
+// (RayScene::canonical_t, in double), not taken from Embree. Embree's packet intersector and its single-ray
+// one (which its packet traversal falls back to where few rays of a packet remain, at places that depend
+// on the BVH) can round the same hit differently, so Embree's own t would make an image depend on the
+// chunking: for curves, a packet's t a ulp above the single-ray t of the same segment once kept an earlier
+// chunk's hit where the whole scene took the later one. Whether a ray meets a curve or a disc at all is
+// still Embree's single-ray intersector's call: a ray that hits them is traced again alone
+// (core/view_cast.cpp).
 // Since Embree culls by its own t, the filter leaves the ray's tfar a little beyond the best canonical t
 // (enlarged_tfar): a primitive whose canonical t ties or beats the best still reaches the filter (Embree
 // keeps a filter's tfar, and offers the other hits of a leaf while their t <= tfar).

@@ -386,7 +386,7 @@ void nearest_hit_filter(const RTCFilterFunctionNArguments* args) {
       const float org[3] = {RTCRayN_org_x(args->ray, n, i), RTCRayN_org_y(args->ray, n, i), RTCRayN_org_z(args->ray, n, i)};
       const float dir[3] = {RTCRayN_dir_x(args->ray, n, i), RTCRayN_dir_y(args->ray, n, i), RTCRayN_dir_z(args->ray, n, i)};
       float canonical;
-      if (c->ray_scene->triangle_hit(geom, prim, org, dir, &canonical)) t = canonical;
+      if (c->ray_scene->canonical_t(geom, prim, org, dir, &canonical)) t = canonical;
     }
     const uint64_t key = hit_key(c->scene, geom, prim);
     if (t < c->best_t[id] || (t == c->best_t[id] && key < c->best_key[id])) {
@@ -416,6 +416,32 @@ bool RayScene::triangle_hit(unsigned geom, unsigned prim, const float org[3], co
     const double len = std::sqrt(dot(nn, nn));
     normal[0] = nn.x / len, normal[1] = nn.y / len, normal[2] = nn.z / len;
   }
+  return true;
+}
+
+bool RayScene::canonical_t(unsigned geom, unsigned prim, const float org[3], const float dir[3], float* t) const {
+  if (geom >= impl_->geoms.size()) return false;
+  const Geom& g = impl_->geoms[geom];
+  if (g.kind == PrimitiveKind::triangle) return triangle_hit(geom, prim, org, dir, t);
+  const Vec o = load(org), d = load(dir);
+  const double dd = dot(d, d);
+  if (!(dd > 0)) return false;
+  if (g.kind == PrimitiveKind::point) {  // a disc facing the ray: its plane through the centre
+    *t = static_cast<float>(dot(sub(load(g.vertices + 4ull * prim), o), d) / dd);
+    return true;
+  }
+  if (g.kind != PrimitiveKind::edge) return false;
+  // A ribbon facing the ray: the point of the axis nearest the ray seen along it (Embree's flat linear
+  // curve), at the depth there.
+  const uint64_t first = g.indices[prim];
+  const Vec w0 = sub(load(g.vertices + 4 * first), o), w1 = sub(load(g.vertices + 4 * first + 4), o);
+  const double z0 = dot(w0, d) / dd, z1 = dot(w1, d) / dd;
+  const Vec q0 = {w0.x - z0 * d.x, w0.y - z0 * d.y, w0.z - z0 * d.z};
+  const Vec q1 = {w1.x - z1 * d.x, w1.y - z1 * d.y, w1.z - z1 * d.z};
+  const Vec v = sub(q1, q0);
+  const double vv = dot(v, v);
+  const double u = vv > 0 ? std::clamp(-dot(q0, v) / vv, 0.0, 1.0) : 0.0;
+  *t = static_cast<float>(z0 + u * (z1 - z0));
   return true;
 }
 

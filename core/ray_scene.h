@@ -84,6 +84,12 @@ class RayScene {
   // a geometry that is not triangles, or a ray parallel to the plane (or a zero-area triangle).
   bool triangle_hit(unsigned geom, unsigned prim, const float org[3], const float dir[3], float* t,
                     double normal[3] = nullptr) const;
+  // The canonical distance of a hit on primitive `prim` of geometry `geom`, in units of dir, computed in
+  // double from the stored vertices so that it does not depend on which intersector (packet or single ray)
+  // reported the hit, nor on the ray's tfar then: a triangle's as triangle_hit; a segment's (a ribbon facing
+  // the ray) at the point of its axis nearest the ray as seen along it; a point's (a disc facing the ray)
+  // at its centre's depth. False where there is none (see triangle_hit).
+  bool canonical_t(unsigned geom, unsigned prim, const float org[3], const float dir[3], float* t) const;
   // Triangles only (no segments or points): rays may be cast in packets (core/nearest_hit.h).
   bool only_triangles() const;
   uint64_t embree_bytes() const;  // bytes Embree holds now

@@ -242,6 +242,37 @@ PixelRect project_box(const Box& box, const Camera& camera) {
   return r;
 }
 
+void clear_view(ViewImage* image, unsigned resolution) {
+  const uint64_t pixels = uint64_t{resolution} * resolution;
+  image->resolution = resolution;
+  image->depth.assign(pixels, std::numeric_limits<float>::infinity());
+  image->normal.assign(3 * pixels, 0.0f);
+  image->kind.assign(pixels, 0);
+  image->centre.assign(pixels, 0);
+  image->color.clear();
+}
+
+void composite_pixel(ViewImage* into, uint64_t p, float depth, const float normal[3], uint8_t kind, bool centre,
+                     const uint8_t* rgb) {
+  if (rgb && into->color.empty()) into->color.assign(3 * into->depth.size(), 255);
+  if (!later_hit_wins(into->centre[p] != 0, into->depth[p], centre, depth)) return;
+  into->depth[p] = depth;
+  for (int k = 0; k < 3; ++k) into->normal[3 * p + k] = normal[k];
+  into->kind[p] = kind;
+  into->centre[p] = centre ? 1 : 0;
+  if (!into->color.empty())
+    for (int k = 0; k < 3; ++k) into->color[3 * p + k] = rgb ? rgb[k] : 255;
+}
+
+void composite_view(ViewImage* into, const ViewImage& part) {
+  if (into->resolution != part.resolution || into->depth.size() != part.depth.size()) clear_view(into, part.resolution);
+  if (!part.color.empty() && into->color.empty()) into->color.assign(3 * into->depth.size(), 255);
+  for (uint64_t p = 0; p < part.depth.size(); ++p)
+    if (part.kind[p] != 0)
+      composite_pixel(into, p, part.depth[p], &part.normal[3 * p], part.kind[p], part.centre[p] != 0,
+                      part.color.empty() ? nullptr : &part.color[3 * p]);
+}
+
 uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out, bool accumulate) {
   return cast_view(scenes, camera, out, accumulate, PixelRect{0, 0, camera.resolution, camera.resolution});
 }
@@ -251,14 +282,7 @@ uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera
   const unsigned h = camera.resolution;
   const unsigned k = std::max(1u, camera.supersample);
   const uint64_t pixels = uint64_t{h} * h;
-  if (!accumulate || out->resolution != h || out->depth.size() != pixels || out->centre.size() != pixels) {
-    out->resolution = h;
-    out->depth.assign(pixels, std::numeric_limits<float>::infinity());
-    out->normal.assign(3 * pixels, 0.0f);
-    out->kind.assign(pixels, 0);
-    out->centre.assign(pixels, 0);
-    out->color.clear();
-  }
+  if (!accumulate || out->resolution != h || out->depth.size() != pixels || out->centre.size() != pixels) clear_view(out, h);
   bool colors = false;
   for (const RayScene* scene : scenes) colors = colors || scene->has_colors();
   if (colors && out->color.size() != 3 * pixels) out->color.assign(3 * pixels, 255);

@@ -5,10 +5,11 @@
 // or else the nearest of the k × k hits. So a part of a scene that crosses a pixel without meeting its
 // centre still covers it, when it is wider than about 1/k pixel, whatever kind of primitive it is.
 //
-// Rays go in 16-ray packets (rtcIntersect16): a triangle's distance and normal are recomputed from its
-// corners (core/nearest_hit.h), so they do not depend on which of Embree's intersectors found the hit; on a
-// scene of lines and points, a ray whose packet found a hit there is traced again alone (rtcIntersect1),
-// so a curve's or a disc's hit always comes from Embree's single-ray intersector. Each pixel gets the hit distance along its unit ray, the geometric normal
+// Rays go in 16-ray packets (rtcIntersect16): every hit's distance, and a triangle's normal, are recomputed
+// from the primitive's vertices (core/nearest_hit.h), so they do not depend on which of Embree's
+// intersectors found the hit; on a scene of lines and points, a ray whose packet found a hit there is
+// traced again alone (rtcIntersect1), so whether a curve or a disc is hit is always Embree's single-ray
+// intersector's call. Each pixel gets the hit distance along its unit ray, the geometric normal
 // turned to face the camera (so one- and two-sided faces compare alike), and the kind of primitive hit. A
 // pixel's result depends on that pixel's rays only, so images are the same for any thread count.
 //
@@ -72,6 +73,29 @@ struct ViewImage {
 // are cast only while no chunk's centre ray has hit it. Returns the number of rays cast (per scene).
 uint64_t cast_view(std::span<const RayScene* const> scenes, const Camera& camera, ViewImage* out,
                    bool accumulate = false);
+
+// Sort-last compositing: the scene's primitives cast in consecutive parts, each part into a fresh image (no
+// accumulate), give the whole scene's image when the parts' images are composited in part order. A later
+// part's hit replaces the pixel's hit so far when its centre ray hit and the pixel's had not, or when both
+// are hits of the same sort (centre, or k × k) and the later is strictly nearer: cast_view with accumulate
+// makes the same choice (an earlier chunk's hit wins ties, a centre hit beats any k × k hit), so the
+// composite is cast_view's image of the parts in order, bit for bit. A pixel the part did not cover
+// (kind none, depth +inf, not centre) never replaces anything.
+inline bool later_hit_wins(bool earlier_centre, float earlier_depth, bool later_centre, float later_depth) {
+  return later_centre ? (!earlier_centre || later_depth < earlier_depth) : (!earlier_centre && later_depth < earlier_depth);
+}
+
+// An empty image (nothing hit) of resolution × resolution pixels, as cast_view starts one.
+void clear_view(ViewImage* image, unsigned resolution);
+
+// Composites one pixel of a later part into `into` (see later_hit_wins): `rgb` is the hit's colour, or null
+// for a part cast without colours (white, as cast_view stores it, when `into` has colours). `into` gets a
+// colour array (white) the first time a coloured hit arrives.
+void composite_pixel(ViewImage* into, uint64_t pixel, float depth, const float normal[3], uint8_t kind, bool centre,
+                     const uint8_t* rgb);
+
+// Composites every pixel of `part` (same resolution; its primitives after every one already in `into`).
+void composite_view(ViewImage* into, const ViewImage& part);
 
 // An axis-aligned box, as the bounds of what a scene list holds (its segments and discs widened by their
 // radii).

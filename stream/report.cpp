@@ -26,7 +26,9 @@
 // Everything drawn at random comes from counter-based streams of --seed (views, targets, samples), every
 // sum is formed in a fixed order, distances are minima over chunks and a pixel keeps the hit of lowest
 // (distance, primitive order) over chunks (core/nearest_hit.h), so the figures are the same for any
-// thread count, memory budget or chunking.
+// thread count, memory budget or chunking. A task of a sharded report traces a range of the original's and
+// of each level's primitives for every view, and the merge composites the tasks' images in range order
+// (core::composite_view), or else a share of the views against the whole original (stream/report_shard.h).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -350,42 +352,53 @@ struct Original {
   double diagonal = 0;
 };
 
-// Cuts the original into chunks of at most `sizing.bytes()` and draws its samples and view targets: two
-// passes over the chunks (measure, sample), then its used vertices in store order.
-void load_original(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
-                   const ChunkSizing& sizing, stream::Progress& progress, Original* o) {
-  o->meta = meta;
-  o->chunks = std::make_unique<stream::StoreChunks>(store_dir, meta);
-  o->chunks->plan(sizing.costs(), sizing.bytes());
-  progress.report("load", 0.1);
-  const size_t n = o->chunks->chunks().size();
+// Draws the original's samples and view targets from `chunks` (planned over the whole store): two passes over
+// the chunks (measure, sample), then its used vertices in store order.
+void draw_original_samples(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
+                           stream::StoreChunks& chunks, stream::Progress& progress, Samples* samples,
+                           std::vector<float>* targets) {
+  const size_t n = chunks.chunks().size();
   MeshSampling s(ro.samples, ro.seed, kStreamOriginalSamples, ro.views, meta.triangles > 0);
   stream::ChunkGeometry g;
   for (size_t c = 0; c < n; ++c) {
-    o->chunks->read(c, &g);
+    chunks.read(c, &g);
     s.measure(g.xyz, g.triangles, g.lines);
     progress.report("load", 0.1 + 0.4 * double(c + 1) / double(n));
   }
-  s.begin(o->chunks->used_vertices());
+  s.begin(chunks.used_vertices());
   for (size_t c = 0; c < n; ++c) {
-    if (n > 1) o->chunks->read(c, &g);  // one chunk: still there
+    if (n > 1) chunks.read(c, &g);  // one chunk: still there
     s.sample(g.xyz, g.triangles, g.lines);
     progress.report("load", 0.5 + 0.4 * double(c + 1) / double(n));
   }
   g = {};
-  o->chunks->for_used_vertices([&](std::span<const float> xyz) { s.sample_vertices(xyz); });
-  o->samples = s.finish(&o->targets, [&] {
+  chunks.for_used_vertices([&](std::span<const float> xyz) { s.sample_vertices(xyz); });
+  *samples = s.finish(targets, [&] {
     std::vector<uint32_t> ids;
     stream::for_column_blocks(store_dir + "/points.u32", meta.points, 1, 1 << 20, [&](uint64_t, std::span<const uint32_t> p) {
       for (size_t i = 0; i < p.size() && ids.size() < ro.views; ++i) ids.push_back(p[i]);
     });
     const size_t have = ids.size();
     for (size_t i = have; have > 0 && i < ro.views; ++i) ids.push_back(ids[i % have]);
-    return o->chunks->positions_of(ids);
+    return chunks.positions_of(ids);
   });
+}
+
+double bbox_diagonal(const stream::StoreMeta& meta) {
   const double d[3] = {meta.bbox.max[0] - meta.bbox.min[0], meta.bbox.max[1] - meta.bbox.min[1],
                        meta.bbox.max[2] - meta.bbox.min[2]};
-  o->diagonal = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  return std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+}
+
+// Cuts the original into chunks of at most `sizing.bytes()` and draws its samples and view targets.
+void load_original(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
+                   const ChunkSizing& sizing, stream::Progress& progress, Original* o) {
+  o->meta = meta;
+  o->chunks = std::make_unique<stream::StoreChunks>(store_dir, meta);
+  o->chunks->plan(sizing.costs(), sizing.bytes());
+  progress.report("load", 0.1);
+  draw_original_samples(store_dir, meta, ro, *o->chunks, progress, &o->samples, &o->targets);
+  o->diagonal = bbox_diagonal(meta);
   progress.report("load", 1);
 }
 
@@ -524,6 +537,9 @@ struct LevelWork {
   // and keeps its share of the raw values in `share` instead of forming the figures. A level whose distance
   // comes from its Hausdorff max needs every sample first: each task measures them all, and keeps its share.
   bool sharded = false;
+  // A task of a report by primitive ranges: every view and sample, against its ranges of the original and
+  // of the level (stream/report_shard.h).
+  bool ranges = false;
   unsigned view_first = 0, view_end = 0;
   uint64_t from_first = 0, from_end = 0, to_first = 0, to_end = 0;
   stream::ReportLevelShare share;
@@ -629,30 +645,42 @@ LevelScene build_level_scene(const core::LodMesh& mesh, const WireRadii& wire, u
   return scene;
 }
 
+uint64_t primitive_count(const core::LodMesh& m) { return m.triangle_count() + m.edge_count() + m.point_count(); }
+
 // A level too large for one scene is traced the same way as an original, in chunks: consecutive ranges of
 // its primitives (triangles, then edges, then points: the order of build_level_scene's geometries, so the
-// tie rule picks the same hit), each with its own vertices.
+// tie rule picks the same hit), each with its own vertices. A report task by ranges cuts only its range
+// [range_first, range_end) of them (none when it is empty).
 class LevelChunks {
  public:
-  LevelChunks(const core::LodMesh& m, uint64_t bytes) : m_(m), colors_(primitive_colors(m)) {
-    const uint64_t prims = m.triangle_count() + m.edge_count() + m.point_count();
+  LevelChunks(const core::LodMesh& m, uint64_t bytes) : LevelChunks(m, bytes, 0, primitive_count(m)) {}
+  LevelChunks(const core::LodMesh& m, uint64_t bytes, uint64_t range_first, uint64_t range_end)
+      : m_(m), colors_(primitive_colors(m)) {
+    const uint64_t prims = primitive_count(m);
+    whole_ = range_first == 0 && range_end == prims;
     const double per_vertex = prims ? kChunkCosts.vertex * double(m.vertex_count()) / double(prims) : 0;
     const double cost[3] = {kChunkCosts.triangle + per_vertex, kChunkCosts.line + per_vertex, kChunkCosts.point + per_vertex};
     const uint64_t count[3] = {m.triangle_count(), m.edge_count(), m.point_count()};
+    const auto kind_of = [&](uint64_t g) { return g < count[0] ? 0 : g < count[0] + count[1] ? 1 : 2; };
+    if (range_first >= range_end) return;
     double total = 0;
-    for (int k = 0; k < 3; ++k) total += cost[k] * double(count[k]);
+    uint64_t base = 0;
+    for (int k = 0; k < 3; base += count[k], ++k) {
+      const uint64_t lo = std::max(range_first, base), hi = std::min(range_end, base + count[k]);
+      if (lo < hi) total += cost[k] * double(hi - lo);
+    }
     if (total <= double(bytes)) {
-      ranges_.push_back({0, prims});
+      ranges_.push_back({range_first, range_end});
       return;
     }
-    uint64_t first = 0, g = 0;
+    uint64_t first = range_first;
     double used = 0;
-    for (int k = 0; k < 3; ++k)
-      for (uint64_t i = 0; i < count[k]; ++i, ++g) {
-        if (g > first && used + cost[k] > double(bytes)) ranges_.push_back({first, g}), first = g, used = 0;
-        used += cost[k];
-      }
-    ranges_.push_back({first, prims});
+    for (uint64_t g = range_first; g < range_end; ++g) {
+      const int k = kind_of(g);
+      if (g > first && used + cost[k] > double(bytes)) ranges_.push_back({first, g}), first = g, used = 0;
+      used += cost[k];
+    }
+    ranges_.push_back({first, range_end});
   }
   size_t size() const { return ranges_.size(); }
   // The scene of chunk c; the whole level's for a level in one chunk.
@@ -660,7 +688,7 @@ class LevelChunks {
     auto slice = [](const std::vector<uint8_t>& rgb, uint64_t from, uint64_t n) {
       return rgb.empty() ? std::span<const uint8_t>() : std::span<const uint8_t>(rgb.data() + 3 * from, 3 * n);
     };
-    if (ranges_.size() == 1)
+    if (ranges_.size() == 1 && whole_)
       return build_level_scene(m_, wire, embree_limit,
                                {slice(colors_.triangles, 0, m_.triangle_count()), slice(colors_.edges, 0, m_.edge_count()),
                                 slice(colors_.points, 0, m_.point_count())});
@@ -711,6 +739,7 @@ class LevelChunks {
   const core::LodMesh& m_;
   PrimitiveColors colors_;
   std::vector<std::pair<uint64_t, uint64_t>> ranges_;
+  bool whole_ = true;  // the ranges cover every primitive
   std::vector<uint32_t> local_;  // store vertex -> chunk vertex, UINT32_MAX outside the chunk being made
 };
 
@@ -728,12 +757,71 @@ uint64_t level_chunk_bytes(uint64_t limit, uint64_t chunk_cap) {
   return chunk_cap ? std::min(chunk_cap, limit / 4 * 3) : limit / 4 * 3;
 }
 
+// ------------------------------------------------------------------------------------------- ranges
+// A report by primitive ranges (stream/report_shard.h): the shared stages draw each original's samples and
+// view targets once; task I traces the I-th N-th of the original's primitives and of every level's.
+
+// Every level has its switching distance: the tasks can share the work by primitive ranges.
+bool every_distance_known(const std::vector<RunSpec>& runs) {
+  for (const RunSpec& r : runs)
+    for (const LevelSpec& l : r.levels)
+      if (!(l.switch_distance > 0)) return false;
+  return true;
+}
+
+std::string original_samples_path(const stream::WorkDir& work, size_t g) {
+  return work.file(g == 0 ? std::string("report-samples.bin") : fmt::format("report-samples-{}.bin", g));
+}
+
+// What an original's samples are drawn from.
+std::string original_samples_key(const stream::StoreMeta& meta, const ReportOptions& ro) {
+  return nlohmann::ordered_json{{"source", meta.source.path}, {"bytes", meta.source.bytes}, {"mtime_ns", meta.source.mtime_ns},
+                                {"vertices", meta.vertices}, {"triangles", meta.triangles}, {"lines", meta.lines},
+                                {"points", meta.points}, {"samples", ro.samples}, {"seed", ro.seed}, {"views", ro.views}}
+      .dump();
+}
+
+// The shared stage of a report by ranges, under the work directory's lock: the original's samples and view
+// targets, drawn (as one machine draws them, chunks of a quarter of the budget) unless the work directory
+// holds them for the same key.
+void prepare_original_samples(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
+                              const std::string& path, uint64_t budget, stream::Progress& progress) {
+  const std::string key = original_samples_key(meta, ro);
+  stream::OriginalSamples have;
+  if (read_original_samples(path, key, &have)) return;
+  stream::StoreChunks chunks(store_dir, meta);
+  ChunkSizing sizing;
+  sizing.room = left_of(budget, resident_bytes() + 6 * ro.samples * 16) / 4;
+  chunks.plan(sizing.costs(), sizing.bytes());
+  Samples samples;
+  stream::OriginalSamples out;
+  draw_original_samples(store_dir, meta, ro, chunks, progress, &samples, &out.targets);
+  out.xyz = std::move(samples.xyz), out.faces = samples.faces;
+  stream::write_original_samples(path, key, out);
+}
+
+// Task I's range of the original: its primitives' chunks; the samples and targets the shared stage drew.
+void load_original_range(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
+                         const ChunkSizing& sizing, const std::string& samples_path, stream::Progress& progress, Original* o) {
+  o->meta = meta;
+  stream::OriginalSamples s;
+  if (!read_original_samples(samples_path, original_samples_key(meta, ro), &s))
+    fail(Status::io_error, samples_path + ": the original's samples are missing (the shared stage draws them: run the "
+                                          "prepare step or any task again)");
+  o->samples.xyz = std::move(s.xyz), o->samples.faces = s.faces, o->targets = std::move(s.targets);
+  const auto [first, end] = stream::share_of(meta.primitives(), ro.shard_index, ro.shard_count);
+  o->chunks = std::make_unique<stream::StoreChunks>(store_dir, meta);
+  o->chunks->plan_range(sizing.costs(), sizing.bytes(), first, end);
+  o->diagonal = bbox_diagonal(meta);
+  progress.report("load", 1);
+}
+
 // A task's shares of the level's views and samples (stream/report_shard.h); one machine's: all of them.
 void set_shares(const Original& o, LevelWork& w, const ReportOptions& ro) {
   w.sharded = ro.shard_count > 0;
-  const auto views = stream::share_of(w.views, ro.shard_index, ro.shard_count);
+  const auto views = stream::share_of(w.views, ro.shard_index, w.ranges ? 0 : ro.shard_count);
   w.view_first = static_cast<unsigned>(views.first), w.view_end = static_cast<unsigned>(views.second);
-  const unsigned count = w.distance_known ? ro.shard_count : 0;
+  const unsigned count = w.distance_known && !w.ranges ? ro.shard_count : 0;
   std::tie(w.from_first, w.from_end) = stream::share_of(o.samples.xyz.size() / 3, ro.shard_index, count);
   std::tie(w.to_first, w.to_end) = stream::share_of(w.samples.xyz.size() / 3, ro.shard_index, count);
 }
@@ -782,6 +870,10 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   w.to_original.assign(w.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
   read_time.reset();
   set_shares(o, w, ro);
+  if (w.ranges) {  // the original's samples meet the task's range of the level in trace_level_range
+    L.seconds += seconds_since(t0);
+    return;
+  }
   // Segment and point radii do not enter the point queries: any distance builds the same query scene.
   const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh));
   LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap));
@@ -807,7 +899,8 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
 void finish_hausdorff(const Original& o, LevelWork& w, const ReportOptions& ro) {
   ReportLevel& L = w.out.level;
   if (w.sharded) {
-    w.share.lod_to_original = kept_share(w.to_original, ro), w.share.lod_faces = w.samples.faces;
+    w.share.lod_to_original = w.ranges ? std::move(w.to_original) : kept_share(w.to_original, ro);
+    w.share.lod_faces = w.samples.faces;
     if (w.distance_known) {  // the merge forms the figures from every task's share
       w.to_original = {};
       return;
@@ -986,6 +1079,51 @@ void trace_original(const Original& o, const std::vector<LevelWork*>& queries, c
   }
 }
 
+// What comparing a view needs beside its two images, reused from view to view.
+struct CompareScratch {
+  core::SilhouetteScratch silhouette;
+  std::vector<float> distance_image;
+};
+
+// View k's images of the original and the level compared: its silhouette counts, depth and normal errors
+// (appended to w.share), its CSV row and, for the first html_views views, its renders.
+void compare_view(const Original& o, LevelWork& w, const ReportOptions& ro, unsigned k, const core::ViewImage& vo,
+                  const core::ViewImage& vl, CompareScratch& scratch) {
+  const unsigned h = ro.resolution;
+  const uint64_t pixels = uint64_t{h} * h;
+  double dir[3], target[3], eye[3];
+  view_geometry(o, w, ro, k, dir, target, eye);
+  const core::Camera& cam = w.cameras[k];
+  scratch.distance_image.resize(pixels);
+  core::SilhouetteCounts view;
+  core::compare_silhouettes(vo.kind, vl.kind, int(h), int(h), scratch.silhouette, view, scratch.distance_image);
+  core::add_silhouette_counts(w.share.silhouette, view);
+  const core::SilhouetteStats vs = core::silhouette_stats(view);
+  double depth_sum = 0, normal_sum = 0;
+  uint64_t both = 0;
+  for (uint64_t p = 0; p < pixels; ++p) {
+    if (!vo.covered(p) || !vl.covered(p)) continue;
+    const float px = static_cast<float>(cam.pixel_size(vo.depth[p]));
+    const float de = px > 0 ? std::fabs(vo.depth[p] - vl.depth[p]) / px : 0.0f;
+    const float* n0 = &vo.normal[3 * p];
+    const float* n1 = &vl.normal[3 * p];
+    const double c = std::clamp(double(n0[0]) * n1[0] + double(n0[1]) * n1[1] + double(n0[2]) * n1[2], -1.0, 1.0);
+    const float ne = static_cast<float>(std::acos(c) * 180 / M_PI);
+    w.share.depth_err.push_back(de), w.share.normal_err.push_back(ne);
+    depth_sum += de, normal_sum += ne, ++both;
+  }
+  w.out.csv_rows.push_back(fmt_csv_row(k, dir, target, eye, vs, both, both ? depth_sum / both : 0, both ? normal_sum / both : 0));
+  if (k < ro.html_views) {
+    io::HtmlView hv;
+    hv.view = k;
+    hv.resolution = h;
+    hv.original_rgb = shade(vo, cam);
+    hv.lod_rgb = shade(vl, cam);
+    hv.heat_rgb = heat(vo, vl, scratch.distance_image);
+    w.out.views.push_back(std::move(hv));
+  }
+}
+
 // The level's own images, compared with the original's view by view.
 void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint64_t embree_limit, uint64_t chunk_cap) {
   const auto t0 = std::chrono::steady_clock::now();
@@ -1022,18 +1160,11 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
     PhaseTimer t(w.phases, kLevelBuild);
     lod = chunks.scene(0, wire, limit);
   }
-  core::SilhouetteCounts& total = w.share.silhouette;
-  core::SilhouetteScratch scratch;
-  std::vector<float>& depth_err = w.share.depth_err;
-  std::vector<float>& normal_err = w.share.normal_err;
-  std::vector<float> distance_image(pixels);
+  CompareScratch scratch;
   // At most a value a pixel of every view of the share: reserved, so that neither grows by doubling.
-  depth_err.reserve(pixels * (w.view_end - w.view_first)), normal_err.reserve(pixels * (w.view_end - w.view_first));
+  w.share.depth_err.reserve(pixels * (w.view_end - w.view_first)), w.share.normal_err.reserve(pixels * (w.view_end - w.view_first));
   for (unsigned k = w.view_first; k < w.view_end; ++k) {
-    double dir[3], target[3], eye[3];
-    view_geometry(o, w, ro, k, dir, target, eye);
     const core::Camera& cam = w.cameras[k];
-    const core::ViewImage& vo = w.original_views[k];
     core::ViewImage& vl = lod.triangles ? lod_views[0] : lod_views[k];
     if (lod.triangles) {
       const auto lod_scenes = lod.list();
@@ -1042,34 +1173,9 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
       w.out.rays += core::cast_view(lod_scenes, cam, &vl, false, core::project_box(lod.box, cam));
       w.out.ray_seconds += seconds_since(t_r);
     }
-    PhaseTimer compare_time(w.phases, kCompare);
-    core::SilhouetteCounts view;
-    core::compare_silhouettes(vo.kind, vl.kind, int(h), int(h), scratch, view, distance_image);
-    core::add_silhouette_counts(total, view);
-    const core::SilhouetteStats vs = core::silhouette_stats(view);
-    double depth_sum = 0, normal_sum = 0;
-    uint64_t both = 0;
-    for (uint64_t p = 0; p < pixels; ++p) {
-      if (!vo.covered(p) || !vl.covered(p)) continue;
-      const float px = static_cast<float>(cam.pixel_size(vo.depth[p]));
-      const float de = px > 0 ? std::fabs(vo.depth[p] - vl.depth[p]) / px : 0.0f;
-      const float* n0 = &vo.normal[3 * p];
-      const float* n1 = &vl.normal[3 * p];
-      const double c = std::clamp(double(n0[0]) * n1[0] + double(n0[1]) * n1[1] + double(n0[2]) * n1[2], -1.0, 1.0);
-      const float ne = static_cast<float>(std::acos(c) * 180 / M_PI);
-      depth_err.push_back(de), normal_err.push_back(ne);
-      depth_sum += de, normal_sum += ne, ++both;
-    }
-    w.out.csv_rows.push_back(fmt_csv_row(k, dir, target, eye, vs, both, both ? depth_sum / both : 0,
-                                         both ? normal_sum / both : 0));
-    if (k < ro.html_views) {
-      io::HtmlView hv;
-      hv.view = k;
-      hv.resolution = h;
-      hv.original_rgb = shade(vo, cam);
-      hv.lod_rgb = shade(vl, cam);
-      hv.heat_rgb = heat(vo, vl, distance_image);
-      w.out.views.push_back(std::move(hv));
+    {
+      PhaseTimer compare_time(w.phases, kCompare);
+      compare_view(o, w, ro, k, w.original_views[k], vl, scratch);
     }
     w.original_views[k] = {};
     if (!lod.triangles) lod_views[k] = {};
@@ -1077,12 +1183,68 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   w.original_views = {};
   lod_views = {};
   if (!w.sharded) {  // a task hands the counts and errors to the merge
-    view_figures(L, total, depth_err, normal_err);
+    view_figures(L, w.share.silhouette, w.share.depth_err, w.share.normal_err);
     w.share = {};
   }
   L.seconds += seconds_since(t0);
 }
 
+// A task by ranges: its range of the level's primitives, cut into chunks that fit, traced into every view
+// (the level's image of those primitives, written to `views` view by view), and every sample of the
+// original lowered to its distance to them (w.share.original_to_lod).
+void trace_level_range(const Original& o, LevelWork& w, const ReportOptions& ro, uint64_t embree_limit,
+                       uint64_t chunk_cap, stream::ViewHitsWriter& views) {
+  const auto t0 = std::chrono::steady_clock::now();
+  std::optional<PhaseTimer> read_time(std::in_place, w.phases, kLevelRead);
+  const core::LodMesh mesh = io::read_lod_mesh(w.run->levels[w.index].file);
+  read_time.reset();
+  const uint64_t pixels = uint64_t{ro.resolution} * ro.resolution;
+  const WireRadii wire(w.pixel_at(w.distance, ro.resolution), ro.supersample);
+  const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh) + pixels * view_pixel_bytes(!mesh.colors.empty() || !mesh.materials.empty()) * w.views);
+  const auto [first, end] = stream::share_of(primitive_count(mesh), ro.shard_index, ro.shard_count);
+  LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap), first, end);
+  w.level_chunks = std::max<uint64_t>(w.level_chunks, chunks.size());
+  std::vector<core::ViewImage> images(w.views);
+  std::vector<float> d(o.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
+  for (size_t c = 0; c < chunks.size(); ++c) {
+    std::optional<PhaseTimer> build_time(std::in_place, w.phases, kLevelBuild);
+    const LevelScene lod = chunks.scene(c, wire, limit);
+    build_time.reset();
+    const auto lod_scenes = lod.list();
+    {
+      PhaseTimer t(w.phases, kQueriesOnLevel);
+      const auto t_q = std::chrono::steady_clock::now();
+      lower_closest_distances(o.samples.xyz, lod_scenes, d, 0, d.size());
+      w.out.queries += d.size();
+      w.out.query_seconds += seconds_since(t_q);
+    }
+    PhaseTimer t(w.phases, kRaysOnLevel);
+    const auto t_r = std::chrono::steady_clock::now();
+    for (unsigned k = 0; k < w.views; ++k)
+      w.out.rays += core::cast_view(lod_scenes, w.cameras[k], &images[k], true, core::project_box(lod.box, w.cameras[k]));
+    w.out.ray_seconds += seconds_since(t_r);
+  }
+  for (unsigned k = 0; k < w.views; ++k) {
+    views.add(images[k]);
+    images[k] = {};
+  }
+  views.commit();
+  w.share.original_to_lod = std::move(d), w.share.original_faces = o.samples.faces;
+  w.share.targets = o.targets;
+  w.out.level.seconds += seconds_since(t0);
+}
+
+// A task by ranges: the original's images of a level's views (its range of the original), written view by
+// view and freed.
+void write_original_views(LevelWork& w, const std::string& path) {
+  stream::ViewHitsWriter views(path);
+  for (core::ViewImage& image : w.original_views) {
+    views.add(image);
+    image = {};
+  }
+  views.commit();
+  w.original_views = {};
+}
 
 nlohmann::ordered_json stats_json(const ErrorStats& s) {
   return {{"max", s.max}, {"p95", s.p95}, {"mean", s.mean}, {"rms", s.rms}, {"count", s.count}};
@@ -1139,7 +1301,8 @@ nlohmann::ordered_json report_json(const Report& rep, const ReportOptions& ro) {
                       {"rays_per_second", rep.ray_seconds > 0 ? double(rep.rays) / rep.ray_seconds : 0.0},
                       {"point_queries", rep.point_queries}, {"query_seconds", rep.query_seconds},
                       {"queries_per_second", rep.query_seconds > 0 ? double(rep.point_queries) / rep.query_seconds : 0.0},
-                      {"original_chunks", rep.original_chunks}, {"chunk_scenes", rep.chunk_scenes},
+                      {"original_chunks", rep.original_chunks}, {"original_primitives", rep.original_primitives},
+                      {"chunk_scenes", rep.chunk_scenes},
                       {"chunk_embree_peak_bytes", rep.chunk_embree_peak_bytes}, {"chunk_triangles", rep.chunk_triangles},
                       {"level_chunks", rep.level_chunks}, {"chunk_replans", rep.chunk_replans},
                       {"chunk_triangle_bytes", rep.chunk_triangle_bytes}};
@@ -1263,11 +1426,13 @@ void write_report_task(const ReportOptions& ro, const std::vector<RunSpec>& runs
   for (const StageStats& s : rep.stages) stages.push_back(stream::stage_json(s));
   const nlohmann::ordered_json task{
       {"index", ro.shard_index},
-      {"key", {{"count", ro.shard_count}, {"options", report_options_json(ro)}}},
+      {"key", {{"count", ro.shard_count}, {"options", report_options_json(ro)},
+               {"shared_by", every_distance_known(runs) ? "ranges" : "views"}}},
       {"runs", jruns},
       {"performance",
        {{"rays", rep.rays}, {"ray_seconds", rep.ray_seconds}, {"point_queries", rep.point_queries},
-        {"query_seconds", rep.query_seconds}, {"original_chunks", rep.original_chunks}, {"chunk_scenes", rep.chunk_scenes},
+        {"query_seconds", rep.query_seconds}, {"original_chunks", rep.original_chunks},
+        {"original_primitives", rep.original_primitives}, {"chunk_scenes", rep.chunk_scenes},
         {"chunk_embree_peak_bytes", rep.chunk_embree_peak_bytes}, {"chunk_triangles", rep.chunk_triangles},
         {"level_chunks", rep.level_chunks}}},
       {"stages", stages},
@@ -1298,6 +1463,8 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     // lock, taken before the directory is opened (as simplify's tasks do, stream/shard.h).
     const bool sharded = ro.shard_count > 0 || ro.shard_prepare;
     if (sharded) check_report_shard(ro, options);
+    // Tasks share the work by primitive ranges when every level has its distance, else by views.
+    const bool by_ranges = sharded && every_distance_known(runs);
     std::unique_ptr<stream::ShardLock> shard_lock;
     if (sharded) shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
     stream::WorkDir work(options.work_dir);
@@ -1325,6 +1492,10 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         const stream::StoreMeta meta =
             stream::run_ingest_stage(originals[g], store_dir, plan, work, progress, &rep.stages, &scene, &reused,
                                      sharded ? stream::ingest_ranges_dir(work, g) : std::string());
+        if (by_ranges)
+          run_stage(&rep.stages, "samples", [&](StageStats&) {
+            prepare_original_samples(store_dir, meta, ro, original_samples_path(work, g), plan.budget, progress);
+          });
         shard_lock.reset();
         input_bytes += scene.file_bytes;
         if (ro.shard_prepare) continue;
@@ -1335,7 +1506,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
           if (run_original[r] == o.path)
             for (size_t l = 0; l < runs[r].levels.size(); ++l) {
               works.emplace_back();
-              works.back().run = &runs[r], works.back().index = l;
+              works.back().run = &runs[r], works.back().index = l, works.back().ranges = by_ranges;
             }
         // Memory of the measure stage, every part that grows with the options or the scene counted:
         // - held throughout: what the process holds now (resident, mapped pages included), the samples
@@ -1365,7 +1536,10 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         const uint64_t embree_limit = left_of(avail, group_bytes);
         ChunkSizing sizing;
         sizing.room = embree_limit, sizing.cap = options.chunk_bytes, sizing.colored = colored;
-        run_stage(&rep.stages, "load", [&](StageStats&) { load_original(store_dir, meta, ro, sizing, progress, &o); });
+        run_stage(&rep.stages, "load", [&](StageStats&) {
+          if (by_ranges) load_original_range(store_dir, meta, ro, sizing, original_samples_path(work, g), progress, &o);
+          else load_original(store_dir, meta, ro, sizing, progress, &o);
+        });
         PhaseTimes phases;
         run_stage(&rep.stages, "measure", [&](StageStats&) {
           for (LevelWork& w : works) w.phases = &phases, begin_level(o, w, ro, embree_limit, options.chunk_bytes);
@@ -1389,13 +1563,25 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
             for (LevelWork* w : pending) finish_hausdorff(o, *w, ro);
             pending.clear();
             for (LevelWork* w : group) {
+              const size_t r = static_cast<size_t>(w->run - runs.data());
+              if (by_ranges) write_original_views(*w, stream::report_views_path(ro.output_dir, ro.shard_index, r, w->index, false));
+            }
+            for (LevelWork* w : group) {
               // A single chunk stays built between passes, unless the level's scene needs its room.
               if (cache && cached_bytes(*cache) + level_scene_bytes(w->out.level, sizing) > embree_limit) cache.reset();
-              finish_level(o, *w, ro, left_of(embree_limit, cache ? cached_bytes(*cache) : 0), options.chunk_bytes);
+              const uint64_t limit = left_of(embree_limit, cache ? cached_bytes(*cache) : 0);
+              if (by_ranges) {
+                const size_t r = static_cast<size_t>(w->run - runs.data());
+                stream::ViewHitsWriter views(stream::report_views_path(ro.output_dir, ro.shard_index, r, w->index, true));
+                trace_level_range(o, *w, ro, limit, options.chunk_bytes, views);
+              } else {
+                finish_level(o, *w, ro, limit, options.chunk_bytes);
+              }
             }
           }
           rep.chunk_scenes += totals.chunks;
           rep.original_chunks += o.chunks->chunks().size();
+          for (const stream::StoreChunk& c : o.chunks->chunks()) rep.original_primitives += c.end - c.first;
             rep.chunk_replans += totals.replans;
           rep.chunk_triangle_bytes = std::max(rep.chunk_triangle_bytes, sizing.embree_triangle);
           for (int p = 0; p < kPhaseCount; ++p) {
@@ -1465,6 +1651,81 @@ bool has_report_shards(const std::string& output_dir) {
   return fs::is_directory(stream::report_shards_dir(output_dir), ec);
 }
 
+// The merge of one level of a report by ranges (stream/report_shard.h): each sample's least distance over the
+// tasks, then view by view the tasks' images composited in task order (the images of the original and of the
+// level, as one machine casts them chunk by chunk) and compared as one machine compares them. Sets w's level
+// figures, CSV rows (w.out.csv_rows) and renders (`renders`).
+void merge_level_ranges(Original& o, LevelWork& w, const ReportOptions& ro, const std::string& output_dir,
+                        const std::vector<std::unique_ptr<stream::ReportShareReader>>& readers, size_t run,
+                        std::vector<io::HtmlView>& renders) {
+  ReportLevel& L = w.out.level;
+  std::vector<float> from_original;
+  uint64_t original_faces = 0;
+  stream::ReportLevelShare share;
+  const auto lower = [&](std::vector<float>& into, const std::vector<float>& d, const std::string& path) {
+    if (into.size() != d.size()) fail(Status::io_error, path + ": a report task's shares do not hold every sample");
+    for (size_t i = 0; i < d.size(); ++i) into[i] = std::min(into[i], d[i]);
+  };
+  for (size_t t = 0; t < readers.size(); ++t) {
+    readers[t]->next(&share);
+    const std::string path = stream::report_levels_path(output_dir, static_cast<unsigned>(t));
+    original_faces = share.original_faces, w.samples.faces = share.lod_faces;
+    if (t == 0) {
+      from_original = std::move(share.original_to_lod), w.to_original = std::move(share.lod_to_original);
+      o.targets = std::move(share.targets);
+    } else {
+      lower(from_original, share.original_to_lod, path);
+      lower(w.to_original, share.lod_to_original, path);
+    }
+  }
+  L.original_to_lod = hausdorff_stats(from_original, original_faces);
+  from_original = {};
+  finish_hausdorff(o, w, ro);
+  w.views = std::min<unsigned>(ro.views, static_cast<unsigned>(o.targets.size() / 3));
+  begin_views(o, w, ro);
+  std::vector<std::unique_ptr<stream::ViewHitsReader>> of_original, of_level;
+  for (size_t t = 0; t < readers.size(); ++t) {
+    const unsigned task = static_cast<unsigned>(t);
+    of_original.push_back(std::make_unique<stream::ViewHitsReader>(stream::report_views_path(output_dir, task, run, w.index, false)));
+    of_level.push_back(std::make_unique<stream::ViewHitsReader>(stream::report_views_path(output_dir, task, run, w.index, true)));
+  }
+  CompareScratch scratch;
+  core::ViewImage vo, vl;
+  for (unsigned k = 0; k < w.views; ++k) {
+    core::clear_view(&vo, ro.resolution), core::clear_view(&vl, ro.resolution);
+    for (size_t t = 0; t < readers.size(); ++t) of_original[t]->composite_next(&vo), of_level[t]->composite_next(&vl);
+    compare_view(o, w, ro, k, vo, vl, scratch);
+  }
+  view_figures(L, w.share.silhouette, w.share.depth_err, w.share.normal_err);
+  renders = std::move(w.out.views);
+}
+
+// The merge of one level of a report by views: every array in task order, one machine's sample and view
+// order, and the figures formed from them. Sets w's level figures, CSV rows and renders, as
+// merge_level_ranges.
+void merge_level_views(const Original& o, LevelWork& w, const ReportOptions& ro,
+                       const std::vector<std::unique_ptr<stream::ReportShareReader>>& readers,
+                       std::vector<io::HtmlView>& renders) {
+  ReportLevel& L = w.out.level;
+  std::vector<float> from_original;
+  uint64_t original_faces = 0;
+  stream::ReportLevelShare share;
+  for (const auto& reader : readers) {
+    reader->next(&share);
+    original_faces = share.original_faces, w.samples.faces = share.lod_faces;
+    from_original.insert(from_original.end(), share.original_to_lod.begin(), share.original_to_lod.end());
+    w.to_original.insert(w.to_original.end(), share.lod_to_original.begin(), share.lod_to_original.end());
+    core::add_silhouette_counts(w.share.silhouette, share.silhouette);
+    w.share.depth_err.insert(w.share.depth_err.end(), share.depth_err.begin(), share.depth_err.end());
+    w.share.normal_err.insert(w.share.normal_err.end(), share.normal_err.begin(), share.normal_err.end());
+    w.out.csv_rows.insert(w.out.csv_rows.end(), share.csv_rows.begin(), share.csv_rows.end());
+    for (io::HtmlView& v : share.views) renders.push_back(std::move(v));
+  }
+  L.original_to_lod = hausdorff_stats(from_original, original_faces);
+  finish_hausdorff(o, w, ro);
+  view_figures(L, w.share.silhouette, w.share.depth_err, w.share.normal_err);
+}
+
 // The merge of a sharded report (stream/report_shard.h): every level's arrays are the tasks' shares in task
 // order, which is one machine's sample and view order, and its figures are formed by the same functions.
 Result merge_report(const std::string& output_dir, const Options& options, Report* out) {
@@ -1476,6 +1737,7 @@ Result merge_report(const std::string& output_dir, const Options& options, Repor
     const unsigned count = static_cast<unsigned>(tasks.size());
     ReportOptions ro = report_options_from_json(tasks[0].at("key").at("options"));
     ro.output_dir = output_dir;
+    const bool by_ranges = tasks[0].at("key").value("shared_by", std::string("views")) == "ranges";
     stream::remove_summary(output_dir + "/report.json");
     const ordered_json& jruns = tasks[0].at("runs");
     std::vector<RunSpec> runs(jruns.size());
@@ -1518,30 +1780,11 @@ Result merge_report(const std::string& output_dir, const Options& options, Repor
           w.tan_half = std::tan(run.fov_degrees * M_PI / 360.0);
           w.distance_known = run.levels[l].switch_distance > 0;
           w.distance = w.distance_known ? run.levels[l].switch_distance : 1.0;
-          // Every array in task order: one machine's sample and view order.
-          std::vector<float> from_original;
-          core::SilhouetteCounts silhouette;
-          std::vector<float> depth_err, normal_err;
-          std::vector<std::string> rows;
-          uint64_t original_faces = 0;
-          stream::ReportLevelShare share;
-          for (unsigned t = 0; t < count; ++t) {
-            readers[t]->next(&share);
-            original_faces = share.original_faces, w.samples.faces = share.lod_faces;
-            from_original.insert(from_original.end(), share.original_to_lod.begin(), share.original_to_lod.end());
-            w.to_original.insert(w.to_original.end(), share.lod_to_original.begin(), share.lod_to_original.end());
-            core::add_silhouette_counts(silhouette, share.silhouette);
-            depth_err.insert(depth_err.end(), share.depth_err.begin(), share.depth_err.end());
-            normal_err.insert(normal_err.end(), share.normal_err.begin(), share.normal_err.end());
-            rows.insert(rows.end(), share.csv_rows.begin(), share.csv_rows.end());
-            for (io::HtmlView& v : share.views) views[r][l].push_back(std::move(v));
-          }
-          L.original_to_lod = hausdorff_stats(from_original, original_faces);
-          finish_hausdorff(o, w, ro);
-          view_figures(L, silhouette, depth_err, normal_err);
+          if (by_ranges) merge_level_ranges(o, w, ro, output_dir, readers, r, views[r][l]);
+          else merge_level_views(o, w, ro, readers, views[r][l]);
           L.csv = runs.size() > 1 ? fmt::format("run{}-lod{}.csv", r, l) : fmt::format("lod{}.csv", l);
           std::string csv = kCsvHeader;
-          for (const std::string& row : rows) csv += row;
+          for (const std::string& row : w.out.csv_rows) csv += row;
           csvs[r][l] = std::move(csv);
           rr.levels[l] = std::move(L);
           progress.report("merge", double(++done) / double(total_levels));
@@ -1563,13 +1806,15 @@ Result merge_report(const std::string& output_dir, const Options& options, Repor
       rep.rays += p.at("rays").get<uint64_t>(), rep.ray_seconds += p.at("ray_seconds").get<double>();
       rep.point_queries += p.at("point_queries").get<uint64_t>(), rep.query_seconds += p.at("query_seconds").get<double>();
       rep.original_chunks = std::max(rep.original_chunks, p.at("original_chunks").get<uint64_t>());
+      rep.original_primitives += p.at("original_primitives").get<uint64_t>();
       rep.chunk_scenes += p.at("chunk_scenes").get<uint64_t>();
       if (p.at("chunk_embree_peak_bytes").get<uint64_t>() > rep.chunk_embree_peak_bytes)
         rep.chunk_embree_peak_bytes = p.at("chunk_embree_peak_bytes"), rep.chunk_triangles = p.at("chunk_triangles");
       rep.level_chunks = std::max(rep.level_chunks, p.at("level_chunks").get<uint64_t>());
       rep.work_dir.bytes = std::max(rep.work_dir.bytes, tj.at("work_dir").at("bytes").get<uint64_t>());
       rep.work_dir.input_bytes = tj.at("work_dir").at("input_bytes");
-      shards.push_back({{"index", t}, {"stages", tj.at("stages")}, {"seconds", tj.at("seconds")}, {"peak_rss_bytes", tj.at("peak_rss_bytes")}});
+      shards.push_back({{"index", t}, {"stages", tj.at("stages")}, {"seconds", tj.at("seconds")}, {"peak_rss_bytes", tj.at("peak_rss_bytes")},
+                        {"original_primitives", p.at("original_primitives")}});
     }
     rep.seconds = seconds_since(t0);
     rep.peak_rss_bytes = stream::peak_rss_bytes();

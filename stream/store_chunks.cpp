@@ -53,11 +53,14 @@ void StoreChunks::for_ids(uint64_t first, uint64_t end,
   }
 }
 
-void StoreChunks::plan(const ChunkCosts& costs, uint64_t bytes) {
+void StoreChunks::plan(const ChunkCosts& costs, uint64_t bytes) { plan_range(costs, bytes, 0, meta_.primitives()); }
+
+void StoreChunks::plan_range(const ChunkCosts& costs, uint64_t bytes, uint64_t first, uint64_t end) {
   chunks_.clear();
   used_.assign((meta_.vertices + 63) / 64, 0);
   used_count_ = 0;
-  cut(0, costs, bytes, true);
+  end_ = std::min(end, meta_.primitives());
+  cut(std::min(first, end_), costs, bytes, true);
 }
 
 void StoreChunks::replan(size_t from, const ChunkCosts& costs, uint64_t bytes) {
@@ -73,7 +76,7 @@ void StoreChunks::cut(uint64_t from, const ChunkCosts& costs, uint64_t bytes, bo
   StoreChunk chunk{from, from, 0};
   double cost = 0;
   const double prim_cost[4] = {0, costs.point, costs.line, costs.triangle};  // by arity
-  for_ids(from, meta_.primitives(), [&](uint64_t first, int arity, std::span<const uint32_t> ids) {
+  for_ids(from, end_, [&](uint64_t first, int arity, std::span<const uint32_t> ids) {
     for (size_t i = 0; i < ids.size(); i += static_cast<size_t>(arity)) {
       const uint32_t* p = ids.data() + i;
       int fresh = 0;
@@ -98,7 +101,7 @@ void StoreChunks::cut(uint64_t from, const ChunkCosts& costs, uint64_t bytes, bo
       }
     }
   });
-  chunk.end = meta_.primitives();
+  chunk.end = end_;
   if (chunk.end > chunk.first) chunks_.push_back(chunk);
 }
 

@@ -45,6 +45,9 @@ class StoreChunks {
   // Cuts the store into chunks of at most `bytes` by `costs` (at least one primitive each). Also marks
   // every vertex any primitive uses (used()).
   void plan(const ChunkCosts& costs, uint64_t bytes);
+  // The same over the primitives [first, end) only (a report task's range, stream/report_shard.h): the
+  // chunks cover that range, and used() marks the vertices its primitives use.
+  void plan_range(const ChunkCosts& costs, uint64_t bytes, uint64_t first, uint64_t end);
   // Cuts again, from chunk `from` on (the chunks before it stay), by other costs or another size: for a
   // caller that measured what a chunk really takes. One pass over the ids from there.
   void replan(size_t from, const ChunkCosts& costs, uint64_t bytes);
@@ -72,6 +75,7 @@ class StoreChunks {
   std::string dir_;
   StoreMeta meta_;
   std::vector<StoreChunk> chunks_;
+  uint64_t end_ = 0;            // the planned range's end (global id)
   std::vector<uint64_t> used_;  // bit per vertex
   uint64_t used_count_ = 0;
   // Per kind (triangle, line, point), the store's object runs, read by the first chunk that needs them

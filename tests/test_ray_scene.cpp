@@ -496,6 +496,76 @@ TEST(RaySceneChunks, PartsTracedInOrderGiveTheWholeImage) {
   }
 }
 
+// Sort-last: the same scene (the doubled wavy grid, and thin segments over it, thinner than a pixel so that
+// the k × k rays find them) cut into parts that each hold a range of the primitives in key order
+// (triangles, then segments), every part cast into a fresh image and the images composited in part order,
+// is the whole scene's image bit for bit, with 3 × 3 rays a pixel and with one; and so is the accumulated
+// cast of the parts in order. A part that sees nothing changes nothing.
+TEST(RaySceneChunks, PartsCastAloneThenCompositedGiveTheWholeImage) {
+  Mesh m = grid_mesh();
+  const size_t n = m.triangles.size();
+  for (size_t t = 0; t < n; t += 3) m.triangles.insert(m.triangles.end(), {m.triangles[t + 2], m.triangles[t], m.triangles[t + 1]});
+  for (uint32_t i = 0; i < 40; ++i) {
+    const uint32_t a = m.add(0.3 + 0.06 * i, 0.2, 0.2 + 0.001 * i), b = m.add(0.5 + 0.05 * i, 2.9, 0.15);
+    m.edges.insert(m.edges.end(), {a, b});
+    m.radius.push_back(0.0008f + 0.0001f * float(i % 5));
+  }
+  for (uint32_t i = 0; i < 40; ++i) m.edges.insert(m.edges.end(), {m.edges[2 * i + 1], m.edges[2 * i]}), m.radius.push_back(m.radius[i]);
+  const size_t triangles = m.triangles.size() / 3, segments = m.edges.size() / 2;
+  // A part: triangles [t0, t1) and segments [s0, s1), each kind in its own scene (the key order).
+  struct Part {
+    std::unique_ptr<RayScene> triangles, wire;
+  };
+  auto part = [&](size_t t0, size_t t1, size_t s0, size_t s1) {
+    Part p{std::make_unique<RayScene>(), std::make_unique<RayScene>()};
+    p.triangles->add_triangles(m.xyz, std::span<const uint32_t>(m.triangles.data() + 3 * t0, 3 * (t1 - t0)));
+    p.triangles->commit();
+    p.wire->add_segments(m.xyz, std::span<const uint32_t>(m.edges.data() + 2 * s0, 2 * (s1 - s0)),
+                         std::span<const float>(m.radius.data() + s0, s1 - s0));
+    p.wire->commit();
+    return p;
+  };
+  const Part whole = part(0, triangles, 0, segments);
+  // Primitive ranges [0, 1/3), [1/3, 1/3 + 10 segments), ..., the last all segments; one empty part.
+  const size_t cuts[][4] = {{0, triangles / 3, 0, 0}, {triangles / 3, triangles, 0, 10}, {triangles, triangles, 10, 10},
+                            {triangles, triangles, 10, 45}, {triangles, triangles, 45, segments}};
+  std::vector<Part> parts;
+  for (const auto& c : cuts) parts.push_back(part(c[0], c[1], c[2], c[3]));
+  for (unsigned k : {3u, 1u}) {
+    uint64_t sub = 0;  // pixels covered by k × k rays only, over both views
+    for (const auto& [eye, target] : {std::pair{std::array<double, 3>{1.6, 1.5, 2.0}, std::array<double, 3>{1.6, 1.6, 0.0}},
+                                      std::pair{std::array<double, 3>{-1.0, -0.5, 0.8}, std::array<double, 3>{1.5, 1.5, 0.0}}}) {
+      SCOPED_TRACE("supersample " + std::to_string(k));
+      core::Camera cam = core::look_at(eye.data(), target.data(), 60, 128);
+      cam.supersample = k;
+      core::ViewImage a, accumulated, composited;
+      const RayScene* w[] = {whole.triangles.get(), whole.wire.get()};
+      core::cast_view(w, cam, &a);
+      core::clear_view(&composited, 128);
+      for (const Part& p : parts) {
+        const RayScene* one[] = {p.triangles.get(), p.wire.get()};
+        core::cast_view(one, cam, &accumulated, true);
+        core::ViewImage alone;
+        core::cast_view(one, cam, &alone);
+        core::composite_view(&composited, alone);
+      }
+      uint64_t covered = 0, lines = 0;
+      for (uint64_t p = 0; p < a.kind.size(); ++p)
+        covered += a.kind[p] != 0, lines += a.kind[p] == uint8_t(core::PrimitiveKind::edge), sub += a.kind[p] && !a.centre[p];
+      EXPECT_GT(covered, 1000u);
+      EXPECT_GT(lines, 20u);
+      for (const core::ViewImage* b : {&accumulated, &composited}) {
+        SCOPED_TRACE(b == &accumulated ? "accumulated" : "composited");
+        EXPECT_EQ(a.kind, b->kind);
+        EXPECT_EQ(a.centre, b->centre);
+        EXPECT_EQ(0, std::memcmp(a.depth.data(), b->depth.data(), a.depth.size() * sizeof(float)));
+        EXPECT_EQ(0, std::memcmp(a.normal.data(), b->normal.data(), a.normal.size() * sizeof(float)));
+      }
+    }
+    if (k == 3) EXPECT_GT(sub, 20u) << "pixels covered by k × k rays only";
+  }
+}
+
 // ---------------------------------------------------------------------------------------------------------
 // look_at, fibonacci_direction
 

@@ -1007,12 +1007,13 @@ std::map<std::string, std::string> report_files(const std::string& dir) {
   return f;
 }
 
-// Runs report tasks `tasks` of `count` on `work` (then merge_report when `merge_after`).
+// Runs report tasks `tasks` of `count` on `work` (then merge_report when `merge_after`), each with `base`'s
+// options but its work directory.
 Result run_report_tasks(ReportOptions ro, const std::string& work, unsigned count, const std::vector<unsigned>& tasks,
-                        bool merge_after, Report* merged) {
+                        bool merge_after, Report* merged, const Options& base = {}) {
   for (unsigned i : tasks) {
     ro.shard_index = i, ro.shard_count = count;
-    Options o;
+    Options o = base;
     o.work_dir = work;
     o.check_disk_space = false;
     Report r;
@@ -1057,8 +1058,95 @@ TEST(ReportShard, AnyTaskCountGivesOneMachinesReport) {
     const nlohmann::json j = nlohmann::json::parse(slurp(rn.output_dir + "/report.json"));
     EXPECT_EQ(j["shards"]["count"], n);
     EXPECT_EQ(j["shards"]["tasks"].size(), n);
-    EXPECT_EQ(j["performance"]["rays"], nlohmann::json::parse(slurp(dir.file("one/report.json")))["performance"]["rays"])
-        << "every ray is cast by exactly one task";
+    // The tasks share the work by primitive ranges (every level has its distance): each traces its N-th of
+    // the original, none all of it.
+    const nlohmann::json one_json = nlohmann::json::parse(slurp(dir.file("one/report.json")));
+    EXPECT_EQ(j["performance"]["original_primitives"], one_json["performance"]["original_primitives"])
+        << "every primitive of the original is traced by exactly one task";
+    const uint64_t whole = one_json["performance"]["original_primitives"];
+    ASSERT_GT(whole, 0u);
+    for (const auto& t : j["shards"]["tasks"]) {
+      const uint64_t mine = t["original_primitives"];
+      EXPECT_GE(mine, whole / n);
+      EXPECT_LE(mine, whole / n + 1);
+    }
+  }
+}
+
+// An OBJ scene of boxes in two materials, polylines (`l`) and points (`p`) among them: a report's
+// original with lines and points of its own, drawn one pixel wide, and with colours.
+std::string lines_and_points_scene(const TempDir& dir) {
+  std::string mtl = "newmtl red\nKd 0.9 0.1 0.1\nnewmtl blue\nKd 0.1 0.2 0.9\n", obj = "mtllib scene.mtl\n";
+  uint64_t v = 0;
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) {
+      const double x = i * 1.5, y = j * 1.5, h = 0.5 + 0.25 * ((i * 7 + j * 3) % 5);
+      obj += fmt::format("o box{}_{}\nusemtl {}\n", i, j, (i + j) % 2 ? "red" : "blue");
+      for (int c = 0; c < 8; ++c)
+        obj += fmt::format("v {} {} {}\n", x + (c & 1), y + (c >> 1 & 1), c >> 2 ? h : 0.0);
+      const int f[6][4] = {{1, 3, 4, 2}, {5, 6, 8, 7}, {1, 2, 6, 5}, {3, 7, 8, 4}, {1, 5, 7, 3}, {2, 4, 8, 6}};
+      for (const auto& q : f) obj += fmt::format("f {} {} {} {}\n", v + q[0], v + q[1], v + q[2], v + q[3]);
+      v += 8;
+    }
+  obj += "o wires\nusemtl red\n";
+  for (int r = 0; r < 5; ++r) {
+    for (int k = 0; k < 12; ++k) obj += fmt::format("v {} {} {}\n", 0.2 + 0.75 * k, 1.25 + 1.5 * r, 0.05 + 0.3 * (k % 3));
+    obj += "l";
+    for (int k = 1; k <= 12; ++k) obj += fmt::format(" {}", v + k);
+    obj += "\n";
+    v += 12;
+  }
+  obj += "o marks\nusemtl blue\n";
+  for (int k = 0; k < 9; ++k) obj += fmt::format("v {} {} 1.6\np {}\n", 1.25 + k, 0.6 + 0.9 * k, ++v);
+  const std::string path = dir.file("scene.obj");
+  std::ofstream(dir.file("scene.mtl")) << mtl;
+  std::ofstream(path) << obj;
+  return path;
+}
+
+// Tasks by primitive ranges where ranges cut chunks of both the original and the finest level (a tiny
+// --chunk-bytes), an original with lines, points and materials, 3 × 3 rays a pixel, and more tasks than a
+// coarse level has primitives (empty ranges): the tasks' images composited and distances lowered give one
+// machine's report, byte for byte, and one machine's own chunked report.
+TEST(ReportShard, PrimitiveRangesThroughChunksLinesAndColoursGiveOneMachinesReport) {
+  TempDir dir;
+  SimplifyOptions so;
+  so.output_dir = dir.file("lods");
+  so.levels = 3;
+  SimplifyReport sr;
+  const Result s = simplify(lines_and_points_scene(dir), so, shared_work(dir), &sr);
+  ASSERT_TRUE(s.ok()) << s.message;
+  ASSERT_GT(sr.levels.size(), 2u);
+  ReportOptions ro = small_report(dir.file("one"));
+  ro.runs = {so.output_dir};
+  ro.resolution = 64;
+  Report one;
+  Result r = report(ro, shared_work(dir), &one);
+  ASSERT_TRUE(r.ok()) << r.message;
+  Options chunked = shared_work(dir);
+  chunked.chunk_bytes = 8 << 10;
+  ReportOptions rc = ro;
+  rc.output_dir = dir.file("one-chunked");
+  Report one_chunked;
+  r = report(rc, chunked, &one_chunked);
+  ASSERT_TRUE(r.ok()) << r.message;
+  EXPECT_GE(one_chunked.original_chunks, 3u);
+  EXPECT_GE(one_chunked.level_chunks, 2u);
+  const auto want = report_files(dir.file("one"));
+  EXPECT_EQ(report_files(rc.output_dir), want) << "one machine's chunks change nothing";
+  const nlohmann::json levels = nlohmann::json::parse(slurp(dir.file("one/report.json")))["runs"][0]["levels"];
+  EXPECT_LT(levels.back()["triangles"].get<uint64_t>() + levels.back()["edges"].get<uint64_t>() + levels.back()["points"].get<uint64_t>(),
+            40u) << "a coarse level of fewer primitives than tasks";
+  for (unsigned n : {2u, 5u, 40u}) {
+    SCOPED_TRACE("tasks " + std::to_string(n));
+    ReportOptions rn = ro;
+    rn.output_dir = dir.file("ranges-" + std::to_string(n));
+    std::vector<unsigned> all;
+    for (unsigned i = 0; i < n; ++i) all.push_back(i);
+    Report merged;
+    r = run_report_tasks(rn, dir.file("work"), n, all, true, &merged, chunked);
+    ASSERT_TRUE(r.ok()) << r.message;
+    EXPECT_EQ(report_files(rn.output_dir), want);
   }
 }
 

@@ -1,7 +1,9 @@
 #!/bin/bash
 # `report` as N tasks against one machine's report, on one machine (tasks one after another, no
-# scheduler): wall and CPU seconds of one machine's measure, of each task's stages and of the merge, and
-# whether the outputs are one machine's bytes. CPU seconds are the figure to quote on a busy machine.
+# scheduler): wall and CPU seconds of one machine's measure, of each task's stages and of the merge, the
+# primitives of the original each task traced, the bytes the tasks hand to the merge, the slowest task
+# plus the merge (what N nodes would wait for), and whether the outputs are one machine's bytes. CPU
+# seconds are the figure to quote on a busy machine. The levels are made once (kept in WORKDIR/lods).
 # Usage: tools/bench_report_shards.sh LODSTREAM SCENE WORKDIR [N] [report options...]
 set -euo pipefail
 cli=$1 scene=$2 dir=$3 n=${4:-3}
@@ -9,29 +11,47 @@ shift 4 || shift $#
 opts=("$@")
 [ ${#opts[@]} -gt 0 ] || opts=(--views 8 --resolution 256 --samples 100000)
 mkdir -p "$dir"
-"$cli" simplify "$scene" -o "$dir/lods" --work "$dir/work" --no-space-check --progress none >/dev/null
+[ -f "$dir/lods/manifest.json" ] ||
+  "$cli" simplify "$scene" -o "$dir/lods" --work "$dir/work" --no-space-check --progress none >/dev/null
+rm -rf "$dir/one" "$dir/sharded"
 "$cli" report "$dir/lods" -o "$dir/one" --work "$dir/work" --no-space-check --progress none "${opts[@]}" >/dev/null
+# A fresh work directory for the tasks' shared stages (the store is linked, not ingested again).
+rm -rf "$dir/task-work" && mkdir -p "$dir/task-work"
+cp -al "$dir/work/store" "$dir/task-work/store"
+handed=0
 for ((i = 0; i < n; i++)); do
-  "$cli" report "$dir/lods" -o "$dir/sharded" --work "$dir/work" --shard "$i/$n" --no-space-check --progress none "${opts[@]}" >/dev/null
+  "$cli" report "$dir/lods" -o "$dir/sharded" --work "$dir/task-work" --shard "$i/$n" --no-space-check --progress none "${opts[@]}" >/dev/null
 done
+handed=$(du -sb "$dir/sharded/shards" | cut -f1)
 "$cli" merge "$dir/sharded" --progress none >/dev/null
-python3 - "$dir/one" "$dir/sharded" "$n" <<'PY'
+python3 - "$dir/one" "$dir/sharded" "$n" "$handed" <<'PY'
 import filecmp, json, os, sys
-one, sharded, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
+one, sharded, n, handed = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
 a, b = (json.load(open(os.path.join(d, "report.json"))) for d in (one, sharded))
-def stage(j, name):
-    return next(((s["seconds"], s.get("cpu_seconds", 0)) for s in j["stages"] if s["name"] == name), (0, 0))
-w, c = stage(a, "measure")
-print("one machine: %.2f s, measure %.2f s wall %.2f s cpu" % (a["seconds"], w, c))
+def stage(stages, name):
+    return next(((s["seconds"], s.get("cpu_seconds", 0)) for s in stages if s["name"] == name), (0, 0))
+w, c = stage(a["stages"], "measure")
+lw, lc = stage(a["stages"], "load")
+prims = a["performance"]["original_primitives"]
+print("one machine: %.2f s; load %.2f s wall %.2f s cpu; measure %.2f s wall %.2f s cpu; %d chunk scenes of the original (%d chunks), peak %.0f MiB"
+      % (a["seconds"], lw, lc, w, c, a["performance"]["chunk_scenes"], a["performance"]["original_chunks"], a["peak_rss_bytes"] / 2**20))
 tasks = b["shards"]["tasks"]
+slowest, total_cpu = 0, 0
 for t in tasks:
-    m = next(s for s in t["stages"] if s["name"] == "measure")
-    l = next(s for s in t["stages"] if s["name"] == "load")
-    print("task %d of %d: %.2f s, load %.2f s cpu %.2f s, measure %.2f s wall %.2f s cpu (%.0f%% of one machine's measure cpu)"
-          % (t["index"], n, t["seconds"], l["seconds"], l.get("cpu_seconds", 0), m["seconds"], m.get("cpu_seconds", 0),
-             100 * m.get("cpu_seconds", 0) / c if c else 0))
-mw, mc = stage(b, "merge")
-print("merge: %.2f s (merge stage %.2f s cpu %.2f s)" % (b["seconds"], mw, mc))
+    mw, mc = stage(t["stages"], "measure")
+    tl, tlc = stage(t["stages"], "load")
+    sw, sc = stage(t["stages"], "samples")
+    slowest = max(slowest, t["seconds"])
+    total_cpu += mc + tlc + sc
+    print("task %d of %d: %.2f s, samples %.2f s, load %.2f s cpu %.2f s, measure %.2f s wall %.2f s cpu (%.0f%% of one machine's measure cpu), "
+          "%d of %d primitives traced, peak %.0f MiB"
+          % (t["index"], n, t["seconds"], sw, tl, tlc, mw, mc, 100 * mc / c if c else 0, t.get("original_primitives", prims), prims,
+             t["peak_rss_bytes"] / 2**20))
+mw, mc = stage(b["stages"], "merge")
+print("merge: %.2f s (merge stage %.2f s cpu %.2f s), peak %.0f MiB; the tasks handed it %.1f MB"
+      % (b["seconds"], mw, mc, b["peak_rss_bytes"] / 2**20, handed / 1e6))
+print("slowest task + merge: %.2f s against one machine's %.2f s; tasks' load, samples and measure cpu summed: %.2f s against %.2f s"
+      % (slowest + b["seconds"], a["seconds"], total_cpu, c + lc))
 files = sorted(f for f in os.listdir(one) if f != "report.json")
 same = all(filecmp.cmp(os.path.join(one, f), os.path.join(sharded, f), shallow=False) for f in files)
 strip = lambda j: {k: v for k, v in j.items() if k not in ("stages", "seconds", "peak_rss_bytes", "work_dir", "performance", "shards")}

@@ -316,9 +316,11 @@ struct ReportOptions {
   unsigned supersample = 3;
   // Past one machine (README "Running on a cluster"): with shard_count N > 0 this call is task shard_index
   // (0 <= I < N) over a shared work directory (Options::work_dir, required): it ingests the originals
-  // unless another task did (under the work directory's lock), measures the I-th N-th of every level's
-  // views and of its Hausdorff samples in each direction, and writes them to output_dir/shards/report/;
-  // merge_report() then writes report.json, the CSVs and report.html. shard_prepare: ingest only.
+  // and draws their samples unless another task did (under the work directory's lock), then, when every
+  // level has its switching distance, traces the I-th N-th of every original's and every level's
+  // primitives for every view and sample (else the I-th N-th of every level's views and samples against
+  // the whole original), and writes what it measured to output_dir/shards/report/; merge_report() then
+  // writes report.json, the CSVs and report.html. shard_prepare: the shared stages only.
   unsigned shard_index = 0, shard_count = 0;
   bool shard_prepare = false;
   // With ingest_count N > 0: only parse byte range ingest_index of N of every original into the work
@@ -375,6 +377,7 @@ struct Report {
   uint64_t point_queries = 0;
   double query_seconds = 0;
   uint64_t original_chunks = 0;          // chunks the originals were cut into to fit --memory (1 = in core)
+  uint64_t original_primitives = 0;      // primitives of the originals traced (a task by ranges: of its ranges)
   uint64_t chunk_scenes = 0;             // chunk scenes built (a chunk is built once per pass over them)
   uint64_t chunk_embree_peak_bytes = 0;  // the largest chunk scene's peak by Embree's memory monitor
   uint64_t chunk_triangles = 0;          // triangles of that chunk
