@@ -220,11 +220,13 @@ void check_simplify_space(const std::string& input, const SimplifyOptions& o, co
   check_free_space(needs);
 }
 
-void check_report_space(std::span<const std::string> originals, const std::string& work_dir) {
+void check_report_space(std::span<const std::string> originals, const std::string& work_dir,
+                        const std::string& output_dir, uint64_t task_bytes) {
   uint64_t bytes = 0;
   for (const std::string& o : originals) bytes += report_work_bytes(guess_input_counts(o));
-  const SpaceNeed need{work_dir, "work directory", beyond(bytes, directory_bytes(work_dir))};
-  check_free_space(std::span(&need, 1));
+  const SpaceNeed needs[2] = {{work_dir, "work directory", beyond(bytes, directory_bytes(work_dir))},
+                              {output_dir, "report task's shares", task_bytes}};
+  check_free_space(std::span(needs, task_bytes ? 2 : 1));
 }
 
 nlohmann::ordered_json work_dir_json(const WorkDirUsage& u) {

@@ -50,7 +50,9 @@ void check_info_space(const std::string& input, const std::string& work_dir);
 // sharded: a task of a sharded run (its work directory may hold the records' positions in weight order).
 void check_simplify_space(const std::string& input, const SimplifyOptions& options, const std::string& work_dir,
                           bool sharded);
-void check_report_space(std::span<const std::string> originals, const std::string& work_dir);
+// task_bytes: what a report task hands the merge in its output directory (0 for one machine).
+void check_report_space(std::span<const std::string> originals, const std::string& work_dir,
+                        const std::string& output_dir, uint64_t task_bytes);
 
 // {"path", "bytes", "input_bytes", "ratio", "entries": {name: bytes}}, for the JSON files jobs write.
 nlohmann::ordered_json work_dir_json(const WorkDirUsage& usage);

@@ -350,6 +350,8 @@ struct Original {
   Samples samples;              // Metro-style samples
   std::vector<float> targets;   // view targets
   double diagonal = 0;
+  // A task by ranges: its samples as points (their distances' bounds, distance_bounds).
+  std::unique_ptr<core::RayScene> sample_points;
 };
 
 // Draws the original's samples and view targets from `chunks` (planned over the whole store): two passes over
@@ -800,6 +802,40 @@ void prepare_original_samples(const std::string& store_dir, const stream::StoreM
   stream::write_original_samples(path, key, out);
 }
 
+// Samples as a scene of points (closest_distance: to the nearest one).
+std::unique_ptr<core::RayScene> sample_point_scene(const std::vector<float>& xyz) {
+  auto scene = std::make_unique<core::RayScene>();
+  std::vector<uint32_t> ids(xyz.size() / 3);
+  std::iota(ids.begin(), ids.end(), 0u);
+  scene->add_points(xyz, ids, 1e-30f);
+  scene->commit();
+  return scene;
+}
+
+// A task by ranges starts each level sample's distance to the original at a bound no smaller than it: the
+// distance to the nearest of the original's own samples (points on it), widened by their rounding (a
+// sample point lies within a few ulps of its primitive: 2^-18 of the largest coordinate, with 2^-10 of the
+// distance). Its chunks farther than that are culled at their root, so a task pays for the samples near
+// its ranges rather than for every sample. The least distance over the tasks is one machine's: the task
+// that holds the nearest primitive finds it below the bound (closest_distance's result does not depend on
+// where its search starts), and no task reports less than it.
+std::vector<float> distance_bounds(const std::vector<float>& samples, const core::RayScene& other_points,
+                                   const std::vector<float>& other_samples) {
+  float magnitude = 0;
+  for (const std::vector<float>* xyz : {&samples, &other_samples})
+    for (float c : *xyz) magnitude = std::max(magnitude, std::fabs(c));
+  const double slack = double(magnitude) * 0x1p-18;
+  std::vector<float> d(samples.size() / 3, std::numeric_limits<float>::infinity());
+  if (other_points.empty()) return d;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, d.size(), 512), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      const double u = other_points.closest_distance(samples.data() + 3 * i);
+      d[i] = std::nextafter(static_cast<float>(u + u * 0x1p-10 + slack), std::numeric_limits<float>::infinity());
+    }
+  });
+  return d;
+}
+
 // Task I's range of the original: its primitives' chunks; the samples and targets the shared stage drew.
 void load_original_range(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
                          const ChunkSizing& sizing, const std::string& samples_path, stream::Progress& progress, Original* o) {
@@ -813,8 +849,10 @@ void load_original_range(const std::string& store_dir, const stream::StoreMeta& 
   o->chunks = std::make_unique<stream::StoreChunks>(store_dir, meta);
   o->chunks->plan_range(sizing.costs(), sizing.bytes(), first, end);
   o->diagonal = bbox_diagonal(meta);
+  o->sample_points = sample_point_scene(o->samples.xyz);
   progress.report("load", 1);
 }
+
 
 // A task's shares of the level's views and samples (stream/report_shard.h); one machine's: all of them.
 void set_shares(const Original& o, LevelWork& w, const ReportOptions& ro) {
@@ -871,6 +909,8 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   read_time.reset();
   set_shares(o, w, ro);
   if (w.ranges) {  // the original's samples meet the task's range of the level in trace_level_range
+    PhaseTimer t(w.phases, kQueriesOnOriginal);
+    w.to_original = distance_bounds(w.samples.xyz, *o.sample_points, o.samples.xyz);
     L.seconds += seconds_since(t0);
     return;
   }
@@ -1205,6 +1245,7 @@ void trace_level_range(const Original& o, LevelWork& w, const ReportOptions& ro,
   LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap), first, end);
   w.level_chunks = std::max<uint64_t>(w.level_chunks, chunks.size());
   std::vector<core::ViewImage> images(w.views);
+  // No bounds this way (distance_bounds): a level's range is small, and its queries cost less than the bounds.
   std::vector<float> d(o.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
   for (size_t c = 0; c < chunks.size(); ++c) {
     std::optional<PhaseTimer> build_time(std::in_place, w.phases, kLevelBuild);
@@ -1422,8 +1463,9 @@ void write_report_task(const ReportOptions& ro, const std::vector<RunSpec>& runs
                      {"bbox_diagonal", rr.bbox_diagonal}, {"levels", levels}});
   }
   writer.commit();
-  nlohmann::ordered_json stages = nlohmann::ordered_json::array();
+  nlohmann::ordered_json stages = nlohmann::ordered_json::array(), phases = nlohmann::ordered_json::array();
   for (const StageStats& s : rep.stages) stages.push_back(stream::stage_json(s));
+  for (const StageStats& p : rep.phases) phases.push_back({{"name", p.name}, {"seconds", p.seconds}, {"cpu_seconds", p.cpu_seconds}});
   const nlohmann::ordered_json task{
       {"index", ro.shard_index},
       {"key", {{"count", ro.shard_count}, {"options", report_options_json(ro)},
@@ -1434,7 +1476,7 @@ void write_report_task(const ReportOptions& ro, const std::vector<RunSpec>& runs
         {"query_seconds", rep.query_seconds}, {"original_chunks", rep.original_chunks},
         {"original_primitives", rep.original_primitives}, {"chunk_scenes", rep.chunk_scenes},
         {"chunk_embree_peak_bytes", rep.chunk_embree_peak_bytes}, {"chunk_triangles", rep.chunk_triangles},
-        {"level_chunks", rep.level_chunks}}},
+        {"level_chunks", rep.level_chunks}, {"phases", phases}}},
       {"stages", stages},
       {"seconds", rep.seconds},
       {"peak_rss_bytes", rep.peak_rss_bytes},
@@ -1468,7 +1510,15 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
     std::unique_ptr<stream::ShardLock> shard_lock;
     if (sharded) shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
     stream::WorkDir work(options.work_dir);
-    if (options.check_disk_space) stream::check_report_space(distinct_originals(runs), work.path());
+    if (options.check_disk_space) {
+      // A task by ranges hands the merge its covered pixels of every view of every level, of the original
+      // and of the level (at most 25 bytes a pixel), and its distances.
+      uint64_t task_bytes = 0;
+      if (by_ranges && !ro.shard_prepare)
+        for (const RunSpec& r : runs)
+          task_bytes += r.levels.size() * (2ull * ro.views * ro.resolution * ro.resolution * 25 + 2 * 3 * ro.samples * 4);
+      stream::check_report_space(distinct_originals(runs), work.path(), ro.output_dir, task_bytes);
+    }
     stream::make_output_dir(ro.output_dir);
     stream::remove_summary(ro.output_dir + "/report.json");
     if (ro.shard_count > 0 && !ro.shard_prepare) begin_report_task(ro);
@@ -1516,7 +1566,8 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         //   distance transforms' scratch, 64 bytes a pixel), the reading of a chunk (a bit and a rank per
         //   16 store vertices, 3/16 byte; a mapped window of the positions, up to 64 MiB, and of a
         //   primitive column, up to 12 MiB), and a margin for the allocator (48 MiB, a sixteenth of
-        //   smaller budgets);
+        //   smaller budgets); a task by ranges also holds the original's samples as points (about 120
+        //   bytes a point, measured on the 48.6 M-triangle city: its Embree scene and query twin);
         // - the original's view images of a group of levels traced in one pass (18 bytes a pixel, 21
         //   with colours; at most half of what is left, or one level);
         // - the rest, for one chunk of the original at a time (ChunkSizing: its arrays, its Embree scenes)
@@ -1529,7 +1580,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
                                  std::min<uint64_t>(12ull << 20, meta.primitives() * 12);
         const uint64_t held = resident_bytes() + (works.size() + 1) * 3 * ro.samples * 16 + works.size() * html_bytes +
                               uint64_t{ro.views} * pixels * 8 + pixels * 64 + meta.vertices * 3 / 16 + windows +
-                              std::min<uint64_t>(48ull << 20, plan.budget / 16);
+                              std::min<uint64_t>(48ull << 20, plan.budget / 16) + (by_ranges ? 3 * ro.samples * 128 : 0);
         const uint64_t avail = plan.budget - std::min(plan.budget, held);
         const uint64_t levels_per_group = std::max<uint64_t>(1, avail / 2 / std::max<uint64_t>(1, view_bytes));
         const uint64_t group_bytes = std::min<uint64_t>(levels_per_group, works.size()) * view_bytes;
@@ -1582,7 +1633,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
           rep.chunk_scenes += totals.chunks;
           rep.original_chunks += o.chunks->chunks().size();
           for (const stream::StoreChunk& c : o.chunks->chunks()) rep.original_primitives += c.end - c.first;
-            rep.chunk_replans += totals.replans;
+          rep.chunk_replans += totals.replans;
           rep.chunk_triangle_bytes = std::max(rep.chunk_triangle_bytes, sizing.embree_triangle);
           for (int p = 0; p < kPhaseCount; ++p) {
             StageStats st;
@@ -1814,7 +1865,7 @@ Result merge_report(const std::string& output_dir, const Options& options, Repor
       rep.work_dir.bytes = std::max(rep.work_dir.bytes, tj.at("work_dir").at("bytes").get<uint64_t>());
       rep.work_dir.input_bytes = tj.at("work_dir").at("input_bytes");
       shards.push_back({{"index", t}, {"stages", tj.at("stages")}, {"seconds", tj.at("seconds")}, {"peak_rss_bytes", tj.at("peak_rss_bytes")},
-                        {"original_primitives", p.at("original_primitives")}});
+                        {"original_primitives", p.at("original_primitives")}, {"phases", p.at("phases")}});
     }
     rep.seconds = seconds_since(t0);
     rep.peak_rss_bytes = stream::peak_rss_bytes();

@@ -32,9 +32,15 @@ def stage(stages, name):
     return next(((s["seconds"], s.get("cpu_seconds", 0)) for s in stages if s["name"] == name), (0, 0))
 w, c = stage(a["stages"], "measure")
 lw, lc = stage(a["stages"], "load")
-prims = a["performance"]["original_primitives"]
+prims = a["performance"].get("original_primitives", 0)
 print("one machine: %.2f s; load %.2f s wall %.2f s cpu; measure %.2f s wall %.2f s cpu; %d chunk scenes of the original (%d chunks), peak %.0f MiB"
       % (a["seconds"], lw, lc, w, c, a["performance"]["chunk_scenes"], a["performance"]["original_chunks"], a["peak_rss_bytes"] / 2**20))
+def phases(ps):
+    names = ("chunk_build", "rays_on_original", "queries_on_original", "level_build", "rays_on_level", "queries_on_level")
+    cpu = {p["name"]: 0.0 for p in ps}
+    for p in ps: cpu[p["name"]] += p["cpu_seconds"]
+    return ", ".join("%s %.2f" % (k, cpu.get(k, 0)) for k in names)
+print("  one machine's measure cpu by part: " + phases(a["performance"]["phases"]))
 tasks = b["shards"]["tasks"]
 slowest, total_cpu = 0, 0
 for t in tasks:
@@ -47,6 +53,7 @@ for t in tasks:
           "%d of %d primitives traced, peak %.0f MiB"
           % (t["index"], n, t["seconds"], sw, tl, tlc, mw, mc, 100 * mc / c if c else 0, t.get("original_primitives", prims), prims,
              t["peak_rss_bytes"] / 2**20))
+    if "phases" in t: print("  by part: " + phases(t["phases"]))
 mw, mc = stage(b["stages"], "merge")
 print("merge: %.2f s (merge stage %.2f s cpu %.2f s), peak %.0f MiB; the tasks handed it %.1f MB"
       % (b["seconds"], mw, mc, b["peak_rss_bytes"] / 2**20, handed / 1e6))
