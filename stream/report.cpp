@@ -853,7 +853,6 @@ void load_original_range(const std::string& store_dir, const stream::StoreMeta& 
   progress.report("load", 1);
 }
 
-
 // A task's shares of the level's views and samples (stream/report_shard.h); one machine's: all of them.
 void set_shares(const Original& o, LevelWork& w, const ReportOptions& ro) {
   w.sharded = ro.shard_count > 0;

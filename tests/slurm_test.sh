@@ -15,7 +15,9 @@
 # with SIGKILL is run by the next step (a cluster share, the prepare job), and the run ends with exit 0
 # and one machine's bytes.
 # `lodstream slurm report` as 3 tasks on the room's levels (and the city's) must give report.html and the
-# CSVs byte for byte as one machine's report, and report.json equal but for timings and counters.
+# CSVs byte for byte as one machine's report, and report.json equal but for timings and counters, each
+# task tracing its range of the original's primitives; a report task killed with SIGKILL is named by the
+# merge (exit 66) and resubmitted alone to the same report.
 # Prints "skipped:" and exits 77 when a cluster cannot start here (not root, Slurm or MUNGE missing).
 # Usage: slurm_test.sh LODSTREAM_CLI SOURCE_DIR
 set -uo pipefail
@@ -191,20 +193,11 @@ rc=$?
 grep -q "ingest  job .* (array 1 of 3)" "$tmp/resubmit-ingest.log" || fail "resubmit did not submit range 1 alone: $(cat "$tmp/resubmit-ingest.log")"
 same_outputs "$tmp/room-one" "$out"
 
-# The report of $1's levels ($2: one machine's simplify output) as 3 tasks through Slurm, against one
-# machine's report; prints the time of each task (its stages) and of the merge.
-run_report() {
-  local name=$1 levels=$2 one=$tmp/$1-report-one out=$tmp/$1-report-3 t0 t1 rc f; shift 2
-  t0=$(date +%s.%N)
-  "$cli" report "$levels" -o "$one" --work "$tmp/$name-work" --no-space-check "$@" >/dev/null || { fail "$name: one machine's report"; return; }
-  t1=$(date +%s.%N)
-  echo "$name report: one machine $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
-  t0=$(date +%s.%N)
-  "$cli" slurm report "$levels" -o "$out" --work "$tmp/$name-work" --shards 3 --wait --no-space-check "$@" >"$tmp/$name-report.log" 2>&1
-  rc=$?
-  t1=$(date +%s.%N)
-  echo "$name report: 3 tasks through Slurm: exit $rc, $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
-  [ $rc -eq 0 ] || { fail "$name slurm report: exit $rc"; cat "$tmp/$name-report.log" "$out"/slurm/logs/* 2>/dev/null | tail -30; return; }
+# The report in $2 is one machine's ($1): report.html and the CSVs byte for byte, report.json equal but
+# for timings and counters; every task traced its range of the original, the ranges together all of it
+# (performance.original_primitives); prints each task's stages and the merge's time.
+same_report() {
+  local one=$1 out=$2 f
   diff <(cd "$one" && find . -type f | sort) <(cd "$out" && find . -type f ! -path './slurm/*' | sort) \
     || { fail "$out: not the same files as $one"; return; }
   while read -r f; do
@@ -221,14 +214,52 @@ def strip(j):
             l.pop("seconds", None)
     return j
 a, b = (json.load(open(p)) for p in sys.argv[1:])
-for t in b["shards"]["tasks"]:
-    print("  task %d: %.2f s (%s)" % (t["index"], t["seconds"], ", ".join("%s %.2f s cpu %.2f s" % (s["name"], s["seconds"], s.get("cpu_seconds", 0)) for s in t["stages"])))
+total = a["performance"]["original_primitives"]
+tasks = b["shards"]["tasks"]
+for t in tasks:
+    print("  task %d: %.2f s, %d of %d primitives traced (%s)" % (t["index"], t["seconds"], t["original_primitives"], total,
+          ", ".join("%s %.2f s cpu %.2f s" % (s["name"], s["seconds"], s.get("cpu_seconds", 0)) for s in t["stages"])))
 print("  merge: %.2f s" % b["seconds"])
-sys.exit(0 if strip(a) == strip(b) else 1)
+ranges = sum(t["original_primitives"] for t in tasks) == total and all(t["original_primitives"] < total for t in tasks)
+if not ranges: print("the tasks did not trace the original by ranges", file=sys.stderr)
+sys.exit(0 if strip(a) == strip(b) and ranges else 1)
 EOF
   echo "  $out: report.html and CSVs byte-identical to one machine's, report.json equal"
 }
+
+# The report of $1's levels ($2: one machine's simplify output) as 3 tasks through Slurm, against one
+# machine's report.
+run_report() {
+  local name=$1 levels=$2 one=$tmp/$1-report-one out=$tmp/$1-report-3 t0 t1 rc; shift 2
+  t0=$(date +%s.%N)
+  "$cli" report "$levels" -o "$one" --work "$tmp/$name-work" --no-space-check "$@" >/dev/null || { fail "$name: one machine's report"; return; }
+  t1=$(date +%s.%N)
+  echo "$name report: one machine $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
+  t0=$(date +%s.%N)
+  "$cli" slurm report "$levels" -o "$out" --work "$tmp/$name-work" --shards 3 --wait --no-space-check "$@" >"$tmp/$name-report.log" 2>&1
+  rc=$?
+  t1=$(date +%s.%N)
+  echo "$name report: 3 tasks through Slurm: exit $rc, $(printf '%.1f' "$(echo "$t1 - $t0" | bc)") s"
+  [ $rc -eq 0 ] || { fail "$name slurm report: exit $rc"; cat "$tmp/$name-report.log" "$out"/slurm/logs/* 2>/dev/null | tail -30; return; }
+  same_report "$one" "$out"
+}
 run_report room "$tmp/room-one" --views 8 --resolution 128 --samples 20000
+
+# A report task killed with SIGKILL just before its summary: the run exits 137, `lodstream merge` refuses
+# naming it (exit 66), and `slurm resubmit` reruns it alone to one machine's report.
+out=$tmp/room-report-kill
+LODSTREAM_TEST_KILL_AT=report-task-1.json "$cli" slurm report "$tmp/room-one" -o "$out" --work "$tmp/room-work" --shards 3 \
+  --wait --no-space-check --views 8 --resolution 128 --samples 20000 >"$tmp/report-kill.log" 2>&1
+rc=$?
+[ $rc -eq 137 ] || { fail "a report task killed with SIGKILL: the run exited $rc, not 137"; cat "$tmp/report-kill.log"; }
+msg=$("$cli" merge "$out" 2>&1); rc=$?
+[ $rc -eq 66 ] || fail "a report merge with task 1 missing: exit $rc, not 66"
+echo "$msg" | grep -q "report task 1 of 3 has not finished" || fail "the merge does not name the missing report task: $msg"
+"$cli" slurm resubmit "$out" --wait >"$tmp/report-resubmit.log" 2>&1
+rc=$?
+[ $rc -eq 0 ] || { fail "resubmit after a killed report task: exit $rc"; cat "$tmp/report-resubmit.log"; }
+echo "killed report task: merge refused ($msg); resubmitted: exit $rc"
+same_report "$tmp/room-report-one" "$out"
 
 validator=${LODSTREAM_TILES_VALIDATOR:-${TMPDIR:-/tmp}/3d-tiles-validator}
 if command -v node >/dev/null 2>&1 && [ -f "$validator/build/main.js" ] && [ -f "$validator/.installed" ]; then

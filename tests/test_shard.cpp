@@ -1024,6 +1024,16 @@ Result run_report_tasks(ReportOptions ro, const std::string& work, unsigned coun
   return merge_report(ro.output_dir, Options{}, merged);
 }
 
+// All `count` report tasks into `output_dir`, then the merge.
+Result all_report_tasks(ReportOptions ro, const std::string& output_dir, const std::string& work, unsigned count,
+                        const Options& base = {}) {
+  ro.output_dir = output_dir;
+  std::vector<unsigned> all;
+  for (unsigned i = 0; i < count; ++i) all.push_back(i);
+  Report merged;
+  return run_report_tasks(ro, work, count, all, true, &merged, base);
+}
+
 // A simplify output directory of the sample room (three levels), for the reports.
 std::string room_levels(const TempDir& dir) {
   SimplifyOptions so;
@@ -1046,16 +1056,12 @@ TEST(ReportShard, AnyTaskCountGivesOneMachinesReport) {
   ASSERT_EQ(want.count("lod2.csv"), 1u);
   for (unsigned n : {1u, 3u, 4u}) {
     SCOPED_TRACE("tasks " + std::to_string(n));
-    ReportOptions rn = ro;
-    rn.output_dir = dir.file("sharded-" + std::to_string(n));
-    std::vector<unsigned> all;
-    for (unsigned i = 0; i < n; ++i) all.push_back(i);
-    Report merged;
-    const Result r = run_report_tasks(rn, dir.file("work"), n, all, true, &merged);
+    const std::string out = dir.file("sharded-" + std::to_string(n));
+    const Result r = all_report_tasks(ro, out, dir.file("work"), n);
     ASSERT_TRUE(r.ok()) << r.message;
-    EXPECT_EQ(report_files(rn.output_dir), want);
-    EXPECT_FALSE(std::filesystem::exists(rn.output_dir + "/shards")) << "merge removes the shares";
-    const nlohmann::json j = nlohmann::json::parse(slurp(rn.output_dir + "/report.json"));
+    EXPECT_EQ(report_files(out), want);
+    EXPECT_FALSE(std::filesystem::exists(out + "/shards")) << "merge removes the shares";
+    const nlohmann::json j = nlohmann::json::parse(slurp(out + "/report.json"));
     EXPECT_EQ(j["shards"]["count"], n);
     EXPECT_EQ(j["shards"]["tasks"].size(), n);
     // The tasks share the work by primitive ranges (every level has its distance): each traces its N-th of
@@ -1139,14 +1145,10 @@ TEST(ReportShard, PrimitiveRangesThroughChunksLinesAndColoursGiveOneMachinesRepo
             40u) << "a coarse level of fewer primitives than tasks";
   for (unsigned n : {2u, 5u, 40u}) {
     SCOPED_TRACE("tasks " + std::to_string(n));
-    ReportOptions rn = ro;
-    rn.output_dir = dir.file("ranges-" + std::to_string(n));
-    std::vector<unsigned> all;
-    for (unsigned i = 0; i < n; ++i) all.push_back(i);
-    Report merged;
-    r = run_report_tasks(rn, dir.file("work"), n, all, true, &merged, chunked);
+    const std::string out = dir.file("ranges-" + std::to_string(n));
+    r = all_report_tasks(ro, out, dir.file("work"), n, chunked);
     ASSERT_TRUE(r.ok()) << r.message;
-    EXPECT_EQ(report_files(rn.output_dir), want);
+    EXPECT_EQ(report_files(out), want);
   }
 }
 
