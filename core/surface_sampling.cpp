@@ -37,22 +37,41 @@ std::vector<double> sorted_uniform_positions(uint64_t n, double total, uint64_t 
 }
 
 void SurfaceSampler::measure_triangle(const float* a, const float* b, const float* c) {
-  area_total_ += triangle_area(a, b, c);
-  length_total_ += segment_length(a, b) + segment_length(b, c) + segment_length(c, a);
+  block_.area += triangle_area(a, b, c);
+  block_.length += segment_length(a, b) + segment_length(b, c) + segment_length(c, a);
 }
 
-void SurfaceSampler::measure_segment(const float* a, const float* b) { length_total_ += segment_length(a, b); }
+void SurfaceSampler::measure_segment(const float* a, const float* b) { block_.length += segment_length(a, b); }
+
+SamplerSums SurfaceSampler::end_block() {
+  const SamplerSums b = block_;
+  block_ = {};
+  return b;
+}
+
+void SurfaceSampler::add_block(const SamplerSums& block) {
+  area_total_ += block.area;
+  length_total_ += block.length;
+}
 
 void SurfaceSampler::begin_sampling() {
+  add_block(end_block());
   face_pos_ = sorted_uniform_positions(n_, area_total_, seed_, mix64(stream_) ^ kFacePositions);
   edge_pos_ = sorted_uniform_positions(n_, length_total_, seed_, mix64(stream_) ^ kEdgePositions);
+}
+
+void SurfaceSampler::begin_block(const SamplerSums& before) {
+  before_ = before, run_ = {};
+  // Every position before the block belongs to the blocks before it (the invariant).
+  face_next_ = static_cast<uint64_t>(std::lower_bound(face_pos_.begin(), face_pos_.end(), before.area) - face_pos_.begin());
+  edge_next_ = static_cast<uint64_t>(std::lower_bound(edge_pos_.begin(), edge_pos_.end(), before.length) - edge_pos_.begin());
 }
 
 void SurfaceSampler::sample_triangle(const float* a, const float* b, const float* c, std::vector<float>& faces,
                                      std::vector<float>& edges) {
   // Faces: a point uniform in the triangle, from two fresh uniforms (Osada et al. 2002, eq. 1).
   const double area = triangle_area(a, b, c);
-  const double area_end = area_run_ + area;
+  const double area_run = run_.area + area, area_end = before_.area + area_run;
   while (face_next_ < face_pos_.size() && face_pos_[face_next_] < area_end) {
     const double r1 = std::sqrt(uniform01(seed_, mix64(stream_) ^ kBarycentric, 2 * face_next_));
     const double r2 = uniform01(seed_, mix64(stream_) ^ kBarycentric, 2 * face_next_ + 1);
@@ -60,12 +79,13 @@ void SurfaceSampler::sample_triangle(const float* a, const float* b, const float
     for (int k = 0; k < 3; ++k) faces.push_back(static_cast<float>(wa * a[k] + wb * b[k] + wc * c[k]));
     ++face_next_;
   }
-  area_run_ = area_end;
+  run_.area = area_run;
   // Sides: the position within the element's perimeter picks the side and the point on it.
   const double lab = segment_length(a, b), lbc = segment_length(b, c), lca = segment_length(c, a);
-  const double length_end = length_run_ + (lab + lbc + lca);
+  const double length_start = before_.length + run_.length, length_run = run_.length + (lab + lbc + lca);
+  const double length_end = before_.length + length_run;
   while (edge_next_ < edge_pos_.size() && edge_pos_[edge_next_] < length_end) {
-    double s = edge_pos_[edge_next_] - length_run_;
+    double s = edge_pos_[edge_next_] - length_start;
     if (s < lab || (lbc == 0 && lca == 0)) {
       push_lerp(a, b, lab > 0 ? std::min(s / lab, 1.0) : 0.0, edges);
     } else if ((s -= lab) < lbc || lca == 0) {
@@ -76,29 +96,32 @@ void SurfaceSampler::sample_triangle(const float* a, const float* b, const float
     }
     ++edge_next_;
   }
-  length_run_ = length_end;
+  run_.length = length_run;
 }
 
 void SurfaceSampler::sample_segment(const float* a, const float* b, std::vector<float>& edges) {
   const double len = segment_length(a, b);
-  const double end = length_run_ + len;
+  const double start = before_.length + run_.length, run = run_.length + len, end = before_.length + run;
   while (edge_next_ < edge_pos_.size() && edge_pos_[edge_next_] < end) {
-    push_lerp(a, b, len > 0 ? std::min((edge_pos_[edge_next_] - length_run_) / len, 1.0) : 0.0, edges);
+    push_lerp(a, b, len > 0 ? std::min((edge_pos_[edge_next_] - start) / len, 1.0) : 0.0, edges);
     ++edge_next_;
   }
-  length_run_ = end;
+  run_.length = run;
 }
 
-void SurfaceSampler::sample_vertex(const float* p, std::vector<float>& vertices) {
+bool SurfaceSampler::take_vertex() {
   // Algorithm S: take the vertex with probability (still needed) / (still to visit).
   const uint64_t left = vertices_ - vertex_seen_;
   const uint64_t needed = std::min(n_, vertices_) - vertex_taken_;
   const bool take = needed > 0 && (needed >= left || uniform01(seed_, mix64(stream_) ^ kVertexPick, vertex_seen_) *
                                                              static_cast<double>(left) < static_cast<double>(needed));
   ++vertex_seen_;
-  if (!take) return;
-  vertices.insert(vertices.end(), p, p + 3);
-  ++vertex_taken_;
+  vertex_taken_ += take;
+  return take;
+}
+
+void SurfaceSampler::sample_vertex(const float* p, std::vector<float>& vertices) {
+  if (take_vertex()) vertices.insert(vertices.end(), p, p + 3);
 }
 
 }  // namespace lodstream::core

@@ -10,9 +10,15 @@
 // sorted, and the mesh is streamed twice in the same fixed order (measure, then sample), so the sample
 // set depends on the mesh, n and the seed only: never on threads or memory.
 //
-// Invariant of the sampling pass: the running sum of weights is computed by the same function, in the same
-// order, as in the measuring pass, so it ends exactly at the measured total and every drawn position
-// (< total) is reached.
+// Blocks: the elements may be measured and sampled in consecutive blocks (end_block, begin_block), each
+// block's weights summed on their own from 0 and the blocks' sums added to the totals in block order, so
+// that a block can be measured and sampled by another process than its neighbours (a report's tasks,
+// stream/report.cpp) with the same samples; without blocks the whole mesh is one.
+//
+// Invariant of the sampling pass: within a block, the running sum of weights is computed by the same
+// function, in the same order, as in the measuring pass, and a position is compared with the sums before
+// the block plus it (one rounding), so the block ends exactly at the next block's start, the last block at
+// the measured total, and every drawn position (< total) is reached.
 #pragma once
 
 #include <cstdint>
@@ -36,6 +42,11 @@ inline double uniform01(uint64_t seed, uint64_t stream, uint64_t index) {
 // Sorted positions of n independent uniform draws in [0, total).
 std::vector<double> sorted_uniform_positions(uint64_t n, double total, uint64_t seed, uint64_t stream);
 
+// Area and length sums of a block of elements, or of every block before one.
+struct SamplerSums {
+  double area = 0, length = 0;
+};
+
 class SurfaceSampler {
  public:
   // n: samples of each kind. seed/stream: the random sequence (use distinct streams for distinct meshes).
@@ -45,14 +56,25 @@ class SurfaceSampler {
   void measure_triangle(const float* a, const float* b, const float* c);
   void measure_segment(const float* a, const float* b);
   void measure_vertex() { ++vertices_; }
-  // Between the passes: draws the positions.
+  // Closes the block measured since the last one (pass 1) and returns its sums, for add_block.
+  SamplerSums end_block();
+  // Adds a block's sums to the totals, the blocks in their order (whichever process measured them).
+  void add_block(const SamplerSums& block);
+  // Vertices measured elsewhere (instead of measure_vertex).
+  void add_vertices(uint64_t count) { vertices_ += count; }
+  // Between the passes: adds the block still open (all of pass 1 without blocks) and draws the positions.
   void begin_sampling();
+  // Pass 2, before a block's elements: the totals of every block before it, as pass 1 added them. Without
+  // it, the elements continue the block so far (the first: from 0).
+  void begin_block(const SamplerSums& before);
   // Pass 2: appends the samples falling in each element as xyz triples: face samples to `faces`, samples on
   // triangle sides and segments to `edges`, vertex samples to `vertices`.
   void sample_triangle(const float* a, const float* b, const float* c, std::vector<float>& faces,
                        std::vector<float>& edges);
   void sample_segment(const float* a, const float* b, std::vector<float>& edges);
   void sample_vertex(const float* p, std::vector<float>& vertices);
+  // The same decision alone: whether the next vertex is taken (its position is then the caller's to add).
+  bool take_vertex();
 
   double area() const { return area_total_; }
   double length() const { return length_total_; }
@@ -64,10 +86,11 @@ class SurfaceSampler {
   uint64_t n_, seed_, stream_;
   // pass 1
   double area_total_ = 0, length_total_ = 0;
+  SamplerSums block_;  // of the block being measured
   uint64_t vertices_ = 0;
   // pass 2
   std::vector<double> face_pos_, edge_pos_;
-  double area_run_ = 0, length_run_ = 0;
+  SamplerSums before_, run_;  // the blocks before this one; this block's running sums
   uint64_t face_next_ = 0, edge_next_ = 0;
   uint64_t vertex_seen_ = 0, vertex_taken_ = 0;
 };

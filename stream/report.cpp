@@ -241,48 +241,89 @@ struct Samples {
 // sampled in a second; the used vertices are sampled in vertex order. With k > 0, also k view targets
 // from the same passes: points uniform by area on the triangles; with no triangles, uniform by length on
 // the segments; with neither, the points themselves in turn. The samples depend on the mesh alone, never
-// on how it is cut into parts.
+// on how it is cut into parts: the primitives' weights are summed in fixed blocks of kSampleBlock
+// primitives by global id (core/surface_sampling.h), so that blocks measured and sampled by several
+// processes give one process's samples (sample_units).
+constexpr unsigned kSampleBlockBits = 16;
+constexpr uint64_t kSampleBlock = uint64_t{1} << kSampleBlockBits;
+
+// A block's weight sums, of the samples' sampler and of the view targets'.
+struct BlockSums {
+  core::SamplerSums sampler, aim;
+};
+
 class MeshSampling {
  public:
-  MeshSampling(uint64_t n, uint64_t seed, uint64_t stream, unsigned k, bool any_triangles)
-      : sampler_(n, seed, stream), aim_(k, seed, kStreamTargets), n_(n), k_(k), any_triangles_(any_triangles) {}
+  // `triangles`: the mesh's triangle count (its segments' global ids follow them); `primitives`: all of them.
+  MeshSampling(uint64_t n, uint64_t seed, uint64_t stream, unsigned k, uint64_t triangles, uint64_t primitives)
+      : sampler_(n, seed, stream), aim_(k, seed, kStreamTargets), n_(n), k_(k), triangles_(triangles),
+        sums_((primitives + kSampleBlock - 1) / kSampleBlock), before_(sums_.size()) {}
 
-  void measure(std::span<const float> xyz, std::span<const uint32_t> triangles, std::span<const uint32_t> segments) {
+  // Pass 1 over a part whose first primitive has global id `first`.
+  void measure(std::span<const float> xyz, std::span<const uint32_t> triangles, std::span<const uint32_t> segments, uint64_t first) {
     const float* p = xyz.data();
     for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+      measure_block(first + t / 3);
       const float *a = p + 3ull * triangles[t], *b = p + 3ull * triangles[t + 1], *c = p + 3ull * triangles[t + 2];
       sampler_.measure_triangle(a, b, c);
       if (k_) aim_.measure_triangle(a, b, c);
     }
+    const uint64_t first_segment = std::max(first, triangles_);
     for (size_t e = 0; e + 1 < segments.size(); e += 2) {
+      measure_block(first_segment + e / 2);
       const float *a = p + 3ull * segments[e], *b = p + 3ull * segments[e + 1];
       sampler_.measure_segment(a, b);
-      if (k_ && !any_triangles_) aim_.measure_segment(a, b);
+      if (k_ && triangles_ == 0) aim_.measure_segment(a, b);
     }
   }
+  // Pass 1's results, for a process that measured some blocks: every block's sums (zero where it measured
+  // none); and a block another process measured.
+  const std::vector<BlockSums>& sums() {
+    close_block();
+    return sums_;
+  }
+  void set_sums(uint64_t block, const BlockSums& s) { sums_.at(block) = s; }
+  // Between the passes: the blocks' sums added in block order, and the positions drawn.
   void begin(uint64_t used_vertices) {
-    for (uint64_t v = 0; v < used_vertices; ++v) sampler_.measure_vertex();
+    close_block();
+    for (size_t b = 0; b < sums_.size(); ++b) {
+      before_[b] = {{sampler_.area(), sampler_.length()}, {aim_.area(), aim_.length()}};
+      sampler_.add_block(sums_[b].sampler), aim_.add_block(sums_[b].aim);
+    }
+    sampler_.add_vertices(used_vertices);
     sampler_.begin_sampling();
     aim_.begin_sampling();
     faces_.reserve(3 * n_), edges_.reserve(3 * n_), vertices_.reserve(3 * std::min(n_, used_vertices));
   }
-  void sample(std::span<const float> xyz, std::span<const uint32_t> triangles, std::span<const uint32_t> segments) {
+  // Pass 2 over a part, as pass 1.
+  void sample(std::span<const float> xyz, std::span<const uint32_t> triangles, std::span<const uint32_t> segments, uint64_t first) {
     const float* p = xyz.data();
     for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+      sample_block(first + t / 3);
       const float *a = p + 3ull * triangles[t], *b = p + 3ull * triangles[t + 1], *c = p + 3ull * triangles[t + 2];
       sampler_.sample_triangle(a, b, c, faces_, edges_);
       if (k_) aim_.sample_triangle(a, b, c, aim_faces_, aim_unused_);
     }
+    const uint64_t first_segment = std::max(first, triangles_);
     for (size_t e = 0; e + 1 < segments.size(); e += 2) {
+      sample_block(first_segment + e / 2);
       const float *a = p + 3ull * segments[e], *b = p + 3ull * segments[e + 1];
       sampler_.sample_segment(a, b, edges_);
-      if (k_ && aim_faces_.empty()) aim_.sample_segment(a, b, aim_edges_);  // every triangle came before
+      // Targets on segments only without any area: then no target lies on a triangle.
+      if (k_ && !(aim_.area() > 0)) aim_.sample_segment(a, b, aim_edges_);
     }
   }
   // Consecutive used vertices, in vertex order.
   void sample_vertices(std::span<const float> xyz) {
     for (size_t v = 0; v + 2 < xyz.size(); v += 3) sampler_.sample_vertex(xyz.data() + v, vertices_);
   }
+  // Whether the next used vertex is a vertex sample (its position is the caller's to add: add_vertex).
+  bool take_vertex() { return sampler_.take_vertex(); }
+  void add_vertex(const float* p) { vertices_.insert(vertices_.end(), p, p + 3); }
+  // Pass 2's samples so far: face, edge and target samples (targets on triangles or else on segments).
+  const std::vector<float>& faces() const { return faces_; }
+  const std::vector<float>& edges() const { return edges_; }
+  const std::vector<float>& aim() const { return aim_.area() > 0 ? aim_faces_ : aim_edges_; }
   // `point_xyz`: positions of points 0, 1, ... (cyclically, k of them), the targets of a mesh of points.
   Samples finish(std::vector<float>* targets, const std::function<std::vector<float>()>& point_xyz) {
     if (targets) {
@@ -298,22 +339,44 @@ class MeshSampling {
   }
 
  private:
+  // Pass 1: primitive `g` closes the block being measured when it starts another.
+  void measure_block(uint64_t g) {
+    const uint64_t b = g >> kSampleBlockBits;
+    if (open_ && b != block_) close_block();
+    open_ = true, block_ = b;
+  }
+  void close_block() {
+    if (!open_) return;
+    sums_.at(block_) = {sampler_.end_block(), aim_.end_block()};
+    open_ = false;
+  }
+  // Pass 2: primitive `g` starts its block from the sums of the blocks before it.
+  void sample_block(uint64_t g) {
+    const uint64_t b = g >> kSampleBlockBits;
+    if (open_ && b == block_) return;
+    sampler_.begin_block(before_.at(b).sampler), aim_.begin_block(before_.at(b).aim);
+    open_ = true, block_ = b;
+  }
+
   core::SurfaceSampler sampler_, aim_;
   uint64_t n_;
   unsigned k_;
-  bool any_triangles_;
+  uint64_t triangles_;
+  std::vector<BlockSums> sums_, before_;  // per block: its sums; the sums of the blocks before it
+  bool open_ = false;
+  uint64_t block_ = 0;
   std::vector<float> faces_, edges_, vertices_, aim_faces_, aim_edges_, aim_unused_;
 };
 
 // Samples of a mesh held in memory (a level).
 Samples sample_mesh(const core::LodMesh& m, uint64_t n, uint64_t seed, uint64_t stream) {
-  MeshSampling s(n, seed, stream, 0, !m.triangles.empty());
-  s.measure(m.positions, m.triangles, m.edges);
+  MeshSampling s(n, seed, stream, 0, m.triangle_count(), m.triangle_count() + m.edge_count() + m.point_count());
+  s.measure(m.positions, m.triangles, m.edges, 0);
   std::vector<uint8_t> used(m.positions.size() / 3, 0);
   for (auto ids : {std::span<const uint32_t>(m.triangles), std::span<const uint32_t>(m.edges), std::span<const uint32_t>(m.points)})
     for (uint32_t v : ids) used[v] = 1;
   s.begin(static_cast<uint64_t>(std::count(used.begin(), used.end(), 1)));
-  s.sample(m.positions, m.triangles, m.edges);
+  s.sample(m.positions, m.triangles, m.edges, 0);
   for (size_t v = 0; v < used.size(); ++v)
     if (used[v]) s.sample_vertices(std::span<const float>(m.positions.data() + 3 * v, 3));
   return s.finish(nullptr, {});
@@ -360,17 +423,17 @@ void draw_original_samples(const std::string& store_dir, const stream::StoreMeta
                            stream::StoreChunks& chunks, stream::Progress& progress, Samples* samples,
                            std::vector<float>* targets) {
   const size_t n = chunks.chunks().size();
-  MeshSampling s(ro.samples, ro.seed, kStreamOriginalSamples, ro.views, meta.triangles > 0);
+  MeshSampling s(ro.samples, ro.seed, kStreamOriginalSamples, ro.views, meta.triangles, meta.primitives());
   stream::ChunkGeometry g;
   for (size_t c = 0; c < n; ++c) {
     chunks.read(c, &g);
-    s.measure(g.xyz, g.triangles, g.lines);
+    s.measure(g.xyz, g.triangles, g.lines, g.first);
     progress.report("load", 0.1 + 0.4 * double(c + 1) / double(n));
   }
   s.begin(chunks.used_vertices());
   for (size_t c = 0; c < n; ++c) {
     if (n > 1) chunks.read(c, &g);  // one chunk: still there
-    s.sample(g.xyz, g.triangles, g.lines);
+    s.sample(g.xyz, g.triangles, g.lines, g.first);
     progress.report("load", 0.5 + 0.4 * double(c + 1) / double(n));
   }
   g = {};

@@ -477,5 +477,80 @@ TEST(SurfaceSampler, SelectionSamplingIsUniform) {
   for (int i = 0; i < 10; ++i) EXPECT_NEAR(picked[i], 1200, 150) << "vertex " << i;
 }
 
+// Blocks: the random mesh of EveryPositionIsReachedWhateverTheSizes cut into blocks of 97 elements (the
+// segments after the triangles). One sampler measuring and sampling every block in turn, and samplers
+// that each measure one block apart, then each sample two or three blocks apart from the blocks' sums
+// (added in block order) and the sums before their first block, give the same samples, in the same
+// order, bit for bit; every position is reached, and the totals are the blocks' sums added in order.
+TEST(SurfaceSampler, BlocksMeasuredAndSampledApartGiveOneSamplersSamples) {
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(0, 1);
+  Mesh m;
+  for (int t = 0; t < 1500; ++t) {
+    const double sz = std::pow(10.0, -3 + 5 * u(rng));
+    const double x = 100 * u(rng), y = 100 * u(rng), z = 100 * u(rng);
+    const uint32_t a = m.add(x, y, z);
+    m.add(x + sz * u(rng), y + sz * u(rng), z);
+    m.add(x + sz * u(rng), y, z + sz * u(rng));
+    m.triangles.insert(m.triangles.end(), {a, a + 1, a + 2});
+    if (t % 4 == 0) m.segments.insert(m.segments.end(), {a, a + 2});
+  }
+  const size_t triangles = m.triangles.size() / 3, elements = triangles + m.segments.size() / 2;
+  constexpr size_t kBlock = 97;
+  const size_t blocks = (elements + kBlock - 1) / kBlock;
+  // Element e of the mesh (triangles, then segments), measured or sampled by `s`.
+  auto measure = [&](SurfaceSampler& s, size_t e) {
+    if (e < triangles) s.measure_triangle(m.at(m.triangles[3 * e]), m.at(m.triangles[3 * e + 1]), m.at(m.triangles[3 * e + 2]));
+    else s.measure_segment(m.at(m.segments[2 * (e - triangles)]), m.at(m.segments[2 * (e - triangles) + 1]));
+  };
+  auto sample_element = [&](SurfaceSampler& s, size_t e, Samples& out) {
+    if (e < triangles)
+      s.sample_triangle(m.at(m.triangles[3 * e]), m.at(m.triangles[3 * e + 1]), m.at(m.triangles[3 * e + 2]), out.faces, out.edges);
+    else s.sample_segment(m.at(m.segments[2 * (e - triangles)]), m.at(m.segments[2 * (e - triangles) + 1]), out.edges);
+  };
+  const uint64_t n = 5003;
+  // One sampler, block by block.
+  SurfaceSampler one(n, 4, 2);
+  std::vector<core::SamplerSums> sums(blocks), before(blocks);
+  for (size_t b = 0; b < blocks; ++b) {
+    for (size_t e = b * kBlock; e < std::min(elements, (b + 1) * kBlock); ++e) measure(one, e);
+    sums[b] = one.end_block();
+    before[b] = {one.area(), one.length()};
+    one.add_block(sums[b]);
+  }
+  one.begin_sampling();
+  Samples want;
+  for (size_t b = 0; b < blocks; ++b) {
+    one.begin_block(before[b]);
+    for (size_t e = b * kBlock; e < std::min(elements, (b + 1) * kBlock); ++e) sample_element(one, e, want);
+  }
+  ASSERT_EQ(want.faces.size(), 3 * n);
+  ASSERT_EQ(want.edges.size(), 3 * n);
+  // Each block measured by a sampler of its own, then the blocks sampled three at a time by others.
+  std::vector<core::SamplerSums> apart(blocks);
+  for (size_t b = 0; b < blocks; ++b) {
+    SurfaceSampler s(n, 4, 2);
+    for (size_t e = b * kBlock; e < std::min(elements, (b + 1) * kBlock); ++e) measure(s, e);
+    apart[b] = s.end_block();
+    ASSERT_EQ(apart[b].area, sums[b].area) << b;
+    ASSERT_EQ(apart[b].length, sums[b].length) << b;
+  }
+  Samples got;
+  for (size_t first = 0; first < blocks; first += 3) {
+    SurfaceSampler s(n, 4, 2);
+    std::vector<core::SamplerSums> start(blocks);
+    for (size_t b = 0; b < blocks; ++b) start[b] = {s.area(), s.length()}, s.add_block(apart[b]);
+    EXPECT_EQ(s.area(), one.area());
+    EXPECT_EQ(s.length(), one.length());
+    s.begin_sampling();
+    for (size_t b = first; b < std::min(blocks, first + 3); ++b) {
+      s.begin_block(start[b]);
+      for (size_t e = b * kBlock; e < std::min(elements, (b + 1) * kBlock); ++e) sample_element(s, e, got);
+    }
+  }
+  EXPECT_EQ(got.faces, want.faces);
+  EXPECT_EQ(got.edges, want.edges);
+}
+
 }  // namespace
 }  // namespace lodstream

@@ -425,10 +425,13 @@ int main(int argc, char** argv) {
   add_space_check(report_cmd);
   std::string report_shard_text;
   bool report_shard_from_env = false;
-  report_cmd->add_option("--shard", report_shard_text, "Measure task I of N's share over a shared --work DIR (then `lodstream merge -o's DIR`)");
+  report_cmd->add_option("--shard", report_shard_text,
+                         "Measure task I of N's share (an N-th of every original's and level's primitives) over a shared --work DIR "
+                         "(then `lodstream merge -o's DIR`)");
   report_cmd->add_flag("--shard-from-env", report_shard_from_env,
                        "--shard from SLURM_ARRAY_TASK_ID/COUNT, JOB_COMPLETION_INDEX or AWS_BATCH_JOB_ARRAY_INDEX (count: LODSTREAM_SHARD_COUNT)");
-  report_cmd->add_flag("--shard-prepare", ro.shard_prepare, "Ingest the originals into --work DIR for the tasks, then stop");
+  report_cmd->add_flag("--shard-prepare", ro.shard_prepare,
+                       "Ingest the originals and draw their samples into --work DIR for the tasks, then stop");
   std::string report_shard_ingest_text;
   report_cmd->add_option("--shard-ingest", report_shard_ingest_text,
                          "Parse byte range I of N of every original into --work DIR, then stop (--shard-prepare joins the N ranges)");
