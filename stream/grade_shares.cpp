@@ -17,6 +17,7 @@
 #include "io/offset_file.h"
 #include "stream/position_gather.h"
 #include "stream/shard.h"
+#include "stream/units.h"
 #include "stream/work_dir.h"
 
 namespace lodstream::stream {
@@ -68,29 +69,6 @@ bool parse_plan(const std::string& prefix, const ordered_json& j, GradePlan* gp)
   } catch (const std::exception&) {
     return false;
   }
-}
-
-// The file that a set of units fills in place (`path`, in `dir`), made once for `key` under a lock of its
-// own (dir/start.lock), whichever process comes first: unless dir/start.json holds `key` and `path`
-// exists, the files of an older start (names beginning with one of `stale`: its units' stamps and
-// outputs) are removed, make() makes `path`, and start.json is written.
-template <class Make>
-void start_once(const std::string& dir, const std::string& path, const ordered_json& key, std::initializer_list<const char*> stale,
-                Make&& make) {
-  std::filesystem::create_directories(dir);
-  const ShardLock lock(dir, "start.lock");
-  const std::string stamp = dir + "start.json";
-  try {
-    std::error_code ec;
-    if (ordered_json::parse(io::read_small_file(stamp)).at("key") == key && std::filesystem::exists(path, ec)) return;
-  } catch (const std::exception&) {
-    // none yet, or unreadable: started below
-  }
-  for (const auto& e : std::filesystem::directory_iterator(dir))
-    for (const char* name : stale)
-      if (e.path().filename().string().rfind(name, 0) == 0) std::filesystem::remove(e.path());
-  make();
-  io::write_file_atomic(stamp, ordered_json{{"key", key}}.dump() + "\n");
 }
 
 }  // namespace

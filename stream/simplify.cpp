@@ -47,6 +47,7 @@
 #include "stream/shard.h"
 #include "stream/vertex_cells.h"
 #include "stream/tiles.h"
+#include "stream/units.h"
 #include "stream/work_dir.h"
 
 namespace lodstream {
@@ -56,6 +57,10 @@ namespace {
 using nlohmann::ordered_json;
 using stream::guarded;
 using stream::run_stage;
+using stream::stamp_matches;
+using stream::stamped_share;
+using stream::take_units;
+using stream::write_stamp;
 
 // Part of every stage stamp; bumped when a work file changes format (2: the weight index keeps the store's
 // precision; 3: the weight index is the order and, for the mean, the grades; bit-packed cluster maps; cell
@@ -266,22 +271,6 @@ ordered_json source_json(const stream::StoreMeta& m) {
   return {{"path", m.source.path}, {"bytes", m.source.bytes}, {"mtime_ns", m.source.mtime_ns}, {"format", m.format}};
 }
 
-// A stage's stamp: reused when it exists, holds `key`, and every listed file exists.
-bool stamp_matches(const std::string& path, const ordered_json& key, ordered_json* value) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) return false;
-  try {
-    ordered_json j = ordered_json::parse(io::read_small_file(path));
-    if (j.at("key") != key) return false;
-    for (const auto& f : j.at("files"))
-      if (!std::filesystem::exists(f.get<std::string>(), ec)) return false;
-    *value = j.at("value");
-    return true;
-  } catch (const std::exception&) {
-    return false;
-  }
-}
-
 // The 3D Tiles builder (stream/tiles.h) of `--tiles`: fed region by region by the emit stage's region
 // sink, in the scene cube the regions are cut in (stream/emit_regions.h).
 stream::TilesOptions tiles_options(const SimplifyOptions& so, const stream::StoreMeta& meta, size_t levels,
@@ -323,12 +312,6 @@ std::vector<std::string> level_comments(const SimplifyOptions& so, const std::st
                       name(so.variant), name(so.representative), name(so.grading))};
 }
 
-void write_stamp(const std::string& path, const ordered_json& key, const std::vector<std::string>& files,
-                 const ordered_json& value) {
-  stream::kill_point(std::filesystem::path(path).filename().string());
-  io::write_file_atomic(path, ordered_json{{"key", key}, {"files", files}, {"value", value}}.dump(1) + "\n");
-}
-
 // A stage whose outputs are `files`: reused when its stamp holds `key` and the files exist, else run and
 // stamped. Returns true when reused.
 template <class Run>
@@ -341,29 +324,6 @@ bool stamped_stage(const std::string& stamp, const ordered_json& key, const std:
   return false;
 }
 
-// One share of a stage run as N shares (grading, clustering, the weld's units): under its own lock in
-// `dir` (one process a share), reused when its stamp is there, else run, then stamped. run() returns the
-// stamp's files and value; `kill` is the test kill point just before the stamp (empty: none). Returns the
-// stamp's value; with `wait` false, nothing when another process holds the share's lock.
-template <class Run>
-std::optional<ordered_json> share_unless_held(const std::string& dir, unsigned share, const std::string& stamp,
-                                              const ordered_json& key, const std::string& kill, bool wait, Run&& run) {
-  const stream::ShardLock share_lock(dir, fmt::format("share-{}.lock", share), wait);
-  if (!share_lock.held()) return std::nullopt;
-  ordered_json v;
-  if (stamp_matches(stamp, key, &v)) return v;
-  std::filesystem::remove(stamp);
-  const auto [files, value] = run();
-  // tests/slurm_test.sh: a share task killed before its stamp (a later process runs the share again)
-  if (!kill.empty()) stream::kill_point(kill);
-  write_stamp(stamp, key, files, value);
-  return value;
-}
-template <class Run>
-ordered_json stamped_share(const std::string& dir, unsigned share, const std::string& stamp, const ordered_json& key,
-                           const std::string& kill, Run&& run) {
-  return *share_unless_held(dir, share, stamp, key, kill, true, std::forward<Run>(run));
-}
 
 // Silhouette p95 (pixels) of each level file seen from its switching distance, by `report`'s own rule on
 // `views` views: the one place simplify measures a level, so that it always agrees with report.
@@ -520,23 +480,6 @@ struct GradeStageInput {
   bool sharded;
 };
 
-// Units of a stage that every process of a sharded run takes part in (the weld's, the weld map's, the
-// block pass's and the grading merge's: stream/grade_shares.h), in `dir`, unit u stamped at stamp(u) with `key`: first every unit that no other
-// process holds (from `index` on, so that processes starting together take different units), then every
-// unit in turn, waiting for those another process holds; a unit whose holder died is run here. run(u)
-// returns the unit's stamp's files and value. Returns every unit's stamp value.
-template <class Stamp, class Run>
-std::vector<ordered_json> take_units(const std::string& dir, unsigned units, unsigned index, const Stamp& stamp,
-                                     const ordered_json& key, const Run& run) {
-  std::filesystem::create_directories(dir);
-  for (unsigned k = 0; k < units; ++k) {
-    const unsigned u = (index + k) % units;
-    share_unless_held(dir, u, stamp(u), key, "", false, [&] { return run(u); });
-  }
-  std::vector<ordered_json> values;
-  for (unsigned u = 0; u < units; ++u) values.push_back(stamped_share(dir, u, stamp(u), key, "", [&] { return run(u); }));
-  return values;
-}
 
 // The weld's units, as one grading share takes part (take_units). Returns every unit's run and its pairs.
 std::vector<std::pair<std::string, uint64_t>> run_weld_units(const stream::GradeShareInput& gs, unsigned count, unsigned index,
