@@ -3,7 +3,8 @@
 //
 // For every original (ingested into the scene store, reused from a simplify work directory when it is the
 // same file), traced out of core: the store is cut into chunks (stream/store_chunks.h) that fit what
-// --memory leaves, one chunk in core. Its samples and view targets are drawn in two passes over the chunks.
+// --memory leaves, one chunk in core. Its samples and view targets are drawn in two passes over the chunks
+// (stream/report_samples.h).
 // For every level:
 // 1. read the LOD file, draw its samples, and the original → level Hausdorff distances against its scene
 //    (its triangles, and its thick edges and points as flat curves and discs, whose radii do not enter
@@ -66,6 +67,7 @@
 #include "stream/kill_point.h"
 #include "stream/memory.h"
 #include "stream/progress.h"
+#include "stream/report_samples.h"
 #include "stream/report_shard.h"
 #include "stream/scene_store.h"
 #include "stream/shard.h"
@@ -79,10 +81,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using stream::run_stage;
-
-// Random streams of the seed (core/surface_sampling.h): one per use, so that changing one use never
-// moves the numbers of another.
-enum : uint64_t { kStreamTargets = 101, kStreamOriginalSamples = 102, kStreamLodSamples = 103 };
 
 constexpr stream::ChunkCosts kChunkCosts = stream::kChunkSceneCosts;
 
@@ -230,157 +228,7 @@ ErrorStats hausdorff_stats(std::vector<float>& d, size_t faces) {
 
 // ------------------------------------------------------------------------------------------- meshes
 
-// Metro-style samples of a mesh (faces, edges, vertices): face samples first, then edge and vertex samples.
-struct Samples {
-  std::vector<float> xyz;
-  size_t faces = 0;  // the first `faces` samples are uniform by area
-};
-
-// Samples of a mesh streamed in parts, in its primitive order (every triangle, then every segment; a
-// part's triangles and segments come after the earlier parts'), measured in one pass over the parts and
-// sampled in a second; the used vertices are sampled in vertex order. With k > 0, also k view targets
-// from the same passes: points uniform by area on the triangles; with no triangles, uniform by length on
-// the segments; with neither, the points themselves in turn. The samples depend on the mesh alone, never
-// on how it is cut into parts: the primitives' weights are summed in fixed blocks of kSampleBlock
-// primitives by global id (core/surface_sampling.h), so that blocks measured and sampled by several
-// processes give one process's samples (sample_units).
-constexpr unsigned kSampleBlockBits = 16;
-constexpr uint64_t kSampleBlock = uint64_t{1} << kSampleBlockBits;
-
-// A block's weight sums, of the samples' sampler and of the view targets'.
-struct BlockSums {
-  core::SamplerSums sampler, aim;
-};
-
-class MeshSampling {
- public:
-  // `triangles`: the mesh's triangle count (its segments' global ids follow them); `primitives`: all of them.
-  MeshSampling(uint64_t n, uint64_t seed, uint64_t stream, unsigned k, uint64_t triangles, uint64_t primitives)
-      : sampler_(n, seed, stream), aim_(k, seed, kStreamTargets), n_(n), k_(k), triangles_(triangles),
-        sums_((primitives + kSampleBlock - 1) / kSampleBlock), before_(sums_.size()) {}
-
-  // Pass 1 over a part whose first primitive has global id `first`.
-  void measure(std::span<const float> xyz, std::span<const uint32_t> triangles, std::span<const uint32_t> segments, uint64_t first) {
-    const float* p = xyz.data();
-    for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
-      measure_block(first + t / 3);
-      const float *a = p + 3ull * triangles[t], *b = p + 3ull * triangles[t + 1], *c = p + 3ull * triangles[t + 2];
-      sampler_.measure_triangle(a, b, c);
-      if (k_) aim_.measure_triangle(a, b, c);
-    }
-    const uint64_t first_segment = std::max(first, triangles_);
-    for (size_t e = 0; e + 1 < segments.size(); e += 2) {
-      measure_block(first_segment + e / 2);
-      const float *a = p + 3ull * segments[e], *b = p + 3ull * segments[e + 1];
-      sampler_.measure_segment(a, b);
-      if (k_ && triangles_ == 0) aim_.measure_segment(a, b);
-    }
-  }
-  // Pass 1's results, for a process that measured some blocks: every block's sums (zero where it measured
-  // none); and a block another process measured.
-  const std::vector<BlockSums>& sums() {
-    close_block();
-    return sums_;
-  }
-  void set_sums(uint64_t block, const BlockSums& s) { sums_.at(block) = s; }
-  // Between the passes: the blocks' sums added in block order, and the positions drawn.
-  void begin(uint64_t used_vertices) {
-    close_block();
-    for (size_t b = 0; b < sums_.size(); ++b) {
-      before_[b] = {{sampler_.area(), sampler_.length()}, {aim_.area(), aim_.length()}};
-      sampler_.add_block(sums_[b].sampler), aim_.add_block(sums_[b].aim);
-    }
-    sampler_.add_vertices(used_vertices);
-    sampler_.begin_sampling();
-    aim_.begin_sampling();
-    faces_.reserve(3 * n_), edges_.reserve(3 * n_), vertices_.reserve(3 * std::min(n_, used_vertices));
-  }
-  // Pass 2 over a part, as pass 1.
-  void sample(std::span<const float> xyz, std::span<const uint32_t> triangles, std::span<const uint32_t> segments, uint64_t first) {
-    const float* p = xyz.data();
-    for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
-      sample_block(first + t / 3);
-      const float *a = p + 3ull * triangles[t], *b = p + 3ull * triangles[t + 1], *c = p + 3ull * triangles[t + 2];
-      sampler_.sample_triangle(a, b, c, faces_, edges_);
-      if (k_) aim_.sample_triangle(a, b, c, aim_faces_, aim_unused_);
-    }
-    const uint64_t first_segment = std::max(first, triangles_);
-    for (size_t e = 0; e + 1 < segments.size(); e += 2) {
-      sample_block(first_segment + e / 2);
-      const float *a = p + 3ull * segments[e], *b = p + 3ull * segments[e + 1];
-      sampler_.sample_segment(a, b, edges_);
-      // Targets on segments only without any area: then no target lies on a triangle.
-      if (k_ && !(aim_.area() > 0)) aim_.sample_segment(a, b, aim_edges_);
-    }
-  }
-  // Consecutive used vertices, in vertex order.
-  void sample_vertices(std::span<const float> xyz) {
-    for (size_t v = 0; v + 2 < xyz.size(); v += 3) sampler_.sample_vertex(xyz.data() + v, vertices_);
-  }
-  // Whether the next used vertex is a vertex sample (its position is the caller's to add: add_vertex).
-  bool take_vertex() { return sampler_.take_vertex(); }
-  void add_vertex(const float* p) { vertices_.insert(vertices_.end(), p, p + 3); }
-  // Pass 2's samples so far: face, edge and target samples (targets on triangles or else on segments).
-  const std::vector<float>& faces() const { return faces_; }
-  const std::vector<float>& edges() const { return edges_; }
-  const std::vector<float>& aim() const { return aim_.area() > 0 ? aim_faces_ : aim_edges_; }
-  // `point_xyz`: positions of points 0, 1, ... (cyclically, k of them), the targets of a mesh of points.
-  Samples finish(std::vector<float>* targets, const std::function<std::vector<float>()>& point_xyz) {
-    if (targets) {
-      *targets = !aim_faces_.empty() ? std::move(aim_faces_) : std::move(aim_edges_);
-      if (targets->empty()) *targets = point_xyz();
-    }
-    Samples out;
-    out.faces = faces_.size() / 3;
-    faces_.insert(faces_.end(), edges_.begin(), edges_.end());
-    faces_.insert(faces_.end(), vertices_.begin(), vertices_.end());
-    out.xyz = std::move(faces_);
-    return out;
-  }
-
- private:
-  // Pass 1: primitive `g` closes the block being measured when it starts another.
-  void measure_block(uint64_t g) {
-    const uint64_t b = g >> kSampleBlockBits;
-    if (open_ && b != block_) close_block();
-    open_ = true, block_ = b;
-  }
-  void close_block() {
-    if (!open_) return;
-    sums_.at(block_) = {sampler_.end_block(), aim_.end_block()};
-    open_ = false;
-  }
-  // Pass 2: primitive `g` starts its block from the sums of the blocks before it.
-  void sample_block(uint64_t g) {
-    const uint64_t b = g >> kSampleBlockBits;
-    if (open_ && b == block_) return;
-    sampler_.begin_block(before_.at(b).sampler), aim_.begin_block(before_.at(b).aim);
-    open_ = true, block_ = b;
-  }
-
-  core::SurfaceSampler sampler_, aim_;
-  uint64_t n_;
-  unsigned k_;
-  uint64_t triangles_;
-  std::vector<BlockSums> sums_, before_;  // per block: its sums; the sums of the blocks before it
-  bool open_ = false;
-  uint64_t block_ = 0;
-  std::vector<float> faces_, edges_, vertices_, aim_faces_, aim_edges_, aim_unused_;
-};
-
-// Samples of a mesh held in memory (a level).
-Samples sample_mesh(const core::LodMesh& m, uint64_t n, uint64_t seed, uint64_t stream) {
-  MeshSampling s(n, seed, stream, 0, m.triangle_count(), m.triangle_count() + m.edge_count() + m.point_count());
-  s.measure(m.positions, m.triangles, m.edges, 0);
-  std::vector<uint8_t> used(m.positions.size() / 3, 0);
-  for (auto ids : {std::span<const uint32_t>(m.triangles), std::span<const uint32_t>(m.edges), std::span<const uint32_t>(m.points)})
-    for (uint32_t v : ids) used[v] = 1;
-  s.begin(static_cast<uint64_t>(std::count(used.begin(), used.end(), 1)));
-  s.sample(m.positions, m.triangles, m.edges, 0);
-  for (size_t v = 0; v < used.size(); ++v)
-    if (used[v]) s.sample_vertices(std::span<const float>(m.positions.data() + 3 * v, 3));
-  return s.finish(nullptr, {});
-}
+using Samples = stream::MeshSamples;
 
 // How the original's chunks are sized, and kept within what the measure stage leaves them (`room`: a
 // chunk's own arrays, its triangles' Embree scene and its wire scene together). Embree's bytes per
@@ -417,37 +265,7 @@ struct Original {
   std::unique_ptr<core::RayScene> sample_points;
 };
 
-// Draws the original's samples and view targets from `chunks` (planned over the whole store): two passes over
-// the chunks (measure, sample), then its used vertices in store order.
-void draw_original_samples(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
-                           stream::StoreChunks& chunks, stream::Progress& progress, Samples* samples,
-                           std::vector<float>* targets) {
-  const size_t n = chunks.chunks().size();
-  MeshSampling s(ro.samples, ro.seed, kStreamOriginalSamples, ro.views, meta.triangles, meta.primitives());
-  stream::ChunkGeometry g;
-  for (size_t c = 0; c < n; ++c) {
-    chunks.read(c, &g);
-    s.measure(g.xyz, g.triangles, g.lines, g.first);
-    progress.report("load", 0.1 + 0.4 * double(c + 1) / double(n));
-  }
-  s.begin(chunks.used_vertices());
-  for (size_t c = 0; c < n; ++c) {
-    if (n > 1) chunks.read(c, &g);  // one chunk: still there
-    s.sample(g.xyz, g.triangles, g.lines, g.first);
-    progress.report("load", 0.5 + 0.4 * double(c + 1) / double(n));
-  }
-  g = {};
-  chunks.for_used_vertices([&](std::span<const float> xyz) { s.sample_vertices(xyz); });
-  *samples = s.finish(targets, [&] {
-    std::vector<uint32_t> ids;
-    stream::for_column_blocks(store_dir + "/points.u32", meta.points, 1, 1 << 20, [&](uint64_t, std::span<const uint32_t> p) {
-      for (size_t i = 0; i < p.size() && ids.size() < ro.views; ++i) ids.push_back(p[i]);
-    });
-    const size_t have = ids.size();
-    for (size_t i = have; have > 0 && i < ro.views; ++i) ids.push_back(ids[i % have]);
-    return chunks.positions_of(ids);
-  });
-}
+stream::SampleOptions sample_options(const ReportOptions& ro) { return {ro.samples, ro.seed, ro.views}; }
 
 double bbox_diagonal(const stream::StoreMeta& meta) {
   const double d[3] = {meta.bbox.max[0] - meta.bbox.min[0], meta.bbox.max[1] - meta.bbox.min[1],
@@ -462,7 +280,8 @@ void load_original(const std::string& store_dir, const stream::StoreMeta& meta, 
   o->chunks = std::make_unique<stream::StoreChunks>(store_dir, meta);
   o->chunks->plan(sizing.costs(), sizing.bytes());
   progress.report("load", 0.1);
-  draw_original_samples(store_dir, meta, ro, *o->chunks, progress, &o->samples, &o->targets);
+  stream::OriginalSamples s = stream::draw_original_samples(store_dir, meta, sample_options(ro), *o->chunks, progress);
+  o->samples.xyz = std::move(s.xyz), o->samples.faces = s.faces, o->targets = std::move(s.targets);
   o->diagonal = bbox_diagonal(meta);
   progress.report("load", 1);
 }
@@ -834,35 +653,9 @@ bool every_distance_known(const std::vector<RunSpec>& runs) {
   return true;
 }
 
-std::string original_samples_path(const stream::WorkDir& work, size_t g) {
-  return work.file(g == 0 ? std::string("report-samples.bin") : fmt::format("report-samples-{}.bin", g));
-}
-
-// What an original's samples are drawn from.
-std::string original_samples_key(const stream::StoreMeta& meta, const ReportOptions& ro) {
-  return nlohmann::ordered_json{{"source", meta.source.path}, {"bytes", meta.source.bytes}, {"mtime_ns", meta.source.mtime_ns},
-                                {"vertices", meta.vertices}, {"triangles", meta.triangles}, {"lines", meta.lines},
-                                {"points", meta.points}, {"samples", ro.samples}, {"seed", ro.seed}, {"views", ro.views}}
-      .dump();
-}
-
-// The shared stage of a report by ranges, under the work directory's lock: the original's samples and view
-// targets, drawn (as one machine draws them, chunks of a quarter of the budget) unless the work directory
-// holds them for the same key.
-void prepare_original_samples(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
-                              const std::string& path, uint64_t budget, stream::Progress& progress) {
-  const std::string key = original_samples_key(meta, ro);
-  stream::OriginalSamples have;
-  if (read_original_samples(path, key, &have)) return;
-  stream::StoreChunks chunks(store_dir, meta);
-  ChunkSizing sizing;
-  sizing.room = left_of(budget, resident_bytes() + 6 * ro.samples * 16) / 4;
-  chunks.plan(sizing.costs(), sizing.bytes());
-  Samples samples;
-  stream::OriginalSamples out;
-  draw_original_samples(store_dir, meta, ro, chunks, progress, &samples, &out.targets);
-  out.xyz = std::move(samples.xyz), out.faces = samples.faces;
-  stream::write_original_samples(path, key, out);
+// Where the tasks' sampling units of original g go (stream/report_samples.h).
+std::string sample_units_dir(const stream::WorkDir& work, size_t g) {
+  return work.file(g == 0 ? std::string("report-samples") : fmt::format("report-samples-{}", g));
 }
 
 // Samples as a scene of points (closest_distance: to the nearest one).
@@ -899,14 +692,13 @@ std::vector<float> distance_bounds(const std::vector<float>& samples, const core
   return d;
 }
 
-// Task I's range of the original: its primitives' chunks; the samples and targets the shared stage drew.
+// Task I's range of the original: its primitives' chunks; the samples and targets drawn by the tasks'
+// sampling units, which it takes part in (with its index first).
 void load_original_range(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
-                         const ChunkSizing& sizing, const std::string& samples_path, stream::Progress& progress, Original* o) {
+                         const ChunkSizing& sizing, const std::string& units_dir, stream::Progress& progress, Original* o) {
   o->meta = meta;
-  stream::OriginalSamples s;
-  if (!read_original_samples(samples_path, original_samples_key(meta, ro), &s))
-    fail(Status::io_error, samples_path + ": the original's samples are missing (the shared stage draws them: run the "
-                                          "prepare step or any task again)");
+  stream::OriginalSamples s = stream::draw_original_samples_in_units(store_dir, meta, sample_options(ro), units_dir,
+                                                                     ro.shard_count, ro.shard_index, sizing.bytes(), progress);
   o->samples.xyz = std::move(s.xyz), o->samples.faces = s.faces, o->targets = std::move(s.targets);
   const auto [first, end] = stream::share_of(meta.primitives(), ro.shard_index, ro.shard_count);
   o->chunks = std::make_unique<stream::StoreChunks>(store_dir, meta);
@@ -966,7 +758,7 @@ void begin_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint6
   w.distance_known = spec.switch_distance > 0;
   w.distance = w.distance_known ? spec.switch_distance : 1.0;
   w.views = std::min<unsigned>(ro.views, static_cast<unsigned>(o.targets.size() / 3));
-  w.samples = sample_mesh(mesh, ro.samples, ro.seed, kStreamLodSamples);
+  w.samples = stream::sample_mesh(mesh, ro.samples, ro.seed, stream::kStreamLodSamples);
   w.to_original.assign(w.samples.xyz.size() / 3, std::numeric_limits<float>::infinity());
   read_time.reset();
   set_shares(o, w, ro);
@@ -1604,10 +1396,6 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         const stream::StoreMeta meta =
             stream::run_ingest_stage(originals[g], store_dir, plan, work, progress, &rep.stages, &scene, &reused,
                                      sharded ? stream::ingest_ranges_dir(work, g) : std::string());
-        if (by_ranges)
-          run_stage(&rep.stages, "samples", [&](StageStats&) {
-            prepare_original_samples(store_dir, meta, ro, original_samples_path(work, g), plan.budget, progress);
-          });
         shard_lock.reset();
         input_bytes += scene.file_bytes;
         if (ro.shard_prepare) continue;
@@ -1650,7 +1438,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
         ChunkSizing sizing;
         sizing.room = embree_limit, sizing.cap = options.chunk_bytes, sizing.colored = colored;
         run_stage(&rep.stages, "load", [&](StageStats&) {
-          if (by_ranges) load_original_range(store_dir, meta, ro, sizing, original_samples_path(work, g), progress, &o);
+          if (by_ranges) load_original_range(store_dir, meta, ro, sizing, sample_units_dir(work, g), progress, &o);
           else load_original(store_dir, meta, ro, sizing, progress, &o);
         });
         PhaseTimes phases;
@@ -1685,8 +1473,8 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
               const uint64_t limit = left_of(embree_limit, cache ? cached_bytes(*cache) : 0);
               if (by_ranges) {
                 const size_t r = static_cast<size_t>(w->run - runs.data());
-                stream::ViewHitsWriter views(stream::report_views_path(ro.output_dir, ro.shard_index, r, w->index, true));
-                trace_level_range(o, *w, ro, limit, options.chunk_bytes, views);
+                stream::ViewHitsWriter level_views(stream::report_views_path(ro.output_dir, ro.shard_index, r, w->index, true));
+                trace_level_range(o, *w, ro, limit, options.chunk_bytes, level_views);
               } else {
                 finish_level(o, *w, ro, limit, options.chunk_bytes);
               }

@@ -3,7 +3,6 @@
 
 #include <cerrno>
 #include <cstring>
-#include <filesystem>
 
 #include <fmt/format.h>
 
@@ -15,7 +14,6 @@ namespace {
 
 constexpr char kMagic[8] = {'L', 'O', 'D', 'R', 'E', 'P', 'T', '2'};
 constexpr char kViewsMagic[8] = {'L', 'O', 'D', 'V', 'H', 'I', 'T', '1'};
-constexpr char kSamplesMagic[8] = {'L', 'O', 'D', 'S', 'M', 'P', 'L', '1'};
 
 // A covered pixel's record: pixel, depth, normal, kind, centre, and RGB when the view has colours.
 constexpr size_t kHitBytes = 4 + 4 + 12 + 1 + 1;
@@ -86,60 +84,6 @@ void ViewHitsReader::composite_next(core::ViewImage* into) {
                             colored ? reinterpret_cast<const uint8_t*>(r + 22) : nullptr);
     }
     done += n;
-  }
-}
-
-void write_original_samples(const std::string& path, const std::string& key, const OriginalSamples& s) {
-  io::FileWriter out(path);
-  out.write(kSamplesMagic, sizeof kSamplesMagic);
-  put_string(out, key);
-  put(out, s.faces);
-  put_array(out, s.xyz), put_array(out, s.targets);
-  out.commit();
-}
-
-namespace {
-
-class SamplesReader : TaskFileReader {
- public:
-  explicit SamplesReader(const std::string& path) : TaskFileReader(path, kSamplesMagic, "a report's original samples") {}
-  std::string key() {
-    uint64_t n;
-    read(&n, 8);
-    if (n > (1u << 20)) fail(Status::io_error, path_ + ": a report's original samples are damaged");
-    std::string k(n, '\0');
-    read(k.data(), n);
-    return k;
-  }
-  void samples(OriginalSamples* out) {
-    read(&out->faces, 8);
-    array(out->xyz), array(out->targets);
-    if (out->xyz.size() % 3 || out->targets.size() % 3 || out->faces > out->xyz.size() / 3)
-      fail(Status::io_error, path_ + ": a report's original samples are damaged");
-  }
-
- private:
-  void array(std::vector<float>& v) {
-    uint64_t n;
-    read(&n, 8);
-    if (n > (uint64_t{1} << 36)) fail(Status::io_error, path_ + ": a report's original samples are damaged");
-    v.resize(n);
-    read(v.data(), n * sizeof(float));
-  }
-};
-
-}  // namespace
-
-bool read_original_samples(const std::string& path, const std::string& key, OriginalSamples* out) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) return false;
-  try {  // a damaged file, or one of another version, is drawn again
-    SamplesReader r(path);
-    if (r.key() != key) return false;
-    r.samples(out);
-    return true;
-  } catch (const Failure&) {
-    return false;
   }
 }
 

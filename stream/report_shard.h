@@ -8,8 +8,8 @@
 // of the original and of the level (their covered pixels: ViewHitsWriter) and its distances. The merge
 // composites the tasks' images in task order (core::composite_view: the image of the primitives in their
 // order, cast_view's own) and takes each sample's least distance, then compares and forms the figures
-// with one machine's code. The original's samples and view targets are drawn once, by the shared stage
-// that ingests it (write_original_samples), not by every task.
+// with one machine's code. The original's samples and view targets are drawn once, as units that the
+// tasks take up (stream/report_samples.h), not by every task.
 //
 // By views (a level without a switching distance: its camera needs the whole Hausdorff max first): task I
 // measures the I-th N-th of every level's views and of its Hausdorff samples in each direction
@@ -93,17 +93,12 @@ class ViewHitsReader : TaskFileReader {
   std::vector<char> block_;
 };
 
-// An original's Metro samples and view targets, drawn once in the shared stages of a report by ranges
-// (the ingesting task or the prepare job, under the work directory's lock) and read by every task. `key`
-// says what they were drawn from (the original, the store's counts, samples, seed, views).
+// An original's Metro samples and view targets (stream/report_samples.h).
 struct OriginalSamples {
   std::vector<float> xyz;       // face samples first, then edge and vertex samples
   uint64_t faces = 0;
   std::vector<float> targets;   // view targets, xyz
 };
-void write_original_samples(const std::string& path, const std::string& key, const OriginalSamples& s);
-// False when the file is missing or holds another key's samples.
-bool read_original_samples(const std::string& path, const std::string& key, OriginalSamples* out);
 
 class ReportShareWriter {
  public:

@@ -219,18 +219,35 @@ void StoreChunks::read_colors(const StoreChunk& c, std::span<const uint64_t> bit
   }
 }
 
-void StoreChunks::for_used_vertices(const std::function<void(std::span<const float>)>& visit_block) const {
-  // Blocks of 64 × 4096 store vertices, so that the positions read stay small.
+namespace {
+
+// visit(positions) of the vertices whose bits are set, in blocks of 64 × 4096 store vertices, so that the
+// positions read stay small.
+template <class Read, class Visit>
+void for_bits(std::span<const uint64_t> bits, const Read& read, const Visit& visit) {
   constexpr uint64_t kWords = 4096;
   std::vector<float> xyz;
-  for (uint64_t w0 = 0; w0 < used_.size(); w0 += kWords) {
-    const std::span<const uint64_t> block(used_.data() + w0, std::min<uint64_t>(kWords, used_.size() - w0));
+  for (uint64_t w0 = 0; w0 < bits.size(); w0 += kWords) {
+    const std::span<const uint64_t> block(bits.data() + w0, std::min<uint64_t>(kWords, bits.size() - w0));
     uint64_t count = 0;
     for (uint64_t w : block) count += static_cast<uint64_t>(std::popcount(w));
     if (count == 0) continue;
-    read_positions(block, w0, count, xyz);
-    visit_block(xyz);
+    read(block, w0, count, xyz);
+    visit(xyz);
   }
+}
+
+}  // namespace
+
+void StoreChunks::for_used_vertices(const std::function<void(std::span<const float>)>& visit_block) const {
+  for_bits(used_, [&](auto block, uint64_t w0, uint64_t count, auto& xyz) { read_positions(block, w0, count, xyz); }, visit_block);
+}
+
+std::vector<float> StoreChunks::positions_of_bits(std::span<const uint64_t> bits) const {
+  std::vector<float> out;
+  for_bits(bits, [&](auto block, uint64_t w0, uint64_t count, auto& xyz) { read_positions(block, w0, count, xyz); },
+           [&](const std::vector<float>& xyz) { out.insert(out.end(), xyz.begin(), xyz.end()); });
+  return out;
 }
 
 std::vector<float> StoreChunks::positions_of(const std::vector<uint32_t>& ids) const {

@@ -17,7 +17,8 @@
 # `lodstream slurm report` as 3 tasks on the room's levels (and the city's) must give report.html and the
 # CSVs byte for byte as one machine's report, and report.json equal but for timings and counters, each
 # task tracing its range of the original's primitives; a report task killed with SIGKILL is named by the
-# merge (exit 66) and resubmitted alone to the same report.
+# merge (exit 66) and resubmitted alone to the same report; a sampling unit's holder killed before its
+# stamp makes the run exit 137, and resubmitting finishes it to the same report.
 # Prints "skipped:" and exits 77 when a cluster cannot start here (not root, Slurm or MUNGE missing).
 # Usage: slurm_test.sh LODSTREAM_CLI SOURCE_DIR
 set -uo pipefail
@@ -259,6 +260,24 @@ echo "$msg" | grep -q "report task 1 of 3 has not finished" || fail "the merge d
 rc=$?
 [ $rc -eq 0 ] || { fail "resubmit after a killed report task: exit $rc"; cat "$tmp/report-resubmit.log"; }
 echo "killed report task: merge refused ($msg); resubmitted: exit $rc"
+same_report "$tmp/room-report-one" "$out"
+
+# A sampling unit's holder killed just before the unit's stamp (every report task that runs measure unit 1
+# dies there, SIGKILL releasing its claim), in a fresh work directory: the run exits 137 with the other
+# measure units stamped, and `slurm resubmit` (no kill point now) runs unit 1 and the rest to one machine's
+# report.
+out=$tmp/room-report-kill-unit
+LODSTREAM_TEST_KILL_AT=measure-1.json "$cli" slurm report "$tmp/room-one" -o "$out" --work "$tmp/room-report-work-unit" \
+  --shards 3 --wait --no-space-check --views 8 --resolution 128 --samples 20000 >"$tmp/report-kill-unit.log" 2>&1
+rc=$?
+[ $rc -eq 137 ] || { fail "a sampling unit's holder killed with SIGKILL: the run exited $rc, not 137"; cat "$tmp/report-kill-unit.log"; }
+[ -e "$tmp/room-report-work-unit/report-samples/measure-1.json" ] && fail "measure unit 1 was stamped"
+units=$(ls "$tmp/room-report-work-unit/report-samples/" 2>/dev/null | grep -c '^measure-[0-9]*\.json$')
+[ "$units" -eq 2 ] || fail "not the two other measure units stamped: $units"
+"$cli" slurm resubmit "$out" --wait >"$tmp/report-resubmit-unit.log" 2>&1
+rc=$?
+[ $rc -eq 0 ] || { fail "resubmit after a killed sampling unit: exit $rc"; cat "$tmp/report-resubmit-unit.log"; }
+echo "killed sampling unit: run exit 137 with $units measure units stamped; resubmitted: exit $rc"
 same_report "$tmp/room-report-one" "$out"
 
 validator=${LODSTREAM_TILES_VALIDATOR:-${TMPDIR:-/tmp}/3d-tiles-validator}

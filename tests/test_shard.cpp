@@ -28,6 +28,8 @@
 #include "stream/cluster_stage.h"
 #include "stream/grade_shares.h"
 #include "stream/position_gather.h"
+#include "stream/chunk_scene.h"
+#include "stream/report_samples.h"
 #include "stream/scene_store.h"
 #include "stream/shard.h"
 #include "stream/vertex_cells.h"
@@ -1150,6 +1152,64 @@ TEST(ReportShard, PrimitiveRangesThroughChunksLinesAndColoursGiveOneMachinesRepo
     ASSERT_TRUE(r.ok()) << r.message;
     EXPECT_EQ(report_files(out), want);
   }
+}
+
+// An original's samples drawn as units by three processes at once (threads: the units' locks are flock
+// locks on their own open files, which exclude each other within one process too), as 3 and as 7 units,
+// and by one process as 2 units after one process's draw, give one process's samples and view targets bit
+// for bit; a second draw on the same directory reuses the units' files. The room has 4 blocks of
+// primitives: 7 units are 4 (a unit of at least one block each).
+TEST(ReportShard, SamplesDrawnAsUnitsByProcessesAtOnceAreOneProcesssSamples) {
+  TempDir dir;
+  ReportOptions ro = small_report(dir.file("one"));
+  ro.original = sample_room();
+  ro.lods = {sample_room()};
+  ro.switch_distances = {10};
+  Report one;
+  ASSERT_TRUE(report(ro, shared_work(dir), &one).ok()) << "ingests the room into work/store";
+  stream::StoreMeta meta;
+  ASSERT_TRUE(stream::read_store_meta(dir.file("work/store"), &meta));
+  ASSERT_GT(meta.primitives(), 3u << 16);
+  const stream::SampleOptions so{20011, 7, 9};
+  stream::Progress progress(Options{});
+  stream::StoreChunks chunks(dir.file("work/store"), meta);
+  chunks.plan(stream::kChunkSceneCosts, 1 << 20);
+  ASSERT_GT(chunks.chunks().size(), 3u);
+  const stream::OriginalSamples want = stream::draw_original_samples(dir.file("work/store"), meta, so, chunks, progress);
+  ASSERT_EQ(want.xyz.size(), 3u * (20011 * 2 + std::min<uint64_t>(20011, chunks.used_vertices())));
+  ASSERT_EQ(want.faces, 20011u);
+  ASSERT_EQ(want.targets.size(), 27u);
+  for (unsigned units : {3u, 7u}) {
+    SCOPED_TRACE(std::to_string(units) + " units");
+    const std::string units_dir = dir.file("units-" + std::to_string(units));
+    std::vector<stream::OriginalSamples> got(3);
+    std::vector<std::string> errors(3);
+    std::vector<std::thread> processes;
+    for (unsigned i = 0; i < 3; ++i)
+      processes.emplace_back([&, i] {
+        try {
+          stream::Progress p(Options{});
+          got[i] = stream::draw_original_samples_in_units(dir.file("work/store"), meta, so, units_dir, units, i, 256 << 10, p);
+        } catch (const std::exception& e) {
+          errors[i] = e.what();
+        }
+      });
+    for (std::thread& t : processes) t.join();
+    for (unsigned i = 0; i < 3; ++i) {
+      EXPECT_EQ(errors[i], "");
+      EXPECT_EQ(got[i].xyz, want.xyz) << "process " << i;
+      EXPECT_EQ(got[i].faces, want.faces);
+      EXPECT_EQ(got[i].targets, want.targets);
+    }
+    const stream::OriginalSamples again =
+        stream::draw_original_samples_in_units(dir.file("work/store"), meta, so, units_dir, units, 0, 256 << 10, progress);
+    EXPECT_EQ(again.xyz, want.xyz) << "the units' files reused";
+    EXPECT_FALSE(std::filesystem::exists(units_dir + "/measure-0.used")) << "the used vertices' bits go once the vertex samples are drawn";
+  }
+  const stream::OriginalSamples two =
+      stream::draw_original_samples_in_units(dir.file("work/store"), meta, so, dir.file("units-2"), 2, 1, 64 << 10, progress);
+  EXPECT_EQ(two.xyz, want.xyz);
+  EXPECT_EQ(two.targets, want.targets);
 }
 
 // Ingest by byte ranges for a report of two runs with different originals (a binary PLY and an OBJ): every

@@ -431,7 +431,7 @@ int main(int argc, char** argv) {
   report_cmd->add_flag("--shard-from-env", report_shard_from_env,
                        "--shard from SLURM_ARRAY_TASK_ID/COUNT, JOB_COMPLETION_INDEX or AWS_BATCH_JOB_ARRAY_INDEX (count: LODSTREAM_SHARD_COUNT)");
   report_cmd->add_flag("--shard-prepare", ro.shard_prepare,
-                       "Ingest the originals and draw their samples into --work DIR for the tasks, then stop");
+                       "Ingest the originals into --work DIR for the tasks, then stop");
   std::string report_shard_ingest_text;
   report_cmd->add_option("--shard-ingest", report_shard_ingest_text,
                          "Parse byte range I of N of every original into --work DIR, then stop (--shard-prepare joins the N ranges)");

@@ -316,11 +316,12 @@ struct ReportOptions {
   unsigned supersample = 3;
   // Past one machine (README "Running on a cluster"): with shard_count N > 0 this call is task shard_index
   // (0 <= I < N) over a shared work directory (Options::work_dir, required): it ingests the originals
-  // and draws their samples unless another task did (under the work directory's lock), then, when every
-  // level has its switching distance, traces the I-th N-th of every original's and every level's
-  // primitives for every view and sample (else the I-th N-th of every level's views and samples against
-  // the whole original), and writes what it measured to output_dir/shards/report/; merge_report() then
-  // writes report.json, the CSVs and report.html. shard_prepare: the shared stages only.
+  // unless another task did (under the work directory's lock), then, when every level has its switching
+  // distance, takes part in drawing their samples (units every task takes up) and traces the I-th N-th of
+  // every original's and every level's primitives for every view and sample (else the I-th N-th of every
+  // level's views and samples against the whole original), and writes what it measured to
+  // output_dir/shards/report/; merge_report() then writes report.json, the CSVs and report.html.
+  // shard_prepare: the shared stages only.
   unsigned shard_index = 0, shard_count = 0;
   bool shard_prepare = false;
   // With ingest_count N > 0: only parse byte range ingest_index of N of every original into the work

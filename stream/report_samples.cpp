@@ -1,0 +1,370 @@
+// Samples of a report's meshes; see report_samples.h.
+#include "stream/report_samples.h"
+
+#include <algorithm>
+#include <bit>
+#include <cstring>
+#include <functional>
+#include <span>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "core/status.h"
+#include "core/surface_sampling.h"
+#include "io/file_writer.h"
+#include "stream/chunk_scene.h"
+#include "stream/store_access.h"
+#include "stream/units.h"
+
+namespace lodstream::stream {
+namespace {
+
+// Samples of a mesh streamed in parts, in its primitive order (every triangle, then every segment; a
+// part's triangles and segments come after the earlier parts'), measured in one pass over the parts and
+// sampled in a second; the used vertices are sampled in vertex order. With k > 0, also k view targets
+// from the same passes: points uniform by area on the triangles; with no triangles, uniform by length on
+// the segments; with neither, the points themselves in turn. The samples depend on the mesh alone, never
+// on how it is cut into parts: the primitives' weights are summed in fixed blocks of kSampleBlock
+// primitives by global id (core/surface_sampling.h), so that blocks measured and sampled by several
+// processes give one process's samples (sample_units).
+constexpr unsigned kSampleBlockBits = 16;
+constexpr uint64_t kSampleBlock = uint64_t{1} << kSampleBlockBits;
+
+// A block's weight sums, of the samples' sampler and of the view targets'.
+struct BlockSums {
+  core::SamplerSums sampler, aim;
+};
+
+class MeshSampling {
+ public:
+  // `triangles`: the mesh's triangle count (its segments' global ids follow them); `primitives`: all of them.
+  MeshSampling(uint64_t n, uint64_t seed, uint64_t stream, unsigned k, uint64_t triangles, uint64_t primitives)
+      : sampler_(n, seed, stream), aim_(k, seed, kStreamTargets), n_(n), k_(k), triangles_(triangles),
+        sums_((primitives + kSampleBlock - 1) / kSampleBlock), before_(sums_.size()) {}
+
+  // Pass 1 over a part whose first primitive has global id `first`.
+  void measure(std::span<const float> xyz, std::span<const uint32_t> triangles, std::span<const uint32_t> segments, uint64_t first) {
+    const float* p = xyz.data();
+    for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+      measure_block(first + t / 3);
+      const float *a = p + 3ull * triangles[t], *b = p + 3ull * triangles[t + 1], *c = p + 3ull * triangles[t + 2];
+      sampler_.measure_triangle(a, b, c);
+      if (k_) aim_.measure_triangle(a, b, c);
+    }
+    const uint64_t first_segment = std::max(first, triangles_);
+    for (size_t e = 0; e + 1 < segments.size(); e += 2) {
+      measure_block(first_segment + e / 2);
+      const float *a = p + 3ull * segments[e], *b = p + 3ull * segments[e + 1];
+      sampler_.measure_segment(a, b);
+      if (k_ && triangles_ == 0) aim_.measure_segment(a, b);
+    }
+  }
+  // Pass 1's results, for a process that measured some blocks: every block's sums (zero where it measured
+  // none); and a block another process measured.
+  const std::vector<BlockSums>& sums() {
+    close_block();
+    return sums_;
+  }
+  void set_sums(uint64_t block, const BlockSums& s) { sums_.at(block) = s; }
+  // Between the passes: the blocks' sums added in block order, and the positions drawn.
+  void begin(uint64_t used_vertices) {
+    close_block();
+    for (size_t b = 0; b < sums_.size(); ++b) {
+      before_[b] = {{sampler_.area(), sampler_.length()}, {aim_.area(), aim_.length()}};
+      sampler_.add_block(sums_[b].sampler), aim_.add_block(sums_[b].aim);
+    }
+    sampler_.add_vertices(used_vertices);
+    sampler_.begin_sampling();
+    aim_.begin_sampling();
+    faces_.reserve(3 * n_), edges_.reserve(3 * n_), vertices_.reserve(3 * std::min(n_, used_vertices));
+  }
+  // Pass 2 over a part, as pass 1.
+  void sample(std::span<const float> xyz, std::span<const uint32_t> triangles, std::span<const uint32_t> segments, uint64_t first) {
+    const float* p = xyz.data();
+    for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+      sample_block(first + t / 3);
+      const float *a = p + 3ull * triangles[t], *b = p + 3ull * triangles[t + 1], *c = p + 3ull * triangles[t + 2];
+      sampler_.sample_triangle(a, b, c, faces_, edges_);
+      if (k_) aim_.sample_triangle(a, b, c, aim_faces_, aim_unused_);
+    }
+    const uint64_t first_segment = std::max(first, triangles_);
+    for (size_t e = 0; e + 1 < segments.size(); e += 2) {
+      sample_block(first_segment + e / 2);
+      const float *a = p + 3ull * segments[e], *b = p + 3ull * segments[e + 1];
+      sampler_.sample_segment(a, b, edges_);
+      // Targets on segments only without any area: then no target lies on a triangle.
+      if (k_ && !(aim_.area() > 0)) aim_.sample_segment(a, b, aim_edges_);
+    }
+  }
+  // Consecutive used vertices, in vertex order.
+  void sample_vertices(std::span<const float> xyz) {
+    for (size_t v = 0; v + 2 < xyz.size(); v += 3) sampler_.sample_vertex(xyz.data() + v, vertices_);
+  }
+  // Whether the next used vertex is a vertex sample (its position is the caller's to add: add_vertex).
+  bool take_vertex() { return sampler_.take_vertex(); }
+  void add_vertex(const float* p) { vertices_.insert(vertices_.end(), p, p + 3); }
+  // Pass 2's samples so far: face, edge and target samples (targets on triangles or else on segments).
+  const std::vector<float>& faces() const { return faces_; }
+  const std::vector<float>& edges() const { return edges_; }
+  const std::vector<float>& aim() const { return aim_.area() > 0 ? aim_faces_ : aim_edges_; }
+  // `point_xyz`: positions of points 0, 1, ... (cyclically, k of them), the targets of a mesh of points.
+  MeshSamples finish(std::vector<float>* targets, const std::function<std::vector<float>()>& point_xyz) {
+    if (targets) {
+      *targets = !aim_faces_.empty() ? std::move(aim_faces_) : std::move(aim_edges_);
+      if (targets->empty()) *targets = point_xyz();
+    }
+    MeshSamples out;
+    out.faces = faces_.size() / 3;
+    faces_.insert(faces_.end(), edges_.begin(), edges_.end());
+    faces_.insert(faces_.end(), vertices_.begin(), vertices_.end());
+    out.xyz = std::move(faces_);
+    return out;
+  }
+
+ private:
+  // Pass 1: primitive `g` closes the block being measured when it starts another.
+  void measure_block(uint64_t g) {
+    const uint64_t b = g >> kSampleBlockBits;
+    if (open_ && b != block_) close_block();
+    open_ = true, block_ = b;
+  }
+  void close_block() {
+    if (!open_) return;
+    sums_.at(block_) = {sampler_.end_block(), aim_.end_block()};
+    open_ = false;
+  }
+  // Pass 2: primitive `g` starts its block from the sums of the blocks before it.
+  void sample_block(uint64_t g) {
+    const uint64_t b = g >> kSampleBlockBits;
+    if (open_ && b == block_) return;
+    sampler_.begin_block(before_.at(b).sampler), aim_.begin_block(before_.at(b).aim);
+    open_ = true, block_ = b;
+  }
+
+  core::SurfaceSampler sampler_, aim_;
+  uint64_t n_;
+  unsigned k_;
+  uint64_t triangles_;
+  std::vector<BlockSums> sums_, before_;  // per block: its sums; the sums of the blocks before it
+  bool open_ = false;
+  uint64_t block_ = 0;
+  std::vector<float> faces_, edges_, vertices_, aim_faces_, aim_edges_, aim_unused_;
+};
+
+}  // namespace
+
+// Samples of a mesh held in memory (a level).
+MeshSamples sample_mesh(const core::LodMesh& m, uint64_t n, uint64_t seed, uint64_t stream) {
+  MeshSampling s(n, seed, stream, 0, m.triangle_count(), m.triangle_count() + m.edge_count() + m.point_count());
+  s.measure(m.positions, m.triangles, m.edges, 0);
+  std::vector<uint8_t> used(m.positions.size() / 3, 0);
+  for (auto ids : {std::span<const uint32_t>(m.triangles), std::span<const uint32_t>(m.edges), std::span<const uint32_t>(m.points)})
+    for (uint32_t v : ids) used[v] = 1;
+  s.begin(static_cast<uint64_t>(std::count(used.begin(), used.end(), 1)));
+  s.sample(m.positions, m.triangles, m.edges, 0);
+  for (size_t v = 0; v < used.size(); ++v)
+    if (used[v]) s.sample_vertices(std::span<const float>(m.positions.data() + 3 * v, 3));
+  return s.finish(nullptr, {});
+}
+
+
+// The view targets of a mesh of points only: points 0, 1, ... (cyclically, `views` of them).
+std::vector<float> point_targets(const std::string& store_dir, const StoreMeta& meta, unsigned views, const StoreChunks& chunks) {
+  std::vector<uint32_t> ids;
+  for_column_blocks(store_dir + "/points.u32", meta.points, 1, 1 << 20, [&](uint64_t, std::span<const uint32_t> p) {
+    for (size_t i = 0; i < p.size() && ids.size() < views; ++i) ids.push_back(p[i]);
+  });
+  const size_t have = ids.size();
+  for (size_t i = have; have > 0 && i < views; ++i) ids.push_back(ids[i % have]);
+  return chunks.positions_of(ids);
+}
+
+OriginalSamples draw_original_samples(const std::string& store_dir, const StoreMeta& meta, const SampleOptions& o,
+                                      StoreChunks& chunks, Progress& progress) {
+  const size_t n = chunks.chunks().size();
+  MeshSampling s(o.samples, o.seed, kStreamOriginalSamples, o.views, meta.triangles, meta.primitives());
+  ChunkGeometry g;
+  for (size_t c = 0; c < n; ++c) {
+    chunks.read(c, &g);
+    s.measure(g.xyz, g.triangles, g.lines, g.first);
+    progress.report("load", 0.1 + 0.4 * double(c + 1) / double(n));
+  }
+  s.begin(chunks.used_vertices());
+  for (size_t c = 0; c < n; ++c) {
+    if (n > 1) chunks.read(c, &g);  // one chunk: still there
+    s.sample(g.xyz, g.triangles, g.lines, g.first);
+    progress.report("load", 0.5 + 0.4 * double(c + 1) / double(n));
+  }
+  g = {};
+  chunks.for_used_vertices([&](std::span<const float> xyz) { s.sample_vertices(xyz); });
+  OriginalSamples out;
+  const MeshSamples m = s.finish(&out.targets, [&] { return point_targets(store_dir, meta, o.views, chunks); });
+  out.xyz = m.xyz, out.faces = m.faces;
+  return out;
+}
+
+// ------------------------------------------------------------------------------------------- units
+
+namespace {
+
+// A unit's files in `dir`.
+std::string unit_file(const std::string& dir, const char* what, unsigned u, const char* ext) {
+  return fmt::format("{}{}-{}.{}", dir, what, u, ext);
+}
+
+void write_floats(io::FileWriter& out, const std::vector<float>& v) {
+  const uint64_t n = v.size();
+  out.write(&n, 8);
+  out.write(v.data(), n * sizeof(float));
+}
+
+// A small binary file of the units, read whole; Failure(io_error) naming it when it is cut short.
+class UnitFile {
+ public:
+  explicit UnitFile(const std::string& path) : path_(path), bytes_(io::read_small_file(path)) {}
+  template <class T>
+  T value() {
+    T v;
+    take(&v, sizeof v);
+    return v;
+  }
+  std::vector<float> floats() {
+    const uint64_t n = value<uint64_t>();
+    if (n > (bytes_.size() - at_) / sizeof(float)) fail(Status::io_error, path_ + ": a sampling unit's file is damaged");
+    std::vector<float> v(n);
+    take(v.data(), n * sizeof(float));
+    return v;
+  }
+
+ private:
+  void take(void* p, size_t n) {
+    if (n > bytes_.size() - at_) fail(Status::io_error, path_ + ": a sampling unit's file is cut short");
+    std::memcpy(p, bytes_.data() + at_, n);
+    at_ += n;
+  }
+  std::string path_, bytes_;
+  size_t at_ = 0;
+};
+
+}  // namespace
+
+OriginalSamples draw_original_samples_in_units(const std::string& store_dir, const StoreMeta& meta, const SampleOptions& o,
+                                               const std::string& dir_in, unsigned units, unsigned index, uint64_t chunk_bytes,
+                                               Progress& progress) {
+  const std::string dir = dir_in.back() == '/' ? dir_in : dir_in + "/";
+  const uint64_t primitives = meta.primitives(), blocks = (primitives + kSampleBlock - 1) / kSampleBlock;
+  const unsigned count = static_cast<unsigned>(std::max<uint64_t>(1, std::min<uint64_t>(units, blocks)));
+  const nlohmann::ordered_json key{{"source", meta.source.path}, {"bytes", meta.source.bytes}, {"mtime_ns", meta.source.mtime_ns},
+                                   {"vertices", meta.vertices}, {"triangles", meta.triangles}, {"lines", meta.lines},
+                                   {"points", meta.points}, {"samples", o.samples}, {"seed", o.seed}, {"views", o.views},
+                                   {"units", count}, {"block", kSampleBlock}};
+  const auto block_range = [&](unsigned u) { return std::pair(blocks * u / count, blocks * (u + 1) / count); };
+  const ChunkCosts costs = kChunkSceneCosts;
+  const uint64_t words = (meta.vertices + 63) / 64;
+  // Unit u's chunks: the primitives of its blocks.
+  const auto unit_chunks = [&](unsigned u) {
+    const auto [b0, b1] = block_range(u);
+    auto chunks = std::make_unique<StoreChunks>(store_dir, meta);
+    chunks->plan_range(costs, chunk_bytes, b0 * kSampleBlock, std::min(primitives, b1 * kSampleBlock));
+    return chunks;
+  };
+  const auto sampling = [&] {
+    return MeshSampling(o.samples, o.seed, kStreamOriginalSamples, o.views, meta.triangles, primitives);
+  };
+
+  // Measure units: each block's sums (4 doubles a block) and the unit's used vertices (a bit a store vertex).
+  take_units(dir, count, index, [&](unsigned u) { return unit_file(dir, "measure", u, "json"); }, key, [&](unsigned u) {
+    std::unique_ptr<StoreChunks> chunks = unit_chunks(u);
+    MeshSampling s = sampling();
+    ChunkGeometry g;
+    for (size_t c = 0; c < chunks->chunks().size(); ++c) {
+      chunks->read(c, &g);
+      s.measure(g.xyz, g.triangles, g.lines, g.first);
+    }
+    const std::vector<BlockSums>& sums = s.sums();
+    const auto [b0, b1] = block_range(u);
+    io::FileWriter out(unit_file(dir, "measure", u, "sums"));
+    for (uint64_t b = b0; b < b1; ++b) out.write(&sums[b], sizeof(BlockSums));
+    out.commit();
+    io::FileWriter used(unit_file(dir, "measure", u, "used"));
+    used.write(chunks->used_bits().data(), words * 8);
+    used.commit();
+    progress.report("samples", 0.3 * double(u + 1) / double(count));
+    return std::pair(std::vector<std::string>{unit_file(dir, "measure", u, "sums")}, nlohmann::ordered_json{});
+  });
+  std::vector<BlockSums> sums(blocks);
+  for (unsigned u = 0; u < count; ++u) {
+    const auto [b0, b1] = block_range(u);
+    UnitFile f(unit_file(dir, "measure", u, "sums"));
+    for (uint64_t b = b0; b < b1; ++b) sums[b] = f.value<BlockSums>();
+  }
+
+  // Once: the vertex samples, Algorithm S over the vertices any unit's primitives use, in store order; then
+  // the units' bits go.
+  const std::string vertices_path = dir + "vertices.bin";
+  start_once(dir, vertices_path, key, {"vertices"}, [&] {
+    std::vector<std::unique_ptr<UnitFile>> used;
+    std::vector<uint64_t> bits(words, 0);
+    for (unsigned u = 0; u < count; ++u) {
+      const std::string bytes = io::read_small_file(unit_file(dir, "measure", u, "used"));
+      if (bytes.size() != words * 8) fail(Status::io_error, unit_file(dir, "measure", u, "used") + ": a sampling unit's file is cut short");
+      const uint64_t* w = reinterpret_cast<const uint64_t*>(bytes.data());
+      for (uint64_t i = 0; i < words; ++i) bits[i] |= w[i];
+    }
+    uint64_t used_count = 0;
+    for (uint64_t w : bits) used_count += static_cast<uint64_t>(std::popcount(w));
+    MeshSampling s = sampling();
+    s.begin(used_count);
+    std::vector<uint64_t> taken(words, 0);
+    for (uint64_t i = 0; i < words; ++i)
+      for (uint64_t b = bits[i]; b != 0; b &= b - 1)
+        if (s.take_vertex()) taken[i] |= b & (~b + 1);
+    StoreChunks reader(store_dir, meta);
+    io::FileWriter out(vertices_path);
+    out.write(&used_count, 8);
+    write_floats(out, reader.positions_of_bits(taken));
+    out.commit();
+  });
+  for (unsigned u = 0; u < count; ++u) std::filesystem::remove(unit_file(dir, "measure", u, "used"));
+  UnitFile vertices(vertices_path);
+  const uint64_t used_count = vertices.value<uint64_t>();
+  progress.report("samples", 0.4);
+
+  // Sample units: the samples in their blocks, from every block's sums.
+  take_units(dir, count, index, [&](unsigned u) { return unit_file(dir, "sample", u, "json"); }, key, [&](unsigned u) {
+    std::unique_ptr<StoreChunks> chunks = unit_chunks(u);
+    MeshSampling s = sampling();
+    for (uint64_t b = 0; b < blocks; ++b) s.set_sums(b, sums[b]);
+    s.begin(used_count);
+    ChunkGeometry g;
+    for (size_t c = 0; c < chunks->chunks().size(); ++c) {
+      chunks->read(c, &g);
+      s.sample(g.xyz, g.triangles, g.lines, g.first);
+    }
+    io::FileWriter out(unit_file(dir, "sample", u, "bin"));
+    write_floats(out, s.faces()), write_floats(out, s.edges()), write_floats(out, s.aim());
+    out.commit();
+    progress.report("samples", 0.4 + 0.6 * double(u + 1) / double(count));
+    return std::pair(std::vector<std::string>{unit_file(dir, "sample", u, "bin")}, nlohmann::ordered_json{});
+  });
+
+  // The units' samples in unit order: every face sample, then every edge sample, then the vertex samples.
+  OriginalSamples out;
+  std::vector<float> edges;
+  for (unsigned u = 0; u < count; ++u) {
+    UnitFile f(unit_file(dir, "sample", u, "bin"));
+    const std::vector<float> faces = f.floats(), unit_edges = f.floats(), aim = f.floats();
+    out.xyz.insert(out.xyz.end(), faces.begin(), faces.end());
+    edges.insert(edges.end(), unit_edges.begin(), unit_edges.end());
+    out.targets.insert(out.targets.end(), aim.begin(), aim.end());
+  }
+  out.faces = out.xyz.size() / 3;
+  out.xyz.insert(out.xyz.end(), edges.begin(), edges.end());
+  const std::vector<float> vertex_samples = vertices.floats();
+  out.xyz.insert(out.xyz.end(), vertex_samples.begin(), vertex_samples.end());
+  if (out.targets.empty()) out.targets = point_targets(store_dir, meta, o.views, StoreChunks(store_dir, meta));
+  return out;
+}
+
+}  // namespace lodstream::stream
