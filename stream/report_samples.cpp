@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <chrono>
 #include <cstring>
 #include <functional>
 #include <span>
@@ -14,6 +15,7 @@
 #include "core/surface_sampling.h"
 #include "io/file_writer.h"
 #include "stream/chunk_scene.h"
+#include "stream/job.h"
 #include "stream/store_access.h"
 #include "stream/units.h"
 
@@ -208,6 +210,19 @@ OriginalSamples draw_original_samples(const std::string& store_dir, const StoreM
 
 namespace {
 
+// A unit's wall and CPU seconds, for its stamp (tools/bench_report_shards.sh reads them).
+class UnitClock {
+ public:
+  nlohmann::ordered_json seconds() const {
+    return {{"seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0_).count()},
+            {"cpu_seconds", process_cpu_seconds() - cpu0_}};
+  }
+
+ private:
+  std::chrono::steady_clock::time_point t0_ = std::chrono::steady_clock::now();
+  double cpu0_ = process_cpu_seconds();
+};
+
 // A unit's files in `dir`.
 std::string unit_file(const std::string& dir, const char* what, unsigned u, const char* ext) {
   return fmt::format("{}{}-{}.{}", dir, what, u, ext);
@@ -275,6 +290,7 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
 
   // Measure units: each block's sums (4 doubles a block) and the unit's used vertices (a bit a store vertex).
   take_units(dir, count, index, [&](unsigned u) { return unit_file(dir, "measure", u, "json"); }, key, [&](unsigned u) {
+    const UnitClock clock;
     std::unique_ptr<StoreChunks> chunks = unit_chunks(u);
     MeshSampling s = sampling();
     ChunkGeometry g;
@@ -291,7 +307,7 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
     used.write(chunks->used_bits().data(), words * 8);
     used.commit();
     progress.report("samples", 0.3 * double(u + 1) / double(count));
-    return std::pair(std::vector<std::string>{unit_file(dir, "measure", u, "sums")}, nlohmann::ordered_json{});
+    return std::pair(std::vector<std::string>{unit_file(dir, "measure", u, "sums")}, clock.seconds());
   });
   std::vector<BlockSums> sums(blocks);
   for (unsigned u = 0; u < count; ++u) {
@@ -304,7 +320,7 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
   // the units' bits go.
   const std::string vertices_path = dir + "vertices.bin";
   start_once(dir, vertices_path, key, {"vertices"}, [&] {
-    std::vector<std::unique_ptr<UnitFile>> used;
+    const UnitClock clock;
     std::vector<uint64_t> bits(words, 0);
     for (unsigned u = 0; u < count; ++u) {
       const std::string bytes = io::read_small_file(unit_file(dir, "measure", u, "used"));
@@ -325,6 +341,7 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
     out.write(&used_count, 8);
     write_floats(out, reader.positions_of_bits(taken));
     out.commit();
+    io::write_file_atomic(dir + "vertices.json", clock.seconds().dump() + "\n");
   });
   for (unsigned u = 0; u < count; ++u) std::filesystem::remove(unit_file(dir, "measure", u, "used"));
   UnitFile vertices(vertices_path);
@@ -333,6 +350,7 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
 
   // Sample units: the samples in their blocks, from every block's sums.
   take_units(dir, count, index, [&](unsigned u) { return unit_file(dir, "sample", u, "json"); }, key, [&](unsigned u) {
+    const UnitClock clock;
     std::unique_ptr<StoreChunks> chunks = unit_chunks(u);
     MeshSampling s = sampling();
     for (uint64_t b = 0; b < blocks; ++b) s.set_sums(b, sums[b]);
@@ -346,7 +364,7 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
     write_floats(out, s.faces()), write_floats(out, s.edges()), write_floats(out, s.aim());
     out.commit();
     progress.report("samples", 0.4 + 0.6 * double(u + 1) / double(count));
-    return std::pair(std::vector<std::string>{unit_file(dir, "sample", u, "bin")}, nlohmann::ordered_json{});
+    return std::pair(std::vector<std::string>{unit_file(dir, "sample", u, "bin")}, clock.seconds());
   });
 
   // The units' samples in unit order: every face sample, then every edge sample, then the vertex samples.
