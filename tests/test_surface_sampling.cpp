@@ -247,21 +247,28 @@ TEST(SurfaceSampler, CollapsedElementsHaveVertexSamplesOnly) {
   EXPECT_EQ(s.vertices, m.xyz);
 }
 
-// Areas from 1e-6 to 1e4 and lengths likewise, 2000 triangles in random order: every one of the n drawn
-// positions is reached (the invariant of the sampling pass), for many seeds.
-TEST(SurfaceSampler, EveryPositionIsReachedWhateverTheSizes) {
-  std::mt19937 rng(5);
+// `count` triangles of areas from 1e-6 to 1e4 and sides likewise, in random places and order, and a segment
+// on every `segment_every`-th of them.
+Mesh random_sized_mesh(unsigned seed, int count, int segment_every) {
+  std::mt19937 rng(seed);
   std::uniform_real_distribution<double> u(0, 1);
   Mesh m;
-  for (int t = 0; t < 2000; ++t) {
+  for (int t = 0; t < count; ++t) {
     const double s = std::pow(10.0, -3 + 5 * u(rng));
     const double x = 100 * u(rng), y = 100 * u(rng), z = 100 * u(rng);
     const uint32_t a = m.add(x, y, z);
     m.add(x + s * u(rng), y + s * u(rng), z);
     m.add(x + s * u(rng), y, z + s * u(rng));
     m.triangles.insert(m.triangles.end(), {a, a + 1, a + 2});
-    if (t % 3 == 0) m.segments.insert(m.segments.end(), {a, a + 2});
+    if (t % segment_every == 0) m.segments.insert(m.segments.end(), {a, a + 2});
   }
+  return m;
+}
+
+// 2000 random triangles of every size: every one of the n drawn positions is reached (the invariant of the
+// sampling pass), for many seeds.
+TEST(SurfaceSampler, EveryPositionIsReachedWhateverTheSizes) {
+  const Mesh m = random_sized_mesh(5, 2000, 3);
   for (uint64_t seed = 0; seed < 20; ++seed) {
     const Samples s = sample(m, 7777, seed, seed * 3);
     ASSERT_EQ(s.face_count, 7777u) << seed;
@@ -477,24 +484,13 @@ TEST(SurfaceSampler, SelectionSamplingIsUniform) {
   for (int i = 0; i < 10; ++i) EXPECT_NEAR(picked[i], 1200, 150) << "vertex " << i;
 }
 
-// Blocks: the random mesh of EveryPositionIsReachedWhateverTheSizes cut into blocks of 97 elements (the
+// Blocks: 1500 random triangles of every size and 375 segments cut into blocks of 97 elements (the
 // segments after the triangles). One sampler measuring and sampling every block in turn, and samplers
-// that each measure one block apart, then each sample two or three blocks apart from the blocks' sums
+// that each measure one block apart, then each sample up to three blocks apart from the blocks' sums
 // (added in block order) and the sums before their first block, give the same samples, in the same
 // order, bit for bit; every position is reached, and the totals are the blocks' sums added in order.
 TEST(SurfaceSampler, BlocksMeasuredAndSampledApartGiveOneSamplersSamples) {
-  std::mt19937 rng(9);
-  std::uniform_real_distribution<double> u(0, 1);
-  Mesh m;
-  for (int t = 0; t < 1500; ++t) {
-    const double sz = std::pow(10.0, -3 + 5 * u(rng));
-    const double x = 100 * u(rng), y = 100 * u(rng), z = 100 * u(rng);
-    const uint32_t a = m.add(x, y, z);
-    m.add(x + sz * u(rng), y + sz * u(rng), z);
-    m.add(x + sz * u(rng), y, z + sz * u(rng));
-    m.triangles.insert(m.triangles.end(), {a, a + 1, a + 2});
-    if (t % 4 == 0) m.segments.insert(m.segments.end(), {a, a + 2});
-  }
+  const Mesh m = random_sized_mesh(9, 1500, 4);
   const size_t triangles = m.triangles.size() / 3, elements = triangles + m.segments.size() / 2;
   constexpr size_t kBlock = 97;
   const size_t blocks = (elements + kBlock - 1) / kBlock;
