@@ -29,7 +29,7 @@ namespace {
 // the segments; with neither, the points themselves in turn. The samples depend on the mesh alone, never
 // on how it is cut into parts: the primitives' weights are summed in fixed blocks of kSampleBlock
 // primitives by global id (core/surface_sampling.h), so that blocks measured and sampled by several
-// processes give one process's samples (sample_units).
+// processes give one process's samples (draw_original_samples_in_units).
 constexpr unsigned kSampleBlockBits = 16;
 constexpr uint64_t kSampleBlock = uint64_t{1} << kSampleBlockBits;
 
@@ -268,6 +268,7 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
                                                const std::string& dir_in, unsigned units, unsigned index, uint64_t chunk_bytes,
                                                Progress& progress) {
   const std::string dir = dir_in.back() == '/' ? dir_in : dir_in + "/";
+  const std::string measure_dir = dir + "measure/", sample_dir = dir + "sample/";  // each phase's units and locks
   const uint64_t primitives = meta.primitives(), blocks = (primitives + kSampleBlock - 1) / kSampleBlock;
   const unsigned count = static_cast<unsigned>(std::max<uint64_t>(1, std::min<uint64_t>(units, blocks)));
   const nlohmann::ordered_json key{{"source", meta.source.path}, {"bytes", meta.source.bytes}, {"mtime_ns", meta.source.mtime_ns},
@@ -289,7 +290,7 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
   };
 
   // Measure units: each block's sums (4 doubles a block) and the unit's used vertices (a bit a store vertex).
-  take_units(dir, count, index, [&](unsigned u) { return unit_file(dir, "measure", u, "json"); }, key, [&](unsigned u) {
+  take_units(measure_dir, count, index, [&](unsigned u) { return unit_file(measure_dir, "measure", u, "json"); }, key, [&](unsigned u) {
     const UnitClock clock;
     std::unique_ptr<StoreChunks> chunks = unit_chunks(u);
     MeshSampling s = sampling();
@@ -300,19 +301,19 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
     }
     const std::vector<BlockSums>& sums = s.sums();
     const auto [b0, b1] = block_range(u);
-    io::FileWriter out(unit_file(dir, "measure", u, "sums"));
+    io::FileWriter out(unit_file(measure_dir, "measure", u, "sums"));
     for (uint64_t b = b0; b < b1; ++b) out.write(&sums[b], sizeof(BlockSums));
     out.commit();
-    io::FileWriter used(unit_file(dir, "measure", u, "used"));
+    io::FileWriter used(unit_file(measure_dir, "measure", u, "used"));
     used.write(chunks->used_bits().data(), words * 8);
     used.commit();
     progress.report("samples", 0.3 * double(u + 1) / double(count));
-    return std::pair(std::vector<std::string>{unit_file(dir, "measure", u, "sums")}, clock.seconds());
+    return std::pair(std::vector<std::string>{unit_file(measure_dir, "measure", u, "sums")}, clock.seconds());
   });
   std::vector<BlockSums> sums(blocks);
   for (unsigned u = 0; u < count; ++u) {
     const auto [b0, b1] = block_range(u);
-    UnitFile f(unit_file(dir, "measure", u, "sums"));
+    UnitFile f(unit_file(measure_dir, "measure", u, "sums"));
     for (uint64_t b = b0; b < b1; ++b) sums[b] = f.value<BlockSums>();
   }
 
@@ -323,8 +324,8 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
     const UnitClock clock;
     std::vector<uint64_t> bits(words, 0);
     for (unsigned u = 0; u < count; ++u) {
-      const std::string bytes = io::read_small_file(unit_file(dir, "measure", u, "used"));
-      if (bytes.size() != words * 8) fail(Status::io_error, unit_file(dir, "measure", u, "used") + ": a sampling unit's file is cut short");
+      const std::string bytes = io::read_small_file(unit_file(measure_dir, "measure", u, "used"));
+      if (bytes.size() != words * 8) fail(Status::io_error, unit_file(measure_dir, "measure", u, "used") + ": a sampling unit's file is cut short");
       const uint64_t* w = reinterpret_cast<const uint64_t*>(bytes.data());
       for (uint64_t i = 0; i < words; ++i) bits[i] |= w[i];
     }
@@ -343,13 +344,13 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
     out.commit();
     io::write_file_atomic(dir + "vertices.json", clock.seconds().dump() + "\n");
   });
-  for (unsigned u = 0; u < count; ++u) std::filesystem::remove(unit_file(dir, "measure", u, "used"));
+  for (unsigned u = 0; u < count; ++u) std::filesystem::remove(unit_file(measure_dir, "measure", u, "used"));
   UnitFile vertices(vertices_path);
   const uint64_t used_count = vertices.value<uint64_t>();
   progress.report("samples", 0.4);
 
   // Sample units: the samples in their blocks, from every block's sums.
-  take_units(dir, count, index, [&](unsigned u) { return unit_file(dir, "sample", u, "json"); }, key, [&](unsigned u) {
+  take_units(sample_dir, count, index, [&](unsigned u) { return unit_file(sample_dir, "sample", u, "json"); }, key, [&](unsigned u) {
     const UnitClock clock;
     std::unique_ptr<StoreChunks> chunks = unit_chunks(u);
     MeshSampling s = sampling();
@@ -360,18 +361,18 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
       chunks->read(c, &g);
       s.sample(g.xyz, g.triangles, g.lines, g.first);
     }
-    io::FileWriter out(unit_file(dir, "sample", u, "bin"));
+    io::FileWriter out(unit_file(sample_dir, "sample", u, "bin"));
     write_floats(out, s.faces()), write_floats(out, s.edges()), write_floats(out, s.aim());
     out.commit();
     progress.report("samples", 0.4 + 0.6 * double(u + 1) / double(count));
-    return std::pair(std::vector<std::string>{unit_file(dir, "sample", u, "bin")}, clock.seconds());
+    return std::pair(std::vector<std::string>{unit_file(sample_dir, "sample", u, "bin")}, clock.seconds());
   });
 
   // The units' samples in unit order: every face sample, then every edge sample, then the vertex samples.
   OriginalSamples out;
   std::vector<float> edges;
   for (unsigned u = 0; u < count; ++u) {
-    UnitFile f(unit_file(dir, "sample", u, "bin"));
+    UnitFile f(unit_file(sample_dir, "sample", u, "bin"));
     const std::vector<float> faces = f.floats(), unit_edges = f.floats(), aim = f.floats();
     out.xyz.insert(out.xyz.end(), faces.begin(), faces.end());
     edges.insert(edges.end(), unit_edges.begin(), unit_edges.end());

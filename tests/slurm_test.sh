@@ -271,8 +271,8 @@ LODSTREAM_TEST_KILL_AT=measure-1.json "$cli" slurm report "$tmp/room-one" -o "$o
   --shards 3 --wait --no-space-check --views 8 --resolution 128 --samples 20000 >"$tmp/report-kill-unit.log" 2>&1
 rc=$?
 [ $rc -eq 137 ] || { fail "a sampling unit's holder killed with SIGKILL: the run exited $rc, not 137"; cat "$tmp/report-kill-unit.log"; }
-[ -e "$tmp/room-report-work-unit/report-samples/measure-1.json" ] && fail "measure unit 1 was stamped"
-units=$(ls "$tmp/room-report-work-unit/report-samples/" 2>/dev/null | grep -c '^measure-[0-9]*\.json$')
+[ -e "$tmp/room-report-work-unit/report-samples/measure/measure-1.json" ] && fail "measure unit 1 was stamped"
+units=$(ls "$tmp/room-report-work-unit/report-samples/measure/" 2>/dev/null | grep -c '^measure-[0-9]*\.json$')
 [ "$units" -eq 2 ] || fail "not the two other measure units stamped: $units"
 "$cli" slurm resubmit "$out" --wait >"$tmp/report-resubmit-unit.log" 2>&1
 rc=$?

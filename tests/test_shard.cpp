@@ -1204,7 +1204,7 @@ TEST(ReportShard, SamplesDrawnAsUnitsByProcessesAtOnceAreOneProcesssSamples) {
     const stream::OriginalSamples again =
         stream::draw_original_samples_in_units(dir.file("work/store"), meta, so, units_dir, units, 0, 256 << 10, progress);
     EXPECT_EQ(again.xyz, want.xyz) << "the units' files reused";
-    EXPECT_FALSE(std::filesystem::exists(units_dir + "/measure-0.used")) << "the used vertices' bits go once the vertex samples are drawn";
+    EXPECT_FALSE(std::filesystem::exists(units_dir + "/measure/measure-0.used")) << "the used vertices' bits go once the vertex samples are drawn";
   }
   const stream::OriginalSamples two =
       stream::draw_original_samples_in_units(dir.file("work/store"), meta, so, dir.file("units-2"), 2, 1, 64 << 10, progress);

@@ -43,21 +43,19 @@ def phases(ps):
     return ", ".join("%s %.2f" % (k, cpu.get(k, 0)) for k in names)
 print("  one machine's measure cpu by part: " + phases(a["performance"]["phases"]))
 tasks = b["shards"]["tasks"]
-slowest, total_cpu = 0, 0
+total_cpu = 0
 for t in tasks:
     mw, mc = stage(t["stages"], "measure")
     tl, tlc = stage(t["stages"], "load")
-    sw, sc = stage(t["stages"], "samples")
-    slowest = max(slowest, t["seconds"])
-    total_cpu += mc + tlc + sc
-    print("task %d of %d: %.2f s, samples %.2f s, load %.2f s cpu %.2f s, measure %.2f s wall %.2f s cpu (%.0f%% of one machine's measure cpu), "
-          "%d of %d primitives traced, peak %.0f MiB"
-          % (t["index"], n, t["seconds"], sw, tl, tlc, mw, mc, 100 * mc / c if c else 0, t.get("original_primitives", prims), prims,
+    total_cpu += mc + tlc
+    print("task %d of %d: %.2f s, load (with the sampling units it ran) %.2f s cpu %.2f s, measure %.2f s wall %.2f s cpu "
+          "(%.0f%% of one machine's measure cpu), %d of %d primitives traced, peak %.0f MiB"
+          % (t["index"], n, t["seconds"], tl, tlc, mw, mc, 100 * mc / c if c else 0, t.get("original_primitives", prims), prims,
              t["peak_rss_bytes"] / 2**20))
     if "phases" in t: print("  by part: " + phases(t["phases"]))
 # The sampling units the tasks took up (here one after another: the first task ran them all).
 def unit_times(kind):
-    return [json.load(open(f))["value"] for f in sorted(glob.glob(os.path.join(units, kind + "-*.json")))]
+    return [json.load(open(f))["value"] for f in sorted(glob.glob(os.path.join(units, kind, kind + "-*.json")))]
 measure, sample = unit_times("measure"), unit_times("sample")
 vertex = json.load(open(os.path.join(units, "vertices.json"))) if os.path.exists(os.path.join(units, "vertices.json")) else {"seconds": 0, "cpu_seconds": 0}
 sampling = 0
@@ -70,7 +68,7 @@ mw, mc = stage(b["stages"], "merge")
 print("merge: %.2f s (merge stage %.2f s cpu %.2f s), peak %.0f MiB; the tasks handed it %.1f MB"
       % (b["seconds"], mw, mc, b["peak_rss_bytes"] / 2**20, handed / 1e6))
 slowest_measure = max(stage(t["stages"], "measure")[0] for t in tasks)
-print("on %d nodes: sampling units + slowest measure + merge = %.2f s against one machine's %.2f s; tasks' load, samples and measure cpu summed: %.2f s against %.2f s"
+print("on %d nodes: sampling units + slowest measure + merge = %.2f s against one machine's %.2f s; tasks' load and measure cpu summed: %.2f s against %.2f s"
       % (n, sampling + slowest_measure + b["seconds"], a["seconds"], total_cpu, c + lc))
 files = sorted(f for f in os.listdir(one) if f != "report.json")
 same = all(filecmp.cmp(os.path.join(one, f), os.path.join(sharded, f), shallow=False) for f in files)
