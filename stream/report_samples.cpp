@@ -1,6 +1,8 @@
 // Samples of a report's meshes; see report_samples.h.
 #include "stream/report_samples.h"
 
+#include <fcntl.h>
+
 #include <algorithm>
 #include <bit>
 #include <chrono>
@@ -14,6 +16,7 @@
 #include "core/status.h"
 #include "core/surface_sampling.h"
 #include "io/file_writer.h"
+#include "io/offset_file.h"
 #include "stream/chunk_scene.h"
 #include "stream/job.h"
 #include "stream/store_access.h"
@@ -318,29 +321,48 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
   }
 
   // Once: the vertex samples, Algorithm S over the vertices any unit's primitives use, in store order; then
-  // the units' bits go.
+  // the units' bits go. The units' bits are read a slice at a time (a pass to count the used vertices, which
+  // Algorithm S needs first, and a pass to take them): memory a slice of each, and the taken vertices' ids.
   const std::string vertices_path = dir + "vertices.bin";
   start_once(dir, vertices_path, key, {"vertices"}, [&] {
     const UnitClock clock;
-    std::vector<uint64_t> bits(words, 0);
+    std::vector<std::unique_ptr<io::OffsetFile>> used;
     for (unsigned u = 0; u < count; ++u) {
-      const std::string bytes = io::read_small_file(unit_file(measure_dir, "measure", u, "used"));
-      if (bytes.size() != words * 8) fail(Status::io_error, unit_file(measure_dir, "measure", u, "used") + ": a sampling unit's file is cut short");
-      const uint64_t* w = reinterpret_cast<const uint64_t*>(bytes.data());
-      for (uint64_t i = 0; i < words; ++i) bits[i] |= w[i];
+      const std::string path = unit_file(measure_dir, "measure", u, "used");
+      std::error_code ec;
+      if (std::filesystem::file_size(path, ec) != words * 8) fail(Status::io_error, path + ": a sampling unit's file is missing or cut short");
+      used.push_back(std::make_unique<io::OffsetFile>(path, O_RDONLY));
     }
+    constexpr uint64_t kSlice = 1 << 12;  // words: 262,144 vertices, 32 KiB a unit
+    std::vector<uint64_t> bits, part;
+    // visit(first word, the slice's bits OR-ed over the units)
+    const auto for_slices = [&](const auto& visit) {
+      for (uint64_t w0 = 0; w0 < words; w0 += kSlice) {
+        const uint64_t n = std::min(kSlice, words - w0);
+        bits.assign(n, 0), part.resize(n);
+        for (const auto& f : used) {
+          f->read(part.data(), n * 8, w0 * 8);
+          for (uint64_t i = 0; i < n; ++i) bits[i] |= part[i];
+        }
+        visit(w0);
+      }
+    };
     uint64_t used_count = 0;
-    for (uint64_t w : bits) used_count += static_cast<uint64_t>(std::popcount(w));
+    for_slices([&](uint64_t) {
+      for (uint64_t w : bits) used_count += static_cast<uint64_t>(std::popcount(w));
+    });
     MeshSampling s = sampling();
     s.begin(used_count);
-    std::vector<uint64_t> taken(words, 0);
-    for (uint64_t i = 0; i < words; ++i)
-      for (uint64_t b = bits[i]; b != 0; b &= b - 1)
-        if (s.take_vertex()) taken[i] |= b & (~b + 1);
-    StoreChunks reader(store_dir, meta);
+    std::vector<uint32_t> taken;
+    for_slices([&](uint64_t w0) {
+      for (uint64_t i = 0; i < bits.size(); ++i)
+        for (uint64_t b = bits[i]; b != 0; b &= b - 1)
+          if (s.take_vertex()) taken.push_back(static_cast<uint32_t>((w0 + i) * 64 + static_cast<uint64_t>(std::countr_zero(b))));
+    });
+    const StoreChunks reader(store_dir, meta);
     io::FileWriter out(vertices_path);
     out.write(&used_count, 8);
-    write_floats(out, reader.positions_of_bits(taken));
+    write_floats(out, reader.positions_of_sorted(taken));
     out.commit();
     io::write_file_atomic(dir + "vertices.json", clock.seconds().dump() + "\n");
   });

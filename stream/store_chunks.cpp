@@ -243,10 +243,20 @@ void StoreChunks::for_used_vertices(const std::function<void(std::span<const flo
   for_bits(used_, [&](auto block, uint64_t w0, uint64_t count, auto& xyz) { read_positions(block, w0, count, xyz); }, visit_block);
 }
 
-std::vector<float> StoreChunks::positions_of_bits(std::span<const uint64_t> bits) const {
-  std::vector<float> out;
-  for_bits(bits, [&](auto block, uint64_t w0, uint64_t count, auto& xyz) { read_positions(block, w0, count, xyz); },
-           [&](const std::vector<float>& xyz) { out.insert(out.end(), xyz.begin(), xyz.end()); });
+std::vector<float> StoreChunks::positions_of_sorted(std::span<const uint32_t> ids) const {
+  // The ids of one block of 64 × 4096 store vertices at a time, as that block's bits.
+  constexpr uint64_t kWords = 4096;
+  std::vector<float> out, xyz;
+  std::vector<uint64_t> block;
+  for (size_t i = 0; i < ids.size();) {
+    const uint64_t w0 = ids[i] / 64 / kWords * kWords;
+    block.assign(kWords, 0);
+    uint64_t count = 0;
+    for (; i < ids.size() && ids[i] / 64 < w0 + kWords; ++i, ++count) block[ids[i] / 64 - w0] |= uint64_t{1} << (ids[i] & 63);
+    block.resize(std::min(kWords, (meta_.vertices + 63) / 64 - w0));
+    read_positions(block, w0, count, xyz);
+    out.insert(out.end(), xyz.begin(), xyz.end());
+  }
   return out;
 }
 

@@ -60,8 +60,9 @@ class StoreChunks {
   void for_used_vertices(const std::function<void(std::span<const float> xyz)>& visit_block) const;
   // Positions of the given store vertices (any order), as float.
   std::vector<float> positions_of(const std::vector<uint32_t>& ids) const;
-  // Positions of the store vertices whose bits are set (a bit a vertex), in increasing order, as float.
-  std::vector<float> positions_of_bits(std::span<const uint64_t> bits) const;
+  // Positions of the given store vertices, in increasing id order (each id once), as float: read in runs
+  // of nearby ids, not one id at a time.
+  std::vector<float> positions_of_sorted(std::span<const uint32_t> ids) const;
   // The used vertices' bits after plan() (a bit a store vertex).
   std::span<const uint64_t> used_bits() const { return used_; }
 

@@ -560,12 +560,11 @@ TEST(GradeShares, MergeUnitsInAnyOrderWriteOneMergesBytes) {
 // backwards give plan_grading's own pass, every block's ranges and the area histogram to the bit (a
 // block's areas are summed in triangle order, the blocks' in store order, whoever summed them); a unit's
 // areas file cut short is refused.
-TEST(GradeShares, BlockUnitsGiveTheBlockPassBits) {
-  TempDir dir;
-  const std::string store = dir.file("store");
+// A store of a wavy 600 × 600 grid of vertices: about 717 K triangles, 300 K segments across it, 10 points.
+stream::StoreMeta grid_store(const std::string& store) {
   std::filesystem::create_directories(store);
   stream::StoreWriter w(store, false);
-  const uint32_t side = 600;  // (side - 1)^2 * 2 triangles: about 717 K, three blocks
+  const uint32_t side = 600;  // (side - 1)^2 * 2 triangles
   std::vector<double> xyz;
   for (uint32_t y = 0; y < side; ++y)
     for (uint32_t x = 0; x < side; ++x) xyz.insert(xyz.end(), {x * (1 + 1e-3 * y), y + 1e-4 * x * x, std::sin(0.01 * x * y)});
@@ -581,7 +580,13 @@ TEST(GradeShares, BlockUnitsGiveTheBlockPassBits) {
   w.add_triangles(tris, {});
   w.add_lines(lines, {});
   w.add_points(points, {});
-  const stream::StoreMeta meta = w.commit(stream::StoreMeta{});
+  return w.commit(stream::StoreMeta{});
+}
+
+TEST(GradeShares, BlockUnitsGiveTheBlockPassBits) {
+  TempDir dir;
+  const std::string store = dir.file("store");
+  const stream::StoreMeta meta = grid_store(store);
   const std::array<uint64_t, 3> blocks = stream::grade_blocks(meta);
   ASSERT_EQ(blocks[0], 3u);
   ASSERT_EQ(blocks[1], 2u);
@@ -1210,6 +1215,37 @@ TEST(ReportShard, SamplesDrawnAsUnitsByProcessesAtOnceAreOneProcesssSamples) {
       stream::draw_original_samples_in_units(dir.file("work/store"), meta, so, dir.file("units-2"), 2, 1, 64 << 10, progress);
   EXPECT_EQ(two.xyz, want.xyz);
   EXPECT_EQ(two.targets, want.targets);
+}
+
+// The same on the grid store (1.02 M primitives: 16 blocks; 360 K vertices: the vertex samples' bits
+// read in two slices, their positions in two blocks of ids), with segments and points: 5 units by three
+// processes at once are one process's samples bit for bit.
+TEST(ReportShard, SamplesOfAGridWithSegmentsDrawnAsUnitsAreOneProcesssSamples) {
+  TempDir dir;
+  const std::string store = dir.file("store");
+  const stream::StoreMeta meta = grid_store(store);
+  const stream::SampleOptions so{50000, 3, 12};
+  stream::Progress progress(Options{});
+  stream::StoreChunks chunks(store, meta);
+  chunks.plan(stream::kChunkSceneCosts, 8 << 20);
+  const stream::OriginalSamples want = stream::draw_original_samples(store, meta, so, chunks, progress);
+  ASSERT_EQ(want.xyz.size(), 3u * 150000);
+  std::vector<stream::OriginalSamples> got(3);
+  std::vector<std::thread> processes;
+  for (unsigned i = 0; i < 3; ++i)
+    processes.emplace_back([&, i] {
+      stream::Progress p(Options{});
+      got[i] = stream::draw_original_samples_in_units(store, meta, so, dir.file("units"), 5, i, 4 << 20, p);
+    });
+  for (std::thread& t : processes) t.join();
+  for (unsigned i = 0; i < 3; ++i) {
+    EXPECT_EQ(got[i].xyz, want.xyz) << "process " << i;
+    EXPECT_EQ(got[i].targets, want.targets) << "process " << i;
+  }
+  // Vertex positions read by runs of sorted ids match the ones read one id at a time.
+  std::vector<uint32_t> ids;
+  for (uint32_t v = 3; v < meta.vertices; v += 977) ids.push_back(v);
+  EXPECT_EQ(chunks.positions_of_sorted(ids), chunks.positions_of(ids));
 }
 
 // Ingest by byte ranges for a report of two runs with different originals (a binary PLY and an OBJ): every
