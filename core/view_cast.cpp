@@ -264,9 +264,13 @@ void composite_pixel(ViewImage* into, uint64_t p, float depth, const float norma
     for (int k = 0; k < 3; ++k) into->color[3 * p + k] = rgb ? rgb[k] : 255;
 }
 
+void begin_composite(ViewImage* into, unsigned resolution, bool colored) {
+  if (into->resolution != resolution || into->depth.size() != uint64_t{resolution} * resolution) clear_view(into, resolution);
+  if (colored && into->color.empty()) into->color.assign(3 * into->depth.size(), 255);
+}
+
 void composite_view(ViewImage* into, const ViewImage& part) {
-  if (into->resolution != part.resolution || into->depth.size() != part.depth.size()) clear_view(into, part.resolution);
-  if (!part.color.empty() && into->color.empty()) into->color.assign(3 * into->depth.size(), 255);
+  begin_composite(into, part.resolution, !part.color.empty());
   for (uint64_t p = 0; p < part.depth.size(); ++p)
     if (part.kind[p] != 0)
       composite_pixel(into, p, part.depth[p], &part.normal[3 * p], part.kind[p], part.centre[p] != 0,

@@ -88,6 +88,10 @@ inline bool later_hit_wins(bool earlier_centre, float earlier_depth, bool later_
 // An empty image (nothing hit) of resolution × resolution pixels, as cast_view starts one.
 void clear_view(ViewImage* image, unsigned resolution);
 
+// Before a part is composited into `into`: cleared when it has another resolution, and given colours
+// (white) when the part was cast with colours, as cast_view gives an image colours when a scene has them.
+void begin_composite(ViewImage* into, unsigned resolution, bool colored);
+
 // Composites one pixel of a later part into `into` (see later_hit_wins): `rgb` is the hit's colour, or null
 // for a part cast without colours (white, as cast_view stores it, when `into` has colours). `into` gets a
 // colour array (white) the first time a coloured hit arrives.

@@ -267,6 +267,10 @@ struct Original {
 
 stream::SampleOptions sample_options(const ReportOptions& ro) { return {ro.samples, ro.seed, ro.views}; }
 
+void set_samples(Original* o, stream::OriginalSamples&& s) {
+  o->samples.xyz = std::move(s.xyz), o->samples.faces = s.faces, o->targets = std::move(s.targets);
+}
+
 double bbox_diagonal(const stream::StoreMeta& meta) {
   const double d[3] = {meta.bbox.max[0] - meta.bbox.min[0], meta.bbox.max[1] - meta.bbox.min[1],
                        meta.bbox.max[2] - meta.bbox.min[2]};
@@ -280,8 +284,7 @@ void load_original(const std::string& store_dir, const stream::StoreMeta& meta, 
   o->chunks = std::make_unique<stream::StoreChunks>(store_dir, meta);
   o->chunks->plan(sizing.costs(), sizing.bytes());
   progress.report("load", 0.1);
-  stream::OriginalSamples s = stream::draw_original_samples(store_dir, meta, sample_options(ro), *o->chunks, progress);
-  o->samples.xyz = std::move(s.xyz), o->samples.faces = s.faces, o->targets = std::move(s.targets);
+  set_samples(o, stream::draw_original_samples(store_dir, meta, sample_options(ro), *o->chunks, progress));
   o->diagonal = bbox_diagonal(meta);
   progress.report("load", 1);
 }
@@ -635,6 +638,13 @@ uint64_t mesh_bytes(const core::LodMesh& m) {
 // What is left of `bytes` once `held` is taken, at least 16 MiB (the memory monitor stays the guard).
 uint64_t left_of(uint64_t bytes, uint64_t held) { return std::max<uint64_t>(bytes - std::min(bytes, held), 16ull << 20); }
 
+// What a level's scenes may take when every view's image of it is held beside the level: `embree_limit`
+// less the level's arrays and those images.
+uint64_t level_scenes_room(const core::LodMesh& mesh, const LevelWork& w, const ReportOptions& ro, uint64_t embree_limit) {
+  const uint64_t pixels = uint64_t{ro.resolution} * ro.resolution;
+  return left_of(embree_limit, mesh_bytes(mesh) + pixels * view_pixel_bytes(!mesh.colors.empty() || !mesh.materials.empty()) * w.views);
+}
+
 // Estimated bytes of a level's chunk within `limit` (its Embree scene's guard): three quarters of it, the
 // rest for the chunk's own copy of its part of the level (about a quarter of its scene's bytes).
 uint64_t level_chunk_bytes(uint64_t limit, uint64_t chunk_cap) {
@@ -642,8 +652,9 @@ uint64_t level_chunk_bytes(uint64_t limit, uint64_t chunk_cap) {
 }
 
 // ------------------------------------------------------------------------------------------- ranges
-// A report by primitive ranges (stream/report_shard.h): the shared stages draw each original's samples and
-// view targets once; task I traces the I-th N-th of the original's primitives and of every level's.
+// A report by primitive ranges (stream/report_shard.h): the tasks draw each original's samples and view
+// targets as units they all take up (stream/report_samples.h); task I traces the I-th N-th of the
+// original's primitives and of every level's.
 
 // Every level has its switching distance: the tasks can share the work by primitive ranges.
 bool every_distance_known(const std::vector<RunSpec>& runs) {
@@ -697,9 +708,8 @@ std::vector<float> distance_bounds(const std::vector<float>& samples, const core
 void load_original_range(const std::string& store_dir, const stream::StoreMeta& meta, const ReportOptions& ro,
                          const ChunkSizing& sizing, const std::string& units_dir, stream::Progress& progress, Original* o) {
   o->meta = meta;
-  stream::OriginalSamples s = stream::draw_original_samples_in_units(store_dir, meta, sample_options(ro), units_dir,
-                                                                     ro.shard_count, ro.shard_index, sizing.bytes(), progress);
-  o->samples.xyz = std::move(s.xyz), o->samples.faces = s.faces, o->targets = std::move(s.targets);
+  set_samples(o, stream::draw_original_samples_in_units(store_dir, meta, sample_options(ro), units_dir, ro.shard_count,
+                                                        ro.shard_index, sizing.bytes(), progress));
   const auto [first, end] = stream::share_of(meta.primitives(), ro.shard_index, ro.shard_count);
   o->chunks = std::make_unique<stream::StoreChunks>(store_dir, meta);
   o->chunks->plan_range(sizing.costs(), sizing.bytes(), first, end);
@@ -1030,8 +1040,7 @@ void finish_level(const Original& o, LevelWork& w, const ReportOptions& ro, uint
   const WireRadii wire(w.pixel_at(w.distance, ro.resolution), ro.supersample);
   // In one chunk, each view is cast and compared in turn; in several, every view's image is accumulated
   // chunk by chunk first (the level's images then take as much memory as the original's).
-  // Besides the level: with several chunks, every view's image.
-  const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh) + pixels * view_pixel_bytes(!mesh.colors.empty() || !mesh.materials.empty()) * w.views);
+  const uint64_t limit = level_scenes_room(mesh, w, ro, embree_limit);
   LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap));
   w.level_chunks = std::max<uint64_t>(w.level_chunks, chunks.size());
   std::vector<core::ViewImage> lod_views(chunks.size() > 1 ? w.views : 1);
@@ -1092,9 +1101,8 @@ void trace_level_range(const Original& o, LevelWork& w, const ReportOptions& ro,
   std::optional<PhaseTimer> read_time(std::in_place, w.phases, kLevelRead);
   const core::LodMesh mesh = io::read_lod_mesh(w.run->levels[w.index].file);
   read_time.reset();
-  const uint64_t pixels = uint64_t{ro.resolution} * ro.resolution;
   const WireRadii wire(w.pixel_at(w.distance, ro.resolution), ro.supersample);
-  const uint64_t limit = left_of(embree_limit, mesh_bytes(mesh) + pixels * view_pixel_bytes(!mesh.colors.empty() || !mesh.materials.empty()) * w.views);
+  const uint64_t limit = level_scenes_room(mesh, w, ro, embree_limit);
   const auto [first, end] = stream::share_of(primitive_count(mesh), ro.shard_index, ro.shard_count);
   LevelChunks chunks(mesh, level_chunk_bytes(limit, chunk_cap), first, end);
   w.level_chunks = std::max<uint64_t>(w.level_chunks, chunks.size());
@@ -1295,7 +1303,7 @@ void begin_report_task(const ReportOptions& ro) {
 }
 
 // Writes the task's shares (run by run, level by level), then its summary, task-I.json (durably, last).
-void write_report_task(const ReportOptions& ro, const std::vector<RunSpec>& runs, const Report& rep,
+void write_report_task(const ReportOptions& ro, const std::vector<RunSpec>& runs, bool by_ranges, const Report& rep,
                        const std::vector<std::vector<stream::ReportLevelShare>>& shares,
                        const std::vector<std::vector<std::vector<io::HtmlView>>>& views) {
   stream::ReportShareWriter writer(stream::report_levels_path(ro.output_dir, ro.shard_index));
@@ -1323,7 +1331,7 @@ void write_report_task(const ReportOptions& ro, const std::vector<RunSpec>& runs
   const nlohmann::ordered_json task{
       {"index", ro.shard_index},
       {"key", {{"count", ro.shard_count}, {"options", report_options_json(ro)},
-               {"shared_by", every_distance_known(runs) ? "ranges" : "views"}}},
+               {"shared_by", by_ranges ? "ranges" : "views"}}},
       {"runs", jruns},
       {"performance",
        {{"rays", rep.rays}, {"ray_seconds", rep.ray_seconds}, {"point_queries", rep.point_queries},
@@ -1463,17 +1471,18 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
             trace_original(o, pending, group, ro, sizing, progress, cache, totals);
             for (LevelWork* w : pending) finish_hausdorff(o, *w, ro);
             pending.clear();
-            for (LevelWork* w : group) {
-              const size_t r = static_cast<size_t>(w->run - runs.data());
-              if (by_ranges) write_original_views(*w, stream::report_views_path(ro.output_dir, ro.shard_index, r, w->index, false));
-            }
+            // A task by ranges: where its images of level w's views go, of the original or of the level.
+            const auto views_path = [&](const LevelWork* w, bool of_level) {
+              return stream::report_views_path(ro.output_dir, ro.shard_index, static_cast<size_t>(w->run - runs.data()), w->index, of_level);
+            };
+            if (by_ranges)
+              for (LevelWork* w : group) write_original_views(*w, views_path(w, false));
             for (LevelWork* w : group) {
               // A single chunk stays built between passes, unless the level's scene needs its room.
               if (cache && cached_bytes(*cache) + level_scene_bytes(w->out.level, sizing) > embree_limit) cache.reset();
               const uint64_t limit = left_of(embree_limit, cache ? cached_bytes(*cache) : 0);
               if (by_ranges) {
-                const size_t r = static_cast<size_t>(w->run - runs.data());
-                stream::ViewHitsWriter level_views(stream::report_views_path(ro.output_dir, ro.shard_index, r, w->index, true));
+                stream::ViewHitsWriter level_views(views_path(w, true));
                 trace_level_range(o, *w, ro, limit, options.chunk_bytes, level_views);
               } else {
                 finish_level(o, *w, ro, limit, options.chunk_bytes);
@@ -1527,7 +1536,7 @@ Result report(const ReportOptions& ro, const Options& options, Report* out) {
       rep.seconds = seconds_since(t0);
       rep.peak_rss_bytes = stream::peak_rss_bytes();
       rep.work_dir = stream::work_dir_usage(work.path(), input_bytes);
-      if (!ro.shard_prepare) write_report_task(ro, runs, rep, shares, views);
+      if (!ro.shard_prepare) write_report_task(ro, runs, by_ranges, rep, shares, views);
       *out = std::move(rep);
       return;
     }

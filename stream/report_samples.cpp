@@ -173,6 +173,7 @@ MeshSamples sample_mesh(const core::LodMesh& m, uint64_t n, uint64_t seed, uint6
   return s.finish(nullptr, {});
 }
 
+namespace {
 
 // The view targets of a mesh of points only: points 0, 1, ... (cyclically, `views` of them).
 std::vector<float> point_targets(const std::string& store_dir, const StoreMeta& meta, unsigned views, const StoreChunks& chunks) {
@@ -184,6 +185,8 @@ std::vector<float> point_targets(const std::string& store_dir, const StoreMeta& 
   for (size_t i = have; have > 0 && i < views; ++i) ids.push_back(ids[i % have]);
   return chunks.positions_of(ids);
 }
+
+}  // namespace
 
 OriginalSamples draw_original_samples(const std::string& store_dir, const StoreMeta& meta, const SampleOptions& o,
                                       StoreChunks& chunks, Progress& progress) {
@@ -265,80 +268,95 @@ class UnitFile {
   size_t at_ = 0;
 };
 
-}  // namespace
+// One original's sampling units (draw_original_samples_in_units): where they go, and what they share.
+struct SampleUnits {
+  SampleUnits(const std::string& store_dir_in, const StoreMeta& meta_in, const SampleOptions& o_in, const std::string& dir_in,
+              unsigned units, uint64_t chunk_bytes_in)
+      : store_dir(store_dir_in), meta(meta_in), o(o_in), dir(dir_in.back() == '/' ? dir_in : dir_in + "/"),
+        measure_dir(dir + "measure/"), sample_dir(dir + "sample/"),
+        blocks((meta.primitives() + kSampleBlock - 1) / kSampleBlock), words((meta.vertices + 63) / 64),
+        count(static_cast<unsigned>(std::max<uint64_t>(1, std::min<uint64_t>(units, blocks)))), chunk_bytes(chunk_bytes_in),
+        key{{"source", source_json(meta)}, {"vertices", meta.vertices}, {"triangles", meta.triangles}, {"lines", meta.lines},
+            {"points", meta.points}, {"samples", o.samples}, {"seed", o.seed}, {"views", o.views}, {"units", count},
+            {"block", kSampleBlock}} {}
 
-OriginalSamples draw_original_samples_in_units(const std::string& store_dir, const StoreMeta& meta, const SampleOptions& o,
-                                               const std::string& dir_in, unsigned units, unsigned index, uint64_t chunk_bytes,
-                                               Progress& progress) {
-  const std::string dir = dir_in.back() == '/' ? dir_in : dir_in + "/";
-  const std::string measure_dir = dir + "measure/", sample_dir = dir + "sample/";  // each phase's units and locks
-  const uint64_t primitives = meta.primitives(), blocks = (primitives + kSampleBlock - 1) / kSampleBlock;
-  const unsigned count = static_cast<unsigned>(std::max<uint64_t>(1, std::min<uint64_t>(units, blocks)));
-  const nlohmann::ordered_json key{{"source", meta.source.path}, {"bytes", meta.source.bytes}, {"mtime_ns", meta.source.mtime_ns},
-                                   {"vertices", meta.vertices}, {"triangles", meta.triangles}, {"lines", meta.lines},
-                                   {"points", meta.points}, {"samples", o.samples}, {"seed", o.seed}, {"views", o.views},
-                                   {"units", count}, {"block", kSampleBlock}};
-  const auto block_range = [&](unsigned u) { return std::pair(blocks * u / count, blocks * (u + 1) / count); };
-  const ChunkCosts costs = kChunkSceneCosts;
-  const uint64_t words = (meta.vertices + 63) / 64;
-  // Unit u's chunks: the primitives of its blocks.
-  const auto unit_chunks = [&](unsigned u) {
+  const std::string& store_dir;
+  const StoreMeta& meta;
+  const SampleOptions& o;
+  const std::string dir, measure_dir, sample_dir;  // each phase's units in a directory of their own (their locks apart)
+  const uint64_t blocks, words;                    // the store's blocks of primitives; 64-bit words of a bit a vertex
+  const unsigned count;                            // units, at most one a block
+  const uint64_t chunk_bytes;
+  const nlohmann::ordered_json key;
+
+  std::pair<uint64_t, uint64_t> block_range(unsigned u) const { return {blocks * u / count, blocks * (u + 1) / count}; }
+  MeshSampling sampling() const {
+    return MeshSampling(o.samples, o.seed, kStreamOriginalSamples, o.views, meta.triangles, meta.primitives());
+  }
+  // visit(chunk) over unit u's primitives (its blocks'), read chunk by chunk; returns the chunks read.
+  template <class Visit>
+  std::unique_ptr<StoreChunks> for_unit_chunks(unsigned u, const Visit& visit) const {
     const auto [b0, b1] = block_range(u);
     auto chunks = std::make_unique<StoreChunks>(store_dir, meta);
-    chunks->plan_range(costs, chunk_bytes, b0 * kSampleBlock, std::min(primitives, b1 * kSampleBlock));
-    return chunks;
-  };
-  const auto sampling = [&] {
-    return MeshSampling(o.samples, o.seed, kStreamOriginalSamples, o.views, meta.triangles, primitives);
-  };
-
-  // Measure units: each block's sums (4 doubles a block) and the unit's used vertices (a bit a store vertex).
-  take_units(measure_dir, count, index, [&](unsigned u) { return unit_file(measure_dir, "measure", u, "json"); }, key, [&](unsigned u) {
-    const UnitClock clock;
-    std::unique_ptr<StoreChunks> chunks = unit_chunks(u);
-    MeshSampling s = sampling();
+    chunks->plan_range(kChunkSceneCosts, chunk_bytes, b0 * kSampleBlock, std::min(meta.primitives(), b1 * kSampleBlock));
     ChunkGeometry g;
     for (size_t c = 0; c < chunks->chunks().size(); ++c) {
       chunks->read(c, &g);
-      s.measure(g.xyz, g.triangles, g.lines, g.first);
+      visit(g);
     }
-    const std::vector<BlockSums>& sums = s.sums();
-    const auto [b0, b1] = block_range(u);
-    io::FileWriter out(unit_file(measure_dir, "measure", u, "sums"));
-    for (uint64_t b = b0; b < b1; ++b) out.write(&sums[b], sizeof(BlockSums));
-    out.commit();
-    io::FileWriter used(unit_file(measure_dir, "measure", u, "used"));
-    used.write(chunks->used_bits().data(), words * 8);
-    used.commit();
-    progress.report("samples", 0.3 * double(u + 1) / double(count));
-    return std::pair(std::vector<std::string>{unit_file(measure_dir, "measure", u, "sums")}, clock.seconds());
-  });
-  std::vector<BlockSums> sums(blocks);
-  for (unsigned u = 0; u < count; ++u) {
-    const auto [b0, b1] = block_range(u);
-    UnitFile f(unit_file(measure_dir, "measure", u, "sums"));
+    return chunks;
+  }
+};
+
+// Measure units: each block's sums (4 doubles a block) and the unit's used vertices (a bit a store vertex).
+// Returns every block's sums.
+std::vector<BlockSums> run_measure_units(const SampleUnits& su, unsigned index, Progress& progress) {
+  take_units(su.measure_dir, su.count, index, [&](unsigned u) { return unit_file(su.measure_dir, "measure", u, "json"); }, su.key,
+             [&](unsigned u) {
+               const UnitClock clock;
+               MeshSampling s = su.sampling();
+               const auto chunks = su.for_unit_chunks(u, [&](const ChunkGeometry& g) { s.measure(g.xyz, g.triangles, g.lines, g.first); });
+               const std::vector<BlockSums>& sums = s.sums();
+               const auto [b0, b1] = su.block_range(u);
+               io::FileWriter out(unit_file(su.measure_dir, "measure", u, "sums"));
+               out.write(sums.data() + b0, (b1 - b0) * sizeof(BlockSums));
+               out.commit();
+               io::FileWriter used(unit_file(su.measure_dir, "measure", u, "used"));
+               used.write(chunks->used_bits().data(), su.words * 8);
+               used.commit();
+               progress.report("samples", 0.3 * double(u + 1) / double(su.count));
+               return std::pair(std::vector<std::string>{unit_file(su.measure_dir, "measure", u, "sums")}, clock.seconds());
+             });
+  std::vector<BlockSums> sums(su.blocks);
+  for (unsigned u = 0; u < su.count; ++u) {
+    const auto [b0, b1] = su.block_range(u);
+    UnitFile f(unit_file(su.measure_dir, "measure", u, "sums"));
     for (uint64_t b = b0; b < b1; ++b) sums[b] = f.value<BlockSums>();
   }
+  return sums;
+}
 
-  // Once: the vertex samples, Algorithm S over the vertices any unit's primitives use, in store order; then
-  // the units' bits go. The units' bits are read a slice at a time (a pass to count the used vertices, which
-  // Algorithm S needs first, and a pass to take them): memory a slice of each, and the taken vertices' ids.
-  const std::string vertices_path = dir + "vertices.bin";
-  start_once(dir, vertices_path, key, {"vertices"}, [&] {
+// Once, after the measure units: the vertex samples, Algorithm S over the vertices any unit's primitives
+// use, in store order, into dir/vertices.bin (the used count, then the samples); then the units' bits go.
+// The bits are read a slice at a time (a pass to count the used vertices, which Algorithm S needs first,
+// and a pass to take them): memory a slice of each unit's, and the taken vertices' ids.
+std::string draw_vertex_samples(const SampleUnits& su) {
+  const std::string path = su.dir + "vertices.bin";
+  start_once(su.dir, path, su.key, {"vertices"}, [&] {
     const UnitClock clock;
     std::vector<std::unique_ptr<io::OffsetFile>> used;
-    for (unsigned u = 0; u < count; ++u) {
-      const std::string path = unit_file(measure_dir, "measure", u, "used");
+    for (unsigned u = 0; u < su.count; ++u) {
+      const std::string unit = unit_file(su.measure_dir, "measure", u, "used");
       std::error_code ec;
-      if (std::filesystem::file_size(path, ec) != words * 8) fail(Status::io_error, path + ": a sampling unit's file is missing or cut short");
-      used.push_back(std::make_unique<io::OffsetFile>(path, O_RDONLY));
+      if (std::filesystem::file_size(unit, ec) != su.words * 8) fail(Status::io_error, unit + ": a sampling unit's file is missing or cut short");
+      used.push_back(std::make_unique<io::OffsetFile>(unit, O_RDONLY));
     }
     constexpr uint64_t kSlice = 1 << 12;  // words: 262,144 vertices, 32 KiB a unit
     std::vector<uint64_t> bits, part;
-    // visit(first word, the slice's bits OR-ed over the units)
+    // visit(first word), the slice's bits OR-ed over the units in `bits`
     const auto for_slices = [&](const auto& visit) {
-      for (uint64_t w0 = 0; w0 < words; w0 += kSlice) {
-        const uint64_t n = std::min(kSlice, words - w0);
+      for (uint64_t w0 = 0; w0 < su.words; w0 += kSlice) {
+        const uint64_t n = std::min(kSlice, su.words - w0);
         bits.assign(n, 0), part.resize(n);
         for (const auto& f : used) {
           f->read(part.data(), n * 8, w0 * 8);
@@ -351,7 +369,7 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
     for_slices([&](uint64_t) {
       for (uint64_t w : bits) used_count += static_cast<uint64_t>(std::popcount(w));
     });
-    MeshSampling s = sampling();
+    MeshSampling s = su.sampling();
     s.begin(used_count);
     std::vector<uint32_t> taken;
     for_slices([&](uint64_t w0) {
@@ -359,42 +377,41 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
         for (uint64_t b = bits[i]; b != 0; b &= b - 1)
           if (s.take_vertex()) taken.push_back(static_cast<uint32_t>((w0 + i) * 64 + static_cast<uint64_t>(std::countr_zero(b))));
     });
-    const StoreChunks reader(store_dir, meta);
-    io::FileWriter out(vertices_path);
+    io::FileWriter out(path);
     out.write(&used_count, 8);
-    write_floats(out, reader.positions_of_sorted(taken));
+    write_floats(out, StoreChunks(su.store_dir, su.meta).positions_of_sorted(taken));
     out.commit();
-    io::write_file_atomic(dir + "vertices.json", clock.seconds().dump() + "\n");
+    io::write_file_atomic(su.dir + "vertices.json", clock.seconds().dump() + "\n");
   });
-  for (unsigned u = 0; u < count; ++u) std::filesystem::remove(unit_file(measure_dir, "measure", u, "used"));
-  UnitFile vertices(vertices_path);
-  const uint64_t used_count = vertices.value<uint64_t>();
-  progress.report("samples", 0.4);
+  for (unsigned u = 0; u < su.count; ++u) std::filesystem::remove(unit_file(su.measure_dir, "measure", u, "used"));
+  return path;
+}
 
-  // Sample units: the samples in their blocks, from every block's sums.
-  take_units(sample_dir, count, index, [&](unsigned u) { return unit_file(sample_dir, "sample", u, "json"); }, key, [&](unsigned u) {
-    const UnitClock clock;
-    std::unique_ptr<StoreChunks> chunks = unit_chunks(u);
-    MeshSampling s = sampling();
-    for (uint64_t b = 0; b < blocks; ++b) s.set_sums(b, sums[b]);
-    s.begin(used_count);
-    ChunkGeometry g;
-    for (size_t c = 0; c < chunks->chunks().size(); ++c) {
-      chunks->read(c, &g);
-      s.sample(g.xyz, g.triangles, g.lines, g.first);
-    }
-    io::FileWriter out(unit_file(sample_dir, "sample", u, "bin"));
-    write_floats(out, s.faces()), write_floats(out, s.edges()), write_floats(out, s.aim());
-    out.commit();
-    progress.report("samples", 0.4 + 0.6 * double(u + 1) / double(count));
-    return std::pair(std::vector<std::string>{unit_file(sample_dir, "sample", u, "bin")}, clock.seconds());
-  });
+// Sample units: the face, edge and target samples in their blocks, from every block's sums.
+void run_sample_units(const SampleUnits& su, unsigned index, const std::vector<BlockSums>& sums, uint64_t used_count,
+                      Progress& progress) {
+  take_units(su.sample_dir, su.count, index, [&](unsigned u) { return unit_file(su.sample_dir, "sample", u, "json"); }, su.key,
+             [&](unsigned u) {
+               const UnitClock clock;
+               MeshSampling s = su.sampling();
+               for (uint64_t b = 0; b < su.blocks; ++b) s.set_sums(b, sums[b]);
+               s.begin(used_count);
+               su.for_unit_chunks(u, [&](const ChunkGeometry& g) { s.sample(g.xyz, g.triangles, g.lines, g.first); });
+               io::FileWriter out(unit_file(su.sample_dir, "sample", u, "bin"));
+               write_floats(out, s.faces()), write_floats(out, s.edges()), write_floats(out, s.aim());
+               out.commit();
+               progress.report("samples", 0.4 + 0.6 * double(u + 1) / double(su.count));
+               return std::pair(std::vector<std::string>{unit_file(su.sample_dir, "sample", u, "bin")}, clock.seconds());
+             });
+}
 
-  // The units' samples in unit order: every face sample, then every edge sample, then the vertex samples.
+// The units' samples in unit order: every face sample, then every edge sample, then the vertex samples;
+// the targets likewise (or, for a mesh of points only, the points).
+OriginalSamples join_unit_samples(const SampleUnits& su, UnitFile& vertices) {
   OriginalSamples out;
   std::vector<float> edges;
-  for (unsigned u = 0; u < count; ++u) {
-    UnitFile f(unit_file(sample_dir, "sample", u, "bin"));
+  for (unsigned u = 0; u < su.count; ++u) {
+    UnitFile f(unit_file(su.sample_dir, "sample", u, "bin"));
     const std::vector<float> faces = f.floats(), unit_edges = f.floats(), aim = f.floats();
     out.xyz.insert(out.xyz.end(), faces.begin(), faces.end());
     edges.insert(edges.end(), unit_edges.begin(), unit_edges.end());
@@ -404,8 +421,22 @@ OriginalSamples draw_original_samples_in_units(const std::string& store_dir, con
   out.xyz.insert(out.xyz.end(), edges.begin(), edges.end());
   const std::vector<float> vertex_samples = vertices.floats();
   out.xyz.insert(out.xyz.end(), vertex_samples.begin(), vertex_samples.end());
-  if (out.targets.empty()) out.targets = point_targets(store_dir, meta, o.views, StoreChunks(store_dir, meta));
+  if (out.targets.empty()) out.targets = point_targets(su.store_dir, su.meta, su.o.views, StoreChunks(su.store_dir, su.meta));
   return out;
+}
+
+}  // namespace
+
+OriginalSamples draw_original_samples_in_units(const std::string& store_dir, const StoreMeta& meta, const SampleOptions& o,
+                                               const std::string& dir, unsigned units, unsigned index, uint64_t chunk_bytes,
+                                               Progress& progress) {
+  const SampleUnits su(store_dir, meta, o, dir, units, chunk_bytes);
+  const std::vector<BlockSums> sums = run_measure_units(su, index, progress);
+  UnitFile vertices(draw_vertex_samples(su));
+  const uint64_t used_count = vertices.value<uint64_t>();
+  progress.report("samples", 0.4);
+  run_sample_units(su, index, sums, used_count, progress);
+  return join_unit_samples(su, vertices);
 }
 
 }  // namespace lodstream::stream

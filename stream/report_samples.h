@@ -11,7 +11,6 @@
 
 #include "core/mesh.h"
 #include "stream/progress.h"
-#include "stream/report_shard.h"
 #include "stream/scene_store.h"
 #include "stream/store_chunks.h"
 
@@ -29,6 +28,13 @@ struct MeshSamples {
 
 // Samples of a mesh held in memory (a level).
 MeshSamples sample_mesh(const core::LodMesh& m, uint64_t n, uint64_t seed, uint64_t stream);
+
+// An original's Metro samples and view targets.
+struct OriginalSamples {
+  std::vector<float> xyz;       // face samples first, then edge and vertex samples
+  uint64_t faces = 0;
+  std::vector<float> targets;   // view targets, xyz
+};
 
 // How many, from which seed: `samples` of each kind, and `views` view targets.
 struct SampleOptions {

@@ -65,8 +65,7 @@ void ViewHitsReader::composite_next(core::ViewImage* into) {
   if (colored > 1 || covered > pixels || resolution > (1u << 16))
     fail(Status::io_error, path_ + ": a report task's views are damaged");
   if (resolution == 0) return;  // the task cast nothing into this view
-  if (into->resolution != resolution || into->depth.size() != pixels) core::clear_view(into, resolution);
-  if (colored && into->color.empty()) into->color.assign(3 * pixels, 255);
+  core::begin_composite(into, resolution, colored != 0);
   const size_t bytes = hit_bytes(colored != 0);
   constexpr uint64_t kBlockRecords = 1 << 16;
   block_.resize(bytes * kBlockRecords);

@@ -93,12 +93,6 @@ class ViewHitsReader : TaskFileReader {
   std::vector<char> block_;
 };
 
-// An original's Metro samples and view targets (stream/report_samples.h).
-struct OriginalSamples {
-  std::vector<float> xyz;       // face samples first, then edge and vertex samples
-  uint64_t faces = 0;
-  std::vector<float> targets;   // view targets, xyz
-};
 
 class ReportShareWriter {
  public:

@@ -144,6 +144,10 @@ ordered_json bbox_json(const Bbox& b) {
 }
 }  // namespace
 
+ordered_json source_json(const StoreMeta& m) {
+  return {{"path", m.source.path}, {"bytes", m.source.bytes}, {"mtime_ns", m.source.mtime_ns}, {"format", m.format}};
+}
+
 ordered_json material_json(const core::Material& m) {
   ordered_json j;
   j["name"] = m.name;

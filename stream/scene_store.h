@@ -102,6 +102,9 @@ struct StoreMeta {
   std::vector<Bbox> vertex_chunk_bbox;
 };
 
+// The store's source as stage keys record it: path, bytes, mtime_ns, format (a stage redone when it changes).
+nlohmann::ordered_json source_json(const StoreMeta& m);
+
 // A material as store.json (and a sharded run's task summary, stream/shard.h) records it.
 nlohmann::ordered_json material_json(const core::Material& m);
 core::Material material_from_json(const nlohmann::ordered_json& j);

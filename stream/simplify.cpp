@@ -57,6 +57,7 @@ namespace {
 using nlohmann::ordered_json;
 using stream::guarded;
 using stream::run_stage;
+using stream::source_json;
 using stream::stamp_matches;
 using stream::stamped_share;
 using stream::take_units;
@@ -265,10 +266,6 @@ DefaultLevels settle_default_levels(std::vector<double> sizes, std::span<const d
                            d.sizes.size(), d.sizes.size() == 1 ? "" : "s", sizes.size(),
                            by_triangles ? "triangles" : "edges or points", by_triangles ? "triangles" : "edges and points", list);
   return d;
-}
-
-ordered_json source_json(const stream::StoreMeta& m) {
-  return {{"path", m.source.path}, {"bytes", m.source.bytes}, {"mtime_ns", m.source.mtime_ns}, {"format", m.format}};
 }
 
 // The 3D Tiles builder (stream/tiles.h) of `--tiles`: fed region by region by the emit stage's region

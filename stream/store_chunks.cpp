@@ -14,6 +14,8 @@ namespace {
 
 constexpr uint64_t kBlock = 1 << 20;            // primitives per mapped window of a primitive column
 constexpr uint64_t kPositionWindow = 64 << 20;  // bytes per mapped window of the positions column
+// Vertices read by position at a time, as words of a bit a vertex: 64 × 4096, so that the positions read stay small.
+constexpr uint64_t kPositionBlockWords = 4096;
 
 bool test_and_set(std::vector<uint64_t>& bits, uint32_t v) {
   uint64_t& w = bits[v >> 6];
@@ -219,33 +221,21 @@ void StoreChunks::read_colors(const StoreChunk& c, std::span<const uint64_t> bit
   }
 }
 
-namespace {
-
-// visit(positions) of the vertices whose bits are set, in blocks of 64 × 4096 store vertices, so that the
-// positions read stay small.
-template <class Read, class Visit>
-void for_bits(std::span<const uint64_t> bits, const Read& read, const Visit& visit) {
-  constexpr uint64_t kWords = 4096;
+void StoreChunks::for_used_vertices(const std::function<void(std::span<const float>)>& visit_block) const {
   std::vector<float> xyz;
-  for (uint64_t w0 = 0; w0 < bits.size(); w0 += kWords) {
-    const std::span<const uint64_t> block(bits.data() + w0, std::min<uint64_t>(kWords, bits.size() - w0));
+  for (uint64_t w0 = 0; w0 < used_.size(); w0 += kPositionBlockWords) {
+    const std::span<const uint64_t> block(used_.data() + w0, std::min<uint64_t>(kPositionBlockWords, used_.size() - w0));
     uint64_t count = 0;
     for (uint64_t w : block) count += static_cast<uint64_t>(std::popcount(w));
     if (count == 0) continue;
-    read(block, w0, count, xyz);
-    visit(xyz);
+    read_positions(block, w0, count, xyz);
+    visit_block(xyz);
   }
 }
 
-}  // namespace
-
-void StoreChunks::for_used_vertices(const std::function<void(std::span<const float>)>& visit_block) const {
-  for_bits(used_, [&](auto block, uint64_t w0, uint64_t count, auto& xyz) { read_positions(block, w0, count, xyz); }, visit_block);
-}
-
 std::vector<float> StoreChunks::positions_of_sorted(std::span<const uint32_t> ids) const {
-  // The ids of one block of 64 × 4096 store vertices at a time, as that block's bits.
-  constexpr uint64_t kWords = 4096;
+  // The ids of one block of vertices at a time, as that block's bits.
+  constexpr uint64_t kWords = kPositionBlockWords;
   std::vector<float> out, xyz;
   std::vector<uint64_t> block;
   for (size_t i = 0; i < ids.size();) {
