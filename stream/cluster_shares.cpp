@@ -23,6 +23,8 @@
 #include "io/file_writer.h"
 #include "io/mapped_file.h"
 #include "stream/cell_map_file.h"
+#include "stream/cluster_merge.h"
+#include "stream/ranked_bits.h"
 #include "stream/store_access.h"
 #include "stream/vertex_cells.h"
 
@@ -32,15 +34,10 @@ namespace {
 
 constexpr int kBins = 4096;
 constexpr uint64_t kWindowRecords = uint64_t{1} << 22;  // records a window of a column holds
-constexpr uint64_t kMergeWindow = uint64_t{1} << 24;    // bytes of a share's file the merge maps at a time
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-std::string dec_path(const std::string& prefix, unsigned share, size_t level) {
-  return cluster_shares_dir(prefix) + fmt::format("share-{}-level-{}.dec", share, level);
-}
-std::string ctr_path(const std::string& prefix, unsigned share, size_t level) {
-  return cluster_shares_dir(prefix) + fmt::format("share-{}-level-{}.ctr", share, level);
-}
+std::string dec_path(const std::string& prefix, unsigned share, size_t level) { return cluster_share_decisions_path(prefix, share, level); }
+std::string ctr_path(const std::string& prefix, unsigned share, size_t level) { return cluster_share_centers_path(prefix, share, level); }
 // A whole level's map and info, as the share that clustered it leaves them.
 std::string whole_map_path(const std::string& prefix, size_t level) { return cluster_shares_dir(prefix) + fmt::format("level-{}.map", level); }
 std::string whole_info_path(const std::string& prefix, size_t level) { return cluster_shares_dir(prefix) + fmt::format("level-{}.info", level); }
@@ -98,27 +95,6 @@ void for_each_record(const WeightIndex& index, Progress& progress, F&& f) {
     for (size_t i = 0; i < ids.size(); ++i) f(first + i, ids[i]);
   });
 }
-
-// A bit per item, and the set bits in the words before each word: rank(i), the set bits below i, is a
-// lookup and a popcount. `before` is filled by count() once every bit is set, or word by word, in order,
-// by a caller that sets bits in increasing order (merge_level).
-struct RankedBits {
-  std::vector<uint64_t> bits;
-  std::vector<uint32_t> before;
-  explicit RankedBits(uint64_t n = 0) : bits((n + 63) / 64, 0), before(bits.size(), 0) {}
-  void set(uint64_t i) { bits[i >> 6] |= uint64_t{1} << (i & 63); }
-  bool has(uint64_t i) const { return (bits[i >> 6] >> (i & 63)) & 1; }
-  // The set bits (after count()).
-  uint64_t ones() const { return bits.empty() ? 0 : before.back() + static_cast<uint64_t>(std::popcount(bits.back())); }
-  void count() {
-    uint32_t n = 0;
-    for (size_t w = 0; w < bits.size(); ++w) before[w] = n, n += static_cast<uint32_t>(std::popcount(bits[w]));
-  }
-  uint32_t rank(uint64_t i) const {
-    return before[i >> 6] + static_cast<uint32_t>(std::popcount(bits[i >> 6] & ((uint64_t{1} << (i & 63)) - 1)));
-  }
-  uint64_t bytes() const { return bits.capacity() * 8 + before.capacity() * 4; }
-};
 
 // A set of vertex ids with their positions: the k-th selected id's position is at slot k (its rank).
 struct Selection {
@@ -233,100 +209,6 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
   return true;
 }
 
-// Reads a file of fixed-size items front to back.
-class ItemReader {
- public:
-  ItemReader(const std::string& path, size_t item) : file_(path), item_(item) {
-    if (file_.size() % item) fail(Status::io_error, path + ": cut short");
-  }
-  uint64_t items() const { return file_.size() / item_; }
-  // The next item, or null after the last.
-  const char* next() {
-    if (at_ == end_) {
-      const uint64_t first = end_ / item_ * item_;
-      if (first >= file_.size()) return nullptr;
-      // Whole items a window (kMergeWindow rounded down to them), so that no item straddles two.
-      window_ = file_.map(first, std::min<uint64_t>(file_.size(), first + kMergeWindow / item_ * item_));
-      at_ = first, end_ = first + window_.size();
-    }
-    const char* p = window_.data() + (at_ - (end_ - window_.size()));
-    at_ += item_;
-    return p;
-  }
-
- private:
-  io::MappedFile file_;
-  size_t item_;
-  io::Window window_;
-  uint64_t at_ = 0, end_ = 0;
-};
-
-// The merge of one split level (see the header), in one pass over the shares' files merged by record: a
-// record that is its own center makes the next cell; a member's center is an earlier record, so the rank
-// of its center bit among the bits set so far is its cell (every record below it has been seen).
-uint64_t merge_level(const ClusterShareInput& in, const ClusterShares& plan, size_t level, Progress& progress) {
-  const uint64_t records = in.index.records;
-  const bool centers = in.info == CellInfoKind::center;
-  const size_t center_bytes = in.index.single_precision ? 12 : 24;
-  std::vector<std::unique_ptr<ItemReader>> decs, ctrs;
-  using Head = std::pair<uint32_t, unsigned>;  // (record, share)
-  std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heads;
-  for (unsigned s = 0; s < plan.count; ++s) {
-    decs.push_back(std::make_unique<ItemReader>(dec_path(in.prefix, s, level), 8));
-    if (centers) ctrs.push_back(std::make_unique<ItemReader>(ctr_path(in.prefix, s, level), center_bytes));
-  }
-  std::vector<uint32_t> pending(plan.count);  // each share's next record's center
-  auto advance = [&](unsigned s) {
-    if (const char* p = decs[s]->next()) {
-      uint32_t pair[2];
-      std::memcpy(pair, p, 8);
-      if (pair[1] > pair[0]) fail(Status::io_error, dec_path(in.prefix, s, level) + ": not a share's decisions");
-      pending[s] = pair[1];
-      heads.push({pair[0], s});
-    }
-  };
-  for (unsigned s = 0; s < plan.count; ++s) advance(s);
-  RankedBits center(records);
-  uint64_t cells = 0;
-  CellMapWriter map;
-  map.open(cells_path(in.prefix, level), 1 << 20);
-  io::FileWriter info;
-  if (centers) info.open(cell_info_path(in.prefix, level), 1 << 20);
-  std::vector<uint32_t> buffer;
-  buffer.reserve(1 << 16);
-  auto missing = [&](uint64_t r, const char* how) {
-    fail(Status::io_error, fmt::format("{}: record {} of level {} is decided {}", cluster_shares_dir(in.prefix), r, level, how));
-  };
-  for (uint64_t r = 0; r < records; ++r) {
-    if ((r & 0xfffff) == 0) progress.check();
-    if ((r & 63) == 0) center.before[r >> 6] = static_cast<uint32_t>(cells);
-    if (heads.empty()) missing(r, "by no share");
-    const auto [record, s] = heads.top();
-    heads.pop();
-    if (record != r) missing(r, record < r ? "twice" : "by no share");
-    const uint32_t c = pending[s];
-    if (c == record) {
-      center.set(c);
-      buffer.push_back(static_cast<uint32_t>(cells++));
-      if (centers) {
-        const char* q = ctrs[s]->next();
-        if (!q) fail(Status::io_error, ctr_path(in.prefix, s, level) + ": cut short");
-        info.write(q, center_bytes);
-      }
-    } else {
-      if (!center.has(c)) fail(Status::io_error, dec_path(in.prefix, s, level) + ": a member of a record that is no center");
-      buffer.push_back(center.rank(c));
-    }
-    if (buffer.size() == buffer.capacity()) map.write(buffer), buffer.clear();
-    advance(s);
-  }
-  if (!heads.empty()) missing(heads.top().first, "past the weight index's records");
-  map.write(buffer);
-  map.commit();
-  if (centers) info.commit();
-  return cells;
-}
-
 }  // namespace
 
 double ClusterShares::lo(unsigned s) const { return s == 0 ? -kInf : cuts[s - 1]; }
@@ -339,6 +221,12 @@ nlohmann::ordered_json ClusterShares::json() const {
 }
 
 std::string cluster_shares_dir(const std::string& prefix) { return prefix + "cluster-shares/"; }
+std::string cluster_share_decisions_path(const std::string& prefix, unsigned share, size_t level) {
+  return cluster_shares_dir(prefix) + fmt::format("share-{}-level-{}.dec", share, level);
+}
+std::string cluster_share_centers_path(const std::string& prefix, unsigned share, size_t level) {
+  return cluster_shares_dir(prefix) + fmt::format("share-{}-level-{}.ctr", share, level);
+}
 std::string cluster_share_stamp(const std::string& prefix, unsigned index) {
   return cluster_shares_dir(prefix) + fmt::format("share-{}.json", index);
 }
@@ -591,22 +479,25 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
 
 ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterShares& plan,
                                     const std::vector<nlohmann::ordered_json>& figures, Progress& progress) {
+  // Alone in this process: units of an earlier call are not this one's.
+  std::filesystem::remove_all(cluster_merge_dir(in.prefix));
+  const nlohmann::ordered_json key{{"plan", plan.json()}, {"figures", figures}};
+  const std::vector<uint64_t> split_cells = merge_split_levels(in, plan, key, 0, progress).cells;
+  ClusterSummary summary = merge_cluster_shares(in, plan, figures, split_cells, progress);
+  std::filesystem::remove_all(cluster_merge_dir(in.prefix));
+  return summary;
+}
+
+ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterShares& plan,
+                                    const std::vector<nlohmann::ordered_json>& figures, const std::vector<uint64_t>& split_cells,
+                                    Progress& progress) {
   ClusterSummary summary;
   const size_t levels = plan.whole_share.size();
   summary.cells.assign(levels, 0);
   std::vector<size_t> split;
+  std::vector<uint64_t> sums_cells;
   for (size_t l = 0; l < levels; ++l)
-    if (plan.whole_share[l] < 0) split.push_back(l);
-  // The split levels' merges are independent: one task each when they fit the budget together (193 M-triangle
-  // city, 8 shares: levels 0 and 1 at once on two cores), else one after another. A merge holds a bit and a
-  // half per record and a read window (kMergeWindow) of each share's files.
-  std::vector<uint64_t> split_cells(split.size());
-  const uint64_t merge_bytes =
-      in.index.records * 3 / 16 + uint64_t{plan.count} * (in.info == CellInfoKind::center ? 2 : 1) * kMergeWindow;
-  auto merge = [&](size_t j) { split_cells[j] = merge_level(in, plan, split[j], progress); };
-  if (in.memory_bytes == 0 || split.size() * merge_bytes <= in.memory_bytes) tbb::parallel_for(size_t{0}, split.size(), merge);
-  else for (size_t j = 0; j < split.size(); ++j) merge(j);
-  for (size_t j = 0; j < split.size(); ++j) summary.cells[split[j]] = split_cells[j];
+    if (plan.whole_share[l] < 0) split.push_back(l), sums_cells.push_back(split_cells.at(l)), summary.cells[l] = split_cells.at(l);
   progress.report("cluster", 0.4);
   if (in.vertex_cells) summary.vertex_cells.assign(levels, 0);
   for (size_t l = 0; l < levels; ++l) {
@@ -624,7 +515,7 @@ ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterSh
                                            std::to_string(l) + " is missing");
   }
   progress.report("cluster", 0.5);
-  sum_cell_info(in.index, split, split_cells, in.info, in.memory_bytes, in.chunk_cap, progress, in.prefix);
+  sum_cell_info(in.index, split, sums_cells, in.info, in.memory_bytes, in.chunk_cap, progress, in.prefix);
   progress.report("cluster", 1);
   return summary;
 }

@@ -34,10 +34,10 @@
 //    the store's precision.
 // The merge (merge_cluster_shares), per split level: a cell's id is the number of centers before its
 // center in weight order (the one-machine pass numbers cells in creation order, and a cell is created by
-// its center). One pass over the shares' .dec files merged by record makes them: a record that is its own
-// center takes the next id; a member's center is an earlier record, whose id is the rank of its bit
-// among the centers seen so far. The ids go to cells-L.map (stream/cell_map_file.h), and the .ctr
-// files to a center-kind info. Mean and quadric infos are summed afterwards, as
+// its center). The shares' .dec files merged by record make them, as units by record range that every
+// process reaching the merge takes part in (stream/cluster_merge.h): first each unit's centers' bits, then
+// each unit's records' cells, the rank of their center's bit. The ids go to cells-L.map
+// (stream/cell_map_file.h), and the .ctr files to a center-kind info. Mean and quadric infos are summed afterwards, as
 // cluster_levels sums them (sum_cell_info). Whole levels' files are linked from the share that made them:
 // their map and info, and for a sharded run (ClusterShareInput::vertex_cells) their cells by vertex, which
 // the share writes after clustering them (stream/vertex_cells.h), so that the prepare job decodes only the
@@ -95,6 +95,7 @@ struct ClusterShareInput {
   std::string prefix;
   const WorkDir* work = nullptr;
   double first_halo_cells = kFirstHaloCells;  // the tests start lower, to make shares widen
+  unsigned merge_units = 0;  // the merge's units (stream/cluster_merge.h); 0: one a share, at most 256 (tests set more)
   // When set, a share also writes its whole levels' cells by vertex (stream/vertex_cells.h; the weld map at
   // canonical_path, empty when none), which the merge links into the work directory: the sharded tasks
   // read them, and the shares write them at once where the prepare job would decode the levels one by one.
@@ -112,6 +113,10 @@ ClusterShares shared_cluster_plan(const ClusterShareInput& in, unsigned count, c
 
 std::string cluster_shares_dir(const std::string& prefix);
 std::string cluster_share_stamp(const std::string& prefix, unsigned index);
+// Share `share`'s files of split level `level`: its decisions, (record, record of its center) for each own
+// record in weight order, and, for center representatives, its centers' positions in the same order.
+std::string cluster_share_decisions_path(const std::string& prefix, unsigned share, size_t level);
+std::string cluster_share_centers_path(const std::string& prefix, unsigned share, size_t level);
 // The files share `index` writes (for its stamp).
 std::vector<std::string> cluster_share_files(const ClusterShareInput& in, const ClusterShares& plan, unsigned index);
 
@@ -124,7 +129,13 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
 // figures[s]: what run_cluster_share returned for share s), and with `vertex_cells` the whole levels'
 // vertex-cells-L.u32; returns cells per level and the levels whose cells by vertex it wrote. Failure(io_error) when
 // the shares' files do not add up to the weight index.
+// The split levels' maps are made by merge_split_levels (stream/cluster_merge.h), in this process alone.
 ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterShares& plan,
                                     const std::vector<nlohmann::ordered_json>& figures, Progress& progress);
+// The same once merge_split_levels has made the split levels' maps (`split_cells`: what it returned): the
+// whole levels' files linked, the split levels' mean or quadric infos summed.
+ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterShares& plan,
+                                    const std::vector<nlohmann::ordered_json>& figures, const std::vector<uint64_t>& split_cells,
+                                    Progress& progress);
 
 }  // namespace lodstream::stream

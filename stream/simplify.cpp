@@ -44,6 +44,7 @@
 #include "stream/progress.h"
 #include "stream/ingest_range.h"
 #include "stream/block_bounds.h"
+#include "stream/cluster_merge.h"
 #include "stream/shard.h"
 #include "stream/vertex_cells.h"
 #include "stream/tiles.h"
@@ -816,6 +817,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       // cells (the run stops after the stage); the shared stage runs the shares no task ran and merges them.
       const unsigned cluster_shares = so.cluster_share_count ? so.cluster_share_count : sharded ? so.cluster_shares : 0;
       std::vector<char> vertex_cells_written;  // per level: its cells by vertex came with the cluster shares' merge
+      ordered_json merge_units;                // the clustering merge's units' figures (stream/cluster_merge.h), for the stamp
       auto cluster_by_shares = [&](const ordered_json& key, const std::vector<double>& sizes, const stream::FineCells* fine,
                                    const stream::WeightIndex& index, const std::vector<double>& bounds) {
         stream::ClusterShareInput in{index, bounds, sizes, copts, info_kind, fine, plan.stage_bytes, options.chunk_bytes,
@@ -841,7 +843,20 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         }
         std::vector<ordered_json> figures;
         for (unsigned s = 0; s < shares.count; ++s) figures.push_back(run_share(s));
-        stream::ClusterSummary cs = stream::merge_cluster_shares(in, shares, figures, progress);
+        // The split levels' maps as units (stream/cluster_merge.h) that every process here takes part in, the
+        // work directory's lock let go meanwhile (a prepare array's jobs, tasks that reach the stage).
+        const unsigned unit_index = so.shard_count > 0 ? so.shard_index : 0;
+        shard_lock.reset();
+        const stream::SplitMerge merged =
+            stream::merge_split_levels(in, shares, ordered_json{{"shares", share_key}, {"figures", figures}}, unit_index, progress);
+        merge_units = merged.units;
+        shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
+        ordered_json v;
+        if (stamp_matches(work.file("cluster.json"), key, &v)) {  // another process finished the stage meanwhile
+          for (size_t l = 0; l < shares.whole_share.size(); ++l) vertex_cells_written.push_back(shares.whole_share[l] >= 0);
+          return v.at("cells").get<std::vector<uint64_t>>();
+        }
+        stream::ClusterSummary cs = stream::merge_cluster_shares(in, shares, figures, merged.cells, progress);
         vertex_cells_written = cs.vertex_cells;
         return cs.cells;
       };
@@ -895,7 +910,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           files.push_back(stream::cells_path(prefix, l));
           files.push_back(stream::cell_info_path(prefix, l));
         }
-        write_stamp(work.file("cluster.json"), key, files, {{"cells", cs.cells}});
+        ordered_json value{{"cells", cs.cells}};
+        if (!merge_units.is_null()) value["merge_units"] = merge_units;
+        write_stamp(work.file("cluster.json"), key, files, value);
         // The shares are spent once the stage is stamped (the whole levels' maps are links to their files).
         if (in_shares) std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
         std::filesystem::remove_all(stream::grade_merge_dir(prefix));  // the grading merge's units' stamps (grade_stage)
@@ -1150,6 +1167,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
               if (l >= vertex_cells_written.size() || !vertex_cells_written[l])  // else written by its cluster share
                 stream::write_vertex_cells(prefix, canonical, meta.vertices, grade.records, l, cells[l], plan.stage_bytes, progress);
           });
+          // The clustering merge's units' stamps, kept until now for a process that was still taking them
+          // when the cluster stage was stamped.
+          std::filesystem::remove_all(stream::cluster_merge_dir(prefix));
         });
         shard_lock.reset();
         if (so.shard_prepare) return;

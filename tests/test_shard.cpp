@@ -24,6 +24,7 @@
 #include "core/octree_regions.h"
 #include "io/offset_file.h"
 #include "stream/block_bounds.h"
+#include "stream/cluster_merge.h"
 #include "stream/cluster_shares.h"
 #include "stream/cluster_stage.h"
 #include "stream/grade_shares.h"
@@ -704,6 +705,91 @@ TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
   } catch (const Failure& f) {
     EXPECT_EQ(f.status(), Status::io_error);
     EXPECT_NE(std::string(f.what()).find("cluster-shares"), std::string::npos) << f.what();
+  }
+}
+
+// The split levels' merge as units (stream/cluster_merge.h), taken up by three threads at once as three
+// processes would (each starting at its own unit): 1 unit, 7, 37, and one a 64-record word (so that most
+// units share both their first and last word of the map with their neighbours), with center and quadric
+// representatives (the centers' positions copied from the middle of the shares' files). The maps and infos
+// are one machine's bytes; a stamped unit is reused; a record decided by no share fails naming it.
+TEST(ClusterShares, MergeUnitsTakenByThreadsAtOnceGiveOneMachinesMaps) {
+  for (const Representative rep : {Representative::center, Representative::quadric}) {
+    SCOPED_TRACE(rep == Representative::center ? "center" : "quadric");
+    TempDir dir;
+    SimplifyOptions so = room_options(dir.file("one"));
+    so.representative = rep;
+    SimplifyReport one;
+    ASSERT_TRUE(simplify(sample_room(), so, shared_work(dir), &one).ok());
+    const std::string work = dir.file("work") + "/";
+    stream::StoreMeta meta;
+    ASSERT_TRUE(stream::read_store_meta(work + "store", &meta));
+    stream::ClusterShareInput in;
+    in.index = {stream::order_path(work), stream::grades_path(work), work + "store/positions.f32",
+                std::filesystem::file_size(stream::order_path(work)) / 4, meta.vertices, meta.single_precision, ""};
+    in.bounds.assign(meta.bbox.min.begin(), meta.bbox.min.end());
+    in.bounds.insert(in.bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
+    for (const LevelStats& l : one.levels) in.sizes.push_back(l.cell_size);
+    in.info = stream::cell_info_kind(rep);
+    in.memory_bytes = 256 << 20;
+    const std::string prefix = dir.file("shares") + "/";
+    stream::WorkDir shares_work(dir.file("shares"));
+    in.prefix = prefix, in.work = &shares_work;
+    stream::Progress progress{Options{}};
+    const stream::ClusterShares plan = stream::plan_cluster_shares(in, 3, progress);
+    ASSERT_EQ(plan.whole_share.at(0), -1) << "the finest level splits";
+    std::vector<nlohmann::ordered_json> figures;
+    for (unsigned s = 0; s < 3; ++s) figures.push_back(stream::run_cluster_share(in, plan, s, progress));
+    const nlohmann::ordered_json key{{"test", 1}};
+    const uint64_t words = (in.index.records + 63) / 64;
+    ASSERT_GT(words, 300u);
+    for (const uint64_t units : {uint64_t{1}, uint64_t{7}, uint64_t{37}, words}) {
+      SCOPED_TRACE("units " + std::to_string(units));
+      std::filesystem::remove_all(stream::cluster_merge_dir(prefix));
+      for (size_t l = 0; l < one.levels.size(); ++l)
+        if (plan.whole_share[l] < 0) std::filesystem::remove(stream::cells_path(prefix, l)), std::filesystem::remove(stream::cell_info_path(prefix, l));
+      stream::ClusterShareInput unit_in = in;
+      unit_in.merge_units = static_cast<unsigned>(units);
+      std::vector<std::vector<uint64_t>> cells(3);
+      std::vector<std::thread> threads;
+      for (unsigned t = 0; t < 3; ++t)
+        threads.emplace_back([&, t] {
+          stream::Progress p{Options{}};
+          cells[t] = stream::merge_split_levels(unit_in, plan, key, t, p).cells;
+        });
+      for (auto& t : threads) t.join();
+      EXPECT_EQ(cells[0], cells[1]);
+      EXPECT_EQ(cells[0], cells[2]);
+      size_t stamps = 0;
+      for (const auto& e : std::filesystem::directory_iterator(stream::cluster_merge_dir(prefix) + "map"))
+        stamps += e.path().filename().string().rfind("map-", 0) == 0;
+      EXPECT_EQ(stamps, units);
+      // Again in this thread, the shares' files moved away: every unit is reused (one that ran again would
+      // find no decisions to read).
+      std::filesystem::rename(stream::cluster_shares_dir(prefix), dir.file("moved"));
+      EXPECT_EQ(stream::merge_split_levels(unit_in, plan, key, 0, progress).cells, cells[0]);
+      std::filesystem::rename(dir.file("moved"), stream::cluster_shares_dir(prefix));
+      const stream::ClusterSummary cs = stream::merge_cluster_shares(unit_in, plan, figures, cells[0], progress);
+      for (size_t l = 0; l < one.levels.size(); ++l) {
+        EXPECT_EQ(cs.cells[l], one.levels[l].cells) << "level " << l;
+        EXPECT_TRUE(slurp(stream::cells_path(prefix, l)) == slurp(stream::cells_path(work, l))) << "level " << l;
+        EXPECT_TRUE(slurp(stream::cell_info_path(prefix, l)) == slurp(stream::cell_info_path(work, l))) << "level " << l;
+      }
+    }
+    // A record no share decides (share 0's last decision of level 0 cut off): the merge names it.
+    std::filesystem::remove_all(stream::cluster_merge_dir(prefix));
+    const std::string dec = stream::cluster_share_decisions_path(prefix, 0, 0);
+    ASSERT_GT(std::filesystem::file_size(dec), 0u);
+    std::filesystem::resize_file(dec, std::filesystem::file_size(dec) - 8);
+    try {
+      stream::ClusterShareInput unit_in = in;
+      unit_in.merge_units = 7;
+      stream::merge_split_levels(unit_in, plan, key, 0, progress);
+      ADD_FAILURE() << "the merge took a share cut short";
+    } catch (const Failure& f) {
+      EXPECT_EQ(f.status(), Status::io_error);
+      EXPECT_NE(std::string(f.what()).find("is decided by no share"), std::string::npos) << f.what();
+    }
   }
 }
 

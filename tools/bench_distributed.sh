@@ -94,9 +94,9 @@ if [ $slurm -eq 1 ]; then
   trap 'kill $sampler 2>/dev/null || true; "$root/tools/slurm_local_cluster.sh" stop "$cluster"' EXIT
   timed slurm "$bin" slurm simplify "$input" -o "$out/sharded" --shards "$shards" --work "$work" --wait --no-space-check "${opts[@]}"
   kill $sampler 2>/dev/null || true
-  python3 - "$out" "$shards" "$logs/shared-bytes.txt" <<'PY' | tee -a "$out/bench.txt"
+  python3 - "$out" "$shards" "$logs/shared-bytes.txt" "$work" <<'PY' | tee -a "$out/bench.txt"
 import json, os, re, sys
-out, n, sizes = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+out, n, sizes, work = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
 walls = {}
 for line in open(os.path.join(out, "bench.txt")):
     f = line.split()
@@ -124,6 +124,16 @@ order = [k for k in ("ingest", "grade", "cluster", "prepare", "task", "merge") i
 print("  steps end at (s from the submission): " + ", ".join("%s %.0f" % (k, ends[k]) for k in order if k in ends))
 print("  slowest job of each step, one after another: " + " + ".join("%s %.1f" % (k, slowest[k]) for k in order) +
       " = %.1f s (one machine %.1f s)" % (sum(slowest[k] for k in order), walls["one"]))
+# The clustering merge's units (stream/cluster_merge.h): each phase's slowest unit (what N nodes would
+# wait for), all units' seconds summed (one process running them alone), and how many processes ran them.
+try:
+    mu = json.load(open(os.path.join(work, "cluster.json")))["value"]["merge_units"]
+    for phase in ("centers", "map"):
+        sec, by = mu[phase]["seconds"], mu[phase]["by"]
+        print("  clustering merge, %d %s units: slowest %.2f s, all %.2f s, run by %d processes" %
+              (mu["units"], phase, max(sec), sum(sec), len(set(by))))
+except (OSError, KeyError, ValueError) as e:
+    print("  clustering merge units: none recorded (%s)" % e)
 m = json.load(open(os.path.join(out, "sharded", "manifest.json")))
 for t in m["shards"]["tasks"]:
     print("  task %2d: %.1f s, peak %.1f MiB, input primitives read by its emit %d" %

@@ -1,0 +1,359 @@
+// The clustering shares' merge as units. This work is based on:
+// Kok-Lim Low and Tiow-Seng Tan. Model Simplification Using Vertex-Clustering. I3D 1997, §3.2
+// See cluster_merge.h for the phases and the invariant.
+#include "stream/cluster_merge.h"
+
+#include <fcntl.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <bit>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <queue>
+
+#include <unistd.h>
+
+#include <fmt/format.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include "core/status.h"
+#include "io/mapped_file.h"
+#include "io/offset_file.h"
+#include "stream/cell_map_file.h"
+#include "stream/ranked_bits.h"
+#include "stream/units.h"
+
+namespace lodstream::stream {
+
+namespace {
+
+constexpr uint64_t kReadWindow = uint64_t{1} << 24;  // bytes of a share's file mapped at a time
+constexpr uint64_t kInfoFlush = uint64_t{1} << 16;   // centers' positions a map unit writes at a time
+
+using json = nlohmann::ordered_json;
+
+// Reads a file of fixed-size items front to back, from item `first`.
+class ItemReader {
+ public:
+  ItemReader(const std::string& path, size_t item, uint64_t first = 0) : file_(path), item_(item), at_(first * item), end_(at_) {
+    if (file_.size() % item || at_ > file_.size()) fail(Status::io_error, path + ": cut short");
+  }
+  // The next item, or null after the last.
+  const char* next() {
+    if (at_ == end_) {
+      if (at_ >= file_.size()) return nullptr;
+      // Whole items a window, so that no item straddles two.
+      window_ = file_.map(at_, std::min<uint64_t>(file_.size(), at_ + kReadWindow / item_ * item_));
+      end_ = at_ + window_.size();
+    }
+    const char* p = window_.data() + (at_ - (end_ - window_.size()));
+    at_ += item_;
+    return p;
+  }
+
+ private:
+  io::MappedFile file_;
+  size_t item_;
+  io::Window window_;
+  uint64_t at_, end_;
+};
+
+// The records [lo(u), hi(u)) of unit u: whole 64-record words (the last unit's end aside).
+struct Units {
+  uint64_t records = 0, words = 0;
+  unsigned count = 0;
+  uint64_t lo(unsigned u) const { return std::min(records, words * u / count * 64); }
+  uint64_t hi(unsigned u) const { return std::min(records, words * (u + 1) / count * 64); }
+};
+
+// Calls f(record, its center, share) for every record of [lo, hi) of split level `level`, in record order,
+// from the shares' decision files merged by record. Failure(io_error) when a record is decided twice, by no
+// share or past the index's records, or a decision names a later record as its center.
+template <class F>
+void for_each_decision(const ClusterShareInput& in, const ClusterShares& plan, size_t level, uint64_t lo, uint64_t hi,
+                       Progress& progress, F&& f) {
+  const uint64_t records = in.index.records;
+  std::vector<std::unique_ptr<ItemReader>> decs;
+  using Head = std::pair<uint32_t, unsigned>;  // (record, share)
+  std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heads;
+  std::vector<uint32_t> pending(plan.count);  // each share's next record's center
+  auto advance = [&](unsigned s) {
+    if (const char* p = decs[s]->next()) {
+      uint32_t pair[2];
+      std::memcpy(pair, p, 8);
+      if (pair[1] > pair[0]) fail(Status::io_error, cluster_share_decisions_path(in.prefix, s, level) + ": not a share's decisions");
+      if (pair[0] >= hi && hi < records) return;  // the next unit's
+      pending[s] = pair[1];
+      heads.push({pair[0], s});
+    }
+  };
+  for (unsigned s = 0; s < plan.count; ++s) {
+    const std::string path = cluster_share_decisions_path(in.prefix, s, level);
+    uint64_t first = 0;
+    if (lo > 0) {
+      const io::OffsetFile file(path, O_RDONLY);
+      first = file.partition_point<std::array<uint32_t, 2>>(std::filesystem::file_size(path) / 8,
+                                                            [&](const std::array<uint32_t, 2>& d) { return d[0] < lo; });
+    }
+    decs.push_back(std::make_unique<ItemReader>(path, 8, first));
+    advance(s);
+  }
+  auto missing = [&](uint64_t r, const char* how) {
+    fail(Status::io_error, fmt::format("{}: record {} of level {} is decided {}", cluster_shares_dir(in.prefix), r, level, how));
+  };
+  for (uint64_t r = lo; r < hi; ++r) {
+    if ((r & 0xfffff) == 0) progress.check();
+    if (heads.empty()) missing(r, "by no share");
+    const auto [record, s] = heads.top();
+    heads.pop();
+    if (record != r) missing(r, record < r ? "twice" : "by no share");
+    f(r, pending[s], s);
+    advance(s);
+  }
+  if (!heads.empty()) missing(heads.top().first, heads.top().first < hi ? "twice" : "past the weight index's records");
+}
+
+// The bits of a cell map before record `end`: record i's cell takes bit_width(rank(i)) bits, rank(i) the
+// centers before it (cell_map_file.h). A word whose ranks keep one width counts 64 of it at once.
+uint64_t map_bits_before(const RankedBits& centers, uint64_t end) {
+  uint64_t total = 0;
+  const uint64_t whole = end / 64;
+  for (uint64_t w = 0; w < whole; ++w) {
+    const uint64_t first = centers.before[w], last = first + static_cast<uint64_t>(std::popcount(centers.bits[w] & (~uint64_t{0} >> 1)));
+    const unsigned width = static_cast<unsigned>(std::bit_width(first));
+    if (width == std::bit_width(last)) {
+      total += 64 * width;
+    } else {
+      for (uint64_t i = 64 * w; i < 64 * w + 64; ++i) total += static_cast<unsigned>(std::bit_width(centers.rank(i)));
+    }
+  }
+  for (uint64_t i = 64 * whole; i < end; ++i) total += static_cast<unsigned>(std::bit_width(centers.rank(i)));
+  return total;
+}
+
+struct Merge {
+  const ClusterShareInput& in;
+  const ClusterShares& plan;
+  std::vector<size_t> split;  // the split levels
+  Units units;
+  std::string dir, bits_path;
+  uint64_t center_bytes() const { return in.index.single_precision ? 12 : 24; }
+  bool centers_info() const { return in.info == CellInfoKind::center; }
+
+  // Split level j's center bits, from the centers units' file.
+  RankedBits load_centers(size_t j) const {
+    RankedBits c(in.index.records);
+    io::OffsetFile(bits_path, O_RDONLY).read(c.bits.data(), c.bits.size() * 8, j * units.words * 8);
+    c.count();
+    return c;
+  }
+
+  // Phase 1, unit u: its records' center bits, each split level's, in place; returns its centers per level
+  // and share.
+  json centers_unit(unsigned u, Progress& progress) const {
+    const uint64_t lo = units.lo(u), hi = units.hi(u);
+    const io::OffsetFile bits(bits_path, O_WRONLY);
+    json centers = json::array(), share_centers = json::array();
+    for (size_t j = 0; j < split.size(); ++j) {
+      std::vector<uint64_t> words((hi - lo + 63) / 64, 0);
+      std::vector<uint64_t> per_share(plan.count, 0);
+      uint64_t n = 0;
+      for_each_decision(in, plan, split[j], lo, hi, progress, [&](uint64_t r, uint32_t center, unsigned s) {
+        if (center != r) return;
+        words[(r - lo) >> 6] |= uint64_t{1} << ((r - lo) & 63);
+        ++per_share[s], ++n;
+      });
+      bits.write(words.data(), words.size() * 8, (j * units.words + lo / 64) * 8);
+      centers.push_back(n);
+      share_centers.push_back(per_share);
+    }
+    return {{"centers", centers}, {"share_centers", share_centers}};
+  }
+
+  // Sizes every split level's map (and center info) for phase 2, from the centers' bits.
+  void size_outputs() const {
+    for (size_t j = 0; j < split.size(); ++j) {
+      const RankedBits c = load_centers(j);
+      const uint64_t bits = map_bits_before(c, in.index.records);
+      io::OffsetFile(cells_path(in.prefix, split[j]), O_WRONLY | O_CREAT | O_TRUNC).resize((bits + 63) / 64 * 8);
+      if (centers_info())
+        io::OffsetFile(cell_info_path(in.prefix, split[j]), O_WRONLY | O_CREAT | O_TRUNC).resize(c.ones() * center_bytes());
+    }
+  }
+
+  // Phase 2, unit u: its records' cells in every split level's map, in place (the words shared with its
+  // neighbours returned as [level j, word, bits]), and its centers' positions for center representatives.
+  json map_unit(unsigned u, const std::vector<json>& centers_values, Progress& progress) const {
+    const uint64_t lo = units.lo(u), hi = units.hi(u), records = in.index.records;
+    json edges = json::array();
+    for (size_t j = 0; j < split.size(); ++j) {
+      const size_t level = split[j];
+      const RankedBits c = load_centers(j);
+      const uint64_t start = map_bits_before(c, lo);
+      std::vector<uint64_t> words(1, 0);  // from word start / 64
+      unsigned used = static_cast<unsigned>(start % 64);
+      auto put = [&](uint64_t value, unsigned bits) {
+        if (bits == 0) return;
+        words.back() |= value << used;
+        if (used + bits >= 64) {
+          const unsigned spill = used + bits - 64;
+          words.push_back(spill ? value >> (bits - spill) : 0);
+          used = spill;
+        } else {
+          used += bits;
+        }
+      };
+      // The centers' positions: share s's first center of this unit is its centers in the units before.
+      std::vector<std::unique_ptr<ItemReader>> ctrs;
+      std::vector<char> info;
+      uint64_t info_cell = lo < records ? c.rank(lo) : 0;
+      const io::OffsetFile* info_file = nullptr;
+      std::unique_ptr<io::OffsetFile> info_out;
+      if (centers_info()) {
+        for (unsigned s = 0; s < plan.count; ++s) {
+          uint64_t before = 0;
+          for (unsigned v = 0; v < u; ++v) before += centers_values[v].at("share_centers").at(j).at(s).get<uint64_t>();
+          ctrs.push_back(std::make_unique<ItemReader>(cluster_share_centers_path(in.prefix, s, level), center_bytes(), before));
+        }
+        info_out = std::make_unique<io::OffsetFile>(cell_info_path(in.prefix, level), O_WRONLY);
+        info_file = info_out.get();
+      }
+      auto flush_info = [&] {
+        info_file->write(info.data(), info.size(), info_cell * center_bytes());
+        info_cell += info.size() / center_bytes();
+        info.clear();
+      };
+      uint64_t bits = 0;
+      for_each_decision(in, plan, level, lo, hi, progress, [&](uint64_t r, uint32_t center, unsigned s) {
+        if (!c.has(center))
+          fail(Status::io_error, cluster_share_decisions_path(in.prefix, s, level) + ": a member of a record that is no center");
+        const unsigned width = static_cast<unsigned>(std::bit_width(c.rank(r)));
+        put(c.rank(center), width);
+        bits += width;
+        if (center == r && info_file) {
+          const char* q = ctrs[s]->next();
+          if (!q) fail(Status::io_error, cluster_share_centers_path(in.prefix, s, level) + ": cut short");
+          info.insert(info.end(), q, q + center_bytes());
+          if (info.size() >= kInfoFlush * center_bytes()) flush_info();
+        }
+      });
+      if (info_file) flush_info();
+      if (bits == 0) continue;
+      // Words [first, last] hold bits [start, start + bits); the first is shared unless the unit starts
+      // it, the last unless the unit ends it or is the map's end.
+      const uint64_t end = start + bits, first = start / 64, last = (end - 1) / 64;
+      words.resize(last - first + 1);
+      const bool head = start % 64 != 0, tail = end % 64 != 0 && hi < records;
+      uint64_t from = first, to = last + 1;  // the words written here
+      if (first == last) {
+        if (head || tail) edges.push_back({j, first, words.front()}), from = to;
+      } else {
+        if (head) edges.push_back({j, first, words.front()}), ++from;
+        if (tail) edges.push_back({j, last, words.back()}), --to;
+      }
+      if (from < to)
+        io::OffsetFile(cells_path(in.prefix, level), O_WRONLY).write(&words[from - first], (to - from) * 8, from * 8);
+    }
+    return {{"edges", edges}};
+  }
+
+  // The words units share, once every map unit is stamped: each the OR of its parts (written by every
+  // process that gets here, the same value each time).
+  void write_edges(const std::vector<json>& map_values) const {
+    std::map<std::pair<size_t, uint64_t>, uint64_t> words;
+    for (const json& v : map_values)
+      for (const json& e : v.at("edges")) words[{e.at(0).get<size_t>(), e.at(1).get<uint64_t>()}] |= e.at(2).get<uint64_t>();
+    for (const auto& [at, bits] : words) io::OffsetFile(cells_path(in.prefix, split.at(at.first)), O_WRONLY).write(&bits, 8, at.second * 8);
+  }
+};
+
+// Who runs a unit, for its stamp: host and process.
+std::string runner() {
+  char host[256] = {};
+  ::gethostname(host, sizeof host - 1);
+  return fmt::format("{}:{}", host, ::getpid());
+}
+
+// Runs `units` units in `dir` as take_units does, on as many of this process's threads as `threads`, each
+// starting at its own unit; returns every unit's stamp value (with its wall seconds and runner).
+template <class Run>
+std::vector<json> take_units_threaded(const std::string& dir, unsigned units, unsigned index, unsigned threads, const char* stem,
+                                      const json& key, const Run& run) {
+  std::vector<std::vector<json>> values(threads);
+  tbb::parallel_for(0u, threads, [&](unsigned t) {
+    values[t] = take_units(
+        dir, units, (index * threads + t) % units, [&](unsigned u) { return dir + fmt::format("{}-{}.json", stem, u); }, key,
+        [&](unsigned u) {
+          const auto t0 = std::chrono::steady_clock::now();
+          json v = run(u);
+          v["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+          v["by"] = runner();
+          return std::pair(std::vector<std::string>{}, std::move(v));
+        });
+  });
+  return values.front();
+}
+
+// The units' seconds and runners, for the cluster stage's stamp.
+json unit_figures(const std::vector<json>& values) {
+  json seconds = json::array(), by = json::array();
+  for (const json& v : values) seconds.push_back(v.at("seconds")), by.push_back(v.at("by"));
+  return {{"seconds", seconds}, {"by", by}};
+}
+
+}  // namespace
+
+std::string cluster_merge_dir(const std::string& prefix) { return prefix + "cluster-merge/"; }
+
+SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key,
+                              unsigned index, Progress& progress) {
+  SplitMerge out;
+  std::vector<uint64_t>& cells = out.cells;
+  cells.assign(plan.whole_share.size(), 0);
+  Merge m{in, plan, {}, {}, cluster_merge_dir(in.prefix), ""};
+  for (size_t l = 0; l < plan.whole_share.size(); ++l)
+    if (plan.whole_share[l] < 0) m.split.push_back(l);
+  if (m.split.empty()) return out;
+  const uint64_t records = in.index.records;
+  m.units.records = records;
+  m.units.words = (records + 63) / 64;
+  const uint64_t asked = in.merge_units ? in.merge_units : std::min<uint64_t>(plan.count, kMaxClusterMergeUnits);
+  m.units.count = static_cast<unsigned>(std::clamp<uint64_t>(asked, 1, std::max<uint64_t>(m.units.words, 1)));
+  if (records == 0) {  // empty maps and infos
+    for (size_t l : m.split) {
+      io::OffsetFile(cells_path(in.prefix, l), O_WRONLY | O_CREAT | O_TRUNC).close();
+      if (m.centers_info()) io::OffsetFile(cell_info_path(in.prefix, l), O_WRONLY | O_CREAT | O_TRUNC).close();
+    }
+    return out;
+  }
+  // A unit at a time on each thread the budget holds: a bit and a half a record and a window of each share's
+  // files (two with centers).
+  const uint64_t unit_bytes = records * 3 / 16 + uint64_t{plan.count} * (m.centers_info() ? 2 : 1) * kReadWindow;
+  const uint64_t fit = in.memory_bytes ? std::max<uint64_t>(in.memory_bytes / unit_bytes, 1) : m.units.count;
+  const unsigned threads = static_cast<unsigned>(std::clamp<uint64_t>(
+      std::min<uint64_t>(static_cast<uint64_t>(std::max(1, tbb::this_task_arena::max_concurrency())), fit), 1, m.units.count));
+  const json unit_key{{"key", key}, {"split", m.split}, {"units", m.units.count}, {"records", records}};
+  const std::string centers_dir = m.dir + "centers/", map_dir = m.dir + "map/";
+  m.bits_path = centers_dir + "centers.bits";
+  start_once(centers_dir, m.bits_path, unit_key, {"centers-"}, [&] {
+    io::OffsetFile(m.bits_path, O_WRONLY | O_CREAT | O_TRUNC).resize(m.split.size() * m.units.words * 8);
+  });
+  const std::vector<json> centers = take_units_threaded(centers_dir, m.units.count, index, threads, "centers", unit_key,
+                                                        [&](unsigned u) { return m.centers_unit(u, progress); });
+  progress.report("cluster", 0.2);
+  start_once(map_dir, cells_path(in.prefix, m.split.back()), unit_key, {"map-"}, [&] { m.size_outputs(); });
+  const std::vector<json> maps = take_units_threaded(map_dir, m.units.count, index, threads, "map", unit_key,
+                                                     [&](unsigned u) { return m.map_unit(u, centers, progress); });
+  m.write_edges(maps);
+  for (size_t j = 0; j < m.split.size(); ++j)
+    for (const json& v : centers) cells[m.split[j]] += v.at("centers").at(j).get<uint64_t>();
+  out.units = {{"units", m.units.count}, {"centers", unit_figures(centers)}, {"map", unit_figures(maps)}};
+  return out;
+}
+
+}  // namespace lodstream::stream

@@ -1,0 +1,56 @@
+// The clustering shares' merge of the split levels (stream/cluster_shares.h) as units that every process
+// of a sharded run that reaches it, and every thread of each, takes part in (take_units, stream/units.h).
+// Kok-Lim Low and Tiow-Seng Tan. Model Simplification Using Vertex-Clustering. I3D 1997, §3.2: the
+// one-machine pass creates a cell at its center, in weight order, so a split level's cell id is the rank
+// of its center among the level's centers in weight order.
+//
+// The records are cut into U units of whole 64-record words (U = the shares, at most 256); two phases of
+// U units each, in WORK/cluster-merge/:
+// 1. centers (unit u, centers/centers-u.json): the shares' decisions of u's records, merged by record
+//    (each share's .dec file is in record order; its first record of the unit is found by binary search),
+//    checked to decide each record exactly once; the centers' bits, written in place into
+//    centers/centers.bits (each split level's bits a run of words); the stamp counts u's centers per share.
+// 2. map (unit u, map/map-u.json), once every centers unit is stamped: reads the level's bits whole (a bit
+//    and a half a record with their ranks) and writes its records' cells into cells-L.map in place. The map
+//    is self-delimiting (stream/cell_map_file.h: record i's cell in bit_width(rank(i)) bits), so unit u's
+//    first bit is the sum of those widths before its first record, which the bits give word by word. The
+//    words it fills alone it writes; the one or two it shares with its neighbours go into its stamp, and
+//    every process that has seen every stamp writes them (the OR of their parts: the same value each time).
+//    For center representatives it copies its centers' positions from the shares' .ctr files (its first
+//    center in share s's file: the centers of s in the units before it) into cells-L.info at its first cell.
+// Mean and quadric infos are summed afterwards (merge_cluster_shares).
+// Invariant: the map and the center info are the bytes of one pass over the records in weight order (the
+// merge before the units, and the whole-scene clustering): every record's cell is the rank of its center,
+// written at the map bits of the records before it.
+// Memory: a process runs as many units at once as it has threads and `memory_bytes` holds, each a bit and
+// a half a record of its level and a 16 MiB read window of each share's files.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "stream/cluster_shares.h"
+#include "stream/progress.h"
+
+namespace lodstream::stream {
+
+inline constexpr unsigned kMaxClusterMergeUnits = 256;
+
+std::string cluster_merge_dir(const std::string& prefix);  // WORK/cluster-merge/
+
+struct SplitMerge {
+  std::vector<uint64_t> cells;  // per level (0 for the whole levels)
+  nlohmann::ordered_json units;  // the units' count, and each phase's units' wall seconds and runners (host:pid)
+};
+
+// Writes every split level's cells-L.map (and, for center representatives, cells-L.info) from the shares'
+// files as units (above), this process's threads starting at unit `index`; units stamped for `key` (the
+// shares' plan and figures) are reused. Every share must have run. Failure(io_error) when the shares'
+// files do not add up to the weight index.
+SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key,
+                              unsigned index, Progress& progress);
+
+}  // namespace lodstream::stream

@@ -1,0 +1,31 @@
+// A bit per item with rank: the set bits below an item, from a count per 64-bit word and a popcount.
+// Used for the clustering shares' selected vertices (cluster_shares.cpp) and the centers of a split
+// level's cells (cluster_merge.cpp: a cell's id is the rank of its center).
+#pragma once
+
+#include <bit>
+#include <cstdint>
+#include <vector>
+
+namespace lodstream::stream {
+
+// `before` is filled by count() once every bit is set.
+struct RankedBits {
+  std::vector<uint64_t> bits;
+  std::vector<uint32_t> before;
+  explicit RankedBits(uint64_t n = 0) : bits((n + 63) / 64, 0), before(bits.size(), 0) {}
+  void set(uint64_t i) { bits[i >> 6] |= uint64_t{1} << (i & 63); }
+  bool has(uint64_t i) const { return (bits[i >> 6] >> (i & 63)) & 1; }
+  // The set bits (after count()).
+  uint64_t ones() const { return bits.empty() ? 0 : before.back() + static_cast<uint64_t>(std::popcount(bits.back())); }
+  void count() {
+    uint32_t n = 0;
+    for (size_t w = 0; w < bits.size(); ++w) before[w] = n, n += static_cast<uint32_t>(std::popcount(bits[w]));
+  }
+  uint32_t rank(uint64_t i) const {
+    return before[i >> 6] + static_cast<uint32_t>(std::popcount(bits[i >> 6] & ((uint64_t{1} << (i & 63)) - 1)));
+  }
+  uint64_t bytes() const { return bits.capacity() * 8 + before.capacity() * 4; }
+};
+
+}  // namespace lodstream::stream
