@@ -1,6 +1,8 @@
 // Block boxes of the store's primitives and the grid a task tests them against (see block_bounds.h).
 #include "stream/block_bounds.h"
 
+#include <fcntl.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -10,7 +12,9 @@
 #include "core/status.h"
 #include "io/file_writer.h"
 #include "io/mapped_file.h"
+#include "io/offset_file.h"
 #include "stream/store_access.h"
+#include "stream/units.h"
 
 namespace lodstream::stream {
 
@@ -26,45 +30,101 @@ uint64_t column_count(const StoreMeta& meta, int kind) { return kind == 0 ? meta
 
 std::string block_bounds_path(const std::string& prefix) { return prefix + "block-bounds.f64"; }
 
+namespace {
+
+// The boxes of the blocks of `ids` (n primitives of `arity` ids, from a block's first), one thread a box:
+// the boxes do not depend on the threads.
+void block_boxes(const std::string& column, const StoreMeta& meta, const StorePositions& positions, std::span<const uint32_t> ids,
+                 size_t arity, std::vector<double>& boxes) {
+  const uint64_t n = ids.size() / arity;
+  const uint64_t nb = (n + kBoundsBlock - 1) / kBoundsBlock;
+  boxes.assign(6 * nb, 0.0);
+  tbb::parallel_for(uint64_t{0}, nb, [&](uint64_t b) {
+    double lo[3], hi[3];
+    for (int k = 0; k < 3; ++k) lo[k] = std::numeric_limits<double>::infinity(), hi[k] = -lo[k];
+    const uint64_t end = std::min(n, (b + 1) * kBoundsBlock) * arity;
+    for (uint64_t i = b * kBoundsBlock * arity; i < end; ++i) {
+      if (ids[i] >= meta.vertices) fail(Status::io_error, column + ": vertex id out of range");
+      double p[3];
+      positions.get(ids[i], p);
+      for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], p[k]), hi[k] = std::max(hi[k], p[k]);
+    }
+    std::copy(lo, lo + 3, &boxes[6 * b]);
+    std::copy(hi, hi + 3, &boxes[6 * b + 3]);
+  });
+}
+
+// Steps of many boxes: a window of the column and the positions it touches at a time.
+constexpr uint64_t kStepBlocks = 256;
+
+}  // namespace
+
 void write_block_bounds(const std::string& store_dir, const StoreMeta& meta, const std::string& path, Progress& progress) {
   StorePositions positions(store_dir, meta);
   io::FileWriter out(path, 1 << 20);
   const uint64_t total = std::max<uint64_t>(meta.primitives(), 1);
   uint64_t done = 0;
-  // Steps of many boxes, each box formed by one thread: the boxes do not depend on the threads.
-  constexpr uint64_t kStep = kBoundsBlock * 256;
   std::vector<double> boxes;
   for (int kind = 0; kind < 3; ++kind) {
-    const uint64_t count = column_count(meta, kind);
+    const std::string column = store_dir + column_name(kind);
     const size_t arity = static_cast<size_t>(kArity[kind]);
-    for_column_blocks(store_dir + column_name(kind), count, kArity[kind], kStep, [&](uint64_t first, std::span<const uint32_t> ids) {
+    for_column_blocks(column, column_count(meta, kind), kArity[kind], kBoundsBlock * kStepBlocks, [&](uint64_t, std::span<const uint32_t> ids) {
       progress.check();
       positions.acquire();
-      const uint64_t n = ids.size() / arity;
-      const uint64_t nb = (n + kBoundsBlock - 1) / kBoundsBlock;
-      boxes.assign(6 * nb, 0.0);
-      tbb::parallel_for(uint64_t{0}, nb, [&](uint64_t b) {
-        double lo[3], hi[3];
-        for (int k = 0; k < 3; ++k) lo[k] = std::numeric_limits<double>::infinity(), hi[k] = -lo[k];
-        const uint64_t end = std::min(n, (b + 1) * kBoundsBlock) * arity;
-        for (uint64_t i = b * kBoundsBlock * arity; i < end; ++i) {
-          if (ids[i] >= meta.vertices) fail(Status::io_error, store_dir + column_name(kind) + ": vertex id out of range");
-          double p[3];
-          positions.get(ids[i], p);
-          for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], p[k]), hi[k] = std::max(hi[k], p[k]);
-        }
-        std::copy(lo, lo + 3, &boxes[6 * b]);
-        std::copy(hi, hi + 3, &boxes[6 * b + 3]);
-      });
+      block_boxes(column, meta, positions, ids, arity, boxes);
       out.write(boxes.data(), boxes.size() * sizeof(double));
       // Mapped pages count as resident (the memory contract): drop the positions this step touched.
       positions.release();
-      done += n;
-      (void)first;
+      done += ids.size() / arity;
       progress.report("bounds", static_cast<double>(done) / static_cast<double>(total));
     });
   }
   out.commit();
+}
+
+void write_block_bounds_unit(const std::string& store_dir, const StoreMeta& meta, const std::string& path, unsigned unit,
+                             unsigned units, Progress& progress) {
+  StorePositions positions(store_dir, meta);
+  const io::OffsetFile out(path, O_WRONLY);
+  std::vector<double> boxes;
+  uint64_t before = 0;  // the blocks of the kinds before
+  for (int kind = 0; kind < 3; ++kind) {
+    const uint64_t count = column_count(meta, kind), blocks = (count + kBoundsBlock - 1) / kBoundsBlock;
+    const uint64_t b0 = blocks * unit / units, b1 = blocks * (unit + 1) / units;
+    const std::string column = store_dir + column_name(kind);
+    const size_t arity = static_cast<size_t>(kArity[kind]);
+    if (b0 < b1) {
+      const io::MappedFile file(column);
+      if (file.size() != count * 4 * arity) fail(Status::io_error, column + ": size does not match store.json");
+      for (uint64_t b = b0; b < b1; b += kStepBlocks) {
+        progress.check();
+        const uint64_t first = b * kBoundsBlock, end = std::min(count, std::min(b1, b + kStepBlocks) * kBoundsBlock);
+        const io::Window w = file.map(first * 4 * arity, end * 4 * arity);
+        positions.acquire();
+        block_boxes(column, meta, positions, std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), (end - first) * arity),
+                    arity, boxes);
+        out.write(boxes.data(), boxes.size() * sizeof(double), (before + b) * 6 * sizeof(double));
+        positions.release();
+      }
+    }
+    before += blocks;
+  }
+}
+
+nlohmann::ordered_json write_block_bounds_in_units(const std::string& store_dir, const StoreMeta& meta, const std::string& path,
+                                                   const std::string& dir, unsigned units, unsigned index,
+                                                   const nlohmann::ordered_json& key, Progress& progress) {
+  uint64_t blocks = 0;
+  for (int kind = 0; kind < 3; ++kind) blocks += (column_count(meta, kind) + kBoundsBlock - 1) / kBoundsBlock;
+  units = static_cast<unsigned>(std::clamp<uint64_t>(units, 1, std::max<uint64_t>(blocks, 1)));
+  const nlohmann::ordered_json unit_key{{"key", key}, {"units", units}};
+  start_once(dir, path, unit_key, {"unit-"}, [&] { io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize(blocks * 6 * sizeof(double)); });
+  // One unit at a time (its boxes' threads are the process's).
+  const auto values = take_units_on_threads(dir, units, index, 1, "unit", unit_key, [&](unsigned u) {
+    write_block_bounds_unit(store_dir, meta, path, u, units, progress);
+    return nlohmann::ordered_json::object();
+  });
+  return {{"units", units}, {"unit", unit_figures(values)}};
 }
 
 BlockBounds read_block_bounds(const std::string& path, const StoreMeta& meta) {

@@ -22,6 +22,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "core/octree_regions.h"
 #include "stream/progress.h"
 #include "stream/scene_store.h"
@@ -44,6 +46,16 @@ std::string block_bounds_path(const std::string& prefix);
 // Computes the boxes from the store (one pass over its primitive columns, positions read by id, their
 // pages dropped after every step) and writes them to `path` (atomically).
 void write_block_bounds(const std::string& store_dir, const StoreMeta& meta, const std::string& path, Progress& progress);
+
+// The same boxes as units (the prepare jobs of a sharded run, stream/units.h): unit u of `units` writes the
+// u-th `units`-th of each kind's blocks in place into `path` (sized beforehand).
+void write_block_bounds_unit(const std::string& store_dir, const StoreMeta& meta, const std::string& path, unsigned unit,
+                             unsigned units, Progress& progress);
+// Every unit, taken up by every process that calls it (take_units_on_threads from unit `index`, one at a
+// time) in `dir`, the file sized once for `key`; returns the units' figures (seconds, runners).
+nlohmann::ordered_json write_block_bounds_in_units(const std::string& store_dir, const StoreMeta& meta, const std::string& path,
+                                                   const std::string& dir, unsigned units, unsigned index,
+                                                   const nlohmann::ordered_json& key, Progress& progress);
 
 // Reads them back; Failure(io_error) when the file does not hold the store's blocks.
 BlockBounds read_block_bounds(const std::string& path, const StoreMeta& meta);

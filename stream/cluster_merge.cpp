@@ -7,15 +7,12 @@
 
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <bit>
 #include <cstring>
 #include <filesystem>
 #include <map>
 #include <memory>
 #include <queue>
-
-#include <unistd.h>
 
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
@@ -71,6 +68,19 @@ struct Units {
   uint64_t hi(unsigned u) const { return std::min(records, words * (u + 1) / count * 64); }
 };
 
+// Share s's decisions of split level `level` from its first record at or after `lo` (each share's file is
+// in record order: a binary search).
+std::unique_ptr<ItemReader> decisions_from(const ClusterShareInput& in, unsigned s, size_t level, uint64_t lo) {
+  const std::string path = cluster_share_decisions_path(in.prefix, s, level);
+  uint64_t first = 0;
+  if (lo > 0) {
+    const io::OffsetFile file(path, O_RDONLY);
+    first = file.partition_point<std::array<uint32_t, 2>>(std::filesystem::file_size(path) / 8,
+                                                          [&](const std::array<uint32_t, 2>& d) { return d[0] < lo; });
+  }
+  return std::make_unique<ItemReader>(path, 8, first);
+}
+
 // Calls f(record, its center, share) for every record of [lo, hi) of split level `level`, in record order,
 // from the shares' decision files merged by record. Failure(io_error) when a record is decided twice, by no
 // share or past the index's records, or a decision names a later record as its center.
@@ -93,14 +103,7 @@ void for_each_decision(const ClusterShareInput& in, const ClusterShares& plan, s
     }
   };
   for (unsigned s = 0; s < plan.count; ++s) {
-    const std::string path = cluster_share_decisions_path(in.prefix, s, level);
-    uint64_t first = 0;
-    if (lo > 0) {
-      const io::OffsetFile file(path, O_RDONLY);
-      first = file.partition_point<std::array<uint32_t, 2>>(std::filesystem::file_size(path) / 8,
-                                                            [&](const std::array<uint32_t, 2>& d) { return d[0] < lo; });
-    }
-    decs.push_back(std::make_unique<ItemReader>(path, 8, first));
+    decs.push_back(decisions_from(in, s, level, lo));
     advance(s);
   }
   auto missing = [&](uint64_t r, const char* how) {
@@ -154,7 +157,9 @@ struct Merge {
   }
 
   // Phase 1, unit u: its records' center bits, each split level's, in place; returns its centers per level
-  // and share.
+  // and share. Each share's decisions of the unit are read in turn, unmerged: phase 2 merges them and checks
+  // that they decide each record once (a record decided twice or by no share sets no wrong bit that it
+  // would not find).
   json centers_unit(unsigned u, Progress& progress) const {
     const uint64_t lo = units.lo(u), hi = units.hi(u);
     const io::OffsetFile bits(bits_path, O_WRONLY);
@@ -163,11 +168,22 @@ struct Merge {
       std::vector<uint64_t> words((hi - lo + 63) / 64, 0);
       std::vector<uint64_t> per_share(plan.count, 0);
       uint64_t n = 0;
-      for_each_decision(in, plan, split[j], lo, hi, progress, [&](uint64_t r, uint32_t center, unsigned s) {
-        if (center != r) return;
-        words[(r - lo) >> 6] |= uint64_t{1} << ((r - lo) & 63);
-        ++per_share[s], ++n;
-      });
+      for (unsigned s = 0; s < plan.count; ++s) {
+        const std::unique_ptr<ItemReader> dec = decisions_from(in, s, split[j], lo);
+        uint64_t seen = 0;
+        while (const char* p = dec->next()) {
+          uint32_t pair[2];
+          std::memcpy(pair, p, 8);
+          if (pair[0] >= hi) break;
+          if (pair[1] > pair[0])
+            fail(Status::io_error, cluster_share_decisions_path(in.prefix, s, split[j]) + ": not a share's decisions");
+          if ((++seen & 0xfffff) == 0) progress.check();
+          if (pair[1] != pair[0]) continue;
+          uint64_t& w = words[(pair[0] - lo) >> 6];
+          const uint64_t bit = uint64_t{1} << ((pair[0] - lo) & 63);
+          if (!(w & bit)) w |= bit, ++per_share[s], ++n;
+        }
+      }
       bits.write(words.data(), words.size() * 8, (j * units.words + lo / 64) * 8);
       centers.push_back(n);
       share_centers.push_back(per_share);
@@ -228,13 +244,14 @@ struct Merge {
         info_cell += info.size() / center_bytes();
         info.clear();
       };
-      uint64_t bits = 0;
+      uint64_t bits = 0, made = info_cell;  // the bits put, and the cells made before the record (its rank)
       for_each_decision(in, plan, level, lo, hi, progress, [&](uint64_t r, uint32_t center, unsigned s) {
         if (!c.has(center))
           fail(Status::io_error, cluster_share_decisions_path(in.prefix, s, level) + ": a member of a record that is no center");
-        const unsigned width = static_cast<unsigned>(std::bit_width(c.rank(r)));
-        put(c.rank(center), width);
+        const unsigned width = static_cast<unsigned>(std::bit_width(made));
+        put(center == r ? made : c.rank(center), width);
         bits += width;
+        made += center == r;
         if (center == r && info_file) {
           const char* q = ctrs[s]->next();
           if (!q) fail(Status::io_error, cluster_share_centers_path(in.prefix, s, level) + ": cut short");
@@ -271,40 +288,6 @@ struct Merge {
     for (const auto& [at, bits] : words) io::OffsetFile(cells_path(in.prefix, split.at(at.first)), O_WRONLY).write(&bits, 8, at.second * 8);
   }
 };
-
-// Who runs a unit, for its stamp: host and process.
-std::string runner() {
-  char host[256] = {};
-  ::gethostname(host, sizeof host - 1);
-  return fmt::format("{}:{}", host, ::getpid());
-}
-
-// Runs `units` units in `dir` as take_units does, on as many of this process's threads as `threads`, each
-// starting at its own unit; returns every unit's stamp value (with its wall seconds and runner).
-template <class Run>
-std::vector<json> take_units_threaded(const std::string& dir, unsigned units, unsigned index, unsigned threads, const char* stem,
-                                      const json& key, const Run& run) {
-  std::vector<std::vector<json>> values(threads);
-  tbb::parallel_for(0u, threads, [&](unsigned t) {
-    values[t] = take_units(
-        dir, units, (index * threads + t) % units, [&](unsigned u) { return dir + fmt::format("{}-{}.json", stem, u); }, key,
-        [&](unsigned u) {
-          const auto t0 = std::chrono::steady_clock::now();
-          json v = run(u);
-          v["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-          v["by"] = runner();
-          return std::pair(std::vector<std::string>{}, std::move(v));
-        });
-  });
-  return values.front();
-}
-
-// The units' seconds and runners, for the cluster stage's stamp.
-json unit_figures(const std::vector<json>& values) {
-  json seconds = json::array(), by = json::array();
-  for (const json& v : values) seconds.push_back(v.at("seconds")), by.push_back(v.at("by"));
-  return {{"seconds", seconds}, {"by", by}};
-}
 
 }  // namespace
 
@@ -343,11 +326,11 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   start_once(centers_dir, m.bits_path, unit_key, {"centers-"}, [&] {
     io::OffsetFile(m.bits_path, O_WRONLY | O_CREAT | O_TRUNC).resize(m.split.size() * m.units.words * 8);
   });
-  const std::vector<json> centers = take_units_threaded(centers_dir, m.units.count, index, threads, "centers", unit_key,
+  const std::vector<json> centers = take_units_on_threads(centers_dir, m.units.count, index, threads, "centers", unit_key,
                                                         [&](unsigned u) { return m.centers_unit(u, progress); });
   progress.report("cluster", 0.2);
   start_once(map_dir, cells_path(in.prefix, m.split.back()), unit_key, {"map-"}, [&] { m.size_outputs(); });
-  const std::vector<json> maps = take_units_threaded(map_dir, m.units.count, index, threads, "map", unit_key,
+  const std::vector<json> maps = take_units_on_threads(map_dir, m.units.count, index, threads, "map", unit_key,
                                                      [&](unsigned u) { return m.map_unit(u, centers, progress); });
   m.write_edges(maps);
   for (size_t j = 0; j < m.split.size(); ++j)

@@ -310,18 +310,21 @@ std::vector<std::string> level_comments(const SimplifyOptions& so, const std::st
                       name(so.variant), name(so.representative), name(so.grading))};
 }
 
-// A stage whose outputs are `files`: reused when its stamp holds `key` and the files exist, else run and
-// stamped. Returns true when reused.
+// A shared stage of a sharded run whose work is units that every process takes part in: reused when its
+// stamp matches `key`; else the work directory's lock (`lock`, held) is let go while run() takes part in
+// the units, and back under the lock the first process stamps the stage with run()'s value (the units'
+// figures). Returns whether it was reused.
 template <class Run>
-bool stamped_stage(const std::string& stamp, const ordered_json& key, const std::vector<std::string>& files, Run&& run) {
+bool stage_in_units(const std::string& stamp, const ordered_json& key, const std::vector<std::string>& files,
+                    std::unique_ptr<stream::ShardLock>& lock, const std::string& work_dir, Run&& run) {
   ordered_json v;
   if (stamp_matches(stamp, key, &v)) return true;
-  std::filesystem::remove(stamp);
-  run();
-  write_stamp(stamp, key, files, nullptr);
+  lock.reset();
+  const ordered_json value = run();
+  lock = std::make_unique<stream::ShardLock>(work_dir);
+  if (!stamp_matches(stamp, key, &v)) write_stamp(stamp, key, files, {{"units", value}});
   return false;
 }
-
 
 // Silhouette p95 (pixels) of each level file seen from its switching distance, by `report`'s own rule on
 // `views` views: the one place simplify measures a level, so that it always agrees with report.
@@ -1151,10 +1154,16 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         // The store's block boxes (stream/block_bounds.h) and every level's cells by vertex
         // (stream/vertex_cells.h: the tasks' packed maps). No representative is written ahead: a task forms
         // its cells' own (stream::EmitOptions::own_representatives).
+        // Both as units (stream/units.h) that every process here takes part in, the lock let go meanwhile
+        // (stage_in_units), N of them (one a cluster share, else the budget's).
+        const unsigned unit_count = std::max(1u, cluster_shares), unit_index = so.shard_count > 0 ? so.shard_index : 0;
         run_stage(&report.stages, "bounds", [&](StageStats& st) {
           const std::string path = stream::block_bounds_path(prefix);
-          st.reused = stamped_stage(work.file("block-bounds.json"), {{"version", kStampVersion}, {"source", source_json(meta)}},
-                                    {path}, [&] { stream::write_block_bounds(store_dir, meta, path, progress); });
+          const ordered_json key{{"version", kStampVersion}, {"source", source_json(meta)}};
+          st.reused = stage_in_units(work.file("block-bounds.json"), key, {path}, shard_lock, options.work_dir, [&] {
+            return stream::write_block_bounds_in_units(store_dir, meta, path, prefix + "block-bounds-units/", unit_count, unit_index,
+                                                       key, progress);
+          });
         });
         run_stage(&report.stages, "vertex-cells", [&](StageStats& st) {
           ordered_json key = cluster_base;
@@ -1162,14 +1171,17 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           for (double c : sizes) key["cell_sizes"].push_back(exact(c));
           std::vector<std::string> files;
           for (size_t l = 0; l < cells.size(); ++l) files.push_back(stream::vertex_cells_path(prefix, l));
-          st.reused = stamped_stage(work.file("shard-vertex-cells.json"), key, files, [&] {
+          st.reused = stage_in_units(work.file("shard-vertex-cells.json"), key, files, shard_lock, options.work_dir, [&] {
+            std::vector<size_t> levels;  // else written by its cluster share
             for (size_t l = 0; l < cells.size(); ++l)
-              if (l >= vertex_cells_written.size() || !vertex_cells_written[l])  // else written by its cluster share
-                stream::write_vertex_cells(prefix, canonical, meta.vertices, grade.records, l, cells[l], plan.stage_bytes, progress);
+              if (l >= vertex_cells_written.size() || !vertex_cells_written[l]) levels.push_back(l);
+            return stream::write_vertex_cells_in_units(prefix, canonical, meta.vertices, grade.records, levels, cells, unit_count,
+                                                       unit_index, key, plan.stage_bytes, progress);
           });
-          // The clustering merge's units' stamps, kept until now for a process that was still taking them
-          // when the cluster stage was stamped.
-          std::filesystem::remove_all(stream::cluster_merge_dir(prefix));
+          // The clustering merge's centers' bits, kept until now for a process that was still taking its
+          // units when the cluster stage was stamped. The units' stamps stay (a few bytes each): a process
+          // that comes to a set of units late finds them done rather than starting them afresh.
+          std::filesystem::remove(stream::cluster_merge_dir(prefix) + "centers/centers.bits");
         });
         shard_lock.reset();
         if (so.shard_prepare) return;

@@ -1,7 +1,21 @@
 // Stamps; see units.h.
 #include "stream/units.h"
 
+#include <unistd.h>
+
 namespace lodstream::stream {
+
+std::string unit_runner() {
+  char host[256] = {};
+  ::gethostname(host, sizeof host - 1);
+  return fmt::format("{}:{}", host, ::getpid());
+}
+
+nlohmann::ordered_json unit_figures(const std::vector<nlohmann::ordered_json>& values) {
+  nlohmann::ordered_json seconds = nlohmann::ordered_json::array(), by = nlohmann::ordered_json::array();
+  for (const auto& v : values) seconds.push_back(v.at("seconds")), by.push_back(v.at("by"));
+  return {{"seconds", seconds}, {"by", by}};
+}
 
 bool stamp_matches(const std::string& path, const nlohmann::ordered_json& key, nlohmann::ordered_json* value) {
   std::error_code ec;

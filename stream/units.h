@@ -7,6 +7,7 @@
 // units, the report tasks' sampling units.
 #pragma once
 
+#include <chrono>
 #include <filesystem>
 #include <initializer_list>
 #include <optional>
@@ -16,6 +17,7 @@
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
+#include <tbb/parallel_for.h>
 
 #include "io/file_writer.h"
 #include "stream/kill_point.h"
@@ -71,6 +73,34 @@ std::vector<nlohmann::ordered_json> take_units(const std::string& dir, unsigned 
   for (unsigned u = 0; u < units; ++u) values.push_back(stamped_share(dir, u, stamp(u), key, "", [&] { return run(u); }));
   return values;
 }
+
+// Who runs a unit, for its stamp: "host:pid".
+std::string unit_runner();
+
+// take_units on `threads` of this process's threads at once, each starting at its own unit (index · threads
+// + t), for units whose stamps are dir/STEM-u.json and which write their outputs in place (no files in the
+// stamp). Each unit's stamp value gets its wall seconds ("seconds") and runner ("by"). Returns every
+// unit's stamp value.
+template <class Run>
+std::vector<nlohmann::ordered_json> take_units_on_threads(const std::string& dir, unsigned units, unsigned index, unsigned threads,
+                                                          const char* stem, const nlohmann::ordered_json& key, const Run& run) {
+  std::vector<std::vector<nlohmann::ordered_json>> values(threads);
+  tbb::parallel_for(0u, threads, [&](unsigned t) {
+    values[t] = take_units(
+        dir, units, (index * threads + t) % units, [&](unsigned u) { return dir + fmt::format("{}-{}.json", stem, u); }, key,
+        [&](unsigned u) {
+          const auto t0 = std::chrono::steady_clock::now();
+          nlohmann::ordered_json v = run(u);
+          v["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+          v["by"] = unit_runner();
+          return std::pair(std::vector<std::string>{}, std::move(v));
+        });
+  });
+  return values.front();
+}
+
+// The units' wall seconds and runners, from their stamp values: {"seconds": [...], "by": [...]}.
+nlohmann::ordered_json unit_figures(const std::vector<nlohmann::ordered_json>& values);
 
 // The file that a set of units fills in place (`path`, in `dir`), made once for `key` under a lock of its
 // own (dir/start.lock), whichever process comes first: unless dir/start.json holds `key` and `path`

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <utility>
 #include <cstring>
 #include <filesystem>
 #include <memory>
@@ -16,8 +17,11 @@
 
 #include "core/status.h"
 #include "io/mapped_file.h"
+#include "io/offset_file.h"
 #include "stream/cell_map_file.h"
 #include "stream/cluster_stage.h"
+#include "stream/ranked_bits.h"
+#include "stream/units.h"
 #include "stream/weld_file.h"
 
 namespace lodstream::stream {
@@ -123,6 +127,82 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
     progress.report("vertex cells", static_cast<double>(lo + n) / static_cast<double>(vertices));
   }
   out.commit();
+}
+
+void write_vertex_cells_unit(const std::string& map_path, const std::string& order_path, const std::string& canonical_path,
+                             const std::string& path, uint64_t vertices, uint64_t records, uint64_t cells, unsigned unit,
+                             unsigned units, Progress& progress) {
+  const uint64_t lo = vertices * unit / units, hi = vertices * (unit + 1) / units;
+  io::MappedFile order(order_path);
+  if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
+  // The unit's welded vertices, and the canonical vertices before the unit that they name (a canonical id is
+  // smaller than its welded vertices' and is its own canonical vertex: weld_file.h).
+  std::vector<std::pair<uint32_t, uint32_t>> welded;  // (vertex, canonical)
+  RankedBits outside(canonical_path.empty() ? 0 : vertices);
+  if (!canonical_path.empty()) {
+    const WeldFile weld(canonical_path, vertices);
+    weld.for_each_welded([&](uint64_t v, uint32_t c) {
+      if (v < lo || v >= hi) return;
+      welded.emplace_back(static_cast<uint32_t>(v), c);
+      if (c < lo) outside.set(c);
+    });
+    outside.count();
+  }
+  std::vector<uint32_t> outside_cells(outside.ones(), kNoCell);
+  std::vector<uint32_t> buf(hi - lo, kNoCell);
+  // One decoding of the map in weight order: the unit's vertices' cells and those canonical vertices'.
+  constexpr uint64_t kChunk = 1 << 18;
+  CellMapReader map(map_path);
+  std::vector<uint32_t> cs(kChunk);
+  const bool any_outside = !outside_cells.empty();
+  for (uint64_t first = 0; first < records; first += kChunk) {
+    progress.check();
+    const uint64_t k = std::min(kChunk, records - first);
+    const io::Window a = order.map(first * 4, (first + k) * 4);
+    const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
+    map.read(std::span<uint32_t>(cs.data(), k));
+    for (uint64_t i = 0; i < k; ++i) {
+      if (cs[i] >= cells) fail(Status::io_error, map_path + ": cell id out of range");
+      const uint32_t id = ids[i];
+      if (id >= vertices) fail(Status::io_error, order.path() + ": vertex id out of range");
+      if (id - lo < hi - lo) buf[id - lo] = cs[i];  // unsigned: below lo wraps around
+      else if (any_outside && id < lo && outside.has(id)) outside_cells[outside.rank(id)] = cs[i];
+    }
+  }
+  map.finish(records, cells);
+  // Welded vertices take their canonical vertex's cell (in increasing order: a canonical vertex in the unit
+  // is not welded, so its cell is final).
+  for (const auto& [v, c] : welded) buf[v - lo] = c >= lo ? buf[c - lo] : outside_cells[outside.rank(c)];
+  io::OffsetFile(path, O_WRONLY).write(buf.data(), 4 * buf.size(), 4 * lo);
+}
+
+nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, const std::string& canonical_path, uint64_t vertices,
+                                                   uint64_t records, const std::vector<size_t>& levels,
+                                                   const std::vector<uint64_t>& cells, unsigned units, unsigned index,
+                                                   const nlohmann::ordered_json& key, uint64_t budget, Progress& progress) {
+  if (levels.empty()) return nullptr;
+  // At least as many units as the budget needs (a unit's bytes below), and at least one a vertex.
+  const uint64_t fixed = vertices * 3 / 16 + (4 << 20), room = budget > fixed + (1 << 20) ? budget - fixed : (1 << 20);
+  units = static_cast<unsigned>(std::clamp<uint64_t>(std::max<uint64_t>(units, (12 * vertices + room - 1) / room), 1,
+                                                     std::max<uint64_t>(vertices, 1)));
+  const std::string dir = prefix + "vertex-cells-units/";
+  const nlohmann::ordered_json unit_key{{"key", key}, {"levels", levels}, {"units", units}};
+  start_once(dir, vertex_cells_path(prefix, levels.back()), unit_key, {"unit-"}, [&] {
+    for (size_t l : levels) io::OffsetFile(vertex_cells_path(prefix, l), O_WRONLY | O_CREAT | O_TRUNC).resize(4 * vertices);
+  });
+  // A unit at a time on each thread the budget holds: 4 bytes a vertex of its share, a bit and a half a
+  // vertex for the canonical vertices it looks up, 8 bytes a welded vertex of its share.
+  const uint64_t unit_bytes = 12 * (vertices / units + 1) + vertices * 3 / 16 + (4 << 20);
+  const unsigned threads = static_cast<unsigned>(std::clamp<uint64_t>(
+      std::min<uint64_t>(static_cast<uint64_t>(std::max(1, tbb::this_task_arena::max_concurrency())), std::max<uint64_t>(budget / unit_bytes, 1)),
+      1, uint64_t{units} * levels.size()));
+  const auto values = take_units_on_threads(dir, units * static_cast<unsigned>(levels.size()), index, threads, "unit", unit_key, [&](unsigned k) {
+    const size_t l = levels[k / units];
+    write_vertex_cells_unit(cells_path(prefix, l), order_path(prefix), canonical_path, vertex_cells_path(prefix, l), vertices, records,
+                            cells[l], k % units, units, progress);
+    return nlohmann::ordered_json::object();
+  });
+  return {{"units", units}, {"levels", levels}, {"unit", unit_figures(values)}};
 }
 
 }  // namespace lodstream::stream

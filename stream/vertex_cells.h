@@ -19,6 +19,9 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "stream/progress.h"
 
@@ -38,5 +41,22 @@ void write_vertex_cells(const std::string& prefix, const std::string& canonical_
 void write_vertex_cells_of(const std::string& map_path, const std::string& order_path, const std::string& canonical_path,
                            const std::string& path, uint64_t vertices, uint64_t records, uint64_t cells, uint64_t budget,
                            Progress& progress);
+
+// Level `level`'s file as `units` units, by vertex range, for the prepare jobs of a sharded run
+// (stream/units.h): unit u writes the vertices [u·V/units, (u+1)·V/units) in place into `path` (sized
+// beforehand to 4 bytes a vertex), from one decoding of the map: its vertices' cells, and the cells of the
+// canonical vertices before it that its welded vertices name; then its welded vertices'. The same bytes
+// as write_vertex_cells_of. Memory: 4 bytes a vertex of the unit, 8 a welded vertex of it, a bit and a
+// half a vertex of the scene.
+void write_vertex_cells_unit(const std::string& map_path, const std::string& order_path, const std::string& canonical_path,
+                             const std::string& path, uint64_t vertices, uint64_t records, uint64_t cells, unsigned unit,
+                             unsigned units, Progress& progress);
+// Every level of `levels` (cells[l] cells each) as `units` units a level, taken up by every process that
+// calls it and its threads (take_units_on_threads, from unit `index`) in prefix/vertex-cells-units/, the
+// files sized once for `key`; returns the units' figures (seconds, runners), or null for no level.
+nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, const std::string& canonical_path, uint64_t vertices,
+                                                   uint64_t records, const std::vector<size_t>& levels,
+                                                   const std::vector<uint64_t>& cells, unsigned units, unsigned index,
+                                                   const nlohmann::ordered_json& key, uint64_t budget, Progress& progress);
 
 }  // namespace lodstream::stream

@@ -165,8 +165,9 @@ TEST(Shard, TasksInBatchesUnderASmallBudgetGiveTheSameBytes) {
 }
 
 // The tasks look their vertices' cells up in the vertex-cells files (stream/vertex_cells.h), which the
-// shared stages write by decoding the cluster maps. Written again in ranges of 4096 vertices (so that welded
-// vertices find their canonical vertex's cell in an earlier range) they hold the same bytes; and tasks under
+// shared stages write by decoding the cluster maps (as units by vertex range). Written again in ranges of
+// 4096 vertices (so that welded vertices find their canonical vertex's cell in an earlier range), and as
+// 1, 3 and 7 units, they hold the same bytes; and tasks under
 // center and mean representatives give one machine's bytes. No representative is written ahead: the tasks
 // form their own (EmitOptions::own_representatives).
 TEST(Shard, VertexCellsInRangesAgree) {
@@ -190,6 +191,34 @@ TEST(Shard, VertexCellsInRangesAgree) {
     std::filesystem::remove(path);
     stream::write_vertex_cells(prefix, weld, vertices, records, l, merged.levels[l].cells, 4 * 4096, progress);
     EXPECT_TRUE(slurp(path) == from_map);
+    // As units (the prepare jobs'), each by vertex range: 1, 3 and 7, run in reverse order (a welded
+    // vertex's canonical vertex before its unit is found in the unit's own pass over the map).
+    for (unsigned units : {1u, 3u, 7u}) {
+      SCOPED_TRACE("units " + std::to_string(units));
+      std::filesystem::remove(path);
+      io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize(4 * vertices);
+      for (unsigned u = units; u-- > 0;)
+        stream::write_vertex_cells_unit(stream::cells_path(prefix, l), stream::order_path(prefix), weld, path, vertices, records,
+                                        merged.levels[l].cells, u, units, progress);
+      EXPECT_TRUE(slurp(path) == from_map);
+    }
+  }
+
+  // The store's block boxes, which the run wrote as units: one pass gives the same bytes, and so do 1, 3
+  // and 7 units run in reverse order.
+  {
+    stream::StoreMeta meta;
+    ASSERT_TRUE(stream::read_store_meta(prefix + "store", &meta));
+    const std::string from_units = slurp(stream::block_bounds_path(prefix)), path = dir.file("bounds.f64");
+    ASSERT_GT(from_units.size(), 3 * 48u);
+    stream::write_block_bounds(prefix + "store", meta, path, progress);
+    EXPECT_TRUE(slurp(path) == from_units);
+    for (unsigned units : {1u, 3u, 7u}) {
+      SCOPED_TRACE("bounds units " + std::to_string(units));
+      io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize(from_units.size());
+      for (unsigned u = units; u-- > 0;) stream::write_block_bounds_unit(prefix + "store", meta, path, u, units, progress);
+      EXPECT_TRUE(slurp(path) == from_units);
+    }
   }
 
   for (Representative rep : {Representative::center, Representative::mean}) {
