@@ -118,9 +118,9 @@ nlohmann::ordered_json write_block_bounds_in_units(const std::string& store_dir,
   for (int kind = 0; kind < 3; ++kind) blocks += (column_count(meta, kind) + kBoundsBlock - 1) / kBoundsBlock;
   units = static_cast<unsigned>(std::clamp<uint64_t>(units, 1, std::max<uint64_t>(blocks, 1)));
   const nlohmann::ordered_json unit_key{{"key", key}, {"units", units}};
-  start_once(dir, path, unit_key, {"unit-"}, [&] { io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize(blocks * 6 * sizeof(double)); });
+  start_once(dir, path, unit_key, {"block-bounds-"}, [&] { io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize(blocks * 6 * sizeof(double)); });
   // One unit at a time (its boxes' threads are the process's).
-  const auto values = take_units_on_threads(dir, units, index, 1, "unit", unit_key, [&](unsigned u) {
+  const auto values = take_units_on_threads(dir, units, index, 1, "block-bounds", unit_key, [&](unsigned u) {
     write_block_bounds_unit(store_dir, meta, path, u, units, progress);
     return nlohmann::ordered_json::object();
   });

@@ -323,14 +323,14 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   const json unit_key{{"key", key}, {"split", m.split}, {"units", m.units.count}, {"records", records}};
   const std::string centers_dir = m.dir + "centers/", map_dir = m.dir + "map/";
   m.bits_path = centers_dir + "centers.bits";
-  start_once(centers_dir, m.bits_path, unit_key, {"centers-"}, [&] {
+  start_once(centers_dir, m.bits_path, unit_key, {"merge-centers-"}, [&] {
     io::OffsetFile(m.bits_path, O_WRONLY | O_CREAT | O_TRUNC).resize(m.split.size() * m.units.words * 8);
   });
-  const std::vector<json> centers = take_units_on_threads(centers_dir, m.units.count, index, threads, "centers", unit_key,
+  const std::vector<json> centers = take_units_on_threads(centers_dir, m.units.count, index, threads, "merge-centers", unit_key,
                                                         [&](unsigned u) { return m.centers_unit(u, progress); });
   progress.report("cluster", 0.2);
-  start_once(map_dir, cells_path(in.prefix, m.split.back()), unit_key, {"map-"}, [&] { m.size_outputs(); });
-  const std::vector<json> maps = take_units_on_threads(map_dir, m.units.count, index, threads, "map", unit_key,
+  start_once(map_dir, cells_path(in.prefix, m.split.back()), unit_key, {"merge-map-"}, [&] { m.size_outputs(); });
+  const std::vector<json> maps = take_units_on_threads(map_dir, m.units.count, index, threads, "merge-map", unit_key,
                                                      [&](unsigned u) { return m.map_unit(u, centers, progress); });
   m.write_edges(maps);
   for (size_t j = 0; j < m.split.size(); ++j)

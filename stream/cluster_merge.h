@@ -6,11 +6,12 @@
 //
 // The records are cut into U units of whole 64-record words (U = the shares, at most 256); two phases of
 // U units each, in WORK/cluster-merge/:
-// 1. centers (unit u, centers/centers-u.json): the shares' decisions of u's records, merged by record
-//    (each share's .dec file is in record order; its first record of the unit is found by binary search),
-//    checked to decide each record exactly once; the centers' bits, written in place into
-//    centers/centers.bits (each split level's bits a run of words); the stamp counts u's centers per share.
-// 2. map (unit u, map/map-u.json), once every centers unit is stamped: reads the level's bits whole (a bit
+// 1. centers (unit u, centers/merge-centers-u.json): each share's decisions of u's records in turn (each
+//    share's .dec file is in record order; its first record of the unit is found by binary search) set the
+//    centers' bits, written in place into centers/centers.bits (each split level's bits a run of words);
+//    the stamp counts u's centers per share.
+// 2. map (unit u, map/merge-map-u.json), once every centers unit is stamped: merges the shares' decisions
+//    of its records by record, checking that they decide each record exactly once, reads the level's bits whole (a bit
 //    and a half a record with their ranks) and writes its records' cells into cells-L.map in place. The map
 //    is self-delimiting (stream/cell_map_file.h: record i's cell in bit_width(rank(i)) bits), so unit u's
 //    first bit is the sum of those widths before its first record, which the bits give word by word. The
@@ -19,6 +20,9 @@
 //    For center representatives it copies its centers' positions from the shares' .ctr files (its first
 //    center in share s's file: the centers of s in the units before it) into cells-L.info at its first cell.
 // Mean and quadric infos are summed afterwards (merge_cluster_shares).
+// The centers' bits and the units' stamps stay after the stage: a process that saw the cluster stage
+// unstamped and comes late to the units must find them done, where start_once, missing the bits, would start
+// them afresh from the shares' decision files, which the stage's stamp removes.
 // Invariant: the map and the center info are the bytes of one pass over the records in weight order (the
 // merge before the units, and the whole-scene clustering): every record's cell is the rank of its center,
 // written at the map bits of the records before it.

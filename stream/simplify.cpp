@@ -1178,10 +1178,6 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
             return stream::write_vertex_cells_in_units(prefix, canonical, meta.vertices, grade.records, levels, cells, unit_count,
                                                        unit_index, key, plan.stage_bytes, progress);
           });
-          // The clustering merge's centers' bits, kept until now for a process that was still taking its
-          // units when the cluster stage was stamped. The units' stamps stay (a few bytes each): a process
-          // that comes to a set of units late finds them done rather than starting them afresh.
-          std::filesystem::remove(stream::cluster_merge_dir(prefix) + "centers/centers.bits");
         });
         shard_lock.reset();
         if (so.shard_prepare) return;

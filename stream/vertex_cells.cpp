@@ -67,6 +67,29 @@ class RandomFile {
   int fd_ = -1;
 };
 
+// Calls f(vertex id, cell) for every record of the weight index at `order` (`records` of them), in weight
+// order, its cell from one decoding of the map at `map_path` (`cells` cells); checks both.
+template <class F>
+void for_each_record_cell(const std::string& map_path, const io::MappedFile& order, uint64_t records, uint64_t cells, uint64_t vertices,
+                          Progress& progress, F&& f) {
+  constexpr uint64_t kChunk = 1 << 18;
+  CellMapReader map(map_path);
+  std::vector<uint32_t> cs(kChunk);
+  for (uint64_t first = 0; first < records; first += kChunk) {
+    progress.check();
+    const uint64_t k = std::min(kChunk, records - first);
+    const io::Window a = order.map(first * 4, (first + k) * 4);
+    const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
+    map.read(std::span<uint32_t>(cs.data(), k));
+    for (uint64_t i = 0; i < k; ++i) {
+      if (cs[i] >= cells) fail(Status::io_error, map_path + ": cell id out of range");
+      if (ids[i] >= vertices) fail(Status::io_error, order.path() + ": vertex id out of range");
+      f(ids[i], cs[i]);
+    }
+  }
+  map.finish(records, cells);
+}
+
 }  // namespace
 
 std::string vertex_cells_path(const std::string& prefix, size_t level) {
@@ -89,7 +112,6 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
   RandomFile out(path);
   const uint64_t range = std::clamp<uint64_t>(budget / 4, 4096, std::max<uint64_t>(vertices, 1));
   std::vector<uint32_t> buf;
-  constexpr uint64_t kChunk = 1 << 18;
   for (uint64_t lo = 0; lo < vertices; lo += range) {
     const uint64_t n = std::min(range, vertices - lo);
     buf.assign(n, kNoCell);
@@ -101,21 +123,9 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
     tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
       const uint64_t plo = lo + part * per_part, pn = std::min(n, (part + 1) * per_part) - std::min(n, part * per_part);
       if (pn == 0) return;
-      CellMapReader map(map_path);
-      std::vector<uint32_t> cs(kChunk);
-      for (uint64_t first = 0; first < records; first += kChunk) {
-        progress.check();
-        const uint64_t k = std::min(kChunk, records - first);
-        const io::Window a = order.map(first * 4, (first + k) * 4);
-        const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
-        map.read(std::span<uint32_t>(cs.data(), k));
-        for (uint64_t i = 0; i < k; ++i) {
-          if (cs[i] >= cells) fail(Status::io_error, map_path + ": cell id out of range");
-          if (ids[i] >= vertices) fail(Status::io_error, order.path() + ": vertex id out of range");
-          if (ids[i] - plo < pn) buf[ids[i] - lo] = cs[i];  // unsigned: below plo wraps around
-        }
-      }
-      map.finish(records, cells);
+      for_each_record_cell(map_path, order, records, cells, vertices, progress, [&](uint32_t id, uint32_t cell) {
+        if (id - plo < pn) buf[id - lo] = cell;  // unsigned: below plo wraps around
+      });
     });
     // Pass 2: welded vertices take their canonical vertex's cell (canonical ids are smaller, and canonical:
     // weld_file.h), from this range or, read back, from an earlier one.
@@ -151,25 +161,11 @@ void write_vertex_cells_unit(const std::string& map_path, const std::string& ord
   std::vector<uint32_t> outside_cells(outside.ones(), kNoCell);
   std::vector<uint32_t> buf(hi - lo, kNoCell);
   // One decoding of the map in weight order: the unit's vertices' cells and those canonical vertices'.
-  constexpr uint64_t kChunk = 1 << 18;
-  CellMapReader map(map_path);
-  std::vector<uint32_t> cs(kChunk);
   const bool any_outside = !outside_cells.empty();
-  for (uint64_t first = 0; first < records; first += kChunk) {
-    progress.check();
-    const uint64_t k = std::min(kChunk, records - first);
-    const io::Window a = order.map(first * 4, (first + k) * 4);
-    const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
-    map.read(std::span<uint32_t>(cs.data(), k));
-    for (uint64_t i = 0; i < k; ++i) {
-      if (cs[i] >= cells) fail(Status::io_error, map_path + ": cell id out of range");
-      const uint32_t id = ids[i];
-      if (id >= vertices) fail(Status::io_error, order.path() + ": vertex id out of range");
-      if (id - lo < hi - lo) buf[id - lo] = cs[i];  // unsigned: below lo wraps around
-      else if (any_outside && id < lo && outside.has(id)) outside_cells[outside.rank(id)] = cs[i];
-    }
-  }
-  map.finish(records, cells);
+  for_each_record_cell(map_path, order, records, cells, vertices, progress, [&](uint32_t id, uint32_t cell) {
+    if (id - lo < hi - lo) buf[id - lo] = cell;  // unsigned: below lo wraps around
+    else if (any_outside && id < lo && outside.has(id)) outside_cells[outside.rank(id)] = cell;
+  });
   // Welded vertices take their canonical vertex's cell (in increasing order: a canonical vertex in the unit
   // is not welded, so its cell is final).
   for (const auto& [v, c] : welded) buf[v - lo] = c >= lo ? buf[c - lo] : outside_cells[outside.rank(c)];
@@ -187,7 +183,7 @@ nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, co
                                                      std::max<uint64_t>(vertices, 1)));
   const std::string dir = prefix + "vertex-cells-units/";
   const nlohmann::ordered_json unit_key{{"key", key}, {"levels", levels}, {"units", units}};
-  start_once(dir, vertex_cells_path(prefix, levels.back()), unit_key, {"unit-"}, [&] {
+  start_once(dir, vertex_cells_path(prefix, levels.back()), unit_key, {"vertex-cells-"}, [&] {
     for (size_t l : levels) io::OffsetFile(vertex_cells_path(prefix, l), O_WRONLY | O_CREAT | O_TRUNC).resize(4 * vertices);
   });
   // A unit at a time on each thread the budget holds: 4 bytes a vertex of its share, a bit and a half a
@@ -196,7 +192,7 @@ nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, co
   const unsigned threads = static_cast<unsigned>(std::clamp<uint64_t>(
       std::min<uint64_t>(static_cast<uint64_t>(std::max(1, tbb::this_task_arena::max_concurrency())), std::max<uint64_t>(budget / unit_bytes, 1)),
       1, uint64_t{units} * levels.size()));
-  const auto values = take_units_on_threads(dir, units * static_cast<unsigned>(levels.size()), index, threads, "unit", unit_key, [&](unsigned k) {
+  const auto values = take_units_on_threads(dir, units * static_cast<unsigned>(levels.size()), index, threads, "vertex-cells", unit_key, [&](unsigned k) {
     const size_t l = levels[k / units];
     write_vertex_cells_unit(cells_path(prefix, l), order_path(prefix), canonical_path, vertex_cells_path(prefix, l), vertices, records,
                             cells[l], k % units, units, progress);

@@ -100,11 +100,12 @@ run_scene() {
         [ -e "$w/$kind-shares" ] && fail "$name: the step after the $kind array left its spent shares"
         echo "  3 $kind shares: $(grep -h "^stage        $kind " "$out"/slurm/logs/$kind-*.out | awk '{print $3 " s"}' | paste -sd' ')"
       done
-      # The prepare array: every job finished, and the clustering merge's centers' bits are gone.
+      # The prepare array: every job finished, and the cluster stage's stamp lists the clustering merge's units.
       for r in 0 1 2; do
         [ "$(cat "$out/slurm/status/prepare-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: prepare job $r did not finish"
       done
-      [ -e "$w/cluster-merge/centers/centers.bits" ] && fail "$name: the clustering merge's centers' bits outlived the prepare jobs"
+      python3 -c 'import json,sys; v=json.load(open(sys.argv[1]))["value"]["merge_units"]; assert len(v["map"]["seconds"])==3' \
+        "$w/cluster.json" || fail "$name: the cluster stage's stamp does not list 3 merge units"
       echo "  3 prepare jobs: $(grep -h "^stage        cluster " "$out"/slurm/logs/prepare-*.out | awk '{print $3 " s"}' | paste -sd' ')"
     fi
     python3 -c 'import json,sys; m=json.load(open(sys.argv[1])); assert m["shards"]["count"]==int(sys.argv[2]) and len(m["shards"]["tasks"])==int(sys.argv[2])' \

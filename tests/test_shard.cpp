@@ -659,6 +659,22 @@ TEST(GradeShares, BlockUnitsGiveTheBlockPassBits) {
   EXPECT_THROW(stream::plan_grading(store, meta, plan, work, progress, dir.file("weld.map"), 0, 40, true, pu), Failure);
 }
 
+// The clustering shares' input for the sample room's one-machine run `one` in the work directory `work`
+// (float positions), at a 256 MiB budget; its prefix and work directory are the caller's.
+stream::ClusterShareInput room_share_input(const std::string& work, const SimplifyReport& one, stream::CellInfoKind info) {
+  stream::StoreMeta meta;
+  if (!stream::read_store_meta(work + "store", &meta) || !meta.single_precision) ADD_FAILURE() << work << "store: no float store";
+  stream::ClusterShareInput in;
+  in.index = {stream::order_path(work), stream::grades_path(work), work + "store/positions.f32",
+              std::filesystem::file_size(stream::order_path(work)) / 4, meta.vertices, meta.single_precision, ""};
+  in.bounds.assign(meta.bbox.min.begin(), meta.bbox.min.end());
+  in.bounds.insert(in.bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
+  for (const LevelStats& l : one.levels) in.sizes.push_back(l.cell_size);
+  in.info = info;
+  in.memory_bytes = 256 << 20;
+  return in;
+}
+
 // The shares through the stream API with a first halo of a quarter cell, so that their own vertices near
 // the slabs' edges stay unsettled and the shares widen their halos: every level's map and info are still
 // one machine's, and the merge refuses shares that do not add up.
@@ -669,17 +685,7 @@ TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
   SimplifyReport one;
   ASSERT_TRUE(simplify(sample_room(), so, shared_work(dir), &one).ok());
   const std::string work = dir.file("work") + "/";
-  stream::StoreMeta meta;
-  ASSERT_TRUE(stream::read_store_meta(work + "store", &meta));
-  stream::ClusterShareInput in;
-  in.index = {stream::order_path(work), stream::grades_path(work), work + "store/positions.f32",
-              std::filesystem::file_size(stream::order_path(work)) / 4, meta.vertices, meta.single_precision};
-  ASSERT_TRUE(meta.single_precision);
-  in.bounds.assign(meta.bbox.min.begin(), meta.bbox.min.end());
-  in.bounds.insert(in.bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
-  for (const LevelStats& l : one.levels) in.sizes.push_back(l.cell_size);
-  in.info = stream::CellInfoKind::mean;
-  in.memory_bytes = 256 << 20;
+  stream::ClusterShareInput in = room_share_input(work, one, stream::CellInfoKind::mean);
   const std::string prefix = dir.file("shares") + "/";
   stream::WorkDir shares_work(dir.file("shares"));
   in.prefix = prefix, in.work = &shares_work;
@@ -751,16 +757,7 @@ TEST(ClusterShares, MergeUnitsTakenByThreadsAtOnceGiveOneMachinesMaps) {
     SimplifyReport one;
     ASSERT_TRUE(simplify(sample_room(), so, shared_work(dir), &one).ok());
     const std::string work = dir.file("work") + "/";
-    stream::StoreMeta meta;
-    ASSERT_TRUE(stream::read_store_meta(work + "store", &meta));
-    stream::ClusterShareInput in;
-    in.index = {stream::order_path(work), stream::grades_path(work), work + "store/positions.f32",
-                std::filesystem::file_size(stream::order_path(work)) / 4, meta.vertices, meta.single_precision, ""};
-    in.bounds.assign(meta.bbox.min.begin(), meta.bbox.min.end());
-    in.bounds.insert(in.bounds.end(), meta.bbox.max.begin(), meta.bbox.max.end());
-    for (const LevelStats& l : one.levels) in.sizes.push_back(l.cell_size);
-    in.info = stream::cell_info_kind(rep);
-    in.memory_bytes = 256 << 20;
+    stream::ClusterShareInput in = room_share_input(work, one, stream::cell_info_kind(rep));
     const std::string prefix = dir.file("shares") + "/";
     stream::WorkDir shares_work(dir.file("shares"));
     in.prefix = prefix, in.work = &shares_work;
@@ -791,7 +788,7 @@ TEST(ClusterShares, MergeUnitsTakenByThreadsAtOnceGiveOneMachinesMaps) {
       EXPECT_EQ(cells[0], cells[2]);
       size_t stamps = 0;
       for (const auto& e : std::filesystem::directory_iterator(stream::cluster_merge_dir(prefix) + "map"))
-        stamps += e.path().filename().string().rfind("map-", 0) == 0;
+        stamps += e.path().filename().string().rfind("merge-map-", 0) == 0;
       EXPECT_EQ(stamps, units);
       // Again in this thread, the shares' files moved away: every unit is reused (one that ran again would
       // find no decisions to read).
