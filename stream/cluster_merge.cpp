@@ -228,16 +228,14 @@ struct Merge {
       std::vector<std::unique_ptr<ItemReader>> ctrs;
       std::vector<char> info;
       uint64_t info_cell = lo < records ? c.rank(lo) : 0;
-      const io::OffsetFile* info_file = nullptr;
-      std::unique_ptr<io::OffsetFile> info_out;
+      std::unique_ptr<io::OffsetFile> info_file;
       if (centers_info()) {
         for (unsigned s = 0; s < plan.count; ++s) {
           uint64_t before = 0;
           for (unsigned v = 0; v < u; ++v) before += centers_values[v].at("share_centers").at(j).at(s).get<uint64_t>();
           ctrs.push_back(std::make_unique<ItemReader>(cluster_share_centers_path(in.prefix, s, level), center_bytes(), before));
         }
-        info_out = std::make_unique<io::OffsetFile>(cell_info_path(in.prefix, level), O_WRONLY);
-        info_file = info_out.get();
+        info_file = std::make_unique<io::OffsetFile>(cell_info_path(in.prefix, level), O_WRONLY);
       }
       auto flush_info = [&] {
         info_file->write(info.data(), info.size(), info_cell * center_bytes());

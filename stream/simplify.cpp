@@ -815,6 +815,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       // The clustering as N shares (stream/cluster_shares.h): a share task runs its share and returns no
       // cells (the run stops after the stage); the shared stage runs the shares no task ran and merges them.
       const unsigned cluster_shares = so.cluster_share_count ? so.cluster_share_count : sharded ? so.cluster_shares : 0;
+      const unsigned unit_index = so.shard_count > 0 ? so.shard_index : 0;  // the first unit this process takes
       std::vector<char> vertex_cells_written;  // per level: its cells by vertex came with the cluster shares' merge
       ordered_json merge_units;                // the clustering merge's units' figures (stream/cluster_merge.h), for the stamp
       auto cluster_by_shares = [&](const ordered_json& key, const std::vector<double>& sizes, const stream::FineCells* fine,
@@ -846,7 +847,6 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         // the work directory's lock. (Let go, every process here took part; a prepare array's job then failed
         // once in a while with an I/O error in tests/slurm_test.sh's killed-weld-unit run, not yet understood:
         // README, "the prepare step as units".)
-        const unsigned unit_index = so.shard_count > 0 ? so.shard_index : 0;
         const stream::SplitMerge merged =
             stream::merge_split_levels(in, shares, ordered_json{{"shares", share_key}, {"figures", figures}}, unit_index, progress);
         merge_units = merged.units;
@@ -1147,7 +1147,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         // its cells' own (stream::EmitOptions::own_representatives).
         // Both as units (stream/units.h) on this process's threads (stage_in_units), N of them (one a cluster
         // share, else the budget's).
-        const unsigned unit_count = std::max(1u, cluster_shares), unit_index = so.shard_count > 0 ? so.shard_index : 0;
+        const unsigned unit_count = std::max(1u, cluster_shares);
         run_stage(&report.stages, "bounds", [&](StageStats& st) {
           const std::string path = stream::block_bounds_path(prefix);
           const ordered_json key{{"version", kStampVersion}, {"source", source_json(meta)}};
