@@ -816,7 +816,15 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       // cells (the run stops after the stage); the shared stage runs the shares no task ran and merges them.
       const unsigned cluster_shares = so.cluster_share_count ? so.cluster_share_count : sharded ? so.cluster_shares : 0;
       const unsigned unit_index = so.shard_count > 0 ? so.shard_index : 0;  // the first unit this process takes
-      std::vector<char> vertex_cells_written;  // per level: its cells by vertex came with the cluster shares' merge
+      // Per level: its cells by vertex came with the cluster shares' merge (kept in the cluster stage's stamp,
+      // so that a process that reuses the stage writes the others only: processes that disagreed on the
+      // levels would restart each other's cells-by-vertex units).
+      std::vector<char> vertex_cells_written;
+      auto vertex_cells_from_stamp = [&](const ordered_json& v) {
+        vertex_cells_written.clear();
+        if (v.contains("vertex_cells"))
+          for (const auto& b : v.at("vertex_cells")) vertex_cells_written.push_back(b.get<bool>());
+      };
       ordered_json merge_units;                // the clustering merge's units' figures (stream/cluster_merge.h), for the stamp
       auto cluster_by_shares = [&](const ordered_json& key, const std::vector<double>& sizes, const stream::FineCells* fine,
                                    const stream::WeightIndex& index, const std::vector<double>& bounds) {
@@ -872,6 +880,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         ordered_json v;
         if (stamp_matches(work.file("cluster.json"), key, &v)) {
           if (st) st->reused = true;
+          vertex_cells_from_stamp(v);
           return v.at("cells").get<std::vector<uint64_t>>();
         }
         std::filesystem::remove(work.file("cluster.json"));
@@ -906,6 +915,8 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         }
         ordered_json value{{"cells", cs.cells}};
         if (!merge_units.is_null()) value["merge_units"] = merge_units;
+        if (in_shares)
+          for (char b : vertex_cells_written) value["vertex_cells"].push_back(b != 0);
         write_stamp(work.file("cluster.json"), key, files, value);
         // The shares are spent once the stage is stamped (the whole levels' maps are links to their files).
         if (in_shares) std::filesystem::remove_all(stream::cluster_shares_dir(prefix));

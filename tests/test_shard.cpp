@@ -299,6 +299,20 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       const Result pres = simplify(sample_room(), prepare, o, &pr);
       ASSERT_TRUE(pres.ok()) << pres.message;
       EXPECT_FALSE(std::filesystem::exists(stream::cluster_shares_dir(work + "/"))) << "the merge removes the spent shares";
+      if (!whole_levels.empty()) {
+        // A prepare job that reuses the cluster stage (here: the first one's, killed before the cells by vertex
+        // were stamped) takes up the same units as the one that ran it, for the split levels only: had it
+        // asked for every level, it would restart the first one's units under its feet (a unit stamp removed
+        // while it was being written, and the first job failed: exit 74 in tests/slurm_test.sh).
+        const std::string units = work + "/vertex-cells-units/", start = slurp(units + "start.json"),
+                          unit0 = slurp(units + "vertex-cells-0.json");
+        std::filesystem::remove(work + "/shard-vertex-cells.json");
+        SimplifyReport again;
+        ASSERT_TRUE(simplify(sample_room(), prepare, o, &again).ok());
+        EXPECT_EQ(slurp(units + "start.json"), start) << "the second prepare job restarted the cells-by-vertex units";
+        EXPECT_EQ(slurp(units + "vertex-cells-0.json"), unit0) << "the second prepare job ran a unit again";
+        EXPECT_TRUE(std::filesystem::exists(work + "/shard-vertex-cells.json"));
+      }
       // The whole levels' cells by vertex, as their shares wrote them, are the prepare job's own.
       for (size_t l : whole_levels) {
         const std::string path = stream::vertex_cells_path(work + "/", l), weld = work + "/weld.map";
