@@ -310,15 +310,19 @@ std::vector<std::string> level_comments(const SimplifyOptions& so, const std::st
                       name(so.variant), name(so.representative), name(so.grading))};
 }
 
-// A shared stage of a sharded run whose work is units (stream/units.h): reused when its stamp matches `key`;
-// else run() takes up the units on this process's threads, under the work directory's lock (held by the
-// caller: see cluster_by_shares for why it is not let go), and the stage is stamped with run()'s value
-// (the units' figures). Returns whether it was reused.
+// A shared stage of a sharded run whose work is units that every process takes part in: reused when its
+// stamp matches `key`; else the work directory's lock (`lock`, held) is let go while run() takes part in
+// the units, and back under the lock the first process stamps the stage with run()'s value (the units'
+// figures). Returns whether it was reused.
 template <class Run>
-bool stage_in_units(const std::string& stamp, const ordered_json& key, const std::vector<std::string>& files, Run&& run) {
+bool stage_in_units(const std::string& stamp, const ordered_json& key, const std::vector<std::string>& files,
+                    std::unique_ptr<stream::ShardLock>& lock, const std::string& work_dir, Run&& run) {
   ordered_json v;
   if (stamp_matches(stamp, key, &v)) return true;
-  write_stamp(stamp, key, files, {{"units", run()}});
+  lock.reset();
+  const ordered_json value = run();
+  lock = std::make_unique<stream::ShardLock>(work_dir);
+  if (!stamp_matches(stamp, key, &v)) write_stamp(stamp, key, files, {{"units", value}});
   return false;
 }
 
@@ -851,13 +855,18 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         }
         std::vector<ordered_json> figures;
         for (unsigned s = 0; s < shares.count; ++s) figures.push_back(run_share(s));
-        // The split levels' maps as units (stream/cluster_merge.h), taken up by this process's threads under
-        // the work directory's lock. (Let go, every process here took part; a prepare array's job then failed
-        // once in a while with an I/O error in tests/slurm_test.sh's killed-weld-unit run, not yet understood:
-        // README, "the prepare step as units".)
+        // The split levels' maps as units (stream/cluster_merge.h) that every process here takes part in, the
+        // work directory's lock let go meanwhile (a prepare array's jobs, tasks that reach the stage).
+        shard_lock.reset();
         const stream::SplitMerge merged =
             stream::merge_split_levels(in, shares, ordered_json{{"shares", share_key}, {"figures", figures}}, unit_index, progress);
         merge_units = merged.units;
+        shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
+        ordered_json v;
+        if (stamp_matches(work.file("cluster.json"), key, &v)) {  // another process finished the stage meanwhile
+          vertex_cells_from_stamp(v);
+          return v.at("cells").get<std::vector<uint64_t>>();
+        }
         stream::ClusterSummary cs = stream::merge_cluster_shares(in, shares, figures, merged.cells, progress);
         vertex_cells_written = cs.vertex_cells;
         return cs.cells;
@@ -1156,13 +1165,13 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         // The store's block boxes (stream/block_bounds.h) and every level's cells by vertex
         // (stream/vertex_cells.h: the tasks' packed maps). No representative is written ahead: a task forms
         // its cells' own (stream::EmitOptions::own_representatives).
-        // Both as units (stream/units.h) on this process's threads (stage_in_units), N of them (one a cluster
-        // share, else the budget's).
+        // Both as units (stream/units.h) that every process here takes part in, the lock let go meanwhile
+        // (stage_in_units), N of them (one a cluster share, else the budget's).
         const unsigned unit_count = std::max(1u, cluster_shares);
         run_stage(&report.stages, "bounds", [&](StageStats& st) {
           const std::string path = stream::block_bounds_path(prefix);
           const ordered_json key{{"version", kStampVersion}, {"source", source_json(meta)}};
-          st.reused = stage_in_units(work.file("block-bounds.json"), key, {path}, [&] {
+          st.reused = stage_in_units(work.file("block-bounds.json"), key, {path}, shard_lock, options.work_dir, [&] {
             return stream::write_block_bounds_in_units(store_dir, meta, path, prefix + "block-bounds-units/", unit_count, unit_index,
                                                        key, progress);
           });
@@ -1173,7 +1182,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           for (double c : sizes) key["cell_sizes"].push_back(exact(c));
           std::vector<std::string> files;
           for (size_t l = 0; l < cells.size(); ++l) files.push_back(stream::vertex_cells_path(prefix, l));
-          st.reused = stage_in_units(work.file("shard-vertex-cells.json"), key, files, [&] {
+          st.reused = stage_in_units(work.file("shard-vertex-cells.json"), key, files, shard_lock, options.work_dir, [&] {
             std::vector<size_t> levels;  // else written by its cluster share
             for (size_t l = 0; l < cells.size(); ++l)
               if (l >= vertex_cells_written.size() || !vertex_cells_written[l]) levels.push_back(l);

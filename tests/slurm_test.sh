@@ -11,9 +11,9 @@
 # then refuses naming it (exit 66), and `lodstream slurm resubmit` reruns it alone to the same bytes;
 # likewise an ingest range killed before its segment is complete: the prepare job does not run, a prepare
 # by hand refuses naming the range (exit 66), and resubmitting reruns that range alone, then the chain.
-# The 3 tasks' run checks the grade and cluster arrays' shares; a grade share or a cluster share killed
-# with SIGKILL is run by the next step (a cluster share, the prepare job), and the run ends with exit 0
-# and one machine's bytes.
+# The 3 tasks' run checks the grade and cluster arrays' shares and the prepare array; a grade share or a
+# cluster share killed with SIGKILL is run by the next step (a cluster share, the prepare jobs), and the
+# run ends with exit 0 and one machine's bytes.
 # `lodstream slurm report` as 3 tasks on the room's levels (and the city's) must give report.html and the
 # CSVs byte for byte as one machine's report, and report.json equal but for timings and counters, each
 # task tracing its range of the original's primitives; a report task killed with SIGKILL is named by the
@@ -100,9 +100,13 @@ run_scene() {
         [ -e "$w/$kind-shares" ] && fail "$name: the step after the $kind array left its spent shares"
         echo "  3 $kind shares: $(grep -h "^stage        $kind " "$out"/slurm/logs/$kind-*.out | awk '{print $3 " s"}' | paste -sd' ')"
       done
-      # The prepare job took up the clustering merge's units (stream/cluster_merge.h): its stamp lists them.
+      # The prepare array: every job finished, and the cluster stage's stamp lists the clustering merge's units.
+      for r in 0 1 2; do
+        [ "$(cat "$out/slurm/status/prepare-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: prepare job $r did not finish"
+      done
       python3 -c 'import json,sys; v=json.load(open(sys.argv[1]))["value"]["merge_units"]; assert len(v["map"]["seconds"])==3' \
         "$w/cluster.json" || fail "$name: the cluster stage's stamp does not list 3 merge units"
+      echo "  3 prepare jobs: $(grep -h "^stage        cluster " "$out"/slurm/logs/prepare-*.out | awk '{print $3 " s"}' | paste -sd' ')"
     fi
     python3 -c 'import json,sys; m=json.load(open(sys.argv[1])); assert m["shards"]["count"]==int(sys.argv[2]) and len(m["shards"]["tasks"])==int(sys.argv[2])' \
       "$out/manifest.json" "$n" || fail "$name --shards $n: the manifest does not list every task"
@@ -139,16 +143,20 @@ run_room_killed() {
     --shards 3 --wait --no-space-check --tiles --tile-triangles 10000 --obj >"$tmp/$1.log" 2>&1
   rc=$?
 }
+# What a failed run said, and the ends of its jobs' logs (the test's directory goes with it).
+show_run() { cat "$tmp/$1.log"; tail -n 20 "$tmp/room-$1"/slurm/logs/*.out; }
 
 # A grade share and a cluster share killed in one run (both kill points set): the first cluster share
 # (afterany) grades share 1 under the lock before it merges the grading shares, the prepare job (afterany)
 # runs cluster share 1 itself, and the run ends with exit 0 and one machine's bytes.
 run_room_killed kill-shares grade-share-1,cluster-share-1
-[ $rc -eq 0 ] || { fail "a grade and a cluster share killed with SIGKILL: the run exited $rc, not 0"; cat "$tmp/kill-shares.log"; }
+[ $rc -eq 0 ] || { fail "a grade and a cluster share killed with SIGKILL: the run exited $rc, not 0"; show_run kill-shares; }
 [ "$(cat "$out/slurm/status/grade-1.rc" 2>/dev/null)" = 137 ] || fail "grade share 1 was not killed"
 [ "$(cat "$out/slurm/status/cluster-1.rc" 2>/dev/null)" = 137 ] || fail "cluster share 1 was not killed"
-grep -q "^stage        grade .*(reused" "$out/slurm/logs/prepare.out" || fail "the cluster array did not merge the grading shares"
-grep -q "^stage        cluster .*(reused" "$out/slurm/logs/prepare.out" && fail "the prepare job did not cluster"
+for log in "$out"/slurm/logs/prepare-*.out; do
+  grep -q "^stage        grade .*(reused" "$log" || fail "the cluster array did not merge the grading shares ($log)"
+done
+grep -h "^stage        cluster " "$out"/slurm/logs/prepare-*.out | grep -qv "(reused" || fail "no prepare job clustered"
 same_outputs "$tmp/room-one" "$out"
 echo "killed grade and cluster shares: run exit $rc, a cluster share graded share 1 and merged, the prepare job ran cluster share 1"
 
@@ -156,7 +164,7 @@ echo "killed grade and cluster shares: run exit $rc, a cluster share graded shar
 # there, SIGKILL releasing its claim): a share waiting for the unit runs it in turn, and when none is left
 # the next step welds under the lock; the run ends with exit 0 and one machine's bytes.
 run_room_killed kill-unit unit-1.json
-[ $rc -eq 0 ] || { fail "a weld unit's holder killed with SIGKILL: the run exited $rc, not 0"; cat "$tmp/kill-unit.log"; }
+[ $rc -eq 0 ] || { fail "a weld unit's holder killed with SIGKILL: the run exited $rc, not 0"; show_run kill-unit; }
 grep -qx 137 "$out"/slurm/status/grade-*.rc || fail "no grading share was killed at weld unit 1"
 same_outputs "$tmp/room-one" "$out"
 echo "killed weld unit: run exit $rc, grading shares' exits $(cat "$out"/slurm/status/grade-*.rc | tr '\n' ' ')"
@@ -166,9 +174,9 @@ echo "killed weld unit: run exit $rc, grading shares' exits $(cat "$out"/slurm/s
 # run exits 137 with the other units stamped, and `slurm resubmit` (no kill point now) runs unit 1 alone
 # and ends with one machine's bytes.
 run_room_killed kill-merge merge-1.json
-[ $rc -eq 137 ] || { fail "a grading merge unit's holder killed with SIGKILL: the run exited $rc, not 137"; cat "$tmp/kill-merge.log"; }
+[ $rc -eq 137 ] || { fail "a grading merge unit's holder killed with SIGKILL: the run exited $rc, not 137"; show_run kill-merge; }
 grep -qx 137 "$out"/slurm/status/cluster-*.rc || fail "no clustering share was killed at merge unit 1"
-exits=$(cat "$out"/slurm/status/cluster-*.rc "$out"/slurm/status/prepare.rc | tr '\n' ' ')
+exits=$(cat "$out"/slurm/status/cluster-*.rc "$out"/slurm/status/prepare-*.rc | tr '\n' ' ')
 units=$(ls "$tmp/room-work-kill-merge/grade-merge/" 2>/dev/null | grep -c '^merge-[0-9]*\.json$')
 [ -e "$tmp/room-work-kill-merge/grade-merge/merge-1.json" ] && fail "merge unit 1 was stamped"
 [ "$units" -eq 2 ] || fail "not the two other merge units stamped: $units"
@@ -186,7 +194,7 @@ LODSTREAM_TEST_KILL_AT=range-1-of-3.seg "$cli" slurm simplify "$room" -o "$out" 
 rc=$?
 [ $rc -eq 137 ] || fail "an ingest range killed with SIGKILL: the run exited $rc, not 137"
 grep -q "ingest range 1 failed with exit 137" "$tmp/kill-ingest.log" || fail "the run does not name the killed range: $(cat "$tmp/kill-ingest.log")"
-[ -e "$out/slurm/status/prepare.rc" ] && fail "the prepare job ran after a failed ingest range"
+ls "$out"/slurm/status/prepare-*.rc >/dev/null 2>&1 && fail "the prepare jobs ran after a failed ingest range"
 msg=$("$cli" simplify "$room" -o "$out" --work "$tmp/room-work-kill" --shard-prepare --no-space-check 2>&1); rc=$?
 [ $rc -eq 66 ] || fail "a prepare with an ingest range missing: exit $rc, not 66"
 echo "$msg" | grep -q "range 1 missing" || fail "the prepare does not name the missing range: $msg"

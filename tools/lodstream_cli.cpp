@@ -372,7 +372,8 @@ int main(int argc, char** argv) {
   simplify_cmd->add_option("--shard", shard_text, "Run task I of N over a shared --work DIR (then `lodstream merge OUTDIR`)");
   simplify_cmd->add_flag("--shard-from-env", shard_from_env,
                          "--shard from SLURM_ARRAY_TASK_ID/COUNT, JOB_COMPLETION_INDEX or AWS_BATCH_JOB_ARRAY_INDEX (count: LODSTREAM_SHARD_COUNT)");
-  simplify_cmd->add_flag("--shard-prepare", so.shard_prepare, "Run the stages every task shares (ingest to cluster) over --work DIR, then stop");
+  simplify_cmd->add_flag("--shard-prepare", so.shard_prepare, "Run the stages every task shares (ingest to cluster) over --work DIR, then stop (with --shard I/N: "
+                         "the I-th of N such jobs, which share the clustering merge's units)");
   std::string shard_ingest_text;
   simplify_cmd->add_option("--shard-ingest", shard_ingest_text,
                            "Parse byte range I of N of the input into --work DIR, then stop (--shard-prepare joins the N ranges)");

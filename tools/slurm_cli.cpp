@@ -7,9 +7,10 @@
 // share takes up weld units until the weld is done, then the weld map's units, the first back under the
 // lock makes the grading plan, and each grades and sorts its share: stream/grade_shares.h)
 // and a cluster array job of N shares (they take up the grading shares' merge as units, then each
-// clusters its share: stream/cluster_shares.h); then a prepare job (the shared stages: for simplify the
-// clustering shares' merge, the block boxes and the split levels' cells by vertex (a whole level's come from its
-// cluster share), for a report the join alone), an array job of N tasks
+// clusters its share: stream/cluster_shares.h); then a prepare job (the shared stages: for simplify an
+// array of N jobs, which take up as units the clustering shares' merge (stream/cluster_merge.h), the block
+// boxes and the split levels' cells by vertex (a whole level's come from its cluster share), the first back
+// under the lock stamping each stage; for a report one job, the join alone), an array job of N tasks
 // after it (--dependency=afterok), and the merge after the array. The cluster array and the prepare job
 // wait for the array before them to end, not to succeed (afterany): the share that did not finish is run
 // by the next step. The scheduler is Slurm's; lodstream adds none of its own. Each script records its command's exit
@@ -141,6 +142,7 @@ struct Submission {
   bool ranges = false;  // the chain starts with the ingest array (ingest.sbatch); false: a submission of older code
   bool clusters = false;  // the cluster array (cluster.sbatch) runs before the prepare job (simplify)
   bool grades = false;    // the grade array (grade.sbatch) runs before the cluster array (simplify)
+  bool prepares = false;  // the prepare job is an array of N (simplify: they share the clustering merge's units)
   std::string ingest, grade, cluster, prepare, tasks, merge;  // job ids
 };
 
@@ -150,6 +152,7 @@ bool save(const Submission& s) {
                        {"ingest_ranges", s.ranges},
                        {"grade_shares", s.grades},
                        {"cluster_shares", s.clusters},
+                       {"prepare_array", s.prepares},
                        {"jobs",
                         {{"ingest", s.ingest}, {"grade", s.grade}, {"cluster", s.cluster}, {"prepare", s.prepare}, {"tasks", s.tasks}, {"merge", s.merge}}}};
   return write_text(s.slurm_dir + "/submit.json", j.dump(2) + "\n", false);
@@ -184,7 +187,7 @@ int submit_chain(Submission& s, bool from_prepare, const std::string& array, con
     if (s.cluster.empty()) return kIoError;
   }
   if (from_prepare) {
-    s.prepare = submit(dependency(s.ingest, s.cluster), s.slurm_dir + "/prepare.sbatch");
+    s.prepare = submit(dependency(s.ingest, s.cluster) + (s.prepares ? all_shares : std::string()), s.slurm_dir + "/prepare.sbatch");
     if (s.prepare.empty()) return kIoError;
     after = s.prepare;
   }
@@ -199,10 +202,21 @@ int submit_chain(Submission& s, bool from_prepare, const std::string& array, con
   if (!s.ingest.empty()) std::printf("ingest  job %s (array %s of %u)\n", s.ingest.c_str(), ingest_array.c_str(), s.shards);
   if (!s.grade.empty()) std::printf("grade   job %s (array 0-%u of %u)\n", s.grade.c_str(), s.shards - 1, s.shards);
   if (!s.cluster.empty()) std::printf("cluster job %s (array 0-%u of %u)\n", s.cluster.c_str(), s.shards - 1, s.shards);
-  if (from_prepare) std::printf("prepare job %s\n", s.prepare.c_str());
+  if (from_prepare && s.prepares) std::printf("prepare job %s (array 0-%u of %u)\n", s.prepare.c_str(), s.shards - 1, s.shards);
+  else if (from_prepare) std::printf("prepare job %s\n", s.prepare.c_str());
   std::printf("tasks   job %s (array %s of %u)\nmerge   job %s\n", s.tasks.c_str(), array.c_str(), s.shards, s.merge.c_str());
   std::fflush(stdout);
   return 0;
+}
+
+// The prepare job's exit code (nonzero or -1: it failed or did not finish), and its name: with an array,
+// the first job of the array that did not succeed.
+std::pair<int, std::string> prepare_failure(const Submission& s) {
+  const std::string st = s.slurm_dir + "/status/";
+  if (!s.prepares) return {read_rc(st + "prepare.rc"), "the prepare job"};
+  for (unsigned i = 0; i < s.shards; ++i)
+    if (const int rc = read_rc(st + fmt::format("prepare-{}.rc", i)); rc != 0) return {rc, fmt::format("prepare job {}", i)};
+  return {0, ""};
 }
 
 // Waits until the merge has recorded its status, or none of the chain's jobs is queued any more (a failed
@@ -235,10 +249,8 @@ int wait_chain(const Submission& s, const std::vector<unsigned>& tasks, const st
         break;
       }
     }
-    if (failed < 0 && !s.prepare.empty()) {
-      const int rc = read_rc(st + "prepare.rc");
-      if (rc != 0) failed = rc, failed_name = "the prepare job";
-    }
+    if (failed < 0 && !s.prepare.empty())
+      if (const auto [rc, name] = prepare_failure(s); rc != 0) failed = rc, failed_name = name;
     for (unsigned t : tasks) {
       if (failed >= 0) break;
       const int rc = read_rc(st + fmt::format("task-{}.rc", t));
@@ -345,6 +357,7 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
   s.ranges = ranges == "yes" || (ranges == "auto" && ranges_pay(command, input));
   s.clusters = command == "simplify";
   s.grades = command == "simplify";
+  s.prepares = command == "simplify";
   work = work.empty() ? s.slurm_dir + "/work" : absolute(work);
   for (const char* d : {"", "/logs", "/status"}) fs::create_directories(s.slurm_dir + d, ec);
   if (ec) {
@@ -372,8 +385,12 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
                          common + fmt::format(" --shard-cluster \"${{SLURM_ARRAY_TASK_ID}}/{}\"", shards)),
                   true)) &&
       write_text(s.slurm_dir + "/prepare.sbatch",
-                 script(s.slurm_dir, "lodstream-prepare", "prepare.out", "", sbatch_args, "prepare",
-                        common + " --shard-prepare" + (s.clusters ? fmt::format(" --cluster-shards {}", shards) : std::string())),
+                 s.prepares ? script(s.slurm_dir, "lodstream-prepare", "prepare-%a.out", tasks_array, sbatch_args,
+                                     "prepare-${SLURM_ARRAY_TASK_ID}",
+                                     common + fmt::format(" --shard-prepare --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\"", shards) +
+                                         (s.clusters ? fmt::format(" --cluster-shards {}", shards) : std::string()))
+                            : script(s.slurm_dir, "lodstream-prepare", "prepare.out", "", sbatch_args, "prepare",
+                                     common + " --shard-prepare" + (s.clusters ? fmt::format(" --cluster-shards {}", shards) : std::string())),
                  true) &&
       write_text(s.slurm_dir + "/tasks.sbatch",
                  script(s.slurm_dir, "lodstream-" + command, "task-%a.out", tasks_array, sbatch_args, "task-${SLURM_ARRAY_TASK_ID}",
@@ -420,6 +437,7 @@ int resubmit(const std::vector<std::string>& args) {
     s.ranges = j.value("ingest_ranges", false);
     s.clusters = j.value("cluster_shares", false);
     s.grades = j.value("grade_shares", false);
+    s.prepares = j.value("prepare_array", false);
   } catch (const std::exception&) {
     std::fprintf(stderr, "lodstream slurm: %s/submit.json: no submission to resubmit (run `lodstream slurm simplify` first)\n",
                  s.slurm_dir.c_str());
@@ -436,7 +454,7 @@ int resubmit(const std::vector<std::string>& args) {
     return kUsage;
   }
   const std::string st = s.slurm_dir + "/status/";
-  const bool from_prepare = read_rc(st + "prepare.rc") != 0;
+  const bool from_prepare = prepare_failure(s).first != 0;
   std::vector<unsigned> tasks;
   std::string array;
   for (unsigned t = 0; t < s.shards; ++t)
@@ -461,7 +479,8 @@ int resubmit(const std::vector<std::string>& args) {
   fs::remove(st + "merge.rc", ec);
   if (from_prepare) fs::remove(st + "prepare.rc", ec);
   for (unsigned t = 0; t < s.shards && from_prepare; ++t)
-    fs::remove(st + fmt::format("cluster-{}.rc", t), ec), fs::remove(st + fmt::format("grade-{}.rc", t), ec);
+    fs::remove(st + fmt::format("cluster-{}.rc", t), ec), fs::remove(st + fmt::format("grade-{}.rc", t), ec),
+        fs::remove(st + fmt::format("prepare-{}.rc", t), ec);
   if (tasks.empty()) {
     std::printf("every task finished; resubmitting the merge\n");
     s.prepare.clear();
