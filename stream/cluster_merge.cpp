@@ -22,6 +22,7 @@
 #include "io/mapped_file.h"
 #include "io/offset_file.h"
 #include "stream/cell_map_file.h"
+#include "stream/cluster_stage.h"
 #include "stream/ranked_bits.h"
 #include "stream/units.h"
 
@@ -331,9 +332,34 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   const std::vector<json> maps = take_units_on_threads(map_dir, m.units.count, index, threads, "merge-map", unit_key,
                                                      [&](unsigned u) { return m.map_unit(u, centers, progress); });
   m.write_edges(maps);
-  for (size_t j = 0; j < m.split.size(); ++j)
-    for (const json& v : centers) cells[m.split[j]] += v.at("centers").at(j).get<uint64_t>();
+  std::vector<uint64_t> split_cells(m.split.size(), 0);
+  for (size_t j = 0; j < m.split.size(); ++j) {
+    for (const json& v : centers) split_cells[j] += v.at("centers").at(j).get<uint64_t>();
+    cells[m.split[j]] = split_cells[j];
+  }
   out.units = {{"units", m.units.count}, {"centers", unit_figures(centers)}, {"map", unit_figures(maps)}};
+  if (m.centers_info()) return out;
+  // Phase 3: the mean or quadric infos by ranges of cells, once every map is whole.
+  progress.report("cluster", 0.6);
+  const std::string sums_dir = m.dir + "sums/";
+  const uint64_t info_bytes = cell_info_bytes(in.info, in.index.single_precision);
+  start_once(sums_dir, cell_info_path(in.prefix, m.split.back()), unit_key, {"merge-sums-"}, [&] {
+    for (size_t j = 0; j < m.split.size(); ++j)
+      io::OffsetFile(cell_info_path(in.prefix, m.split[j]), O_WRONLY | O_CREAT | O_TRUNC).resize(split_cells[j] * info_bytes);
+  });
+  uint64_t total = 0;
+  for (uint64_t c : split_cells) total += c;
+  // A unit a thread, each with its share of the budget while that leaves it kMinSumsUnitBytes.
+  const uint64_t sum_fit = in.memory_bytes ? std::max<uint64_t>(in.memory_bytes / kMinSumsUnitBytes, 1) : m.units.count;
+  const unsigned sum_threads = static_cast<unsigned>(std::clamp<uint64_t>(
+      std::min<uint64_t>(static_cast<uint64_t>(std::max(1, tbb::this_task_arena::max_concurrency())), sum_fit), 1, m.units.count));
+  const std::vector<json> sums = take_units_on_threads(sums_dir, m.units.count, index, sum_threads, "merge-sums", unit_key, [&](unsigned u) {
+    const uint64_t first = total * u / m.units.count, end = total * (u + 1) / m.units.count;
+    sum_cell_info_range(in.index, m.split, split_cells, in.info, in.memory_bytes / sum_threads, in.chunk_cap, progress, in.prefix,
+                        first, end, 1);
+    return json{{"cells", end - first}};
+  });
+  out.units["sums"] = unit_figures(sums);
   return out;
 }
 

@@ -19,7 +19,12 @@
 //    every process that has seen every stamp writes them (the OR of their parts: the same value each time).
 //    For center representatives it copies its centers' positions from the shares' .ctr files (its first
 //    center in share s's file: the centers of s in the units before it) into cells-L.info at its first cell.
-// Mean and quadric infos are summed afterwards (merge_cluster_shares).
+// 3. sums (mean and quadric representatives; unit u, sums/merge-sums-u.json), once every map unit is stamped
+//    and the maps' shared words written: the u-th U-th of the split levels' cells (taken one level after
+//    another) summed by one pass over the records in weight order (sum_cell_info_range, stream/cluster_stage.h)
+//    into cells-L.info in place. A cell adds its vertices in weight order, whichever cells are summed beside
+//    it, so a unit's records are one machine's bytes; the cells, not the records, are cut, because partial
+//    sums of record ranges added up would not be.
 // The centers' bits and the units' stamps stay after the stage: a process that saw the cluster stage
 // unstamped and comes late to the units must find them done, where start_once, missing the bits, would start
 // them afresh from the shares' decision files, which the stage's stamp removes.
@@ -27,7 +32,9 @@
 // merge before the units, and the whole-scene clustering): every record's cell is the rank of its center,
 // written at the map bits of the records before it.
 // Memory: a process runs as many units at once as it has threads and `memory_bytes` holds, each a bit and
-// a half a record of its level and a 16 MiB read window of each share's files.
+// a half a record of its level and a 16 MiB read window of each share's files; a sums unit takes its
+// thread's share of `memory_bytes` (at least kMinSumsUnitBytes) and, when its cells' sums (88 bytes a cell)
+// do not fit, sums them in several passes.
 #pragma once
 
 #include <cstdint>
@@ -42,6 +49,7 @@
 namespace lodstream::stream {
 
 inline constexpr unsigned kMaxClusterMergeUnits = 256;
+inline constexpr uint64_t kMinSumsUnitBytes = uint64_t{256} << 20;
 
 std::string cluster_merge_dir(const std::string& prefix);  // WORK/cluster-merge/
 
@@ -50,8 +58,7 @@ struct SplitMerge {
   nlohmann::ordered_json units;  // the units' count, and each phase's units' wall seconds and runners (host:pid)
 };
 
-// Writes every split level's cells-L.map (and, for center representatives, cells-L.info) from the shares'
-// files as units (above), this process's threads starting at unit `index`; units stamped for `key` (the
+// Writes every split level's cells-L.map and cells-L.info from the shares' files as units (above), this process's threads starting at unit `index`; units stamped for `key` (the
 // shares' plan and figures) are reused. Every share must have run. Failure(io_error) when the shares'
 // files do not add up to the weight index.
 SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key,

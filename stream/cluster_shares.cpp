@@ -494,11 +494,9 @@ ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterSh
   ClusterSummary summary;
   const size_t levels = plan.whole_share.size();
   summary.cells.assign(levels, 0);
-  std::vector<size_t> split;
-  std::vector<uint64_t> sums_cells;
   for (size_t l = 0; l < levels; ++l)
-    if (plan.whole_share[l] < 0) split.push_back(l), sums_cells.push_back(split_cells.at(l)), summary.cells[l] = split_cells.at(l);
-  progress.report("cluster", 0.4);
+    if (plan.whole_share[l] < 0) summary.cells[l] = split_cells.at(l);
+  progress.report("cluster", 0.9);
   if (in.vertex_cells) summary.vertex_cells.assign(levels, 0);
   for (size_t l = 0; l < levels; ++l) {
     if (plan.whole_share[l] < 0) continue;
@@ -514,8 +512,6 @@ ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterSh
     if (!found) fail(Status::io_error, cluster_share_stamp(in.prefix, static_cast<unsigned>(plan.whole_share[l])) + ": level " +
                                            std::to_string(l) + " is missing");
   }
-  progress.report("cluster", 0.5);
-  sum_cell_info(in.index, split, sums_cells, in.info, in.memory_bytes, in.chunk_cap, progress, in.prefix);
   progress.report("cluster", 1);
   return summary;
 }

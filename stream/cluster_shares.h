@@ -37,8 +37,8 @@
 // its center). The shares' .dec files merged by record make them, as units by record range that every
 // process reaching the merge takes part in (stream/cluster_merge.h): first each unit's centers' bits, then
 // each unit's records' cells, the rank of their center's bit. The ids go to cells-L.map
-// (stream/cell_map_file.h), and the .ctr files to a center-kind info. Mean and quadric infos are summed afterwards, as
-// cluster_levels sums them (sum_cell_info). Whole levels' files are linked from the share that made them:
+// (stream/cell_map_file.h), and the .ctr files to a center-kind info. Mean and quadric infos are summed
+// afterwards, as cluster_levels sums them, as units by ranges of cells (sum_cell_info_range). Whole levels' files are linked from the share that made them:
 // their map and info, and for a sharded run (ClusterShareInput::vertex_cells) their cells by vertex, which
 // the share writes after clustering them (stream/vertex_cells.h), so that the prepare job decodes only the
 // split levels' maps (193 M-triangle city: about 2.5 s a level).
@@ -132,8 +132,8 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
 // The split levels' maps are made by merge_split_levels (stream/cluster_merge.h), in this process alone.
 ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterShares& plan,
                                     const std::vector<nlohmann::ordered_json>& figures, Progress& progress);
-// The same once merge_split_levels has made the split levels' maps (`split_cells`: what it returned): the
-// whole levels' files linked, the split levels' mean or quadric infos summed.
+// The same once merge_split_levels has made the split levels' maps and infos (`split_cells`: what it
+// returned): the whole levels' files linked.
 ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterShares& plan,
                                     const std::vector<nlohmann::ordered_json>& figures, const std::vector<uint64_t>& split_cells,
                                     Progress& progress);

@@ -14,6 +14,7 @@
 #include "core/status.h"
 #include "io/file_writer.h"
 #include "io/mapped_file.h"
+#include "io/offset_file.h"
 #include "stream/cell_map_file.h"
 #include "stream/grade_stage.h"
 #include "stream/position_gather.h"
@@ -179,12 +180,23 @@ void for_each_block(const io::MappedFile& index, const RecordPositions& position
   }
 }
 
+// Which cells a sums pass makes, and how: the cells [first, end) of the levels' cells taken in level order
+// (the levels' cells one after another), `threads` chunks summed at once. in_place: the info files are
+// sized already and each range of cells is written at its place (a unit of the clustering merge,
+// stream/cluster_merge.h); else each level's file is written whole, in order (the window then holds every cell).
+constexpr size_t kPlaceBytes = 1 << 20;
+struct SumWindow {
+  uint64_t first = 0, end = UINT64_MAX;
+  size_t threads = 0;  // 0: the arena's
+  bool in_place = false;
+};
+
 // The sums pass (mean and quadric representatives) over the levels `level_ids` (their maps and info files
 // under `prefix`), of `cells_per_level` cells each. `sum_bytes`: what the sums may hold at once.
 void sum_cells(const io::MappedFile& index, const RecordPositions& positions, uint64_t batch, const io::MappedFile* grades,
                uint64_t records, std::span<const size_t> level_ids, std::span<const uint64_t> cells_per_level,
                CellInfoKind info_kind, bool single_precision, uint64_t sum_bytes, Progress& progress, const std::string& prefix,
-               double progress_from) {
+               double progress_from, const SumWindow& window = {}) {
   constexpr uint64_t block = kBlock;
   // The sums pass (mean and quadric representatives): each level's CellInfo records, from the cluster maps
   // just written and the index, both read in order, so that every cell adds its vertices in weight order
@@ -193,10 +205,13 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
   // the clusterers held at their peak divided among the threads (so the sums never raise the stage's
   // peak), within the budget; a chunk costs one more sequential read of the index and of its levels'
   // maps, where holding every record at once would cost 88 bytes a cell.
-  const size_t n_threads = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  const size_t n_threads = window.threads ? window.threads : static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
   const size_t levels = level_ids.size();
-  uint64_t total_cells = 0;
-  for (uint64_t c : cells_per_level) total_cells += c;
+  uint64_t all_cells = 0;
+  for (uint64_t c : cells_per_level) all_cells += c;
+  const uint64_t window_end = std::min(window.end, all_cells), window_first = std::min(window.first, window_end);
+  const uint64_t total_cells = window_end - window_first;
+  if (total_cells == 0) return;
   // As many chunks as that takes, rounded up to whole rounds of one per thread, and as even as can be.
   const uint64_t most_per_chunk = std::max<uint64_t>(1, sum_bytes / n_threads / sizeof(CellInfo));
   const uint64_t rounds = std::max<uint64_t>(1, (total_cells + most_per_chunk * n_threads - 1) / (most_per_chunk * n_threads));
@@ -207,15 +222,19 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
   };
   std::vector<std::vector<Range>> chunks(1);
   uint64_t room = per_chunk;
-  for (size_t l = 0; l < levels; ++l) {
-    uint64_t first = 0;
+  for (size_t l = 0, before = 0; l < levels; before += cells_per_level[l], ++l) {
+    // The level's cells in the window: [first, last).
+    const uint64_t first_here = std::clamp(window_first, before, before + cells_per_level[l]) - before;
+    const uint64_t last = std::clamp(window_end, before, before + cells_per_level[l]) - before;
+    if (first_here == last && !(cells_per_level[l] == 0 && !window.in_place)) continue;
+    uint64_t first = first_here;
     do {
       if (room == 0) chunks.emplace_back(), room = per_chunk;
-      const uint64_t end = std::min(cells_per_level[l], first + room);
+      const uint64_t end = std::min(last, first + room);
       chunks.back().push_back({l, first, end});
       room -= end - first;
       first = end;
-    } while (first < cells_per_level[l]);
+    } while (first < last);
   }
   std::unique_ptr<io::FileWriter> info;  // the level of the range being written
   std::vector<char> record(cell_info_bytes(info_kind, single_precision));
@@ -288,7 +307,17 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
     for (size_t k = round; k < round_end; ++k)
       for (size_t r = 0; r < chunks[k].size(); ++r) {
         const Range& range = chunks[k][r];
-        if (range.first == 0) info = std::make_unique<io::FileWriter>(cell_info_path(prefix, level_ids[range.level]), kWriterBuffer);
+        // In place: the range's records, a MiB at a time, from cell `placed_at` on.
+        std::unique_ptr<io::OffsetFile> placed_file;
+        std::vector<char> placed;
+        uint64_t placed_at = range.first;
+        auto place = [&] {
+          placed_file->write(placed.data(), placed.size(), placed_at * record.size());
+          placed_at += placed.size() / record.size();
+          placed.clear();
+        };
+        if (window.in_place) placed_file = std::make_unique<io::OffsetFile>(cell_info_path(prefix, level_ids[range.level]), O_WRONLY);
+        else if (range.first == 0) info = std::make_unique<io::FileWriter>(cell_info_path(prefix, level_ids[range.level]), kWriterBuffer);
         for (const CellInfo& c : sums[k - round][r]) {
           // The mean as the emit stage computes it (emit_stage.cpp, representatives), in the same operations.
           double mean[3];
@@ -299,13 +328,20 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
             const double m = info_kind == CellInfoKind::mean && c.weight > 0 ? c.weighted[a] / c.weight : mean[a];
             std::memcpy(q + 8 * a, &m, 8);
           }
-          info->write(record.data(), record.size());
+          if (!window.in_place) {
+            info->write(record.data(), record.size());
+            continue;
+          }
+          placed.insert(placed.end(), record.begin(), record.end());
+          if (placed.size() >= kPlaceBytes) place();
         }
         std::vector<CellInfo>().swap(sums[k - round][r]);
-        if (range.end == cells_per_level[range.level]) info->commit();
+        if (window.in_place && !placed.empty()) place();
+        else if (!window.in_place && range.end == cells_per_level[range.level]) info->commit();
         done_cells += range.end - range.first;
       }
-    progress.report("cluster", progress_from + (1 - progress_from) * static_cast<double>(done_cells) /
+    if (!window.in_place)  // a unit's share of the cells says little of the stage's
+      progress.report("cluster", progress_from + (1 - progress_from) * static_cast<double>(done_cells) /
                                                    static_cast<double>(std::max<uint64_t>(total_cells, 1)));
   }
 }
@@ -526,9 +562,11 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   return summary;
 }
 
-void sum_cell_info(const WeightIndex& weights, std::span<const size_t> levels, std::span<const uint64_t> cells,
-                   CellInfoKind info_kind, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,
-                   const std::string& prefix) {
+namespace {
+
+void sum_cell_info_in(const WeightIndex& weights, std::span<const size_t> levels, std::span<const uint64_t> cells,
+                      CellInfoKind info_kind, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,
+                      const std::string& prefix, const SumWindow& window) {
   if (info_kind == CellInfoKind::center || levels.empty()) return;
   io::MappedFile index(weights.order_path);
   if (index.size() != weights.records * 4) fail(Status::io_error, weights.order_path + ": size does not match");
@@ -541,7 +579,22 @@ void sum_cell_info(const WeightIndex& weights, std::span<const size_t> levels, s
   // No clusterer is held here: the sums take what cluster_levels leaves its cells.
   const uint64_t budget = std::max<uint64_t>(cell_budget(levels.size(), weights.vertices, weights.single_precision, memory_bytes, chunk_cap), 1);
   sum_cells(index, positions, gather_batch(memory_bytes, chunk_cap, positions.per_block()), grades.get(), weights.records, levels, cells,
-            info_kind, weights.single_precision, budget, progress, prefix, 0);
+            info_kind, weights.single_precision, budget, progress, prefix, 0, window);
+}
+
+}  // namespace
+
+void sum_cell_info(const WeightIndex& weights, std::span<const size_t> levels, std::span<const uint64_t> cells,
+                   CellInfoKind info_kind, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,
+                   const std::string& prefix) {
+  sum_cell_info_in(weights, levels, cells, info_kind, memory_bytes, chunk_cap, progress, prefix, {});
+}
+
+void sum_cell_info_range(const WeightIndex& weights, std::span<const size_t> levels, std::span<const uint64_t> cells,
+                         CellInfoKind info_kind, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,
+                         const std::string& prefix, uint64_t first, uint64_t end, unsigned threads) {
+  sum_cell_info_in(weights, levels, cells, info_kind, memory_bytes, chunk_cap, progress, prefix,
+                   {first, end, std::max<size_t>(threads, 1), true});
 }
 
 }  // namespace lodstream::stream

@@ -113,6 +113,14 @@ ClusterSummary cluster_levels(const WeightIndex& index, std::span<const double> 
 // CellInfoKind::center (the pass that makes the maps writes the centers).
 void sum_cell_info(const WeightIndex& index, std::span<const size_t> levels, std::span<const uint64_t> cells,
                    CellInfoKind info, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress, const std::string& prefix);
+// The same pass for the cells [first, end) of `levels` only (their cells taken one level after another),
+// written in place into info files already sized to their cells (a unit of the clustering merge,
+// stream/cluster_merge.h): those cells' bytes of sum_cell_info, since each cell adds its vertices in weight
+// order whichever cells are summed beside it. `threads`: the ranges of cells summed at once (each reads
+// every record); `memory_bytes`: this call's budget.
+void sum_cell_info_range(const WeightIndex& index, std::span<const size_t> levels, std::span<const uint64_t> cells,
+                         CellInfoKind info, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,
+                         const std::string& prefix, uint64_t first, uint64_t end, unsigned threads);
 
 // The early estimate (before the stage runs, so that a run that cannot fit stops at once rather than
 // after minutes of clustering). Cells of a level of size c: a surface of area A cut into cells of side c

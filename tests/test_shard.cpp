@@ -760,8 +760,9 @@ TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
 // The split levels' merge as units (stream/cluster_merge.h), taken up by three threads at once as three
 // processes would (each starting at its own unit): 1 unit, 7, 37, and one a 64-record word (so that most
 // units share both their first and last word of the map with their neighbours), with center and quadric
-// representatives (the centers' positions copied from the middle of the shares' files). The maps and infos
-// are one machine's bytes; a stamped unit is reused; a record decided by no share fails naming it.
+// representatives (the centers' positions copied from the middle of the shares' files; the quadric infos
+// summed by as many units of cells, each a pass over every record). The maps and infos are one machine's
+// bytes; a stamped unit is reused; a record decided by no share fails naming it.
 TEST(ClusterShares, MergeUnitsTakenByThreadsAtOnceGiveOneMachinesMaps) {
   for (const Representative rep : {Representative::center, Representative::quadric}) {
     SCOPED_TRACE(rep == Representative::center ? "center" : "quadric");
@@ -804,6 +805,11 @@ TEST(ClusterShares, MergeUnitsTakenByThreadsAtOnceGiveOneMachinesMaps) {
       for (const auto& e : std::filesystem::directory_iterator(stream::cluster_merge_dir(prefix) + "map"))
         stamps += e.path().filename().string().rfind("merge-map-", 0) == 0;
       EXPECT_EQ(stamps, units);
+      size_t sums = 0;
+      if (rep == Representative::quadric)
+        for (const auto& e : std::filesystem::directory_iterator(stream::cluster_merge_dir(prefix) + "sums"))
+          sums += e.path().filename().string().rfind("merge-sums-", 0) == 0;
+      EXPECT_EQ(sums, rep == Representative::quadric ? units : 0);
       // Again in this thread, the shares' files moved away: every unit is reused (one that ran again would
       // find no decisions to read).
       std::filesystem::rename(stream::cluster_shares_dir(prefix), dir.file("moved"));
