@@ -184,12 +184,12 @@ void for_each_block(const io::MappedFile& index, const RecordPositions& position
 // (the levels' cells one after another), `threads` chunks summed at once. in_place: the info files are
 // sized already and each range of cells is written at its place (a unit of the clustering merge,
 // stream/cluster_merge.h); else each level's file is written whole, in order (the window then holds every cell).
-constexpr size_t kPlaceBytes = 1 << 20;
 struct SumWindow {
   uint64_t first = 0, end = UINT64_MAX;
   size_t threads = 0;  // 0: the arena's
   bool in_place = false;
 };
+constexpr size_t kPlaceBytes = 1 << 20;  // in place: the records written at once
 
 // The sums pass (mean and quadric representatives) over the levels `level_ids` (their maps and info files
 // under `prefix`), of `cells_per_level` cells each. `sum_bytes`: what the sums may hold at once.
@@ -211,7 +211,7 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
   for (uint64_t c : cells_per_level) all_cells += c;
   const uint64_t window_end = std::min(window.end, all_cells), window_first = std::min(window.first, window_end);
   const uint64_t total_cells = window_end - window_first;
-  if (total_cells == 0) return;
+  if (total_cells == 0 && window.in_place) return;  // else the levels' empty files are written below
   // As many chunks as that takes, rounded up to whole rounds of one per thread, and as even as can be.
   const uint64_t most_per_chunk = std::max<uint64_t>(1, sum_bytes / n_threads / sizeof(CellInfo));
   const uint64_t rounds = std::max<uint64_t>(1, (total_cells + most_per_chunk * n_threads - 1) / (most_per_chunk * n_threads));
