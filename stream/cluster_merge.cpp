@@ -192,6 +192,23 @@ struct Merge {
     return {{"centers", centers}, {"share_centers", share_centers}};
   }
 
+  // Where phase 3's unit summing cells [first, end) of the split levels (their cells one level after another)
+  // starts: at the first of its levels' first cells' centers (sum_cell_info_range).
+  SumStart sums_start(uint64_t first, uint64_t end, const std::vector<uint64_t>& split_cells) const {
+    SumStart start;
+    start.record = in.index.records;
+    std::vector<RankedBits> bits;
+    for (size_t j = 0, before = 0; j < split.size(); before += split_cells[j], ++j) {
+      bits.push_back(load_centers(j));
+      if (first < before + split_cells[j] && end > before)
+        start.record = std::min<uint64_t>(start.record, bits[j].select(std::max<uint64_t>(first, before) - before));
+    }
+    for (size_t j = 0; j < split.size(); ++j)
+      start.maps.emplace_back(map_bits_before(bits[j], start.record),
+                              start.record < in.index.records ? bits[j].rank(start.record) : bits[j].ones());
+    return start;
+  }
+
   // Sizes every split level's map (and center info) for phase 2, from the centers' bits.
   void size_outputs() const {
     for (size_t j = 0; j < split.size(); ++j) {
@@ -355,9 +372,11 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
       std::min<uint64_t>(static_cast<uint64_t>(std::max(1, tbb::this_task_arena::max_concurrency())), sum_fit), 1, m.units.count));
   const std::vector<json> sums = take_units_on_threads(sums_dir, m.units.count, index, sum_threads, "merge-sums", unit_key, [&](unsigned u) {
     const uint64_t first = total * u / m.units.count, end = total * (u + 1) / m.units.count;
+    if (first == end) return json{{"cells", 0}, {"from_record", records}};
+    const SumStart start = m.sums_start(first, end, split_cells);
     sum_cell_info_range(in.index, m.split, split_cells, in.info, in.memory_bytes / sum_threads, in.chunk_cap, progress, in.prefix,
-                        first, end, 1);
-    return json{{"cells", end - first}};
+                        first, end, 1, start);
+    return json{{"cells", end - first}, {"from_record", start.record}};
   });
   out.units["sums"] = unit_figures(sums);
   return out;

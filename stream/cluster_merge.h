@@ -22,7 +22,9 @@
 // 3. sums (mean and quadric representatives; unit u, sums/merge-sums-u.json), once every map unit is stamped
 //    and the maps' shared words written: the u-th U-th of the split levels' cells (taken one level after
 //    another) summed by one pass over the records in weight order (sum_cell_info_range, stream/cluster_stage.h)
-//    into cells-L.info in place. A cell adds its vertices in weight order, whichever cells are summed beside
+//    into cells-L.info in place, from the center of its first cell on (a cell's id is its center's rank, so
+//    no record before that center is in one of its cells; the centers' bits give where it is, and where
+//    its record's cell starts in the map). A cell adds its vertices in weight order, whichever cells are summed beside
 //    it, so a unit's records are one machine's bytes; the cells, not the records, are cut, because partial
 //    sums of record ranges added up would not be.
 // The centers' bits and the units' stamps stay after the stage: a process that saw the cluster stage

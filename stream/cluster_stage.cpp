@@ -188,6 +188,7 @@ struct SumWindow {
   uint64_t first = 0, end = UINT64_MAX;
   size_t threads = 0;  // 0: the arena's
   bool in_place = false;
+  SumStart start;  // the records from start.record on (sum_cell_info_range)
 };
 constexpr size_t kPlaceBytes = 1 << 20;  // in place: the records written at once
 
@@ -212,6 +213,7 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
   const uint64_t window_end = std::min(window.end, all_cells), window_first = std::min(window.first, window_end);
   const uint64_t total_cells = window_end - window_first;
   if (total_cells == 0 && window.in_place) return;  // else the levels' empty files are written below
+  const uint64_t first_record = window.start.maps.empty() ? 0 : std::min(window.start.record, records);
   // As many chunks as that takes, rounded up to whole rounds of one per thread, and as even as can be.
   const uint64_t most_per_chunk = std::max<uint64_t>(1, sum_bytes / n_threads / sizeof(CellInfo));
   const uint64_t rounds = std::max<uint64_t>(1, (total_cells + most_per_chunk * n_threads - 1) / (most_per_chunk * n_threads));
@@ -247,6 +249,7 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
       for (const Range& range : chunks[k]) {
         sums[k - round].emplace_back(range.end - range.first, CellInfo{});
         chunk_maps[k - round].push_back(std::make_unique<CellMapReader>(cells_path(prefix, level_ids[range.level])));
+        if (!window.start.maps.empty()) chunk_maps[k - round].back()->seek(window.start.maps.at(range.level).first, window.start.maps.at(range.level).second);
       }
     // Chunk k's sums over records [lo, hi): positions from `shared` (the read way), else fetched per block.
     auto sum_records = [&](size_t k, uint64_t lo, uint64_t hi, const Batch* shared) {
@@ -292,10 +295,10 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
       });
     };
     if (positions.per_block()) {
-      tbb::parallel_for(round, round_end, [&](size_t k) { sum_records(k, 0, records, nullptr); });
+      tbb::parallel_for(round, round_end, [&](size_t k) { sum_records(k, first_record, records, nullptr); });
     } else {
       Batch shared;
-      for (uint64_t at = 0; at < records; at += batch) {
+      for (uint64_t at = first_record; at < records; at += batch) {
         progress.check();
         shared.load(index, positions, at, std::min(batch, records - at));
         tbb::parallel_for(round, round_end, [&](size_t k) { sum_records(k, at, shared.at + shared.ids.size(), &shared); });
@@ -592,9 +595,11 @@ void sum_cell_info(const WeightIndex& weights, std::span<const size_t> levels, s
 
 void sum_cell_info_range(const WeightIndex& weights, std::span<const size_t> levels, std::span<const uint64_t> cells,
                          CellInfoKind info_kind, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,
-                         const std::string& prefix, uint64_t first, uint64_t end, unsigned threads) {
+                         const std::string& prefix, uint64_t first, uint64_t end, unsigned threads, const SumStart& start) {
+  if (!start.maps.empty() && start.maps.size() != levels.size())
+    fail(Status::internal, "sum_cell_info_range: a map start a level");
   sum_cell_info_in(weights, levels, cells, info_kind, memory_bytes, chunk_cap, progress, prefix,
-                   {first, end, std::max<size_t>(threads, 1), true});
+                   {first, end, std::max<size_t>(threads, 1), true, start});
 }
 
 }  // namespace lodstream::stream

@@ -118,9 +118,17 @@ void sum_cell_info(const WeightIndex& index, std::span<const size_t> levels, std
 // stream/cluster_merge.h): those cells' bytes of sum_cell_info, since each cell adds its vertices in weight
 // order whichever cells are summed beside it. `threads`: the ranges of cells summed at once (each reads
 // every record); `memory_bytes`: this call's budget.
+// `start`: where the pass may begin. A level's cells are numbered in their centers' weight order and a
+// cell's center is its first record, so no record before the center of the range's first cell of each
+// level is in one of its cells: start.record is the first of those centers, start.maps[j] the bit of
+// levels[j]'s map at that record and the cells made before it (empty: from the first record).
+struct SumStart {
+  uint64_t record = 0;
+  std::vector<std::pair<uint64_t, uint64_t>> maps;
+};
 void sum_cell_info_range(const WeightIndex& index, std::span<const size_t> levels, std::span<const uint64_t> cells,
                          CellInfoKind info, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,
-                         const std::string& prefix, uint64_t first, uint64_t end, unsigned threads);
+                         const std::string& prefix, uint64_t first, uint64_t end, unsigned threads, const SumStart& start);
 
 // The early estimate (before the stage runs, so that a run that cannot fit stops at once rather than
 // after minutes of clustering). Cells of a level of size c: a surface of area A cut into cells of side c

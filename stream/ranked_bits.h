@@ -3,6 +3,7 @@
 // level's cells (cluster_merge.cpp: a cell's id is the rank of its center).
 #pragma once
 
+#include <algorithm>
 #include <bit>
 #include <cstdint>
 #include <vector>
@@ -24,6 +25,13 @@ struct RankedBits {
   }
   uint32_t rank(uint64_t i) const {
     return before[i >> 6] + static_cast<uint32_t>(std::popcount(bits[i >> 6] & ((uint64_t{1} << (i & 63)) - 1)));
+  }
+  // The position of set bit k (k < ones(), after count()).
+  uint64_t select(uint64_t k) const {
+    const size_t w = static_cast<size_t>(std::upper_bound(before.begin(), before.end(), k) - before.begin()) - 1;
+    uint64_t b = bits[w];
+    for (uint64_t r = k - before[w]; r > 0; --r) b &= b - 1;
+    return 64 * w + static_cast<uint64_t>(std::countr_zero(b));
   }
   uint64_t bytes() const { return bits.capacity() * 8 + before.capacity() * 4; }
 };

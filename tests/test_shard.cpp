@@ -29,6 +29,7 @@
 #include "stream/cluster_stage.h"
 #include "stream/grade_shares.h"
 #include "stream/position_gather.h"
+#include "stream/ranked_bits.h"
 #include "stream/chunk_scene.h"
 #include "stream/report_samples.h"
 #include "stream/scene_store.h"
@@ -755,6 +756,23 @@ TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
     EXPECT_EQ(f.status(), Status::io_error);
     EXPECT_NE(std::string(f.what()).find("cluster-shares"), std::string::npos) << f.what();
   }
+}
+
+// RankedBits::select, which finds where a sums unit of the clustering merge starts (the center of its first
+// cell): the inverse of rank on the set bits, over runs of empty and of full words.
+TEST(ClusterShares, CenterBitsSelectIsTheInverseOfRank) {
+  stream::RankedBits b(1000);
+  for (uint64_t i = 0; i < 1000; ++i)
+    if ((i < 200 && i % 7 == 3) || (i >= 448 && i < 640) || i == 999) b.set(i);  // words 4-6 empty, 7-9 full
+  b.count();
+  uint64_t k = 0;
+  for (uint64_t i = 0; i < 1000; ++i)
+    if (b.has(i)) {
+      EXPECT_EQ(b.rank(i), k);
+      EXPECT_EQ(b.select(k), i) << "set bit " << k;
+      ++k;
+    }
+  EXPECT_EQ(k, b.ones());
 }
 
 // The split levels' merge as units (stream/cluster_merge.h), taken up by three threads at once as three
