@@ -15,8 +15,6 @@
 #include <queue>
 
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include "core/status.h"
 #include "io/mapped_file.h"
@@ -334,8 +332,7 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   // files (two with centers).
   const uint64_t unit_bytes = records * 3 / 16 + uint64_t{plan.count} * (m.centers_info() ? 2 : 1) * kReadWindow;
   const uint64_t fit = in.memory_bytes ? std::max<uint64_t>(in.memory_bytes / unit_bytes, 1) : m.units.count;
-  const unsigned threads = static_cast<unsigned>(std::clamp<uint64_t>(
-      std::min<uint64_t>(static_cast<uint64_t>(std::max(1, tbb::this_task_arena::max_concurrency())), fit), 1, m.units.count));
+  const unsigned threads = unit_threads(m.units.count, fit);
   const json unit_key{{"key", key}, {"split", m.split}, {"units", m.units.count}, {"records", records}};
   const std::string centers_dir = m.dir + "centers/", map_dir = m.dir + "map/";
   m.bits_path = centers_dir + "centers.bits";
@@ -368,8 +365,7 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   for (uint64_t c : split_cells) total += c;
   // A unit a thread, each with its share of the budget while that leaves it kMinSumsUnitBytes.
   const uint64_t sum_fit = in.memory_bytes ? std::max<uint64_t>(in.memory_bytes / kMinSumsUnitBytes, 1) : m.units.count;
-  const unsigned sum_threads = static_cast<unsigned>(std::clamp<uint64_t>(
-      std::min<uint64_t>(static_cast<uint64_t>(std::max(1, tbb::this_task_arena::max_concurrency())), sum_fit), 1, m.units.count));
+  const unsigned sum_threads = unit_threads(m.units.count, sum_fit);
   const std::vector<json> sums = take_units_on_threads(sums_dir, m.units.count, index, sum_threads, "merge-sums", unit_key, [&](unsigned u) {
     const uint64_t first = total * u / m.units.count, end = total * (u + 1) / m.units.count;
     if (first == end) return json{{"cells", 0}, {"from_record", records}};

@@ -7,6 +7,7 @@
 // units, the report tasks' sampling units.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <initializer_list>
@@ -18,6 +19,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include "io/file_writer.h"
 #include "stream/kill_point.h"
@@ -76,6 +78,13 @@ std::vector<nlohmann::ordered_json> take_units(const std::string& dir, unsigned 
 
 // Who runs a unit, for its stamp: "host:pid".
 std::string unit_runner();
+
+// How many of `units` units a process takes up at once: one a thread of its arena, at most `fit` (what its
+// budget holds), at least one.
+inline unsigned unit_threads(uint64_t units, uint64_t fit) {
+  const uint64_t arena = static_cast<uint64_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  return static_cast<unsigned>(std::clamp<uint64_t>(std::min(arena, fit), 1, std::max<uint64_t>(units, 1)));
+}
 
 // take_units on `threads` of this process's threads at once, each starting at its own unit (index · threads
 // + t), for units whose stamps are dir/STEM-u.json and which write their outputs in place (no files in the

@@ -189,9 +189,7 @@ nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, co
   // A unit at a time on each thread the budget holds: 4 bytes a vertex of its share, a bit and a half a
   // vertex for the canonical vertices it looks up, 8 bytes a welded vertex of its share.
   const uint64_t unit_bytes = 12 * (vertices / units + 1) + vertices * 3 / 16 + (4 << 20);
-  const unsigned threads = static_cast<unsigned>(std::clamp<uint64_t>(
-      std::min<uint64_t>(static_cast<uint64_t>(std::max(1, tbb::this_task_arena::max_concurrency())), std::max<uint64_t>(budget / unit_bytes, 1)),
-      1, uint64_t{units} * levels.size()));
+  const unsigned threads = unit_threads(uint64_t{units} * levels.size(), std::max<uint64_t>(budget / unit_bytes, 1));
   const auto values = take_units_on_threads(dir, units * static_cast<unsigned>(levels.size()), index, threads, "vertex-cells", unit_key, [&](unsigned k) {
     const size_t l = levels[k / units];
     write_vertex_cells_unit(cells_path(prefix, l), order_path(prefix), canonical_path, vertex_cells_path(prefix, l), vertices, records,
