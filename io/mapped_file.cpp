@@ -5,8 +5,10 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <string>
 
 #include "core/status.h"
 
@@ -75,6 +77,18 @@ Window MappedFile::map(uint64_t begin, uint64_t end, Access access) const {
   w.begin_ = begin;
   w.end_ = end;
   return w;
+}
+
+void MappedFile::read(uint64_t begin, uint64_t bytes, void* out) const {
+  if (begin > size_ || bytes > size_ - begin)
+    fail(Status::io_error, path_ + ": cannot read " + std::to_string(bytes) + " bytes at byte " + std::to_string(begin));
+  char* p = static_cast<char*>(out);
+  while (bytes > 0) {
+    const ssize_t n = ::pread(fd_, p, static_cast<size_t>(std::min<uint64_t>(bytes, uint64_t{1} << 30)), static_cast<off_t>(begin));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) fail(Status::io_error, path_ + ": cannot read at byte " + std::to_string(begin) + (n < 0 ? std::string(": ") + std::strerror(errno) : std::string(": file shrank")));
+    p += n, begin += static_cast<uint64_t>(n), bytes -= static_cast<uint64_t>(n);
+  }
 }
 
 }  // namespace lodstream::io

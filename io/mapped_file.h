@@ -53,6 +53,10 @@ class MappedFile {
   enum class Access { sequential, random };
   // Maps [begin, min(end, size())). An empty range gives an empty window. Thread-safe.
   Window map(uint64_t begin, uint64_t end, Access access = Access::sequential) const;
+  // Copies bytes [begin, begin + bytes) into `out` (pread): for a pass that reads a file front to back in
+  // small blocks on several threads, where a window mapped and unmapped a block costs page faults and,
+  // at each unmap, a flush of every thread's TLB. Throws Failure(io_error) past the end. Thread-safe.
+  void read(uint64_t begin, uint64_t bytes, void* out) const;
 
  private:
   std::string path_;

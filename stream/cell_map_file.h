@@ -8,6 +8,7 @@
 // cluster stage's sums pass and the emit stage read it. Bits fill 64-bit little-endian words from the low end.
 #pragma once
 
+#include <algorithm>
 #include <bit>
 #include <cstring>
 #include <cstdint>
@@ -104,12 +105,11 @@ class CellMapReader {
     if (i >= window_first_ + window_words_) {
       if (i * 8 >= file_.size()) fail(Status::io_error, file_.path() + ": cell map ends early");
       window_first_ = i;
-      window_ = file_.map(i * 8, (i + kWindowWords) * 8);
-      window_words_ = window_.size() / 8;
+      window_words_ = std::min(kWindowWords, file_.size() / 8 - i);
+      window_.resize(kWindowWords);
+      file_.read(i * 8, window_words_ * 8, window_.data());
     }
-    uint64_t w;
-    std::memcpy(&w, window_.data() + 8 * (i - window_first_), 8);
-    return w;
+    return window_[i - window_first_];
   }
   uint64_t take(unsigned bits) {
     if (bits == 0) return 0;
@@ -121,10 +121,33 @@ class CellMapReader {
     return bits == 64 ? v : v & ((uint64_t{1} << bits) - 1);
   }
   io::MappedFile file_;
-  io::Window window_;
+  std::vector<uint64_t> window_;  // words [window_first_, window_first_ + window_words_), read (pread)
   uint64_t window_first_ = 0, window_words_ = 0;
   uint64_t bits_read_ = 0;
   uint64_t count_ = 0;
+};
+
+// A level's cells as one uint32 a record, in weight order: what the clustering merge's map units write
+// beside the packed map for its sums units (stream/cluster_merge.h), which then read their records' cells
+// without decoding the map from its start each.
+class PlainCellReader {
+ public:
+  // From record `first` on.
+  PlainCellReader(const std::string& path, uint64_t first) : file_(path), at_(first) {}
+  // The cells of the next out.size() records. Throws Failure(io_error) past the end of the file.
+  void read(std::span<uint32_t> out) {
+    file_.read(at_ * 4, out.size() * 4, out.data());
+    at_ += out.size();
+  }
+  // Throws Failure(io_error) unless the file holds exactly `records` cells, every one read.
+  void finish(uint64_t records) const {
+    if (at_ != records || file_.size() != records * 4)
+      fail(Status::io_error, file_.path() + ": does not hold the cells of " + std::to_string(records) + " records");
+  }
+
+ private:
+  io::MappedFile file_;
+  uint64_t at_;
 };
 
 }  // namespace lodstream::stream

@@ -190,20 +190,18 @@ struct Merge {
     return {{"centers", centers}, {"share_centers", share_centers}};
   }
 
+  std::string plain_cells_path(size_t j) const { return stream::plain_cells_path(in.prefix, split[j]); }
+
   // Where phase 3's unit summing cells [first, end) of the split levels (their cells one level after another)
-  // starts: at the first of its levels' first cells' centers (sum_cell_info_range).
+  // starts: at the first of its levels' first cells' centers (sum_cell_info_range); it reads their plain cells.
   SumStart sums_start(uint64_t first, uint64_t end, const std::vector<uint64_t>& split_cells) const {
     SumStart start;
     start.record = in.index.records;
-    std::vector<RankedBits> bits;
     for (size_t j = 0, before = 0; j < split.size(); before += split_cells[j], ++j) {
-      bits.push_back(load_centers(j));
       if (first < before + split_cells[j] && end > before)
-        start.record = std::min<uint64_t>(start.record, bits[j].select(std::max<uint64_t>(first, before) - before));
+        start.record = std::min<uint64_t>(start.record, load_centers(j).select(std::max<uint64_t>(first, before) - before));
+      start.plain.push_back(plain_cells_path(j));
     }
-    for (size_t j = 0; j < split.size(); ++j)
-      start.maps.emplace_back(map_bits_before(bits[j], start.record),
-                              start.record < in.index.records ? bits[j].rank(start.record) : bits[j].ones());
     return start;
   }
 
@@ -215,6 +213,7 @@ struct Merge {
       io::OffsetFile(cells_path(in.prefix, split[j]), O_WRONLY | O_CREAT | O_TRUNC).resize((bits + 63) / 64 * 8);
       if (centers_info())
         io::OffsetFile(cell_info_path(in.prefix, split[j]), O_WRONLY | O_CREAT | O_TRUNC).resize(c.ones() * center_bytes());
+      io::OffsetFile(plain_cells_path(j), O_WRONLY | O_CREAT | O_TRUNC).resize(in.index.records * 4);
     }
   }
 
@@ -258,12 +257,26 @@ struct Merge {
         info_cell += info.size() / center_bytes();
         info.clear();
       };
+      // The plain cells (sums units'), a buffer at a time from record `plain_at`.
+      std::unique_ptr<io::OffsetFile> plain_file;
+      std::vector<uint32_t> plain;
+      plain.reserve(kInfoFlush * 8);
+      uint64_t plain_at = lo;
+      auto flush_plain = [&] {
+        plain_file->write(plain.data(), plain.size() * 4, plain_at * 4);
+        plain_at += plain.size();
+        plain.clear();
+      };
+      plain_file = std::make_unique<io::OffsetFile>(plain_cells_path(j), O_WRONLY);
       uint64_t bits = 0, made = info_cell;  // the bits put, and the cells made before the record (its rank)
       for_each_decision(in, plan, level, lo, hi, progress, [&](uint64_t r, uint32_t center, unsigned s) {
         if (!c.has(center))
           fail(Status::io_error, cluster_share_decisions_path(in.prefix, s, level) + ": a member of a record that is no center");
         const unsigned width = static_cast<unsigned>(std::bit_width(made));
-        put(center == r ? made : c.rank(center), width);
+        const uint64_t cell = center == r ? made : c.rank(center);
+        put(cell, width);
+        plain.push_back(static_cast<uint32_t>(cell));
+        if (plain.size() >= kInfoFlush * 8) flush_plain();
         bits += width;
         made += center == r;
         if (center == r && info_file) {
@@ -274,6 +287,7 @@ struct Merge {
         }
       });
       if (info_file) flush_info();
+      flush_plain();
       if (bits == 0) continue;
       // Words [first, last] hold bits [start, start + bits); the first is shared unless the unit starts
       // it, the last unless the unit ends it or is the map's end.
@@ -307,6 +321,18 @@ struct Merge {
 
 std::string cluster_merge_dir(const std::string& prefix) { return prefix + "cluster-merge/"; }
 
+std::string plain_cells_path(const std::string& prefix, size_t level) {
+  return cluster_merge_dir(prefix) + fmt::format("map/cells-{}.u32", level);
+}
+
+void remove_plain_cells(const std::string& prefix) {
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(cluster_merge_dir(prefix) + "map/", ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.starts_with("cells-") && name.ends_with(".u32")) std::filesystem::remove(e.path(), ec);
+  }
+}
+
 SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key,
                               unsigned index, Progress& progress) {
   SplitMerge out;
@@ -333,7 +359,8 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   const uint64_t unit_bytes = records * 3 / 16 + uint64_t{plan.count} * (m.centers_info() ? 2 : 1) * kReadWindow;
   const uint64_t fit = in.memory_bytes ? std::max<uint64_t>(in.memory_bytes / unit_bytes, 1) : m.units.count;
   const unsigned threads = unit_threads(m.units.count, fit);
-  const json unit_key{{"key", key}, {"split", m.split}, {"units", m.units.count}, {"records", records}};
+  // plain_cells: the map units write them (a set of units started by a build that did not lacks them).
+  const json unit_key{{"key", key}, {"split", m.split}, {"units", m.units.count}, {"records", records}, {"plain_cells", true}};
   const std::string centers_dir = m.dir + "centers/", map_dir = m.dir + "map/";
   m.bits_path = centers_dir + "centers.bits";
   start_once(centers_dir, m.bits_path, unit_key, {"merge-centers-"}, [&] {

@@ -19,20 +19,26 @@
 //    every process that has seen every stamp writes them (the OR of their parts: the same value each time).
 //    For center representatives it copies its centers' positions from the shares' .ctr files (its first
 //    center in share s's file: the centers of s in the units before it) into cells-L.info at its first cell.
+//    It also writes its records' cells one uint32 a record into map/cells-L.u32 (plain_cells_path), in place.
 // 3. sums (mean and quadric representatives; unit u, sums/merge-sums-u.json), once every map unit is stamped
 //    and the maps' shared words written: the u-th U-th of the split levels' cells (taken one level after
 //    another) summed by one pass over the records in weight order (sum_cell_info_range, stream/cluster_stage.h)
 //    into cells-L.info in place, from the center of its first cell on (a cell's id is its center's rank, so
-//    no record before that center is in one of its cells; the centers' bits give where it is, and where
-//    its record's cell starts in the map). A cell adds its vertices in weight order, whichever cells are summed beside
-//    it, so a unit's records are one machine's bytes; the cells, not the records, are cut, because partial
-//    sums of record ranges added up would not be.
+//    no record before that center is in one of its cells; the centers' bits give where it is). It reads the
+//    records' cells from the plain cells, not the map: decoding a map is a serial chain through every
+//    record before the unit's start (a record's width is that of the cells made before it), which made
+//    the 8 units of the 193 M-triangle city cost 27 thread-seconds where, reading the plain cells, they
+//    cost 7. A cell adds its vertices in weight order, whichever cells are summed beside it, so a unit's
+//    records are one machine's bytes; the cells, not the records, are cut, because partial sums of record
+//    ranges added up would not be.
 // The centers' bits and the units' stamps stay after the stage: a process that saw the cluster stage
 // unstamped and comes late to the units must find them done, where start_once, missing the bits, would start
 // them afresh from the shares' decision files, which the stage's stamp removes.
 // Invariant: the map and the center info are the bytes of one pass over the records in weight order (the
 // merge before the units, and the whole-scene clustering): every record's cell is the rank of its center,
 // written at the map bits of the records before it.
+// Disk: the plain cells, 4 bytes a record a split level (0.8 GB on the 193 M-triangle city's two split
+// levels), until the cells by vertex are written.
 // Memory: a process runs as many units at once as it has threads and `memory_bytes` holds, each a bit and
 // a half a record of its level and a 16 MiB read window of each share's files; a sums unit takes its
 // thread's share of `memory_bytes` (at least kMinSumsUnitBytes) and, when its cells' sums (88 bytes a cell)
@@ -54,6 +60,12 @@ inline constexpr unsigned kMaxClusterMergeUnits = 256;
 inline constexpr uint64_t kMinSumsUnitBytes = uint64_t{256} << 20;
 
 std::string cluster_merge_dir(const std::string& prefix);  // WORK/cluster-merge/
+// Split level `level`'s cells one uint32 a record in weight order (PlainCellReader, stream/cell_map_file.h),
+// which the map units write beside the packed map: the sums units (phase 3) and the split levels' cells by
+// vertex (stream/vertex_cells.h) read them rather than decode the map from its start, each of them. They
+// outlive the stage; remove_plain_cells removes them once the cells by vertex are written.
+std::string plain_cells_path(const std::string& prefix, size_t level);
+void remove_plain_cells(const std::string& prefix);
 
 struct SplitMerge {
   std::vector<uint64_t> cells;  // per level (0 for the whole levels)

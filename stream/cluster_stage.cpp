@@ -157,10 +157,9 @@ struct Batch {
   PositionGather::Scratch scratch;
   void load(const io::MappedFile& order, const RecordPositions& positions, uint64_t first, uint64_t n) {
     at = first;
-    const io::Window w = order.map(first * 4, (first + n) * 4);
     ids.resize(n);
     xyz.resize(3 * n);
-    std::memcpy(ids.data(), w.data(), n * 4);
+    order.read(first * 4, n * 4, ids.data());
     positions.load(first, ids, xyz.data(), scratch);
   }
 };
@@ -213,7 +212,8 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
   const uint64_t window_end = std::min(window.end, all_cells), window_first = std::min(window.first, window_end);
   const uint64_t total_cells = window_end - window_first;
   if (total_cells == 0 && window.in_place) return;  // else the levels' empty files are written below
-  const uint64_t first_record = window.start.maps.empty() ? 0 : std::min(window.start.record, records);
+  const bool plain = !window.start.plain.empty();
+  const uint64_t first_record = window.start.maps.empty() && !plain ? 0 : std::min(window.start.record, records);
   // As many chunks as that takes, rounded up to whole rounds of one per thread, and as even as can be.
   const uint64_t most_per_chunk = std::max<uint64_t>(1, sum_bytes / n_threads / sizeof(CellInfo));
   const uint64_t rounds = std::max<uint64_t>(1, (total_cells + most_per_chunk * n_threads - 1) / (most_per_chunk * n_threads));
@@ -245,9 +245,14 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
     const size_t round_end = std::min(chunks.size(), round + n_threads);
     std::vector<std::vector<std::vector<CellInfo>>> sums(round_end - round);
     std::vector<std::vector<std::unique_ptr<CellMapReader>>> chunk_maps(round_end - round);
+    std::vector<std::vector<std::unique_ptr<PlainCellReader>>> chunk_plain(round_end - round);
     for (size_t k = round; k < round_end; ++k)
       for (const Range& range : chunks[k]) {
         sums[k - round].emplace_back(range.end - range.first, CellInfo{});
+        if (plain) {
+          chunk_plain[k - round].push_back(std::make_unique<PlainCellReader>(window.start.plain.at(range.level), first_record));
+          continue;
+        }
         chunk_maps[k - round].push_back(std::make_unique<CellMapReader>(cells_path(prefix, level_ids[range.level])));
         if (!window.start.maps.empty()) chunk_maps[k - round].back()->seek(window.start.maps.at(range.level).first, window.start.maps.at(range.level).second);
       }
@@ -256,18 +261,17 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
       const std::vector<Range>& chunk = chunks[k];
       std::vector<std::vector<CellInfo>>& outs = sums[k - round];
       std::vector<std::unique_ptr<CellMapReader>>& maps = chunk_maps[k - round];
+      std::vector<std::unique_ptr<PlainCellReader>>& plains = chunk_plain[k - round];
       constexpr uint64_t kAhead = 8;
       std::vector<uint32_t> cells(block);
       std::vector<double> grade(block, 0.0);
       for_each_block(index, positions, lo, hi, shared, progress, [&](uint64_t first, uint64_t n, const Batch& b) {
         const double* xyz = b.xyz.data() + 3 * (first - b.at);
-        if (grades) {
-          const io::Window w = grades->map(first * 8, (first + n) * 8);
-          std::memcpy(grade.data(), w.data(), n * 8);
-        }
+        if (grades) grades->read(first * 8, n * 8, grade.data());
         for (size_t r = 0; r < chunk.size(); ++r) {
           std::vector<CellInfo>& out = outs[r];
-          maps[r]->read(std::span<uint32_t>(cells.data(), n));
+          if (plain) plains[r]->read(std::span<uint32_t>(cells.data(), n));
+          else maps[r]->read(std::span<uint32_t>(cells.data(), n));
           if (out.empty()) continue;
           const uint64_t base = chunk[r].first;
           for (uint64_t i = 0; i < n; ++i) {
@@ -306,7 +310,9 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
     }
     progress.check();
     for (size_t k = round; k < round_end; ++k)
-      for (size_t r = 0; r < chunks[k].size(); ++r) chunk_maps[k - round][r]->finish(records, cells_per_level[chunks[k][r].level]);
+      for (size_t r = 0; r < chunks[k].size(); ++r)
+        if (plain) chunk_plain[k - round][r]->finish(records);
+        else chunk_maps[k - round][r]->finish(records, cells_per_level[chunks[k][r].level]);
     for (size_t k = round; k < round_end; ++k)
       for (size_t r = 0; r < chunks[k].size(); ++r) {
         const Range& range = chunks[k][r];
@@ -596,8 +602,8 @@ void sum_cell_info(const WeightIndex& weights, std::span<const size_t> levels, s
 void sum_cell_info_range(const WeightIndex& weights, std::span<const size_t> levels, std::span<const uint64_t> cells,
                          CellInfoKind info_kind, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,
                          const std::string& prefix, uint64_t first, uint64_t end, unsigned threads, const SumStart& start) {
-  if (!start.maps.empty() && start.maps.size() != levels.size())
-    fail(Status::internal, "sum_cell_info_range: a map start a level");
+  if ((!start.maps.empty() && start.maps.size() != levels.size()) || (!start.plain.empty() && start.plain.size() != levels.size()))
+    fail(Status::internal, "sum_cell_info_range: a map start or plain cells a level");
   sum_cell_info_in(weights, levels, cells, info_kind, memory_bytes, chunk_cap, progress, prefix,
                    {first, end, std::max<size_t>(threads, 1), true, start});
 }

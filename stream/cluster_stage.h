@@ -122,9 +122,12 @@ void sum_cell_info(const WeightIndex& index, std::span<const size_t> levels, std
 // cell's center is its first record, so no record before the center of the range's first cell of each
 // level is in one of its cells: start.record is the first of those centers, start.maps[j] the bit of
 // levels[j]'s map at that record and the cells made before it (empty: from the first record).
+// `plain`: per level, a file of each record's cell as a uint32 (PlainCellReader, stream/cell_map_file.h)
+// read in place of its map (then only start.record is needed); empty: the maps.
 struct SumStart {
   uint64_t record = 0;
   std::vector<std::pair<uint64_t, uint64_t>> maps;
+  std::vector<std::string> plain;
 };
 void sum_cell_info_range(const WeightIndex& index, std::span<const size_t> levels, std::span<const uint64_t> cells,
                          CellInfoKind info, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,

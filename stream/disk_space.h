@@ -38,8 +38,8 @@ SceneCounts guess_counts(uint64_t bytes, const std::string& format);
 // Most bytes each job has in its work directory at once (see disk_space.cpp for the terms).
 uint64_t info_work_bytes(const SceneCounts& c);
 uint64_t report_work_bytes(const SceneCounts& c);
-// ordered_positions: a sharded run, whose grading shares' merge also writes the records' positions in weight order.
-uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative representative, bool ordered_positions);
+// sharded: a sharded run (its records' positions in weight order, its cells by vertex, the clustering merge's plain cells).
+uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative representative, bool sharded);
 // Bytes of simplify's outputs for `output_triangles` triangles over all levels.
 uint64_t simplify_output_bytes(uint64_t output_triangles, const SimplifyOptions& options);
 

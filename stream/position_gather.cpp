@@ -168,15 +168,17 @@ OrderedPositions::OrderedPositions(const std::string& path, bool single_precisio
 void OrderedPositions::read(uint64_t first, uint64_t n, double* xyz) const {
   if (first + n > records_) fail(Status::internal, file_.path() + ": record past the index");
   const uint64_t stride = position_bytes(single_);
-  const io::Window w = file_.map(first * stride, (first + n) * stride);
   if (!single_) {
-    std::memcpy(xyz, w.data(), n * stride);
+    file_.read(first * stride, n * stride, xyz);
     return;
   }
-  const char* p = w.data();
+  // The floats read into the back half of xyz and widened front to back: double i (bytes [8i, 8i + 8))
+  // never reaches a float not yet widened (at 12n + 4j, j > i, since i < 3n).
+  char* floats = reinterpret_cast<char*>(xyz) + 12 * n;
+  file_.read(first * stride, n * stride, floats);
   for (uint64_t i = 0; i < 3 * n; ++i) {
     float f;
-    std::memcpy(&f, p + 4 * i, 4);
+    std::memcpy(&f, floats + 4 * i, 4);
     xyz[i] = f;
   }
 }

@@ -1184,12 +1184,19 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           for (size_t l = 0; l < cells.size(); ++l) files.push_back(stream::vertex_cells_path(prefix, l));
           st.reused = stage_in_units(work.file("shard-vertex-cells.json"), key, files, shard_lock, options.work_dir, [&] {
             std::vector<size_t> levels;  // else written by its cluster share
+            std::vector<std::string> plain;  // the clustering merge's plain cells, where they are
             for (size_t l = 0; l < cells.size(); ++l)
-              if (l >= vertex_cells_written.size() || !vertex_cells_written[l]) levels.push_back(l);
-            return stream::write_vertex_cells_in_units(prefix, canonical, meta.vertices, grade.records, levels, cells, unit_count,
+              if (l >= vertex_cells_written.size() || !vertex_cells_written[l]) {
+                levels.push_back(l);
+                const std::string p = stream::plain_cells_path(prefix, l);
+                plain.push_back(std::filesystem::exists(p) ? p : std::string());
+              }
+            return stream::write_vertex_cells_in_units(prefix, canonical, meta.vertices, grade.records, levels, cells, plain, unit_count,
                                                        unit_index, key, plan.stage_bytes, progress);
           });
         });
+        // Every cells-by-vertex unit is done (the stage is stamped): no process reads the plain cells again.
+        stream::remove_plain_cells(prefix);
         shard_lock.reset();
         if (so.shard_prepare) return;
         if (so.write_tiles)

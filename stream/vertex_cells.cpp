@@ -68,26 +68,32 @@ class RandomFile {
 };
 
 // Calls f(vertex id, cell) for every record of the weight index at `order` (`records` of them), in weight
-// order, its cell from one decoding of the map at `map_path` (`cells` cells); checks both.
+// order, its cell from one decoding of the map at `map_path` (`cells` cells), or, where `plain_path` names
+// the clustering merge's plain cells of the same map (stream/cluster_merge.h), read from them; checks both.
 template <class F>
-void for_each_record_cell(const std::string& map_path, const io::MappedFile& order, uint64_t records, uint64_t cells, uint64_t vertices,
-                          Progress& progress, F&& f) {
+void for_each_record_cell(const std::string& map_path, const std::string& plain_path, const io::MappedFile& order,
+                          uint64_t records, uint64_t cells, uint64_t vertices, Progress& progress, F&& f) {
   constexpr uint64_t kChunk = 1 << 18;
-  CellMapReader map(map_path);
-  std::vector<uint32_t> cs(kChunk);
+  std::unique_ptr<CellMapReader> map;
+  std::unique_ptr<PlainCellReader> plain;
+  if (plain_path.empty()) map = std::make_unique<CellMapReader>(map_path);
+  else plain = std::make_unique<PlainCellReader>(plain_path, 0);
+  const std::string& cells_file = plain ? plain_path : map_path;
+  std::vector<uint32_t> cs(kChunk), ids(kChunk);
   for (uint64_t first = 0; first < records; first += kChunk) {
     progress.check();
     const uint64_t k = std::min(kChunk, records - first);
-    const io::Window a = order.map(first * 4, (first + k) * 4);
-    const uint32_t* ids = reinterpret_cast<const uint32_t*>(a.data());
-    map.read(std::span<uint32_t>(cs.data(), k));
+    order.read(first * 4, k * 4, ids.data());
+    if (plain) plain->read(std::span<uint32_t>(cs.data(), k));
+    else map->read(std::span<uint32_t>(cs.data(), k));
     for (uint64_t i = 0; i < k; ++i) {
-      if (cs[i] >= cells) fail(Status::io_error, map_path + ": cell id out of range");
+      if (cs[i] >= cells) fail(Status::io_error, cells_file + ": cell id out of range");
       if (ids[i] >= vertices) fail(Status::io_error, order.path() + ": vertex id out of range");
       f(ids[i], cs[i]);
     }
   }
-  map.finish(records, cells);
+  if (plain) plain->finish(records);
+  else map->finish(records, cells);
 }
 
 }  // namespace
@@ -123,7 +129,7 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
     tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
       const uint64_t plo = lo + part * per_part, pn = std::min(n, (part + 1) * per_part) - std::min(n, part * per_part);
       if (pn == 0) return;
-      for_each_record_cell(map_path, order, records, cells, vertices, progress, [&](uint32_t id, uint32_t cell) {
+      for_each_record_cell(map_path, {}, order, records, cells, vertices, progress, [&](uint32_t id, uint32_t cell) {
         if (id - plo < pn) buf[id - lo] = cell;  // unsigned: below plo wraps around
       });
     });
@@ -139,9 +145,9 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
   out.commit();
 }
 
-void write_vertex_cells_unit(const std::string& map_path, const std::string& order_path, const std::string& canonical_path,
-                             const std::string& path, uint64_t vertices, uint64_t records, uint64_t cells, unsigned unit,
-                             unsigned units, Progress& progress) {
+void write_vertex_cells_unit(const std::string& map_path, const std::string& plain_path, const std::string& order_path,
+                             const std::string& canonical_path, const std::string& path, uint64_t vertices, uint64_t records,
+                             uint64_t cells, unsigned unit, unsigned units, Progress& progress) {
   const uint64_t lo = vertices * unit / units, hi = vertices * (unit + 1) / units;
   io::MappedFile order(order_path);
   if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
@@ -162,7 +168,7 @@ void write_vertex_cells_unit(const std::string& map_path, const std::string& ord
   std::vector<uint32_t> buf(hi - lo, kNoCell);
   // One decoding of the map in weight order: the unit's vertices' cells and those canonical vertices'.
   const bool any_outside = !outside_cells.empty();
-  for_each_record_cell(map_path, order, records, cells, vertices, progress, [&](uint32_t id, uint32_t cell) {
+  for_each_record_cell(map_path, plain_path, order, records, cells, vertices, progress, [&](uint32_t id, uint32_t cell) {
     if (id - lo < hi - lo) buf[id - lo] = cell;  // unsigned: below lo wraps around
     else if (any_outside && id < lo && outside.has(id)) outside_cells[outside.rank(id)] = cell;
   });
@@ -174,9 +180,11 @@ void write_vertex_cells_unit(const std::string& map_path, const std::string& ord
 
 nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, const std::string& canonical_path, uint64_t vertices,
                                                    uint64_t records, const std::vector<size_t>& levels,
-                                                   const std::vector<uint64_t>& cells, unsigned units, unsigned index,
-                                                   const nlohmann::ordered_json& key, uint64_t budget, Progress& progress) {
+                                                   const std::vector<uint64_t>& cells, const std::vector<std::string>& plain_paths,
+                                                   unsigned units, unsigned index, const nlohmann::ordered_json& key, uint64_t budget,
+                                                   Progress& progress) {
   if (levels.empty()) return nullptr;
+  if (!plain_paths.empty() && plain_paths.size() != levels.size()) fail(Status::internal, "write_vertex_cells_in_units: plain cells a level");
   // At least as many units as the budget needs (a unit's bytes below), and at least one a vertex.
   const uint64_t fixed = vertices * 3 / 16 + (4 << 20), room = budget > fixed + (1 << 20) ? budget - fixed : (1 << 20);
   units = static_cast<unsigned>(std::clamp<uint64_t>(std::max<uint64_t>(units, (12 * vertices + room - 1) / room), 1,
@@ -192,8 +200,8 @@ nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, co
   const unsigned threads = unit_threads(uint64_t{units} * levels.size(), std::max<uint64_t>(budget / unit_bytes, 1));
   const auto values = take_units_on_threads(dir, units * static_cast<unsigned>(levels.size()), index, threads, "vertex-cells", unit_key, [&](unsigned k) {
     const size_t l = levels[k / units];
-    write_vertex_cells_unit(cells_path(prefix, l), order_path(prefix), canonical_path, vertex_cells_path(prefix, l), vertices, records,
-                            cells[l], k % units, units, progress);
+    write_vertex_cells_unit(cells_path(prefix, l), plain_paths.empty() ? std::string() : plain_paths[k / units], order_path(prefix),
+                            canonical_path, vertex_cells_path(prefix, l), vertices, records, cells[l], k % units, units, progress);
     return nlohmann::ordered_json::object();
   });
   return {{"units", units}, {"levels", levels}, {"unit", unit_figures(values)}};

@@ -48,15 +48,18 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
 // canonical vertices before it that its welded vertices name; then its welded vertices'. The same bytes
 // as write_vertex_cells_of. Memory: 4 bytes a vertex of the unit, 8 a welded vertex of it, a bit and a
 // half a vertex of the scene.
-void write_vertex_cells_unit(const std::string& map_path, const std::string& order_path, const std::string& canonical_path,
-                             const std::string& path, uint64_t vertices, uint64_t records, uint64_t cells, unsigned unit,
-                             unsigned units, Progress& progress);
+// `plain_path`: the map's plain cells (stream/cluster_merge.h), read in place of decoding it; empty: the map.
+void write_vertex_cells_unit(const std::string& map_path, const std::string& plain_path, const std::string& order_path,
+                             const std::string& canonical_path, const std::string& path, uint64_t vertices, uint64_t records,
+                             uint64_t cells, unsigned unit, unsigned units, Progress& progress);
 // Every level of `levels` (cells[l] cells each) as `units` units a level, taken up by every process that
 // calls it and its threads (take_units_on_threads, from unit `index`) in prefix/vertex-cells-units/, the
 // files sized once for `key`; returns the units' figures (seconds, runners), or null for no level.
+// `plain_paths`: empty, or per level of `levels` its plain cells' path or "" (write_vertex_cells_unit).
 nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, const std::string& canonical_path, uint64_t vertices,
                                                    uint64_t records, const std::vector<size_t>& levels,
-                                                   const std::vector<uint64_t>& cells, unsigned units, unsigned index,
-                                                   const nlohmann::ordered_json& key, uint64_t budget, Progress& progress);
+                                                   const std::vector<uint64_t>& cells, const std::vector<std::string>& plain_paths,
+                                                   unsigned units, unsigned index, const nlohmann::ordered_json& key, uint64_t budget,
+                                                   Progress& progress);
 
 }  // namespace lodstream::stream

@@ -24,6 +24,7 @@
 #include "core/octree_regions.h"
 #include "io/offset_file.h"
 #include "stream/block_bounds.h"
+#include "stream/cell_map_file.h"
 #include "stream/cluster_merge.h"
 #include "stream/cluster_shares.h"
 #include "stream/cluster_stage.h"
@@ -193,16 +194,26 @@ TEST(Shard, VertexCellsInRangesAgree) {
     stream::write_vertex_cells(prefix, weld, vertices, records, l, merged.levels[l].cells, 4 * 4096, progress);
     EXPECT_TRUE(slurp(path) == from_map);
     // As units (the prepare jobs'), each by vertex range: 1, 3 and 7, run in reverse order (a welded
-    // vertex's canonical vertex before its unit is found in the unit's own pass over the map).
-    for (unsigned units : {1u, 3u, 7u}) {
-      SCOPED_TRACE("units " + std::to_string(units));
-      std::filesystem::remove(path);
-      io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize(4 * vertices);
-      for (unsigned u = units; u-- > 0;)
-        stream::write_vertex_cells_unit(stream::cells_path(prefix, l), stream::order_path(prefix), weld, path, vertices, records,
-                                        merged.levels[l].cells, u, units, progress);
-      EXPECT_TRUE(slurp(path) == from_map);
+    // vertex's canonical vertex before its unit is found in the unit's own pass over the map); each from
+    // the map, and from its plain cells (one uint32 a record, as the clustering merge's map units write them).
+    const std::string plain = dir.file("plain-cells.u32");
+    {
+      stream::CellMapReader map(stream::cells_path(prefix, l));
+      std::vector<uint32_t> cells(records);
+      map.read(cells);
+      map.finish(records, merged.levels[l].cells);
+      io::OffsetFile(plain, O_WRONLY | O_CREAT | O_TRUNC).write(cells.data(), 4 * records, 0);
     }
+    for (const std::string& from : {std::string(), plain})
+      for (unsigned units : {1u, 3u, 7u}) {
+        SCOPED_TRACE("units " + std::to_string(units) + (from.empty() ? " from the map" : " from the plain cells"));
+        std::filesystem::remove(path);
+        io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize(4 * vertices);
+        for (unsigned u = units; u-- > 0;)
+          stream::write_vertex_cells_unit(stream::cells_path(prefix, l), from, stream::order_path(prefix), weld, path, vertices,
+                                          records, merged.levels[l].cells, u, units, progress);
+        EXPECT_TRUE(slurp(path) == from_map);
+      }
   }
 
   // The store's block boxes, which the run wrote as units: one pass gives the same bytes, and so do 1, 3
@@ -300,6 +311,10 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       const Result pres = simplify(sample_room(), prepare, o, &pr);
       ASSERT_TRUE(pres.ok()) << pres.message;
       EXPECT_FALSE(std::filesystem::exists(stream::cluster_shares_dir(work + "/"))) << "the merge removes the spent shares";
+      ASSERT_FALSE(one.levels.empty());
+      for (size_t l = 0; l < one.levels.size(); ++l)
+        EXPECT_FALSE(std::filesystem::exists(stream::plain_cells_path(work + "/", l)))
+            << "level " << l << ": the plain cells outlive the cells by vertex";
       if (!whole_levels.empty()) {
         // A prepare job that reuses the cluster stage (here: the first one's, killed before the cells by vertex
         // were stamped) takes up the same units as the one that ran it, for the split levels only: had it
