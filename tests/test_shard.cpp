@@ -270,6 +270,14 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       Options o;
       o.work_dir = work;
       o.check_disk_space = false;
+      if (n == 4) {  // graded as shares first: the slabs are then selected from the records' positions in weight order
+        for (unsigned i = 0; i < n; ++i) {
+          SimplifyOptions so = room_options(out);
+          so.representative = rep, so.grade_share_index = i, so.grade_share_count = n;
+          SimplifyReport r;
+          ASSERT_TRUE(simplify(sample_room(), so, o, &r).ok());
+        }
+      }
       for (unsigned i = 0; i < n; ++i) {
         if (n > 1 && i == 1) continue;  // a share no task ran
         SimplifyOptions so = room_options(out);
@@ -281,6 +289,8 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
         EXPECT_TRUE(std::filesystem::exists(stream::cluster_share_stamp(work + "/", i)));
         EXPECT_FALSE(std::filesystem::exists(work + "/cluster.json")) << "a share does not stamp the whole stage";
       }
+      // The first cluster share merged the grading shares, writing the positions in weight order (the room's store holds floats).
+      EXPECT_EQ(std::filesystem::exists(work + "/positions-w.f32"), n == 4);
       std::vector<size_t> whole_levels;  // and their cells by vertex, which their shares write
       if (n >= 3) {  // the whole levels go to shares 1 to K, whose slabs are empty: repeated cuts (plan_cluster_shares)
         const nlohmann::json plan = nlohmann::json::parse(slurp(stream::cluster_shares_dir(work + "/") + "plan.json")).at("plan");
