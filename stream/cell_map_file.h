@@ -93,11 +93,6 @@ class CellMapReader {
                                  std::to_string(cells) + " cells");
   }
   uint64_t cells() const { return count_; }
-  // Goes forward to the record whose cell starts at bit `bit` of the map, `cells` cells made before it.
-  void seek(uint64_t bit, uint64_t cells) {
-    bits_read_ = bit, count_ = cells;
-    window_first_ = window_words_ = 0;
-  }
 
  private:
   static constexpr uint64_t kWindowWords = 1 << 16;

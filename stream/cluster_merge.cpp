@@ -257,17 +257,16 @@ struct Merge {
         info_cell += info.size() / center_bytes();
         info.clear();
       };
-      // The plain cells (sums units'), a buffer at a time from record `plain_at`.
-      std::unique_ptr<io::OffsetFile> plain_file;
+      // The records' plain cells (the sums units' and the cells by vertex's), a buffer at a time from record `plain_at`.
+      const io::OffsetFile plain_file(plain_cells_path(j), O_WRONLY);
       std::vector<uint32_t> plain;
       plain.reserve(kInfoFlush * 8);
       uint64_t plain_at = lo;
       auto flush_plain = [&] {
-        plain_file->write(plain.data(), plain.size() * 4, plain_at * 4);
+        plain_file.write(plain.data(), plain.size() * 4, plain_at * 4);
         plain_at += plain.size();
         plain.clear();
       };
-      plain_file = std::make_unique<io::OffsetFile>(plain_cells_path(j), O_WRONLY);
       uint64_t bits = 0, made = info_cell;  // the bits put, and the cells made before the record (its rank)
       for_each_decision(in, plan, level, lo, hi, progress, [&](uint64_t r, uint32_t center, unsigned s) {
         if (!c.has(center))

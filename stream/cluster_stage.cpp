@@ -187,7 +187,7 @@ struct SumWindow {
   uint64_t first = 0, end = UINT64_MAX;
   size_t threads = 0;  // 0: the arena's
   bool in_place = false;
-  SumStart start;  // the records from start.record on (sum_cell_info_range)
+  SumStart start;  // with plain cells, the records from start.record on (sum_cell_info_range)
 };
 constexpr size_t kPlaceBytes = 1 << 20;  // in place: the records written at once
 
@@ -213,7 +213,7 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
   const uint64_t total_cells = window_end - window_first;
   if (total_cells == 0 && window.in_place) return;  // else the levels' empty files are written below
   const bool plain = !window.start.plain.empty();
-  const uint64_t first_record = window.start.maps.empty() && !plain ? 0 : std::min(window.start.record, records);
+  const uint64_t first_record = plain ? std::min(window.start.record, records) : 0;
   // As many chunks as that takes, rounded up to whole rounds of one per thread, and as even as can be.
   const uint64_t most_per_chunk = std::max<uint64_t>(1, sum_bytes / n_threads / sizeof(CellInfo));
   const uint64_t rounds = std::max<uint64_t>(1, (total_cells + most_per_chunk * n_threads - 1) / (most_per_chunk * n_threads));
@@ -254,7 +254,6 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
           continue;
         }
         chunk_maps[k - round].push_back(std::make_unique<CellMapReader>(cells_path(prefix, level_ids[range.level])));
-        if (!window.start.maps.empty()) chunk_maps[k - round].back()->seek(window.start.maps.at(range.level).first, window.start.maps.at(range.level).second);
       }
     // Chunk k's sums over records [lo, hi): positions from `shared` (the read way), else fetched per block.
     auto sum_records = [&](size_t k, uint64_t lo, uint64_t hi, const Batch* shared) {
@@ -602,8 +601,7 @@ void sum_cell_info(const WeightIndex& weights, std::span<const size_t> levels, s
 void sum_cell_info_range(const WeightIndex& weights, std::span<const size_t> levels, std::span<const uint64_t> cells,
                          CellInfoKind info_kind, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,
                          const std::string& prefix, uint64_t first, uint64_t end, unsigned threads, const SumStart& start) {
-  if ((!start.maps.empty() && start.maps.size() != levels.size()) || (!start.plain.empty() && start.plain.size() != levels.size()))
-    fail(Status::internal, "sum_cell_info_range: a map start or plain cells a level");
+  if (!start.plain.empty() && start.plain.size() != levels.size()) fail(Status::internal, "sum_cell_info_range: plain cells a level");
   sum_cell_info_in(weights, levels, cells, info_kind, memory_bytes, chunk_cap, progress, prefix,
                    {first, end, std::max<size_t>(threads, 1), true, start});
 }

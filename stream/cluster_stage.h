@@ -118,15 +118,14 @@ void sum_cell_info(const WeightIndex& index, std::span<const size_t> levels, std
 // stream/cluster_merge.h): those cells' bytes of sum_cell_info, since each cell adds its vertices in weight
 // order whichever cells are summed beside it. `threads`: the ranges of cells summed at once (each reads
 // every record); `memory_bytes`: this call's budget.
-// `start`: where the pass may begin. A level's cells are numbered in their centers' weight order and a
-// cell's center is its first record, so no record before the center of the range's first cell of each
-// level is in one of its cells: start.record is the first of those centers, start.maps[j] the bit of
-// levels[j]'s map at that record and the cells made before it (empty: from the first record).
-// `plain`: per level, a file of each record's cell as a uint32 (PlainCellReader, stream/cell_map_file.h)
-// read in place of its map (then only start.record is needed); empty: the maps.
+// `start`: where the pass begins and what it reads. A level's cells are numbered in their centers' weight
+// order and a cell's center is its first record, so no record before the center of the range's first
+// cell of each level is in one of its cells: start.record may be the first of those centers. start.plain:
+// per level, a file of each record's cell as a uint32 (PlainCellReader, stream/cell_map_file.h), read from
+// start.record on in place of its map; empty: the maps, decoded from their first record (start.record is
+// then ignored: a packed map cannot be entered in the middle without the bits before).
 struct SumStart {
   uint64_t record = 0;
-  std::vector<std::pair<uint64_t, uint64_t>> maps;
   std::vector<std::string> plain;
 };
 void sum_cell_info_range(const WeightIndex& index, std::span<const size_t> levels, std::span<const uint64_t> cells,
