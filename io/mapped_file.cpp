@@ -5,12 +5,12 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <string>
 
 #include "core/status.h"
+#include "io/offset_file.h"
 
 namespace lodstream::io {
 
@@ -82,13 +82,7 @@ Window MappedFile::map(uint64_t begin, uint64_t end, Access access) const {
 void MappedFile::read(uint64_t begin, uint64_t bytes, void* out) const {
   if (begin > size_ || bytes > size_ - begin)
     fail(Status::io_error, path_ + ": cannot read " + std::to_string(bytes) + " bytes at byte " + std::to_string(begin));
-  char* p = static_cast<char*>(out);
-  while (bytes > 0) {
-    const ssize_t n = ::pread(fd_, p, static_cast<size_t>(std::min<uint64_t>(bytes, uint64_t{1} << 30)), static_cast<off_t>(begin));
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) fail(Status::io_error, path_ + ": cannot read at byte " + std::to_string(begin) + (n < 0 ? std::string(": ") + std::strerror(errno) : std::string(": file shrank")));
-    p += n, begin += static_cast<uint64_t>(n), bytes -= static_cast<uint64_t>(n);
-  }
+  pread_all(fd_, out, static_cast<size_t>(bytes), begin, path_);
 }
 
 }  // namespace lodstream::io

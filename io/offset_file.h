@@ -16,6 +16,18 @@
 
 namespace lodstream::io {
 
+// Reads exactly `bytes` at `offset` of the open file `fd` (pread, retried where it stops short or is
+// interrupted); Failure(io_error) naming `path` where it cannot.
+inline void pread_all(int fd, void* data, size_t bytes, uint64_t offset, const std::string& path) {
+  char* p = static_cast<char*>(data);
+  while (bytes > 0) {
+    const ssize_t n = ::pread(fd, p, std::min<size_t>(bytes, 1 << 30), static_cast<off_t>(offset));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) fail(Status::io_error, path + ": cannot read at byte " + std::to_string(offset));
+    p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
+  }
+}
+
 class OffsetFile {
  public:
   // `flags` as open(2)'s (O_RDONLY; O_WRONLY, with O_CREAT | O_TRUNC for a new file).
@@ -28,15 +40,7 @@ class OffsetFile {
     if (fd_ >= 0) ::close(fd_);
   }
   const std::string& path() const { return path_; }
-  void read(void* data, size_t bytes, uint64_t offset) const {
-    char* p = static_cast<char*>(data);
-    while (bytes > 0) {
-      const ssize_t n = ::pread(fd_, p, std::min<size_t>(bytes, 1 << 30), static_cast<off_t>(offset));
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) fail(Status::io_error, path_ + ": cannot read at byte " + std::to_string(offset));
-      p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
-    }
-  }
+  void read(void* data, size_t bytes, uint64_t offset) const { pread_all(fd_, data, bytes, offset, path_); }
   void write(const void* data, size_t bytes, uint64_t offset) const {
     const char* p = static_cast<const char*>(data);
     while (bytes > 0) {

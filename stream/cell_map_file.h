@@ -12,6 +12,7 @@
 #include <bit>
 #include <cstring>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -93,6 +94,7 @@ class CellMapReader {
                                  std::to_string(cells) + " cells");
   }
   uint64_t cells() const { return count_; }
+  const std::string& path() const { return file_.path(); }
 
  private:
   static constexpr uint64_t kWindowWords = 1 << 16;
@@ -134,6 +136,7 @@ class PlainCellReader {
     file_.read(at_ * 4, out.size() * 4, out.data());
     at_ += out.size();
   }
+  const std::string& path() const { return file_.path(); }
   // Throws Failure(io_error) unless the file holds exactly `records` cells, every one read.
   void finish(uint64_t records) const {
     if (at_ != records || file_.size() != records * 4)
@@ -143,6 +146,27 @@ class PlainCellReader {
  private:
   io::MappedFile file_;
   uint64_t at_;
+};
+
+// A level's cells in weight order from record `first` on: from its plain cells where `plain_path` names
+// them, else decoded from its packed map at `map_path` (which is read from its first record: `first` must
+// then be 0).
+class CellsReader {
+ public:
+  CellsReader(const std::string& map_path, const std::string& plain_path, uint64_t first) {
+    if (!plain_path.empty()) plain_ = std::make_unique<PlainCellReader>(plain_path, first);
+    else if (first != 0) fail(Status::internal, map_path + ": a packed map is read from its first record");
+    else map_ = std::make_unique<CellMapReader>(map_path);
+  }
+  const std::string& path() const { return plain_ ? plain_->path() : map_->path(); }
+  void read(std::span<uint32_t> out) { plain_ ? plain_->read(out) : map_->read(out); }
+  // Throws Failure(io_error) unless the stream held exactly `records` records of `cells` cells (a map) or
+  // the plain cells of `records` records, every one read.
+  void finish(uint64_t records, uint64_t cells) const { plain_ ? plain_->finish(records) : map_->finish(records, cells); }
+
+ private:
+  std::unique_ptr<CellMapReader> map_;
+  std::unique_ptr<PlainCellReader> plain_;
 };
 
 }  // namespace lodstream::stream

@@ -30,6 +30,7 @@ namespace {
 
 constexpr uint64_t kReadWindow = uint64_t{1} << 24;  // bytes of a share's file mapped at a time
 constexpr uint64_t kInfoFlush = uint64_t{1} << 16;   // centers' positions a map unit writes at a time
+constexpr uint64_t kPlainFlush = uint64_t{1} << 19;  // plain cells a map unit writes at a time (2 MiB)
 
 using json = nlohmann::ordered_json;
 
@@ -260,7 +261,7 @@ struct Merge {
       // The records' plain cells (the sums units' and the cells by vertex's), a buffer at a time from record `plain_at`.
       const io::OffsetFile plain_file(plain_cells_path(j), O_WRONLY);
       std::vector<uint32_t> plain;
-      plain.reserve(kInfoFlush * 8);
+      plain.reserve(kPlainFlush);
       uint64_t plain_at = lo;
       auto flush_plain = [&] {
         plain_file.write(plain.data(), plain.size() * 4, plain_at * 4);
@@ -275,7 +276,7 @@ struct Merge {
         const uint64_t cell = center == r ? made : c.rank(center);
         put(cell, width);
         plain.push_back(static_cast<uint32_t>(cell));
-        if (plain.size() >= kInfoFlush * 8) flush_plain();
+        if (plain.size() >= kPlainFlush) flush_plain();
         bits += width;
         made += center == r;
         if (center == r && info_file) {

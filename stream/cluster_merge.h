@@ -28,7 +28,7 @@
 //    records' cells from the plain cells, not the map: decoding a map is a serial chain through every
 //    record before the unit's start (a record's width is that of the cells made before it), which made
 //    the 8 units of the 193 M-triangle city cost 27 thread-seconds where, reading the plain cells, they
-//    cost 7. A cell adds its vertices in weight order, whichever cells are summed beside it, so a unit's
+//    cost 7–8. A cell adds its vertices in weight order, whichever cells are summed beside it, so a unit's
 //    records are one machine's bytes; the cells, not the records, are cut, because partial sums of record
 //    ranges added up would not be.
 // The centers' bits and the units' stamps stay after the stage: a process that saw the cluster stage

@@ -74,26 +74,20 @@ template <class F>
 void for_each_record_cell(const std::string& map_path, const std::string& plain_path, const io::MappedFile& order,
                           uint64_t records, uint64_t cells, uint64_t vertices, Progress& progress, F&& f) {
   constexpr uint64_t kChunk = 1 << 18;
-  std::unique_ptr<CellMapReader> map;
-  std::unique_ptr<PlainCellReader> plain;
-  if (plain_path.empty()) map = std::make_unique<CellMapReader>(map_path);
-  else plain = std::make_unique<PlainCellReader>(plain_path, 0);
-  const std::string& cells_file = plain ? plain_path : map_path;
+  CellsReader reader(map_path, plain_path, 0);
   std::vector<uint32_t> cs(kChunk), ids(kChunk);
   for (uint64_t first = 0; first < records; first += kChunk) {
     progress.check();
     const uint64_t k = std::min(kChunk, records - first);
     order.read(first * 4, k * 4, ids.data());
-    if (plain) plain->read(std::span<uint32_t>(cs.data(), k));
-    else map->read(std::span<uint32_t>(cs.data(), k));
+    reader.read(std::span<uint32_t>(cs.data(), k));
     for (uint64_t i = 0; i < k; ++i) {
-      if (cs[i] >= cells) fail(Status::io_error, cells_file + ": cell id out of range");
+      if (cs[i] >= cells) fail(Status::io_error, reader.path() + ": cell id out of range");
       if (ids[i] >= vertices) fail(Status::io_error, order.path() + ": vertex id out of range");
       f(ids[i], cs[i]);
     }
   }
-  if (plain) plain->finish(records);
-  else map->finish(records, cells);
+  reader.finish(records, cells);
 }
 
 }  // namespace
