@@ -57,24 +57,6 @@ static_assert(sizeof(FloatCell) == 16 && sizeof(DoubleCell) == 32 && sizeof(Slot
 constexpr size_t kInitialSlots = 16;  // per sub-table
 constexpr int kSubShift = 64 - 6;     // the sub-table of a hash: its top Clusterer::kSubTableBits bits
 
-[[noreturn]] void out_of_range(double x, double size) {
-  fail(Status::usage, "clustering: coordinate " + std::to_string(x) + " is too far from the origin (or not finite) "
-                      "for cell size " + std::to_string(size) + " (at most 2^49 half-cells per axis)");
-}
-
-// floor(x / h) exactly, for |x / h| < kMaxSquaresPerAxis. The rounded quotient can only be wrong when the
-// exact one lies just below an integer and rounds onto it (a non-integer rounded quotient has the same
-// floor, since integers of this size are doubles); then x − q·h, evaluated with one rounding by fma, is
-// negative, and its sign is exact. The fma is a library call on targets without the instruction, but it
-// runs only for quotients that are exact integers (points on a half-square boundary).
-inline int64_t half_index(double x, double h, double size) {
-  const double r = x / h;
-  if (!(std::fabs(r) < kMaxSquaresPerAxis)) out_of_range(x, size);
-  double q = std::floor(r);
-  if (q == r && std::fma(-q, h, x) < 0) q -= 1;
-  return static_cast<int64_t>(q);
-}
-
 // Squares hash by hash_square (core/hash.h).
 
 // The two kinds of hash-table slot, with their keys: a Slot keys a square by its three coordinates; a
@@ -331,6 +313,11 @@ uint64_t GrowableBuffer::resident_bytes() const {
   return (size_ + page - 1) / page * page;
 }
 
+
+void coordinate_out_of_range(double x, double size) {
+  fail(Status::usage, "clustering: coordinate " + std::to_string(x) + " is too far from the origin (or not finite) "
+                      "for cell size " + std::to_string(size) + " (at most 2^49 half-cells per axis)");
+}
 
 int64_t grid_square(double x, double size) {
   if (!(size >= kMinCellSize && size <= kMaxCellSize))

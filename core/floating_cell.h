@@ -119,6 +119,22 @@ inline constexpr double kMaxSquaresPerAxis = 0x1p49;
 inline constexpr double kMinCellSize = 0x1p-480;
 inline constexpr double kMaxCellSize = 0x1p480;
 
+[[noreturn]] void coordinate_out_of_range(double x, double size);  // Failure(Status::usage)
+
+// floor(x / h) exactly, for |x / h| < kMaxSquaresPerAxis, h = size / 2 (else coordinate_out_of_range):
+// the half-square of x, inline for the clusterers' queries. The rounded quotient can only be wrong when
+// the exact one lies just below an integer and rounds onto it (a non-integer rounded quotient has the
+// same floor, since integers of this size are doubles); then x − q·h, evaluated with one rounding by fma,
+// is negative, and its sign is exact. The fma is a library call on targets without the instruction, but
+// it runs only for quotients that are exact integers (points on a half-square boundary).
+inline int64_t half_index(double x, double h, double size) {
+  const double r = x / h;
+  if (!(std::fabs(r) < kMaxSquaresPerAxis)) coordinate_out_of_range(x, size);
+  double q = std::floor(r);
+  if (q == r && std::fma(-q, h, x) < 0) q -= 1;
+  return static_cast<int64_t>(q);
+}
+
 // floor(x / size) as int64, exact (see "Grid square" above). Same limits as the Clusterer: size within
 // [kMinCellSize, kMaxCellSize] and |x| < kMaxSquaresPerAxis · size / 2; otherwise throws
 // Failure(Status::usage).

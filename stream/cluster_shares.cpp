@@ -200,42 +200,61 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
   const bool centers = in.info == CellInfoKind::center;  // the merge reads the centers' positions for this kind only
   io::FileWriter dec(dec_path(in.prefix, share, level), 1 << 20), ctr;
   if (centers) ctr.open(ctr_path(in.prefix, share, level), 1 << 20);
-  std::vector<uint32_t> assigned;  // the record of each vertex assigned, in assign order
-  uint64_t counted = 0;            // this level's share of `clusterers`
-  struct Uncount {                 // returned to `clusterers` however the level ends
+  uint64_t counted = 0;  // this level's share of `clusterers`
+  struct Uncount {       // returned to `clusterers` however the level ends
     std::atomic<uint64_t>& total;
     uint64_t& n;
     ~Uncount() { total.fetch_sub(n); }
   } uncount{clusterers, counted};
   *held_in_box = *own = 0;
+  // The held records in the box go to the clusterer a block at a time (its pipeline fetches ahead within a
+  // block), named by their records, so that a decision names its center's record.
+  constexpr size_t kBlock = 4096;
+  std::vector<uint32_t> tags;
+  std::vector<double> xyz;
+  std::vector<core::RegionDecision> decisions(kBlock);
+  tags.reserve(kBlock);
+  xyz.reserve(3 * kBlock);
+  auto decide_block = [&] {  // false when one of the share's own records did not settle
+    rc.assign_block(tags, xyz, std::span<core::RegionDecision>(decisions.data(), tags.size()));
+    for (size_t i = 0; i < tags.size(); ++i) {
+      const double* p = &xyz[3 * i];
+      if (!(own_lo <= p[axis] && p[axis] < own_hi)) continue;
+      const core::RegionDecision& d = decisions[i];
+      if (d.status == core::RegionStatus::unsettled || !d.cell_settled) return false;  // the writers discard
+      const uint32_t pair[2] = {tags[i], d.center};
+      dec.write(pair, sizeof pair);
+      if (centers && pair[0] == pair[1]) {
+        if (in.index.single_precision) {
+          const float f[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
+          ctr.write(f, sizeof f);
+        } else {
+          ctr.write(p, 24);
+        }
+      }
+      ++*own;
+    }
+    tags.clear();
+    xyz.clear();
+    return true;
+  };
   double p[3];
   for (size_t k = 0; k < held.record.size(); ++k) {
     if ((k & 0xfffff) == 0) {
       progress.check();
-      const uint64_t now = rc.memory_bytes() + rc.growth_bytes() + assigned.capacity() * 4;
+      const uint64_t now = rc.memory_bytes() + rc.growth_bytes();
       clusterers.fetch_add(now - counted);  // wraps correctly: counted only grows
       counted = now;
       check_share_memory(in, fmt::format("level {}'s cells", level), held.bytes() + clusterers.load());
     }
     held.xyz.get(k, p);
     if (!(box[axis] <= p[axis] && p[axis] < box[3 + axis])) continue;
-    const core::RegionDecision d = rc.assign(std::span<const double, 3>(p, 3));
-    assigned.push_back(held.record[k]);
+    tags.push_back(held.record[k]);
+    xyz.insert(xyz.end(), p, p + 3);
     ++*held_in_box;
-    if (!(own_lo <= p[axis] && p[axis] < own_hi)) continue;
-    if (d.status == core::RegionStatus::unsettled || !d.cell_settled) return false;  // the writers discard
-    const uint32_t pair[2] = {held.record[k], assigned[d.center]};
-    dec.write(pair, sizeof pair);
-    if (centers && pair[0] == pair[1]) {
-      if (in.index.single_precision) {
-        const float f[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
-        ctr.write(f, sizeof f);
-      } else {
-        ctr.write(p, 24);
-      }
-    }
-    ++*own;
+    if (tags.size() == kBlock && !decide_block()) return false;
   }
+  if (!decide_block()) return false;
   dec.commit();
   if (centers) ctr.commit();
   return true;

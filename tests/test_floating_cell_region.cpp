@@ -15,6 +15,7 @@
 
 #include "core/floating_cell.h"
 #include "core/floating_cell_region.h"
+#include "core/status.h"
 
 namespace lodstream {
 namespace {
@@ -45,19 +46,25 @@ struct Tally {
   uint64_t held = 0, settled_status = 0, settled_cells = 0;
 };
 
-// Runs a RegionClusterer over the vertices in `box` and checks each settled decision against `whole`.
+// Runs a RegionClusterer over the vertices in `box`, each tagged by its whole-scene index, and checks each
+// settled decision against `whole`; a second one runs them through assign_block, in blocks of random
+// sizes, and must decide exactly as the first.
 Tally check_box(const std::vector<P>& pts, const std::vector<uint32_t>& whole, double c, ClusterOptions o,
                 const std::array<double, 6>& box, uint32_t max_open = 16, uint64_t* crowded = nullptr) {
-  RegionClusterer rc(c, o, box, max_open);
-  std::vector<uint32_t> held;  // task index -> whole-scene index
+  RegionClusterer rc(c, o, box, max_open), blocks(c, o, box, max_open);
+  std::vector<uint32_t> tags;
+  std::vector<double> xyz;
+  std::vector<core::RegionDecision> decisions;
   Tally t;
   for (uint32_t i = 0; i < pts.size(); ++i) {
     const P& p = pts[i];
     bool in = true;
     for (int a = 0; a < 3; ++a) in &= p[a] >= box[a] && p[a] < box[3 + a];
     if (!in) continue;
-    held.push_back(i);
-    const core::RegionDecision d = rc.assign(p);
+    tags.push_back(i);
+    xyz.insert(xyz.end(), p.begin(), p.end());
+    const core::RegionDecision d = rc.assign(i, p);
+    decisions.push_back(d);
     ++t.held;
     if (d.status != RegionStatus::unsettled) {
       ++t.settled_status;
@@ -66,10 +73,24 @@ Tally check_box(const std::vector<P>& pts, const std::vector<uint32_t>& whole, d
     if (d.cell_settled) {
       ++t.settled_cells;
       EXPECT_NE(d.status, RegionStatus::unsettled);
-      EXPECT_EQ(held.at(d.center), whole[i]) << "vertex " << i;
+      EXPECT_EQ(d.center, whole[i]) << "vertex " << i;
     }
   }
   EXPECT_EQ(t.held - t.settled_status, rc.unsettled());
+  std::mt19937 rng(static_cast<uint32_t>(tags.size()));
+  std::vector<core::RegionDecision> out(tags.size());
+  for (size_t first = 0; first < tags.size();) {
+    const size_t n = std::min<size_t>(tags.size() - first, 1 + rng() % 100);
+    blocks.assign_block(std::span<const uint32_t>(&tags[first], n), std::span<const double>(&xyz[3 * first], 3 * n),
+                        std::span<core::RegionDecision>(&out[first], n));
+    first += n;
+  }
+  for (size_t k = 0; k < tags.size(); ++k) {
+    EXPECT_EQ(out[k].status, decisions[k].status) << "vertex " << tags[k];
+    EXPECT_EQ(out[k].cell_settled, decisions[k].cell_settled) << "vertex " << tags[k];
+    EXPECT_EQ(out[k].center, decisions[k].center) << "vertex " << tags[k];
+  }
+  EXPECT_EQ(blocks.crowded_squares(), rc.crowded_squares());
   if (crowded) *crowded += rc.crowded_squares();
   return t;
 }
@@ -179,6 +200,16 @@ TEST(FloatingCellRegion, ADoubtRunsDownAChainUntilTheHaloHoldsItsHead) {
   // Holding the head, but with it within c/2 of the box's edge: it is exposed, and the chain with it.
   t = check_box(pts, whole, 1.0, o, {-0.4, -kInf, -kInf, kInf, kInf, kInf});
   EXPECT_EQ(t.settled_status, 0u);
+}
+
+// Tags name the vertices in weight order: one that does not exceed the last is a caller's bug.
+TEST(FloatingCellRegion, TagsMustIncrease) {
+  RegionClusterer rc(1.0, kVariants[0], std::array<double, 6>{-kInf, -kInf, -kInf, kInf, kInf, kInf});
+  const P p{0, 0, 0}, q{5, 5, 5};
+  EXPECT_EQ(rc.assign(7, p).center, 7u);
+  EXPECT_THROW(rc.assign(7, q), Failure);
+  EXPECT_THROW(rc.assign(3, q), Failure);
+  EXPECT_EQ(rc.assign(8, q).center, 8u);
 }
 
 }  // namespace

@@ -57,18 +57,16 @@ Run run_task(const std::vector<P>& pts, const std::vector<uint32_t>& whole, doub
   if (side == 0) box[3 + axis] = x0 + h;
   else box[axis] = x0 - h;
   core::RegionClusterer rc(c, o, box);
-  std::vector<uint32_t> held;  // task index -> whole-scene index, when verifying
   Run r;
   for (uint32_t i = 0; i < pts.size(); ++i) {
     const double x = pts[i][axis];
     if (!(x >= box[axis] && x < box[3 + axis])) continue;
-    if (!whole.empty()) held.push_back(i);
-    const core::RegionDecision d = rc.assign(pts[i]);
+    const core::RegionDecision d = rc.assign(i, pts[i]);  // tagged by its whole-scene index
     ++r.held;
     if (!whole.empty()) {
       if (d.status != core::RegionStatus::unsettled && (d.status == core::RegionStatus::center) != (whole[i] == i))
         ++r.mismatches;
-      if (d.cell_settled && held[d.center] != whole[i]) ++r.mismatches;
+      if (d.cell_settled && d.center != whole[i]) ++r.mismatches;
     }
     const bool own = side == 0 ? x < x0 : x >= x0;
     if (!own) continue;
