@@ -84,9 +84,26 @@ std::unique_ptr<ItemReader> decisions_from(const ClusterShareInput& in, unsigned
 // Calls f(record, its center, share) for every record of [lo, hi) of split level `level`, in record order,
 // from the shares' decision files merged by record. Failure(io_error) when a record is decided twice, by no
 // share or past the index's records, or a decision names a later record as its center.
-template <class F>
+// ahead(center) is called kDecisionsAhead decisions before f is called with that center, so that a caller
+// who looks the center up at random (its rank among the centers) can fetch it meanwhile.
+constexpr size_t kDecisionsAhead = 16;
+template <class Ahead, class F>
 void for_each_decision(const ClusterShareInput& in, const ClusterShares& plan, size_t level, uint64_t lo, uint64_t hi,
-                       Progress& progress, F&& f) {
+                       Progress& progress, Ahead&& ahead, F&& f) {
+  struct Decision {
+    uint64_t record;
+    uint32_t center;
+    unsigned share;
+  };
+  Decision ring[kDecisionsAhead];
+  uint64_t queued = 0;  // decisions given to ahead; f has had all but the last min(queued, kDecisionsAhead)
+  auto decided = [&](uint64_t r, uint32_t center, unsigned s) {
+    ahead(center);
+    Decision& slot = ring[queued % kDecisionsAhead];
+    if (queued >= kDecisionsAhead) f(slot.record, slot.center, slot.share);
+    slot = {r, center, s};
+    ++queued;
+  };
   const uint64_t records = in.index.records;
   std::vector<std::unique_ptr<ItemReader>> decs;
   using Head = std::pair<uint32_t, unsigned>;  // (record, share)
@@ -115,10 +132,14 @@ void for_each_decision(const ClusterShareInput& in, const ClusterShares& plan, s
     const auto [record, s] = heads.top();
     heads.pop();
     if (record != r) missing(r, record < r ? "twice" : "by no share");
-    f(r, pending[s], s);
+    decided(r, pending[s], s);
     advance(s);
   }
   if (!heads.empty()) missing(heads.top().first, heads.top().first < hi ? "twice" : "past the weight index's records");
+  for (uint64_t k = queued > kDecisionsAhead ? queued - kDecisionsAhead : 0; k < queued; ++k) {
+    const Decision& d = ring[k % kDecisionsAhead];
+    f(d.record, d.center, d.share);
+  }
 }
 
 // The bits of a cell map before record `end`: record i's cell takes bit_width(rank(i)) bits, rank(i) the
@@ -269,7 +290,8 @@ struct Merge {
         plain.clear();
       };
       uint64_t bits = 0, made = info_cell;  // the bits put, and the cells made before the record (its rank)
-      for_each_decision(in, plan, level, lo, hi, progress, [&](uint64_t r, uint32_t center, unsigned s) {
+      auto fetch = [&](uint32_t center) { c.prefetch(center); };  // a center earlier in the order, at random
+      for_each_decision(in, plan, level, lo, hi, progress, fetch, [&](uint64_t r, uint32_t center, unsigned s) {
         if (!c.has(center))
           fail(Status::io_error, cluster_share_decisions_path(in.prefix, s, level) + ": a member of a record that is no center");
         const unsigned width = static_cast<unsigned>(std::bit_width(made));
