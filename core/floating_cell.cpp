@@ -168,14 +168,9 @@ uint32_t scan_fast(const Cell* pool, const Clusterer::Query& q, const double* p,
   for (int i = 0; i < 8; ++i) {
     const Cell* run = pool + q.run[i];
     for (uint32_t j = 0; j < q.count[i]; ++j) {
-      const double dx = p[0] - static_cast<double>(run[j].position[0]), dy = p[1] - static_cast<double>(run[j].position[1]),
-                   dz = p[2] - static_cast<double>(run[j].position[2]);
-      const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
-      const double d2 = dx * dx + dy * dy + dz * dz;
-      on_h |= m == h;
-      bool inside = m < h;
-      if constexpr (kSphere) inside &= d2 <= half_sq;
-      const double key = kNearest ? d2 : 0.0;
+      double key;
+      const bool inside = fast_inside<kNearest, kSphere>(p, static_cast<double>(run[j].position[0]), static_cast<double>(run[j].position[1]),
+                                                         static_cast<double>(run[j].position[2]), h, half_sq, on_h, key);
       const uint32_t c = run[j].id;
       const bool better = inside & ((key < best_key) | ((key == best_key) & (c < best)));
       best = better ? c : best;

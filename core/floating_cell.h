@@ -170,6 +170,24 @@ inline bool floating_cell_contains(const double* p, const double* center, double
   return shape != CellShape::sphere || d2 <= half_sq;
 }
 
+// The branch-free candidate test of the clusterers' fast scans (Clusterer's in floating_cell.cpp, the region
+// clusterer's in floating_cell_region.cpp): whether p lies inside the cell centred on c, judged on the
+// rounded differences, which is exact unless some |d| rounds onto h itself (then `on_h` is set, and the
+// caller redoes its scan with floating_cell_contains); `key` receives the choice's key, fl(d²) for the
+// nearest choice and 0 for the heaviest.
+template <bool kNearest, bool kSphere>
+inline bool fast_inside(const double* p, double cx, double cy, double cz, double h, double half_sq, bool& on_h,
+                        double& key) {
+  const double dx = p[0] - cx, dy = p[1] - cy, dz = p[2] - cz;
+  const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
+  const double d2 = dx * dx + dy * dy + dz * dz;
+  on_h |= m == h;
+  bool inside = m < h;
+  if constexpr (kSphere) inside &= d2 <= half_sq;
+  key = kNearest ? d2 : 0.0;
+  return inside;
+}
+
 // One clustering pass, all levels at once. Not thread-safe (one pass is inherently sequential: each
 // vertex's cell depends on every heavier vertex). Levels are independent, though: a Clusterer per level
 // (one cell size each), run on separate threads over the same vertex order, gives the same ids.

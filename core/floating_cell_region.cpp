@@ -221,13 +221,8 @@ Holders scan_fast(const Runs<Record>& runs, const double* p, double h, double ha
         if (e.kind == Record::kBoxLo) crowded = crowded || box_holds(e.position, run[j + 1].position, p);
         continue;
       }
-      const double dx = p[0] - e.position[0], dy = p[1] - e.position[1], dz = p[2] - e.position[2];
-      const double m = std::max(std::max(std::fabs(dx), std::fabs(dy)), std::fabs(dz));
-      const double d2 = dx * dx + dy * dy + dz * dz;
-      on_h |= m == h;
-      bool inside = m < h;
-      if constexpr (kSphere) inside &= d2 <= half_sq;
-      const double key = kNearest ? d2 : 0.0;
+      double key;
+      const bool inside = fast_inside<kNearest, kSphere>(p, e.position[0], e.position[1], e.position[2], h, half_sq, on_h, key);
       const bool settled = e.kind == Record::kSettled;
       const bool s_better = inside & settled & ((key < sk) | ((key == sk) & (e.tag < st)));
       const bool o_better = inside & !settled & ((key < ok) | ((key == ok) & (e.tag < ot)));
