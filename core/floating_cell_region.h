@@ -50,7 +50,8 @@
 //
 // Tags: the caller names each vertex by a tag (its record in the weight index, say), strictly increasing
 // in the order of the calls, and a settled cell is reported by its center's tag. The choice orders
-// centers by tag, which is their weight order (ties in the nearest choice go to the lower tag, the heavier center).
+// centers by tag, which is their weight order (ties in the nearest choice go to the lower tag, the
+// heavier center).
 //
 // One grid of one cell size: a level with a fine grid (Mata et al.'s labels) is two such grids, each over
 // the vertices its mask sends it. Memory: one record (32 bytes) per center and per unsettled vertex and
