@@ -195,6 +195,13 @@ struct Holders {
   bool crowded = false;
 };
 
+// The order of the choice (floating_cell.h): whether candidate a (its fl(d²), a_d2) comes before b, which
+// may be none (kNoCell): nearest, ties by the lower tag; or the lower tag.
+inline bool precedes(bool nearest, uint32_t a, double a_d2, uint32_t b, double b_d2) {
+  if (b == kNoCell) return true;
+  return nearest ? (a_d2 < b_d2 || (a_d2 == b_d2 && a < b)) : a < b;
+}
+
 template <class Record>
 struct Runs {
   const Record* first[8];
@@ -244,10 +251,6 @@ template <class Record, class BoxHolds>
 Holders scan_exact(const Runs<Record>& runs, const double* p, double h, double half_sq, ClusterOptions options,
                    BoxHolds box_holds) {
   const bool nearest = options.choice == CellChoice::nearest;
-  auto better = [&](uint32_t a, double a_d2, uint32_t b, double b_d2) {
-    if (b == kNoCell) return true;
-    return nearest ? (a_d2 < b_d2 || (a_d2 == b_d2 && a < b)) : a < b;
-  };
   Holders w;
   for (int i = 0; i < 8; ++i) {
     const Record* run = runs.first[i];
@@ -261,8 +264,8 @@ Holders scan_exact(const Runs<Record>& runs, const double* p, double h, double h
       if (!floating_cell_contains(p, e.position, h, half_sq, options.shape, d2)) continue;
       if (!nearest) d2 = 0;
       if (e.kind == Record::kSettled) {
-        if (better(e.tag, d2, w.settled, w.settled_d2)) w.settled = e.tag, w.settled_d2 = d2;
-      } else if (better(e.tag, d2, w.open, w.open_d2)) {
+        if (precedes(nearest, e.tag, d2, w.settled, w.settled_d2)) w.settled = e.tag, w.settled_d2 = d2;
+      } else if (precedes(nearest, e.tag, d2, w.open, w.open_d2)) {
         w.open = e.tag, w.open_d2 = d2;
       }
     }
@@ -276,11 +279,6 @@ RegionDecision RegionClusterer::decide(uint32_t tag, const double* p, const Quer
   if (tag < last_tag_) fail(Status::internal, "RegionClusterer: tags must be strictly increasing");
   last_tag_ = uint64_t{tag} + 1;
   const bool nearest = options_.choice == CellChoice::nearest, sphere = options_.shape == CellShape::sphere;
-  // The order of the choice (floating_cell.h): nearest, ties by the lower tag; or the lower tag.
-  auto better = [&](uint32_t a, double a_d2, uint32_t b, double b_d2) {
-    if (b == kNoCell) return true;
-    return nearest ? (a_d2 < b_d2 || (a_d2 == b_d2 && a < b)) : a < b;
-  };
   Runs<Record> runs;
   for (int i = 0; i < 8; ++i) {
     const Slot* s = find(q.square[i], q.hash[i]);
@@ -294,21 +292,18 @@ RegionDecision RegionClusterer::decide(uint32_t tag, const double* p, const Quer
                       : (sphere ? scan_fast<false, true>(runs, p, half_, half_sq_, box, boundary)
                                 : scan_fast<false, false>(runs, p, half_, half_sq_, box, boundary));
   if (boundary) w = scan_exact(runs, p, half_, half_sq_, options_, box);
-  const uint32_t settled = w.settled, open = w.open;
-  const double settled_d2 = w.settled_d2, open_d2 = w.open_d2;
-  const bool crowded = w.crowded;
 
   // A vertex the task does not hold, or a crowded square's unsettled vertex, may hold p.
-  const bool outside_may_hold = exposed(p) || crowded;
+  const bool outside_may_hold = exposed(p) || w.crowded;
   RegionDecision d;
-  if (settled != kNoCell) {
+  if (w.settled != kNoCell) {
     // invariant: a settled center's cell holds p, so p starts no cell in the whole-scene pass.
     d.status = RegionStatus::member;
-    d.cell_settled = !outside_may_hold && (open == kNoCell || !better(open, open_d2, settled, settled_d2));
-    if (d.cell_settled) d.center = settled;
+    d.cell_settled = !outside_may_hold && (w.open == kNoCell || !precedes(nearest, w.open, w.open_d2, w.settled, w.settled_d2));
+    if (d.cell_settled) d.center = w.settled;
     return d;
   }
-  const bool is_center = !outside_may_hold && open == kNoCell;
+  const bool is_center = !outside_may_hold && w.open == kNoCell;
   d.status = is_center ? RegionStatus::center : RegionStatus::unsettled;
   d.cell_settled = is_center;
   if (is_center) d.center = tag;

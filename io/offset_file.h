@@ -23,7 +23,9 @@ inline void pread_all(int fd, void* data, size_t bytes, uint64_t offset, const s
   while (bytes > 0) {
     const ssize_t n = ::pread(fd, p, std::min<size_t>(bytes, 1 << 30), static_cast<off_t>(offset));
     if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) fail(Status::io_error, path + ": cannot read at byte " + std::to_string(offset));
+    if (n <= 0)
+      fail(Status::io_error, path + ": cannot read at byte " + std::to_string(offset) +
+                                 (n < 0 ? std::string(": ") + std::strerror(errno) : std::string(": file shrank")));
     p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
   }
 }

@@ -244,18 +244,18 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
   for (size_t round = 0; round < chunks.size(); round += n_threads) {
     const size_t round_end = std::min(chunks.size(), round + n_threads);
     std::vector<std::vector<std::vector<CellInfo>>> sums(round_end - round);
-    std::vector<std::vector<std::unique_ptr<CellsReader>>> chunk_maps(round_end - round);
+    std::vector<std::vector<std::unique_ptr<CellsReader>>> chunk_cells(round_end - round);
     for (size_t k = round; k < round_end; ++k)
       for (const Range& range : chunks[k]) {
         sums[k - round].emplace_back(range.end - range.first, CellInfo{});
-        chunk_maps[k - round].push_back(std::make_unique<CellsReader>(
+        chunk_cells[k - round].push_back(std::make_unique<CellsReader>(
             cells_path(prefix, level_ids[range.level]), plain ? window.start.plain.at(range.level) : std::string(), first_record));
       }
     // Chunk k's sums over records [lo, hi): positions from `shared` (the read way), else fetched per block.
     auto sum_records = [&](size_t k, uint64_t lo, uint64_t hi, const Batch* shared) {
       const std::vector<Range>& chunk = chunks[k];
       std::vector<std::vector<CellInfo>>& outs = sums[k - round];
-      std::vector<std::unique_ptr<CellsReader>>& maps = chunk_maps[k - round];
+      std::vector<std::unique_ptr<CellsReader>>& readers = chunk_cells[k - round];
       constexpr uint64_t kAhead = 8;
       std::vector<uint32_t> cells(block);
       std::vector<double> grade(block, 0.0);
@@ -264,7 +264,7 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
         if (grades) grades->read(first * 8, n * 8, grade.data());
         for (size_t r = 0; r < chunk.size(); ++r) {
           std::vector<CellInfo>& out = outs[r];
-          maps[r]->read(std::span<uint32_t>(cells.data(), n));
+          readers[r]->read(std::span<uint32_t>(cells.data(), n));
           if (out.empty()) continue;
           const uint64_t base = chunk[r].first;
           for (uint64_t i = 0; i < n; ++i) {
@@ -303,7 +303,7 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
     }
     progress.check();
     for (size_t k = round; k < round_end; ++k)
-      for (size_t r = 0; r < chunks[k].size(); ++r) chunk_maps[k - round][r]->finish(records, cells_per_level[chunks[k][r].level]);
+      for (size_t r = 0; r < chunks[k].size(); ++r) chunk_cells[k - round][r]->finish(records, cells_per_level[chunks[k][r].level]);
     for (size_t k = round; k < round_end; ++k)
       for (size_t r = 0; r < chunks[k].size(); ++r) {
         const Range& range = chunks[k][r];
