@@ -23,6 +23,7 @@
 #include "stream/cluster_stage.h"
 #include "stream/ranked_bits.h"
 #include "stream/units.h"
+#include "stream/vertex_pairs.h"
 
 namespace lodstream::stream {
 
@@ -237,6 +238,7 @@ struct Merge {
         io::OffsetFile(cell_info_path(in.prefix, split[j]), O_WRONLY | O_CREAT | O_TRUNC).resize(c.ones() * center_bytes());
       io::OffsetFile(plain_cells_path(j), O_WRONLY | O_CREAT | O_TRUNC).resize(in.index.records * 4);
     }
+    remove_vertex_pairs(in.prefix);  // an earlier unit set's (each unit writes its own file whole)
   }
 
   // Phase 2, unit u: its records' cells in every split level's map, in place (the words shared with its
@@ -244,6 +246,18 @@ struct Merge {
   json map_unit(unsigned u, const std::vector<json>& centers_values, Progress& progress) const {
     const uint64_t lo = units.lo(u), hi = units.hi(u), records = in.index.records;
     json edges = json::array();
+    // The records' vertices (the order's ids), a buffer at a time, and their buckets' counts (the same
+    // for every split level) for the pairs by vertex range (stream/vertex_pairs.h).
+    const io::MappedFile order(in.index.order_path);
+    std::vector<uint32_t> ids(kPlainFlush);
+    std::vector<uint64_t> bucket_counts(kVertexPairBuckets, 0);
+    for (uint64_t r = lo; r < hi; r += kPlainFlush) {
+      const uint64_t n = std::min<uint64_t>(kPlainFlush, hi - r);
+      order.read(4 * r, 4 * n, ids.data());
+      for (uint64_t i = 0; i < n; ++i)
+        if (ids[i] >= in.index.vertices) fail(Status::io_error, order.path() + ": vertex id out of range");
+      count_vertex_pairs(std::span<const uint32_t>(ids.data(), n), in.index.vertices, bucket_counts);
+    }
     for (size_t j = 0; j < split.size(); ++j) {
       const size_t level = split[j];
       const RankedBits c = load_centers(j);
@@ -280,12 +294,17 @@ struct Merge {
         info.clear();
       };
       // The records' plain cells (the sums units' and the cells by vertex's), a buffer at a time from record `plain_at`.
+      // With them, the same cells as (vertex, cell) pairs by vertex range: the order's ids read a buffer at
+      // a time alongside.
       const io::OffsetFile plain_file(plain_cells_path(j), O_WRONLY);
       std::vector<uint32_t> plain;
       plain.reserve(kPlainFlush);
       uint64_t plain_at = lo;
+      VertexPairsWriter pairs(vertex_pairs_path(in.prefix, level, u), in.index.vertices, lo, hi, bucket_counts);
       auto flush_plain = [&] {
         plain_file.write(plain.data(), plain.size() * 4, plain_at * 4);
+        order.read(4 * plain_at, 4 * plain.size(), ids.data());
+        for (size_t i = 0; i < plain.size(); ++i) pairs.add(ids[i], plain[i]);
         plain_at += plain.size();
         plain.clear();
       };
@@ -310,6 +329,7 @@ struct Merge {
       });
       if (info_file) flush_info();
       flush_plain();
+      pairs.commit();
       if (bits == 0) continue;
       // Words [first, last] hold bits [start, start + bits); the first is shared unless the unit starts
       // it, the last unless the unit ends it or is the map's end.
@@ -353,6 +373,36 @@ void remove_plain_cells(const std::string& prefix) {
     const std::string name = e.path().filename().string();
     if (name.starts_with("cells-") && name.ends_with(".u32")) std::filesystem::remove(e.path(), ec);
   }
+  remove_vertex_pairs(prefix);
+}
+
+std::string vertex_pairs_path(const std::string& prefix, size_t level, unsigned unit) {
+  return cluster_merge_dir(prefix) + fmt::format("map/pairs-{}-{}.bin", level, unit);
+}
+
+std::vector<std::string> vertex_pairs_paths(const std::string& prefix, size_t level) {
+  std::vector<std::pair<unsigned, std::string>> found;
+  const std::string head = fmt::format("pairs-{}-", level);
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(cluster_merge_dir(prefix) + "map/", ec)) {
+    const std::string name = e.path().filename().string();
+    if (!name.starts_with(head) || !name.ends_with(".bin")) continue;
+    const std::string digits = name.substr(head.size(), name.size() - head.size() - 4);
+    if (digits.empty() || digits.size() > 4 || digits.find_first_not_of("0123456789") != std::string::npos) continue;
+    found.emplace_back(static_cast<unsigned>(std::stoul(digits)), e.path().string());
+  }
+  std::sort(found.begin(), found.end());
+  std::vector<std::string> paths;
+  for (auto& f : found) paths.push_back(std::move(f.second));
+  return paths;
+}
+
+void remove_vertex_pairs(const std::string& prefix) {
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(cluster_merge_dir(prefix) + "map/", ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.starts_with("pairs-") && name.ends_with(".bin")) std::filesystem::remove(e.path(), ec);
+  }
 }
 
 SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key,
@@ -376,13 +426,14 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
     }
     return out;
   }
-  // A unit at a time on each thread the budget holds: a bit and a half a record and a window of each share's
-  // files (two with centers).
-  const uint64_t unit_bytes = records * 3 / 16 + uint64_t{plan.count} * (m.centers_info() ? 2 : 1) * kReadWindow;
+  // A unit at a time on each thread the budget holds: a bit and a half a record, a window of each share's
+  // files (two with centers), and the buffers of the plain cells, their ids and their pairs.
+  const uint64_t buffers = 8 * kPlainFlush + kVertexPairBuckets * VertexPairsWriter::kBufferPairs * 8;
+  const uint64_t unit_bytes = records * 3 / 16 + uint64_t{plan.count} * (m.centers_info() ? 2 : 1) * kReadWindow + buffers;
   const uint64_t fit = in.memory_bytes ? std::max<uint64_t>(in.memory_bytes / unit_bytes, 1) : m.units.count;
   const unsigned threads = unit_threads(m.units.count, fit);
   // plain_cells: the map units write them (a set of units started by a build that did not lacks them).
-  const json unit_key{{"key", key}, {"split", m.split}, {"units", m.units.count}, {"records", records}, {"plain_cells", true}};
+  const json unit_key{{"key", key}, {"split", m.split}, {"units", m.units.count}, {"records", records}, {"plain_cells", true}, {"vertex_pairs", true}};
   const std::string centers_dir = m.dir + "centers/", map_dir = m.dir + "map/";
   m.bits_path = centers_dir + "centers.bits";
   start_once(centers_dir, m.bits_path, unit_key, {"merge-centers-"}, [&] {

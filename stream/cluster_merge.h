@@ -19,7 +19,8 @@
 //    every process that has seen every stamp writes them (the OR of their parts: the same value each time).
 //    For center representatives it copies its centers' positions from the shares' .ctr files (its first
 //    center in share s's file: the centers of s in the units before it) into cells-L.info at its first cell.
-//    It also writes its records' cells one uint32 a record into map/cells-L.u32 (plain_cells_path), in place.
+//    It also writes its records' cells one uint32 a record into map/cells-L.u32 (plain_cells_path), in place,
+//    and as (vertex, cell) pairs by vertex range into map/pairs-L-u.bin (vertex_pairs_path), its own file.
 // 3. sums (mean and quadric representatives; unit u, sums/merge-sums-u.json), once every map unit is stamped
 //    and the maps' shared words written: the u-th U-th of the split levels' cells (taken one level after
 //    another) summed by one pass over the records in weight order (sum_cell_info_range, stream/cluster_stage.h)
@@ -38,9 +39,10 @@
 // merge before the units, and the whole-scene clustering): every record's cell is the rank of its center,
 // written at the map bits of the records before it.
 // Disk: the plain cells, 4 bytes a record a split level (0.8 GB on the 193 M-triangle city's two split
-// levels), until the cells by vertex are written.
+// levels), and the pairs, 8 bytes a record a split level, until the cells by vertex are written.
 // Memory: a process runs as many units at once as it has threads and `memory_bytes` holds, each a bit and
-// a half a record of its level and a 16 MiB read window of each share's files; a sums unit takes its
+// a half a record of its level, a 16 MiB read window of each share's files and 10 MiB of write buffers
+// (plain cells, ids, pairs); a sums unit takes its
 // thread's share of `memory_bytes` (at least kMinSumsUnitBytes) and, when its cells' sums (88 bytes a cell)
 // do not fit, sums them in several passes.
 #pragma once
@@ -65,7 +67,14 @@ std::string cluster_merge_dir(const std::string& prefix);  // WORK/cluster-merge
 // vertex (stream/vertex_cells.h) read them rather than decode the map from its start, each of them. They
 // outlive the stage; remove_plain_cells removes them once the cells by vertex are written.
 std::string plain_cells_path(const std::string& prefix, size_t level);
+// Also removes the pairs (below).
 void remove_plain_cells(const std::string& prefix);
+// Map unit u's cells of split level `level` as (vertex, cell) pairs by vertex range (stream/vertex_pairs.h),
+// which it writes beside the plain cells for the cells by vertex. vertex_pairs_paths: every unit's that is
+// there, in unit order (empty: none).
+std::string vertex_pairs_path(const std::string& prefix, size_t level, unsigned unit);
+std::vector<std::string> vertex_pairs_paths(const std::string& prefix, size_t level);
+void remove_vertex_pairs(const std::string& prefix);
 
 struct SplitMerge {
   std::vector<uint64_t> cells;  // per level (0 for the whole levels)

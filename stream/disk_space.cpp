@@ -129,8 +129,8 @@ uint64_t report_work_bytes(const SceneCounts& c) { return store_bytes(c) + inges
 //   representative (12 to 48 bytes a cell, about 12 cells per 100 vertices over all levels on the city),
 //   and during emit a level emitted in batches' representatives (24 bytes a cell of the finest level,
 //   taken as half the cells); a sharded run's add every level's cells by vertex (4 bytes a stored vertex,
-//   stream/vertex_cells.h) and, until those are written, the clustering merge's plain cells (4 bytes a
-//   record a split level, stream/cluster_merge.h; every level counted).
+//   stream/vertex_cells.h) and, until those are written, the clustering merge's plain cells and pairs by
+//   vertex range (4 and 8 bytes a record a split level, stream/cluster_merge.h; every level counted).
 // The GLB's binary data and the levels' scratch files are in the output directory (simplify_output_bytes),
 // not here.
 uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative representative, bool sharded) {
@@ -141,7 +141,7 @@ uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative
                          (representative == Representative::mean ? 8 * v : 0);
   const uint64_t maps = static_cast<uint64_t>(levels) * ((v * static_cast<uint64_t>(std::bit_width(v)) + 7) / 8);
   const uint64_t info = v * 12 / 100 * cell_info_bytes(cell_info_kind(representative), c.single_precision);
-  const uint64_t reps = v * 6 / 100 * 24 + (sharded ? 8 * v * static_cast<uint64_t>(levels) : 0);
+  const uint64_t reps = v * 6 / 100 * 24 + (sharded ? 16 * v * static_cast<uint64_t>(levels) : 0);
   const uint64_t after_ingest = store_bytes(c) + weld + std::max(12 * v, index + maps + info + reps);
   return std::max(store_bytes(c) + ingest_transient_bytes(c), after_ingest);
 }

@@ -1184,14 +1184,14 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           for (size_t l = 0; l < cells.size(); ++l) files.push_back(stream::vertex_cells_path(prefix, l));
           st.reused = stage_in_units(work.file("shard-vertex-cells.json"), key, files, shard_lock, options.work_dir, [&] {
             std::vector<size_t> levels;  // else written by its cluster share
-            std::vector<std::string> plain;  // the clustering merge's plain cells, where they are
+            std::vector<stream::VertexCellsSource> sources;  // the clustering merge's pairs and plain cells, where they are
             for (size_t l = 0; l < cells.size(); ++l)
               if (l >= vertex_cells_written.size() || !vertex_cells_written[l]) {
                 levels.push_back(l);
                 const std::string p = stream::plain_cells_path(prefix, l);
-                plain.push_back(std::filesystem::exists(p) ? p : std::string());
+                sources.push_back({std::filesystem::exists(p) ? p : std::string(), stream::vertex_pairs_paths(prefix, l)});
               }
-            return stream::write_vertex_cells_in_units(prefix, canonical, meta.vertices, grade.records, levels, cells, plain, unit_count,
+            return stream::write_vertex_cells_in_units(prefix, canonical, meta.vertices, grade.records, levels, cells, sources, unit_count,
                                                        unit_index, key, plan.stage_bytes, progress);
           });
         });

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <bit>
 #include <cerrno>
 #include <utility>
 #include <cstring>
@@ -22,6 +23,7 @@
 #include "stream/cluster_stage.h"
 #include "stream/ranked_bits.h"
 #include "stream/units.h"
+#include "stream/vertex_pairs.h"
 #include "stream/weld_file.h"
 
 namespace lodstream::stream {
@@ -139,63 +141,94 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
   out.commit();
 }
 
-void write_vertex_cells_unit(const std::string& map_path, const std::string& plain_path, const std::string& order_path,
-                             const std::string& canonical_path, const std::string& path, uint64_t vertices, uint64_t records,
-                             uint64_t cells, unsigned unit, unsigned units, Progress& progress) {
+void write_vertex_cells_unit(const std::vector<VertexCellsLevel>& levels, const std::string& order_path,
+                             const std::string& canonical_path, uint64_t vertices, uint64_t records, unsigned unit, unsigned units,
+                             Progress& progress) {
   const uint64_t lo = vertices * unit / units, hi = vertices * (unit + 1) / units;
-  io::MappedFile order(order_path);
-  if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
   // The unit's welded vertices, and the canonical vertices before the unit that they name (a canonical id is
-  // smaller than its welded vertices' and is its own canonical vertex: weld_file.h).
+  // smaller than its welded vertices' and is its own canonical vertex: weld_file.h), with the buckets of the
+  // pairs by vertex range (vertex_pairs.h) that hold those.
   std::vector<std::pair<uint32_t, uint32_t>> welded;  // (vertex, canonical)
   RankedBits outside(canonical_path.empty() ? 0 : vertices);
+  uint64_t outside_buckets = 0;  // bit b: bucket b holds one
+  const unsigned shift = vertex_pair_shift(vertices);
   if (!canonical_path.empty()) {
     const WeldFile weld(canonical_path, vertices);
-    weld.for_each_welded([&](uint64_t v, uint32_t c) {
-      if (v < lo || v >= hi) return;
+    weld.for_each_welded_in(lo, hi, [&](uint64_t v, uint32_t c) {
       welded.emplace_back(static_cast<uint32_t>(v), c);
-      if (c < lo) outside.set(c);
+      if (c < lo) outside.set(c), outside_buckets |= uint64_t{1} << (c >> shift);
     });
     outside.count();
   }
-  std::vector<uint32_t> outside_cells(outside.ones(), kNoCell);
-  std::vector<uint32_t> buf(hi - lo, kNoCell);
-  // One decoding of the map in weight order: the unit's vertices' cells and those canonical vertices'.
+  std::vector<uint32_t> outside_cells(outside.ones());
+  std::vector<uint32_t> buf(hi - lo);
   const bool any_outside = !outside_cells.empty();
-  for_each_record_cell(map_path, plain_path, order, records, cells, vertices, progress, [&](uint32_t id, uint32_t cell) {
-    if (id - lo < hi - lo) buf[id - lo] = cell;  // unsigned: below lo wraps around
-    else if (any_outside && id < lo && outside.has(id)) outside_cells[outside.rank(id)] = cell;
-  });
-  // Welded vertices take their canonical vertex's cell (in increasing order: a canonical vertex in the unit
-  // is not welded, so its cell is final).
-  for (const auto& [v, c] : welded) buf[v - lo] = c >= lo ? buf[c - lo] : outside_cells[outside.rank(c)];
-  io::OffsetFile(path, O_WRONLY).write(buf.data(), 4 * buf.size(), 4 * lo);
+  std::unique_ptr<io::MappedFile> order;
+  for (const VertexCellsLevel& level : levels) {
+    progress.check();
+    std::fill(buf.begin(), buf.end(), kNoCell);
+    std::fill(outside_cells.begin(), outside_cells.end(), kNoCell);
+    auto keep_outside = [&](uint32_t id, uint32_t cell) {
+      if (id < lo && outside.has(id)) outside_cells[outside.rank(id)] = cell;
+    };
+    if (!level.pairs_paths.empty()) {
+      // The unit's buckets of every map unit's pairs; then, for the canonical vertices before the unit, the
+      // buckets that hold one.
+      const VertexPairs pairs(level.pairs_paths, vertices, records);
+      pairs.for_each_in(lo, hi, level.cells, [&](uint32_t id, uint32_t cell) { buf[id - lo] = cell; });
+      for (uint64_t m = outside_buckets; m; m &= m - 1) {
+        const uint64_t b = static_cast<uint64_t>(std::countr_zero(m));
+        pairs.for_each_in(b << shift, std::min(lo, (b + 1) << shift), level.cells, keep_outside);
+      }
+    } else {
+      // One decoding of the map (or read of the plain cells) in weight order: the unit's vertices' cells and
+      // those canonical vertices'.
+      if (!order) {
+        order = std::make_unique<io::MappedFile>(order_path);
+        if (order->size() != records * 4) fail(Status::io_error, order->path() + ": size does not match the weight index");
+      }
+      for_each_record_cell(level.map_path, level.plain_path, *order, records, level.cells, vertices, progress,
+                           [&](uint32_t id, uint32_t cell) {
+                             if (id - lo < hi - lo) buf[id - lo] = cell;  // unsigned: below lo wraps around
+                             else if (any_outside) keep_outside(id, cell);
+                           });
+    }
+    // Welded vertices take their canonical vertex's cell (in increasing order: a canonical vertex in the unit
+    // is not welded, so its cell is final).
+    for (const auto& [v, c] : welded) buf[v - lo] = c >= lo ? buf[c - lo] : outside_cells[outside.rank(c)];
+    io::OffsetFile(level.path, O_WRONLY).write(buf.data(), 4 * buf.size(), 4 * lo);
+  }
 }
 
 nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, const std::string& canonical_path, uint64_t vertices,
                                                    uint64_t records, const std::vector<size_t>& levels,
-                                                   const std::vector<uint64_t>& cells, const std::vector<std::string>& plain_paths,
+                                                   const std::vector<uint64_t>& cells, const std::vector<VertexCellsSource>& sources,
                                                    unsigned units, unsigned index, const nlohmann::ordered_json& key, uint64_t budget,
                                                    Progress& progress) {
   if (levels.empty()) return nullptr;
-  if (!plain_paths.empty() && plain_paths.size() != levels.size()) fail(Status::internal, "write_vertex_cells_in_units: plain cells a level");
+  if (!sources.empty() && sources.size() != levels.size()) fail(Status::internal, "write_vertex_cells_in_units: sources a level");
   // At least as many units as the budget needs (a unit's bytes below), and at least one a vertex.
   const uint64_t fixed = vertices * 3 / 16 + (4 << 20), room = budget > fixed + (1 << 20) ? budget - fixed : (1 << 20);
   units = static_cast<unsigned>(std::clamp<uint64_t>(std::max<uint64_t>(units, (12 * vertices + room - 1) / room), 1,
                                                      std::max<uint64_t>(vertices, 1)));
   const std::string dir = prefix + "vertex-cells-units/";
-  const nlohmann::ordered_json unit_key{{"key", key}, {"levels", levels}, {"units", units}};
+  const nlohmann::ordered_json unit_key{{"key", key}, {"levels", levels}, {"units", units}, {"by_range", true}};
   start_once(dir, vertex_cells_path(prefix, levels.back()), unit_key, {"vertex-cells-"}, [&] {
     for (size_t l : levels) io::OffsetFile(vertex_cells_path(prefix, l), O_WRONLY | O_CREAT | O_TRUNC).resize(4 * vertices);
   });
-  // A unit at a time on each thread the budget holds: 4 bytes a vertex of its share, a bit and a half a
-  // vertex for the canonical vertices it looks up, 8 bytes a welded vertex of its share.
+  std::vector<VertexCellsLevel> unit_levels;
+  for (size_t j = 0; j < levels.size(); ++j) {
+    VertexCellsLevel& L = unit_levels.emplace_back();
+    L.map_path = cells_path(prefix, levels[j]), L.path = vertex_cells_path(prefix, levels[j]), L.cells = cells[levels[j]];
+    if (!sources.empty()) L.plain_path = sources[j].plain_path, L.pairs_paths = sources[j].pairs_paths;
+  }
+  // A unit (a range of vertices, every level) at a time on each thread the budget holds: 4 bytes a vertex
+  // of its share, a bit and a half a vertex for the canonical vertices it looks up, 8 bytes a welded vertex
+  // of its share.
   const uint64_t unit_bytes = 12 * (vertices / units + 1) + vertices * 3 / 16 + (4 << 20);
-  const unsigned threads = unit_threads(uint64_t{units} * levels.size(), std::max<uint64_t>(budget / unit_bytes, 1));
-  const auto values = take_units_on_threads(dir, units * static_cast<unsigned>(levels.size()), index, threads, "vertex-cells", unit_key, [&](unsigned k) {
-    const size_t l = levels[k / units];
-    write_vertex_cells_unit(cells_path(prefix, l), plain_paths.empty() ? std::string() : plain_paths[k / units], order_path(prefix),
-                            canonical_path, vertex_cells_path(prefix, l), vertices, records, cells[l], k % units, units, progress);
+  const unsigned threads = unit_threads(units, std::max<uint64_t>(budget / unit_bytes, 1));
+  const auto values = take_units_on_threads(dir, units, index, threads, "vertex-cells", unit_key, [&](unsigned u) {
+    write_vertex_cells_unit(unit_levels, order_path(prefix), canonical_path, vertices, records, u, units, progress);
     return nlohmann::ordered_json::object();
   });
   return {{"units", units}, {"levels", levels}, {"unit", unit_figures(values)}};

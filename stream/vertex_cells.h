@@ -42,23 +42,34 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
                            const std::string& path, uint64_t vertices, uint64_t records, uint64_t cells, uint64_t budget,
                            Progress& progress);
 
-// Level `level`'s file as `units` units, by vertex range, for the prepare jobs of a sharded run
-// (stream/units.h): unit u writes the vertices [u·V/units, (u+1)·V/units) in place into `path` (sized
-// beforehand to 4 bytes a vertex), from one decoding of the map: its vertices' cells, and the cells of the
-// canonical vertices before it that its welded vertices name; then its welded vertices'. The same bytes
-// as write_vertex_cells_of. Memory: 4 bytes a vertex of the unit, 8 a welded vertex of it, a bit and a
-// half a vertex of the scene.
-// `plain_path`: the map's plain cells (stream/cluster_merge.h), read in place of decoding it; empty: the map.
-void write_vertex_cells_unit(const std::string& map_path, const std::string& plain_path, const std::string& order_path,
-                             const std::string& canonical_path, const std::string& path, uint64_t vertices, uint64_t records,
-                             uint64_t cells, unsigned unit, unsigned units, Progress& progress);
-// Every level of `levels` (cells[l] cells each) as `units` units a level, taken up by every process that
-// calls it and its threads (take_units_on_threads, from unit `index`) in prefix/vertex-cells-units/, the
-// files sized once for `key`; returns the units' figures (seconds, runners), or null for no level.
-// `plain_paths`: empty, or per level of `levels` its plain cells' path or "" (write_vertex_cells_unit).
+// Where one level's cells come from for the units below, and where its cells by vertex go.
+struct VertexCellsSource {
+  std::string plain_path;                // its plain cells (stream/cluster_merge.h), read in place of decoding its map; or ""
+  std::vector<std::string> pairs_paths;  // its pairs by vertex range (stream/vertex_pairs.h), read in place of both; or none
+};
+struct VertexCellsLevel : VertexCellsSource {
+  std::string map_path;  // its cell map
+  std::string path;      // its cells by vertex, sized beforehand to 4 bytes a vertex
+  uint64_t cells = 0;
+};
+
+// Every level of `levels`' file as `units` units by vertex range, for the prepare jobs of a sharded run
+// (stream/units.h): unit u writes the vertices [u·V/units, (u+1)·V/units) of each level in place. A level
+// with pairs reads only its range's buckets of them, and the buckets holding the canonical vertices before
+// the unit that its welded vertices name; one without, one decoding of the map (or one read of its plain
+// cells) in weight order, keeping those cells. Then its welded vertices take their canonical vertices'.
+// The same bytes as write_vertex_cells_of. Memory: 4 bytes a vertex of the unit, 8 a welded vertex of it,
+// a bit and a half a vertex of the scene.
+void write_vertex_cells_unit(const std::vector<VertexCellsLevel>& levels, const std::string& order_path,
+                             const std::string& canonical_path, uint64_t vertices, uint64_t records, unsigned unit, unsigned units,
+                             Progress& progress);
+// Every level of `levels` (cells[l] cells each) as `units` units, taken up by every process that calls it
+// and its threads (take_units_on_threads, from unit `index`) in prefix/vertex-cells-units/, the files sized
+// once for `key`; returns the units' figures (seconds, runners), or null for no level.
+// `sources`: empty, or per level of `levels` where its cells come from (write_vertex_cells_unit).
 nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, const std::string& canonical_path, uint64_t vertices,
                                                    uint64_t records, const std::vector<size_t>& levels,
-                                                   const std::vector<uint64_t>& cells, const std::vector<std::string>& plain_paths,
+                                                   const std::vector<uint64_t>& cells, const std::vector<VertexCellsSource>& sources,
                                                    unsigned units, unsigned index, const nlohmann::ordered_json& key, uint64_t budget,
                                                    Progress& progress);
 

@@ -112,18 +112,33 @@ class WeldFile {
   // Calls visit(v, canonical id) for every welded vertex, in increasing v, through short-lived windows.
   template <class Visit>
   void for_each_welded(Visit&& visit) const {
+    for_each_welded_in(0, vertices_, visit);
+  }
+  // The same for the welded vertices v in [lo, hi) alone: the words from lo's on, from the rank of lo's.
+  template <class Visit>
+  void for_each_welded_in(uint64_t lo, uint64_t hi, Visit&& visit) const {
     constexpr uint64_t kWords = 1 << 16;
-    const uint64_t w = weld_detail::words(vertices_), targets = weld_detail::targets_offset(vertices_);
-    uint64_t k = 0;
+    hi = std::min(hi, vertices_);
+    if (lo >= hi) return;
+    const uint64_t w = weld_detail::words(hi), targets = weld_detail::targets_offset(vertices_);
+    uint32_t rank = 0;
+    {
+      const io::Window rw = file_.map(weld_detail::ranks_offset(vertices_) + 4 * (lo / 64), weld_detail::ranks_offset(vertices_) + 4 * (lo / 64) + 4);
+      std::memcpy(&rank, rw.data(), 4);
+    }
+    uint64_t k = rank;
     io::Window tw;
     uint64_t t_first = 0, t_end = 0;
-    for (uint64_t first = 0; first < w; first += kWords) {
+    for (uint64_t first = lo / 64; first < w; first += kWords) {
       const uint64_t end = std::min(w, first + kWords);
       const io::Window bw = file_.map(16 + 8 * first, 16 + 8 * end);
       for (uint64_t i = first; i < end; ++i) {
         uint64_t word;
         std::memcpy(&word, bw.data() + 8 * (i - first), 8);
         for (; word; word &= word - 1, ++k) {
+          const uint64_t v = 64 * i + static_cast<uint64_t>(std::countr_zero(word));
+          if (v < lo) continue;
+          if (v >= hi) return;
           if (k >= t_end) {
             if (k >= welded_) fail(Status::io_error, file_.path() + ": more welded vertices than it lists (weld map)");
             t_first = k, t_end = std::min(welded_, k + (kWords << 1));
@@ -131,7 +146,7 @@ class WeldFile {
           }
           uint32_t target;
           std::memcpy(&target, tw.data() + 4 * (k - t_first), 4);
-          visit(64 * i + static_cast<uint64_t>(std::countr_zero(word)), target);
+          visit(v, target);
         }
       }
     }

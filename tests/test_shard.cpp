@@ -36,6 +36,7 @@
 #include "stream/scene_store.h"
 #include "stream/shard.h"
 #include "stream/vertex_cells.h"
+#include "stream/vertex_pairs.h"
 #include "test_util.h"
 
 namespace lodstream {
@@ -194,26 +195,46 @@ TEST(Shard, VertexCellsInRangesAgree) {
     stream::write_vertex_cells(prefix, weld, vertices, records, l, merged.levels[l].cells, 4 * 4096, progress);
     EXPECT_TRUE(slurp(path) == from_map);
     // As units (the prepare jobs'), each by vertex range: 1, 3 and 7, run in reverse order (a welded
-    // vertex's canonical vertex before its unit is found in the unit's own pass over the map); each from
-    // the map, and from its plain cells (one uint32 a record, as the clustering merge's map units write them).
+    // vertex's canonical vertex before its unit is found in the unit's own pass over the map, or in the
+    // buckets of the pairs that hold it); each from the map, from its plain cells (one uint32 a record, as
+    // the clustering merge's map units write them), and from its pairs by vertex range (as they write them
+    // too, here three map units' files, in buckets of a few vertices since the room is small).
     const std::string plain = dir.file("plain-cells.u32");
+    std::vector<std::string> pairs;
     {
       stream::CellMapReader map(stream::cells_path(prefix, l));
-      std::vector<uint32_t> cells(records);
+      std::vector<uint32_t> cells(records), ids(records);
       map.read(cells);
       map.finish(records, merged.levels[l].cells);
       io::OffsetFile(plain, O_WRONLY | O_CREAT | O_TRUNC).write(cells.data(), 4 * records, 0);
+      io::OffsetFile(stream::order_path(prefix), O_RDONLY).read(ids.data(), 4 * records, 0);
+      for (uint64_t u = 0; u < 3; ++u) {
+        const uint64_t lo = records * u / 3, hi = records * (u + 1) / 3;
+        std::vector<uint64_t> counts(stream::kVertexPairBuckets, 0);
+        stream::count_vertex_pairs(std::span<const uint32_t>(ids.data() + lo, hi - lo), vertices, counts);
+        pairs.push_back(dir.file("pairs-" + std::to_string(u) + ".bin"));
+        stream::VertexPairsWriter w(pairs.back(), vertices, lo, hi, counts);
+        for (uint64_t r = lo; r < hi; ++r) w.add(ids[r], cells[r]);
+        w.commit();
+      }
     }
-    for (const std::string& from : {std::string(), plain})
+    EXPECT_GT(vertices >> stream::vertex_pair_shift(vertices), 31u) << "the pairs have many buckets";
+    for (int from = 0; from < 3; ++from)
       for (unsigned units : {1u, 3u, 7u}) {
-        SCOPED_TRACE("units " + std::to_string(units) + (from.empty() ? " from the map" : " from the plain cells"));
+        SCOPED_TRACE("units " + std::to_string(units) + (from == 0 ? " from the map" : from == 1 ? " from the plain cells" : " from the pairs"));
         std::filesystem::remove(path);
         io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize(4 * vertices);
+        stream::VertexCellsLevel level;
+        level.map_path = stream::cells_path(prefix, l), level.path = path, level.cells = merged.levels[l].cells;
+        if (from == 1) level.plain_path = plain;
+        if (from == 2) level.pairs_paths = pairs;
         for (unsigned u = units; u-- > 0;)
-          stream::write_vertex_cells_unit(stream::cells_path(prefix, l), from, stream::order_path(prefix), weld, path, vertices,
-                                          records, merged.levels[l].cells, u, units, progress);
+          stream::write_vertex_cells_unit({level}, stream::order_path(prefix), weld, vertices, records, u, units, progress);
         EXPECT_TRUE(slurp(path) == from_map);
       }
+    // Pairs that miss a map unit's file are refused.
+    pairs.pop_back();
+    EXPECT_THROW(stream::VertexPairs(pairs, vertices, records), Failure);
   }
 
   // The store's block boxes, which the run wrote as units: one pass gives the same bytes, and so do 1, 3
