@@ -41,7 +41,7 @@
 // Disk: the plain cells, 4 bytes a record a split level (0.8 GB on the 193 M-triangle city's two split
 // levels), and the pairs, 8 bytes a record a split level, until the cells by vertex are written.
 // Memory: a process runs as many units at once as it has threads and `memory_bytes` holds, each a bit and
-// a half a record of its level, a 16 MiB read window of each share's files and 10 MiB of write buffers
+// a half a record of its level, a 1 MiB read buffer of each share's files and 10 MiB of write buffers
 // (plain cells, ids, pairs); a sums unit takes its
 // thread's share of `memory_bytes` (at least kMinSumsUnitBytes) and, when its cells' sums (88 bytes a cell)
 // do not fit, sums them in several passes.
