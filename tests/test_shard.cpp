@@ -214,7 +214,7 @@ TEST(Shard, VertexCellsInRangesAgree) {
         stream::count_vertex_pairs(std::span<const uint32_t>(ids.data() + lo, hi - lo), vertices, counts);
         pairs.push_back(dir.file("pairs-" + std::to_string(u) + ".bin"));
         stream::VertexPairsWriter w(pairs.back(), vertices, lo, hi, counts);
-        for (uint64_t r = lo; r < hi; ++r) w.add(ids[r], cells[r]);
+        for (uint64_t rec = lo; rec < hi; ++rec) w.add(ids[rec], cells[rec]);
         w.commit();
       }
     }
