@@ -296,9 +296,9 @@ struct Merge {
         info_cell += info.size() / center_bytes();
         info.clear();
       };
-      // The records' plain cells (the sums units' and the cells by vertex's), a buffer at a time from record `plain_at`.
-      // With them, the same cells as (vertex, cell) pairs by vertex range: the order's ids read a buffer at
-      // a time alongside.
+      // The records' plain cells (the sums units'), a buffer at a time from record `plain_at`; with them,
+      // the same cells as (vertex, cell) pairs by vertex range (the cells by vertex's), the order's ids read
+      // a buffer at a time alongside.
       const io::OffsetFile plain_file(plain_cells_path(j), O_WRONLY);
       std::vector<uint32_t> plain;
       plain.reserve(kPlainFlush);
@@ -435,7 +435,8 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   const uint64_t unit_bytes = records * 3 / 16 + uint64_t{plan.count} * (m.centers_info() ? 2 : 1) * kReadBuffer + buffers;
   const uint64_t fit = in.memory_bytes ? std::max<uint64_t>(in.memory_bytes / unit_bytes, 1) : m.units.count;
   const unsigned threads = unit_threads(m.units.count, fit);
-  // plain_cells: the map units write them (a set of units started by a build that did not lacks them).
+  // plain_cells, vertex_pairs: the map units write them (a set of units started by a build that did not
+  // lacks them).
   const json unit_key{{"key", key}, {"split", m.split}, {"units", m.units.count}, {"records", records}, {"plain_cells", true}, {"vertex_pairs", true}};
   const std::string centers_dir = m.dir + "centers/", map_dir = m.dir + "map/";
   m.bits_path = centers_dir + "centers.bits";

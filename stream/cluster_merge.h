@@ -63,9 +63,9 @@ inline constexpr uint64_t kMinSumsUnitBytes = uint64_t{256} << 20;
 
 std::string cluster_merge_dir(const std::string& prefix);  // WORK/cluster-merge/
 // Split level `level`'s cells one uint32 a record in weight order (PlainCellReader, stream/cell_map_file.h),
-// which the map units write beside the packed map: the sums units (phase 3) and the split levels' cells by
-// vertex (stream/vertex_cells.h) read them rather than decode the map from its start, each of them. They
-// outlive the stage; remove_plain_cells removes them once the cells by vertex are written.
+// which the map units write beside the packed map: the sums units (phase 3) read them rather than decode the
+// map from its start, each of them (the split levels' cells by vertex read the pairs below). They outlive
+// the stage; remove_plain_cells removes them once the cells by vertex are written.
 std::string plain_cells_path(const std::string& prefix, size_t level);
 // Also removes the pairs (below).
 void remove_plain_cells(const std::string& prefix);

@@ -50,7 +50,7 @@
 // exactly: the ids are selected in one read of the column, their positions copied in a second), freed
 // after the gather), a bit and a half per store vertex while selecting, and the RegionClusterers' entries and slots
 // (core/floating_cell_region.h; the split levels run at once, one thread each); of the merge, a bit and
-// a half per record and a 16 MiB window of each share's files, per split level (merged at once when the
+// a half per record and a 1 MiB read buffer of each share's files, per split level (merged at once when the
 // budget holds them all, else one after another).
 #pragma once
 

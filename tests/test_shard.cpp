@@ -904,8 +904,8 @@ TEST(ClusterShares, MergeUnitsTakenByThreadsAtOnceGiveOneMachinesMaps) {
 }
 
 // Every vertex of a 150 x 150 x 134 lattice (3.0 M, 1 apart, cells of 0.5) is a center: as 2 shares under
-// center representatives, each share's centers (1.5 M, 18 MB of floats) outrun the merge's 16 MiB read
-// window, and the map and info are still the whole pass's.
+// center representatives, each share's centers (1.5 M, 18 MB of floats) outrun the merge's 1 MiB read
+// buffer many times, and the map and info are still the whole pass's.
 TEST(ClusterShares, ManyCentersMergeAcrossReadWindows) {
   TempDir dir;
   const int nx = 150, ny = 150, nz = 134;
