@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <map>
@@ -241,7 +242,6 @@ struct Merge {
         io::OffsetFile(cell_info_path(in.prefix, split[j]), O_WRONLY | O_CREAT | O_TRUNC).resize(c.ones() * center_bytes());
       io::OffsetFile(plain_cells_path(j), O_WRONLY | O_CREAT | O_TRUNC).resize(in.index.records * 4);
     }
-    remove_vertex_pairs(in.prefix);  // an earlier unit set's (each unit writes its own file whole)
   }
 
   // Phase 2, unit u: its records' cells in every split level's map, in place (the words shared with its
@@ -370,13 +370,13 @@ std::string plain_cells_path(const std::string& prefix, size_t level) {
   return cluster_merge_dir(prefix) + fmt::format("map/cells-{}.u32", level);
 }
 
-void remove_plain_cells(const std::string& prefix) {
+void remove_plain_cells_and_pairs(const std::string& prefix) {
   std::error_code ec;
   for (const auto& e : std::filesystem::directory_iterator(cluster_merge_dir(prefix) + "map/", ec)) {
     const std::string name = e.path().filename().string();
-    if (name.starts_with("cells-") && name.ends_with(".u32")) std::filesystem::remove(e.path(), ec);
+    if ((name.starts_with("cells-") && name.ends_with(".u32")) || (name.starts_with("pairs-") && name.ends_with(".bin")))
+      std::filesystem::remove(e.path(), ec);
   }
-  remove_vertex_pairs(prefix);
 }
 
 std::string vertex_pairs_path(const std::string& prefix, size_t level, unsigned unit) {
@@ -384,28 +384,19 @@ std::string vertex_pairs_path(const std::string& prefix, size_t level, unsigned 
 }
 
 std::vector<std::string> vertex_pairs_paths(const std::string& prefix, size_t level) {
-  std::vector<std::pair<unsigned, std::string>> found;
-  const std::string head = fmt::format("pairs-{}-", level);
+  std::vector<std::pair<unsigned, std::string>> found;  // (unit, path)
   std::error_code ec;
   for (const auto& e : std::filesystem::directory_iterator(cluster_merge_dir(prefix) + "map/", ec)) {
     const std::string name = e.path().filename().string();
-    if (!name.starts_with(head) || !name.ends_with(".bin")) continue;
-    const std::string digits = name.substr(head.size(), name.size() - head.size() - 4);
-    if (digits.empty() || digits.size() > 4 || digits.find_first_not_of("0123456789") != std::string::npos) continue;
-    found.emplace_back(static_cast<unsigned>(std::stoul(digits)), e.path().string());
+    unsigned l = 0, u = 0;
+    int end = 0;
+    if (std::sscanf(name.c_str(), "pairs-%u-%u.bin%n", &l, &u, &end) == 2 && static_cast<size_t>(end) == name.size() && l == level)
+      found.emplace_back(u, e.path().string());
   }
   std::sort(found.begin(), found.end());
   std::vector<std::string> paths;
   for (auto& f : found) paths.push_back(std::move(f.second));
   return paths;
-}
-
-void remove_vertex_pairs(const std::string& prefix) {
-  std::error_code ec;
-  for (const auto& e : std::filesystem::directory_iterator(cluster_merge_dir(prefix) + "map/", ec)) {
-    const std::string name = e.path().filename().string();
-    if (name.starts_with("pairs-") && name.ends_with(".bin")) std::filesystem::remove(e.path(), ec);
-  }
 }
 
 SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key,
@@ -446,7 +437,8 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   const std::vector<json> centers = take_units_on_threads(centers_dir, m.units.count, index, threads, "merge-centers", unit_key,
                                                         [&](unsigned u) { return m.centers_unit(u, progress); });
   progress.report("cluster", 0.2);
-  start_once(map_dir, cells_path(in.prefix, m.split.back()), unit_key, {"merge-map-"}, [&] { m.size_outputs(); });
+  // An older start's stamps and pairs go (each unit writes its pairs file whole).
+  start_once(map_dir, cells_path(in.prefix, m.split.back()), unit_key, {"merge-map-", "pairs-"}, [&] { m.size_outputs(); });
   const std::vector<json> maps = take_units_on_threads(map_dir, m.units.count, index, threads, "merge-map", unit_key,
                                                      [&](unsigned u) { return m.map_unit(u, centers, progress); });
   m.write_edges(maps);

@@ -65,16 +65,15 @@ std::string cluster_merge_dir(const std::string& prefix);  // WORK/cluster-merge
 // Split level `level`'s cells one uint32 a record in weight order (PlainCellReader, stream/cell_map_file.h),
 // which the map units write beside the packed map: the sums units (phase 3) read them rather than decode the
 // map from its start, each of them (the split levels' cells by vertex read the pairs below). They outlive
-// the stage; remove_plain_cells removes them once the cells by vertex are written.
+// the stage; remove_plain_cells_and_pairs removes them once the cells by vertex are written.
 std::string plain_cells_path(const std::string& prefix, size_t level);
-// Also removes the pairs (below).
-void remove_plain_cells(const std::string& prefix);
+// Removes the plain cells and the pairs (below) of every split level.
+void remove_plain_cells_and_pairs(const std::string& prefix);
 // Map unit u's cells of split level `level` as (vertex, cell) pairs by vertex range (stream/vertex_pairs.h),
 // which it writes beside the plain cells for the cells by vertex. vertex_pairs_paths: every unit's that is
 // there, in unit order (empty: none).
 std::string vertex_pairs_path(const std::string& prefix, size_t level, unsigned unit);
 std::vector<std::string> vertex_pairs_paths(const std::string& prefix, size_t level);
-void remove_vertex_pairs(const std::string& prefix);
 
 struct SplitMerge {
   std::vector<uint64_t> cells;  // per level (0 for the whole levels)

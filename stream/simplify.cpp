@@ -1195,8 +1195,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                                        unit_index, key, plan.stage_bytes, progress);
           });
         });
-        // Every cells-by-vertex unit is done (the stage is stamped): no process reads the plain cells again.
-        stream::remove_plain_cells(prefix);
+        // Every cells-by-vertex unit is done (the stage is stamped): no process reads the plain cells or the
+        // pairs again.
+        stream::remove_plain_cells_and_pairs(prefix);
         shard_lock.reset();
         if (so.shard_prepare) return;
         if (so.write_tiles)

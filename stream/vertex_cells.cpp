@@ -150,6 +150,7 @@ void write_vertex_cells_unit(const std::vector<VertexCellsLevel>& levels, const 
   // pairs by vertex range (vertex_pairs.h) that hold those.
   std::vector<std::pair<uint32_t, uint32_t>> welded;  // (vertex, canonical)
   RankedBits outside(canonical_path.empty() ? 0 : vertices);
+  static_assert(kVertexPairBuckets <= 64, "a bit a bucket in one word");
   uint64_t outside_buckets = 0;  // bit b: bucket b holds one
   const unsigned shift = vertex_pair_shift(vertices);
   if (!canonical_path.empty()) {
