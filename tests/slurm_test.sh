@@ -1,19 +1,19 @@
 #!/bin/bash
 # `lodstream slurm` on a one-node Slurm cluster started here (tools/slurm_local_cluster.sh: munged,
 # slurmctld and slurmd as root, in a temporary directory): the sample room and, with ../shared/data, a
-# 2 M-triangle city from make-scene.sh, simplified as 1, 3 and 4 tasks (grade, cluster, prepare, task and
-# merge jobs; the 3 tasks' run with --ingest-ranges yes, in a fresh work directory, so that an ingest array
+# 2 M-triangle city from make-scene.sh, simplified as 1, 3 and 4 tasks (grade, cluster, task and merge
+# jobs, no prepare job: the tasks take up the shared stages' units; the 3 tasks' run with --ingest-ranges yes, in a fresh work directory, so that an ingest array
 # parses 3 byte ranges and the first grade share joins them into the scene store; the others with the
 # default, auto, which for these binary inputs submits no ingest array) must give every output file byte
 # for byte as one machine's run (manifest.json: equal but for timings,
 # peaks and the tasks' list); the tileset passes the 3D Tiles validator when it is installed; a task killed
 # with SIGKILL (LODSTREAM_TEST_KILL_AT, just before its summary) fails the run with 137, `lodstream merge`
 # then refuses naming it (exit 66), and `lodstream slurm resubmit` reruns it alone to the same bytes;
-# likewise an ingest range killed before its segment is complete: the prepare job does not run, a prepare
-# by hand refuses naming the range (exit 66), and resubmitting reruns that range alone, then the chain.
-# The 3 tasks' run checks the grade and cluster arrays' shares and the prepare array; a grade share or a
-# cluster share killed with SIGKILL is run by the next step (a cluster share, the prepare jobs), and the
-# run ends with exit 0 and one machine's bytes.
+# likewise an ingest range killed before its segment is complete: no task runs, a prepare by hand refuses
+# naming the range (exit 66), and resubmitting reruns that range alone, then the chain.
+# The 3 tasks' run checks the grade and cluster arrays' shares and that the tasks took up the clustering
+# merge's units; a grade share or a cluster share killed with SIGKILL is run by the next step (a cluster
+# share, a task), and the run ends with exit 0 and one machine's bytes.
 # `lodstream slurm report` as 3 tasks on the room's levels (and the city's) must give report.html and the
 # CSVs byte for byte as one machine's report, and report.json equal but for timings and counters, each
 # task tracing its range of the original's primitives; a report task killed with SIGKILL is named by the
@@ -88,9 +88,9 @@ run_scene() {
     fi
     if [ "$n" = 3 ]; then
       for r in 0 1 2; do [ "$(cat "$out/slurm/status/ingest-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: ingest range $r did not finish"; done
-      ls "$w"/ingest-ranges/*.seg >/dev/null 2>&1 && fail "$name: the prepare job did not join the ingest ranges"
+      ls "$w"/ingest-ranges/*.seg >/dev/null 2>&1 && fail "$name: the first grade share did not join the ingest ranges"
       grep -q "range        0 of 3" "$out/slurm/logs/ingest-0.out" || fail "$name: ingest range 0 did not say what it parsed"
-      echo "  3 ingest ranges joined by the prepare job: $(grep -h '^range' "$out"/slurm/logs/ingest-*.out | awk '{print $5}' | paste -sd+) bytes parsed"
+      echo "  3 ingest ranges joined by the first grade share: $(grep -h '^range' "$out"/slurm/logs/ingest-*.out | awk '{print $5}' | paste -sd+) bytes parsed"
       # The grade and cluster arrays: every share finished, did its share, and the next step removed them.
       for kind in grade cluster; do
         for r in 0 1 2; do
@@ -100,13 +100,11 @@ run_scene() {
         [ -e "$w/$kind-shares" ] && fail "$name: the step after the $kind array left its spent shares"
         echo "  3 $kind shares: $(grep -h "^stage        $kind " "$out"/slurm/logs/$kind-*.out | awk '{print $3 " s"}' | paste -sd' ')"
       done
-      # The prepare array: every job finished, and the cluster stage's stamp lists the clustering merge's units.
-      for r in 0 1 2; do
-        [ "$(cat "$out/slurm/status/prepare-$r.rc" 2>/dev/null)" = 0 ] || fail "$name: prepare job $r did not finish"
-      done
+      # No prepare job: the tasks took up the clustering merge's units (the cluster stage's stamp lists them).
+      [ -e "$out/slurm/prepare.sbatch" ] && fail "$name: a prepare job in a simplify chain"
       python3 -c 'import json,sys; v=json.load(open(sys.argv[1]))["value"]["merge_units"]; assert len(v["map"]["seconds"])==3' \
         "$w/cluster.json" || fail "$name: the cluster stage's stamp does not list 3 merge units"
-      echo "  3 prepare jobs: $(grep -h "^stage        cluster " "$out"/slurm/logs/prepare-*.out | awk '{print $3 " s"}' | paste -sd' ')"
+      echo "  3 tasks' cluster stages (the merge's units): $(grep -h "^stage        cluster " "$out"/slurm/logs/task-*.out | awk '{print $3 " s"}' | paste -sd' ')"
     fi
     python3 -c 'import json,sys; m=json.load(open(sys.argv[1])); assert m["shards"]["count"]==int(sys.argv[2]) and len(m["shards"]["tasks"])==int(sys.argv[2])' \
       "$out/manifest.json" "$n" || fail "$name --shards $n: the manifest does not list every task"
@@ -147,18 +145,18 @@ run_room_killed() {
 show_run() { cat "$tmp/$1.log"; tail -n 20 "$tmp/room-$1"/slurm/logs/*.out; }
 
 # A grade share and a cluster share killed in one run (both kill points set): the first cluster share
-# (afterany) grades share 1 under the lock before it merges the grading shares, the prepare job (afterany)
-# runs cluster share 1 itself, and the run ends with exit 0 and one machine's bytes.
+# (afterany) grades share 1 under the lock before it merges the grading shares, a task (afterany) runs
+# cluster share 1 itself, and the run ends with exit 0 and one machine's bytes.
 run_room_killed kill-shares grade-share-1,cluster-share-1
 [ $rc -eq 0 ] || { fail "a grade and a cluster share killed with SIGKILL: the run exited $rc, not 0"; show_run kill-shares; }
 [ "$(cat "$out/slurm/status/grade-1.rc" 2>/dev/null)" = 137 ] || fail "grade share 1 was not killed"
 [ "$(cat "$out/slurm/status/cluster-1.rc" 2>/dev/null)" = 137 ] || fail "cluster share 1 was not killed"
-for log in "$out"/slurm/logs/prepare-*.out; do
+for log in "$out"/slurm/logs/task-*.out; do
   grep -q "^stage        grade .*(reused" "$log" || fail "the cluster array did not merge the grading shares ($log)"
 done
-grep -h "^stage        cluster " "$out"/slurm/logs/prepare-*.out | grep -qv "(reused" || fail "no prepare job clustered"
+grep -h "^stage        cluster " "$out"/slurm/logs/task-*.out | grep -qv "(reused" || fail "no task clustered"
 same_outputs "$tmp/room-one" "$out"
-echo "killed grade and cluster shares: run exit $rc, a cluster share graded share 1 and merged, the prepare job ran cluster share 1"
+echo "killed grade and cluster shares: run exit $rc, a cluster share graded share 1 and merged, a task ran cluster share 1"
 
 # A weld unit's holder killed just before the unit's stamp (every grading share that runs unit 1 dies
 # there, SIGKILL releasing its claim): a share waiting for the unit runs it in turn, and when none is left
@@ -170,13 +168,13 @@ same_outputs "$tmp/room-one" "$out"
 echo "killed weld unit: run exit $rc, grading shares' exits $(cat "$out"/slurm/status/grade-*.rc | tr '\n' ' ')"
 
 # A grading merge unit's holder killed just before the unit's stamp: every clustering share that runs
-# unit 1 dies there (SIGKILL releasing its claim), and so does the prepare job, which runs it in turn; the
-# run exits 137 with the other units stamped, and `slurm resubmit` (no kill point now) runs unit 1 alone
-# and ends with one machine's bytes.
+# unit 1 dies there (SIGKILL releasing its claim), and so does every task, which runs it in turn; the run
+# exits 137 with the other units stamped, and `slurm resubmit` (no kill point now; no task finished, so
+# the chain from its start) runs unit 1 alone and ends with one machine's bytes.
 run_room_killed kill-merge merge-1.json
 [ $rc -eq 137 ] || { fail "a grading merge unit's holder killed with SIGKILL: the run exited $rc, not 137"; show_run kill-merge; }
 grep -qx 137 "$out"/slurm/status/cluster-*.rc || fail "no clustering share was killed at merge unit 1"
-exits=$(cat "$out"/slurm/status/cluster-*.rc "$out"/slurm/status/prepare-*.rc | tr '\n' ' ')
+exits=$(cat "$out"/slurm/status/cluster-*.rc "$out"/slurm/status/task-*.rc | tr '\n' ' ')
 units=$(ls "$tmp/room-work-kill-merge/grade-merge/" 2>/dev/null | grep -c '^merge-[0-9]*\.json$')
 [ -e "$tmp/room-work-kill-merge/grade-merge/merge-1.json" ] && fail "merge unit 1 was stamped"
 [ "$units" -eq 2 ] || fail "not the two other merge units stamped: $units"
@@ -185,7 +183,7 @@ rc=$?
 [ $rc -eq 0 ] || { fail "resubmit after a killed merge unit: exit $rc"; cat "$tmp/resubmit-merge.log"; }
 same_outputs "$tmp/room-one" "$out"
 [ -e "$tmp/room-work-kill-merge/grade-merge" ] && fail "the grading merge's units outlived the cluster stage"
-echo "killed grading merge unit: run exit 137 with $units units stamped, clustering shares' and prepare's exits $exits; resubmitted: exit $rc"
+echo "killed grading merge unit: run exit 137 with $units units stamped, clustering shares' and tasks' exits $exits; resubmitted: exit $rc"
 
 # An ingest range killed just before its segment is complete, in a fresh work directory.
 out=$tmp/room-kill-ingest
@@ -194,7 +192,7 @@ LODSTREAM_TEST_KILL_AT=range-1-of-3.seg "$cli" slurm simplify "$room" -o "$out" 
 rc=$?
 [ $rc -eq 137 ] || fail "an ingest range killed with SIGKILL: the run exited $rc, not 137"
 grep -q "ingest range 1 failed with exit 137" "$tmp/kill-ingest.log" || fail "the run does not name the killed range: $(cat "$tmp/kill-ingest.log")"
-ls "$out"/slurm/status/prepare-*.rc >/dev/null 2>&1 && fail "the prepare jobs ran after a failed ingest range"
+ls "$out"/slurm/status/task-*.rc >/dev/null 2>&1 && fail "the tasks ran after a failed ingest range"
 msg=$("$cli" simplify "$room" -o "$out" --work "$tmp/room-work-kill" --shard-prepare --no-space-check 2>&1); rc=$?
 [ $rc -eq 66 ] || fail "a prepare with an ingest range missing: exit $rc, not 66"
 echo "$msg" | grep -q "range 1 missing" || fail "the prepare does not name the missing range: $msg"

@@ -7,13 +7,13 @@
 // share takes up weld units until the weld is done, then the weld map's units, the first back under the
 // lock makes the grading plan, and each grades and sorts its share: stream/grade_shares.h)
 // and a cluster array job of N shares (they take up the grading shares' merge as units, then each
-// clusters its share: stream/cluster_shares.h); then a prepare job (the shared stages: for simplify an
-// array of N jobs, which take up as units the clustering shares' merge (stream/cluster_merge.h), the block
-// boxes and the split levels' cells by vertex (a whole level's come from its cluster share), the first back
-// under the lock stamping each stage; for a report one job, the join alone), an array job of N tasks
-// after it (--dependency=afterok), and the merge after the array. The cluster array and the prepare job
-// wait for the array before them to end, not to succeed (afterany): the share that did not finish is run
-// by the next step. The scheduler is Slurm's; lodstream adds none of its own. Each script records its command's exit
+// clusters its share: stream/cluster_shares.h); then the array job of N tasks. A simplify task first takes
+// up, as units, the rest of the shared stages: the clustering shares' merge (stream/cluster_merge.h), the
+// block boxes and the split levels' cells by vertex (a whole level's come from its cluster share), the
+// first back under the lock stamping each stage; then it emits its share. A report has a prepare job (the
+// join alone) before its tasks (--dependency=afterok). The merge runs after the task array. The cluster
+// array and a simplify task array wait for the array before them to end, not to succeed (afterany): the
+// share that did not finish is run by the next step. The scheduler is Slurm's; lodstream adds none of its own. Each script records its command's exit
 // status in OUT/slurm/status/NAME.rc (and the command's pid in NAME.pid while it runs), which is how
 // --wait tells a failed task's one-machine exit code from the merge's.
 #include "tools/slurm_cli.h"
@@ -48,13 +48,13 @@ const char* const kUsageText =
     "usage: lodstream slurm simplify INPUT -o OUTDIR --shards N [--work DIR] [--wait] [--sbatch-arg ARG]... [simplify options]\n"
     "       lodstream slurm report RUNDIR -o REPORTDIR --shards N [--work DIR] [--wait] [--sbatch-arg ARG]... [report options]\n"
     "       lodstream slurm resubmit OUTDIR [--wait]\n"
-    "  simplify  writes OUTDIR/slurm/{ingest,grade,cluster,prepare,tasks,merge}.sbatch and submits them (afterok dependencies);\n"
+    "  simplify  writes OUTDIR/slurm/{ingest,grade,cluster,tasks,merge}.sbatch and submits them (afterok dependencies);\n"
     "            --work: the work directory every task shares (default OUTDIR/slurm/work; on a shared file system)\n"
     "  report    the same for `lodstream report RUNDIR -o REPORTDIR` (scripts in REPORTDIR/slurm/; more report\n"
     "            arguments go to every job as given, relative paths from the current directory)\n"
-    "  resubmit  submits again the tasks that did not finish (and the merge), or the whole chain when the\n"
-    "            prepare job did not, from the ingest ranges that did not finish (the scripts keep the first\n"
-    "            submission's sbatch options)\n"
+    "  resubmit  submits again the tasks that did not finish (and the merge), or the whole chain when no\n"
+    "            task did (a report: when its prepare job did not), from the ingest ranges that did not finish\n"
+    "            (the scripts keep the first submission's sbatch options)\n"
     "  --wait    wait for the merge and exit with the one-machine exit code (a failed job's, else the merge's)\n"
     "  --ingest-ranges auto|yes|no  parse the input as N byte ranges in an array before the join (default auto:\n"
     "            for text inputs, OBJ and ASCII PLY and STL, whose parsing is the cost; a binary input is ingested\n"
@@ -140,9 +140,13 @@ struct Submission {
   unsigned shards = 0;
   std::vector<std::string> sbatch_args;
   bool ranges = false;  // the chain starts with the ingest array (ingest.sbatch); false: a submission of older code
-  bool clusters = false;  // the cluster array (cluster.sbatch) runs before the prepare job (simplify)
+  bool clusters = false;  // the cluster array (cluster.sbatch) runs before the tasks (simplify)
   bool grades = false;    // the grade array (grade.sbatch) runs before the cluster array (simplify)
-  bool prepares = false;  // the prepare job is an array of N (simplify: they share the clustering merge's units)
+  // A prepare job runs before the tasks (prepare.sbatch): a report's join. A simplify chain has none (its
+  // tasks take up the shared stages' units); one submitted by an older build had, as an array of N
+  // (`prepares`), which a resubmission of it keeps.
+  bool prepare_job = true;
+  bool prepares = false;
   std::string ingest, grade, cluster, prepare, tasks, merge;  // job ids
 };
 
@@ -152,14 +156,15 @@ bool save(const Submission& s) {
                        {"ingest_ranges", s.ranges},
                        {"grade_shares", s.grades},
                        {"cluster_shares", s.clusters},
+                       {"prepare_job", s.prepare_job},
                        {"prepare_array", s.prepares},
                        {"jobs",
                         {{"ingest", s.ingest}, {"grade", s.grade}, {"cluster", s.cluster}, {"prepare", s.prepare}, {"tasks", s.tasks}, {"merge", s.merge}}}};
   return write_text(s.slurm_dir + "/submit.json", j.dump(2) + "\n", false);
 }
 
-// Submits the chain from `from_prepare` (else the tasks in `array`, then the merge); from the prepare job,
-// the ingest ranges in `ingest_array` first when it is not empty.
+// Submits the chain from its start when `from_start` (else the tasks in `array`, then the merge): the
+// ingest ranges in `ingest_array` first when it is not empty.
 // sbatch's dependency options: after `ok` succeeded and `any` ended (job ids; empty: no such job), or
 // nothing when both are empty.
 std::string dependency(const std::string& ok, const std::string& any = {}) {
@@ -168,30 +173,32 @@ std::string dependency(const std::string& ok, const std::string& any = {}) {
   return deps.empty() ? std::string() : "--kill-on-invalid-dep=yes --dependency=" + deps + " ";
 }
 
-int submit_chain(Submission& s, bool from_prepare, const std::string& array, const std::string& ingest_array) {
-  std::string after;
+int submit_chain(Submission& s, bool from_start, const std::string& array, const std::string& ingest_array) {
+  std::string after_ok, after_any;  // the tasks' dependencies
   s.ingest.clear();
   s.grade.clear();
   s.cluster.clear();
-  if (from_prepare && !ingest_array.empty()) {
+  if (from_start && !ingest_array.empty()) {
     s.ingest = submit("--array=" + ingest_array, s.slurm_dir + "/ingest.sbatch");
     if (s.ingest.empty()) return kIoError;
   }
   const std::string all_shares = fmt::format("--array=0-{}", s.shards - 1);
-  if (from_prepare && s.grades) {
+  if (from_start && s.grades) {
     s.grade = submit(dependency(s.ingest) + all_shares, s.slurm_dir + "/grade.sbatch");
     if (s.grade.empty()) return kIoError;
   }
-  if (from_prepare && s.clusters) {
+  if (from_start && s.clusters) {
     s.cluster = submit(dependency(s.ingest, s.grade) + all_shares, s.slurm_dir + "/cluster.sbatch");
     if (s.cluster.empty()) return kIoError;
   }
-  if (from_prepare) {
+  if (from_start && s.prepare_job) {
     s.prepare = submit(dependency(s.ingest, s.cluster) + (s.prepares ? all_shares : std::string()), s.slurm_dir + "/prepare.sbatch");
     if (s.prepare.empty()) return kIoError;
-    after = s.prepare;
+    after_ok = s.prepare;
+  } else if (from_start) {  // the tasks run the shared stages' units, and any share that did not finish
+    after_ok = s.ingest, after_any = s.cluster;
   }
-  s.tasks = submit(dependency(after) + "--array=" + array, s.slurm_dir + "/tasks.sbatch");
+  s.tasks = submit(dependency(after_ok, after_any) + "--array=" + array, s.slurm_dir + "/tasks.sbatch");
   if (s.tasks.empty()) return kIoError;
   s.merge = submit(dependency(s.tasks), s.slurm_dir + "/merge.sbatch");
   if (s.merge.empty()) return kIoError;
@@ -202,8 +209,8 @@ int submit_chain(Submission& s, bool from_prepare, const std::string& array, con
   if (!s.ingest.empty()) std::printf("ingest  job %s (array %s of %u)\n", s.ingest.c_str(), ingest_array.c_str(), s.shards);
   if (!s.grade.empty()) std::printf("grade   job %s (array 0-%u of %u)\n", s.grade.c_str(), s.shards - 1, s.shards);
   if (!s.cluster.empty()) std::printf("cluster job %s (array 0-%u of %u)\n", s.cluster.c_str(), s.shards - 1, s.shards);
-  if (from_prepare && s.prepares) std::printf("prepare job %s (array 0-%u of %u)\n", s.prepare.c_str(), s.shards - 1, s.shards);
-  else if (from_prepare) std::printf("prepare job %s\n", s.prepare.c_str());
+  if (!s.prepare.empty() && s.prepares) std::printf("prepare job %s (array 0-%u of %u)\n", s.prepare.c_str(), s.shards - 1, s.shards);
+  else if (!s.prepare.empty()) std::printf("prepare job %s\n", s.prepare.c_str());
   std::printf("tasks   job %s (array %s of %u)\nmerge   job %s\n", s.tasks.c_str(), array.c_str(), s.shards, s.merge.c_str());
   std::fflush(stdout);
   return 0;
@@ -357,7 +364,7 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
   s.ranges = ranges == "yes" || (ranges == "auto" && ranges_pay(command, input));
   s.clusters = command == "simplify";
   s.grades = command == "simplify";
-  s.prepares = command == "simplify";
+  s.prepare_job = command == "report";  // a simplify task takes up the shared stages' units itself
   work = work.empty() ? s.slurm_dir + "/work" : absolute(work);
   for (const char* d : {"", "/logs", "/status"}) fs::create_directories(s.slurm_dir + d, ec);
   if (ec) {
@@ -384,17 +391,13 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
                   script(s.slurm_dir, "lodstream-cluster", "cluster-%a.out", tasks_array, sbatch_args, "cluster-${SLURM_ARRAY_TASK_ID}",
                          common + fmt::format(" --shard-cluster \"${{SLURM_ARRAY_TASK_ID}}/{}\"", shards)),
                   true)) &&
-      write_text(s.slurm_dir + "/prepare.sbatch",
-                 s.prepares ? script(s.slurm_dir, "lodstream-prepare", "prepare-%a.out", tasks_array, sbatch_args,
-                                     "prepare-${SLURM_ARRAY_TASK_ID}",
-                                     common + fmt::format(" --shard-prepare --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\"", shards) +
-                                         (s.clusters ? fmt::format(" --cluster-shards {}", shards) : std::string()))
-                            : script(s.slurm_dir, "lodstream-prepare", "prepare.out", "", sbatch_args, "prepare",
-                                     common + " --shard-prepare" + (s.clusters ? fmt::format(" --cluster-shards {}", shards) : std::string())),
-                 true) &&
+      (!s.prepare_job ||
+       write_text(s.slurm_dir + "/prepare.sbatch",
+                  script(s.slurm_dir, "lodstream-prepare", "prepare.out", "", sbatch_args, "prepare", common + " --shard-prepare"), true)) &&
       write_text(s.slurm_dir + "/tasks.sbatch",
                  script(s.slurm_dir, "lodstream-" + command, "task-%a.out", tasks_array, sbatch_args, "task-${SLURM_ARRAY_TASK_ID}",
-                        common + fmt::format(" --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\"", shards)),
+                        common + fmt::format(" --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\"", shards) +
+                            (s.clusters ? fmt::format(" --cluster-shards {}", shards) : std::string())),
                  true) &&
       write_text(s.slurm_dir + "/merge.sbatch",
                  script(s.slurm_dir, "lodstream-merge", "merge.out", "", sbatch_args, "merge", quote(self) + " merge " + quote(out)), true);
@@ -402,8 +405,8 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
     std::fprintf(stderr, "lodstream slurm: cannot write the scripts in %s\n", s.slurm_dir.c_str());
     return kIoError;
   }
-  std::printf("scripts %s/{%s%s%sprepare,tasks,merge}.sbatch\n", s.slurm_dir.c_str(), s.ranges ? "ingest," : "", s.grades ? "grade," : "",
-              s.clusters ? "cluster," : "");
+  std::printf("scripts %s/{%s%s%s%stasks,merge}.sbatch\n", s.slurm_dir.c_str(), s.ranges ? "ingest," : "", s.grades ? "grade," : "",
+              s.clusters ? "cluster," : "", s.prepare_job ? "prepare," : "");
   if (const int rc = submit_chain(s, true, tasks_array, s.ranges ? tasks_array : std::string())) return rc;
   if (!wait) return 0;
   std::vector<unsigned> all(shards);
@@ -437,6 +440,7 @@ int resubmit(const std::vector<std::string>& args) {
     s.ranges = j.value("ingest_ranges", false);
     s.clusters = j.value("cluster_shares", false);
     s.grades = j.value("grade_shares", false);
+    s.prepare_job = j.value("prepare_job", true);
     s.prepares = j.value("prepare_array", false);
   } catch (const std::exception&) {
     std::fprintf(stderr, "lodstream slurm: %s/submit.json: no submission to resubmit (run `lodstream slurm simplify` first)\n",
@@ -454,21 +458,25 @@ int resubmit(const std::vector<std::string>& args) {
     return kUsage;
   }
   const std::string st = s.slurm_dir + "/status/";
-  const bool from_prepare = prepare_failure(s).first != 0;
+  // From the start when the shared stages did not finish: the prepare job failed, or, where the tasks run
+  // them, no task finished.
+  bool from_start = s.prepare_job ? prepare_failure(s).first != 0 : true;
+  for (unsigned t = 0; t < s.shards && !s.prepare_job; ++t)
+    if (read_rc(st + fmt::format("task-{}.rc", t)) == 0) from_start = false;
   std::vector<unsigned> tasks;
   std::string array;
   for (unsigned t = 0; t < s.shards; ++t)
-    if (from_prepare || read_rc(st + fmt::format("task-{}.rc", t)) != 0) {
+    if (from_start || read_rc(st + fmt::format("task-{}.rc", t)) != 0) {
       tasks.push_back(t);
       array += (array.empty() ? "" : ",") + std::to_string(t);
       std::error_code ec;
       fs::remove(st + fmt::format("task-{}.rc", t), ec);
     }
-  // The ingest ranges that did not finish run again before the prepare job (those that did left their
-  // segments, or the prepare job joined them already).
+  // The ingest ranges that did not finish run again first (those that did left their segments, or the
+  // next step joined them already).
   std::vector<unsigned> ranges;
   std::string ingest_array;
-  for (unsigned r = 0; r < s.shards && s.ranges && from_prepare; ++r)
+  for (unsigned r = 0; r < s.shards && s.ranges && from_start; ++r)
     if (read_rc(st + fmt::format("ingest-{}.rc", r)) != 0) {
       ranges.push_back(r);
       ingest_array += (ingest_array.empty() ? "" : ",") + std::to_string(r);
@@ -477,8 +485,8 @@ int resubmit(const std::vector<std::string>& args) {
     }
   std::error_code ec;
   fs::remove(st + "merge.rc", ec);
-  if (from_prepare) fs::remove(st + "prepare.rc", ec);
-  for (unsigned t = 0; t < s.shards && from_prepare; ++t)
+  if (from_start) fs::remove(st + "prepare.rc", ec);
+  for (unsigned t = 0; t < s.shards && from_start; ++t)
     fs::remove(st + fmt::format("cluster-{}.rc", t), ec), fs::remove(st + fmt::format("grade-{}.rc", t), ec),
         fs::remove(st + fmt::format("prepare-{}.rc", t), ec);
   if (tasks.empty()) {
@@ -493,8 +501,8 @@ int resubmit(const std::vector<std::string>& args) {
     if (!wait) return 0;
     return wait_chain(s, {}, {});
   }
-  if (!from_prepare) s.prepare.clear();
-  if (const int rc = submit_chain(s, from_prepare, array, ingest_array)) return rc;
+  if (!from_start) s.prepare.clear();
+  if (const int rc = submit_chain(s, from_start, array, ingest_array)) return rc;
   if (!wait) return 0;
   return wait_chain(s, tasks, ranges);
 }
