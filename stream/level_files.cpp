@@ -8,6 +8,8 @@
 #include <limits>
 #include <memory>
 
+#include <tbb/task_group.h>
+
 #include "core/status.h"
 #include "io/mapped_file.h"
 #include "io/obj_writer.h"
@@ -389,6 +391,15 @@ std::unique_ptr<LevelFiles> OpenLevels::take(size_t level) {
   open_.erase(it);
   files->close();
   return files;
+}
+
+void write_level_outputs(const LevelFiles& level, const std::string& dir, const std::string& stem,
+                         const std::vector<std::string>& comments, bool ply, bool obj, io::GlbBuilder* glb, double lower) {
+  tbb::task_group files;
+  if (ply) files.run([&] { level.write_ply(dir + "/" + stem + ".ply", comments); });
+  if (obj) files.run([&] { level.write_obj(dir + "/" + stem + ".obj", comments); });
+  if (glb) files.run([&] { glb->add(level.glb(stem, lower)); });
+  files.wait();
 }
 
 }  // namespace lodstream::stream

@@ -64,6 +64,12 @@ class LevelFiles {
   std::vector<float> material_edge_bounds_, material_point_bounds_;
 };
 
+// Writes a closed level's files side by side (tasks of the calling arena): `dir`/`stem`.ply and .obj when
+// asked, and its part of the GLB when `glb` is given (shown down to the screen coverage `lower`). One
+// machine's emit and the sharded run's merge write their levels so.
+void write_level_outputs(const LevelFiles& level, const std::string& dir, const std::string& stem,
+                         const std::vector<std::string>& comments, bool ply, bool obj, io::GlbBuilder* glb, double lower);
+
 // The levels being welded while the emit stage hands out their parts (the levels of a group interleave):
 // a level's LevelFiles opens with its first part, on scratch files of `work` named after `stem` and the
 // level, and is taken, closed, after its last.

@@ -123,12 +123,8 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
         level.close();
         const std::vector<std::string> comments = mi.at("comments").at(l);
         const std::string stem = fmt::format("lod{}", l);
-        if (ply) level.write_ply(output_dir + "/" + stem + ".ply", comments);
-        if (obj) level.write_obj(output_dir + "/" + stem + ".obj", comments);
-        if (glb) {
-          const double lower = l + 1 < levels ? m["levels"][l + 1].at("screen_coverage").get<double>() : 1.0 / resolution;
-          glb->add(level.glb(stem, lower));
-        }
+        const double lower = l + 1 < levels ? m["levels"][l + 1].at("screen_coverage").get<double>() : 1.0 / resolution;
+        stream::write_level_outputs(level, output_dir, stem, comments, ply, obj, glb.get(), lower);
         ordered_json files = ordered_json::array();
         if (ply) files.push_back(stem + ".ply");
         if (obj) files.push_back(stem + ".obj");

@@ -16,7 +16,6 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <tbb/task_arena.h>
-#include <tbb/task_group.h>
 
 #include "core/floating_cell.h"
 #include "core/grade.h"
@@ -1258,16 +1257,10 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         ls.vertices = level->vertices();
         const std::vector<std::string> comments = level_comments(so, generator, l, sizes.size(), sizes[l]);
         const std::string stem = fmt::format("lod{}", l);
-        tbb::task_group files;
-        if (so.write_ply) files.run([&] { level->write_ply(so.output_dir + "/" + stem + ".ply", comments); });
-        if (so.write_obj) files.run([&] { level->write_obj(so.output_dir + "/" + stem + ".obj", comments); });
         // MSFT_screencoverage: level l is shown while the coverage is at least the coverage at which the next
         // level takes over; the last level down to one pixel.
-        if (glb) {
-          const double lower = l + 1 < sizes.size() ? report.levels[l + 1].screen_coverage : 1.0 / so.resolution;
-          files.run([&] { glb->add(level->glb(stem, lower)); });
-        }
-        files.wait();
+        const double lower = l + 1 < sizes.size() ? report.levels[l + 1].screen_coverage : 1.0 / so.resolution;
+        stream::write_level_outputs(*level, so.output_dir, stem, comments, so.write_ply, so.write_obj, glb.get(), lower);
         if (so.write_ply) ls.files.push_back(stem + ".ply");
         if (so.write_obj) ls.files.push_back(stem + ".obj");
         if (so.write_obj && !meta.materials.empty()) ls.files.push_back(stem + ".mtl");
