@@ -75,6 +75,40 @@ TEST(Cli, UsageErrorsExit64) {
   EXPECT_NE(r.err.find("unrecognised format"), std::string::npos) << r.err;
 }
 
+// The CLI runs with the allocator's large blocks in transparent huge pages (use_huge_pages in
+// tools/lodstream_cli.cpp): it sets glibc.malloc.hugetlb=1 and executes itself again, keeping the user's
+// other tunables, and leaves a user's own glibc.malloc.hugetlb alone (=0: the opt-out). Whether a block
+// may take huge pages is checked where the kernel's THP mode is "madvise" (the default), the one mode in
+// which the tunable decides it.
+TEST(Cli, RunsWithHugePagesUnlessTheUserSaysOtherwise) {
+  test::TempDir tmp;
+  const bool madvise = test::read_file("/sys/kernel/mm/transparent_hugepage/enabled").find("[madvise]") != std::string::npos;
+  const char* saved = std::getenv("GLIBC_TUNABLES");
+  const std::string kept = saved ? saved : "";
+  auto run = [&](const char* tunables) {
+    if (tunables) ::setenv("GLIBC_TUNABLES", tunables, 1);
+    else ::unsetenv("GLIBC_TUNABLES");
+    ::setenv("LODSTREAM_TEST_HUGE_PAGES", "1", 1);
+    const CliRun r = run_cli({}, tmp);
+    ::unsetenv("LODSTREAM_TEST_HUGE_PAGES");
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return r.out;
+  };
+  const std::string none = run(nullptr), other = run("glibc.malloc.mmap_threshold=1048576"), off = run("glibc.malloc.hugetlb=0");
+  if (saved) ::setenv("GLIBC_TUNABLES", kept.c_str(), 1);
+  else ::unsetenv("GLIBC_TUNABLES");
+  EXPECT_EQ(none.rfind("tunables=glibc.malloc.hugetlb=1 ", 0), 0u) << none;
+  EXPECT_EQ(other.rfind("tunables=glibc.malloc.mmap_threshold=1048576:glibc.malloc.hugetlb=1 ", 0), 0u) << other;
+  EXPECT_EQ(off.rfind("tunables=glibc.malloc.hugetlb=0 ", 0), 0u) << off;
+  if (madvise) {
+    EXPECT_NE(none.find("thp_eligible=1"), std::string::npos) << none;
+    EXPECT_NE(other.find("thp_eligible=1"), std::string::npos) << other;
+    EXPECT_NE(off.find("thp_eligible=0"), std::string::npos) << off;
+  } else {
+    std::printf("notice: the kernel's THP mode is not madvise: only the tunables are checked\n");
+  }
+}
+
 TEST(Cli, ProgressJsonIsOneObjectPerLine) {
   test::TempDir tmp;
   const CliRun r = run_cli({"info", grid_obj(tmp, 100), "--progress", "json", "--chunk-bytes", "4K"}, tmp);
