@@ -372,6 +372,10 @@ int submit_sharded(const std::string& self, const std::vector<std::string>& args
     return kIoError;
   }
   for (const auto& e : fs::directory_iterator(s.slurm_dir + "/status", ec)) fs::remove(e.path(), ec);
+  // A script of an earlier submission into OUTDIR whose job this chain does not have (an older build's
+  // prepare array, an ingest array where ranges do not pay) goes, so that the scripts there are the chain.
+  for (const auto& [job, in_chain] : {std::pair{"ingest", s.ranges}, {"grade", s.grades}, {"cluster", s.clusters}, {"prepare", s.prepare_job}})
+    if (!in_chain) fs::remove(s.slurm_dir + "/" + job + ".sbatch", ec);
   std::string common = quote(self) + " " + command + " " + quote(input) + " -o " + quote(out) + " --work " + quote(work);
   for (const std::string& a : passthrough) common += " " + quote(a);
   const std::string tasks_array = fmt::format("0-{}", shards - 1);
