@@ -393,13 +393,19 @@ std::unique_ptr<LevelFiles> OpenLevels::take(size_t level) {
   return files;
 }
 
-void write_level_outputs(const LevelFiles& level, const std::string& dir, const std::string& stem,
-                         const std::vector<std::string>& comments, bool ply, bool obj, io::GlbBuilder* glb, double lower) {
-  tbb::task_group files;
-  if (ply) files.run([&] { level.write_ply(dir + "/" + stem + ".ply", comments); });
-  if (obj) files.run([&] { level.write_obj(dir + "/" + stem + ".obj", comments); });
-  if (glb) files.run([&] { glb->add(level.glb(stem, lower)); });
-  files.wait();
+std::vector<std::string> write_level_outputs(const LevelFiles& level, const std::string& dir, const std::string& stem,
+                                             const std::vector<std::string>& comments, bool ply, bool obj, io::GlbBuilder* glb,
+                                             double lower) {
+  tbb::task_group writers;
+  if (ply) writers.run([&] { level.write_ply(dir + "/" + stem + ".ply", comments); });
+  if (obj) writers.run([&] { level.write_obj(dir + "/" + stem + ".obj", comments); });
+  if (glb) writers.run([&] { glb->add(level.glb(stem, lower)); });
+  writers.wait();
+  std::vector<std::string> files;
+  if (ply) files.push_back(stem + ".ply");
+  if (obj) files.push_back(stem + ".obj");
+  if (obj && level.has_materials()) files.push_back(stem + ".mtl");
+  return files;
 }
 
 }  // namespace lodstream::stream

@@ -42,6 +42,7 @@ class LevelFiles {
   // After the last part.
   void close();
   uint64_t vertices() const { return vertices_; }
+  bool has_materials() const { return !materials_.empty(); }
   void write_ply(const std::string& path, const std::vector<std::string>& comments) const;
   void write_obj(const std::string& path, const std::vector<std::string>& comments) const;
   // The level for io::GlbBuilder; its blocks read the scratch files (valid while this object lives).
@@ -65,9 +66,10 @@ class LevelFiles {
 };
 
 // Writes a closed level's files side by side (tasks of the calling arena): `dir`/`stem`.ply and .obj when
-// asked, and its part of the GLB when `glb` is given (shown down to the screen coverage `lower`). One
-// machine's emit and the sharded run's merge write their levels so.
-void write_level_outputs(const LevelFiles& level, const std::string& dir, const std::string& stem,
+// asked (the OBJ with its .mtl when the level has a material table), and its part of the GLB when `glb` is
+// given (shown down to the screen coverage `lower`). Returns the files' names in `dir`, for the manifest.
+// One machine's emit and the sharded run's merge write their levels so.
+std::vector<std::string> write_level_outputs(const LevelFiles& level, const std::string& dir, const std::string& stem,
                          const std::vector<std::string>& comments, bool ply, bool obj, io::GlbBuilder* glb, double lower);
 
 // The levels being welded while the emit stage hands out their parts (the levels of a group interleave):

@@ -124,10 +124,7 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
         const std::vector<std::string> comments = mi.at("comments").at(l);
         const std::string stem = fmt::format("lod{}", l);
         const double lower = l + 1 < levels ? m["levels"][l + 1].at("screen_coverage").get<double>() : 1.0 / resolution;
-        stream::write_level_outputs(level, output_dir, stem, comments, ply, obj, glb.get(), lower);
-        ordered_json files = ordered_json::array();
-        if (ply) files.push_back(stem + ".ply");
-        if (obj) files.push_back(stem + ".obj");
+        const std::vector<std::string> files = stream::write_level_outputs(level, output_dir, stem, comments, ply, obj, glb.get(), lower);
         lj["vertices"] = level.vertices();
         lj["triangles"] = triangles, lj["edges"] = edges, lj["points"] = points;
         lj["eliminated"] = {{"edges_on_triangles", on_triangles}, {"points_covered", covered}};

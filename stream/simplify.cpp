@@ -1260,10 +1260,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         // MSFT_screencoverage: level l is shown while the coverage is at least the coverage at which the next
         // level takes over; the last level down to one pixel.
         const double lower = l + 1 < sizes.size() ? report.levels[l + 1].screen_coverage : 1.0 / so.resolution;
-        stream::write_level_outputs(*level, so.output_dir, stem, comments, so.write_ply, so.write_obj, glb.get(), lower);
-        if (so.write_ply) ls.files.push_back(stem + ".ply");
-        if (so.write_obj) ls.files.push_back(stem + ".obj");
-        if (so.write_obj && !meta.materials.empty()) ls.files.push_back(stem + ".mtl");
+        ls.files = stream::write_level_outputs(*level, so.output_dir, stem, comments, so.write_ply, so.write_obj, glb.get(), lower);
       };
       stream::EmitOptions emit_options{so.representative, so.crease_degrees, true, false};
       emit_options.grades_path = grades_path;
