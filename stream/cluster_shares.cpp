@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <atomic>
 #include <bit>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -18,6 +19,7 @@
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
 
+#include "core/floating_cell_centers.h"
 #include "core/floating_cell_region.h"
 #include "core/status.h"
 #include "io/file_writer.h"
@@ -27,6 +29,7 @@
 #include "stream/position_gather.h"
 #include "stream/ranked_bits.h"
 #include "stream/store_access.h"
+#include "stream/units.h"
 #include "stream/vertex_cells.h"
 
 namespace lodstream::stream {
@@ -260,6 +263,139 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
   return true;
 }
 
+// A level split by records, its centers unit: one pass over every record in weight order
+// (core::CenterPass), writing each center's record and position (store precision) to the level's .ctrs.
+// Returns the stamp's files and value.
+std::pair<std::vector<std::string>, nlohmann::ordered_json> find_centers(const ClusterShareInput& in, size_t level,
+                                                                       Progress& progress) {
+  const auto t0 = std::chrono::steady_clock::now();
+  // The covered voxels take at most an eighth of the budget (64 MiB at most: a bit a voxel).
+  const uint64_t bitmap = std::min<uint64_t>(uint64_t{64} << 20, in.memory_bytes ? in.memory_bytes / 8 : uint64_t{64} << 20);
+  core::CenterPass pass(in.sizes[level], in.options, std::span<const double, 6>(in.bounds.data(), 6), bitmap);
+  const RecordPositions positions = record_positions(in.index, in.memory_bytes, in.chunk_cap);
+  const io::MappedFile order(in.index.order_path);
+  if (order.size() != in.index.records * 4) fail(Status::io_error, in.index.order_path + ": size does not match");
+  const std::string path = cluster_centers_path(in.prefix, level);
+  std::filesystem::create_directories(std::filesystem::path(path).parent_path());
+  io::FileWriter out(path, 1 << 20);
+  std::vector<uint32_t> ids;
+  std::vector<double> xyz;
+  std::vector<uint8_t> is_center;
+  PositionGather::Scratch scratch;
+  for (uint64_t first = 0; first < in.index.records; first += kBlockRecords) {
+    progress.check();
+    const uint64_t n = std::min(kBlockRecords, in.index.records - first);
+    ids.resize(n), xyz.resize(3 * n), is_center.resize(n);
+    order.read(first * 4, n * 4, ids.data());
+    positions.load(first, ids, xyz.data(), scratch);
+    pass.visit_block(xyz, is_center);
+    for (uint64_t i = 0; i < n; ++i) {
+      if (!is_center[i]) continue;
+      const uint32_t r = static_cast<uint32_t>(first + i);
+      out.write(&r, 4);
+      if (in.index.single_precision) {
+        const float f[3] = {static_cast<float>(xyz[3 * i]), static_cast<float>(xyz[3 * i + 1]), static_cast<float>(xyz[3 * i + 2])};
+        out.write(f, sizeof f);
+      } else {
+        out.write(&xyz[3 * i], 24);
+      }
+    }
+    check_share_memory(in, fmt::format("level {}'s centers pass", level), pass.memory_bytes());
+  }
+  out.commit();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return {{path},
+          {{"level", level}, {"centers", pass.centers()}, {"skipped", pass.skipped()}, {"voxel", pass.voxel()},
+           {"seconds", std::round(seconds * 1000) / 1000}, {"runner", unit_runner()}}};
+}
+
+// A level split by records, share `share`'s range: a Clusterer given first the centers before the range,
+// then the range's records in weight order (core/floating_cell_centers.h: the whole pass's decisions);
+// writes the range's .dec and .ctr as a slab's share does. Failure(io_error) when the centers file does
+// not agree with the pass (a center that starts no cell, or a cell started by a record it does not list).
+nlohmann::ordered_json cluster_records(const ClusterShareInput& in, const ClusterShares& plan, unsigned share, size_t level,
+                                       uint64_t centers_count, Progress& progress) {
+  const uint64_t lo = plan.first_record(share, in.index.records), hi = plan.first_record(share + 1, in.index.records);
+  const std::string path = cluster_centers_path(in.prefix, level);
+  const size_t item = 4 + (in.index.single_precision ? 12 : 24);
+  const io::MappedFile file(path);
+  if (file.size() != centers_count * item) fail(Status::io_error, path + ": size does not match its stamp");
+  check_share_memory(in, fmt::format("level {}'s centers", level), centers_count * 4);
+  std::vector<uint32_t> center_record(centers_count);  // cell id -> its center's record
+  core::Clusterer clusterer(std::span<const double>(&in.sizes[level], 1), in.options,
+                            std::span<const double>(in.bounds.data(), in.bounds.size()));
+  auto bad = [&](const std::string& what) { fail(Status::io_error, fmt::format("{}: {}", path, what)); };
+  // The centers before the range, each starting its cell in order.
+  uint64_t before = 0;
+  {
+    std::vector<char> buffer;
+    for (uint64_t first = 0; first < centers_count; first += kBlockRecords) {
+      const uint64_t n = std::min(kBlockRecords, centers_count - first);
+      buffer.resize(n * item);
+      file.read(first * item, n * item, buffer.data());
+      for (uint64_t i = 0; i < n; ++i) {
+        const char* c = buffer.data() + i * item;
+        std::memcpy(&center_record[first + i], c, 4);
+        if (first + i > 0 && center_record[first + i] <= center_record[first + i - 1]) bad("centers out of order");
+        if (center_record[first + i] >= lo) continue;
+        double p[3];
+        if (in.index.single_precision) {
+          float f[3];
+          std::memcpy(f, c + 4, 12);
+          p[0] = f[0], p[1] = f[1], p[2] = f[2];
+        } else {
+          std::memcpy(p, c + 4, 24);
+        }
+        uint32_t cell = 0;
+        clusterer.assign(center_record[first + i], std::span<const double, 3>(p, 3), std::span<uint32_t>(&cell, 1));
+        if (cell != before) bad(fmt::format("center {} of level {} starts no cell", first + i, level));
+        ++before;
+      }
+    }
+  }
+  const RecordPositions positions = record_positions(in.index, in.memory_bytes, in.chunk_cap);
+  const io::MappedFile order(in.index.order_path);
+  if (order.size() != in.index.records * 4) fail(Status::io_error, in.index.order_path + ": size does not match");
+  const bool centers = in.info == CellInfoKind::center;
+  io::FileWriter dec(dec_path(in.prefix, share, level), 1 << 20), ctr;
+  if (centers) ctr.open(ctr_path(in.prefix, share, level), 1 << 20);
+  std::vector<uint32_t> ids, cells;
+  std::vector<double> xyz;
+  PositionGather::Scratch scratch;
+  uint64_t next = before;  // the next cell's id
+  for (uint64_t first = lo; first < hi; first += kBlockRecords) {
+    progress.check();
+    const uint64_t n = std::min(kBlockRecords, hi - first);
+    ids.resize(n), xyz.resize(3 * n), cells.resize(n);
+    order.read(first * 4, n * 4, ids.data());
+    positions.load(first, ids, xyz.data(), scratch);
+    clusterer.assign_block(ids, xyz, cells);
+    for (uint64_t i = 0; i < n; ++i) {
+      const uint32_t r = static_cast<uint32_t>(first + i);
+      if (cells[i] == next) {  // r starts a cell: the centers pass must have found it
+        if (next >= centers_count || center_record[next] != r) bad(fmt::format("record {} of level {} is not listed as a center", r, level));
+        ++next;
+        if (centers) {
+          if (in.index.single_precision) {
+            const float f[3] = {static_cast<float>(xyz[3 * i]), static_cast<float>(xyz[3 * i + 1]), static_cast<float>(xyz[3 * i + 2])};
+            ctr.write(f, sizeof f);
+          } else {
+            ctr.write(&xyz[3 * i], 24);
+          }
+        }
+      }
+      const uint32_t pair[2] = {r, center_record[cells[i]]};
+      dec.write(pair, sizeof pair);
+    }
+    check_share_memory(in, fmt::format("level {}'s cells", level), clusterer.memory_bytes() + clusterer.growth_bytes() + centers_count * 4);
+  }
+  if ((next < centers_count && center_record[next] < hi) || (hi == in.index.records && next != centers_count))
+    bad(fmt::format("a center of level {} in records [{}, {}) starts no cell", level, lo, hi));
+  dec.commit();
+  if (centers) ctr.commit();
+  return {{"level", level}, {"first_record", lo}, {"own", hi - lo}, {"own_centers", next - before}, {"centers_before", before}};
+}
+
 }  // namespace
 
 double ClusterShares::lo(unsigned s) const { return s == 0 ? -kInf : cuts[s - 1]; }
@@ -268,7 +404,17 @@ double ClusterShares::hi(unsigned s) const { return s + 1 >= count ? kInf : cuts
 nlohmann::ordered_json ClusterShares::json() const {
   std::vector<std::string> c;
   for (double x : cuts) c.push_back(fmt::format("{:a}", x));
-  return {{"count", count}, {"axis", axis}, {"cuts", c}, {"whole_share", whole_share}};
+  std::vector<int> records;
+  for (char b : by_records) records.push_back(b);
+  return {{"count", count}, {"axis", axis}, {"cuts", c}, {"whole_share", whole_share}, {"by_records", records}};
+}
+
+uint64_t ClusterShares::first_record(unsigned s, uint64_t records) const {
+  return static_cast<uint64_t>((static_cast<unsigned __int128>(records) * s) / count);
+}
+
+std::string cluster_centers_path(const std::string& prefix, size_t level) {
+  return cluster_shares_dir(prefix) + fmt::format("centers/level-{}.ctrs", level);
 }
 
 std::string cluster_shares_dir(const std::string& prefix) { return prefix + "cluster-shares/"; }
@@ -282,11 +428,31 @@ std::string cluster_share_stamp(const std::string& prefix, unsigned index) {
   return cluster_shares_dir(prefix) + fmt::format("share-{}.json", index);
 }
 
+nlohmann::ordered_json cluster_centers_figures(const ClusterShareInput& in, const ClusterShares& plan) {
+  nlohmann::ordered_json out = nlohmann::ordered_json::array();
+  for (size_t l = 0; l < plan.by_records.size(); ++l) {
+    if (!plan.by_records[l]) continue;
+    try {
+      out.push_back(nlohmann::ordered_json::parse(io::read_small_file(cluster_shares_dir(in.prefix) +
+                                                                      fmt::format("centers/level-{}.json", l)))
+                        .at("value"));
+    } catch (const std::exception&) {
+      // not stamped (a share that reused the stage): no figures
+    }
+  }
+  return out;
+}
+
 ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, Progress& progress) {
   ClusterShares plan;
   plan.count = count;
   const size_t levels = in.sizes.size();
   plan.whole_share.assign(levels, -1);
+  plan.by_records.assign(levels, 0);
+  // Levels too coarse for the slabs (floating, no fine grid) split by ranges of records instead.
+  const bool records_split = in.split_by_records && count >= 2 && in.bounds.size() == 6 &&
+                             in.options.clustering == core::Clustering::floating;
+  const auto has_fine = [&](size_t l) { return in.fine && in.fine->sizes.at(l) > 0; };
   bool can_split = count >= 2 && in.bounds.size() == 6 && in.options.clustering == core::Clustering::floating;
   if (can_split) {
     for (int a = 1; a < 3; ++a)
@@ -328,14 +494,17 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
     return cuts;
   };
   // The levels too coarse to split at slabs of min_width (all of them when nothing splits).
+  // (Those split by records are not whole.)
+  auto by_slabs = [&](size_t l, double min_width) { return can_split && !has_fine(l) && in.sizes[l] * kSplitCells <= min_width; };
   auto whole_levels = [&](double min_width) {
     std::vector<size_t> w;
-    for (size_t l = 0; l < levels; ++l) {
-      const bool fine = in.fine && in.fine->sizes.at(l) > 0;
-      if (can_split && !fine && in.sizes[l] * kSplitCells <= min_width) continue;
-      w.push_back(l);
-    }
+    for (size_t l = 0; l < levels; ++l)
+      if (!by_slabs(l, min_width) && !(records_split && !has_fine(l))) w.push_back(l);
     return w;
+  };
+  // The levels split by records, once the slabs are cut.
+  auto mark_by_records = [&](double min_width) {
+    for (size_t l = 0; l < levels; ++l) plan.by_records[l] = records_split && !has_fine(l) && !by_slabs(l, min_width);
   };
   // The whole levels to `shares` shares from share `first` on, in level order, as even runs: a share's levels
   // run in one cluster_levels pass over the index, whose cost is mostly fetching every position by id (the
@@ -353,11 +522,11 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
   // half per store vertex. Fewer slabs hold more each: the 193 M-triangle city at 1 GiB a share held up to
   // 1.2 GiB in 5 slabs while the selection's positions grew by doubling (counted then at 3 positions and a
   // record a vertex), where 7 peaked at 735 MiB.
-  auto slabs_fit = [&](const std::vector<size_t>& whole) {
+  auto slabs_fit = [&](const std::vector<size_t>& whole, double min_width) {
     if (in.memory_bytes == 0) return true;
     double widest = 0;
     for (size_t l = 0; l < levels; ++l)
-      if (std::find(whole.begin(), whole.end(), l) == whole.end()) widest = std::max(widest, in.first_halo_cells * in.sizes[l]);
+      if (by_slabs(l, min_width)) widest = std::max(widest, in.first_halo_cells * in.sizes[l]);
     const uint64_t position = in.index.single_precision ? 12 : 24;
     for (unsigned s = 0; s < count; ++s) {
       if (!(plan.lo(s) < plan.hi(s))) continue;
@@ -371,6 +540,7 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
   if (!can_split) {
     plan.cuts.assign(count ? count - 1 : 0, 0.0);
     assign(whole_levels(0), std::min(1u, count - 1), 1);
+    mark_by_records(0);
     return plan;
   }
   // With N >= 3 and whole levels, the whole levels go to shares 1 to K of their own (no slab), K as many as
@@ -386,14 +556,16 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
     for (unsigned k = static_cast<unsigned>(std::min<size_t>(most, count - 2)); k >= 1; --k) {
       plan.cuts = cut(count - k, &min_width);
       const std::vector<size_t> whole = whole_levels(min_width);
-      if (whole.size() >= k && (k == 1 || slabs_fit(whole))) {
+      if (whole.size() >= k && (k == 1 || slabs_fit(whole, min_width))) {
         assign(whole, 1, k);
+        mark_by_records(min_width);
         return plan;
       }
     }
   }
   plan.cuts = cut(count, &min_width);
   assign(whole_levels(min_width), std::min(1u, count - 1), 1);
+  mark_by_records(min_width);
   return plan;
 }
 
@@ -411,6 +583,8 @@ ClusterShares shared_cluster_plan(const ClusterShareInput& in, unsigned count, c
         plan.axis = p.at("axis");
         for (const auto& c : p.at("cuts")) plan.cuts.push_back(std::strtod(c.get<std::string>().c_str(), nullptr));  // hex: exact
         plan.whole_share = p.at("whole_share").get<std::vector<int>>();
+        for (int b : p.at("by_records").get<std::vector<int>>()) plan.by_records.push_back(static_cast<char>(b));
+        if (plan.by_records.size() != plan.whole_share.size()) throw std::runtime_error("by_records");
         if (plan.cuts.size() + 1 == count) return plan;
       }
     } catch (const std::exception&) {
@@ -468,13 +642,36 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
                               whole_vertex_cells_path(in.prefix, whole[j]), in.index.vertices, in.index.records, cs.cells[j],
                               in.memory_bytes, progress);
   }
+  // The levels split by records: their centers units no other share holds, before the slab.
+  std::vector<size_t> by_records;
+  for (size_t l = 0; l < plan.by_records.size(); ++l)
+    if (plan.by_records[l]) by_records.push_back(l);
+  const std::string centers_dir = cluster_shares_dir(in.prefix) + "centers";
+  const nlohmann::ordered_json centers_key = in.key.is_null() ? plan.json() : in.key;
+  auto centers_unit = [&](size_t j, bool wait) {
+    const size_t l = by_records[j];
+    return share_unless_held(centers_dir, static_cast<unsigned>(l), centers_dir + fmt::format("/level-{}.json", l), centers_key, "",
+                             wait, [&] { return find_centers(in, l, progress); });
+  };
+  if (!by_records.empty()) std::filesystem::create_directories(centers_dir);
+  for (size_t k = 0; k < by_records.size(); ++k) centers_unit((index + k) % by_records.size(), false);
+  // Then, once its slab is done, every centers unit (waiting for those others hold) and its range of records.
+  auto decide_records = [&] {
+    std::vector<uint64_t> centers(by_records.size());
+    for (size_t j = 0; j < by_records.size(); ++j) centers[j] = centers_unit(j, true)->at("centers").get<uint64_t>();
+    std::vector<nlohmann::ordered_json> f(by_records.size());
+    tbb::parallel_for(size_t{0}, by_records.size(),
+                      [&](size_t j) { f[j] = cluster_records(in, plan, index, by_records[j], centers[j], progress); });
+    for (auto& x : f) figures.push_back(std::move(x));
+  };
   // The split levels: select with the widest halo any of them needs, cluster each, widen the ones that did
   // not settle, select again when a halo outgrows the selection.
   std::vector<size_t> split;
   std::vector<double> halo;
   std::vector<unsigned> tries;
   for (size_t l = 0; l < plan.whole_share.size(); ++l)
-    if (plan.whole_share[l] < 0) split.push_back(l), halo.push_back(in.first_halo_cells * in.sizes[l]), tries.push_back(0);
+    if (plan.whole_share[l] < 0 && !plan.by_records[l])
+      split.push_back(l), halo.push_back(in.first_halo_cells * in.sizes[l]), tries.push_back(0);
   if (!(plan.lo(index) < plan.hi(index))) {
     // An empty slab (the whole levels' share, plan_cluster_shares): no record of a split level is its own,
     // and its decision files are empty.
@@ -487,6 +684,7 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
       }
       figures.push_back({{"level", l}, {"halo_cells", 0}, {"tries", 0}, {"held", 0}, {"own", 0}});
     }
+    decide_records();
     return figures;
   }
   Held held;
@@ -525,6 +723,8 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
     }
   }
   for (auto& f : split_figures) figures.push_back(std::move(f));
+  held = Held();
+  decide_records();
   return figures;
 }
 

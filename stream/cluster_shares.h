@@ -21,7 +21,20 @@
 //   whole levels, while two slabs remain), and have empty slabs (repeated cuts: their split levels'
 //   decision files are empty); the other N - K shares own the slabs. With N <= 2, share 1 (share 0 if
 //   N = 1) clusters every whole level beside its slab.
-// The share (run_cluster_share), per split level:
+// - A level too coarse to split by region whose cells float and which has no fine grid is split by
+//   ranges of records instead (with N >= 2 and the scene's bounds, unless ClusterShareInput says not):
+//   share I decides records [I·R/N, (I+1)·R/N) of the R records in weight order. Its centers come first,
+//   from one pass over every record (core/floating_cell_centers.h: the covered voxels skip most of them),
+//   run as a unit of its own that the first share to reach it takes (cluster-shares/centers/level-L.ctrs:
+//   each center's record and position, in weight order; stamped level-L.json; a unit whose holder died is
+//   run by a share waiting for it); then each share clusters its range with a Clusterer given first the
+//   centers before its range (core/floating_cell_centers.h says why that is the whole pass's decision).
+//   Its files are a split level's (.dec, .ctr), which the merge reads as it reads a slab's. Before, such a
+//   level was clustered whole by one share, which on N nodes the array waited for (the whole pass over the
+//   records, the sums and the cells by vertex, in one process).
+// The share (run_cluster_share): first it takes the centers units no other share holds, then its slab's
+// levels, then it waits for every centers unit, then it decides its range of each level split by records.
+// Per split level (by region):
 // 1. Select: the vertex ids within the largest halo of the slab (one sequential read of the positions),
 //    then the records of the weight index that hold them (one sequential read of order.u32) and their
 //    positions, in weight order: the whole-scene order restricted to what the share holds.
@@ -76,9 +89,12 @@ struct ClusterShares {
   std::vector<double> cuts;       // count - 1 planes across `axis`, non-decreasing
   std::vector<int> whole_share;   // per level: the share that clusters the level whole, or -1 (split);
                                   // non-decreasing over the whole levels
+  std::vector<char> by_records;   // per level: 1 when a split level is split by ranges of records, not by slabs
   // Share s's slab on the axis: [lo, hi), infinite at the ends.
   double lo(unsigned s) const;
   double hi(unsigned s) const;
+  // Share s's records of a level split by records: [records·s/count, records·(s+1)/count).
+  uint64_t first_record(unsigned s, uint64_t records) const;
   nlohmann::ordered_json json() const;
 };
 
@@ -101,6 +117,11 @@ struct ClusterShareInput {
   // read them, and the shares write them at once where the prepare job would decode the levels one by one.
   bool vertex_cells = false;
   std::string canonical_path;
+  // false: the levels too coarse for the slabs are clustered whole, one share each where N allows, as a
+  // level with a fine grid is (the tests use it to run that route on plain levels).
+  bool split_by_records = true;
+  // The key the centers units' stamps hold (the caller's share key; empty: the plan's).
+  nlohmann::ordered_json key;
 };
 
 ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, Progress& progress);
@@ -121,7 +142,13 @@ std::string cluster_share_centers_path(const std::string& prefix, unsigned share
 std::vector<std::string> cluster_share_files(const ClusterShareInput& in, const ClusterShares& plan, unsigned index);
 
 // Runs share `index`; returns its figures for the stamp and the manifest: per level {"level", "cells"
-// (whole levels), "halo_cells", "tries", "held", "own"}.
+// (whole levels), "halo_cells", "tries", "held", "own"} (slabs) or {"level", "first_record", "own",
+// "own_centers", "centers_before"} (split by records).
+// The centers file of a level split by records.
+std::string cluster_centers_path(const std::string& prefix, size_t level);
+// The centers passes' figures of the levels split by records (their stamps' values: {"level", "centers",
+// "skipped", "voxel", "seconds", "runner"}), for the cluster stage's stamp; empty when none is stamped.
+nlohmann::ordered_json cluster_centers_figures(const ClusterShareInput& in, const ClusterShares& plan);
 nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const ClusterShares& plan, unsigned index,
                                          Progress& progress);
 

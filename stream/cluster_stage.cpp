@@ -139,14 +139,6 @@ void fine_masks(const io::MappedFile& labels, const FineCells& fine, const std::
   }
 }
 
-// Where a pass's positions come from (position_gather.h): the index's weight-ordered file when it names
-// one, else the store's column by id, mapped whole where it takes at most half the budget (and no
-// --chunk-bytes asks for small reads), else read the read way.
-RecordPositions record_positions(const WeightIndex& weights, uint64_t memory_bytes, uint64_t chunk_cap) {
-  return RecordPositions(weights.positions_path, weights.single_precision, weights.vertices, weights.ordered_positions_path,
-                         weights.records,
-                         map_positions_whole(positions_bytes(weights.vertices, weights.single_precision), memory_bytes, chunk_cap));
-}
 
 // The ids of records [at, at + size) and their positions as plain arrays, widened to double (exact for
 // float): the read way's shared batch, or a group's own block.
@@ -596,6 +588,15 @@ void sum_cell_info_range(const WeightIndex& weights, std::span<const size_t> lev
   if (!start.plain.empty() && start.plain.size() != levels.size()) fail(Status::internal, "sum_cell_info_range: plain cells a level");
   sum_cell_info_in(weights, levels, cells, info_kind, memory_bytes, chunk_cap, progress, prefix,
                    {first, end, std::max<size_t>(threads, 1), true, start});
+}
+
+// Where a pass's positions come from (position_gather.h): the index's weight-ordered file when it names
+// one, else the store's column by id, mapped whole where it takes at most half the budget (and no
+// --chunk-bytes asks for small reads), else read the read way.
+RecordPositions record_positions(const WeightIndex& weights, uint64_t memory_bytes, uint64_t chunk_cap) {
+  return RecordPositions(weights.positions_path, weights.single_precision, weights.vertices, weights.ordered_positions_path,
+                         weights.records,
+                         map_positions_whole(positions_bytes(weights.vertices, weights.single_precision), memory_bytes, chunk_cap));
 }
 
 }  // namespace lodstream::stream

@@ -30,6 +30,7 @@
 #include "io/mapped_file.h"
 #include "lodstream/lodstream.h"
 #include "stream/grade_stage.h"
+#include "stream/position_gather.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
 
@@ -99,6 +100,9 @@ struct WeightIndex {
   bool single_precision = true;
   std::string ordered_positions_path;
 };
+// Where a pass's positions come from (position_gather.h): the index's weight-ordered file when it names
+// one, else the store's column by id, mapped whole where it takes at most half the budget.
+RecordPositions record_positions(const WeightIndex& weights, uint64_t memory_bytes, uint64_t chunk_cap);
 // bounds: empty, or the min and max corners (6 values) of a box holding every position in the index,
 // which lets the coarse levels index their squares directly (core::Clusterer); the result is the same
 // either way.

@@ -860,6 +860,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         const stream::SplitMerge merged =
             stream::merge_split_levels(in, shares, ordered_json{{"shares", share_key}, {"figures", figures}}, unit_index, progress);
         merge_units = merged.units;
+        if (const ordered_json c = stream::cluster_centers_figures(in, shares); !c.empty()) merge_units["centers_passes"] = c;
         shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);
         ordered_json v;
         if (stamp_matches(work.file("cluster.json"), key, &v)) {  // another process finished the stage meanwhile

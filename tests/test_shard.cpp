@@ -312,29 +312,24 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       }
       // The first cluster share merged the grading shares, writing the positions in weight order (the room's store holds floats).
       EXPECT_EQ(std::filesystem::exists(work + "/positions-w.f32"), n == 4);
-      std::vector<size_t> whole_levels;  // and their cells by vertex, which their shares write
-      if (n >= 3) {  // the whole levels go to shares 1 to K, whose slabs are empty: repeated cuts (plan_cluster_shares)
+      std::vector<size_t> whole_levels;  // and their cells by vertex, which their shares write (none here)
+      if (n >= 3) {  // the room's coarsest levels are too coarse for the slabs: split by records (plan_cluster_shares)
         const nlohmann::json plan = nlohmann::json::parse(slurp(stream::cluster_shares_dir(work + "/") + "plan.json")).at("plan");
-        std::vector<int> shares;
+        std::vector<size_t> records_levels;
         for (size_t l = 0; l < plan.at("whole_share").size(); ++l) {
-          const int w = plan.at("whole_share").at(l);
-          if (w < 0) continue;
-          shares.push_back(w), whole_levels.push_back(l);
-          if (w != 1)  // share 1 is the one no task ran
-            EXPECT_TRUE(std::filesystem::exists(stream::cluster_shares_dir(work + "/") + fmt::format("level-{}.vcells", l))) << l;
+          EXPECT_EQ(plan.at("whole_share").at(l), -1) << "level " << l << " is clustered whole";
+          if (plan.at("by_records").at(l) == 0) continue;
+          records_levels.push_back(l);
+          // Its centers, found once by whichever share came first.
+          const nlohmann::json centers =
+              nlohmann::json::parse(slurp(stream::cluster_shares_dir(work + "/") + fmt::format("centers/level-{}.json", l)));
+          EXPECT_GT(centers.at("value").at("centers").get<uint64_t>(), 0u) << "level " << l;
         }
-        ASSERT_FALSE(shares.empty()) << "the room's coarsest levels are too coarse to split";
-        EXPECT_TRUE(std::is_sorted(shares.begin(), shares.end()));
-        const int k = shares.back();
-        EXPECT_EQ(shares.front(), 1);
-        EXPECT_EQ(k, std::min<int>(static_cast<int>(shares.size()), static_cast<int>(n) - 2)) << "one share a whole level, two slabs left";
-        for (int s = 1; s <= k; ++s) {
-          EXPECT_EQ(plan.at("cuts").at(s - 1), plan.at("cuts").at(s)) << "share " << s << "'s slab is empty";
-          EXPECT_NE(std::find(shares.begin(), shares.end(), s), shares.end()) << "share " << s << " has a whole level";
-        }
-        if (k + 1 < static_cast<int>(n) - 1) {
-          EXPECT_NE(plan.at("cuts").at(k), plan.at("cuts").at(k + 1));
-        }
+        ASSERT_FALSE(records_levels.empty()) << "the room's coarsest levels are too coarse for the slabs";
+        EXPECT_EQ(plan.at("by_records").at(0), 0) << "the finest level splits by slabs";
+        EXPECT_EQ(records_levels.back(), one.levels.size() - 1);
+        for (size_t k = 1; k < plan.at("cuts").size(); ++k)
+          EXPECT_NE(plan.at("cuts").at(k - 1), plan.at("cuts").at(k)) << "no empty slab: no share clusters whole levels only";
       }
       SimplifyOptions prepare = room_options(out);
       prepare.representative = rep, prepare.shard_prepare = true, prepare.cluster_shares = n;
@@ -346,7 +341,7 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       for (size_t l = 0; l < one.levels.size(); ++l)
         EXPECT_FALSE(std::filesystem::exists(stream::plain_cells_path(work + "/", l)))
             << "level " << l << ": the plain cells outlive the cells by vertex";
-      if (!whole_levels.empty()) {
+      if (n >= 3) {
         // A prepare job that reuses the cluster stage (here: the first one's, killed before the cells by vertex
         // were stamped) takes up the same units as the one that ran it, for the split levels only: had it
         // asked for every level, it would restart the first one's units under its feet (a unit stamp removed
@@ -754,10 +749,15 @@ TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
   stream::Progress progress{Options{}};
   stream::ClusterShares last_plan;
   std::vector<nlohmann::ordered_json> last_figures;
+  for (const bool by_records : {true, false})
   for (unsigned n : {2u, 3u, 4u}) {
-    SCOPED_TRACE("shares " + std::to_string(n));
+    SCOPED_TRACE("shares " + std::to_string(n) + (by_records ? ", coarse levels by records" : ", coarse levels whole"));
     std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
+    in.split_by_records = by_records;
     const stream::ClusterShares plan = stream::plan_cluster_shares(in, n, progress);
+    EXPECT_EQ(std::count(plan.by_records.begin(), plan.by_records.end(), 1) > 0, by_records);
+    EXPECT_EQ(std::count(plan.whole_share.begin(), plan.whole_share.end(), -1) == static_cast<long>(plan.whole_share.size()), by_records)
+        << "a level too coarse for the slabs is split by records or clustered whole";
     ASSERT_EQ(plan.cuts.size(), n - 1);
     EXPECT_TRUE(std::is_sorted(plan.cuts.begin(), plan.cuts.end()));
     EXPECT_EQ(plan.whole_share.at(0), -1) << "the finest level splits";
@@ -782,6 +782,7 @@ TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
   // (plan_cluster_shares, slabs_fit).
   {
     stream::ClusterShareInput ample = in, scarce = in;
+    ample.split_by_records = scarce.split_by_records = false;
     ample.memory_bytes = uint64_t{1} << 40;
     scarce.memory_bytes = in.index.vertices * 3 / 16 + in.index.vertices;  // a fortieth of the vertices each
     const stream::ClusterShares one_a_share = stream::plan_cluster_shares(ample, 4, progress);
@@ -791,6 +792,13 @@ TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
     EXPECT_EQ(one_a_share.cuts.at(0), one_a_share.cuts.at(2)) << "shares 1 and 2 have no slab";
     EXPECT_EQ(together.cuts.at(0), together.cuts.at(1)) << "share 1 has no slab";
     EXPECT_NE(together.cuts.at(1), together.cuts.at(2)) << "three slabs";
+    // Split by records (the default): no whole level, four slabs, and levels 1 to 4 by records.
+    ample.split_by_records = true;
+    const stream::ClusterShares records = stream::plan_cluster_shares(ample, 4, progress);
+    EXPECT_EQ(records.whole_share, (std::vector<int>{-1, -1, -1, -1, -1}));
+    EXPECT_EQ(records.by_records, (std::vector<char>{0, 1, 1, 1, 1})) << "four slabs are narrower than three";
+    EXPECT_NE(records.cuts.at(0), records.cuts.at(1));
+    EXPECT_NE(records.cuts.at(1), records.cuts.at(2));
   }
   // A share's decisions cut short: the merge fails naming the shares' directory (the last plan's files, 4 shares).
   const std::string dec = stream::cluster_shares_dir(prefix) + "share-0-level-0.dec";

@@ -132,6 +132,10 @@ try:
         sec, by = mu[phase]["seconds"], mu[phase]["by"]
         print("  clustering merge, %d %s units: slowest %.2f s, all %.2f s, run by %d processes" %
               (mu["units"], phase, max(sec), sum(sec), len(set(by))))
+    records = os.path.getsize(os.path.join(work, "order.u32")) // 4
+    for c in mu.get("centers_passes", []):  # the levels split by records (stream/cluster_shares.h)
+        print("  level %d split by records: centers pass %.2f s (%s), %d centers, %.1f %% of the records skipped (voxel %g)" %
+              (c["level"], c["seconds"], c["runner"], c["centers"], 100.0 * c["skipped"] / records, c["voxel"]))
 except (OSError, KeyError, ValueError) as e:
     print("  clustering merge units: none recorded (%s)" % e)
 m = json.load(open(os.path.join(out, "sharded", "manifest.json")))
