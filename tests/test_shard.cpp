@@ -967,6 +967,10 @@ TEST(Shard, MaterialsGiveOneMachinesBytes) {
   const Result r = run_tasks(dir.file("sharded"), dir.file("work"), 3, {0, 1, 2}, 0, true, &merged, board);
   ASSERT_TRUE(r.ok()) << r.message;
   EXPECT_EQ(outputs(dir.file("sharded")), want);
+  // The manifest lists the OBJ's material libraries as one machine's does (the merge's list once lacked them).
+  ASSERT_TRUE(std::filesystem::exists(dir.file("one") + "/lod0.mtl"));
+  EXPECT_NE(slurp(dir.file("sharded") + "/manifest.json").find("\"lod0.mtl\""), std::string::npos);
+  EXPECT_EQ(manifest_without_timings(dir.file("sharded")), manifest_without_timings(dir.file("one")));
 }
 
 TEST(Shard, MergeNamesTheMissingTasks) {
