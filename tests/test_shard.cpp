@@ -1197,6 +1197,48 @@ TEST(Shard, ConcurrentTasksAndAKilledTaskThroughTheCli) {
   }
 }
 
+// Through the CLI: a clustering share killed with SIGKILL while it finds a coarse level's centers (just
+// before the unit's stamp): the unit is left unstamped, the next share runs it, and the tasks then give one
+// machine's bytes.
+TEST(Shard, AKilledCentersUnitIsRunByTheNextShare) {
+  TempDir dir, log;
+  const std::vector<std::string> common{"--tiles", "--tile-triangles", "6000", "--no-space-check", "--progress", "none"};
+  auto args = [&](std::vector<std::string> a) {
+    a.insert(a.end(), common.begin(), common.end());
+    return a;
+  };
+  test::CliRun one = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("one")}), log);
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  const std::string work = dir.file("work"), centers = stream::cluster_shares_dir(work + "/") + "centers/";
+  auto share = [&](unsigned i) {
+    return test::run_cli(args({"simplify", sample_room(), "-o", dir.file("out"), "--work", work, "--shard-cluster",
+                               std::to_string(i) + "/3"}),
+                         log);
+  };
+  setenv("LODSTREAM_TEST_KILL_AT", "level-4.json", 1);
+  const test::CliRun killed = share(0);
+  unsetenv("LODSTREAM_TEST_KILL_AT");
+  EXPECT_EQ(killed.exit_code, 128 + SIGKILL);
+  const nlohmann::json plan = nlohmann::json::parse(slurp(stream::cluster_shares_dir(work + "/") + "plan.json")).at("plan");
+  ASSERT_EQ(plan.at("by_records").size(), 5u);
+  ASSERT_EQ(plan.at("by_records").at(4), 1) << "the room's coarsest level is split by records";
+  EXPECT_TRUE(std::filesystem::exists(centers + "level-4.ctrs")) << "the killed share had written the centers";
+  EXPECT_FALSE(std::filesystem::exists(centers + "level-4.json")) << "but not stamped them";
+  const test::CliRun next = share(1);
+  ASSERT_EQ(next.exit_code, 0) << next.err;
+  EXPECT_TRUE(std::filesystem::exists(centers + "level-4.json")) << "the next share ran the unit";
+  EXPECT_FALSE(std::filesystem::exists(stream::cluster_share_stamp(work + "/", 0))) << "share 0 is still to run";
+  for (unsigned i = 0; i < 3; ++i) {
+    const test::CliRun t = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("out"), "--work", work, "--shard",
+                                               std::to_string(i) + "/3", "--cluster-shards", "3"}),
+                                         log);
+    ASSERT_EQ(t.exit_code, 0) << t.err;
+  }
+  const test::CliRun m = test::run_cli({"merge", dir.file("out")}, log);
+  ASSERT_EQ(m.exit_code, 0) << m.err;
+  EXPECT_EQ(outputs(dir.file("out")), outputs(dir.file("one")));
+}
+
 // ---- report as N tasks (stream/report_shard.h)
 
 ReportOptions small_report(const std::string& out) {
