@@ -66,6 +66,16 @@ struct Positions {
   uint64_t bytes() const { return f.capacity() * sizeof(float) + d.capacity() * sizeof(double); }
 };
 
+// Writes a position at the store's precision (floats for a float store: exact, since its positions are floats).
+void write_position(io::FileWriter& out, const double* p, bool single_precision) {
+  if (single_precision) {
+    const float f[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
+    out.write(f, sizeof f);
+  } else {
+    out.write(p, 24);
+  }
+}
+
 // Calls f(id, xyz) for every position of the store's column, in id order (read front to back).
 template <class F>
 void for_each_position(const WeightIndex& index, Progress& progress, F&& f) {
@@ -227,14 +237,7 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
       if (d.status == core::RegionStatus::unsettled || !d.cell_settled) return false;  // the writers discard
       const uint32_t pair[2] = {tags[i], d.center};
       dec.write(pair, sizeof pair);
-      if (centers && pair[0] == pair[1]) {
-        if (in.index.single_precision) {
-          const float f[3] = {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
-          ctr.write(f, sizeof f);
-        } else {
-          ctr.write(p, 24);
-        }
-      }
+      if (centers && pair[0] == pair[1]) write_position(ctr, p, in.index.single_precision);
       ++*own;
     }
     tags.clear();
@@ -293,12 +296,7 @@ std::pair<std::vector<std::string>, nlohmann::ordered_json> find_centers(const C
       if (!is_center[i]) continue;
       const uint32_t r = static_cast<uint32_t>(first + i);
       out.write(&r, 4);
-      if (in.index.single_precision) {
-        const float f[3] = {static_cast<float>(xyz[3 * i]), static_cast<float>(xyz[3 * i + 1]), static_cast<float>(xyz[3 * i + 2])};
-        out.write(f, sizeof f);
-      } else {
-        out.write(&xyz[3 * i], 24);
-      }
+      write_position(out, &xyz[3 * i], in.index.single_precision);
     }
     check_share_memory(in, fmt::format("level {}'s centers pass", level), pass.memory_bytes());
   }
@@ -375,14 +373,7 @@ nlohmann::ordered_json cluster_records(const ClusterShareInput& in, const Cluste
       if (cells[i] == next) {  // r starts a cell: the centers pass must have found it
         if (next >= centers_count || center_record[next] != r) bad(fmt::format("record {} of level {} is not listed as a center", r, level));
         ++next;
-        if (centers) {
-          if (in.index.single_precision) {
-            const float f[3] = {static_cast<float>(xyz[3 * i]), static_cast<float>(xyz[3 * i + 1]), static_cast<float>(xyz[3 * i + 2])};
-            ctr.write(f, sizeof f);
-          } else {
-            ctr.write(&xyz[3 * i], 24);
-          }
-        }
+        if (centers) write_position(ctr, &xyz[3 * i], in.index.single_precision);
       }
       const uint32_t pair[2] = {r, center_record[cells[i]]};
       dec.write(pair, sizeof pair);

@@ -17,6 +17,7 @@
 #include "core/floating_cell_centers.h"
 #include "core/floating_cell_region.h"
 #include "core/status.h"
+#include "clouds.h"
 
 namespace lodstream {
 namespace {
@@ -35,27 +36,7 @@ constexpr ClusterOptions kVariants[] = {
     {Clustering::floating, CellShape::sphere, CellChoice::heaviest},
 };
 
-std::vector<P> cloud(std::mt19937_64& rng, int kind, size_t n) {
-  std::uniform_real_distribution<double> u(0.0, 10.0);
-  std::normal_distribution<double> g(0.0, 0.4);
-  std::vector<P> pts(n);
-  std::vector<P> clumps(12);
-  for (P& q : clumps) q = {u(rng), u(rng), u(rng)};
-  for (P& p : pts) {
-    if (kind == 0) {
-      p = {u(rng), u(rng), u(rng)};
-    } else if (kind == 1) {  // a lattice of step 1/4: points and cell sides on voxel boundaries, ties at c/2
-      for (double& x : p) x = 0.25 * std::floor(4 * u(rng));
-    } else if (kind == 2) {
-      const P& q = clumps[rng() % clumps.size()];
-      p = {q[0] + g(rng), q[1] + g(rng), q[2] + g(rng)};
-    } else {  // dense on three planes, as a building's walls: most vertices lie in covered voxels
-      const int axis = static_cast<int>(rng() % 3);
-      for (int a = 0; a < 3; ++a) p[a] = a == axis ? 2.0 + 3.0 * static_cast<double>(rng() % 3) : u(rng);
-    }
-  }
-  return pts;  // the order is the weight order
-}
+std::vector<P> cloud(std::mt19937_64& rng, int kind, size_t n) { return test::cloud(rng, kind, n); }
 
 std::array<double, 6> bounds_of(const std::vector<P>& pts) {
   std::array<double, 6> b = {pts[0][0], pts[0][1], pts[0][2], pts[0][0], pts[0][1], pts[0][2]};

@@ -16,6 +16,7 @@
 #include "core/floating_cell.h"
 #include "core/floating_cell_region.h"
 #include "core/status.h"
+#include "clouds.h"
 
 namespace lodstream {
 namespace {
@@ -95,24 +96,7 @@ Tally check_box(const std::vector<P>& pts, const std::vector<uint32_t>& whole, d
   return t;
 }
 
-std::vector<P> cloud(std::mt19937_64& rng, int kind, size_t n) {
-  std::uniform_real_distribution<double> u(0.0, 10.0);
-  std::normal_distribution<double> g(0.0, 0.4);
-  std::vector<P> pts(n);
-  std::vector<P> clumps(12);
-  for (P& q : clumps) q = {u(rng), u(rng), u(rng)};
-  for (P& p : pts) {
-    if (kind == 0) {
-      p = {u(rng), u(rng), u(rng)};
-    } else if (kind == 1) {  // a lattice of step c/4 = 0.25: many points exactly c/2 apart
-      for (double& x : p) x = 0.25 * std::floor(4 * u(rng));
-    } else {
-      const P& q = clumps[rng() % clumps.size()];
-      p = {q[0] + g(rng), q[1] + g(rng), q[2] + g(rng)};
-    }
-  }
-  return pts;  // the order is the weight order
-}
+std::vector<P> cloud(std::mt19937_64& rng, int kind, size_t n) { return test::cloud(rng, kind, n); }
 
 TEST(FloatingCellRegion, SettledDecisionsAreTheWholeScenePass) {
   std::mt19937_64 rng(19);
