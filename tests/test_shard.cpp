@@ -1151,16 +1151,18 @@ TEST(Shard, OptionsAndEnvironment) {
   unsetenv("LODSTREAM_SHARD_COUNT");
 }
 
+// A CLI command line with the room's tiling options (room_options) and no progress lines.
+std::vector<std::string> room_cli_args(std::vector<std::string> a) {
+  for (const char* x : {"--tiles", "--tile-triangles", "6000", "--no-space-check", "--progress", "none"}) a.push_back(x);
+  return a;
+}
+
 // Through the CLI: three tasks started at once on a fresh work directory (the first to take the lock runs
 // the shared stages, the others wait and reuse them), a task killed with SIGKILL just before its summary,
 // merge refusing, the task rerun alone, merge: one machine's bytes.
 TEST(Shard, ConcurrentTasksAndAKilledTaskThroughTheCli) {
   TempDir dir, one_out;
-  const std::vector<std::string> common{"--tiles", "--tile-triangles", "6000", "--no-space-check", "--progress", "none"};
-  auto args = [&](std::vector<std::string> a) {
-    a.insert(a.end(), common.begin(), common.end());
-    return a;
-  };
+  const auto args = room_cli_args;
   test::CliRun one = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("one")}), one_out);
   ASSERT_EQ(one.exit_code, 0) << one.err;
   setenv("LODSTREAM_TEST_KILL_AT", "task-1.json", 1);
@@ -1202,11 +1204,7 @@ TEST(Shard, ConcurrentTasksAndAKilledTaskThroughTheCli) {
 // machine's bytes.
 TEST(Shard, AKilledCentersUnitIsRunByTheNextShare) {
   TempDir dir, log;
-  const std::vector<std::string> common{"--tiles", "--tile-triangles", "6000", "--no-space-check", "--progress", "none"};
-  auto args = [&](std::vector<std::string> a) {
-    a.insert(a.end(), common.begin(), common.end());
-    return a;
-  };
+  const auto args = room_cli_args;
   test::CliRun one = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("one")}), log);
   ASSERT_EQ(one.exit_code, 0) << one.err;
   const std::string work = dir.file("work"), centers = stream::cluster_shares_dir(work + "/") + "centers/";
