@@ -838,6 +838,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         ordered_json share_key = key;
         share_key["shares"] = shares.json();
         share_key["vertex_cells"] = in.vertex_cells;
+        in.key = share_key;  // the centers units' stamps (levels split by records): the stage's inputs and the plan
         const std::string dir = work.subdir("cluster-shares");
         auto run_share = [&](unsigned s) {
           return stamped_share(dir, s, stream::cluster_share_stamp(prefix, s), share_key,

@@ -812,6 +812,45 @@ TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
   }
 }
 
+// The centers units of the levels split by records are stamped with the caller's key (the cluster stage's
+// inputs): a second run at cell sizes 1 % larger, under another key, with the first run's centers units
+// left in place, finds its own centers, and its maps are one pass's at those sizes.
+TEST(ClusterShares, CentersUnitsAreKeyedByTheStage) {
+  TempDir dir;
+  SimplifyOptions so = room_options(dir.file("one"));
+  so.representative = Representative::center;
+  SimplifyReport one;
+  ASSERT_TRUE(simplify(sample_room(), so, shared_work(dir), &one).ok());
+  stream::ClusterShareInput in = room_share_input(dir.file("work") + "/", one, stream::CellInfoKind::center);
+  stream::Progress progress{Options{}};
+  for (int run = 0; run < 2; ++run) {
+    SCOPED_TRACE("run " + std::to_string(run));
+    const std::string prefix = dir.file("shares-" + std::to_string(run)) + "/";
+    stream::WorkDir work(dir.file("shares-" + std::to_string(run)));
+    in.prefix = prefix, in.work = &work;
+    if (run == 1) {
+      for (double& c : in.sizes) c *= 1.01;
+      std::filesystem::create_directories(stream::cluster_shares_dir(prefix));
+      std::filesystem::copy(stream::cluster_shares_dir(dir.file("shares-0") + "/") + "centers",
+                            stream::cluster_shares_dir(prefix) + "centers");
+    }
+    in.key = {{"run", run}};
+    const stream::ClusterShares plan = stream::plan_cluster_shares(in, 3, progress);
+    ASSERT_EQ(plan.by_records.back(), 1) << "the coarsest level is split by records";
+    std::vector<nlohmann::ordered_json> figures;
+    for (unsigned s = 0; s < 3; ++s) figures.push_back(stream::run_cluster_share(in, plan, s, progress));
+    const stream::ClusterSummary cs = stream::merge_cluster_shares(in, plan, figures, progress);
+    const std::string whole = dir.file("whole-" + std::to_string(run) + "-");
+    const stream::ClusterSummary want =
+        stream::cluster_levels(in.index, in.bounds, in.sizes, in.options, in.info, in.memory_bytes, work, progress, whole);
+    EXPECT_EQ(cs.cells, want.cells);
+    for (size_t l = 0; l < in.sizes.size(); ++l) {
+      EXPECT_TRUE(slurp(stream::cells_path(prefix, l)) == slurp(stream::cells_path(whole, l))) << "level " << l;
+      EXPECT_TRUE(slurp(stream::cell_info_path(prefix, l)) == slurp(stream::cell_info_path(whole, l))) << "level " << l;
+    }
+  }
+}
+
 // RankedBits::select, which finds where a sums unit of the clustering merge starts (the center of its first
 // cell): the inverse of rank on the set bits, over runs of empty and of full words.
 TEST(ClusterShares, CenterBitsSelectIsTheInverseOfRank) {
