@@ -19,7 +19,8 @@ ClusterOptions heaviest(ClusterOptions o) {
 
 }  // namespace
 
-CenterPass::CenterPass(double cell_size, ClusterOptions options, std::span<const double, 6> bounds, uint64_t bitmap_bytes)
+CenterPass::CenterPass(double cell_size, ClusterOptions options, std::span<const double, 6> bounds, uint64_t bitmap_bytes,
+                       uint64_t brick_bytes)
     : clusterer_(std::span<const double>(&cell_size, 1), heaviest(options), bounds) {
   if (options.clustering != Clustering::floating) fail(Status::internal, "CenterPass: floating cells only");
   const double h = cell_size / 2;
@@ -43,9 +44,68 @@ CenterPass::CenterPass(double cell_size, ClusterOptions options, std::span<const
     bits_.assign((static_cast<uint64_t>(voxels) + 63) / 64, 0);
     break;
   }
+  if (brick_bytes == 0) brick_bytes = bitmap_bytes;
+  if (voxel_ > 0 || brick_bytes < kMinSparseBytes) return;
+  // Too large a scene for a dense bitmap at c/4: bricks of 8³ voxels of side at most c/4, in a hash table.
+  int es = std::ilogb(cell_size / 4);
+  if (std::ldexp(1.0, es) > cell_size / 4) --es;
+  const double inv = std::ldexp(1.0, -es);
+  int64_t first[3], dims[3];
+  for (int a = 0; a < 3; ++a) {
+    first[a] = static_cast<int64_t>(std::floor(bounds[a] * inv));
+    dims[a] = static_cast<int64_t>(std::floor(bounds[3 + a] * inv)) - first[a] + 1;
+    if (dims[a] >= (int64_t{1} << 24)) return;  // brick coordinates of 21 bits
+  }
+  voxel_ = std::ldexp(1.0, es), inverse_ = inv, sparse_ = true, budget_ = brick_bytes;
+  std::copy(first, first + 3, first_);
+  std::copy(dims, dims + 3, dims_);
+  keys_.assign(kFirstSlots, 0);
+  bricks_.assign(kFirstSlots, Brick{});
 }
 
-bool CenterPass::covered(const double* p) const {
+// The brick of `key` (a brick's packed coordinates), or null when it has none; with `add`, one is made
+// unless the table is at its budget.
+CenterPass::Brick* CenterPass::brick(uint64_t key, bool add) {
+  const uint64_t stored = key + 1;  // 0 marks an empty slot
+  for (;;) {
+    const uint64_t mask = keys_.size() - 1;
+    for (uint64_t at = (stored * 0x9E3779B97F4A7C15ull) >> 20 & mask;; at = (at + 1) & mask) {
+      if (keys_[at] == stored) return &bricks_[at];
+      if (keys_[at] != 0) continue;
+      if (!add) return nullptr;
+      if (2 * (used_ + 1) <= keys_.size()) {
+        keys_[at] = stored;
+        ++used_;
+        return &bricks_[at];
+      }
+      break;  // the table is half full: grow it, or stop adding
+    }
+    if (2 * keys_.size() * (sizeof(uint64_t) + sizeof(Brick)) > budget_) return nullptr;  // marks dropped: conservative
+    std::vector<uint64_t> keys(2 * keys_.size(), 0);
+    std::vector<Brick> bricks(2 * keys_.size());
+    for (size_t i = 0; i < keys_.size(); ++i) {
+      if (!keys_[i]) continue;
+      for (uint64_t at = (keys_[i] * 0x9E3779B97F4A7C15ull) >> 20 & (keys.size() - 1);; at = (at + 1) & (keys.size() - 1))
+        if (!keys[at]) {
+          keys[at] = keys_[i], bricks[at] = bricks_[i];
+          break;
+        }
+    }
+    keys_.swap(keys), bricks_.swap(bricks);
+  }
+}
+
+bool CenterPass::covered(const double* p) {
+  if (sparse_) {
+    int64_t j[3];
+    for (int a = 0; a < 3; ++a) {
+      j[a] = static_cast<int64_t>(std::floor(p[a] * inverse_)) - first_[a];
+      if (j[a] < 0 || j[a] >= dims_[a]) return false;
+    }
+    const Brick* b = brick(brick_key(j), false);
+    const unsigned bit = static_cast<unsigned>((j[0] & 7) | (j[1] & 7) << 3 | (j[2] & 7) << 6);
+    return b && (b->bits[bit >> 6] >> (bit & 63) & 1);
+  }
   uint64_t at = 0;
   for (int a = 2; a >= 0; --a) {
     const int64_t j = static_cast<int64_t>(std::floor(p[a] * inverse_)) - first_[a];
@@ -63,6 +123,20 @@ void CenterPass::mark(const double* p) {
     lo[a] = std::max<int64_t>(static_cast<int64_t>(std::ceil(l * inverse_)) - first_[a], 0);
     hi[a] = std::min<int64_t>(static_cast<int64_t>(std::floor(u * inverse_)) - 1 - first_[a], dims_[a] - 1);
     if (lo[a] > hi[a]) return;
+  }
+  if (sparse_) {
+    uint64_t last = UINT64_MAX;
+    Brick* b = nullptr;
+    for (int64_t z = lo[2]; z <= hi[2]; ++z)
+      for (int64_t y = lo[1]; y <= hi[1]; ++y)
+        for (int64_t x = lo[0]; x <= hi[0]; ++x) {
+          const int64_t j[3] = {x, y, z};
+          if (const uint64_t key = brick_key(j); key != last) last = key, b = brick(key, true);
+          if (!b) continue;  // the table is at its budget
+          const unsigned bit = static_cast<unsigned>((x & 7) | (y & 7) << 3 | (z & 7) << 6);
+          b->bits[bit >> 6] |= uint64_t{1} << (bit & 63);
+        }
+    return;
   }
   for (int64_t z = lo[2]; z <= hi[2]; ++z)
     for (int64_t y = lo[1]; y <= hi[1]; ++y) {

@@ -22,7 +22,12 @@
 // holds it. Skipped vertices are members, which a Clusterer would not have changed: the Clusterer's
 // centers are the whole pass's.
 //
-// Memory: the bitmap (a bit a voxel of the bounds, at most bitmap_bytes) and the Clusterer's cells.
+// Where a bitmap over the scene's bounds does not fit at voxels of c/4, the voxels (of side at most c/4) are
+// kept in bricks of 8³ (64 bytes) in a hash table, made only where a cell marks: a scene's surfaces, not its
+// volume. A table at its budget makes no more bricks; the marks it drops only cost queries.
+//
+// Memory: the bitmap (a bit a voxel of the bounds) or the bricks' table, at most bitmap_bytes, and the
+// Clusterer's cells.
 #pragma once
 
 #include <cstdint>
@@ -36,9 +41,11 @@ namespace lodstream::core {
 class CenterPass {
  public:
   // cell_size: the level's c; options: floating cells (shape; the choice does not matter); bounds: {min x,
-  // min y, min z, max x, max y, max z} of every position visited; bitmap_bytes: what the covered voxels may
-  // take (0, or too little for voxels of at most c/4: none, and every vertex is queried).
-  CenterPass(double cell_size, ClusterOptions options, std::span<const double, 6> bounds, uint64_t bitmap_bytes);
+  // min y, min z, max x, max y, max z} of every position visited; bitmap_bytes: what a bitmap over the
+  // bounds may take; brick_bytes: what the bricks' table may take where no bitmap fits (0: bitmap_bytes).
+  // Neither fits voxels of at most c/4 (or under 4 KiB): no covered voxels, and every vertex is queried.
+  CenterPass(double cell_size, ClusterOptions options, std::span<const double, 6> bounds, uint64_t bitmap_bytes,
+             uint64_t brick_bytes = 0);
 
   // Visits n vertices in weight order, at xyz[3i .. 3i + 3); is_center[i] = 1 when vertex i starts a cell,
   // else 0. Spans of equal n (else Failure(Status::internal)).
@@ -46,18 +53,35 @@ class CenterPass {
 
   uint64_t centers() const { return clusterer_.cell_count(0); }
   uint64_t skipped() const { return skipped_; }  // vertices a covered voxel decided
-  double voxel() const { return voxel_; }        // 0: no bitmap
-  uint64_t memory_bytes() const { return bits_.capacity() * 8 + clusterer_.memory_bytes() + clusterer_.growth_bytes(); }
+  double voxel() const { return voxel_; }        // 0: no covered voxels
+  bool sparse() const { return sparse_; }        // voxels in bricks (else a bitmap over the bounds)
+  uint64_t memory_bytes() const {
+    return bits_.capacity() * 8 + keys_.capacity() * 8 + bricks_.capacity() * sizeof(Brick) + clusterer_.memory_bytes() +
+           clusterer_.growth_bytes();
+  }
 
  private:
-  bool covered(const double* p) const;
+  struct Brick {
+    uint64_t bits[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // voxel (x, y, z) of the brick at bit x | y << 3 | z << 6
+  };
+  static constexpr uint64_t kMinSparseBytes = 4096;
+  static constexpr size_t kFirstSlots = 16;
+  static uint64_t brick_key(const int64_t j[3]) {
+    return static_cast<uint64_t>(j[0] >> 3) | static_cast<uint64_t>(j[1] >> 3) << 21 | static_cast<uint64_t>(j[2] >> 3) << 42;
+  }
+  bool covered(const double* p);
   void mark(const double* p);
+  Brick* brick(uint64_t key, bool add);
 
   Clusterer clusterer_;
   double half_ = 0;         // the half side of the cube a cell holds surely (h, or 0.5773·h for spheres)
   double voxel_ = 0, inverse_ = 0;  // v = 2^e and 1 / v, exact
   int64_t first_[3] = {0, 0, 0}, dims_[3] = {0, 0, 0};
-  std::vector<uint64_t> bits_;  // voxel (x, y, z) at bit (z·dims_y + y)·dims_x + x
+  std::vector<uint64_t> bits_;  // dense: voxel (x, y, z) at bit (z·dims_y + y)·dims_x + x
+  bool sparse_ = false;          // else: bricks of 8³ voxels by their packed coordinates (key + 1; 0: empty slot),
+  std::vector<uint64_t> keys_;   // linear probing, at most half full
+  std::vector<Brick> bricks_;
+  uint64_t used_ = 0, budget_ = 0;
   uint64_t skipped_ = 0;
   // Scratch for a block's queried vertices.
   std::vector<uint32_t> ids_, cells_;

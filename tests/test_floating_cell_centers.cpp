@@ -46,10 +46,14 @@ std::array<double, 6> bounds_of(const std::vector<P>& pts) {
 }
 
 // CenterPass over pts in blocks of random sizes: per vertex, 1 when it starts a cell.
+// wide: bounds 10⁴ times the cloud's, so that no bitmap over them fits and the voxels go in bricks.
 std::vector<uint8_t> centers_of(const std::vector<P>& pts, double c, ClusterOptions o, uint64_t bitmap_bytes, std::mt19937_64& rng,
-                                uint64_t* skipped, double* voxel) {
-  const std::array<double, 6> b = bounds_of(pts);
+                                uint64_t* skipped, double* voxel, bool wide = false, bool* sparse = nullptr) {
+  std::array<double, 6> b = bounds_of(pts);
+  if (wide)
+    for (int a = 0; a < 3; ++a) b[a] -= 1e5, b[3 + a] += 1e5;
   CenterPass pass(c, o, b, bitmap_bytes);
+  if (sparse) *sparse = pass.sparse();
   std::vector<uint8_t> out(pts.size());
   for (size_t at = 0; at < pts.size();) {
     const size_t n = std::min<size_t>(1 + rng() % 700, pts.size() - at);
@@ -64,6 +68,10 @@ std::vector<uint8_t> centers_of(const std::vector<P>& pts, double c, ClusterOpti
   return out;
 }
 
+// The budgets: none, too small for any voxels, a bitmap at c/4 for the coarser cells and bricks at their
+// budget for the finer, an ample bitmap, and (kWide) bricks over bounds too wide for a bitmap.
+constexpr uint64_t kWide = 1;
+
 TEST(FloatingCellCenters, CentersAreTheWholeScenePassWithAndWithoutCoveredVoxels) {
   std::mt19937_64 rng(7);
   uint64_t skipped_total = 0, checked = 0;
@@ -73,10 +81,18 @@ TEST(FloatingCellCenters, CentersAreTheWholeScenePassWithAndWithoutCoveredVoxels
     for (const ClusterOptions& o : kVariants)
       for (double c : {0.5, 1.0, 2.0}) {
         const std::vector<uint32_t> whole = core::whole_scene_centers(xyz, c, o);
-        for (uint64_t bytes : {uint64_t{0}, uint64_t{64}, uint64_t{1} << 12, uint64_t{1} << 22}) {
+        for (uint64_t bytes : {uint64_t{0}, uint64_t{64}, uint64_t{1} << 12, uint64_t{1} << 22, kWide}) {
           uint64_t skipped = 0;
           double voxel = 0;
-          const std::vector<uint8_t> centers = centers_of(pts, c, o, bytes, rng, &skipped, &voxel);
+          bool sparse = false;
+          const bool wide = bytes == kWide;
+          const std::vector<uint8_t> centers = centers_of(pts, c, o, wide ? uint64_t{1} << 22 : bytes, rng, &skipped, &voxel, wide, &sparse);
+          if (wide) {
+            EXPECT_TRUE(sparse) << "no bitmap over the wide bounds fits";
+          }
+          if (bytes == uint64_t{1} << 22) {
+            EXPECT_FALSE(sparse);
+          }
           for (size_t i = 0; i < pts.size(); ++i)
             ASSERT_EQ(centers[i] != 0, whole[i] == i) << "kind " << kind << " c " << c << " bitmap " << bytes << " vertex " << i;
           if (voxel == 0) {
@@ -85,16 +101,25 @@ TEST(FloatingCellCenters, CentersAreTheWholeScenePassWithAndWithoutCoveredVoxels
             EXPECT_LE(voxel, c / 4);
             EXPECT_EQ(voxel, std::ldexp(1.0, std::ilogb(voxel)));  // a power of two
           }
-          if (bytes == 0) EXPECT_EQ(voxel, 0.0);
-          if (bytes == uint64_t{1} << 22) EXPECT_LE(voxel, c / 8);  // room for fine voxels here
-          if (kind == 3 && bytes == uint64_t{1} << 22) EXPECT_GT(skipped, pts.size() / 3) << "c " << c;  // 40 % at c = 0.5
+          if (bytes == 0) {
+            EXPECT_EQ(voxel, 0.0);
+          }
+          if (bytes == uint64_t{1} << 22) {
+            EXPECT_LE(voxel, c / 8);  // room for fine voxels here
+          }
+          if (kind == 3 && bytes == uint64_t{1} << 22) {
+            EXPECT_GT(skipped, pts.size() / 3) << "c " << c;  // 40 % at c = 0.5
+          }
+          if (kind == 3 && wide) {
+            EXPECT_GT(skipped, pts.size() / 8) << "c " << c;  // 16 % at c = 0.5: bricks' voxels are c/4
+          }
           skipped_total += skipped;
           ++checked;
         }
       }
   }
   EXPECT_GT(skipped_total, 0u);
-  EXPECT_EQ(checked, 4u * 4u * 3u * 4u);
+  EXPECT_EQ(checked, 4u * 4u * 3u * 5u);
 }
 
 // A range [lo, hi) of the weight order clustered alone: a Clusterer given the centers before lo, then the
