@@ -302,7 +302,7 @@ std::pair<std::vector<std::string>, nlohmann::ordered_json> find_centers(const C
       out.write(&r, 4);
       write_position(out, &xyz[3 * i], in.index.single_precision);
     }
-    check_share_memory(in, fmt::format("level {}'s centers pass", level), pass.memory_bytes());
+    check_share_memory(in, fmt::format("level {}'s covered voxels and cells", level), pass.memory_bytes());
   }
   out.commit();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -315,14 +315,26 @@ std::pair<std::vector<std::string>, nlohmann::ordered_json> find_centers(const C
 // then the range's records in weight order (core/floating_cell_centers.h: the whole pass's decisions);
 // writes the range's .dec and .ctr as a slab's share does. Failure(io_error) when the centers file does
 // not agree with the pass (a center that starts no cell, or a cell started by a record it does not list).
+// `running`: what the levels clustered at once hold together (each adds its own; checked against the budget).
 nlohmann::ordered_json cluster_records(const ClusterShareInput& in, const ClusterShares& plan, unsigned share, size_t level,
-                                       uint64_t centers_count, Progress& progress) {
+                                       uint64_t centers_count, std::atomic<uint64_t>& running, Progress& progress) {
   const uint64_t lo = plan.first_record(share, in.index.records), hi = plan.first_record(share + 1, in.index.records);
   const std::string path = cluster_centers_path(in.prefix, level);
   const size_t item = 4 + (in.index.single_precision ? 12 : 24);
   const io::MappedFile file(path);
   if (file.size() != centers_count * item) fail(Status::io_error, path + ": size does not match its stamp");
-  check_share_memory(in, fmt::format("level {}'s centers", level), centers_count * 4);
+  uint64_t counted = 0;  // this level's part of `running`
+  struct Uncount {       // returned however the level ends
+    std::atomic<uint64_t>& total;
+    uint64_t& n;
+    ~Uncount() { total.fetch_sub(n); }
+  } uncount{running, counted};
+  auto count = [&](uint64_t now, const char* what) {
+    running.fetch_add(now - counted);  // wraps correctly when it shrinks
+    counted = now;
+    check_share_memory(in, fmt::format("level {}'s {}", level, what), running.load());
+  };
+  count(centers_count * 4, "centers");
   std::vector<uint32_t> center_record(centers_count);  // cell id -> its center's record
   core::Clusterer clusterer(std::span<const double>(&in.sizes[level], 1), in.options,
                             std::span<const double>(in.bounds.data(), in.bounds.size()));
@@ -382,7 +394,7 @@ nlohmann::ordered_json cluster_records(const ClusterShareInput& in, const Cluste
       const uint32_t pair[2] = {r, center_record[cells[i]]};
       dec.write(pair, sizeof pair);
     }
-    check_share_memory(in, fmt::format("level {}'s cells", level), clusterer.memory_bytes() + clusterer.growth_bytes() + centers_count * 4);
+    count(clusterer.memory_bytes() + clusterer.growth_bytes() + centers_count * 4, "cells");
   }
   if ((next < centers_count && center_record[next] < hi) || (hi == in.index.records && next != centers_count))
     bad(fmt::format("a center of level {} in records [{}, {}) starts no cell", level, lo, hi));
@@ -655,8 +667,9 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
     std::vector<uint64_t> centers(by_records.size());
     for (size_t j = 0; j < by_records.size(); ++j) centers[j] = centers_unit(j, true)->at("centers").get<uint64_t>();
     std::vector<nlohmann::ordered_json> f(by_records.size());
+    std::atomic<uint64_t> running{0};  // the levels' clusterers and centers, together under the budget
     tbb::parallel_for(size_t{0}, by_records.size(),
-                      [&](size_t j) { f[j] = cluster_records(in, plan, index, by_records[j], centers[j], progress); });
+                      [&](size_t j) { f[j] = cluster_records(in, plan, index, by_records[j], centers[j], running, progress); });
     for (auto& x : f) figures.push_back(std::move(x));
   };
   // The split levels: select with the widest halo any of them needs, cluster each, widen the ones that did

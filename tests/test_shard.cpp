@@ -851,6 +851,31 @@ TEST(ClusterShares, CentersUnitsAreKeyedByTheStage) {
   }
 }
 
+// A share over --memory stops with a usage error naming what outgrew it: here the first level split by
+// records' centers pass (its covered voxels and cells), at 64 KiB.
+TEST(ClusterShares, AShareOverItsBudgetNamesWhatOutgrewIt) {
+  TempDir dir;
+  SimplifyOptions so = room_options(dir.file("one"));
+  SimplifyReport one;
+  ASSERT_TRUE(simplify(sample_room(), so, shared_work(dir), &one).ok());
+  stream::ClusterShareInput in = room_share_input(dir.file("work") + "/", one, stream::CellInfoKind::center);
+  stream::WorkDir work(dir.file("shares"));
+  in.prefix = dir.file("shares") + "/", in.work = &work;
+  stream::Progress progress{Options{}};
+  const stream::ClusterShares plan = stream::plan_cluster_shares(in, 3, progress);
+  ASSERT_EQ(plan.by_records.back(), 1);
+  in.memory_bytes = 64 << 10;
+  try {
+    stream::run_cluster_share(in, plan, 0, progress);
+    ADD_FAILURE() << "a share ran over its budget";
+  } catch (const Failure& f) {
+    EXPECT_EQ(f.status(), Status::usage);
+    EXPECT_NE(std::string(f.what()).find("covered voxels and cells take"), std::string::npos) << f.what();
+    EXPECT_NE(std::string(f.what()).find("more than --memory allows (0 MiB): raise --memory, or run more shares"), std::string::npos)
+        << f.what();
+  }
+}
+
 // RankedBits::select, which finds where a sums unit of the clustering merge starts (the center of its first
 // cell): the inverse of rank on the set bits, over runs of empty and of full words.
 TEST(ClusterShares, CenterBitsSelectIsTheInverseOfRank) {
