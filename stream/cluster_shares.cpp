@@ -125,6 +125,25 @@ struct Held {
   uint64_t bytes() const { return record.capacity() * 4 + xyz.bytes(); }
 };
 
+// One thread's part of a total that several share (the levels clustered at once, under one budget): set()
+// makes the part `now` and returns the total; the part is given back when the object goes, however.
+class SharedPart {
+ public:
+  explicit SharedPart(std::atomic<uint64_t>& total) : total_(total) {}
+  SharedPart(const SharedPart&) = delete;
+  SharedPart& operator=(const SharedPart&) = delete;
+  ~SharedPart() { total_.fetch_sub(part_); }
+  uint64_t set(uint64_t now) {
+    total_.fetch_add(now - part_);  // wraps correctly when the part shrinks
+    part_ = now;
+    return total_.load();
+  }
+
+ private:
+  std::atomic<uint64_t>& total_;
+  uint64_t part_ = 0;
+};
+
 // What a share holds past its budget: Failure(usage), naming what outgrew it.
 void check_share_memory(const ClusterShareInput& in, const std::string& what, uint64_t bytes) {
   if (bytes <= in.memory_bytes) return;
@@ -213,12 +232,7 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
   const bool centers = in.info == CellInfoKind::center;  // the merge reads the centers' positions for this kind only
   io::FileWriter dec(dec_path(in.prefix, share, level), 1 << 20), ctr;
   if (centers) ctr.open(ctr_path(in.prefix, share, level), 1 << 20);
-  uint64_t counted = 0;  // this level's share of `clusterers`
-  struct Uncount {       // returned to `clusterers` however the level ends
-    std::atomic<uint64_t>& total;
-    uint64_t& n;
-    ~Uncount() { total.fetch_sub(n); }
-  } uncount{clusterers, counted};
+  SharedPart part(clusterers);  // this level's part of `clusterers`
   *held_in_box = *own = 0;
   // The held records in the box go to the clusterer a block at a time (its pipeline fetches ahead within a
   // block), named by their records, so that a decision names its center's record.
@@ -248,10 +262,8 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
   for (size_t k = 0; k < held.record.size(); ++k) {
     if ((k & 0xfffff) == 0) {
       progress.check();
-      const uint64_t now = rc.memory_bytes() + rc.growth_bytes();
-      clusterers.fetch_add(now - counted);  // wraps correctly: counted only grows
-      counted = now;
-      check_share_memory(in, fmt::format("level {}'s cells", level), held.bytes() + clusterers.load());
+      const uint64_t total = part.set(rc.memory_bytes() + rc.growth_bytes());
+      check_share_memory(in, fmt::format("level {}'s cells", level), held.bytes() + total);
     }
     held.xyz.get(k, p);
     if (!(box[axis] <= p[axis] && p[axis] < box[3 + axis])) continue;
@@ -323,16 +335,9 @@ nlohmann::ordered_json cluster_records(const ClusterShareInput& in, const Cluste
   const size_t item = 4 + (in.index.single_precision ? 12 : 24);
   const io::MappedFile file(path);
   if (file.size() != centers_count * item) fail(Status::io_error, path + ": size does not match its stamp");
-  uint64_t counted = 0;  // this level's part of `running`
-  struct Uncount {       // returned however the level ends
-    std::atomic<uint64_t>& total;
-    uint64_t& n;
-    ~Uncount() { total.fetch_sub(n); }
-  } uncount{running, counted};
+  SharedPart part(running);  // this level's part of `running`
   auto count = [&](uint64_t now, const char* what) {
-    running.fetch_add(now - counted);  // wraps correctly when it shrinks
-    counted = now;
-    check_share_memory(in, fmt::format("level {}'s {}", level, what), running.load());
+    check_share_memory(in, fmt::format("level {}'s {}", level, what), part.set(now));
   };
   count(centers_count * 4, "centers");
   std::vector<uint32_t> center_record(centers_count);  // cell id -> its center's record

@@ -731,17 +731,22 @@ stream::ClusterShareInput room_share_input(const std::string& work, const Simpli
   return in;
 }
 
+// One machine's run of the room in dir's work directory (into dir/one), and the shares' input over it.
+stream::ClusterShareInput room_run_and_share_input(const TempDir& dir, Representative rep, SimplifyReport* one) {
+  SimplifyOptions so = room_options(dir.file("one"));
+  so.representative = rep;
+  if (!simplify(sample_room(), so, shared_work(dir), one).ok()) ADD_FAILURE() << "one machine's run failed";
+  return room_share_input(dir.file("work") + "/", *one, stream::cell_info_kind(rep));
+}
+
 // The shares through the stream API with a first halo of a quarter cell, so that their own vertices near
 // the slabs' edges stay unsettled and the shares widen their halos: every level's map and info are still
 // one machine's, and the merge refuses shares that do not add up.
 TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
   TempDir dir;
-  SimplifyOptions so = room_options(dir.file("one"));
-  so.representative = Representative::mean;
   SimplifyReport one;
-  ASSERT_TRUE(simplify(sample_room(), so, shared_work(dir), &one).ok());
+  stream::ClusterShareInput in = room_run_and_share_input(dir, Representative::mean, &one);
   const std::string work = dir.file("work") + "/";
-  stream::ClusterShareInput in = room_share_input(work, one, stream::CellInfoKind::mean);
   const std::string prefix = dir.file("shares") + "/";
   stream::WorkDir shares_work(dir.file("shares"));
   in.prefix = prefix, in.work = &shares_work;
@@ -817,11 +822,8 @@ TEST(ClusterShares, WideningSharesGiveOneMachinesMapsAndInfos) {
 // left in place, finds its own centers, and its maps are one pass's at those sizes.
 TEST(ClusterShares, CentersUnitsAreKeyedByTheStage) {
   TempDir dir;
-  SimplifyOptions so = room_options(dir.file("one"));
-  so.representative = Representative::center;
   SimplifyReport one;
-  ASSERT_TRUE(simplify(sample_room(), so, shared_work(dir), &one).ok());
-  stream::ClusterShareInput in = room_share_input(dir.file("work") + "/", one, stream::CellInfoKind::center);
+  stream::ClusterShareInput in = room_run_and_share_input(dir, Representative::center, &one);
   stream::Progress progress{Options{}};
   for (int run = 0; run < 2; ++run) {
     SCOPED_TRACE("run " + std::to_string(run));
@@ -855,10 +857,8 @@ TEST(ClusterShares, CentersUnitsAreKeyedByTheStage) {
 // records' centers pass (its covered voxels and cells), at 64 KiB.
 TEST(ClusterShares, AShareOverItsBudgetNamesWhatOutgrewIt) {
   TempDir dir;
-  SimplifyOptions so = room_options(dir.file("one"));
   SimplifyReport one;
-  ASSERT_TRUE(simplify(sample_room(), so, shared_work(dir), &one).ok());
-  stream::ClusterShareInput in = room_share_input(dir.file("work") + "/", one, stream::CellInfoKind::center);
+  stream::ClusterShareInput in = room_run_and_share_input(dir, SimplifyOptions().representative, &one);
   stream::WorkDir work(dir.file("shares"));
   in.prefix = dir.file("shares") + "/", in.work = &work;
   stream::Progress progress{Options{}};
