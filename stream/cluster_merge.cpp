@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <optional>
 #include <queue>
 
 #include <fmt/format.h>
@@ -114,6 +115,10 @@ void for_each_decision(const ClusterShareInput& in, const ClusterShares& plan, s
   using Head = std::pair<uint32_t, unsigned>;  // (record, share)
   std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heads;
   std::vector<uint32_t> pending(plan.count);  // each share's next record's center
+  // The head of the share just read stays out of the heap while it comes first: a level split by records
+  // (cluster_shares.h) gives one run of consecutive records a share, where a push and a pop a record were
+  // the merge's own cost. The order is the heap's (record, then share).
+  std::optional<Head> held;
   auto advance = [&](unsigned s) {
     if (const char* p = decs[s]->next()) {
       uint32_t pair[2];
@@ -121,25 +126,35 @@ void for_each_decision(const ClusterShareInput& in, const ClusterShares& plan, s
       if (pair[1] > pair[0]) fail(Status::io_error, cluster_share_decisions_path(in.prefix, s, level) + ": not a share's decisions");
       if (pair[0] >= hi && hi < records) return;  // the next unit's
       pending[s] = pair[1];
-      heads.push({pair[0], s});
+      held = Head{pair[0], s};
     }
   };
   for (unsigned s = 0; s < plan.count; ++s) {
     decs.push_back(decisions_from(in, s, level, lo));
     advance(s);
+    if (held) heads.push(*held), held.reset();
   }
   auto missing = [&](uint64_t r, const char* how) {
     fail(Status::io_error, fmt::format("{}: record {} of level {} is decided {}", cluster_shares_dir(in.prefix), r, level, how));
   };
   for (uint64_t r = lo; r < hi; ++r) {
     if ((r & 0xfffff) == 0) progress.check();
-    if (heads.empty()) missing(r, "by no share");
-    const auto [record, s] = heads.top();
-    heads.pop();
+    Head head;
+    if (held && (heads.empty() || *held < heads.top())) {
+      head = *held;
+    } else {
+      if (held) heads.push(*held);
+      if (heads.empty()) missing(r, "by no share");
+      head = heads.top();
+      heads.pop();
+    }
+    held.reset();
+    const auto [record, s] = head;
     if (record != r) missing(r, record < r ? "twice" : "by no share");
     decided(r, pending[s], s);
     advance(s);
   }
+  if (held) heads.push(*held), held.reset();
   if (!heads.empty()) missing(heads.top().first, heads.top().first < hi ? "twice" : "past the weight index's records");
   for (uint64_t k = queued > kDecisionsAhead ? queued - kDecisionsAhead : 0; k < queued; ++k) {
     const Decision& d = ring[k % kDecisionsAhead];
