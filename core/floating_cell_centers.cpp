@@ -19,6 +19,31 @@ ClusterOptions heaviest(ClusterOptions o) {
 
 }  // namespace
 
+namespace {
+
+// The voxels of side 1 / inv over the bounds: the first voxel's index and the count per axis; returns their
+// product.
+double voxel_grid(std::span<const double, 6> bounds, double inv, int64_t first[3], int64_t dims[3]) {
+  double voxels = 1;
+  for (int a = 0; a < 3; ++a) {
+    first[a] = static_cast<int64_t>(std::floor(bounds[a] * inv));
+    dims[a] = static_cast<int64_t>(std::floor(bounds[3 + a] * inv)) - first[a] + 1;
+    voxels *= static_cast<double>(dims[a]);
+  }
+  return voxels;
+}
+
+// The largest power of two at most x, as its exponent.
+int exponent_at_most(double x) {
+  const int e = std::ilogb(x);
+  return std::ldexp(1.0, e) > x ? e - 1 : e;
+}
+
+// A brick key's first slot in a table of `slots` (a power of two).
+uint64_t first_slot(uint64_t stored, size_t slots) { return (stored * 0x9E3779B97F4A7C15ull) >> 20 & (slots - 1); }
+
+}  // namespace
+
 CenterPass::CenterPass(double cell_size, ClusterOptions options, std::span<const double, 6> bounds, uint64_t bitmap_bytes,
                        uint64_t brick_bytes)
     : clusterer_(std::span<const double>(&cell_size, 1), heaviest(options), bounds) {
@@ -26,92 +51,69 @@ CenterPass::CenterPass(double cell_size, ClusterOptions options, std::span<const
   const double h = cell_size / 2;
   half_ = options.shape == CellShape::sphere ? h * 0.5773 : h;
   // The finest power of two at most c/16 whose voxels over the bounds fit the bitmap, up to c/4.
-  int e = std::ilogb(cell_size / 16);
-  if (std::ldexp(1.0, e) > cell_size / 16) --e;
-  for (; std::ldexp(1.0, e) <= cell_size / 4; ++e) {
-    const double v = std::ldexp(1.0, e), inv = std::ldexp(1.0, -e);
-    double voxels = 1;
-    int64_t first[3], dims[3];
-    for (int a = 0; a < 3; ++a) {
-      first[a] = static_cast<int64_t>(std::floor(bounds[a] * inv));
-      dims[a] = static_cast<int64_t>(std::floor(bounds[3 + a] * inv)) - first[a] + 1;
-      voxels *= static_cast<double>(dims[a]);
-    }
+  for (int e = exponent_at_most(cell_size / 16); std::ldexp(1.0, e) <= cell_size / 4; ++e) {
+    const double voxels = voxel_grid(bounds, std::ldexp(1.0, -e), first_, dims_);
     if (voxels / 8 + 8 > static_cast<double>(bitmap_bytes)) continue;
-    voxel_ = v, inverse_ = inv;
-    std::copy(first, first + 3, first_);
-    std::copy(dims, dims + 3, dims_);
+    voxel_ = std::ldexp(1.0, e), inverse_ = std::ldexp(1.0, -e);
     bits_.assign((static_cast<uint64_t>(voxels) + 63) / 64, 0);
-    break;
+    return;
   }
-  if (brick_bytes == 0) brick_bytes = bitmap_bytes;
-  if (voxel_ > 0 || brick_bytes < kMinSparseBytes) return;
   // Too large a scene for a dense bitmap at c/4: bricks of 8³ voxels of side at most c/4, in a hash table.
-  int es = std::ilogb(cell_size / 4);
-  if (std::ldexp(1.0, es) > cell_size / 4) --es;
-  const double inv = std::ldexp(1.0, -es);
-  int64_t first[3], dims[3];
-  for (int a = 0; a < 3; ++a) {
-    first[a] = static_cast<int64_t>(std::floor(bounds[a] * inv));
-    dims[a] = static_cast<int64_t>(std::floor(bounds[3 + a] * inv)) - first[a] + 1;
-    if (dims[a] >= (int64_t{1} << 24)) return;  // brick coordinates of 21 bits
-  }
-  voxel_ = std::ldexp(1.0, es), inverse_ = inv, sparse_ = true, budget_ = brick_bytes;
-  std::copy(first, first + 3, first_);
-  std::copy(dims, dims + 3, dims_);
+  if (brick_bytes == 0) brick_bytes = bitmap_bytes;
+  if (brick_bytes < kMinSparseBytes) return;
+  const int e = exponent_at_most(cell_size / 4);
+  voxel_grid(bounds, std::ldexp(1.0, -e), first_, dims_);
+  for (int a = 0; a < 3; ++a)
+    if (dims_[a] >= (int64_t{1} << 24)) return;  // brick coordinates of 21 bits
+  voxel_ = std::ldexp(1.0, e), inverse_ = std::ldexp(1.0, -e), sparse_ = true, budget_ = brick_bytes;
   keys_.assign(kFirstSlots, 0);
   bricks_.assign(kFirstSlots, Brick{});
 }
 
-// The brick of `key` (a brick's packed coordinates), or null when it has none; with `add`, one is made
-// unless the table is at its budget.
-CenterPass::Brick* CenterPass::brick(uint64_t key, bool add) {
+const CenterPass::Brick* CenterPass::find_brick(uint64_t key) const {
   const uint64_t stored = key + 1;  // 0 marks an empty slot
-  for (;;) {
-    const uint64_t mask = keys_.size() - 1;
-    for (uint64_t at = (stored * 0x9E3779B97F4A7C15ull) >> 20 & mask;; at = (at + 1) & mask) {
-      if (keys_[at] == stored) return &bricks_[at];
-      if (keys_[at] != 0) continue;
-      if (!add) return nullptr;
-      if (2 * (used_ + 1) <= keys_.size()) {
-        keys_[at] = stored;
-        ++used_;
-        return &bricks_[at];
-      }
-      break;  // the table is half full: grow it, or stop adding
-    }
-    if (2 * keys_.size() * (sizeof(uint64_t) + sizeof(Brick)) > budget_) return nullptr;  // marks dropped: conservative
-    std::vector<uint64_t> keys(2 * keys_.size(), 0);
-    std::vector<Brick> bricks(2 * keys_.size());
-    for (size_t i = 0; i < keys_.size(); ++i) {
-      if (!keys_[i]) continue;
-      for (uint64_t at = (keys_[i] * 0x9E3779B97F4A7C15ull) >> 20 & (keys.size() - 1);; at = (at + 1) & (keys.size() - 1))
-        if (!keys[at]) {
-          keys[at] = keys_[i], bricks[at] = bricks_[i];
-          break;
-        }
-    }
-    keys_.swap(keys), bricks_.swap(bricks);
+  for (uint64_t at = first_slot(stored, keys_.size());; at = (at + 1) & (keys_.size() - 1)) {
+    if (keys_[at] == stored) return &bricks_[at];
+    if (keys_[at] == 0) return nullptr;
   }
 }
 
-bool CenterPass::covered(const double* p) {
-  if (sparse_) {
-    int64_t j[3];
-    for (int a = 0; a < 3; ++a) {
-      j[a] = static_cast<int64_t>(std::floor(p[a] * inverse_)) - first_[a];
-      if (j[a] < 0 || j[a] >= dims_[a]) return false;
+CenterPass::Brick* CenterPass::add_brick(uint64_t key) {
+  const uint64_t stored = key + 1;
+  if (2 * (used_ + 1) > keys_.size()) {  // half full: grow the table, or stop adding
+    if (2 * keys_.size() * (sizeof(uint64_t) + sizeof(Brick)) > budget_) return nullptr;  // marks dropped: conservative
+    std::vector<uint64_t> keys(2 * keys_.size(), 0);
+    std::vector<Brick> bricks(keys.size());
+    for (size_t i = 0; i < keys_.size(); ++i) {
+      if (!keys_[i]) continue;
+      uint64_t at = first_slot(keys_[i], keys.size());
+      while (keys[at]) at = (at + 1) & (keys.size() - 1);
+      keys[at] = keys_[i], bricks[at] = bricks_[i];
     }
-    const Brick* b = brick(brick_key(j), false);
-    const unsigned bit = static_cast<unsigned>((j[0] & 7) | (j[1] & 7) << 3 | (j[2] & 7) << 6);
+    keys_.swap(keys), bricks_.swap(bricks);
+  }
+  for (uint64_t at = first_slot(stored, keys_.size());; at = (at + 1) & (keys_.size() - 1)) {
+    if (keys_[at] == stored) return &bricks_[at];
+    if (keys_[at] == 0) {
+      keys_[at] = stored;
+      ++used_;
+      return &bricks_[at];
+    }
+  }
+}
+
+bool CenterPass::covered(const double* p) const {
+  int64_t j[3];
+  for (int a = 0; a < 3; ++a) {
+    j[a] = static_cast<int64_t>(std::floor(p[a] * inverse_)) - first_[a];
+    if (j[a] < 0 || j[a] >= dims_[a]) return false;
+  }
+  if (sparse_) {
+    const Brick* b = find_brick(brick_key(j));
+    const unsigned bit = brick_bit(j);
     return b && (b->bits[bit >> 6] >> (bit & 63) & 1);
   }
-  uint64_t at = 0;
-  for (int a = 2; a >= 0; --a) {
-    const int64_t j = static_cast<int64_t>(std::floor(p[a] * inverse_)) - first_[a];
-    if (j < 0 || j >= dims_[a]) return false;
-    at = at * static_cast<uint64_t>(dims_[a]) + static_cast<uint64_t>(j);
-  }
+  const uint64_t at = dense_bit(j);
   return bits_[at >> 6] >> (at & 63) & 1;
 }
 
@@ -124,29 +126,22 @@ void CenterPass::mark(const double* p) {
     hi[a] = std::min<int64_t>(static_cast<int64_t>(std::floor(u * inverse_)) - 1 - first_[a], dims_[a] - 1);
     if (lo[a] > hi[a]) return;
   }
-  if (sparse_) {
-    uint64_t last = UINT64_MAX;
-    Brick* b = nullptr;
-    for (int64_t z = lo[2]; z <= hi[2]; ++z)
-      for (int64_t y = lo[1]; y <= hi[1]; ++y)
-        for (int64_t x = lo[0]; x <= hi[0]; ++x) {
-          const int64_t j[3] = {x, y, z};
-          if (const uint64_t key = brick_key(j); key != last) last = key, b = brick(key, true);
-          if (!b) continue;  // the table is at its budget
-          const unsigned bit = static_cast<unsigned>((x & 7) | (y & 7) << 3 | (z & 7) << 6);
-          b->bits[bit >> 6] |= uint64_t{1} << (bit & 63);
-        }
-    return;
-  }
+  uint64_t last = UINT64_MAX;  // sparse: the brick of the voxel before, kept while the next is in it
+  Brick* b = nullptr;
   for (int64_t z = lo[2]; z <= hi[2]; ++z)
-    for (int64_t y = lo[1]; y <= hi[1]; ++y) {
-      const uint64_t row = (static_cast<uint64_t>(z) * static_cast<uint64_t>(dims_[1]) + static_cast<uint64_t>(y)) *
-                           static_cast<uint64_t>(dims_[0]);
+    for (int64_t y = lo[1]; y <= hi[1]; ++y)
       for (int64_t x = lo[0]; x <= hi[0]; ++x) {
-        const uint64_t at = row + static_cast<uint64_t>(x);
-        bits_[at >> 6] |= uint64_t{1} << (at & 63);
+        const int64_t j[3] = {x, y, z};
+        if (!sparse_) {
+          const uint64_t at = dense_bit(j);
+          bits_[at >> 6] |= uint64_t{1} << (at & 63);
+          continue;
+        }
+        if (const uint64_t key = brick_key(j); key != last) last = key, b = add_brick(key);
+        if (!b) continue;  // the table is at its budget
+        const unsigned bit = brick_bit(j);
+        b->bits[bit >> 6] |= uint64_t{1} << (bit & 63);
       }
-    }
 }
 
 void CenterPass::visit_block(std::span<const double> xyz, std::span<uint8_t> is_center) {

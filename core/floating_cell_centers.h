@@ -66,12 +66,21 @@ class CenterPass {
   };
   static constexpr uint64_t kMinSparseBytes = 4096;
   static constexpr size_t kFirstSlots = 16;
+  // Voxel j (per axis, from first_): its brick's packed coordinates and its bit in the brick, or its bit in
+  // the dense bitmap.
   static uint64_t brick_key(const int64_t j[3]) {
     return static_cast<uint64_t>(j[0] >> 3) | static_cast<uint64_t>(j[1] >> 3) << 21 | static_cast<uint64_t>(j[2] >> 3) << 42;
   }
-  bool covered(const double* p);
+  static unsigned brick_bit(const int64_t j[3]) { return static_cast<unsigned>((j[0] & 7) | (j[1] & 7) << 3 | (j[2] & 7) << 6); }
+  uint64_t dense_bit(const int64_t j[3]) const {
+    return (static_cast<uint64_t>(j[2]) * static_cast<uint64_t>(dims_[1]) + static_cast<uint64_t>(j[1])) *
+               static_cast<uint64_t>(dims_[0]) +
+           static_cast<uint64_t>(j[0]);
+  }
+  bool covered(const double* p) const;
   void mark(const double* p);
-  Brick* brick(uint64_t key, bool add);
+  const Brick* find_brick(uint64_t key) const;  // null: none
+  Brick* add_brick(uint64_t key);               // null: the table is at its budget
 
   Clusterer clusterer_;
   double half_ = 0;         // the half side of the cube a cell holds surely (h, or 0.5773·h for spheres)

@@ -76,6 +76,17 @@ void write_position(io::FileWriter& out, const double* p, bool single_precision)
   }
 }
 
+// Reads a position written so.
+void read_position(const char* at, bool single_precision, double* p) {
+  if (single_precision) {
+    float f[3];
+    std::memcpy(f, at, 12);
+    p[0] = f[0], p[1] = f[1], p[2] = f[2];
+  } else {
+    std::memcpy(p, at, 24);
+  }
+}
+
 // Calls f(id, xyz) for every position of the store's column, in id order (read front to back).
 template <class F>
 void for_each_position(const WeightIndex& index, Progress& progress, F&& f) {
@@ -278,6 +289,21 @@ bool cluster_region(const ClusterShareInput& in, const ClusterShares& plan, unsi
   return true;
 }
 
+// Calls f(batch) for the records [lo, hi) of the weight index in weight order, a block of kBlockRecords
+// records at a time (their ids and positions: stream/cluster_stage.h).
+template <class F>
+void for_each_record_batch(const ClusterShareInput& in, uint64_t lo, uint64_t hi, Progress& progress, F&& f) {
+  const RecordPositions positions = record_positions(in.index, in.memory_bytes, in.chunk_cap);
+  const io::MappedFile order(in.index.order_path);
+  if (order.size() != in.index.records * 4) fail(Status::io_error, in.index.order_path + ": size does not match");
+  RecordBatch batch;
+  for (uint64_t first = lo; first < hi; first += kBlockRecords) {
+    progress.check();
+    batch.load(order, positions, first, std::min(kBlockRecords, hi - first));
+    f(static_cast<const RecordBatch&>(batch));
+  }
+}
+
 // A level split by records, its centers unit: one pass over every record in weight order
 // (core::CenterPass), writing each center's record and position (store precision) to the level's .ctrs.
 // Returns the stamp's files and value.
@@ -291,31 +317,20 @@ std::pair<std::vector<std::string>, nlohmann::ordered_json> find_centers(const C
   const uint64_t budget = in.memory_bytes ? in.memory_bytes : uint64_t{2} << 30;
   core::CenterPass pass(in.sizes[level], in.options, std::span<const double, 6>(in.bounds.data(), 6),
                         std::min<uint64_t>(uint64_t{64} << 20, budget / 8), budget / 2);
-  const RecordPositions positions = record_positions(in.index, in.memory_bytes, in.chunk_cap);
-  const io::MappedFile order(in.index.order_path);
-  if (order.size() != in.index.records * 4) fail(Status::io_error, in.index.order_path + ": size does not match");
-  const std::string path = cluster_centers_path(in.prefix, level);
-  std::filesystem::create_directories(std::filesystem::path(path).parent_path());
+  const std::string path = cluster_centers_path(in.prefix, level);  // its directory: run_cluster_share's
   io::FileWriter out(path, 1 << 20);
-  std::vector<uint32_t> ids;
-  std::vector<double> xyz;
   std::vector<uint8_t> is_center;
-  PositionGather::Scratch scratch;
-  for (uint64_t first = 0; first < in.index.records; first += kBlockRecords) {
-    progress.check();
-    const uint64_t n = std::min(kBlockRecords, in.index.records - first);
-    ids.resize(n), xyz.resize(3 * n), is_center.resize(n);
-    order.read(first * 4, n * 4, ids.data());
-    positions.load(first, ids, xyz.data(), scratch);
-    pass.visit_block(xyz, is_center);
-    for (uint64_t i = 0; i < n; ++i) {
+  for_each_record_batch(in, 0, in.index.records, progress, [&](const RecordBatch& b) {
+    is_center.resize(b.ids.size());
+    pass.visit_block(b.xyz, is_center);
+    for (size_t i = 0; i < is_center.size(); ++i) {
       if (!is_center[i]) continue;
-      const uint32_t r = static_cast<uint32_t>(first + i);
+      const uint32_t r = static_cast<uint32_t>(b.at + i);
       out.write(&r, 4);
-      write_position(out, &xyz[3 * i], in.index.single_precision);
+      write_position(out, &b.xyz[3 * i], in.index.single_precision);
     }
     check_share_memory(in, fmt::format("level {}'s covered voxels and cells", level), pass.memory_bytes());
-  }
+  });
   out.commit();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return {{path},
@@ -323,11 +338,13 @@ std::pair<std::vector<std::string>, nlohmann::ordered_json> find_centers(const C
            {"seconds", std::round(seconds * 1000) / 1000}, {"runner", unit_runner()}}};
 }
 
-// A level split by records, share `share`'s range: a Clusterer given first the centers before the range,
+// A level split by records, share `share`'s range [lo, hi): a Clusterer given first the centers before lo,
 // then the range's records in weight order (core/floating_cell_centers.h: the whole pass's decisions);
-// writes the range's .dec and .ctr as a slab's share does. Failure(io_error) when the centers file does
-// not agree with the pass (a center that starts no cell, or a cell started by a record it does not list).
-// `running`: what the levels clustered at once hold together (each adds its own; checked against the budget).
+// writes the range's .dec and .ctr as a slab's share does. It reads the centers file up to the first
+// center at or past hi (no record of the range is in a later cell). Failure(io_error) when the centers
+// file does not agree with the pass (a center that starts no cell, or a cell started by a record it does
+// not list). `running`: what the levels clustered at once hold together (each adds its own; checked
+// against the budget).
 nlohmann::ordered_json cluster_records(const ClusterShareInput& in, const ClusterShares& plan, unsigned share, size_t level,
                                        uint64_t centers_count, std::atomic<uint64_t>& running, Progress& progress) {
   const uint64_t lo = plan.first_record(share, in.index.records), hi = plan.first_record(share + 1, in.index.records);
@@ -340,69 +357,59 @@ nlohmann::ordered_json cluster_records(const ClusterShareInput& in, const Cluste
     check_share_memory(in, fmt::format("level {}'s {}", level, what), part.set(now));
   };
   count(centers_count * 4, "centers");
-  std::vector<uint32_t> center_record(centers_count);  // cell id -> its center's record
+  std::vector<uint32_t> center_record;  // cell id -> its center's record: the centers before hi
   core::Clusterer clusterer(std::span<const double>(&in.sizes[level], 1), in.options,
                             std::span<const double>(in.bounds.data(), in.bounds.size()));
   auto bad = [&](const std::string& what) { fail(Status::io_error, fmt::format("{}: {}", path, what)); };
-  // The centers before the range, each starting its cell in order.
-  uint64_t before = 0;
-  {
-    std::vector<char> buffer;
-    for (uint64_t first = 0; first < centers_count; first += kBlockRecords) {
-      const uint64_t n = std::min(kBlockRecords, centers_count - first);
-      buffer.resize(n * item);
-      file.read(first * item, n * item, buffer.data());
-      for (uint64_t i = 0; i < n; ++i) {
-        const char* c = buffer.data() + i * item;
-        std::memcpy(&center_record[first + i], c, 4);
-        if (first + i > 0 && center_record[first + i] <= center_record[first + i - 1]) bad("centers out of order");
-        if (center_record[first + i] >= lo) continue;
-        double p[3];
-        if (in.index.single_precision) {
-          float f[3];
-          std::memcpy(f, c + 4, 12);
-          p[0] = f[0], p[1] = f[1], p[2] = f[2];
-        } else {
-          std::memcpy(p, c + 4, 24);
-        }
-        uint32_t cell = 0;
-        clusterer.assign(center_record[first + i], std::span<const double, 3>(p, 3), std::span<uint32_t>(&cell, 1));
-        if (cell != before) bad(fmt::format("center {} of level {} starts no cell", first + i, level));
-        ++before;
+  // The centers before the range, each starting its cell in order; then the range's, listed.
+  const std::string unstarted = fmt::format("a center of level {} in records [{}, {}) starts no cell", level, lo, hi);
+  std::vector<char> buffer;
+  bool past = false;  // a center at or past hi was read
+  for (uint64_t first = 0; first < centers_count && !past; first += kBlockRecords) {
+    const uint64_t n = std::min(kBlockRecords, centers_count - first);
+    buffer.resize(n * item);
+    file.read(first * item, n * item, buffer.data());
+    for (uint64_t i = 0; i < n; ++i) {
+      const char* c = buffer.data() + i * item;
+      uint32_t r;
+      std::memcpy(&r, c, 4);
+      if (!center_record.empty() && r <= center_record.back()) bad("centers out of order");
+      if (r >= hi) {
+        if (hi == in.index.records) bad(unstarted);  // past the last record
+        past = true;
+        break;
       }
+      center_record.push_back(r);
+      if (r >= lo) continue;
+      double p[3];
+      read_position(c + 4, in.index.single_precision, p);
+      uint32_t cell = 0;
+      clusterer.assign(r, std::span<const double, 3>(p, 3), std::span<uint32_t>(&cell, 1));
+      if (cell != center_record.size() - 1) bad(fmt::format("center {} of level {} starts no cell", first + i, level));
     }
   }
-  const RecordPositions positions = record_positions(in.index, in.memory_bytes, in.chunk_cap);
-  const io::MappedFile order(in.index.order_path);
-  if (order.size() != in.index.records * 4) fail(Status::io_error, in.index.order_path + ": size does not match");
+  const uint64_t before = static_cast<uint64_t>(std::lower_bound(center_record.begin(), center_record.end(), lo) - center_record.begin());
   const bool centers = in.info == CellInfoKind::center;
   io::FileWriter dec(dec_path(in.prefix, share, level), 1 << 20), ctr;
   if (centers) ctr.open(ctr_path(in.prefix, share, level), 1 << 20);
-  std::vector<uint32_t> ids, cells;
-  std::vector<double> xyz;
-  PositionGather::Scratch scratch;
+  std::vector<uint32_t> cells;
   uint64_t next = before;  // the next cell's id
-  for (uint64_t first = lo; first < hi; first += kBlockRecords) {
-    progress.check();
-    const uint64_t n = std::min(kBlockRecords, hi - first);
-    ids.resize(n), xyz.resize(3 * n), cells.resize(n);
-    order.read(first * 4, n * 4, ids.data());
-    positions.load(first, ids, xyz.data(), scratch);
-    clusterer.assign_block(ids, xyz, cells);
-    for (uint64_t i = 0; i < n; ++i) {
-      const uint32_t r = static_cast<uint32_t>(first + i);
+  for_each_record_batch(in, lo, hi, progress, [&](const RecordBatch& b) {
+    cells.resize(b.ids.size());
+    clusterer.assign_block(b.ids, b.xyz, cells);
+    for (size_t i = 0; i < cells.size(); ++i) {
+      const uint32_t r = static_cast<uint32_t>(b.at + i);
       if (cells[i] == next) {  // r starts a cell: the centers pass must have found it
-        if (next >= centers_count || center_record[next] != r) bad(fmt::format("record {} of level {} is not listed as a center", r, level));
+        if (next >= center_record.size() || center_record[next] != r) bad(fmt::format("record {} of level {} is not listed as a center", r, level));
         ++next;
-        if (centers) write_position(ctr, &xyz[3 * i], in.index.single_precision);
+        if (centers) write_position(ctr, &b.xyz[3 * i], in.index.single_precision);
       }
       const uint32_t pair[2] = {r, center_record[cells[i]]};
       dec.write(pair, sizeof pair);
     }
     count(clusterer.memory_bytes() + clusterer.growth_bytes() + centers_count * 4, "cells");
-  }
-  if ((next < centers_count && center_record[next] < hi) || (hi == in.index.records && next != centers_count))
-    bad(fmt::format("a center of level {} in records [{}, {}) starts no cell", level, lo, hi));
+  });
+  if (next != center_record.size()) bad(unstarted);
   dec.commit();
   if (centers) ctr.commit();
   return {{"level", level}, {"first_record", lo}, {"own", hi - lo}, {"own_centers", next - before}, {"centers_before", before}};
@@ -425,8 +432,12 @@ uint64_t ClusterShares::first_record(unsigned s, uint64_t records) const {
   return records * s / count;  // records < 2^32 (record ids are 32-bit) and s <= count < 2^32: no overflow
 }
 
+std::string cluster_centers_dir(const std::string& prefix) { return cluster_shares_dir(prefix) + "centers"; }
 std::string cluster_centers_path(const std::string& prefix, size_t level) {
-  return cluster_shares_dir(prefix) + fmt::format("centers/level-{}.ctrs", level);
+  return cluster_centers_dir(prefix) + fmt::format("/level-{}.ctrs", level);
+}
+std::string cluster_centers_stamp(const std::string& prefix, size_t level) {
+  return cluster_centers_dir(prefix) + fmt::format("/level-{}.json", level);
 }
 
 std::string cluster_shares_dir(const std::string& prefix) { return prefix + "cluster-shares/"; }
@@ -445,9 +456,7 @@ nlohmann::ordered_json cluster_centers_figures(const ClusterShareInput& in, cons
   for (size_t l = 0; l < plan.by_records.size(); ++l) {
     if (!plan.by_records[l]) continue;
     try {
-      out.push_back(nlohmann::ordered_json::parse(io::read_small_file(cluster_shares_dir(in.prefix) +
-                                                                      fmt::format("centers/level-{}.json", l)))
-                        .at("value"));
+      out.push_back(nlohmann::ordered_json::parse(io::read_small_file(cluster_centers_stamp(in.prefix, l))).at("value"));
     } catch (const std::exception&) {
       // not stamped (a share that reused the stage): no figures
     }
@@ -461,11 +470,12 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
   const size_t levels = in.sizes.size();
   plan.whole_share.assign(levels, -1);
   plan.by_records.assign(levels, 0);
-  // Levels too coarse for the slabs (floating, no fine grid) split by ranges of records instead.
-  const bool records_split = in.split_by_records && count >= 2 && in.bounds.size() == 6 &&
-                             in.options.clustering == core::Clustering::floating;
+  // Floating cells over bounds, in shares: a level may split, by slabs (can_split: the bounds have an
+  // extent across their longest axis) or, too coarse for the slabs, by ranges of records.
+  const bool shared = count >= 2 && in.bounds.size() == 6 && in.options.clustering == core::Clustering::floating;
+  const bool records_split = shared && in.split_by_records;
   const auto has_fine = [&](size_t l) { return in.fine && in.fine->sizes.at(l) > 0; };
-  bool can_split = count >= 2 && in.bounds.size() == 6 && in.options.clustering == core::Clustering::floating;
+  bool can_split = shared;
   if (can_split) {
     for (int a = 1; a < 3; ++a)
       if (in.bounds[3 + a] - in.bounds[a] > in.bounds[3 + plan.axis] - in.bounds[plan.axis]) plan.axis = a;
@@ -508,15 +518,16 @@ ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, P
   // The levels too coarse to split at slabs of min_width (all of them when nothing splits).
   // (Those split by records are not whole.)
   auto by_slabs = [&](size_t l, double min_width) { return can_split && !has_fine(l) && in.sizes[l] * kSplitCells <= min_width; };
+  auto by_records = [&](size_t l, double min_width) { return records_split && !has_fine(l) && !by_slabs(l, min_width); };
   auto whole_levels = [&](double min_width) {
     std::vector<size_t> w;
     for (size_t l = 0; l < levels; ++l)
-      if (!by_slabs(l, min_width) && !(records_split && !has_fine(l))) w.push_back(l);
+      if (!by_slabs(l, min_width) && !by_records(l, min_width)) w.push_back(l);
     return w;
   };
   // The levels split by records, once the slabs are cut.
   auto mark_by_records = [&](double min_width) {
-    for (size_t l = 0; l < levels; ++l) plan.by_records[l] = records_split && !has_fine(l) && !by_slabs(l, min_width);
+    for (size_t l = 0; l < levels; ++l) plan.by_records[l] = by_records(l, min_width);
   };
   // The whole levels to `shares` shares from share `first` on, in level order, as even runs: a share's levels
   // run in one cluster_levels pass over the index, whose cost is mostly fetching every position by id (the
@@ -658,12 +669,12 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
   std::vector<size_t> by_records;
   for (size_t l = 0; l < plan.by_records.size(); ++l)
     if (plan.by_records[l]) by_records.push_back(l);
-  const std::string centers_dir = cluster_shares_dir(in.prefix) + "centers";
+  const std::string centers_dir = cluster_centers_dir(in.prefix);
   const nlohmann::ordered_json centers_key = in.key.is_null() ? plan.json() : in.key;
   auto centers_unit = [&](size_t j, bool wait) {
     const size_t l = by_records[j];
-    return share_unless_held(centers_dir, static_cast<unsigned>(l), centers_dir + fmt::format("/level-{}.json", l), centers_key, "",
-                             wait, [&] { return find_centers(in, l, progress); });
+    return share_unless_held(centers_dir, static_cast<unsigned>(l), cluster_centers_stamp(in.prefix, l), centers_key, "", wait,
+                             [&] { return find_centers(in, l, progress); });
   };
   if (!by_records.empty()) std::filesystem::create_directories(centers_dir);
   for (size_t k = 0; k < by_records.size(); ++k) centers_unit((index + k) % by_records.size(), false);

@@ -144,8 +144,10 @@ std::vector<std::string> cluster_share_files(const ClusterShareInput& in, const 
 // Runs share `index`; returns its figures for the stamp and the manifest: per level {"level", "cells"
 // (whole levels), "halo_cells", "tries", "held", "own"} (slabs) or {"level", "first_record", "own",
 // "own_centers", "centers_before"} (split by records).
-// The centers file of a level split by records.
+// The centers units of the levels split by records: their directory, a level's centers file and its stamp.
+std::string cluster_centers_dir(const std::string& prefix);
 std::string cluster_centers_path(const std::string& prefix, size_t level);
+std::string cluster_centers_stamp(const std::string& prefix, size_t level);
 // The centers passes' figures of the levels split by records (their stamps' values: {"level", "centers",
 // "skipped", "voxel", "seconds", "runner"}), for the cluster stage's stamp; empty when none is stamped.
 nlohmann::ordered_json cluster_centers_figures(const ClusterShareInput& in, const ClusterShares& plan);

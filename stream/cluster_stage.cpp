@@ -140,28 +140,13 @@ void fine_masks(const io::MappedFile& labels, const FineCells& fine, const std::
 }
 
 
-// The ids of records [at, at + size) and their positions as plain arrays, widened to double (exact for
-// float): the read way's shared batch, or a group's own block.
-struct Batch {
-  uint64_t at = 0;
-  std::vector<uint32_t> ids;
-  std::vector<double> xyz;
-  PositionGather::Scratch scratch;
-  void load(const io::MappedFile& order, const RecordPositions& positions, uint64_t first, uint64_t n) {
-    at = first;
-    ids.resize(n);
-    xyz.resize(3 * n);
-    order.read(first * 4, n * 4, ids.data());
-    positions.load(first, ids, xyz.data(), scratch);
-  }
-};
 
 // Calls f(first, n, batch) for the blocks of records [lo, hi), in order: positions from `shared` (the read
 // way), else loaded block by block. Stops early when the task group is cancelled.
 template <class F>
 void for_each_block(const io::MappedFile& index, const RecordPositions& positions, uint64_t lo, uint64_t hi,
-                    const Batch* shared, Progress& progress, F&& f) {
-  Batch own;
+                    const RecordBatch* shared, Progress& progress, F&& f) {
+  RecordBatch own;
   for (uint64_t first = lo; first < hi; first += kBlock) {
     progress.check();
     if (tbb::is_current_task_group_canceling()) return;
@@ -244,14 +229,14 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
             cells_path(prefix, level_ids[range.level]), plain ? window.start.plain.at(range.level) : std::string(), first_record));
       }
     // Chunk k's sums over records [lo, hi): positions from `shared` (the read way), else fetched per block.
-    auto sum_records = [&](size_t k, uint64_t lo, uint64_t hi, const Batch* shared) {
+    auto sum_records = [&](size_t k, uint64_t lo, uint64_t hi, const RecordBatch* shared) {
       const std::vector<Range>& chunk = chunks[k];
       std::vector<std::vector<CellInfo>>& outs = sums[k - round];
       std::vector<std::unique_ptr<CellsReader>>& readers = chunk_cells[k - round];
       constexpr uint64_t kAhead = 8;
       std::vector<uint32_t> cells(block);
       std::vector<double> grade(block, 0.0);
-      for_each_block(index, positions, lo, hi, shared, progress, [&](uint64_t first, uint64_t n, const Batch& b) {
+      for_each_block(index, positions, lo, hi, shared, progress, [&](uint64_t first, uint64_t n, const RecordBatch& b) {
         const double* xyz = b.xyz.data() + 3 * (first - b.at);
         if (grades) grades->read(first * 8, n * 8, grade.data());
         for (size_t r = 0; r < chunk.size(); ++r) {
@@ -286,7 +271,7 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
     if (positions.per_block()) {
       tbb::parallel_for(round, round_end, [&](size_t k) { sum_records(k, first_record, records, nullptr); });
     } else {
-      Batch shared;
+      RecordBatch shared;
       for (uint64_t at = first_record; at < records; at += batch) {
         progress.check();
         shared.load(index, positions, at, std::min(batch, records - at));
@@ -490,10 +475,10 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   summary.cells.resize(levels);
   // Runs records [lo, hi) through group g's clusterer, block by block: positions from `shared` (the read
   // way), else fetched by the group itself.
-  auto run_group = [&](size_t g, uint64_t lo, uint64_t hi, const Batch* shared) {
+  auto run_group = [&](size_t g, uint64_t lo, uint64_t hi, const RecordBatch* shared) {
     Group& grp = groups[g];
     std::vector<uint32_t> masks;
-    for_each_block(index, positions, lo, hi, shared, progress, [&](uint64_t first, uint64_t n, const Batch& b) {
+    for_each_block(index, positions, lo, hi, shared, progress, [&](uint64_t first, uint64_t n, const RecordBatch& b) {
       const std::span<const uint32_t> ids(b.ids.data() + (first - b.at), n);
       const std::span<const double> xyz(b.xyz.data() + 3 * (first - b.at), 3 * n);
       grp.cells.resize(grp.levels.size() * n);
@@ -530,7 +515,7 @@ ClusterSummary cluster_levels(const WeightIndex& weights, std::span<const double
   } else {
     // One batch at a time, gathered once (by all threads) for every group: a barrier per batch of
     // millions of records, where each group gathering its own would copy the column once per group.
-    Batch shared;
+    RecordBatch shared;
     for (uint64_t at = 0; at < records; at += batch) {
       progress.check();
       shared.load(index, positions, at, std::min(batch, records - at));

@@ -103,6 +103,22 @@ struct WeightIndex {
 // Where a pass's positions come from (position_gather.h): the index's weight-ordered file when it names
 // one, else the store's column by id, mapped whole where it takes at most half the budget.
 RecordPositions record_positions(const WeightIndex& weights, uint64_t memory_bytes, uint64_t chunk_cap);
+// The ids of records [at, at + size) and their positions as plain arrays, widened to double (exact for
+// float): a pass's block in weight order (the clustering passes' shared batch or a group's own block, the
+// clustering shares' centers and ranges).
+struct RecordBatch {
+  uint64_t at = 0;
+  std::vector<uint32_t> ids;
+  std::vector<double> xyz;
+  PositionGather::Scratch scratch;
+  void load(const io::MappedFile& order, const RecordPositions& positions, uint64_t first, uint64_t n) {
+    at = first;
+    ids.resize(n);
+    xyz.resize(3 * n);
+    order.read(first * 4, n * 4, ids.data());
+    positions.load(first, ids, xyz.data(), scratch);
+  }
+};
 // bounds: empty, or the min and max corners (6 values) of a box holding every position in the index,
 // which lets the coarse levels index their squares directly (core::Clusterer); the result is the same
 // either way.
