@@ -7,6 +7,9 @@
 #include <cstdio>
 #include <algorithm>
 #include <cstring>
+#include <functional>
+#include <string>
+#include <thread>
 
 #include "core/status.h"
 
@@ -35,13 +38,15 @@ void sync_directory_of(const std::string& path) {
 
 FileWriter::~FileWriter() { discard(); }
 
-void FileWriter::open(const std::string& path, size_t buffer_bytes, Sync sync) {
+void FileWriter::open(const std::string& path, size_t buffer_bytes, Sync sync, Writers writers) {
   discard();
   path_ = path;
   sync_ = sync;
-  const std::string partial = path + ".partial";
-  fd_ = ::open(partial.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd_ < 0) io_fail(partial, "create", errno);
+  partial_ = writers == Writers::one
+                 ? path + ".partial"
+                 : path + ".partial-" + std::to_string(::getpid()) + "-" + std::to_string(std::hash<std::thread::id>{}(std::this_thread::get_id()));
+  fd_ = ::open(partial_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) io_fail(partial_, "create", errno);
   buffer_.resize(buffer_bytes < 4096 ? 4096 : buffer_bytes);
   used_ = 0;
 }
@@ -52,9 +57,9 @@ void FileWriter::write_through(const char* p, size_t bytes) {
     const ssize_t n = ::write(fd_, p + done, bytes - done);
     if (n < 0) {
       if (errno == EINTR) continue;
-      io_fail(path_ + ".partial", "write", errno);
+      io_fail(partial_, "write", errno);
     }
-    if (n == 0) io_fail(path_ + ".partial", "write", ENOSPC);
+    if (n == 0) io_fail(partial_, "write", ENOSPC);
     done += static_cast<size_t>(n);
   }
 }
@@ -85,7 +90,7 @@ void FileWriter::write(const void* data, size_t bytes) {
 void FileWriter::commit() {
   if (fd_ < 0) return;
   flush();
-  const std::string partial = path_ + ".partial";
+  const std::string& partial = partial_;
   if (sync_ == Sync::durable) {
     int r;
     while ((r = ::fdatasync(fd_)) != 0 && errno == EINTR) {
@@ -117,11 +122,11 @@ void FileWriter::discard() {
   if (fd_ < 0) return;
   ::close(fd_);
   fd_ = -1;
-  ::unlink((path_ + ".partial").c_str());
+  ::unlink(partial_.c_str());
 }
 
-void write_file_atomic(const std::string& path, std::string_view contents, Sync sync) {
-  FileWriter w(path, contents.size() + 1, sync);
+void write_file_atomic(const std::string& path, std::string_view contents, Sync sync, Writers writers) {
+  FileWriter w(path, contents.size() + 1, sync, writers);
   w.write(contents);
   w.commit();
 }

@@ -19,18 +19,24 @@
 namespace lodstream::io {
 
 enum class Sync { none, durable };
+// Who may write a path at once. one: this writer only (its temporary is `<path>.partial`). several: other
+// processes or threads may write the same path with the same contents at the same time (weld units that
+// each leave the bucket sizes they counted for the others): each writes its own temporary,
+// `<path>.partial-<pid>-<thread>`, so that no writer's rename takes another's file; the last rename wins.
+enum class Writers { one, several };
 
 class FileWriter {
  public:
   FileWriter() = default;
-  explicit FileWriter(const std::string& path, size_t buffer_bytes = 1 << 20, Sync sync = Sync::none) {
-    open(path, buffer_bytes, sync);
+  explicit FileWriter(const std::string& path, size_t buffer_bytes = 1 << 20, Sync sync = Sync::none,
+                      Writers writers = Writers::one) {
+    open(path, buffer_bytes, sync, writers);
   }
   FileWriter(const FileWriter&) = delete;
   FileWriter& operator=(const FileWriter&) = delete;
   ~FileWriter();  // discards the partial file if commit() was not called
 
-  void open(const std::string& path, size_t buffer_bytes = 1 << 20, Sync sync = Sync::none);
+  void open(const std::string& path, size_t buffer_bytes = 1 << 20, Sync sync = Sync::none, Writers writers = Writers::one);
   void write(const void* data, size_t bytes);
   void write(std::string_view s) { write(s.data(), s.size()); }
   template <class T>
@@ -44,7 +50,7 @@ class FileWriter {
  private:
   void flush();
   void write_through(const char* p, size_t bytes);
-  std::string path_;
+  std::string path_, partial_;  // the final name, and the temporary the bytes go to until commit()
   int fd_ = -1;
   std::vector<char> buffer_;
   size_t used_ = 0;
@@ -52,7 +58,8 @@ class FileWriter {
 };
 
 // Writes a whole small file atomically (temporary + rename).
-void write_file_atomic(const std::string& path, std::string_view contents, Sync sync = Sync::none);
+void write_file_atomic(const std::string& path, std::string_view contents, Sync sync = Sync::none,
+                       Writers writers = Writers::one);
 
 // Reads a whole small file; throws Failure(io_error) on failure.
 std::string read_small_file(const std::string& path);

@@ -422,7 +422,7 @@ void write_sizes_file(const std::string& sizes_path, const io::MappedFile& colum
   const uint64_t header[3] = {count, column.size(), static_cast<uint64_t>(column.mtime_ns())};
   std::memcpy(bytes.data(), header, sizeof header);
   std::memcpy(bytes.data() + 24, sizes.data(), 8 * sizes.size());
-  io::write_file_atomic(sizes_path, bytes);
+  io::write_file_atomic(sizes_path, bytes, io::Sync::none, io::Writers::several);  // units may count them at once
 }
 
 void set_bit(std::vector<uint64_t>& bits, uint64_t pair) { bits[pair >> 38] |= uint64_t{1} << ((pair >> 32) % 64); }

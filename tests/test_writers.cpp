@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <atomic>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
@@ -12,6 +13,7 @@
 #include <iostream>
 #include <span>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -56,6 +58,33 @@ std::vector<double> widened(const std::vector<float>& v) { return std::vector<do
 template <class T>
 std::vector<int64_t> as_i64(const std::vector<T>& v) {
   return std::vector<int64_t>(v.begin(), v.end());
+}
+
+// Several writers of one path at once (io::Writers::several, the weld units' shared bucket sizes): each
+// writes its own temporary, so none fails at its rename (with one shared `<path>.partial`, a writer's
+// rename took another's file, and the other failed with "cannot rename into place"), and the file is
+// always one writer's whole contents; no temporary is left.
+TEST(FileWriter, SeveralWritersOfOnePathAtOnce) {
+  TempDir dir;
+  const std::string path = dir.file("sizes.bin"), contents(100000, 'x');
+  std::vector<std::thread> writers;
+  std::atomic<int> failures{0};
+  for (int t = 0; t < 4; ++t)
+    writers.emplace_back([&] {
+      for (int k = 0; k < 200; ++k) {
+        try {
+          io::write_file_atomic(path, contents, io::Sync::none, io::Writers::several);
+        } catch (const Failure&) {
+          ++failures;
+        }
+      }
+    });
+  for (auto& w : writers) w.join();
+  EXPECT_EQ(failures.load(), 0);
+  EXPECT_EQ(io::read_small_file(path), contents);
+  size_t files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir.path())) files += e.is_regular_file();
+  EXPECT_EQ(files, 1u) << "a temporary was left";
 }
 
 // ----------------------------------------------------------------------------------------------- PLY
