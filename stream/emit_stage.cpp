@@ -22,6 +22,7 @@
 #include "core/normals.h"
 #include "core/quadric.h"
 #include "core/status.h"
+#include "io/file_writer.h"
 #include "io/mapped_file.h"
 #include "stream/cell_map_file.h"
 #include "stream/cluster_stage.h"
@@ -84,6 +85,68 @@ struct Scratch {
     triangles.clear(), edges.clear(), points.clear(), cells.clear(), corners.clear();
     last_point = last_cell = UINT32_MAX;
   }
+};
+
+// The whole input's blocks (emit_block_count): kind by kind, each in store order.
+std::vector<Block> whole_blocks(const uint64_t* column_count) {
+  std::vector<Block> blocks;
+  for (int kind = 0; kind < 3; ++kind)
+    for (uint64_t first = 0; first < column_count[kind]; first += kEmitBlock)
+      blocks.push_back({kind, first, std::min(kEmitBlock, column_count[kind] - first)});
+  return blocks;
+}
+
+// A unit's file of one level's pass A outputs (EmitOptions::classify_unit): the magic, then per block its
+// kind, first primitive and count, its BlockOut's triangles, edges, points (each with its materials when
+// the store has them) and quadric sums, and the level's collapsed bits of its primitives (whole words: a
+// block starts at a multiple of 64); then the count of blocks.
+constexpr char kClassifiedMagic[8] = {'L', 'O', 'D', 'C', 'L', 'S', 'A', '1'};
+
+template <class T>
+void put_values(io::FileWriter& out, const std::vector<T>& v) {
+  const uint64_t n = v.size();
+  out.write(&n, sizeof n);
+  if (n) out.write(v.data(), n * sizeof(T));
+}
+
+// Reads a unit's file written by put_values and its block headers, in order; Failure(io_error) naming the
+// file where it is missing, of another version or cut short.
+class ClassifiedReader {
+ public:
+  explicit ClassifiedReader(const std::string& path) : file_(path) {
+    char magic[8];
+    read(magic, sizeof magic);
+    if (std::memcmp(magic, kClassifiedMagic, sizeof magic) != 0) fail(Status::io_error, file_.path() + ": not a unit of pass A of this version");
+  }
+  // The next block's header; false at the trailer (its count of blocks checked).
+  bool next(Block& b, uint64_t blocks_so_far) {
+    uint64_t head[3];
+    if (at_ + 8 == file_.size()) {
+      read(head, 8);
+      if (head[0] != blocks_so_far) fail(Status::io_error, file_.path() + ": its count of blocks does not match");
+      return false;
+    }
+    read(head, sizeof head);
+    b = {static_cast<int>(head[0]), head[1], head[2]};
+    return true;
+  }
+  template <class T>
+  void values(std::vector<T>& v) {
+    uint64_t n;
+    read(&n, sizeof n);
+    if (n > (file_.size() - at_) / sizeof(T)) fail(Status::io_error, file_.path() + ": cut short");
+    v.resize(n);
+    if (n) read(v.data(), n * sizeof(T));
+  }
+  void read(void* data, uint64_t bytes) {
+    if (bytes > file_.size() - at_) fail(Status::io_error, file_.path() + ": cut short");
+    file_.read(at_, bytes, data);
+    at_ += bytes;
+  }
+
+ private:
+  io::MappedFile file_;
+  uint64_t at_ = 0;
 };
 
 void add(double* sum, const double* p) {
@@ -199,11 +262,13 @@ class PackedMap {
 
 // What a lone level's packed map is made of: its cluster map and the weld, named with their sizes and
 // modification times, the order, and the counts.
+// `by_file`: the map is read from the level's cells by vertex (vertex_cells.h) instead.
 std::string packed_map_key(const std::string& prefix, const std::string& canonical_path, const EmitLevel& level,
-                           uint64_t vertices, uint64_t records) {
+                           uint64_t vertices, uint64_t records, bool by_file = false) {
   std::string key = std::to_string(level.level) + " " + std::to_string(level.cells) + " " + std::to_string(vertices) + " " +
                     std::to_string(records);
-  for (const std::string& path : {cells_path(prefix, level.level), order_path(prefix), canonical_path}) {
+  for (const std::string& path : {by_file ? vertex_cells_path(prefix, level.level) : cells_path(prefix, level.level),
+                                  order_path(prefix), canonical_path}) {
     struct stat st {};
     if (!path.empty() && ::stat(path.c_str(), &st) != 0) return {};
     key += " " + path + " " + std::to_string(st.st_ino) + " " + std::to_string(st.st_size) + " " +
@@ -853,6 +918,84 @@ void mark_reach(const std::vector<LevelState>& levels, const std::string& prefix
   reach.finish();
 }
 
+// A unit of pass A (EmitOptions::classify_unit): classifies its blocks and writes each block's outputs
+// (classify's BlockOut and the level's collapsed bits of the block, final once the block is classified: its
+// words are its own) to each level's file, in block order (run_blocks merges in block order).
+template <class RunBlocks, class Classify>
+void write_classified(const ClassifyUnit& unit, const std::vector<Block>& blocks, const std::vector<LevelState>& levels,
+                      RunBlocks& run_blocks, Classify& classify) {
+  std::vector<std::unique_ptr<io::FileWriter>> files;
+  for (const std::string& path : unit.paths) {
+    files.push_back(std::make_unique<io::FileWriter>(path));
+    files.back()->write(kClassifiedMagic, sizeof kClassifiedMagic);
+  }
+  uint64_t written = 0;
+  run_blocks("emit", false, classify, [&](BlockOut* outs_l) {
+    const Block& b = blocks[written++];
+    for (size_t l = 0; l < levels.size(); ++l) {
+      io::FileWriter& f = *files[l];
+      const uint64_t head[3] = {static_cast<uint64_t>(b.kind), b.first, b.count};
+      f.write(head, sizeof head);
+      const BlockOut& o = outs_l[l];
+      put_values(f, o.triangles), put_values(f, o.triangle_materials);
+      put_values(f, o.edges), put_values(f, o.edge_materials);
+      put_values(f, o.points), put_values(f, o.point_materials);
+      put_values(f, o.quadric_cells), put_values(f, o.quadrics);
+      if (b.kind < 2) f.write(levels[l].collapsed[b.kind].data() + b.first / 64, (b.count + 63) / 64 * sizeof(uint64_t));
+    }
+  });
+  for (auto& f : files) {
+    f->write(&written, sizeof written);
+    f->commit();
+  }
+}
+
+// Pass A from its units' files (EmitOptions::classified: per level of the group, its units' files in unit
+// order): every block's outputs, in the order of the whole input's blocks, to merge_block, and each block's
+// collapsed bits into the level's. Failure(io_error) where the files do not hold every block once, in order.
+template <class MergeBlock>
+void read_classified(const std::vector<std::vector<std::string>>& files, const std::vector<Block>& whole,
+                     std::vector<LevelState>& levels, std::vector<BlockOut>& outs, MergeBlock& merge_block, Progress& progress) {
+  const size_t nl = levels.size();
+  if (files.size() != nl || nl == 0) fail(Status::internal, "emit: units of pass A for another group");
+  const size_t units = files[0].size();
+  uint64_t next = 0;  // in `whole`
+  for (size_t u = 0; u < units; ++u) {
+    progress.check();
+    std::vector<std::unique_ptr<ClassifiedReader>> in;
+    for (size_t l = 0; l < nl; ++l) {
+      if (files[l].size() != units) fail(Status::internal, "emit: units of pass A for another group");
+      in.push_back(std::make_unique<ClassifiedReader>(files[l][u]));
+    }
+    for (uint64_t read = 0;; ++read) {
+      Block b;
+      const bool more = in[0]->next(b, read);
+      for (size_t l = 1; l < nl; ++l) {
+        Block c;
+        if (in[l]->next(c, read) != more || (more && (c.kind != b.kind || c.first != b.first || c.count != b.count)))
+          fail(Status::io_error, files[l][u] + ": its blocks are not those of " + files[0][u]);
+      }
+      if (!more) break;
+      if (next >= whole.size() || whole[next].kind != b.kind || whole[next].first != b.first || whole[next].count != b.count)
+        fail(Status::io_error, files[0][u] + ": a block out of the input's order (units of another input or count)");
+      ++next;
+      for (size_t l = 0; l < nl; ++l) {
+        ClassifiedReader& r = *in[l];
+        BlockOut& o = outs[l];
+        r.values(o.triangles), r.values(o.triangle_materials);
+        r.values(o.edges), r.values(o.edge_materials);
+        r.values(o.points), r.values(o.point_materials);
+        r.values(o.quadric_cells), r.values(o.quadrics);
+        if (b.kind < 2) r.read(levels[l].collapsed[b.kind].data() + b.first / 64, (b.count + 63) / 64 * sizeof(uint64_t));
+      }
+      merge_block(outs.data());
+    }
+    progress.report("emit", static_cast<double>(next) / static_cast<double>(std::max<size_t>(whole.size(), 1)));
+  }
+  if (next != whole.size()) fail(Status::io_error, "emit: the units of pass A do not cover the input (" + std::to_string(next) + " of " +
+                                                       std::to_string(whole.size()) + " blocks)");
+}
+
 std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
                                       const std::string& prefix, std::span<const EmitLevel> group, uint64_t records,
                                       const core::ClusterOptions& cluster, const EmitOptions& options, Progress& progress,
@@ -883,9 +1026,19 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // The batches of a level (its representatives' passes and its routing) all use the one map: built for
   // the first, kept in the scratch for the others (map_key names what it was built from, files' sizes and
   // times included).
+  // So do a process's units of pass A (EmitOptions::classify_unit), which share their group's map.
   const bool lone_batched = nl == 1 && (levels[0].in.batched || routes || options.representatives_only);
-  const std::string map_key =
-      lone_batched ? packed_map_key(prefix, canonical_path, levels[0].in, meta.vertices, records) : std::string();
+  std::string map_key;
+  if (lone_batched) map_key = packed_map_key(prefix, canonical_path, levels[0].in, meta.vertices, records);
+  if (options.classify_unit)
+    for (const LevelState& L : levels) {
+      const std::string k = packed_map_key(prefix, canonical_path, L.in, meta.vertices, records, by_file);
+      if (k.empty()) {
+        map_key.clear();
+        break;
+      }
+      map_key += "|" + k;
+    }
   const bool reuse = !map_key.empty() && emit_scratch.map_key == map_key;
   emit_scratch.map_key.clear();
   if (reuse) map.attach(emit_scratch.map, bits);
@@ -956,20 +1109,25 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   const std::string column_path[3] = {store_dir + "/triangles.u32", store_dir + "/lines.u32", store_dir + "/points.u32"};
   const uint64_t column_count[3] = {meta.triangles, meta.lines, meta.points};
   std::unique_ptr<io::MappedFile> columns[3];
-  std::vector<Block> blocks;
   for (int kind = 0; kind < 3; ++kind) {
     if (column_count[kind] == 0) continue;
     columns[kind] = std::make_unique<io::MappedFile>(column_path[kind]);
     if (columns[kind]->size() != column_count[kind] * 4 * static_cast<uint64_t>(3 - kind))
       fail(Status::io_error, column_path[kind] + ": size does not match store.json");
-    for (uint64_t first = 0; first < column_count[kind]; first += kEmitBlock)
-      blocks.push_back({kind, first, std::min(kEmitBlock, column_count[kind] - first)});
   }
+  const std::vector<Block> whole = whole_blocks(column_count);
+  std::vector<Block> blocks = whole;
   if (nl == 1 && levels[0].in.batched && levels[0].in.routes && !routes)
     blocks = routed_blocks(*levels[0].in.routes, levels[0].in.route_bit, column_count);
+  const ClassifyUnit* unit = options.classify_unit;
+  if (unit) {
+    if (unit->first > unit->end || unit->end > whole.size() || unit->paths.size() != nl)
+      fail(Status::internal, "emit: a unit of pass A outside the input's blocks");
+    blocks.assign(whole.begin() + static_cast<ptrdiff_t>(unit->first), whole.begin() + static_cast<ptrdiff_t>(unit->end));
+  }
   // A bounded group: first the blocks near its own regions (all its halo pass needs), then, once the halo
   // is known, those near its halo cells too.
-  bool bounded = options.block_bounds && !routes && !options.count_only && !options.representatives_only;
+  bool bounded = options.block_bounds && !routes && !options.count_only && !options.representatives_only && !unit;
   for (const LevelState& L : levels) bounded = bounded && L.in.batched && !L.in.routes;
   std::unique_ptr<ReachGrid> reach;
   const core::SceneCube cube = scene_cube_of(meta);
@@ -1165,7 +1323,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       }
     }
   };
-  run_blocks("emit", false, classify, [&](BlockOut* outs_l) {
+  auto merge_block = [&](BlockOut* outs_l) {
     for (size_t l = 0; l < nl; ++l) {
       LevelState& L = levels[l];
       const BlockOut& o = outs_l[l];
@@ -1188,7 +1346,13 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       }
       merge_quadrics(L, o);
     }
-  });
+  };
+  if (unit) {
+    write_classified(*unit, blocks, levels, run_blocks, classify);
+    return std::vector<EmitCounts>(nl);
+  }
+  if (options.classified) read_classified(*options.classified, whole, levels, outs[0], merge_block, progress);
+  else run_blocks("emit", false, classify, merge_block);
   if (options.representatives_only) {
     for (LevelState& L : levels)
       write_representative_range(prefix, L.in.level, L.in.cells, L.in.first_cell, L.in.end_cell - L.in.first_cell, L.quadrics,
@@ -1481,6 +1645,11 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
 }
 
 }  // namespace
+
+uint64_t emit_block_count(const StoreMeta& meta) {
+  const uint64_t column_count[3] = {meta.triangles, meta.lines, meta.points};
+  return whole_blocks(column_count).size();
+}
 
 std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMeta& meta,
                                     const std::string& canonical_path, const std::string& prefix,

@@ -59,6 +59,8 @@
 
 namespace lodstream::stream {
 
+struct ClassifyUnit;  // below
+
 struct EmitOptions {
   Representative representative = Representative::center;
   double crease_degrees = 30;
@@ -93,6 +95,25 @@ struct EmitOptions {
   bool own_representatives = false;
   // When set, the primitives the passes read are added to it (the blocks' sizes, pass by pass).
   std::atomic<uint64_t>* primitives_read = nullptr;
+  // Pass A as units (a sharded run's wide levels, stream/wide_units.h). With classify_unit, pass A runs over
+  // the unit's blocks of the whole input's (emit_blocks) and writes each block's outputs to the unit's file
+  // of each level of the group, and the emit stops there. With classified (per level of the group, its
+  // units' files in unit order), pass A's outputs are read from those files instead of being formed: each
+  // block's are the same outputs, merged in the same block order, so the level gets the same bytes.
+  // Only for groups of batched levels whose batch is every region (visited() is then true for every
+  // primitive, in the unit as in the task that reads it).
+  const ClassifyUnit* classify_unit = nullptr;
+  const std::vector<std::vector<std::string>>* classified = nullptr;
+};
+
+// Pass A's blocks: kEmitBlock primitives each (fixed, so that sums do not depend on the memory plan or the
+// threads), the triangles', then the segments', then the points', each kind in store order.
+uint64_t emit_block_count(const StoreMeta& meta);
+// A unit of pass A (EmitOptions::classify_unit): blocks [first, end) of emit_block_count's, and per level of
+// the group the file its outputs go to.
+struct ClassifyUnit {
+  uint64_t first = 0, end = 0;
+  std::vector<std::string> paths;
 };
 
 struct EmitCounts {

@@ -1,11 +1,13 @@
 // A task's share of simplify's emit stage, and the parts files it hands to the merge (see stream/shard.h).
 #include "stream/shard.h"
+#include "stream/wide_units.h"
 
 #include <fcntl.h>
 #include <sys/file.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <set>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
@@ -227,6 +229,12 @@ bool PartsReader::next(StoredPart* out) {
   return true;
 }
 
+std::vector<LevelCut> shard_cuts(const ShardEmitInput& in) {
+  const core::SceneCube cube = scene_cube_of(*in.meta);
+  const std::vector<core::SideBound> sides = in.tiles ? tile_side_bounds(in.sizes, in.cells, cube.side) : std::vector<core::SideBound>();
+  return cut_levels(in.prefix, in.cells, cube, in.tile_triangles / 2, in.options.representative, in.meta->single_precision, sides);
+}
+
 std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, unsigned count, const std::string& output_dir,
                                    Progress& progress, EmitScratch& scratch, uint64_t* primitives_read,
                                    std::vector<std::array<uint32_t, 3>>* runs_out) {
@@ -242,9 +250,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     if (std::sscanf(e.path().filename().c_str(), "task-%u", &i) == 1 && i >= count) std::filesystem::remove(e.path(), ec);
   }
   const core::SceneCube cube = scene_cube_of(meta);
-  const std::vector<core::SideBound> sides = in.tiles ? tile_side_bounds(in.sizes, in.cells, cube.side) : std::vector<core::SideBound>();
-  const std::vector<LevelCut> cuts =
-      cut_levels(in.prefix, in.cells, cube, in.tile_triangles / 2, in.options.representative, meta.single_precision, sides);
+  const std::vector<LevelCut> cuts = shard_cuts(in);
   const std::vector<std::pair<uint32_t, uint32_t>> runs = shard_runs(cuts, index, count);
   if (runs_out) {
     runs_out->clear();
@@ -271,6 +277,11 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   std::atomic<uint64_t> read{0};
   emit.block_bounds = &bounds, emit.primitives_read = &read, emit.vertex_cells = true;
 
+  // The wide levels whose pass A ran as units (wide_units.h).
+  std::set<size_t> classified_levels;
+  if (in.wide_units)
+    for (const std::vector<size_t>& g : plan_wide_units(in, cuts, count).groups) classified_levels.insert(g.begin(), g.end());
+
   std::vector<EmitCounts> counts(n);
   std::vector<std::unique_ptr<PartsWriter>> writers(n);
   for (size_t l = 0; l < n; ++l) writers[l] = std::make_unique<PartsWriter>(shard_parts_path(output_dir, index, l));
@@ -292,6 +303,15 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     for (size_t l : group)
       region_of.push_back(load_region_of(in.prefix, l, in.cells[l], cube, cuts[l], in.options.representative, meta.single_precision));
     if (group.size() > 1 || emit_map_bytes(meta.vertices, bits) + bytes <= in.budget) {
+      // Wide levels whose pass A ran as units (wide_units.h): read from the units' files.
+      std::vector<std::vector<std::string>> classified;
+      if (std::all_of(group.begin(), group.end(), [&](size_t l) { return classified_levels.count(l) > 0; })) {
+        for (size_t l : group) {
+          classified.emplace_back();
+          for (unsigned u = 0; u < count; ++u) classified.back().push_back(wide_unit_path(in.prefix, u, l));
+        }
+        emit.classified = &classified;
+      }
       std::vector<EmitLevel> levels;
       for (size_t i = 0; i < group.size(); ++i) {
         const size_t l = group[i];
@@ -302,6 +322,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
                                                       const size_t l = group[i];
                                                       writers[l]->add(info(l, part.region), part);
                                                     });
+      emit.classified = nullptr;
       for (size_t i = 0; i < group.size(); ++i) add(group[i], c[i]);
       return;
     }
@@ -351,7 +372,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     }
   }
   for (auto& w : writers) w->commit();
-  if (primitives_read) *primitives_read = read.load();
+  if (primitives_read) *primitives_read += read.load();
   return counts;
 }
 

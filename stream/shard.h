@@ -9,12 +9,16 @@
 //   WORK/shard.lock (flock; taken before the work directory is opened, so that no task takes another's
 //   live scratch files for a dead process's); the others wait, then find their stamps and reuse them.
 //   `--shard-prepare` runs them alone (a scheduler's first job). They do not scale with N: they are what
-//   one machine runs before its emit stage, plus the block boxes and the cells by vertex.
+//   one machine runs before its emit stage, plus the block boxes and the cells by vertex. (The stages run
+//   as units, stream/units.h, let the lock go while every task takes part in them; the last of them, the
+//   wide levels' pass A, stream/wide_units.h, runs in the tasks only, not in --shard-prepare.)
 // - A task's share: one run of the Morton codes (shard_bounds), the codes of the finest level's regions
 //   that hold an N-th of its cells (shard_regions); in every level, the regions whose code falls in it, a
 //   contiguous run (region order is octree Morton order, so whole subtrees but at its two ends). So a
 //   task's levels cover about the same place, and its passes read about the same blocks. The levels of
-//   fewer regions than tasks go whole to one task (shard_runs), which emits them in one pass.
+//   fewer regions than tasks go whole to one task (shard_runs), which emits them in one pass; their
+//   classification (the emit's pass A) runs first as units that every task takes part in
+//   (stream/wide_units.h), and that task reads the units' outputs.
 //   It emits them as the batched emit does, each batch with its halo, forming the representatives of its
 //   own cells, its halo's and the ring beyond it from their quadrics (EmitOptions::own_representatives;
 //   no stage writes them ahead, so none is run once for all tasks), which gives every part the bytes it has
@@ -178,10 +182,16 @@ struct ShardEmitInput {
   std::vector<double> sizes;
   std::vector<uint64_t> cells;
   bool tiles = false;  // the run writes 3D Tiles: regions are cut with the tiles' side bounds, as one machine cuts them
+  // The wide levels' pass A ran as units (stream/wide_units.h): a task emitting a wide level whole reads
+  // its units' outputs instead of classifying the input.
+  bool wide_units = false;
 };
 
+// Every level's cut, as one machine's emit cuts them (with the tiles' side bounds when the run writes tiles).
+std::vector<LevelCut> shard_cuts(const ShardEmitInput& in);
+
 // Emits task `index` of `count`'s regions of every level and writes their parts (see above). Returns the
-// task's counts per level; `primitives_read`, when given, is set to the input primitives its passes read;
+// task's counts per level; `primitives_read`, when given, gets the input primitives its passes read added;
 // `runs`, when given, to its run of each level {first, end, regions in the level} (shard_runs).
 std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, unsigned count, const std::string& output_dir,
                                    Progress& progress, EmitScratch& scratch, uint64_t* primitives_read = nullptr,

@@ -46,6 +46,7 @@
 #include "stream/cluster_merge.h"
 #include "stream/shard.h"
 #include "stream/vertex_cells.h"
+#include "stream/wide_units.h"
 #include "stream/tiles.h"
 #include "stream/units.h"
 #include "stream/work_dir.h"
@@ -1199,6 +1200,26 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         // Every cells-by-vertex unit is done (the stage is stamped): no process reads the plain cells or the
         // pairs again.
         stream::remove_plain_cells_and_pairs(prefix);
+        // The wide levels' pass A (stream/wide_units.h), as units that every task takes part in, N of them:
+        // a task's, since which levels are wide depends on the task count (a prepare job leaves it to them).
+        if (so.shard_count > 0 && !so.shard_prepare)
+          run_stage(&report.stages, "wide-units", [&](StageStats& st) {
+            ordered_json key = cluster_base;
+            key["source"] = source_json(meta);
+            key["cells"] = cells;
+            for (double c : sizes) key["cell_sizes"].push_back(exact(c));
+            key["representative"] = name(so.representative);
+            key["tiles"] = so.write_tiles;
+            key["tile_triangles"] = so.tile_triangles;
+            key["tasks"] = so.shard_count;
+            std::atomic<uint64_t> read{0};
+            st.reused = stage_in_units(work.file("wide-units.json"), key, {}, shard_lock, options.work_dir, [&] {
+              return stream::run_wide_units(shard_input, so.shard_index, so.shard_count, key, progress, scratch, read);
+            });
+            primitives_read += read.load();
+            shard_input.wide_units = true;
+            scratch = stream::EmitScratch();  // the units' packed map: the task's emit counts its own
+          });
         shard_lock.reset();
         if (so.shard_prepare) return;
         if (so.write_tiles)

@@ -36,6 +36,7 @@
 #include "stream/scene_store.h"
 #include "stream/shard.h"
 #include "stream/vertex_cells.h"
+#include "stream/wide_units.h"
 #include "stream/vertex_pairs.h"
 #include "test_util.h"
 
@@ -52,11 +53,20 @@ std::string slurp(const std::string& path) {
 }
 
 // Every file under `dir` but manifest.json, by relative path.
-std::map<std::string, std::string> outputs(const std::string& dir) {
-  std::map<std::string, std::string> f;
+// A file's bytes, which gtest prints as their size and hash only: printed whole (escaped) when two runs'
+// outputs differed, the room's took the test process past the machine's 24 GB.
+struct Bytes {
+  std::string data;
+  bool operator==(const Bytes& o) const { return data == o.data; }
+};
+void PrintTo(const Bytes& b, std::ostream* os) { *os << b.data.size() << " bytes, hash " << std::hash<std::string>{}(b.data); }
+
+// Every output file of a run's directory but manifest.json, by its path there.
+std::map<std::string, Bytes> outputs(const std::string& dir) {
+  std::map<std::string, Bytes> f;
   for (const auto& e : std::filesystem::recursive_directory_iterator(dir))
     if (e.is_regular_file() && e.path().filename() != "manifest.json")
-      f[std::filesystem::relative(e.path(), dir).string()] = slurp(e.path().string());
+      f[std::filesystem::relative(e.path(), dir).string()] = {slurp(e.path().string())};
   return f;
 }
 
@@ -1301,6 +1311,53 @@ TEST(Shard, AKilledCentersUnitIsRunByTheNextShare) {
   EXPECT_EQ(outputs(dir.file("out")), outputs(dir.file("one")));
 }
 
+// Through the CLI: the wide levels' pass A as units (stream/wide_units.h). A task killed with SIGKILL just
+// before a unit's stamp leaves the unit's files unstamped; the next task runs the unit, and the tasks then
+// give one machine's bytes. The task that emits the wide levels reads the units' files: one of them cut
+// short, that task stops with exit 74 naming it rather than classifying the input itself.
+TEST(Shard, WideLevelsAreClassifiedInUnitsThatAKilledTaskLeavesToTheNext) {
+  TempDir dir, log;
+  const auto args = room_cli_args;
+  test::CliRun one = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("one")}), log);
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  const std::string work = dir.file("work"), units = stream::wide_units_dir(work + "/");
+  auto task = [&](unsigned i) {
+    return test::run_cli(args({"simplify", sample_room(), "-o", dir.file("out"), "--work", work, "--shard", std::to_string(i) + "/3"}),
+                         log);
+  };
+  setenv("LODSTREAM_TEST_KILL_AT", "wide-unit-1.json", 1);
+  const test::CliRun killed = task(1);
+  unsetenv("LODSTREAM_TEST_KILL_AT");
+  EXPECT_EQ(killed.exit_code, 128 + SIGKILL);
+  // Task 1 took its own unit first: written, not stamped.
+  const size_t coarsest = 4;  // the room's levels: the coarsest is wide at N = 3 (one region)
+  EXPECT_TRUE(std::filesystem::exists(stream::wide_unit_path(work + "/", 1, coarsest)));
+  EXPECT_FALSE(std::filesystem::exists(units + "group-0/wide-unit-1.json"));
+  const test::CliRun next = task(2);
+  ASSERT_EQ(next.exit_code, 0) << next.err;
+  EXPECT_TRUE(std::filesystem::exists(units + "group-0/wide-unit-1.json")) << "the next task ran the unit";
+  for (unsigned i : {0u, 1u}) {
+    const test::CliRun t = task(i);
+    ASSERT_EQ(t.exit_code, 0) << t.err;
+    EXPECT_NE(t.out.find("wide-units"), std::string::npos) << t.out;
+  }
+  const test::CliRun m = test::run_cli({"merge", dir.file("out")}, log);
+  ASSERT_EQ(m.exit_code, 0) << m.err;
+  EXPECT_EQ(outputs(dir.file("out")), outputs(dir.file("one")));
+  const nlohmann::json stage = nlohmann::json::parse(slurp(work + "/wide-units.json")).at("value").at("units");
+  ASSERT_FALSE(stage.at("levels").empty());
+  EXPECT_EQ(stage.at("levels").back(), coarsest);
+  EXPECT_EQ(stage.at("units"), 3);
+  EXPECT_EQ(stage.at("seconds").size(), 3u) << "one group: every wide level in one pass of each unit";
+
+  // Task 0 emits the wide levels (wide_tasks: K = 1 at N = 3): it reads unit 1's file of the coarsest.
+  const std::string cut = stream::wide_unit_path(work + "/", 1, coarsest);
+  std::filesystem::resize_file(cut, std::filesystem::file_size(cut) - 8);
+  const test::CliRun rerun = task(0);
+  EXPECT_EQ(rerun.exit_code, 74) << rerun.err;
+  EXPECT_NE(rerun.err.find(cut), std::string::npos) << rerun.err;
+}
+
 // ---- report as N tasks (stream/report_shard.h)
 
 ReportOptions small_report(const std::string& out) {
@@ -1315,14 +1372,14 @@ ReportOptions small_report(const std::string& out) {
 
 // Every file of a report directory but report.json, and report.json without its timings, performance
 // counters and task list.
-std::map<std::string, std::string> report_files(const std::string& dir) {
-  std::map<std::string, std::string> f = outputs(dir);
+std::map<std::string, Bytes> report_files(const std::string& dir) {
+  std::map<std::string, Bytes> f = outputs(dir);
   f.erase("report.json");
   nlohmann::json j = nlohmann::json::parse(slurp(dir + "/report.json"));
   for (const char* k : {"stages", "seconds", "peak_rss_bytes", "work_dir", "performance", "shards"}) j.erase(k);
   for (auto& run : j["runs"])
     for (auto& level : run["levels"]) level.erase("seconds");
-  f["report.json"] = j.dump(1);
+  f["report.json"] = {j.dump(1)};
   return f;
 }
 

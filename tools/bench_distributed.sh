@@ -138,6 +138,14 @@ try:
               (c["level"], c["seconds"], c["runner"], c["centers"], 100.0 * c["skipped"] / records, c["voxel"]))
 except (OSError, KeyError, ValueError) as e:
     print("  clustering merge units: none recorded (%s)" % e)
+# The wide levels' pass A as units (stream/wide_units.h), as the clustering merge's.
+try:
+    wu = json.load(open(os.path.join(work, "wide-units.json")))["value"]["units"]
+    if wu["levels"]:
+        print("  wide levels %s: %d units of pass A, slowest %.2f s, all %.2f s, run by %d processes" %
+              (",".join(str(l) for l in wu["levels"]), wu["units"], max(wu["seconds"]), sum(wu["seconds"]), len(set(wu["by"]))))
+except (OSError, KeyError, ValueError) as e:
+    print("  wide levels' units: none recorded (%s)" % e)
 m = json.load(open(os.path.join(out, "sharded", "manifest.json")))
 for t in m["shards"]["tasks"]:
     print("  task %2d: %.1f s, peak %.1f MiB, input primitives read by its emit %d" %
