@@ -63,10 +63,15 @@ struct BlockOut {
   std::vector<uint32_t> triangle_materials, edge_materials, point_materials;
   std::vector<uint32_t> quadric_cells;
   std::vector<core::Quadric> quadrics;
+  // A unit of pass A only (EmitOptions::classify_unit): per edge and point above, which of the block's
+  // sixteen sub-blocks of kBoundsBlock primitives hold a triangle or segment that collapsed to it (bit k:
+  // sub-block k), so that the task reading the unit visits in pass B only the sub-blocks that hold one
+  // that collapsed to a kept edge or point.
+  std::vector<uint16_t> edge_masks, point_masks;
   // Pass B: the block's distinct corners of kept edges (and points), as corner_key()s.
   std::vector<uint64_t> corners;
   void clear() {
-    triangles.clear(), edges.clear(), points.clear();
+    triangles.clear(), edges.clear(), points.clear(), edge_masks.clear(), point_masks.clear();
     triangle_materials.clear(), edge_materials.clear(), point_materials.clear();
     quadric_cells.clear(), quadrics.clear(), corners.clear();
   }
@@ -75,12 +80,12 @@ struct BlockOut {
 struct Scratch {
   FlatMap<3, false> triangles;
   FlatMap<2> edges;
-  FlatMap<1, false> points;
+  FlatMap<1> points;  // a point's index in BlockOut::points
   FlatMap<1> cells;  // pass A: a cell's quadric slot
   FlatMap<2, false> corners;  // pass B: {kept edge, canonical vertex} pairs seen in the block
   // Pass A: the last point and the last quadric cell of the block. Neighbouring triangles mostly fall in
   // the same cell at coarse levels; these skip the hash table then (same result: the cell is in it).
-  uint32_t last_point = UINT32_MAX, last_cell = UINT32_MAX, last_slot = 0;
+  uint32_t last_point = UINT32_MAX, last_point_index = 0, last_cell = UINT32_MAX, last_slot = 0;
   void clear() {
     triangles.clear(), edges.clear(), points.clear(), cells.clear(), corners.clear();
     last_point = last_cell = UINT32_MAX;
@@ -98,9 +103,9 @@ std::vector<Block> whole_blocks(const uint64_t* column_count) {
 
 // A unit's file of one level's pass A outputs (EmitOptions::classify_unit): the magic, then per block its
 // kind, first primitive and count, its BlockOut's triangles, edges, points (each with its materials when
-// the store has them) and quadric sums, and the level's collapsed bits of its primitives (whole words: a
-// block starts at a multiple of 64); then the count of blocks.
-constexpr char kClassifiedMagic[8] = {'L', 'O', 'D', 'C', 'L', 'S', 'A', '1'};
+// the store has them, and the edges' and points' sub-block masks) and quadric sums, and the level's
+// collapsed bits of its primitives (whole words: a block starts at a multiple of 64); then the count of blocks.
+constexpr char kClassifiedMagic[8] = {'L', 'O', 'D', 'C', 'L', 'S', 'A', '2'};
 
 template <class T>
 void put_values(io::FileWriter& out, const std::vector<T>& v) {
@@ -938,8 +943,8 @@ void write_classified(const ClassifyUnit& unit, const std::vector<Block>& blocks
       f.write(head, sizeof head);
       const BlockOut& o = outs_l[l];
       put_values(f, o.triangles), put_values(f, o.triangle_materials);
-      put_values(f, o.edges), put_values(f, o.edge_materials);
-      put_values(f, o.points), put_values(f, o.point_materials);
+      put_values(f, o.edges), put_values(f, o.edge_materials), put_values(f, o.edge_masks);
+      put_values(f, o.points), put_values(f, o.point_materials), put_values(f, o.point_masks);
       put_values(f, o.quadric_cells), put_values(f, o.quadrics);
       if (b.kind < 2) f.write(levels[l].collapsed[b.kind].data() + b.first / 64, (b.count + 63) / 64 * sizeof(uint64_t));
     }
@@ -983,8 +988,8 @@ void read_classified(const std::vector<std::vector<std::string>>& files, const s
         ClassifiedReader& r = *in[l];
         BlockOut& o = outs[l];
         r.values(o.triangles), r.values(o.triangle_materials);
-        r.values(o.edges), r.values(o.edge_materials);
-        r.values(o.points), r.values(o.point_materials);
+        r.values(o.edges), r.values(o.edge_materials), r.values(o.edge_masks);
+        r.values(o.points), r.values(o.point_materials), r.values(o.point_masks);
         r.values(o.quadric_cells), r.values(o.quadrics);
         if (b.kind < 2) r.read(levels[l].collapsed[b.kind].data() + b.first / 64, (b.count + 63) / 64 * sizeof(uint64_t));
       }
@@ -994,6 +999,66 @@ void read_classified(const std::vector<std::vector<std::string>>& files, const s
   }
   if (next != whole.size()) fail(Status::io_error, "emit: the units of pass A do not cover the input (" + std::to_string(next) + " of " +
                                                        std::to_string(whole.size()) + " blocks)");
+}
+
+// Pass B's blocks when pass A came from units (read_classified), once elimination has found the kept edges
+// and points (LevelState::k_edges): the spans of `blocks` (triangles and segments) made of the sub-blocks
+// of kBoundsBlock primitives that hold a primitive which collapsed to a kept edge or point in some level of
+// the group, from the units' masks (BlockOut::edge_masks). Pass B finds its pairs in those only, so it
+// collects the same pairs (their order is the sort's).
+std::vector<Block> kept_subblocks(const std::vector<std::vector<std::string>>& files, const std::vector<Block>& blocks,
+                                  const std::vector<LevelState>& levels, const uint64_t* column_count) {
+  static_assert(kEmitBlock % kBoundsBlock == 0 && kEmitBlock / kBoundsBlock <= 16);
+  std::vector<uint64_t> kept[2];  // a bit a sub-block
+  for (int kind = 0; kind < 2; ++kind) kept[kind].assign((column_count[kind] / kBoundsBlock + 1 + 63) / 64, 0);
+  BlockOut o;
+  for (size_t l = 0; l < levels.size(); ++l) {
+    const LevelState& L = levels[l];
+    if (L.k_edges.size() == 0) continue;
+    for (const std::string& path : files[l]) {
+      ClassifiedReader r(path);
+      Block b;
+      for (uint64_t read = 0; r.next(b, read); ++read) {
+        r.values(o.triangles), r.values(o.triangle_materials);
+        r.values(o.edges), r.values(o.edge_materials), r.values(o.edge_masks);
+        r.values(o.points), r.values(o.point_materials), r.values(o.point_masks);
+        r.values(o.quadric_cells), r.values(o.quadrics);
+        if (b.kind < 2) {
+          std::vector<uint64_t> words((b.count + 63) / 64);
+          r.read(words.data(), words.size() * sizeof(uint64_t));
+        }
+        if (b.kind == 2 || o.edge_masks.size() != o.edges.size() || o.point_masks.size() != o.points.size()) continue;
+        uint32_t mask = 0;
+        for (size_t i = 0; i < o.edges.size(); ++i)
+          if (L.k_edges.find(o.edges[i]) != FlatMap<2>::empty) mask |= o.edge_masks[i];
+        for (size_t i = 0; i < o.points.size(); ++i)
+          if (L.k_edges.find({o.points[i], o.points[i]}) != FlatMap<2>::empty) mask |= o.point_masks[i];
+        for (; mask; mask &= mask - 1) {
+          const uint64_t sub = b.first / kBoundsBlock + static_cast<uint64_t>(std::countr_zero(mask));
+          kept[b.kind][sub / 64] |= uint64_t{1} << (sub % 64);
+        }
+      }
+    }
+  }
+  std::vector<Block> out;
+  for (const Block& b : blocks) {
+    if (b.kind == 2) continue;
+    const uint64_t end = b.first + b.count;
+    for (uint64_t p = b.first; p < end;) {
+      const uint64_t sub = p / kBoundsBlock, next = std::min(end, (sub + 1) * kBoundsBlock);
+      if (!(kept[b.kind][sub / 64] >> (sub % 64) & 1)) {
+        p = next;
+        continue;
+      }
+      if (!out.empty() && out.back().kind == b.kind && out.back().first + out.back().count == p &&
+          out.back().count + (next - p) <= kEmitBlock)
+        out.back().count += next - p;
+      else
+        out.push_back({b.kind, p, next - p});
+      p = next;
+    }
+  }
+  return out;
 }
 
 std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
@@ -1241,20 +1306,30 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       const uint64_t p = b.first + i;
       L.collapsed[b.kind][p / 64] |= uint64_t{1} << (p % 64);
     };
-    auto edge = [&](BlockOut& o, Scratch& s, uint32_t c0, uint32_t c1, uint32_t m) {
+    // The sub-block bit of the block's q-th primitive (units only: BlockOut::edge_masks).
+    auto sub_bit = [&](size_t q) { return static_cast<uint16_t>(1u << ((b.first + q) % kEmitBlock / kBoundsBlock)); };
+    auto edge = [&](BlockOut& o, Scratch& s, uint32_t c0, uint32_t c1, uint32_t m, size_t q) {
       const std::array<uint32_t, 2> key{std::min(c0, c1), std::max(c0, c1)};
-      if (s.edges.insert(key, 0).second) {
+      const auto [index, fresh] = s.edges.insert(key, static_cast<uint32_t>(o.edges.size()));
+      if (fresh) {
         o.edges.push_back(key);
         if (materials) o.edge_materials.push_back(m);
+        if (unit) o.edge_masks.push_back(0);
       }
+      if (unit) o.edge_masks[index] |= sub_bit(q);
     };
-    auto point = [&](BlockOut& o, Scratch& s, uint32_t c, uint32_t m) {
-      if (c == s.last_point) return;
-      s.last_point = c;
-      if (s.points.insert({c}, 0).second) {
-        o.points.push_back(c);
-        if (materials) o.point_materials.push_back(m);
+    auto point = [&](BlockOut& o, Scratch& s, uint32_t c, uint32_t m, size_t q) {
+      if (c != s.last_point) {
+        s.last_point = c;
+        const auto [index, fresh] = s.points.insert({c}, static_cast<uint32_t>(o.points.size()));
+        if (fresh) {
+          o.points.push_back(c);
+          if (materials) o.point_materials.push_back(m);
+          if (unit) o.point_masks.push_back(0);
+        }
+        s.last_point_index = index;
       }
+      if (unit) o.point_masks[s.last_point_index] |= sub_bit(q);
     };
     const size_t arity = static_cast<size_t>(3 - b.kind);
     if (options.representatives_only && arity != 3) return;
@@ -1293,10 +1368,10 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
               if (materials) o.triangle_materials.push_back(m);
             }
           } else if (c[0] == c[1] && c[1] == c[2]) {
-            point(o, s, c[0], m);
+            point(o, s, c[0], m, i / 3);
             mark(L, i / 3);
           } else {
-            edge(o, s, c[0], c[0] != c[1] ? c[1] : c[2], m);
+            edge(o, s, c[0], c[0] != c[1] ? c[1] : c[2], m, i / 3);
             mark(L, i / 3);
           }
         }
@@ -1307,10 +1382,10 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
           const uint32_t c[2] = {c0, c1};
           if (!visited(levels[l], c, 2)) continue;
           if (c0 == c1) {
-            point(outs_l[l], scratch_l[l], c0, m);
+            point(outs_l[l], scratch_l[l], c0, m, i / 2);
             mark(levels[l], i / 2);
           } else {
-            edge(outs_l[l], scratch_l[l], c0, c1, m);
+            edge(outs_l[l], scratch_l[l], c0, c1, m, i / 2);
             mark(levels[l], i / 2);
           }
         }
@@ -1318,7 +1393,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
         const uint64_t r0 = record_of(ids[i]);
         for (size_t l = 0; l < nl; ++l) {
           const uint32_t c = cell(levels[l], r0);
-          if (visited(levels[l], &c, 1)) point(outs_l[l], scratch_l[l], c, m);
+          if (visited(levels[l], &c, 1)) point(outs_l[l], scratch_l[l], c, m, i);
         }
       }
     }
@@ -1482,6 +1557,8 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   }
 
   release_free_memory();  // pass A's dedupe tables, before the thickness passes
+  // Pass A from units: pass B reads only the sub-blocks that hold a primitive collapsed to a kept edge or point.
+  if (options.classified && any_kept_edges) blocks = kept_subblocks(*options.classified, blocks, levels, column_count);
   // Pass B visits the input triangles and segments that collapsed to a kept edge (or a kept point:
   // index_kept_points) in some level of the group (an eliminated edge's thickness would go unused), and
   // gives each of their corners as a pair {kept edge, canonical vertex} (corner_key): a vertex shared by

@@ -1212,6 +1212,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
             key["tiles"] = so.write_tiles;
             key["tile_triangles"] = so.tile_triangles;
             key["tasks"] = so.shard_count;
+            key["format"] = 2;  // the units' files (stream/emit_stage.cpp write_classified)
             std::atomic<uint64_t> read{0};
             st.reused = stage_in_units(work.file("wide-units.json"), key, {}, shard_lock, options.work_dir, [&] {
               return stream::run_wide_units(shard_input, so.shard_index, so.shard_count, key, progress, scratch, read);
