@@ -114,6 +114,15 @@ void put_values(io::FileWriter& out, const std::vector<T>& v) {
   if (n) out.write(v.data(), n * sizeof(T));
 }
 
+// A block's outputs, as ClassifiedReader::block_out reads them.
+void write_block_out(io::FileWriter& f, const Block& b, const BlockOut& o, const std::vector<uint64_t>* collapsed) {
+  put_values(f, o.triangles), put_values(f, o.triangle_materials);
+  put_values(f, o.edges), put_values(f, o.edge_materials), put_values(f, o.edge_masks);
+  put_values(f, o.points), put_values(f, o.point_materials), put_values(f, o.point_masks);
+  put_values(f, o.quadric_cells), put_values(f, o.quadrics);
+  if (b.kind < 2) f.write(collapsed[b.kind].data() + b.first / 64, (b.count + 63) / 64 * sizeof(uint64_t));
+}
+
 // Reads a unit's file written by put_values and its block headers, in order; Failure(io_error) naming the
 // file where it is missing, of another version or cut short.
 class ClassifiedReader {
@@ -134,6 +143,19 @@ class ClassifiedReader {
     read(head, sizeof head);
     b = {static_cast<int>(head[0]), head[1], head[2]};
     return true;
+  }
+  // A block's outputs (after its header) into `o`, its collapsed bits into `collapsed` (per kind, the
+  // level's words of every primitive; none: passed over).
+  void block_out(const Block& b, BlockOut& o, std::vector<uint64_t>* collapsed) {
+    values(o.triangles), values(o.triangle_materials);
+    values(o.edges), values(o.edge_materials), values(o.edge_masks);
+    values(o.points), values(o.point_materials), values(o.point_masks);
+    values(o.quadric_cells), values(o.quadrics);
+    if (b.kind == 2) return;
+    const uint64_t bytes = (b.count + 63) / 64 * sizeof(uint64_t);
+    if (collapsed) read(collapsed[b.kind].data() + b.first / 64, bytes);
+    else if (bytes > file_.size() - at_) fail(Status::io_error, file_.path() + ": cut short");
+    else at_ += bytes;
   }
   template <class T>
   void values(std::vector<T>& v) {
@@ -941,12 +963,7 @@ void write_classified(const ClassifyUnit& unit, const std::vector<Block>& blocks
       io::FileWriter& f = *files[l];
       const uint64_t head[3] = {static_cast<uint64_t>(b.kind), b.first, b.count};
       f.write(head, sizeof head);
-      const BlockOut& o = outs_l[l];
-      put_values(f, o.triangles), put_values(f, o.triangle_materials);
-      put_values(f, o.edges), put_values(f, o.edge_materials), put_values(f, o.edge_masks);
-      put_values(f, o.points), put_values(f, o.point_materials), put_values(f, o.point_masks);
-      put_values(f, o.quadric_cells), put_values(f, o.quadrics);
-      if (b.kind < 2) f.write(levels[l].collapsed[b.kind].data() + b.first / 64, (b.count + 63) / 64 * sizeof(uint64_t));
+      write_block_out(f, b, outs_l[l], levels[l].collapsed);
     }
   });
   for (auto& f : files) {
@@ -985,13 +1002,7 @@ void read_classified(const std::vector<std::vector<std::string>>& files, const s
         fail(Status::io_error, files[0][u] + ": a block out of the input's order (units of another input or count)");
       ++next;
       for (size_t l = 0; l < nl; ++l) {
-        ClassifiedReader& r = *in[l];
-        BlockOut& o = outs[l];
-        r.values(o.triangles), r.values(o.triangle_materials);
-        r.values(o.edges), r.values(o.edge_materials), r.values(o.edge_masks);
-        r.values(o.points), r.values(o.point_materials), r.values(o.point_masks);
-        r.values(o.quadric_cells), r.values(o.quadrics);
-        if (b.kind < 2) r.read(levels[l].collapsed[b.kind].data() + b.first / 64, (b.count + 63) / 64 * sizeof(uint64_t));
+        in[l]->block_out(b, outs[l], levels[l].collapsed);
       }
       merge_block(outs.data());
     }
@@ -1019,14 +1030,7 @@ std::vector<Block> kept_subblocks(const std::vector<std::vector<std::string>>& f
       ClassifiedReader r(path);
       Block b;
       for (uint64_t read = 0; r.next(b, read); ++read) {
-        r.values(o.triangles), r.values(o.triangle_materials);
-        r.values(o.edges), r.values(o.edge_materials), r.values(o.edge_masks);
-        r.values(o.points), r.values(o.point_materials), r.values(o.point_masks);
-        r.values(o.quadric_cells), r.values(o.quadrics);
-        if (b.kind < 2) {
-          std::vector<uint64_t> words((b.count + 63) / 64);
-          r.read(words.data(), words.size() * sizeof(uint64_t));
-        }
+        r.block_out(b, o, nullptr);
         if (b.kind == 2 || o.edge_masks.size() != o.edges.size() || o.point_masks.size() != o.points.size()) continue;
         uint32_t mask = 0;
         for (size_t i = 0; i < o.edges.size(); ++i)
