@@ -975,9 +975,26 @@ void write_classified(const ClassifyUnit& unit, const std::vector<Block>& blocks
 // Pass A from its units' files (EmitOptions::classified: per level of the group, its units' files in unit
 // order): every block's outputs, in the order of the whole input's blocks, to merge_block, and each block's
 // collapsed bits into the level's. Failure(io_error) where the files do not hold every block once, in order.
+// A block's outputs as read from a unit's file hold only the level's cells, and a material (with
+// `materials`) and a sub-block mask per primitive: Failure(io_error) naming the file otherwise (a file of
+// another level or run), before any of it is merged.
+void check_block_out(const BlockOut& o, uint64_t cells, bool materials, const std::string& path) {
+  bool ok = o.edge_masks.size() == o.edges.size() && o.point_masks.size() == o.points.size() &&
+            o.quadric_cells.size() == o.quadrics.size();
+  const size_t m = materials ? 1 : 0;
+  ok = ok && o.triangle_materials.size() == m * o.triangles.size() && o.edge_materials.size() == m * o.edges.size() &&
+       o.point_materials.size() == m * o.points.size();
+  for (const auto& t : o.triangles) ok = ok && t[0] < cells && t[1] < cells && t[2] < cells;
+  for (const auto& e : o.edges) ok = ok && e[0] < cells && e[1] < cells;
+  for (uint32_t c : o.points) ok = ok && c < cells;
+  for (uint32_t c : o.quadric_cells) ok = ok && c < cells;
+  if (!ok) fail(Status::io_error, path + ": not a unit of pass A of this level (a cell out of range or arrays that disagree)");
+}
+
 template <class MergeBlock>
 void read_classified(const std::vector<std::vector<std::string>>& files, const std::vector<Block>& whole,
-                     std::vector<LevelState>& levels, std::vector<BlockOut>& outs, MergeBlock& merge_block, Progress& progress) {
+                     std::vector<LevelState>& levels, std::vector<BlockOut>& outs, bool materials, MergeBlock& merge_block,
+                     Progress& progress) {
   const size_t nl = levels.size();
   if (files.size() != nl || nl == 0) fail(Status::internal, "emit: units of pass A for another group");
   const size_t units = files[0].size();
@@ -1003,6 +1020,7 @@ void read_classified(const std::vector<std::vector<std::string>>& files, const s
       ++next;
       for (size_t l = 0; l < nl; ++l) {
         in[l]->block_out(b, outs[l], levels[l].collapsed);
+        check_block_out(outs[l], levels[l].in.cells, materials, files[l][u]);
       }
       merge_block(outs.data());
     }
@@ -1430,7 +1448,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     write_classified(*unit, blocks, levels, run_blocks, classify);
     return std::vector<EmitCounts>(nl);
   }
-  if (options.classified) read_classified(*options.classified, whole, levels, outs[0], merge_block, progress);
+  if (options.classified) read_classified(*options.classified, whole, levels, outs[0], materials, merge_block, progress);
   else run_blocks("emit", false, classify, merge_block);
   if (options.representatives_only) {
     for (LevelState& L : levels)

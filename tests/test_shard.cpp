@@ -1356,6 +1356,22 @@ TEST(Shard, WideLevelsAreClassifiedInUnitsThatAKilledTaskLeavesToTheNext) {
   const test::CliRun rerun = task(0);
   EXPECT_EQ(rerun.exit_code, 74) << rerun.err;
   EXPECT_NE(rerun.err.find(cut), std::string::npos) << rerun.err;
+  // Without tiles the room's levels 1-4 are wide at N = 3: a whole unit file of level 1 in the place of
+  // level 4's (the same blocks, cells out of level 4's range).
+  const std::string plain = dir.file("plain");
+  auto plain_task = [&] {
+    return test::run_cli({"simplify", sample_room(), "-o", dir.file("plain-out"), "--work", plain, "--shard", "0/3",
+                          "--no-space-check", "--progress", "none"},
+                         log);
+  };
+  ASSERT_EQ(plain_task().exit_code, 0);
+  const nlohmann::json levels = nlohmann::json::parse(slurp(plain + "/wide-units.json")).at("value").at("units").at("levels");
+  ASSERT_EQ(levels, nlohmann::json({1, 2, 3, 4}));
+  const std::string swapped = stream::wide_unit_path(plain + "/", 1, 4);
+  std::filesystem::copy_file(stream::wide_unit_path(plain + "/", 1, 1), swapped, std::filesystem::copy_options::overwrite_existing);
+  const test::CliRun other = plain_task();
+  EXPECT_EQ(other.exit_code, 74) << other.err;
+  EXPECT_NE(other.err.find(swapped + ": not a unit of pass A of this level"), std::string::npos) << other.err;
 }
 
 // ---- report as N tasks (stream/report_shard.h)
