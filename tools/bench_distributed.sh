@@ -146,6 +146,27 @@ try:
               (",".join(str(l) for l in wu["levels"]), wu["units"], max(wu["seconds"]), sum(wu["seconds"]), len(set(wu["by"]))))
 except (OSError, KeyError, ValueError) as e:
     print("  wide levels' units: none recorded (%s)" % e)
+# The tasks' step on N nodes: each shared stage the tasks take up in units (N units a stage, one a task)
+# lasts about its slowest unit, the stages one after another, then every task emits its share. On one node
+# the first tasks take every unit, so the step's slowest job is no measure of N nodes.
+try:
+    stages = []
+    cj = json.load(open(os.path.join(work, "cluster.json")))["value"]["merge_units"]
+    stages += [("merge " + k, cj[k]["seconds"]) for k in ("centers", "map", "sums") if k in cj]
+    for name, f in (("bounds", "block-bounds.json"), ("cells by vertex", "shard-vertex-cells.json"), ("wide", "wide-units.json")):
+        if os.path.exists(os.path.join(work, f)):
+            u = json.load(open(os.path.join(work, f)))["value"]["units"]
+            stages.append((name, u["unit"]["seconds"] if "unit" in u else u["seconds"]))
+    emits = []
+    for name in os.listdir(logs):
+        if name.startswith("task-"):
+            e = re.findall(r"^stage\s+emit\s+([0-9.]+) s", open(os.path.join(logs, name)).read(), re.M)
+            emits += [float(x) for x in e]
+    units = sum(max(sec, default=0) for _, sec in stages)
+    print("  tasks' step on %d nodes: slowest unit of each stage %s = %.1f s, then the slowest emit %.1f s: %.1f s" %
+          (n, " + ".join("%s %.2f" % (k, max(sec, default=0)) for k, sec in stages), units, max(emits, default=0), units + max(emits, default=0)))
+except (OSError, KeyError, ValueError) as e:
+    print("  tasks' step on N nodes: not estimated (%s)" % e)
 m = json.load(open(os.path.join(out, "sharded", "manifest.json")))
 for t in m["shards"]["tasks"]:
     print("  task %2d: %.1f s, peak %.1f MiB, input primitives read by its emit %d" %
