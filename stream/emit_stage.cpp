@@ -972,9 +972,6 @@ void write_classified(const ClassifyUnit& unit, const std::vector<Block>& blocks
   }
 }
 
-// Pass A from its units' files (EmitOptions::classified: per level of the group, its units' files in unit
-// order): every block's outputs, in the order of the whole input's blocks, to merge_block, and each block's
-// collapsed bits into the level's. Failure(io_error) where the files do not hold every block once, in order.
 // A block's outputs as read from a unit's file hold only the level's cells, and a material (with
 // `materials`) and a sub-block mask per primitive: Failure(io_error) naming the file otherwise (a file of
 // another level or run), before any of it is merged.
@@ -991,6 +988,9 @@ void check_block_out(const BlockOut& o, uint64_t cells, bool materials, const st
   if (!ok) fail(Status::io_error, path + ": not a unit of pass A of this level (a cell out of range or arrays that disagree)");
 }
 
+// Pass A from its units' files (EmitOptions::classified: per level of the group, its units' files in unit
+// order): every block's outputs, in the order of the whole input's blocks, to merge_block, and each block's
+// collapsed bits into the level's. Failure(io_error) where the files do not hold every block once, in order.
 template <class MergeBlock>
 void read_classified(const std::vector<std::vector<std::string>>& files, const std::vector<Block>& whole,
                      std::vector<LevelState>& levels, std::vector<BlockOut>& outs, bool materials, MergeBlock& merge_block,
@@ -1036,7 +1036,7 @@ void read_classified(const std::vector<std::vector<std::string>>& files, const s
 // the group, from the units' masks (BlockOut::edge_masks). Pass B finds its pairs in those only, so it
 // collects the same pairs (their order is the sort's).
 std::vector<Block> kept_subblocks(const std::vector<std::vector<std::string>>& files, const std::vector<Block>& blocks,
-                                  const std::vector<LevelState>& levels, const uint64_t* column_count) {
+                                  const std::vector<LevelState>& levels, bool materials, const uint64_t* column_count) {
   static_assert(kEmitBlock % kBoundsBlock == 0 && kEmitBlock / kBoundsBlock <= 16);
   std::vector<uint64_t> kept[2];  // a bit a sub-block
   for (int kind = 0; kind < 2; ++kind) kept[kind].assign((column_count[kind] / kBoundsBlock + 1 + 63) / 64, 0);
@@ -1049,7 +1049,8 @@ std::vector<Block> kept_subblocks(const std::vector<std::vector<std::string>>& f
       Block b;
       for (uint64_t read = 0; r.next(b, read); ++read) {
         r.block_out(b, o, nullptr);
-        if (b.kind == 2 || o.edge_masks.size() != o.edges.size() || o.point_masks.size() != o.points.size()) continue;
+        check_block_out(o, L.in.cells, materials, path);
+        if (b.kind == 2) continue;
         uint32_t mask = 0;
         for (size_t i = 0; i < o.edges.size(); ++i)
           if (L.k_edges.find(o.edges[i]) != FlatMap<2>::empty) mask |= o.edge_masks[i];
@@ -1580,7 +1581,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
 
   release_free_memory();  // pass A's dedupe tables, before the thickness passes
   // Pass A from units: pass B reads only the sub-blocks that hold a primitive collapsed to a kept edge or point.
-  if (options.classified && any_kept_edges) blocks = kept_subblocks(*options.classified, blocks, levels, column_count);
+  if (options.classified && any_kept_edges) blocks = kept_subblocks(*options.classified, blocks, levels, materials, column_count);
   // Pass B visits the input triangles and segments that collapsed to a kept edge (or a kept point:
   // index_kept_points) in some level of the group (an eliminated edge's thickness would go unused), and
   // gives each of their corners as a pair {kept edge, canonical vertex} (corner_key): a vertex shared by
