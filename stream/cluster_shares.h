@@ -116,12 +116,12 @@ struct ClusterShareInput {
   // canonical_path, empty when none), which the merge links into the work directory: the sharded tasks
   // read them, and the shares write them at once where the prepare job would decode the levels one by one.
   bool vertex_cells = false;
-  std::string canonical_path;
+  std::string canonical_path{};
   // false: the levels too coarse for the slabs are clustered whole, one share each where N allows, as a
   // level with a fine grid is (the tests use it to run that route on plain levels).
   bool split_by_records = true;
   // The key the centers units' stamps hold (the caller's share key; empty: the plan's).
-  nlohmann::ordered_json key;
+  nlohmann::ordered_json key{};
 };
 
 ClusterShares plan_cluster_shares(const ClusterShareInput& in, unsigned count, Progress& progress);

@@ -98,7 +98,7 @@ struct WeightIndex {
   std::string order_path, grades_path, positions_path;
   uint64_t records = 0, vertices = 0;
   bool single_precision = true;
-  std::string ordered_positions_path;
+  std::string ordered_positions_path{};
 };
 // Where a pass's positions come from (position_gather.h): the index's weight-ordered file when it names
 // one, else the store's column by id, mapped whole where it takes at most half the budget.

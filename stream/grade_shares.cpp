@@ -264,8 +264,8 @@ GradeMergePlan shared_grade_merge_plan(const GradeShareInput& in, const std::vec
   mp.cut.assign(units + 1, std::vector<uint64_t>(records.size(), 0));
   mp.cut[units] = records;
   for (unsigned u = 1; u < units && !samples.empty(); ++u) {
-    const GradeRecord& key = samples[samples.size() * u / units];  // unit u starts at the first record not below it
-    auto below = [&](const GradeRecord& r) { return WeightLess()(r, key); };
+    const GradeRecord& splitter = samples[samples.size() * u / units];  // unit u starts at the first record not below it
+    auto below = [&](const GradeRecord& r) { return WeightLess()(r, splitter); };
     for (unsigned s = 0; s < records.size(); ++s) mp.cut[u][s] = runs[s]->partition_point<GradeRecord>(records[s], below);
   }
   // The index's files at their full size; the units write their parts in place.

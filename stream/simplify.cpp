@@ -1161,9 +1161,11 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       if (so.cluster_share_count > 0) return;  // a share task (or a share whose stage another task finished)
       stream::ShardEmitInput shard_input;
       if (sharded) {
-        shard_input = {store_dir, canonical, prefix, &meta, grade.records, copts,
-                       {so.representative, so.crease_degrees, true, false}, plan.stage_bytes, so.tile_triangles, sizes, cells, so.write_tiles};
-        shard_input.options.work = &work, shard_input.options.chunk_bytes = options.chunk_bytes;
+        stream::EmitOptions shard_emit;
+        shard_emit.representative = so.representative, shard_emit.crease_degrees = so.crease_degrees;
+        shard_emit.work = &work, shard_emit.chunk_bytes = options.chunk_bytes;
+        shard_input = {store_dir, canonical, prefix, &meta, grade.records, copts, shard_emit, plan.stage_bytes, so.tile_triangles,
+                       sizes, cells, so.write_tiles};
         // The store's block boxes (stream/block_bounds.h) and every level's cells by vertex
         // (stream/vertex_cells.h: the tasks' packed maps). No representative is written ahead: a task forms
         // its cells' own (stream::EmitOptions::own_representatives).

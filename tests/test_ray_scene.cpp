@@ -562,7 +562,9 @@ TEST(RaySceneChunks, PartsCastAloneThenCompositedGiveTheWholeImage) {
         EXPECT_EQ(0, std::memcmp(a.normal.data(), b->normal.data(), a.normal.size() * sizeof(float)));
       }
     }
-    if (k == 3) EXPECT_GT(sub, 20u) << "pixels covered by k × k rays only";
+    if (k == 3) {
+      EXPECT_GT(sub, 20u) << "pixels covered by k × k rays only";
+    }
   }
 }
 

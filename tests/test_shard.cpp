@@ -149,9 +149,9 @@ TEST(Shard, AnyTaskCountGivesOneMachinesBytes) {
     const nlohmann::json m = nlohmann::json::parse(slurp(out + "/manifest.json"));
     uint64_t sum = 0, most = 0;
     for (const auto& t : m.at("shards").at("tasks")) {
-      const uint64_t r = t.at("input_primitives_read");
-      EXPECT_GT(r, 0u);
-      sum += r, most = std::max(most, r);
+      const uint64_t read = t.at("input_primitives_read");
+      EXPECT_GT(read, 0u);
+      sum += read, most = std::max(most, read);
     }
     if (n == 1) read_by_one = sum;
     if (n == 5) {
@@ -467,7 +467,9 @@ TEST(GradeShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       EXPECT_TRUE(slurp(work + "/order.u32") == slurp(one_work + "order.u32"));
       EXPECT_TRUE(slurp(work + "/weld.map") == slurp(one_work + "weld.map"));
       EXPECT_FALSE(slurp(work + "/weld.map").empty());
-      if (rep == Representative::mean) EXPECT_TRUE(slurp(work + "/grades.f64") == slurp(one_work + "grades.f64"));
+      if (rep == Representative::mean) {
+        EXPECT_TRUE(slurp(work + "/grades.f64") == slurp(one_work + "grades.f64"));
+      }
       expect_ordered_positions(work);
       SimplifyOptions late = room_options(out);
       late.representative = rep, late.grade_share_index = 0, late.grade_share_count = n;
@@ -609,8 +611,12 @@ TEST(GradeShares, MergeUnitsInAnyOrderWriteOneMergesBytes) {
       EXPECT_EQ(mp.total(), n);
       unsigned empty = 0;
       for (unsigned u = 0; u < units; ++u) empty += mp.first(u + 1) == mp.first(u);
-      if (units > n) EXPECT_GT(empty, 0u) << "fewer samples than units: splitters repeat, units are empty";
-      if (units < n / 100) EXPECT_EQ(empty, 0u);
+      if (units > n) {
+        EXPECT_GT(empty, 0u) << "fewer samples than units: splitters repeat, units are empty";
+      }
+      if (units < n / 100) {
+        EXPECT_EQ(empty, 0u);
+      }
       for (unsigned k = 0; k < units; ++k) {
         const unsigned u = reverse ? units - 1 - k : k;
         EXPECT_EQ(stream::run_grade_merge_unit(in, mp, u, progress), mp.first(u + 1) - mp.first(u));
@@ -1112,9 +1118,13 @@ TEST(Shard, LevelsShareTheFinestLevelsRunsOfCodes) {
         EXPECT_LE(first, end);
         for (uint32_t r = first; r < end; ++r) {
           EXPECT_GE(core::region_code(cut->regions[r]), bounds[t]);
-          if (t + 1 < n) EXPECT_LT(core::region_code(cut->regions[r]), bounds[t + 1]);
+          if (t + 1 < n) {
+            EXPECT_LT(core::region_code(cut->regions[r]), bounds[t + 1]);
+          }
         }
-        if (cut == &fine) EXPECT_EQ(std::make_pair(first, end), stream::shard_regions(fine, t, n)) << n << " tasks, task " << t;
+        if (cut == &fine) {
+          EXPECT_EQ(std::make_pair(first, end), stream::shard_regions(fine, t, n)) << n << " tasks, task " << t;
+        }
         next = end;
       }
       EXPECT_EQ(next, cut->regions.size()) << n << " tasks";

@@ -276,7 +276,9 @@ TEST(OctreeRegions, SideBoundSplitsNodesThatHoldMuch) {
     const uint64_t n = static_cast<uint64_t>(std::count_if(codes.begin(), codes.end(), [&](uint64_t c) {
       return c >= core::region_code(k) && c < core::region_code(k) + core::region_span(k);
     }));
-    if (n > 5) EXPECT_EQ(k.depth, 3u);
+    if (n > 5) {
+      EXPECT_EQ(k.depth, 3u);
+    }
   }
   EXPECT_NE(std::find(cut.begin(), cut.end(), core::RegionKey{1, 1, 1, 1}), cut.end());
   // Nested in a coarser cut, as without the bound.
@@ -389,7 +391,9 @@ TEST(Tiles, UnionOfALevelsTilesIsTheLevel) {
     for (const Tile& t : tiles)
       if (t.level == static_cast<int>(l) && !t.uri.empty()) {
         const double q = t.node["extras"]["quantum"].get<double>();
-        if (quantum >= 0) EXPECT_EQ(q, quantum);
+        if (quantum >= 0) {
+          EXPECT_EQ(q, quantum);
+        }
         quantum = q;
       }
     EXPECT_GT(quantum, 0);
