@@ -132,7 +132,7 @@ int main(int argc, char** argv) {
                          median(ours_wall) / median(peer_wall));
     fmt::print("\n");
     if (units > 0) {
-      std::vector<std::pair<std::string, uint64_t>> runs;
+      std::vector<std::pair<std::string, uint64_t>> unit_runs;
       double slowest = 0, sum_cpu = 0;
       const std::string sizes = work.file("sizes.bin");  // the bucket sizes the first unit counts for the others
       std::filesystem::remove(sizes);
@@ -141,21 +141,21 @@ int main(int argc, char** argv) {
         stream::WeldUnitResult r;
         const Timing t = timed([&] { r = stream::weld_unit(path, n, single, memory, work, progress, u, units, run, sizes); });
         fmt::print("unit {} of {}: {:7.2f} s wall {:7.2f} s CPU  {} distinct, {} welded\n", u, units, t.wall, t.cpu, r.distinct, r.welded);
-        runs.emplace_back(run, r.welded);
+        unit_runs.emplace_back(run, r.welded);
         slowest = std::max(slowest, t.wall);
         sum_cpu += t.cpu;
       }
       const std::string map = work.file("units.map");
-      const Timing m = timed([&] { stream::write_weld_map(runs, n, memory, work, map); });
+      const Timing m = timed([&] { stream::write_weld_map(unit_runs, n, memory, work, map); });
       fmt::print("map from {} units' runs: {:.2f} s wall {:.2f} s CPU\n", units, m.wall, m.cpu);
       // The map as units too (write_weld_map_unit, one process each on a cluster), in place.
       const std::string in_place = work.file("map-units.map");
       uint64_t welded = 0;
-      for (const auto& run : runs) welded += run.second;
+      for (const auto& run : unit_runs) welded += run.second;
       const Timing start = timed([&] { stream::start_weld_map(in_place, n, welded); });
       double slowest_map = 0, map_cpu = start.cpu;
       for (unsigned u = 0; u < units; ++u) {
-        const Timing t = timed([&] { stream::write_weld_map_unit(runs, n, memory, work, in_place, u, units); });
+        const Timing t = timed([&] { stream::write_weld_map_unit(unit_runs, n, memory, work, in_place, u, units); });
         fmt::print("map unit {} of {}: {:7.2f} s wall {:7.2f} s CPU\n", u, units, t.wall, t.cpu);
         slowest_map = std::max(slowest_map, t.wall);
         map_cpu += t.cpu;
