@@ -31,6 +31,7 @@
 #include "stream/flat_map.h"
 #include "stream/position_gather.h"
 #include "stream/store_access.h"
+#include "stream/task_file.h"
 #include "stream/vertex_cells.h"
 #include "stream/weld_file.h"
 
@@ -101,46 +102,38 @@ std::vector<Block> whole_blocks(const uint64_t* column_count) {
   return blocks;
 }
 
-// A unit's file of one level's pass A outputs (EmitOptions::classify_unit): the magic, then per block its
+// A unit's file of one level's pass A outputs (EmitOptions::classify_unit; written and read as the other
+// files the processes of a sharded run hand one another, stream/task_file.h): the magic, then per block its
 // kind, first primitive and count, its BlockOut's triangles, edges, points (each with its materials when
 // the store has them, and the edges' and points' sub-block masks) and quadric sums, and the level's
-// collapsed bits of its primitives (whole words: a block starts at a multiple of 64); then the count of blocks.
-constexpr char kClassifiedMagic[8] = {'L', 'O', 'D', 'C', 'L', 'S', 'A', '2'};
+// collapsed bits of its primitives (whole words: a block starts at a multiple of 64); then an end header
+// {kEndOfBlocks, the count of blocks, 0}.
+constexpr char kClassifiedMagic[8] = {'L', 'O', 'D', 'C', 'L', 'S', 'A', '3'};
+constexpr uint64_t kEndOfBlocks = UINT64_MAX;
 
-template <class T>
-void put_values(io::FileWriter& out, const std::vector<T>& v) {
-  const uint64_t n = v.size();
-  out.write(&n, sizeof n);
-  if (n) out.write(v.data(), n * sizeof(T));
-}
-
-// A block's outputs, as ClassifiedReader::block_out reads them.
+// A block's header and outputs, as ClassifiedReader reads them.
 void write_block_out(io::FileWriter& f, const Block& b, const BlockOut& o, const std::vector<uint64_t>* collapsed) {
-  put_values(f, o.triangles), put_values(f, o.triangle_materials);
-  put_values(f, o.edges), put_values(f, o.edge_materials), put_values(f, o.edge_masks);
-  put_values(f, o.points), put_values(f, o.point_materials), put_values(f, o.point_masks);
-  put_values(f, o.quadric_cells), put_values(f, o.quadrics);
+  put(f, static_cast<uint64_t>(b.kind)), put(f, b.first), put(f, b.count);
+  put_array(f, o.triangles), put_array(f, o.triangle_materials);
+  put_array(f, o.edges), put_array(f, o.edge_materials), put_array(f, o.edge_masks);
+  put_array(f, o.points), put_array(f, o.point_materials), put_array(f, o.point_masks);
+  put_array(f, o.quadric_cells), put_array(f, o.quadrics);
   if (b.kind < 2) f.write(collapsed[b.kind].data() + b.first / 64, (b.count + 63) / 64 * sizeof(uint64_t));
 }
 
-// Reads a unit's file written by put_values and its block headers, in order; Failure(io_error) naming the
-// file where it is missing, of another version or cut short.
-class ClassifiedReader {
+// Reads a unit's file block by block; Failure(io_error) naming the file where it is missing, of another
+// version, cut short or damaged.
+class ClassifiedReader : TaskFileReader {
  public:
-  explicit ClassifiedReader(const std::string& path) : file_(path) {
-    char magic[8];
-    read(magic, sizeof magic);
-    if (std::memcmp(magic, kClassifiedMagic, sizeof magic) != 0) fail(Status::io_error, file_.path() + ": not a unit of pass A of this version");
-  }
-  // The next block's header; false at the trailer (its count of blocks checked).
+  explicit ClassifiedReader(const std::string& path) : TaskFileReader(path, kClassifiedMagic, "a unit of pass A") {}
+  // The next block's header; false at the end header (its count of blocks checked).
   bool next(Block& b, uint64_t blocks_so_far) {
     uint64_t head[3];
-    if (at_ + 8 == file_.size()) {
-      read(head, 8);
-      if (head[0] != blocks_so_far) fail(Status::io_error, file_.path() + ": its count of blocks does not match");
+    read(head, sizeof head);
+    if (head[0] == kEndOfBlocks) {
+      if (head[1] != blocks_so_far) fail(Status::io_error, path_ + ": its count of blocks does not match");
       return false;
     }
-    read(head, sizeof head);
     b = {static_cast<int>(head[0]), head[1], head[2]};
     return true;
   }
@@ -154,26 +147,19 @@ class ClassifiedReader {
     if (b.kind == 2) return;
     const uint64_t bytes = (b.count + 63) / 64 * sizeof(uint64_t);
     if (collapsed) read(collapsed[b.kind].data() + b.first / 64, bytes);
-    else if (bytes > file_.size() - at_) fail(Status::io_error, file_.path() + ": cut short");
-    else at_ += bytes;
+    else if (std::fseek(f_, static_cast<long>(bytes), SEEK_CUR) != 0) fail(Status::io_error, path_ + ": " + what_ + " is cut short");
   }
+
+ private:
+  // A block holds at most three cells' quadrics a primitive, and fewer outputs of each kind than primitives.
   template <class T>
   void values(std::vector<T>& v) {
     uint64_t n;
     read(&n, sizeof n);
-    if (n > (file_.size() - at_) / sizeof(T)) fail(Status::io_error, file_.path() + ": cut short");
+    if (n > 3 * kEmitBlock) fail(Status::io_error, path_ + ": " + what_ + " is damaged");
     v.resize(n);
-    if (n) read(v.data(), n * sizeof(T));
+    read(v.data(), n * sizeof(T));
   }
-  void read(void* data, uint64_t bytes) {
-    if (bytes > file_.size() - at_) fail(Status::io_error, file_.path() + ": cut short");
-    file_.read(at_, bytes, data);
-    at_ += bytes;
-  }
-
- private:
-  io::MappedFile file_;
-  uint64_t at_ = 0;
 };
 
 void add(double* sum, const double* p) {
@@ -959,15 +945,10 @@ void write_classified(const ClassifyUnit& unit, const std::vector<Block>& blocks
   uint64_t written = 0;
   run_blocks("emit", false, classify, [&](BlockOut* outs_l) {
     const Block& b = blocks[written++];
-    for (size_t l = 0; l < levels.size(); ++l) {
-      io::FileWriter& f = *files[l];
-      const uint64_t head[3] = {static_cast<uint64_t>(b.kind), b.first, b.count};
-      f.write(head, sizeof head);
-      write_block_out(f, b, outs_l[l], levels[l].collapsed);
-    }
+    for (size_t l = 0; l < levels.size(); ++l) write_block_out(*files[l], b, outs_l[l], levels[l].collapsed);
   });
   for (auto& f : files) {
-    f->write(&written, sizeof written);
+    put(*f, kEndOfBlocks), put(*f, written), put(*f, uint64_t{0});
     f->commit();
   }
 }

@@ -180,23 +180,6 @@ void PartsWriter::add(const RegionInfo& info, const RegionPart& part) {
 
 void PartsWriter::commit() { out_.commit(); }
 
-TaskFileReader::TaskFileReader(const std::string& path, const char (&magic)[8], std::string what)
-    : path_(path), what_(std::move(what)) {
-  f_ = std::fopen(path.c_str(), "rb");
-  if (!f_) fail(Status::io_error, path + ": cannot open " + what_ + ": " + std::strerror(errno));
-  char got[8];
-  read(got, sizeof got);
-  if (std::memcmp(got, magic, sizeof got) != 0) fail(Status::io_error, path + ": not " + what_ + " of this version");
-}
-
-TaskFileReader::~TaskFileReader() {
-  if (f_) std::fclose(f_);
-}
-
-void TaskFileReader::read(void* data, size_t bytes) {
-  if (bytes && std::fread(data, 1, bytes, f_) != bytes) fail(Status::io_error, path_ + ": " + what_ + " is cut short");
-}
-
 PartsReader::PartsReader(const std::string& path) : TaskFileReader(path, kPartsMagic, "a task's parts") {}
 
 bool PartsReader::next(StoredPart* out) {
@@ -250,7 +233,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     if (std::sscanf(e.path().filename().c_str(), "task-%u", &i) == 1 && i >= count) std::filesystem::remove(e.path(), ec);
   }
   const core::SceneCube cube = scene_cube_of(meta);
-  const std::vector<LevelCut> cuts = shard_cuts(in);
+  const std::vector<LevelCut> cuts = in.cuts.empty() ? shard_cuts(in) : in.cuts;
   const std::vector<std::pair<uint32_t, uint32_t>> runs = shard_runs(cuts, index, count);
   if (runs_out) {
     runs_out->clear();

@@ -51,6 +51,7 @@
 #include "stream/emit_stage.h"
 #include "stream/progress.h"
 #include "stream/scene_store.h"
+#include "stream/task_file.h"
 #include "stream/tiles.h"
 
 namespace lodstream::stream {
@@ -131,38 +132,6 @@ class PartsWriter {
   io::FileWriter out_;
   uint64_t parts_ = 0;
 };
-// A task's binary file, written in order: a value's bytes, an array or a string as its count then its
-// elements.
-template <class T>
-void put(io::FileWriter& out, const T& v) {
-  out.write(&v, sizeof(T));
-}
-template <class T>
-void put_array(io::FileWriter& out, const std::vector<T>& v) {
-  put(out, uint64_t{v.size()});
-  if (!v.empty()) out.write(v.data(), v.size() * sizeof(T));
-}
-inline void put_string(io::FileWriter& out, const std::string& s) {
-  put(out, uint64_t{s.size()});
-  out.write(s);
-}
-
-// A task's binary file, read from its start: opened, its 8-byte magic checked, then read in order.
-// Failure(io_error) naming the file and `what` it holds ("a task's parts") when it is missing, of
-// another version or cut short.
-class TaskFileReader {
- public:
-  TaskFileReader(const TaskFileReader&) = delete;
-  TaskFileReader& operator=(const TaskFileReader&) = delete;
-
- protected:
-  TaskFileReader(const std::string& path, const char (&magic)[8], std::string what);
-  ~TaskFileReader();
-  void read(void* data, size_t bytes);
-  std::string path_, what_;
-  std::FILE* f_ = nullptr;
-};
-
 // Reads a parts file part by part; next() returns false after the last.
 class PartsReader : TaskFileReader {
  public:
@@ -185,6 +154,8 @@ struct ShardEmitInput {
   // The wide levels' pass A ran as units (stream/wide_units.h): a task emitting a wide level whole reads
   // its units' outputs instead of classifying the input.
   bool wide_units = false;
+  // Every level's cut (shard_cuts), when the caller made them already; else made where needed.
+  std::vector<LevelCut> cuts{};
 };
 
 // Every level's cut, as one machine's emit cuts them (with the tiles' side bounds when the run writes tiles).

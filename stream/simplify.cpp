@@ -1180,10 +1180,12 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                                        key, progress);
           });
         });
+        // What the stages below are made from: the clustering and its levels.
+        ordered_json levels_key = cluster_base;
+        levels_key["cells"] = cells;
+        for (double c : sizes) levels_key["cell_sizes"].push_back(exact(c));
         run_stage(&report.stages, "vertex-cells", [&](StageStats& st) {
-          ordered_json key = cluster_base;
-          key["cells"] = cells;
-          for (double c : sizes) key["cell_sizes"].push_back(exact(c));
+          const ordered_json& key = levels_key;
           std::vector<std::string> files;
           for (size_t l = 0; l < cells.size(); ++l) files.push_back(stream::vertex_cells_path(prefix, l));
           st.reused = stage_in_units(work.file("shard-vertex-cells.json"), key, files, shard_lock, options.work_dir, [&] {
@@ -1206,16 +1208,15 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         // a task's, since which levels are wide depends on the task count (a prepare job leaves it to them).
         if (so.shard_count > 0 && !so.shard_prepare)
           run_stage(&report.stages, "wide-units", [&](StageStats& st) {
-            ordered_json key = cluster_base;
+            ordered_json key = levels_key;
             key["source"] = source_json(meta);
-            key["cells"] = cells;
-            for (double c : sizes) key["cell_sizes"].push_back(exact(c));
             key["representative"] = name(so.representative);
             key["tiles"] = so.write_tiles;
             key["tile_triangles"] = so.tile_triangles;
             key["tasks"] = so.shard_count;
-            key["format"] = 2;  // the units' files (stream/emit_stage.cpp write_classified)
+            key["format"] = 3;  // the units' files (stream/emit_stage.cpp write_classified)
             std::atomic<uint64_t> read{0};
+            shard_input.cuts = stream::shard_cuts(shard_input);  // the units' and the emit's
             st.reused = stage_in_units(work.file("wide-units.json"), key, {}, shard_lock, options.work_dir, [&] {
               return stream::run_wide_units(shard_input, so.shard_index, so.shard_count, key, progress, scratch, read);
             });

@@ -48,7 +48,7 @@ nlohmann::ordered_json run_wide_units(const ShardEmitInput& in, unsigned index, 
                                       Progress& progress, EmitScratch& scratch, std::atomic<uint64_t>& read) {
   using nlohmann::ordered_json;
   const StoreMeta& meta = *in.meta;
-  const std::vector<LevelCut> cuts = shard_cuts(in);
+  const std::vector<LevelCut> cuts = in.cuts.empty() ? shard_cuts(in) : in.cuts;
   const WideUnitsPlan plan = plan_wide_units(in, cuts, count);
   ordered_json figures{{"levels", ordered_json::array()}, {"units", plan.units}};
   for (const auto& g : plan.groups)
