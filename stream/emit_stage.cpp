@@ -1011,11 +1011,34 @@ void read_classified(const std::vector<std::vector<std::string>>& files, const s
                                                        std::to_string(whole.size()) + " blocks)");
 }
 
+// The spans of `blocks` (triangles and segments) made of their sub-blocks of kBoundsBlock primitives
+// marked in `marked` (per kind, a bit a sub-block), each span within kEmitBlock primitives.
+std::vector<Block> marked_subblocks(const std::vector<Block>& blocks, const std::vector<uint64_t>* marked) {
+  std::vector<Block> out;
+  for (const Block& b : blocks) {
+    if (b.kind == 2) continue;
+    const uint64_t end = b.first + b.count;
+    for (uint64_t p = b.first; p < end;) {
+      const uint64_t sub = p / kBoundsBlock, next = std::min(end, (sub + 1) * kBoundsBlock);
+      if (!(marked[b.kind][sub / 64] >> (sub % 64) & 1)) {
+        p = next;
+        continue;
+      }
+      if (!out.empty() && out.back().kind == b.kind && out.back().first + out.back().count == p &&
+          out.back().count + (next - p) <= kEmitBlock)
+        out.back().count += next - p;
+      else
+        out.push_back({b.kind, p, next - p});
+      p = next;
+    }
+  }
+  return out;
+}
+
 // Pass B's blocks when pass A came from units (read_classified), once elimination has found the kept edges
-// and points (LevelState::k_edges): the spans of `blocks` (triangles and segments) made of the sub-blocks
-// of kBoundsBlock primitives that hold a primitive which collapsed to a kept edge or point in some level of
-// the group, from the units' masks (BlockOut::edge_masks). Pass B finds its pairs in those only, so it
-// collects the same pairs (their order is the sort's).
+// and points (LevelState::k_edges): the sub-blocks that hold a primitive which collapsed to a kept edge or
+// point in some level of the group, from the units' masks (BlockOut::edge_masks). Pass B finds its pairs in
+// those only, so it collects the same pairs (their order is the sort's).
 std::vector<Block> kept_subblocks(const std::vector<std::vector<std::string>>& files, const std::vector<Block>& blocks,
                                   const std::vector<LevelState>& levels, bool materials, const uint64_t* column_count) {
   static_assert(kEmitBlock % kBoundsBlock == 0 && kEmitBlock / kBoundsBlock <= 16);
@@ -1044,25 +1067,28 @@ std::vector<Block> kept_subblocks(const std::vector<std::vector<std::string>>& f
       }
     }
   }
-  std::vector<Block> out;
-  for (const Block& b : blocks) {
-    if (b.kind == 2) continue;
-    const uint64_t end = b.first + b.count;
-    for (uint64_t p = b.first; p < end;) {
-      const uint64_t sub = p / kBoundsBlock, next = std::min(end, (sub + 1) * kBoundsBlock);
-      if (!(kept[b.kind][sub / 64] >> (sub % 64) & 1)) {
-        p = next;
-        continue;
-      }
-      if (!out.empty() && out.back().kind == b.kind && out.back().first + out.back().count == p &&
-          out.back().count + (next - p) <= kEmitBlock)
-        out.back().count += next - p;
-      else
-        out.push_back({b.kind, p, next - p});
-      p = next;
+  return marked_subblocks(blocks, kept);
+}
+
+// Pass B's blocks otherwise: the sub-blocks that hold a primitive which collapsed to an edge or a point in
+// some level of the group (LevelState::collapsed, set by pass A), the only primitives pass B visits. A
+// task's pass A reads the blocks whose boxes come near its cells; the primitives that collapsed in them are
+// in a few of their sub-blocks.
+std::vector<Block> collapsed_subblocks(const std::vector<Block>& blocks, const std::vector<LevelState>& levels,
+                                       const uint64_t* column_count) {
+  static_assert(kBoundsBlock % 64 == 0);
+  constexpr uint64_t words = kBoundsBlock / 64;  // collapsed words a sub-block
+  std::vector<uint64_t> marked[2];
+  for (int kind = 0; kind < 2; ++kind) {
+    const uint64_t subs = (column_count[kind] + kBoundsBlock - 1) / kBoundsBlock;
+    marked[kind].assign((subs + 63) / 64, 0);
+    for (const LevelState& L : levels) {
+      const std::vector<uint64_t>& bits = L.collapsed[kind];
+      for (uint64_t w = 0; w < bits.size(); ++w)
+        if (bits[w]) marked[kind][w / words / 64] |= uint64_t{1} << (w / words % 64);
     }
   }
-  return out;
+  return marked_subblocks(blocks, marked);
 }
 
 std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
@@ -1563,6 +1589,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   release_free_memory();  // pass A's dedupe tables, before the thickness passes
   // Pass A from units: pass B reads only the sub-blocks that hold a primitive collapsed to a kept edge or point.
   if (options.classified && any_kept_edges) blocks = kept_subblocks(*options.classified, blocks, levels, materials, column_count);
+  else if (any_kept_edges) blocks = collapsed_subblocks(blocks, levels, column_count);
   // Pass B visits the input triangles and segments that collapsed to a kept edge (or a kept point:
   // index_kept_points) in some level of the group (an eliminated edge's thickness would go unused), and
   // gives each of their corners as a pair {kept edge, canonical vertex} (corner_key): a vertex shared by
