@@ -4,10 +4,12 @@
 #include "stream/cluster_merge.h"
 
 #include <fcntl.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -19,6 +21,7 @@
 #include <fmt/format.h>
 
 #include "core/status.h"
+#include "io/file_writer.h"
 #include "io/mapped_file.h"
 #include "io/offset_file.h"
 #include "stream/cell_map_file.h"
@@ -180,6 +183,28 @@ uint64_t map_bits_before(const RankedBits& centers, uint64_t end) {
   return total;
 }
 
+std::string spent_path(const std::string& prefix) { return cluster_shares_dir(prefix) + "spent.json"; }
+
+std::vector<size_t> split_levels(const ClusterShares& plan) {
+  std::vector<size_t> split;
+  for (size_t l = 0; l < plan.whole_share.size(); ++l)
+    if (plan.whole_share[l] < 0) split.push_back(l);
+  return split;
+}
+
+unsigned merge_unit_count(const ClusterShareInput& in, const ClusterShares& plan) {
+  const uint64_t words = (in.index.records + 63) / 64;
+  const uint64_t asked = in.merge_units ? in.merge_units : std::min<uint64_t>(plan.count, kMaxClusterMergeUnits);
+  return static_cast<unsigned>(std::clamp<uint64_t>(asked, 1, std::max<uint64_t>(words, 1)));
+}
+
+// The key every unit's stamp holds. plain_cells, vertex_pairs: the map units write the plain cells and a
+// phase of their own the pairs (a set of units started by a build that did not lacks them).
+json merge_unit_key(const ClusterShareInput& in, const ClusterShares& plan, const json& key) {
+  return {{"key", key}, {"split", split_levels(plan)}, {"units", merge_unit_count(in, plan)}, {"records", in.index.records},
+          {"plain_cells", true}, {"vertex_pairs", "phase 3"}};
+}
+
 struct Merge {
   const ClusterShareInput& in;
   const ClusterShares& plan;
@@ -234,7 +259,7 @@ struct Merge {
 
   std::string plain_cells_path(size_t j) const { return stream::plain_cells_path(in.prefix, split[j]); }
 
-  // Where phase 3's unit summing cells [first, end) of the split levels (their cells one level after another)
+  // Where phase 4's unit summing cells [first, end) of the split levels (their cells one level after another)
   // starts: at the first of its levels' first cells' centers (sum_cell_info_range); it reads their plain cells.
   SumStart sums_start(uint64_t first, uint64_t end, const std::vector<uint64_t>& split_cells) const {
     SumStart start;
@@ -264,18 +289,6 @@ struct Merge {
   json map_unit(unsigned u, const std::vector<json>& centers_values, Progress& progress) const {
     const uint64_t lo = units.lo(u), hi = units.hi(u), records = in.index.records;
     json edges = json::array();
-    // The records' vertices (the order's ids), a buffer at a time, and their buckets' counts (the same
-    // for every split level) for the pairs by vertex range (stream/vertex_pairs.h).
-    const io::MappedFile order(in.index.order_path);
-    std::vector<uint32_t> ids(kPlainFlush);
-    std::vector<uint64_t> bucket_counts(kVertexPairBuckets, 0);
-    for (uint64_t r = lo; r < hi; r += kPlainFlush) {
-      const uint64_t n = std::min<uint64_t>(kPlainFlush, hi - r);
-      order.read(4 * r, 4 * n, ids.data());
-      for (uint64_t i = 0; i < n; ++i)
-        if (ids[i] >= in.index.vertices) fail(Status::io_error, order.path() + ": vertex id out of range");
-      count_vertex_pairs(std::span<const uint32_t>(ids.data(), n), in.index.vertices, bucket_counts);
-    }
     for (size_t j = 0; j < split.size(); ++j) {
       const size_t level = split[j];
       const RankedBits c = load_centers(j);
@@ -311,18 +324,13 @@ struct Merge {
         info_cell += info.size() / center_bytes();
         info.clear();
       };
-      // The records' plain cells (the sums units'), a buffer at a time from record `plain_at`; with them,
-      // the same cells as (vertex, cell) pairs by vertex range (the cells by vertex's), the order's ids read
-      // a buffer at a time alongside.
+      // The records' plain cells (the pairs and sums units'), a buffer at a time from record `plain_at`.
       const io::OffsetFile plain_file(plain_cells_path(j), O_WRONLY);
       std::vector<uint32_t> plain;
       plain.reserve(kPlainFlush);
       uint64_t plain_at = lo;
-      VertexPairsWriter pairs(vertex_pairs_path(in.prefix, level, u), in.index.vertices, lo, hi, bucket_counts);
       auto flush_plain = [&] {
         plain_file.write(plain.data(), plain.size() * 4, plain_at * 4);
-        order.read(4 * plain_at, 4 * plain.size(), ids.data());
-        for (size_t i = 0; i < plain.size(); ++i) pairs.add(ids[i], plain[i]);
         plain_at += plain.size();
         plain.clear();
       };
@@ -347,7 +355,6 @@ struct Merge {
       });
       if (info_file) flush_info();
       flush_plain();
-      pairs.commit();
       if (bits == 0) continue;
       // Words [first, last] hold bits [start, start + bits); the first is shared unless the unit starts
       // it, the last unless the unit ends it or is the map's end.
@@ -365,6 +372,58 @@ struct Merge {
         io::OffsetFile(cells_path(in.prefix, level), O_WRONLY).write(&words[from - first], (to - from) * 8, from * 8);
     }
     return {{"edges", edges}};
+  }
+
+  // The shares' decisions (and centers) of the split levels, once every map unit is stamped: nothing reads
+  // them again, and the pairs units are about to write as many bytes. Emptied, not removed, so that the
+  // shares' stamps, which name them, still hold for a process that comes late (it finds every unit done).
+  // Every process that gets here does it (the same result whoever does); one that comes after the stage's
+  // stamp, which removes the shares' directory, finds nothing left to do.
+  void spend_share_files(const json& unit_key) const {
+    if (!in.spend_decisions) return;
+    std::error_code ec;
+    try {
+      io::write_file_atomic(spent_path(in.prefix), json{{"key", unit_key}}.dump() + "\n", io::Sync::durable, io::Writers::several);
+    } catch (const Failure&) {
+      if (!std::filesystem::exists(cluster_shares_dir(in.prefix), ec)) return;
+      throw;
+    }
+    for (unsigned s = 0; s < plan.count; ++s)
+      for (size_t level : split)
+        for (const std::string& path : {cluster_share_decisions_path(in.prefix, s, level), cluster_share_centers_path(in.prefix, s, level)})
+          if (::truncate(path.c_str(), 0) != 0 && errno != ENOENT)
+            fail(Status::io_error, path + ": cannot empty: " + std::strerror(errno));
+  }
+
+  // Phase 3, unit u: its records' cells of every split level as (vertex, cell) pairs by vertex range
+  // (stream/vertex_pairs.h; the cells by vertex's), from the plain cells and the order's ids, a buffer at a
+  // time. Apart from phase 2 so that they are written once the shares' decisions are spent: on the 193 M-
+  // triangle city at N = 8 the two made 7.8 GB together.
+  json pairs_unit(unsigned u, Progress& progress) const {
+    const uint64_t lo = units.lo(u), hi = units.hi(u);
+    const io::OffsetFile order(in.index.order_path, O_RDONLY);
+    std::vector<uint32_t> ids(kPlainFlush), cells(kPlainFlush);
+    std::vector<uint64_t> bucket_counts(kVertexPairBuckets, 0);  // the same for every split level
+    for (uint64_t r = lo; r < hi; r += kPlainFlush) {
+      const uint64_t n = std::min<uint64_t>(kPlainFlush, hi - r);
+      order.read(ids.data(), 4 * n, 4 * r);
+      for (uint64_t i = 0; i < n; ++i)
+        if (ids[i] >= in.index.vertices) fail(Status::io_error, in.index.order_path + ": vertex id out of range");
+      count_vertex_pairs(std::span<const uint32_t>(ids.data(), n), in.index.vertices, bucket_counts);
+    }
+    for (size_t j = 0; j < split.size(); ++j) {
+      const io::OffsetFile plain(plain_cells_path(j), O_RDONLY);
+      VertexPairsWriter pairs(vertex_pairs_path(in.prefix, split[j], u), in.index.vertices, lo, hi, bucket_counts);
+      for (uint64_t r = lo; r < hi; r += kPlainFlush) {
+        progress.check();
+        const uint64_t n = std::min<uint64_t>(kPlainFlush, hi - r);
+        order.read(ids.data(), 4 * n, 4 * r);
+        plain.read(cells.data(), 4 * n, 4 * r);
+        for (uint64_t i = 0; i < n; ++i) pairs.add(ids[i], cells[i]);
+      }
+      pairs.commit();
+    }
+    return json::object();
   }
 
   // The words units share, once every map unit is stamped: each the OR of its parts (written by every
@@ -414,20 +473,33 @@ std::vector<std::string> vertex_pairs_paths(const std::string& prefix, size_t le
   return paths;
 }
 
+bool cluster_shares_spent_elsewhere(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key) {
+  std::error_code ec;
+  if (!std::filesystem::exists(spent_path(in.prefix), ec)) return false;
+  try {
+    return json::parse(io::read_small_file(spent_path(in.prefix))).at("key") != merge_unit_key(in, plan, key);
+  } catch (const std::exception&) {
+    return true;  // unreadable: spent by someone
+  }
+}
+
+void remove_spent_shares(const ClusterShareInput& in, const ClusterShares& plan) {
+  std::error_code ec;
+  for (unsigned s = 0; s < plan.count; ++s) std::filesystem::remove(cluster_share_stamp(in.prefix, s), ec);
+  std::filesystem::remove(spent_path(in.prefix), ec);
+}
+
 SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key,
                               unsigned index, Progress& progress) {
   SplitMerge out;
   std::vector<uint64_t>& cells = out.cells;
   cells.assign(plan.whole_share.size(), 0);
-  Merge m{in, plan, {}, {}, cluster_merge_dir(in.prefix), ""};
-  for (size_t l = 0; l < plan.whole_share.size(); ++l)
-    if (plan.whole_share[l] < 0) m.split.push_back(l);
+  Merge m{in, plan, split_levels(plan), {}, cluster_merge_dir(in.prefix), ""};
   if (m.split.empty()) return out;
   const uint64_t records = in.index.records;
   m.units.records = records;
   m.units.words = (records + 63) / 64;
-  const uint64_t asked = in.merge_units ? in.merge_units : std::min<uint64_t>(plan.count, kMaxClusterMergeUnits);
-  m.units.count = static_cast<unsigned>(std::clamp<uint64_t>(asked, 1, std::max<uint64_t>(m.units.words, 1)));
+  m.units.count = merge_unit_count(in, plan);
   if (records == 0) {  // empty maps and infos
     for (size_t l : m.split) {
       io::OffsetFile(cells_path(in.prefix, l), O_WRONLY | O_CREAT | O_TRUNC).close();
@@ -436,14 +508,13 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
     return out;
   }
   // A unit at a time on each thread the budget holds: a bit and a half a record, a window of each share's
-  // files (two with centers), and the buffers of the plain cells, their ids and their pairs.
+  // files (two with centers), and the buffers of the plain cells (a map unit), or of the plain cells, their
+  // ids and their pairs (a pairs unit).
   const uint64_t buffers = 8 * kPlainFlush + kVertexPairBuckets * VertexPairsWriter::kBufferPairs * 8;
   const uint64_t unit_bytes = records * 3 / 16 + uint64_t{plan.count} * (m.centers_info() ? 2 : 1) * kReadBuffer + buffers;
   const uint64_t fit = in.memory_bytes ? std::max<uint64_t>(in.memory_bytes / unit_bytes, 1) : m.units.count;
   const unsigned threads = unit_threads(m.units.count, fit);
-  // plain_cells, vertex_pairs: the map units write them (a set of units started by a build that did not
-  // lacks them).
-  const json unit_key{{"key", key}, {"split", m.split}, {"units", m.units.count}, {"records", records}, {"plain_cells", true}, {"vertex_pairs", true}};
+  const json unit_key = merge_unit_key(in, plan, key);
   const std::string centers_dir = m.dir + "centers/", map_dir = m.dir + "map/";
   m.bits_path = centers_dir + "centers.bits";
   start_once(centers_dir, m.bits_path, unit_key, {"merge-centers-"}, [&] {
@@ -457,14 +528,20 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   const std::vector<json> maps = take_units_on_threads(map_dir, m.units.count, index, threads, "merge-map", unit_key,
                                                      [&](unsigned u) { return m.map_unit(u, centers, progress); });
   m.write_edges(maps);
+  m.spend_share_files(unit_key);
+  // Phase 3: the pairs by vertex range.
+  const std::string pairs_dir = m.dir + "pairs/";
+  start_once(pairs_dir, m.plain_cells_path(m.split.size() - 1), unit_key, {"merge-pairs-"}, [] {});
+  const std::vector<json> pairs = take_units_on_threads(pairs_dir, m.units.count, index, threads, "merge-pairs", unit_key,
+                                                        [&](unsigned u) { return m.pairs_unit(u, progress); });
   std::vector<uint64_t> split_cells(m.split.size(), 0);
   for (size_t j = 0; j < m.split.size(); ++j) {
     for (const json& v : centers) split_cells[j] += v.at("centers").at(j).get<uint64_t>();
     cells[m.split[j]] = split_cells[j];
   }
-  out.units = {{"units", m.units.count}, {"centers", unit_figures(centers)}, {"map", unit_figures(maps)}};
+  out.units = {{"units", m.units.count}, {"centers", unit_figures(centers)}, {"map", unit_figures(maps)}, {"pairs", unit_figures(pairs)}};
   if (m.centers_info()) return out;
-  // Phase 3: the mean or quadric infos by ranges of cells, once every map is whole.
+  // Phase 4: the mean or quadric infos by ranges of cells, once every map is whole.
   progress.report("cluster", 0.6);
   const std::string sums_dir = m.dir + "sums/";
   const uint64_t info_bytes = cell_info_bytes(in.info, in.index.single_precision);

@@ -4,8 +4,8 @@
 // one-machine pass creates a cell at its center, in weight order, so a split level's cell id is the rank
 // of its center among the level's centers in weight order.
 //
-// The records are cut into U units of whole 64-record words (U = the shares, at most 256); two phases of
-// U units each, in WORK/cluster-merge/:
+// The records are cut into U units of whole 64-record words (U = the shares, at most 256); phases of U
+// units each, in WORK/cluster-merge/:
 // 1. centers (unit u, centers/merge-centers-u.json): each share's decisions of u's records in turn (each
 //    share's .dec file is in record order; its first record of the unit is found by binary search) set the
 //    centers' bits, written in place into centers/centers.bits (each split level's bits a run of words);
@@ -19,9 +19,18 @@
 //    every process that has seen every stamp writes them (the OR of their parts: the same value each time).
 //    For center representatives it copies its centers' positions from the shares' .ctr files (its first
 //    center in share s's file: the centers of s in the units before it) into cells-L.info at its first cell.
-//    It also writes its records' cells one uint32 a record into map/cells-L.u32 (plain_cells_path), in place,
-//    and as (vertex, cell) pairs by vertex range into map/pairs-L-u.bin (vertex_pairs_path), its own file.
-// 3. sums (mean and quadric representatives; unit u, sums/merge-sums-u.json), once every map unit is stamped
+//    It also writes its records' cells one uint32 a record into map/cells-L.u32 (plain_cells_path), in place.
+//    Once every map unit is stamped, the shares' decision (and center) files of the split levels are spent
+//    (ClusterShareInput::spend_decisions): emptied, so that they take no disk while the pairs are written
+//    (their names stay, for the shares' stamps, which a process that comes late still reads), the units' key
+//    written first to cluster-shares/spent.json; a merge under another key finds them spent there
+//    (cluster_shares_spent_elsewhere), and the shares run again.
+// 3. pairs (unit u, pairs/merge-pairs-u.json): its records' cells, from the plain cells, as (vertex, cell)
+//    pairs by vertex range into map/pairs-L-u.bin (vertex_pairs_path), its own file, the order's ids read
+//    alongside. A phase of its own so that the pairs (8 bytes a record a split level) and the shares'
+//    decisions (8 too) are never on disk together: on the 193 M-triangle city at N = 8 they were, with the
+//    plain cells, the shared directory's peak (16.9 GB for a 4.15 GB input).
+// 4. sums (mean and quadric representatives; unit u, sums/merge-sums-u.json), once every map unit is stamped
 //    and the maps' shared words written: the u-th U-th of the split levels' cells (taken one level after
 //    another) summed by one pass over the records in weight order (sum_cell_info_range, stream/cluster_stage.h)
 //    into cells-L.info in place, from the center of its first cell on (a cell's id is its center's rank, so
@@ -38,8 +47,10 @@
 // Invariant: the map and the center info are the bytes of one pass over the records in weight order (the
 // merge before the units, and the whole-scene clustering): every record's cell is the rank of its center,
 // written at the map bits of the records before it.
-// Disk: the plain cells, 4 bytes a record a split level (0.8 GB on the 193 M-triangle city's two split
-// levels), and the pairs, 8 bytes a record a split level, until the cells by vertex are written.
+// Disk: the plain cells, 4 bytes a record a split level, and the shares' decisions, 8 bytes a record a split
+// level, until the map units are done; then the plain cells and the pairs, 8 bytes a record a split level,
+// until the cells by vertex are written (on the 193 M-triangle city at N = 8, five split levels: 1.96, 3.91
+// and 3.91 GB).
 // Memory: a process runs as many units at once as it has threads and `memory_bytes` holds, each a bit and
 // a half a record of its level, a 1 MiB read buffer of each share's files and 10 MiB of write buffers
 // (plain cells, ids, pairs); a sums unit takes its
@@ -63,7 +74,7 @@ inline constexpr uint64_t kMinSumsUnitBytes = uint64_t{256} << 20;
 
 std::string cluster_merge_dir(const std::string& prefix);  // WORK/cluster-merge/
 // Split level `level`'s cells one uint32 a record in weight order (PlainCellReader, stream/cell_map_file.h),
-// which the map units write beside the packed map: the sums units (phase 3) read them rather than decode the
+// which the map units write beside the packed map: the pairs and sums units (phases 3 and 4) read them rather than decode the
 // map from its start, each of them (the split levels' cells by vertex read the pairs below). They outlive
 // the stage; remove_plain_cells_and_pairs removes them once the cells by vertex are written.
 std::string plain_cells_path(const std::string& prefix, size_t level);
@@ -85,5 +96,11 @@ struct SplitMerge {
 // files do not add up to the weight index.
 SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key,
                               unsigned index, Progress& progress);
+// Whether the shares' decision files were spent (ClusterShareInput::spend_decisions) by a merge under
+// another key than merge_split_levels(in, plan, key) would use (a merge of another build, say, left half
+// done): that merge cannot read them, so the shares must run again. remove_spent_shares removes the shares'
+// stamps (and the mark) so that they do.
+bool cluster_shares_spent_elsewhere(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key);
+void remove_spent_shares(const ClusterShareInput& in, const ClusterShares& plan);
 
 }  // namespace lodstream::stream

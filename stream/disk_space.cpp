@@ -130,7 +130,8 @@ uint64_t report_work_bytes(const SceneCounts& c) { return store_bytes(c) + inges
 //   and during emit a level emitted in batches' representatives (24 bytes a cell of the finest level,
 //   taken as half the cells); a sharded run's add every level's cells by vertex (4 bytes a stored vertex,
 //   stream/vertex_cells.h) and, until those are written, the clustering merge's plain cells and pairs by
-//   vertex range (4 and 8 bytes a record a split level, stream/cluster_merge.h; every level counted), which
+//   vertex range (4 and 8 bytes a record a split level, stream/cluster_merge.h; every level counted; the
+//   shares' decisions, 8 bytes a record a split level too, are emptied before the pairs are written), which
 //   the tasks remove before the wide levels' units write their outputs (stream/wide_units.h: a bit a
 //   triangle and segment a wide level, and each block's deduplicated outputs; 86 MB for the 193 M-triangle
 //   city's three wide levels, within the 12 bytes a vertex and level so freed).

@@ -835,6 +835,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         stream::ClusterShareInput in{index, bounds, sizes, copts, info_kind, fine, plan.stage_bytes, options.chunk_bytes,
                                      prefix, &work};
         in.vertex_cells = true, in.canonical_path = canonical;  // the tasks read them (stream/vertex_cells.h)
+        in.spend_decisions = true;  // emptied once the merge's map is written (stream/cluster_merge.h)
         const stream::ClusterShares shares = stream::shared_cluster_plan(in, cluster_shares, key, progress);  // under the lock
         ordered_json share_key = key;
         share_key["shares"] = shares.json();
@@ -856,11 +857,18 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         }
         std::vector<ordered_json> figures;
         for (unsigned s = 0; s < shares.count; ++s) figures.push_back(run_share(s));
+        ordered_json merge_key{{"shares", share_key}, {"figures", figures}};
+        // Shares whose decisions a merge under another key spent (a build's half-done merge): run them again.
+        if (stream::cluster_shares_spent_elsewhere(in, shares, merge_key)) {
+          stream::remove_spent_shares(in, shares);
+          figures.clear();
+          for (unsigned s = 0; s < shares.count; ++s) figures.push_back(run_share(s));
+          merge_key = {{"shares", share_key}, {"figures", figures}};
+        }
         // The split levels' maps as units (stream/cluster_merge.h) that every process here takes part in, the
         // work directory's lock let go meanwhile (a prepare array's jobs, tasks that reach the stage).
         shard_lock.reset();
-        const stream::SplitMerge merged =
-            stream::merge_split_levels(in, shares, ordered_json{{"shares", share_key}, {"figures", figures}}, unit_index, progress);
+        const stream::SplitMerge merged = stream::merge_split_levels(in, shares, merge_key, unit_index, progress);
         merge_units = merged.units;
         if (const ordered_json c = stream::cluster_centers_figures(in, shares); !c.empty()) merge_units["centers_passes"] = c;
         shard_lock = std::make_unique<stream::ShardLock>(options.work_dir);

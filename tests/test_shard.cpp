@@ -22,6 +22,7 @@
 #include "lodstream/lodstream.h"
 #include "cli_harness.h"
 #include "core/octree_regions.h"
+#include "io/file_writer.h"
 #include "io/offset_file.h"
 #include "stream/block_bounds.h"
 #include "stream/cell_map_file.h"
@@ -1382,6 +1383,49 @@ TEST(Shard, WideLevelsAreClassifiedInUnitsThatAKilledTaskLeavesToTheNext) {
   const test::CliRun other = plain_task();
   EXPECT_EQ(other.exit_code, 74) << other.err;
   EXPECT_NE(other.err.find(swapped + ": not a unit of pass A of this level"), std::string::npos) << other.err;
+}
+
+// Through the CLI: the clustering shares' decisions are spent once the merge's map is written
+// (stream/cluster_merge.h): a task killed just before a pairs unit's stamp has emptied them, marked them
+// spent, and left the shares' stamps holding. A merge under another key (another build's, half done: here
+// its units removed and the mark's key another) could not read them: the next task runs the shares again,
+// and the tasks give one machine's bytes.
+TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge) {
+  TempDir dir, log;
+  const auto args = room_cli_args;
+  test::CliRun one = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("one")}), log);
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  const std::string work = dir.file("work"), prefix = work + "/";
+  auto task = [&](unsigned i) {
+    return test::run_cli(args({"simplify", sample_room(), "-o", dir.file("out"), "--work", work, "--shard", std::to_string(i) + "/3",
+                               "--cluster-shards", "3"}),
+                         log);
+  };
+  setenv("LODSTREAM_TEST_KILL_AT", "merge-pairs-0.json", 1);
+  const test::CliRun killed = task(0);
+  unsetenv("LODSTREAM_TEST_KILL_AT");
+  EXPECT_EQ(killed.exit_code, 128 + SIGKILL);
+  const std::string spent = stream::cluster_shares_dir(prefix) + "spent.json";
+  ASSERT_TRUE(std::filesystem::exists(spent));
+  for (unsigned s = 0; s < 3; ++s) {
+    const std::string dec = stream::cluster_share_decisions_path(prefix, s, 0);
+    ASSERT_TRUE(std::filesystem::exists(dec)) << dec;
+    EXPECT_EQ(std::filesystem::file_size(dec), 0u) << dec << " is spent";
+    EXPECT_TRUE(std::filesystem::exists(stream::cluster_share_stamp(prefix, s))) << "share " << s << "'s stamp holds";
+  }
+  EXPECT_TRUE(std::filesystem::exists(stream::plain_cells_path(prefix, 0))) << "the map units wrote the plain cells";
+
+  std::filesystem::remove_all(stream::cluster_merge_dir(prefix));
+  io::write_file_atomic(spent, "{\"key\": \"another build's merge\"}\n");
+  for (unsigned i = 0; i < 3; ++i) {
+    const test::CliRun t = task(i);
+    ASSERT_EQ(t.exit_code, 0) << t.err;
+  }
+  const test::CliRun m = test::run_cli({"merge", dir.file("out")}, log);
+  ASSERT_EQ(m.exit_code, 0) << m.err;
+  EXPECT_EQ(outputs(dir.file("out")), outputs(dir.file("one")));
+  const nlohmann::json units = nlohmann::json::parse(slurp(work + "/cluster.json")).at("value").at("merge_units");
+  EXPECT_EQ(units.at("pairs").at("seconds").size(), 3u) << "three pairs units";
 }
 
 // ---- report as N tasks (stream/report_shard.h)

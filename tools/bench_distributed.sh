@@ -87,8 +87,14 @@ if [ $slurm -eq 1 ]; then
   python3 -c 'import json,sys; m=json.load(open(sys.argv[1])); print("  one machine stages:", ", ".join("%s %.1f s" % (s["name"], s["seconds"]) for s in m["stages"]))' \
     "$out/one/manifest.json" | tee -a "$out/bench.txt"
   rm -rf "$work" "$out/sharded"
-  # The shared directories' size, sampled while the jobs run.
-  ( while :; do du -sb "$work" "$out/sharded" 2>/dev/null | awk '{s += $1} END {printf "%.0f\n", s}' || true; sleep 5; done ) >"$logs/shared-bytes.txt" &
+  # The shared directories' size, sampled while the jobs run: a line a sample, the total (du counts a file
+  # linked twice once), then each entry of the two directories as name=bytes.
+  ( while :; do
+      { du -sb "$work" "$out/sharded" 2>/dev/null | awk '{s += $1} END {printf "%.0f", s}'
+        du -sb "$work"/* "$out/sharded"/* 2>/dev/null | awk '{n = $2; sub(".*/", "", n); printf " %s=%s", n, $1}'
+        echo; } || true
+      sleep 5
+    done ) >"$logs/shared-bytes.txt" &
   sampler=$!
   # Stopped also when a step fails and the script exits (as the cluster is).
   trap 'kill $sampler 2>/dev/null || true; "$root/tools/slurm_local_cluster.sh" stop "$cluster"' EXIT
@@ -128,7 +134,8 @@ print("  slowest job of each step, one after another: " + " + ".join("%s %.1f" %
 # wait for), all units' seconds summed (one process running them alone), and how many processes ran them.
 try:
     mu = json.load(open(os.path.join(work, "cluster.json")))["value"]["merge_units"]
-    for phase in ("centers", "map"):
+    for phase in ("centers", "map", "pairs", "sums"):
+        if phase not in mu: continue
         sec, by = mu[phase]["seconds"], mu[phase]["by"]
         print("  clustering merge, %d %s units: slowest %.2f s, all %.2f s, run by %d processes" %
               (mu["units"], phase, max(sec), sum(sec), len(set(by))))
@@ -152,7 +159,7 @@ except (OSError, KeyError, ValueError) as e:
 try:
     stages = []
     cj = json.load(open(os.path.join(work, "cluster.json")))["value"]["merge_units"]
-    stages += [("merge " + k, cj[k]["seconds"]) for k in ("centers", "map", "sums") if k in cj]
+    stages += [("merge " + k, cj[k]["seconds"]) for k in ("centers", "map", "pairs", "sums") if k in cj]
     for name, f in (("bounds", "block-bounds.json"), ("cells by vertex", "shard-vertex-cells.json"), ("wide", "wide-units.json")):
         if os.path.exists(os.path.join(work, f)):
             u = json.load(open(os.path.join(work, f)))["value"]["units"]
@@ -174,8 +181,16 @@ for t in m["shards"]["tasks"]:
 total = m["input"]["triangles"] + m["input"]["lines"] + m["input"]["points"]
 reads = [t["input_primitives_read"] for t in m["shards"]["tasks"]]
 print("  input primitives %d; tasks' reads: sum %.2fx the input, largest %.2fx" % (total, sum(reads) / total, max(reads) / total))
-s = [int(float(x)) for x in open(sizes).read().replace("\0", " ").split() if x.strip()]
-print("  shared directories (work + output), largest sample: %.2f GB (input %.2f GB)" % (max(s, default=0) / 1e9, m["input"]["bytes"] / 1e9))
+samples = []  # (total, {entry: bytes})
+for line in open(sizes).read().replace("\0", " ").splitlines():
+    f = line.split()
+    if f and re.fullmatch(r"[0-9.e+]+", f[0]):
+        samples.append((int(float(f[0])), {k: int(v) for k, v in (x.split("=", 1) for x in f[1:] if "=" in x)}))
+peak = max(samples, default=(0, {}), key=lambda x: x[0])
+print("  shared directories (work + output), largest sample: %.2f GB (input %.2f GB, %.2fx)" %
+      (peak[0] / 1e9, m["input"]["bytes"] / 1e9, peak[0] / max(m["input"]["bytes"], 1)))
+big = sorted(peak[1].items(), key=lambda x: -x[1])[:6]
+print("    at that sample: " + ", ".join("%s %.2f GB" % (k, v / 1e9) for k, v in big))
 PY
   same_outputs "$out/one" "$out/sharded"
   echo "results in $out/bench.txt"
