@@ -444,6 +444,14 @@ std::string plain_cells_path(const std::string& prefix, size_t level) {
   return cluster_merge_dir(prefix) + fmt::format("map/cells-{}.u32", level);
 }
 
+void remove_plain_cells(const std::string& prefix) {
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(cluster_merge_dir(prefix) + "map/", ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.starts_with("cells-") && name.ends_with(".u32")) std::filesystem::remove(e.path(), ec);
+  }
+}
+
 void remove_plain_cells_and_pairs(const std::string& prefix) {
   std::error_code ec;
   for (const auto& e : std::filesystem::directory_iterator(cluster_merge_dir(prefix) + "map/", ec)) {
@@ -531,7 +539,8 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   m.spend_share_files(unit_key);
   // Phase 3: the pairs by vertex range.
   const std::string pairs_dir = m.dir + "pairs/";
-  start_once(pairs_dir, m.plain_cells_path(m.split.size() - 1), unit_key, {"merge-pairs-"}, [] {});
+  // Started is its own stamp (the plain cells go with the stage's stamp, which a process late here may follow).
+  start_once(pairs_dir, pairs_dir + "start.json", unit_key, {"merge-pairs-"}, [] {});
   const std::vector<json> pairs = take_units_on_threads(pairs_dir, m.units.count, index, threads, "merge-pairs", unit_key,
                                                         [&](unsigned u) { return m.pairs_unit(u, progress); });
   std::vector<uint64_t> split_cells(m.split.size(), 0);

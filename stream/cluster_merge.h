@@ -49,8 +49,8 @@
 // written at the map bits of the records before it.
 // Disk: the plain cells, 4 bytes a record a split level, and the shares' decisions, 8 bytes a record a split
 // level, until the map units are done; then the plain cells and the pairs, 8 bytes a record a split level,
-// until the cells by vertex are written (on the 193 M-triangle city at N = 8, five split levels: 1.96, 3.91
-// and 3.91 GB).
+// the plain cells until the stage's stamp, the pairs until the cells by vertex are written (4 bytes a vertex
+// and split level; on the 193 M-triangle city at N = 8, five split levels: 1.96, 3.91, 3.91 and 2.75 GB).
 // Memory: a process runs as many units at once as it has threads and `memory_bytes` holds, each a bit and
 // a half a record of its level, a 1 MiB read buffer of each share's files and 10 MiB of write buffers
 // (plain cells, ids, pairs); a sums unit takes its
@@ -76,9 +76,11 @@ std::string cluster_merge_dir(const std::string& prefix);  // WORK/cluster-merge
 // Split level `level`'s cells one uint32 a record in weight order (PlainCellReader, stream/cell_map_file.h),
 // which the map units write beside the packed map: the pairs and sums units (phases 3 and 4) read them rather than decode the
 // map from its start, each of them (the split levels' cells by vertex read the pairs below). They outlive
-// the stage; remove_plain_cells_and_pairs removes them once the cells by vertex are written.
+// the stage's units; remove_plain_cells removes them with the stage's stamp.
 std::string plain_cells_path(const std::string& prefix, size_t level);
-// Removes the plain cells and the pairs (below) of every split level.
+// Removes the plain cells of every split level (once the stage is stamped: the sums units are done, and the
+// cells by vertex read the pairs), or the plain cells and the pairs (below).
+void remove_plain_cells(const std::string& prefix);
 void remove_plain_cells_and_pairs(const std::string& prefix);
 // Map unit u's cells of split level `level` as (vertex, cell) pairs by vertex range (stream/vertex_pairs.h),
 // which it writes beside the plain cells for the cells by vertex. vertex_pairs_paths: every unit's that is

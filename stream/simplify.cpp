@@ -938,7 +938,12 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           for (char b : vertex_cells_written) value["vertex_cells"].push_back(b != 0);
         write_stamp(work.file("cluster.json"), key, files, value);
         // The shares are spent once the stage is stamped (the whole levels' maps are links to their files).
-        if (in_shares) std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
+        // The merge's plain cells too (the sums units are done; the cells by vertex read the pairs), so that
+        // they are not on disk beside the cells by vertex.
+        if (in_shares) {
+          std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
+          stream::remove_plain_cells(prefix);
+        }
         std::filesystem::remove_all(stream::grade_merge_dir(prefix));  // the grading merge's units' stamps (grade_stage)
         return cs.cells;
       };

@@ -1389,7 +1389,8 @@ TEST(Shard, WideLevelsAreClassifiedInUnitsThatAKilledTaskLeavesToTheNext) {
 // (stream/cluster_merge.h): a task killed just before a pairs unit's stamp has emptied them, marked them
 // spent, and left the shares' stamps holding. A merge under another key (another build's, half done: here
 // its units removed and the mark's key another) could not read them: the next task runs the shares again,
-// and the tasks give one machine's bytes.
+// and the tasks give one machine's bytes. The merge's plain cells go with the stage's stamp, before the cells
+// by vertex are written.
 TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge) {
   TempDir dir, log;
   const auto args = room_cli_args;
@@ -1417,6 +1418,16 @@ TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge
 
   std::filesystem::remove_all(stream::cluster_merge_dir(prefix));
   io::write_file_atomic(spent, "{\"key\": \"another build's merge\"}\n");
+  // Killed again just before a cells-by-vertex unit's stamp: the stage is stamped, and its plain cells are
+  // gone with the shares (the cells by vertex read the pairs).
+  setenv("LODSTREAM_TEST_KILL_AT", "vertex-cells-0.json", 1);
+  const test::CliRun killed_again = task(0);
+  unsetenv("LODSTREAM_TEST_KILL_AT");
+  EXPECT_EQ(killed_again.exit_code, 128 + SIGKILL);
+  EXPECT_TRUE(std::filesystem::exists(work + "/cluster.json"));
+  EXPECT_FALSE(std::filesystem::exists(stream::cluster_shares_dir(prefix)));
+  EXPECT_FALSE(std::filesystem::exists(stream::plain_cells_path(prefix, 0)));
+  EXPECT_FALSE(stream::vertex_pairs_paths(prefix, 0).empty()) << "the pairs stay for the cells by vertex";
   for (unsigned i = 0; i < 3; ++i) {
     const test::CliRun t = task(i);
     ASSERT_EQ(t.exit_code, 0) << t.err;

@@ -8,7 +8,7 @@
 #   task array, merge, the jobs sharing this machine's cores as Slurm schedules them. Prints both wall
 #   times and their ratio, every job's peak (the largest stage peak in its log) against the cap, the input
 #   primitives each task's emit read, and the largest size of the shared directories (work and output,
-#   sampled every 5 s), when each step ended, and the slowest job of each step one after another (what N
+#   sampled every 2 s), when each step ended, and the slowest job of each step one after another (what N
 #   nodes would take when no job waits for another's core), then compares the outputs byte for byte.
 # default (tasks one after another): one machine's run, then on the same work directory the prepare step,
 #   the N tasks one after the other and the merge, each timed (wall, CPU, peak RSS from /usr/bin/time -v),
@@ -93,7 +93,7 @@ if [ $slurm -eq 1 ]; then
       { du -sb "$work" "$out/sharded" 2>/dev/null | awk '{s += $1} END {printf "%.0f", s}'
         du -sb "$work"/* "$out/sharded"/* 2>/dev/null | awk '{n = $2; sub(".*/", "", n); printf " %s=%s", n, $1}'
         echo; } || true
-      sleep 5
+      sleep 2
     done ) >"$logs/shared-bytes.txt" &
   sampler=$!
   # Stopped also when a step fails and the script exits (as the cluster is).
