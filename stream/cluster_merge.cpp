@@ -444,22 +444,20 @@ std::string plain_cells_path(const std::string& prefix, size_t level) {
   return cluster_merge_dir(prefix) + fmt::format("map/cells-{}.u32", level);
 }
 
-void remove_plain_cells(const std::string& prefix) {
+namespace {
+// Removes the plain cells of every split level from the map units' directory, and with `pairs` the pairs too.
+void remove_map_files(const std::string& prefix, bool pairs) {
   std::error_code ec;
   for (const auto& e : std::filesystem::directory_iterator(cluster_merge_dir(prefix) + "map/", ec)) {
     const std::string name = e.path().filename().string();
-    if (name.starts_with("cells-") && name.ends_with(".u32")) std::filesystem::remove(e.path(), ec);
-  }
-}
-
-void remove_plain_cells_and_pairs(const std::string& prefix) {
-  std::error_code ec;
-  for (const auto& e : std::filesystem::directory_iterator(cluster_merge_dir(prefix) + "map/", ec)) {
-    const std::string name = e.path().filename().string();
-    if ((name.starts_with("cells-") && name.ends_with(".u32")) || (name.starts_with("pairs-") && name.ends_with(".bin")))
+    if ((name.starts_with("cells-") && name.ends_with(".u32")) || (pairs && name.starts_with("pairs-") && name.ends_with(".bin")))
       std::filesystem::remove(e.path(), ec);
   }
 }
+}  // namespace
+
+void remove_plain_cells(const std::string& prefix) { remove_map_files(prefix, false); }
+void remove_plain_cells_and_pairs(const std::string& prefix) { remove_map_files(prefix, true); }
 
 std::string vertex_pairs_path(const std::string& prefix, size_t level, unsigned unit) {
   return cluster_merge_dir(prefix) + fmt::format("map/pairs-{}-{}.bin", level, unit);
@@ -481,20 +479,17 @@ std::vector<std::string> vertex_pairs_paths(const std::string& prefix, size_t le
   return paths;
 }
 
-bool cluster_shares_spent_elsewhere(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key) {
+bool forget_shares_spent_elsewhere(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key) {
   std::error_code ec;
   if (!std::filesystem::exists(spent_path(in.prefix), ec)) return false;
   try {
-    return json::parse(io::read_small_file(spent_path(in.prefix))).at("key") != merge_unit_key(in, plan, key);
+    if (json::parse(io::read_small_file(spent_path(in.prefix))).at("key") == merge_unit_key(in, plan, key)) return false;
   } catch (const std::exception&) {
-    return true;  // unreadable: spent by someone
+    // unreadable: spent by someone
   }
-}
-
-void remove_spent_shares(const ClusterShareInput& in, const ClusterShares& plan) {
-  std::error_code ec;
   for (unsigned s = 0; s < plan.count; ++s) std::filesystem::remove(cluster_share_stamp(in.prefix, s), ec);
   std::filesystem::remove(spent_path(in.prefix), ec);
+  return true;
 }
 
 SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key,

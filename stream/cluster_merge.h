@@ -24,7 +24,7 @@
 //    (ClusterShareInput::spend_decisions): emptied, so that they take no disk while the pairs are written
 //    (their names stay, for the shares' stamps, which a process that comes late still reads), the units' key
 //    written first to cluster-shares/spent.json; a merge under another key finds them spent there
-//    (cluster_shares_spent_elsewhere), and the shares run again.
+//    (forget_shares_spent_elsewhere), and the shares run again.
 // 3. pairs (unit u, pairs/merge-pairs-u.json): its records' cells, from the plain cells, as (vertex, cell)
 //    pairs by vertex range into map/pairs-L-u.bin (vertex_pairs_path), its own file, the order's ids read
 //    alongside. A phase of its own so that the pairs (8 bytes a record a split level) and the shares'
@@ -98,11 +98,10 @@ struct SplitMerge {
 // files do not add up to the weight index.
 SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key,
                               unsigned index, Progress& progress);
-// Whether the shares' decision files were spent (ClusterShareInput::spend_decisions) by a merge under
-// another key than merge_split_levels(in, plan, key) would use (a merge of another build, say, left half
-// done): that merge cannot read them, so the shares must run again. remove_spent_shares removes the shares'
-// stamps (and the mark) so that they do.
-bool cluster_shares_spent_elsewhere(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key);
-void remove_spent_shares(const ClusterShareInput& in, const ClusterShares& plan);
+// When the shares' decision files were spent (ClusterShareInput::spend_decisions) by a merge under another
+// key than merge_split_levels(in, plan, key) would use (a merge of another build, say, left half done), that
+// merge cannot read them: removes the shares' stamps (and the mark), so that the shares run again, and
+// returns true. The caller holds the work directory's lock.
+bool forget_shares_spent_elsewhere(const ClusterShareInput& in, const ClusterShares& plan, const nlohmann::ordered_json& key);
 
 }  // namespace lodstream::stream

@@ -855,16 +855,16 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           report.cluster_share = run_share(so.cluster_share_index).dump();
           return std::vector<uint64_t>();
         }
+        // Every share's figures (a share no process finished runs here); the merge's key.
         std::vector<ordered_json> figures;
-        for (unsigned s = 0; s < shares.count; ++s) figures.push_back(run_share(s));
-        ordered_json merge_key{{"shares", share_key}, {"figures", figures}};
-        // Shares whose decisions a merge under another key spent (a build's half-done merge): run them again.
-        if (stream::cluster_shares_spent_elsewhere(in, shares, merge_key)) {
-          stream::remove_spent_shares(in, shares);
+        auto run_shares = [&] {
           figures.clear();
           for (unsigned s = 0; s < shares.count; ++s) figures.push_back(run_share(s));
-          merge_key = {{"shares", share_key}, {"figures", figures}};
-        }
+          return ordered_json{{"shares", share_key}, {"figures", figures}};
+        };
+        ordered_json merge_key = run_shares();
+        // Shares whose decisions a merge under another key spent (a build's half-done merge): run them again.
+        if (stream::forget_shares_spent_elsewhere(in, shares, merge_key)) merge_key = run_shares();
         // The split levels' maps as units (stream/cluster_merge.h) that every process here takes part in, the
         // work directory's lock let go meanwhile (a prepare array's jobs, tasks that reach the stage).
         shard_lock.reset();
