@@ -160,7 +160,7 @@ nlohmann::ordered_json run_cluster_share(const ClusterShareInput& in, const Clus
 
 // Writes cells-L.map and cells-L.info for every level from the shares' files (every share must have run;
 // figures[s]: what run_cluster_share returned for share s), and with `vertex_cells` the whole levels'
-// vertex-cells-L.u32; returns cells per level and the levels whose cells by vertex it wrote. Failure(io_error) when
+// vertex-cells-L.bits; returns cells per level and the levels whose cells by vertex it wrote. Failure(io_error) when
 // the shares' files do not add up to the weight index.
 // The split levels' maps are made by merge_split_levels (stream/cluster_merge.h), in this process alone.
 ClusterSummary merge_cluster_shares(const ClusterShareInput& in, const ClusterShares& plan,

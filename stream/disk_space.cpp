@@ -128,8 +128,8 @@ uint64_t report_work_bytes(const SceneCounts& c) { return store_bytes(c) + inges
 //   bit_width(records) bits a record; 22 bits or less on the city scene's levels) and the cell info by
 //   representative (12 to 48 bytes a cell, about 12 cells per 100 vertices over all levels on the city),
 //   and during emit a level emitted in batches' representatives (24 bytes a cell of the finest level,
-//   taken as half the cells); a sharded run's add every level's cells by vertex (4 bytes a stored vertex,
-//   stream/vertex_cells.h) and, until those are written, the clustering merge's plain cells and pairs by
+//   taken as half the cells); a sharded run's add every level's cells by vertex (at most 4 bytes a stored vertex,
+//   packed to the level's bits, stream/vertex_cells.h) and, until those are written, the clustering merge's plain cells and pairs by
 //   vertex range (4 and 8 bytes a record a split level, stream/cluster_merge.h; every level counted; the
 //   shares' decisions, 8 bytes a record a split level too, are emptied before the pairs are written), which
 //   the tasks remove before the wide levels' units write their outputs (stream/wide_units.h: a bit a

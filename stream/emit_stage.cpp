@@ -640,7 +640,7 @@ void build_parts(LevelState& L, const std::vector<float>& thickness, const std::
   }
 }
 
-unsigned emit_bits(uint64_t cells) { return std::max(1u, static_cast<unsigned>(std::bit_width(cells))); }
+unsigned emit_bits(uint64_t cells) { return vertex_cell_bits(cells); }
 
 uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions& options) {
   // Measured on the 48M-triangle city scene at its finest level (2.56M cells, 5.4M output triangles): the
@@ -1141,10 +1141,15 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   const size_t parts = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
   const uint64_t per_part = ((meta.vertices + parts - 1) / parts + 63) / 64 * 64;  // 64 records: whole words
   if (!reuse && by_file) {
+    // Each level's file holds its fields of the record (vertex_cells.h: the same width, all ones for no
+    // cell); the parts' chunks start at multiples of 64 vertices, so on a word of every file.
     std::vector<std::unique_ptr<io::MappedFile>> files;
+    std::vector<unsigned> field_bits;
     for (const LevelState& L : levels) {
+      field_bits.push_back(vertex_cell_bits(L.in.cells));
       files.push_back(std::make_unique<io::MappedFile>(vertex_cells_path(prefix, L.in.level)));
-      if (files.back()->size() != 4 * meta.vertices) fail(Status::io_error, files.back()->path() + ": size does not match the store");
+      if (files.back()->size() != vertex_cells_bytes(meta.vertices, L.in.cells))
+        fail(Status::io_error, files.back()->path() + ": size does not match the store and the level's cells");
     }
     tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
       const uint64_t lo = std::min(meta.vertices, part * per_part), hi = std::min(meta.vertices, lo + per_part);
@@ -1152,14 +1157,14 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       std::vector<io::Window> w(nl);
       for (uint64_t first = lo; first < hi; first += kChunk) {
         const uint64_t end = std::min(hi, first + kChunk);
-        for (size_t l = 0; l < nl; ++l) w[l] = files[l]->map(4 * first, 4 * end);
+        for (size_t l = 0; l < nl; ++l)
+          w[l] = files[l]->map(first * field_bits[l] / 8, first * field_bits[l] / 8 + packed_field_bytes(end - first, field_bits[l]));
         for (uint64_t v = first; v < end; ++v) {
           uint64_t record = 0;
           for (size_t l = 0; l < nl; ++l) {
-            uint32_t c;
-            std::memcpy(&c, w[l].data() + 4 * (v - first), 4);
-            if (c != kNoCell && c >= levels[l].in.cells) fail(Status::io_error, files[l]->path() + ": cell id out of range");
-            record |= (c == kNoCell ? levels[l].mask : uint64_t{c}) << levels[l].shift;
+            const uint64_t c = packed_field(w[l].data(), v - first, field_bits[l]);
+            if (c != levels[l].mask && c >= levels[l].in.cells) fail(Status::io_error, files[l]->path() + ": cell id out of range");
+            record |= c << levels[l].shift;
           }
           map.set(v, record);
         }

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <filesystem>
 #include <cerrno>
 #include <cstring>
 
@@ -116,6 +117,18 @@ void PositionGather::gather_read(std::span<const uint32_t> ids, double* xyz, Scr
 
 std::string ordered_positions_path(const std::string& prefix, bool single_precision) {
   return prefix + (single_precision ? "positions-w.f32" : "positions-w.f64");
+}
+
+void spend_ordered_positions(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec)) std::filesystem::resize_file(path, 0, ec);
+  if (ec) fail(Status::io_error, path + ": cannot empty: " + ec.message());
+}
+
+std::string live_ordered_positions(const std::string& path) {
+  std::error_code ec;
+  const uint64_t bytes = path.empty() ? 0 : std::filesystem::file_size(path, ec);
+  return !ec && bytes > 0 ? path : std::string();
 }
 
 uint64_t ordered_positions_batch(uint64_t memory_bytes) {

@@ -785,8 +785,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
       report.grade_ranges = grade.ranges;
       const std::string canonical = grade.distinct_positions < meta.vertices ? canonical_path : std::string();
       const std::string labels_path = work.file("labels.f32");
-      const std::string ordered_positions = grade.ordered_positions ? positions_path : std::string();
-      const ordered_json labels_key = run_labels_stage(so, store_dir, meta, grade.records, order_path, ordered_positions,
+      // The records' positions in weight order, while they are not spent (position_gather.h).
+      auto ordered_positions = [&] { return grade.ordered_positions ? stream::live_ordered_positions(positions_path) : std::string(); };
+      const ordered_json labels_key = run_labels_stage(so, store_dir, meta, grade.records, order_path, ordered_positions(),
                                                        labels_path, grade_key, plan, options.chunk_bytes, progress, work, &report);
 
       const stream::EmitOptions count_only{so.representative, so.crease_degrees, true, true};
@@ -918,7 +919,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
                                         grade.records,
                                         meta.vertices,
                                         meta.single_precision,
-                                        ordered_positions};
+                                        ordered_positions()};
         stream::ClusterSummary cs;
         if (in_shares) {
           cs.cells = cluster_by_shares(key, sizes, fine.get(), index, bounds);
@@ -939,10 +940,11 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         write_stamp(work.file("cluster.json"), key, files, value);
         // The shares are spent once the stage is stamped (the whole levels' maps are links to their files).
         // The merge's plain cells too (the sums units are done; the cells by vertex read the pairs), so that
-        // they are not on disk beside the cells by vertex.
+        // they are not on disk beside the cells by vertex; and the records' positions in weight order.
         if (in_shares) {
           std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
           stream::remove_plain_cells(prefix);
+          stream::spend_ordered_positions(positions_path);
         }
         std::filesystem::remove_all(stream::grade_merge_dir(prefix));  // the grading merge's units' stamps (grade_stage)
         return cs.cells;

@@ -48,10 +48,19 @@ class RandomFile {
       p += n, bytes -= static_cast<uint64_t>(n), offset += static_cast<uint64_t>(n);
     }
   }
-  uint32_t read_u32(uint64_t offset) const {
-    uint32_t x;
-    if (::pread(fd_, &x, 4, static_cast<off_t>(offset)) != 4) fail(Status::io_error, partial_ + ": cannot read back");
-    return x;
+  // Field i of `bits` bits, read back (its words are written).
+  uint32_t read_field(uint64_t i, unsigned bits) const {
+    const uint64_t bit = i * bits;
+    const size_t bytes = bit % 64 + bits > 64 ? 16 : 8;
+    char w[16];
+    if (::pread(fd_, w, bytes, static_cast<off_t>(bit / 64 * 8)) != static_cast<ssize_t>(bytes))
+      fail(Status::io_error, partial_ + ": cannot read back");
+    uint64_t x;
+    std::memcpy(&x, w, 8);
+    uint64_t v = x >> (bit % 64);
+    if (bytes == 16) std::memcpy(&x, w + 8, 8), v |= x << (64 - bit % 64);
+    v &= (uint64_t{1} << bits) - 1;
+    return v == (uint64_t{1} << bits) - 1 ? kNoCell : static_cast<uint32_t>(v);
   }
   void commit() {
     if (::close(fd_) != 0) {
@@ -95,7 +104,24 @@ void for_each_record_cell(const std::string& map_path, const std::string& plain_
 }  // namespace
 
 std::string vertex_cells_path(const std::string& prefix, size_t level) {
-  return prefix + "vertex-cells-" + std::to_string(level) + ".u32";
+  return prefix + "vertex-cells-" + std::to_string(level) + ".bits";
+}
+
+unsigned vertex_cell_bits(uint64_t cells) { return std::max(1u, static_cast<unsigned>(std::bit_width(cells))); }
+
+void pack_vertex_cells(std::span<const uint32_t> cells, unsigned bits, std::vector<uint64_t>& words) {
+  const uint64_t none = (uint64_t{1} << bits) - 1;
+  words.assign(packed_field_bytes(cells.size(), bits) / 8, 0);
+  for (uint64_t i = 0; i < cells.size(); ++i) {
+    const uint64_t f = cells[i] == kNoCell ? none : cells[i], bit = i * bits, s = bit % 64;
+    words[bit / 64] |= f << s;
+    if (s + bits > 64) words[bit / 64 + 1] |= f >> (64 - s);
+  }
+}
+
+std::pair<uint64_t, uint64_t> vertex_cells_unit_range(uint64_t vertices, unsigned unit, unsigned units) {
+  auto start = [&](unsigned u) { return u >= units ? vertices : vertices * u / units / 64 * 64; };
+  return {start(unit), start(unit + 1)};
 }
 
 void write_vertex_cells(const std::string& prefix, const std::string& canonical_path, uint64_t vertices, uint64_t records,
@@ -112,8 +138,11 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
   std::unique_ptr<WeldFile> weld;
   if (!canonical_path.empty()) weld = std::make_unique<WeldFile>(canonical_path, vertices);
   RandomFile out(path);
-  const uint64_t range = std::clamp<uint64_t>(budget / 4, 4096, std::max<uint64_t>(vertices, 1));
+  const unsigned bits = vertex_cell_bits(cells);
+  // Ranges of a multiple of 64 vertices (whole words), of 4 bytes a vertex and their packed words.
+  const uint64_t range = std::clamp<uint64_t>(budget / 5 / 64 * 64, 4096, std::max<uint64_t>(vertices, 1));
   std::vector<uint32_t> buf;
+  std::vector<uint64_t> words;
   for (uint64_t lo = 0; lo < vertices; lo += range) {
     const uint64_t n = std::min(range, vertices - lo);
     buf.assign(n, kNoCell);
@@ -133,9 +162,10 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
     // weld_file.h), from this range or, read back, from an earlier one.
     if (weld)
       weld->for_each_welded([&](uint64_t v, uint32_t c) {
-        if (v - lo < n) buf[v - lo] = c >= lo ? buf[c - lo] : out.read_u32(4 * uint64_t{c});
+        if (v - lo < n) buf[v - lo] = c >= lo ? buf[c - lo] : out.read_field(c, bits);
       });
-    out.write(buf.data(), 4 * n, 4 * lo);
+    pack_vertex_cells(buf, bits, words);
+    out.write(words.data(), 8 * words.size(), lo * bits / 8);
     progress.report("vertex cells", static_cast<double>(lo + n) / static_cast<double>(vertices));
   }
   out.commit();
@@ -144,7 +174,8 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
 void write_vertex_cells_unit(const std::vector<VertexCellsLevel>& levels, const std::string& order_path,
                              const std::string& canonical_path, uint64_t vertices, uint64_t records, unsigned unit, unsigned units,
                              Progress& progress) {
-  const uint64_t lo = vertices * unit / units, hi = vertices * (unit + 1) / units;
+  const auto [lo, hi] = vertex_cells_unit_range(vertices, unit, units);
+  if (lo == hi) return;
   // The unit's welded vertices, and the canonical vertices before the unit that they name (a canonical id is
   // smaller than its welded vertices' and is its own canonical vertex: weld_file.h), with the buckets of the
   // pairs by vertex range (vertex_pairs.h) that hold those.
@@ -163,6 +194,7 @@ void write_vertex_cells_unit(const std::vector<VertexCellsLevel>& levels, const 
   }
   std::vector<uint32_t> outside_cells(outside.ones());
   std::vector<uint32_t> buf(hi - lo);
+  std::vector<uint64_t> words;
   const bool any_outside = !outside_cells.empty();
   std::unique_ptr<io::MappedFile> order;
   for (const VertexCellsLevel& level : levels) {
@@ -197,7 +229,9 @@ void write_vertex_cells_unit(const std::vector<VertexCellsLevel>& levels, const 
     // Welded vertices take their canonical vertex's cell (in increasing order: a canonical vertex in the unit
     // is not welded, so its cell is final).
     for (const auto& [v, c] : welded) buf[v - lo] = c >= lo ? buf[c - lo] : outside_cells[outside.rank(c)];
-    io::OffsetFile(level.path, O_WRONLY).write(buf.data(), 4 * buf.size(), 4 * lo);
+    const unsigned bits = vertex_cell_bits(level.cells);
+    pack_vertex_cells(buf, bits, words);
+    io::OffsetFile(level.path, O_WRONLY).write(words.data(), 8 * words.size(), lo * bits / 8);
   }
 }
 
@@ -210,12 +244,13 @@ nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, co
   if (!sources.empty() && sources.size() != levels.size()) fail(Status::internal, "write_vertex_cells_in_units: sources a level");
   // At least as many units as the budget needs (a unit's bytes below), and at least one a vertex.
   const uint64_t fixed = vertices * 3 / 16 + (4 << 20), room = budget > fixed + (1 << 20) ? budget - fixed : (1 << 20);
-  units = static_cast<unsigned>(std::clamp<uint64_t>(std::max<uint64_t>(units, (12 * vertices + room - 1) / room), 1,
+  units = static_cast<unsigned>(std::clamp<uint64_t>(std::max<uint64_t>(units, (16 * vertices + room - 1) / room), 1,
                                                      std::max<uint64_t>(vertices, 1)));
   const std::string dir = prefix + "vertex-cells-units/";
   const nlohmann::ordered_json unit_key{{"key", key}, {"levels", levels}, {"units", units}, {"by_range", true}};
   start_once(dir, vertex_cells_path(prefix, levels.back()), unit_key, {"vertex-cells-"}, [&] {
-    for (size_t l : levels) io::OffsetFile(vertex_cells_path(prefix, l), O_WRONLY | O_CREAT | O_TRUNC).resize(4 * vertices);
+    for (size_t l : levels)
+      io::OffsetFile(vertex_cells_path(prefix, l), O_WRONLY | O_CREAT | O_TRUNC).resize(vertex_cells_bytes(vertices, cells[l]));
   });
   std::vector<VertexCellsLevel> unit_levels;
   for (size_t j = 0; j < levels.size(); ++j) {
@@ -224,9 +259,9 @@ nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, co
     if (!sources.empty()) L.plain_path = sources[j].plain_path, L.pairs_paths = sources[j].pairs_paths;
   }
   // A unit (a range of vertices, every level) at a time on each thread the budget holds: 4 bytes a vertex
-  // of its share, a bit and a half a vertex for the canonical vertices it looks up, 8 bytes a welded vertex
-  // of its share.
-  const uint64_t unit_bytes = 12 * (vertices / units + 1) + vertices * 3 / 16 + (4 << 20);
+  // of its share and at most as much of packed words, a bit and a half a vertex for the canonical vertices
+  // it looks up, 8 bytes a welded vertex of its share.
+  const uint64_t unit_bytes = 16 * (vertices / units + 64) + vertices * 3 / 16 + (4 << 20);
   const unsigned threads = unit_threads(units, std::max<uint64_t>(budget / unit_bytes, 1));
   const auto values = take_units_on_threads(dir, units, index, threads, "vertex-cells", unit_key, [&](unsigned u) {
     write_vertex_cells_unit(unit_levels, order_path(prefix), canonical_path, vertices, records, u, units, progress);

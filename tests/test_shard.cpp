@@ -200,8 +200,13 @@ TEST(Shard, VertexCellsInRangesAgree) {
     EXPECT_FALSE(std::filesystem::exists(stream::representatives_path(prefix, l)));
     const std::string path = stream::vertex_cells_path(prefix, l);
     const std::string from_map = slurp(path);
-    const uint64_t vertices = from_map.size() / 4;
+    stream::StoreMeta meta;
+    ASSERT_TRUE(stream::read_store_meta(prefix + "store", &meta));
+    const uint64_t vertices = meta.vertices;
     ASSERT_GT(vertices, 3 * 4096u);
+    const unsigned bits = stream::vertex_cell_bits(merged.levels[l].cells);
+    ASSERT_EQ(from_map.size(), stream::vertex_cells_bytes(vertices, merged.levels[l].cells));
+    EXPECT_LT(from_map.size(), vertices * 4) << "packed to the level's " << bits << " bits a vertex, not a uint32";
     std::filesystem::remove(path);
     stream::write_vertex_cells(prefix, weld, vertices, records, l, merged.levels[l].cells, 4 * 4096, progress);
     EXPECT_TRUE(slurp(path) == from_map);
@@ -217,6 +222,11 @@ TEST(Shard, VertexCellsInRangesAgree) {
       std::vector<uint32_t> cells(records), ids(records);
       map.read(cells);
       map.finish(records, merged.levels[l].cells);
+      // Every record's vertex holds its cell in the packed file.
+      io::OffsetFile(stream::order_path(prefix), O_RDONLY).read(ids.data(), 4 * records, 0);
+      uint64_t differ = 0;
+      for (uint64_t rec = 0; rec < records; ++rec) differ += stream::packed_field(from_map.data(), ids[rec], bits) != cells[rec];
+      EXPECT_EQ(differ, 0u) << "records whose vertex's field is not their cell";
       io::OffsetFile(plain, O_WRONLY | O_CREAT | O_TRUNC).write(cells.data(), 4 * records, 0);
       io::OffsetFile(stream::order_path(prefix), O_RDONLY).read(ids.data(), 4 * records, 0);
       for (uint64_t u = 0; u < 3; ++u) {
@@ -234,7 +244,7 @@ TEST(Shard, VertexCellsInRangesAgree) {
       for (unsigned units : {1u, 3u, 7u}) {
         SCOPED_TRACE("units " + std::to_string(units) + (from == 0 ? " from the map" : from == 1 ? " from the plain cells" : " from the pairs"));
         std::filesystem::remove(path);
-        io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize(4 * vertices);
+        io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize(from_map.size());
         stream::VertexCellsLevel level;
         level.map_path = stream::cells_path(prefix, l), level.path = path, level.cells = merged.levels[l].cells;
         if (from == 1) level.plain_path = plain;
@@ -372,7 +382,9 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
         const std::string shares_made = slurp(path);
         std::filesystem::remove(path);
         stream::Progress progress{Options{}};
-        stream::write_vertex_cells(work + "/", std::filesystem::exists(weld) ? weld : std::string(), shares_made.size() / 4,
+        stream::StoreMeta meta;
+        ASSERT_TRUE(stream::read_store_meta(work + "/store", &meta));
+        stream::write_vertex_cells(work + "/", std::filesystem::exists(weld) ? weld : std::string(), meta.vertices,
                                    std::filesystem::file_size(work + "/order.u32") / 4, l, one.levels[l].cells, 1 << 20, progress);
         EXPECT_TRUE(slurp(path) == shares_made) << "level " << l;
       }
@@ -1390,7 +1402,8 @@ TEST(Shard, WideLevelsAreClassifiedInUnitsThatAKilledTaskLeavesToTheNext) {
 // spent, and left the shares' stamps holding. A merge under another key (another build's, half done: here
 // its units removed and the mark's key another) could not read them: the next task runs the shares again,
 // and the tasks give one machine's bytes. The merge's plain cells go with the stage's stamp, before the cells
-// by vertex are written.
+// by vertex are written, and the records' positions in weight order are spent with it: a clustering at other
+// levels then reads the store's positions.
 TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge) {
   TempDir dir, log;
   const auto args = room_cli_args;
@@ -1402,6 +1415,11 @@ TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge
                                "--cluster-shards", "3"}),
                          log);
   };
+  for (unsigned i = 0; i < 3; ++i) {  // graded as shares: their merge writes the records' positions in weight order
+    const test::CliRun g = test::run_cli(
+        args({"simplify", sample_room(), "-o", dir.file("out"), "--work", work, "--shard-grade", std::to_string(i) + "/3"}), log);
+    ASSERT_EQ(g.exit_code, 0) << g.err;
+  }
   setenv("LODSTREAM_TEST_KILL_AT", "merge-pairs-0.json", 1);
   const test::CliRun killed = task(0);
   unsetenv("LODSTREAM_TEST_KILL_AT");
@@ -1415,6 +1433,8 @@ TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge
     EXPECT_TRUE(std::filesystem::exists(stream::cluster_share_stamp(prefix, s))) << "share " << s << "'s stamp holds";
   }
   EXPECT_TRUE(std::filesystem::exists(stream::plain_cells_path(prefix, 0))) << "the map units wrote the plain cells";
+  const std::string positions = stream::ordered_positions_path(prefix, true);
+  EXPECT_GT(std::filesystem::file_size(positions), 0u) << "the positions in weight order stay until the stage's stamp";
 
   std::filesystem::remove_all(stream::cluster_merge_dir(prefix));
   io::write_file_atomic(spent, "{\"key\": \"another build's merge\"}\n");
@@ -1428,6 +1448,11 @@ TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge
   EXPECT_FALSE(std::filesystem::exists(stream::cluster_shares_dir(prefix)));
   EXPECT_FALSE(std::filesystem::exists(stream::plain_cells_path(prefix, 0)));
   EXPECT_FALSE(stream::vertex_pairs_paths(prefix, 0).empty()) << "the pairs stay for the cells by vertex";
+  // The records' positions in weight order are spent with the stage's stamp: emptied, named still by the
+  // grading stage's stamp, which holds.
+  const std::string grade_stamp = slurp(work + "/grade.json");
+  ASSERT_TRUE(std::filesystem::exists(positions));
+  EXPECT_EQ(std::filesystem::file_size(positions), 0u) << positions << " is spent";
   for (unsigned i = 0; i < 3; ++i) {
     const test::CliRun t = task(i);
     ASSERT_EQ(t.exit_code, 0) << t.err;
@@ -1437,6 +1462,26 @@ TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge
   EXPECT_EQ(outputs(dir.file("out")), outputs(dir.file("one")));
   const nlohmann::json units = nlohmann::json::parse(slurp(work + "/cluster.json")).at("value").at("merge_units");
   EXPECT_EQ(units.at("pairs").at("seconds").size(), 3u) << "three pairs units";
+
+  // Other levels on the same work directory: the grading stage is reused, and the clustering shares and the
+  // merge's sums, finding the positions spent, read the store's column by id: one machine's bytes again.
+  auto three_levels = [&](std::vector<std::string> a) {
+    a.push_back("--levels"), a.push_back("3");
+    return args(a);
+  };
+  const test::CliRun one3 = test::run_cli(three_levels({"simplify", sample_room(), "-o", dir.file("one3")}), log);
+  ASSERT_EQ(one3.exit_code, 0) << one3.err;
+  for (unsigned i = 0; i < 3; ++i) {
+    const test::CliRun t = test::run_cli(three_levels({"simplify", sample_room(), "-o", dir.file("out3"), "--work", work, "--shard",
+                                                       std::to_string(i) + "/3", "--cluster-shards", "3"}),
+                                         log);
+    ASSERT_EQ(t.exit_code, 0) << t.err;
+  }
+  const test::CliRun m3 = test::run_cli({"merge", dir.file("out3")}, log);
+  ASSERT_EQ(m3.exit_code, 0) << m3.err;
+  EXPECT_EQ(outputs(dir.file("out3")), outputs(dir.file("one3")));
+  EXPECT_EQ(slurp(work + "/grade.json"), grade_stamp) << "the grading stage ran again";
+  EXPECT_EQ(std::filesystem::file_size(positions), 0u);
 }
 
 // ---- report as N tasks (stream/report_shard.h)

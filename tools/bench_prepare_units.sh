@@ -29,7 +29,7 @@ common=(simplify "$input" -o "$out/sharded" --work "$out/work" --no-space-check 
 for i in $(seq 0 $((n - 1))); do "$bin" "${common[@]}" --shard-grade "$i/$n" >"$out/logs/grade-$i.out"; done
 for i in $(seq 0 $((n - 1))); do "$bin" "${common[@]}" --shard-cluster "$i/$n" >"$out/logs/cluster-$i.out"; done
 cp -r "$out/work" "$out/saved"
-outputs() { (cd "$out/work" && ls cells-*.map cells-*.info block-bounds.f64 vertex-cells-*.u32 2>/dev/null); }
+outputs() { (cd "$out/work" && ls cells-*.map cells-*.info block-bounds.f64 vertex-cells-*.bits 2>/dev/null); }
 # prepare NAME BIN: one prepare job from the saved work directory
 prepare() {
   local name=$1 b=$2
