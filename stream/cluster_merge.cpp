@@ -26,6 +26,7 @@
 #include "io/offset_file.h"
 #include "stream/cell_map_file.h"
 #include "stream/cluster_stage.h"
+#include "stream/position_gather.h"
 #include "stream/ranked_bits.h"
 #include "stream/units.h"
 #include "stream/vertex_pairs.h"
@@ -199,10 +200,11 @@ unsigned merge_unit_count(const ClusterShareInput& in, const ClusterShares& plan
 }
 
 // The key every unit's stamp holds. plain_cells, vertex_pairs: the map units write the plain cells and a
-// phase of their own the pairs (a set of units started by a build that did not lacks them).
+// phase of their own the pairs, packed (a set of units started by a build that did not lacks them, or has
+// pairs of the older layout).
 json merge_unit_key(const ClusterShareInput& in, const ClusterShares& plan, const json& key) {
   return {{"key", key}, {"split", split_levels(plan)}, {"units", merge_unit_count(in, plan)}, {"records", in.index.records},
-          {"plain_cells", true}, {"vertex_pairs", "phase 3"}};
+          {"plain_cells", true}, {"vertex_pairs", "after the sums, packed"}};
 }
 
 struct Merge {
@@ -395,11 +397,13 @@ struct Merge {
             fail(Status::io_error, path + ": cannot empty: " + std::strerror(errno));
   }
 
-  // Phase 3, unit u: its records' cells of every split level as (vertex, cell) pairs by vertex range
+  // Phase 4, unit u: its records' cells of every split level as (vertex, cell) pairs by vertex range
   // (stream/vertex_pairs.h; the cells by vertex's), from the plain cells and the order's ids, a buffer at a
   // time. Apart from phase 2 so that they are written once the shares' decisions are spent: on the 193 M-
   // triangle city at N = 8 the two made 7.8 GB together.
-  json pairs_unit(unsigned u, Progress& progress) const {
+  json sums_phase(const json& unit_key, const std::vector<uint64_t>& split_cells, unsigned index, Progress& progress) const;
+
+  json pairs_unit(unsigned u, const std::vector<uint64_t>& split_cells, Progress& progress) const {
     const uint64_t lo = units.lo(u), hi = units.hi(u);
     const io::OffsetFile order(in.index.order_path, O_RDONLY);
     std::vector<uint32_t> ids(kPlainFlush), cells(kPlainFlush);
@@ -413,7 +417,7 @@ struct Merge {
     }
     for (size_t j = 0; j < split.size(); ++j) {
       const io::OffsetFile plain(plain_cells_path(j), O_RDONLY);
-      VertexPairsWriter pairs(vertex_pairs_path(in.prefix, split[j], u), in.index.vertices, lo, hi, bucket_counts);
+      VertexPairsWriter pairs(vertex_pairs_path(in.prefix, split[j], u), in.index.vertices, lo, hi, split_cells[j], bucket_counts);
       for (uint64_t r = lo; r < hi; r += kPlainFlush) {
         progress.check();
         const uint64_t n = std::min<uint64_t>(kPlainFlush, hi - r);
@@ -532,42 +536,51 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
                                                      [&](unsigned u) { return m.map_unit(u, centers, progress); });
   m.write_edges(maps);
   m.spend_share_files(unit_key);
-  // Phase 3: the pairs by vertex range.
-  const std::string pairs_dir = m.dir + "pairs/";
-  // Started is its own stamp (the plain cells go with the stage's stamp, which a process late here may follow).
-  start_once(pairs_dir, pairs_dir + "start.json", unit_key, {"merge-pairs-"}, [] {});
-  const std::vector<json> pairs = take_units_on_threads(pairs_dir, m.units.count, index, threads, "merge-pairs", unit_key,
-                                                        [&](unsigned u) { return m.pairs_unit(u, progress); });
   std::vector<uint64_t> split_cells(m.split.size(), 0);
   for (size_t j = 0; j < m.split.size(); ++j) {
     for (const json& v : centers) split_cells[j] += v.at("centers").at(j).get<uint64_t>();
     cells[m.split[j]] = split_cells[j];
   }
-  out.units = {{"units", m.units.count}, {"centers", unit_figures(centers)}, {"map", unit_figures(maps)}, {"pairs", unit_figures(pairs)}};
-  if (m.centers_info()) return out;
-  // Phase 4: the mean or quadric infos by ranges of cells, once every map is whole.
+  out.units = {{"units", m.units.count}, {"centers", unit_figures(centers)}, {"map", unit_figures(maps)}};
+  if (!m.centers_info()) out.units["sums"] = m.sums_phase(unit_key, split_cells, index, progress);
+  // The records' positions in weight order are read by nothing after the sums (position_gather.h): spent
+  // before the pairs are written.
+  if (in.spend_decisions && !in.index.ordered_positions_path.empty()) spend_ordered_positions(in.index.ordered_positions_path);
+  // Phase 4: the pairs by vertex range. Started is its own stamp (the plain cells go with the stage's stamp,
+  // which a process late here may follow).
+  const std::string pairs_dir = m.dir + "pairs/";
+  start_once(pairs_dir, pairs_dir + "start.json", unit_key, {"merge-pairs-"}, [] {});
+  const std::vector<json> pairs = take_units_on_threads(pairs_dir, m.units.count, index, threads, "merge-pairs", unit_key,
+                                                        [&](unsigned u) { return m.pairs_unit(u, split_cells, progress); });
+  out.units["pairs"] = unit_figures(pairs);
+  return out;
+}
+
+// Phase 3 (mean and quadric representatives): the infos by ranges of cells, once every map is whole; returns
+// the units' figures.
+json Merge::sums_phase(const json& unit_key, const std::vector<uint64_t>& split_cells, unsigned index, Progress& progress) const {
+  const uint64_t records = in.index.records;
   progress.report("cluster", 0.6);
-  const std::string sums_dir = m.dir + "sums/";
+  const std::string sums_dir = dir + "sums/";
   const uint64_t info_bytes = cell_info_bytes(in.info, in.index.single_precision);
-  start_once(sums_dir, cell_info_path(in.prefix, m.split.back()), unit_key, {"merge-sums-"}, [&] {
-    for (size_t j = 0; j < m.split.size(); ++j)
-      io::OffsetFile(cell_info_path(in.prefix, m.split[j]), O_WRONLY | O_CREAT | O_TRUNC).resize(split_cells[j] * info_bytes);
+  start_once(sums_dir, cell_info_path(in.prefix, split.back()), unit_key, {"merge-sums-"}, [&] {
+    for (size_t j = 0; j < split.size(); ++j)
+      io::OffsetFile(cell_info_path(in.prefix, split[j]), O_WRONLY | O_CREAT | O_TRUNC).resize(split_cells[j] * info_bytes);
   });
   uint64_t total = 0;
   for (uint64_t c : split_cells) total += c;
   // A unit a thread, each with its share of the budget while that leaves it kMinSumsUnitBytes.
-  const uint64_t sum_fit = in.memory_bytes ? std::max<uint64_t>(in.memory_bytes / kMinSumsUnitBytes, 1) : m.units.count;
-  const unsigned sum_threads = unit_threads(m.units.count, sum_fit);
-  const std::vector<json> sums = take_units_on_threads(sums_dir, m.units.count, index, sum_threads, "merge-sums", unit_key, [&](unsigned u) {
-    const uint64_t first = total * u / m.units.count, end = total * (u + 1) / m.units.count;
+  const uint64_t sum_fit = in.memory_bytes ? std::max<uint64_t>(in.memory_bytes / kMinSumsUnitBytes, 1) : units.count;
+  const unsigned sum_threads = unit_threads(units.count, sum_fit);
+  const std::vector<json> sums = take_units_on_threads(sums_dir, units.count, index, sum_threads, "merge-sums", unit_key, [&](unsigned u) {
+    const uint64_t first = total * u / units.count, end = total * (u + 1) / units.count;
     if (first == end) return json{{"cells", 0}, {"from_record", records}};
-    const SumStart start = m.sums_start(first, end, split_cells);
-    sum_cell_info_range(in.index, m.split, split_cells, in.info, in.memory_bytes / sum_threads, in.chunk_cap, progress, in.prefix,
+    const SumStart start = sums_start(first, end, split_cells);
+    sum_cell_info_range(in.index, split, split_cells, in.info, in.memory_bytes / sum_threads, in.chunk_cap, progress, in.prefix,
                         first, end, 1, start);
     return json{{"cells", end - first}, {"from_record", start.record}};
   });
-  out.units["sums"] = unit_figures(sums);
-  return out;
+  return unit_figures(sums);
 }
 
 }  // namespace lodstream::stream

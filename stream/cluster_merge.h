@@ -27,7 +27,8 @@
 //    (forget_shares_spent_elsewhere), and the shares run again.
 // 3. pairs (unit u, pairs/merge-pairs-u.json): its records' cells, from the plain cells, as (vertex, cell)
 //    pairs by vertex range into map/pairs-L-u.bin (vertex_pairs_path), its own file, the order's ids read
-//    alongside. A phase of its own so that the pairs (8 bytes a record a split level) and the shares'
+//    alongside. A phase of its own so that the pairs (8 bytes a record a split level until 2026-12-05, about
+//    5 now that they are packed: vertex_pairs.h) and the shares'
 //    decisions (8 too) are never on disk together: on the 193 M-triangle city at N = 8 they were, with the
 //    plain cells, the shared directory's peak (16.9 GB for a 4.15 GB input).
 // 4. sums (mean and quadric representatives; unit u, sums/merge-sums-u.json), once every map unit is stamped
@@ -48,9 +49,11 @@
 // merge before the units, and the whole-scene clustering): every record's cell is the rank of its center,
 // written at the map bits of the records before it.
 // Disk: the plain cells, 4 bytes a record a split level, and the shares' decisions, 8 bytes a record a split
-// level, until the map units are done; then the plain cells and the pairs, 8 bytes a record a split level,
-// the plain cells until the stage's stamp, the pairs until the cells by vertex are written (4 bytes a vertex
-// and split level; on the 193 M-triangle city at N = 8, five split levels: 1.96, 3.91, 3.91 and 2.75 GB).
+// level, until the map units are done; then the plain cells and the pairs (the vertex's low bits and the
+// cell, packed: 43 bits or fewer a record on the 193 M-triangle city's levels), the plain cells until the
+// stage's stamp, the pairs until the cells by vertex are written (packed to each level's bits,
+// vertex_cells.h; on that city at N = 8, five split levels, the decisions, plain cells and pairs took 3.91,
+// 1.96 and 3.91 GB and the cells by vertex 2.75 GB before the pairs and the cells by vertex were packed).
 // Memory: a process runs as many units at once as it has threads and `memory_bytes` holds, each a bit and
 // a half a record of its level, a 1 MiB read buffer of each share's files and 10 MiB of write buffers
 // (plain cells, ids, pairs); a sums unit takes its

@@ -130,7 +130,7 @@ uint64_t report_work_bytes(const SceneCounts& c) { return store_bytes(c) + inges
 //   and during emit a level emitted in batches' representatives (24 bytes a cell of the finest level,
 //   taken as half the cells); a sharded run's add every level's cells by vertex (at most 4 bytes a stored vertex,
 //   packed to the level's bits, stream/vertex_cells.h) and, until those are written, the clustering merge's plain cells and pairs by
-//   vertex range (4 and 8 bytes a record a split level, stream/cluster_merge.h; every level counted; the
+//   vertex range (4 and at most 8 bytes a record a split level, stream/cluster_merge.h; every level counted; the
 //   shares' decisions, 8 bytes a record a split level too, are emptied before the pairs are written), which
 //   the tasks remove before the wide levels' units write their outputs (stream/wide_units.h: a bit a
 //   triangle and segment a wide level, and each block's deduplicated outputs; 86 MB for the 193 M-triangle

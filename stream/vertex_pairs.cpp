@@ -13,7 +13,7 @@ namespace lodstream::stream {
 
 namespace {
 
-constexpr uint64_t kHeaderBytes = 32;
+constexpr uint64_t kHeaderBytes = 40;
 
 uint64_t bucket_count(uint64_t vertices, unsigned shift) { return vertices == 0 ? 1 : ((vertices - 1) >> shift) + 1; }
 
@@ -30,39 +30,59 @@ void count_vertex_pairs(std::span<const uint32_t> ids, uint64_t vertices, std::s
   for (uint32_t id : ids) ++counts[id >> shift];
 }
 
+unsigned VertexPairs::pair_cell_bits(uint64_t cells) {
+  return std::max(1u, static_cast<unsigned>(std::bit_width(cells > 0 ? cells - 1 : 0)));
+}
+
+namespace {
+
+// Words of `pairs` pairs of `width` bits.
+uint64_t pair_words(uint64_t pairs, unsigned width) { return (pairs * width + 63) / 64; }
+
+}  // namespace
+
 VertexPairsWriter::VertexPairsWriter(const std::string& path, uint64_t vertices, uint64_t first_record, uint64_t end_record,
-                                     std::span<const uint64_t> counts)
-    : file_(path, O_WRONLY | O_CREAT | O_TRUNC), shift_(vertex_pair_shift(vertices)) {
+                                     uint64_t cells, std::span<const uint64_t> counts)
+    : file_(path, O_WRONLY | O_CREAT | O_TRUNC), cells_(cells), shift_(vertex_pair_shift(vertices)) {
+  const unsigned cell_bits = VertexPairs::pair_cell_bits(cells);
+  width_ = shift_ + cell_bits;
+  low_ = (uint64_t{1} << shift_) - 1;
   const uint64_t buckets = bucket_count(vertices, shift_);
   for (uint64_t b = buckets; b < counts.size(); ++b)
     if (counts[b]) fail(Status::internal, path + ": a vertex past the store's vertices");
-  std::vector<uint64_t> offsets(buckets + 1, 0);
-  for (uint64_t b = 0; b < buckets; ++b) offsets[b + 1] = offsets[b] + counts[b];
   const uint64_t header[3] = {vertices, first_record, end_record};
-  const uint32_t layout[2] = {shift_, static_cast<uint32_t>(buckets)};
+  const uint32_t layout[4] = {shift_, static_cast<uint32_t>(buckets), cell_bits, width_};
   file_.write(header, sizeof header, 0);
   file_.write(layout, sizeof layout, sizeof header);
-  file_.write(offsets.data(), 8 * offsets.size(), kHeaderBytes);
-  const uint64_t pairs_at = kHeaderBytes + 8 * offsets.size();
-  file_.resize(pairs_at + 8 * offsets.back());
-  for (uint64_t b = 0; b < buckets; ++b) next_.push_back(pairs_at + 8 * offsets[b]), end_.push_back(pairs_at + 8 * offsets[b + 1]);
-  buffers_.resize(buckets);
-  for (std::vector<uint32_t>& buf : buffers_) buf.reserve(2 * kBufferPairs);
+  file_.write(counts.data(), 8 * buckets, kHeaderBytes);
+  uint64_t at = kHeaderBytes + 8 * buckets;
+  buckets_.resize(buckets);
+  for (uint64_t b = 0; b < buckets; ++b) {
+    Bucket& k = buckets_[b];
+    k.next = at, at += 8 * pair_words(counts[b], width_), k.end = at;
+    k.words.reserve(kBufferPairs + 2);
+  }
+  file_.resize(at);
 }
 
-void VertexPairsWriter::flush(uint32_t b) {
-  std::vector<uint32_t>& buf = buffers_[b];
-  const uint64_t bytes = 4 * buf.size();
-  if (next_[b] + bytes > end_[b]) fail(Status::internal, file_.path() + ": more pairs than counted in a bucket");
-  file_.write(buf.data(), bytes, next_[b]);
-  next_[b] += bytes;
-  buf.clear();
+void VertexPairsWriter::flush(Bucket& k, bool last) {
+  // All but a last word still being filled, unless it is the bucket's end.
+  const size_t n = last || k.bit == 64 ? k.words.size() : k.words.size() - 1;
+  const uint64_t bytes = 8 * n;
+  if (k.next + bytes > k.end) fail(Status::internal, file_.path() + ": more pairs than counted in a bucket");
+  file_.write(k.words.data(), bytes, k.next);
+  k.next += bytes;
+  k.words.erase(k.words.begin(), k.words.begin() + static_cast<std::ptrdiff_t>(n));
+}
+
+void VertexPairsWriter::cell_past_the_level() const {
+  fail(Status::internal, file_.path() + ": a cell past the level's cells");
 }
 
 void VertexPairsWriter::commit() {
-  for (uint32_t b = 0; b < buffers_.size(); ++b) {
-    if (!buffers_[b].empty()) flush(b);
-    if (next_[b] != end_[b]) fail(Status::internal, file_.path() + ": fewer pairs than counted in a bucket");
+  for (Bucket& k : buckets_) {
+    if (!k.words.empty()) flush(k, true);
+    if (k.next != k.end) fail(Status::internal, file_.path() + ": fewer pairs than counted in a bucket");
   }
   file_.close();
 }
@@ -75,19 +95,21 @@ VertexPairs::VertexPairs(std::vector<std::string> paths, uint64_t vertices, uint
     File f;
     f.file = std::make_unique<io::OffsetFile>(path, O_RDONLY);
     uint64_t header[3] = {0, 0, 0};
-    uint32_t layout[2] = {0, 0};
+    uint32_t layout[4] = {0, 0, 0, 0};
     const uint64_t size = std::filesystem::file_size(path);
     if (size >= kHeaderBytes) f.file->read(header, sizeof header, 0), f.file->read(layout, sizeof layout, sizeof header);
-    if (size < kHeaderBytes || header[0] != vertices || layout[0] != shift_ || layout[1] != buckets || header[1] > header[2] ||
-        size < kHeaderBytes + 8 * (buckets + 1))
+    if (size < kHeaderBytes || header[0] != vertices || layout[0] != shift_ || layout[1] != buckets || layout[2] == 0 ||
+        layout[2] > 32 || layout[3] != shift_ + layout[2] || header[1] > header[2] || size < kHeaderBytes + 8 * buckets)
       fail(Status::io_error, path + ": not the vertex pairs of this weight index");
-    f.offsets.resize(buckets + 1);
-    f.file->read(f.offsets.data(), 8 * f.offsets.size(), kHeaderBytes);
-    f.pairs_at = kHeaderBytes + 8 * f.offsets.size();
-    if (f.offsets[0] != 0 || !std::is_sorted(f.offsets.begin(), f.offsets.end()) || f.offsets.back() != header[2] - header[1] ||
-        size != f.pairs_at + 8 * f.offsets.back())
+    f.cell_bits = layout[2];
+    f.counts.resize(buckets);
+    f.file->read(f.counts.data(), 8 * buckets, kHeaderBytes);
+    f.words_at = kHeaderBytes + 8 * buckets;
+    uint64_t words = 0, n = 0;
+    for (uint64_t c : f.counts) f.offsets.push_back(words), words += pair_words(c, layout[3]), n += c;
+    if (n != header[2] - header[1] || size != f.words_at + 8 * words)
       fail(Status::io_error, path + ": cut short or not the vertex pairs of this weight index");
-    pairs += f.offsets.back();
+    pairs += n;
     ranges.emplace_back(header[1], header[2]);
     files_.push_back(std::move(f));
   }
@@ -102,7 +124,7 @@ VertexPairs::VertexPairs(std::vector<std::string> paths, uint64_t vertices, uint
 }
 
 void VertexPairs::bad(const File& file) {
-  fail(Status::io_error, file.file->path() + ": a pair in the wrong bucket or past the level's cells");
+  fail(Status::io_error, file.file->path() + ": a pair past the level's cells, or the pairs of another level");
 }
 
 }  // namespace lodstream::stream

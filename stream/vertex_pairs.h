@@ -9,10 +9,13 @@
 // kVertexPairBuckets buckets), and a cells-by-vertex unit reads only the buckets of its range: every pair is
 // written once and read about once.
 //
-// File layout (little-endian, per split level L and map unit u: WORK/cluster-merge/map/pairs-L-u.bin):
-// vertices (u64), the unit's first record and its end (u64 each), shift (u32), buckets (u32), then
-// buckets + 1 pair offsets (u64: bucket b's pairs are [offset[b], offset[b + 1])), then the pairs
-// (u32 vertex, u32 cell), each bucket's in record order.
+// File layout (the machine's byte order, per split level L and map unit u: WORK/cluster-merge/map/pairs-L-u.bin):
+// vertices (u64), the unit's first record and its end (u64 each), shift, buckets, cell bits and pair bits
+// (u32 each), then the buckets' pair counts (u64 each), then each bucket's pairs in record order, packed:
+// pair i of a bucket at bit i·w of the bucket's words (w = shift + cell bits), the vertex's low `shift` bits
+// (its bucket gives the rest) and above them its cell in bit_width(cells - 1) bits (at least 1); each bucket
+// starts on a word. (Until 2026-12-05 a u32 vertex and a u32 cell: 64 bits a pair where the 193 M-triangle city's
+// levels take 43 or fewer; the pairs were then the largest item of the shared directory's peak.)
 // Invariant: a level's files hold every record of the weight index once, its vertex (the order's id) with
 // its cell, in the bucket of vertex >> shift.
 #pragma once
@@ -32,29 +35,45 @@ inline constexpr unsigned kVertexPairBuckets = 64;
 // The bucket shift for `vertices` vertices: vertex >> shift < kVertexPairBuckets.
 unsigned vertex_pair_shift(uint64_t vertices);
 
-// Writes one map unit's pairs of one level into `path`, bucket by bucket at offsets known from the
-// bucket counts (`counts[b]`: the unit's records whose vertex is in bucket b, of every level alike).
-// add() takes the records in order; commit() checks every bucket got its count. A buffer of
-// kBufferPairs pairs a bucket. Throws Failure(io_error), Failure(internal) on a count that does not match.
+// Writes one map unit's pairs of one level of `cells` cells into `path`, bucket by bucket at offsets known
+// from the bucket counts (`counts[b]`: the unit's records whose vertex is in bucket b, of every level
+// alike). add() takes the records in order (each cell below `cells`); commit() checks every bucket got its
+// count. A buffer of kBufferPairs words a bucket. Throws Failure(io_error), Failure(internal) on a count
+// that does not match.
 class VertexPairsWriter {
  public:
   static constexpr size_t kBufferPairs = 8192;
-  VertexPairsWriter(const std::string& path, uint64_t vertices, uint64_t first_record, uint64_t end_record,
+  VertexPairsWriter(const std::string& path, uint64_t vertices, uint64_t first_record, uint64_t end_record, uint64_t cells,
                     std::span<const uint64_t> counts);
   void add(uint32_t vertex, uint32_t cell) {
-    const uint32_t b = vertex >> shift_;
-    std::vector<uint32_t>& buf = buffers_[b];
-    buf.push_back(vertex), buf.push_back(cell);
-    if (buf.size() == 2 * kBufferPairs) flush(b);
+    if (cell >= cells_) cell_past_the_level();
+    Bucket& k = buckets_[vertex >> shift_];
+    const uint64_t pair = (vertex & low_) | (uint64_t{cell} << shift_);
+    if (k.bit == 64) k.words.push_back(0), k.bit = 0;
+    k.words.back() |= pair << k.bit;
+    if (k.bit + width_ > 64) {
+      k.words.push_back(pair >> (64 - k.bit));
+      k.bit += width_ - 64;
+    } else {
+      k.bit += width_;
+    }
+    if (k.words.size() > kBufferPairs) flush(k, false);
   }
   void commit();
 
  private:
-  void flush(uint32_t b);
+  struct Bucket {
+    std::vector<uint64_t> words;  // the last one filled to `bit` bits (64: full)
+    unsigned bit = 64;
+    uint64_t next = 0, end = 0;   // its next word's offset in the file, and its end
+  };
+  void flush(Bucket& k, bool last);
+  [[noreturn]] void cell_past_the_level() const;
   io::OffsetFile file_;
-  unsigned shift_;
-  std::vector<uint64_t> next_, end_;  // per bucket: the next pair's offset, and its end
-  std::vector<std::vector<uint32_t>> buffers_;
+  uint64_t cells_;
+  unsigned shift_, width_;
+  uint64_t low_;  // the vertex bits a pair holds
+  std::vector<Bucket> buckets_;
 };
 
 // The bucket counts of the vertices `ids` for `vertices` vertices, added to `counts` (kVertexPairBuckets).
@@ -69,29 +88,44 @@ class VertexPairs {
   // Failure(io_error) on a vertex of the wrong bucket or a cell >= cells.
   template <class F>
   void for_each_in(uint64_t lo, uint64_t hi, uint64_t cells, F&& f) const {
-    std::vector<uint32_t> buf;
-    for (const File& file : files_)
-      for (uint64_t b = lo >> shift_; b < file.offsets.size() - 1 && (b << shift_) < hi; ++b)
-        for (uint64_t at = file.offsets[b]; at < file.offsets[b + 1];) {
-          const uint64_t n = std::min<uint64_t>(file.offsets[b + 1] - at, kReadPairs);
-          buf.resize(2 * n);
-          file.file->read(buf.data(), 8 * n, at * 8 + file.pairs_at);
-          for (uint64_t i = 0; i < n; ++i) {
-            const uint32_t v = buf[2 * i], c = buf[2 * i + 1];
-            if (v >> shift_ != b || c >= cells) bad(file);
-            if (v - lo < hi - lo) f(v, c);  // unsigned: below lo wraps around
+    std::vector<uint64_t> buf;
+    for (const File& file : files_) {
+      if (file.cell_bits != pair_cell_bits(cells)) bad(file);
+      const unsigned w = shift_ + file.cell_bits;
+      const uint64_t mask = (uint64_t{1} << w) - 1, low = (uint64_t{1} << shift_) - 1;
+      for (uint64_t b = lo >> shift_; b < file.counts.size() && (b << shift_) < hi; ++b)
+        for (uint64_t i = 0; i < file.counts[b];) {
+          // Pairs [i, i + n): the words from the one holding pair i's first bit to the one holding the last's.
+          const uint64_t n = std::min<uint64_t>(file.counts[b] - i, kReadPairs), w0 = i * w / 64;
+          const uint64_t words = ((i + n) * w + 63) / 64 - w0;
+          buf.resize(words + 1);
+          file.file->read(buf.data(), 8 * words, file.words_at + 8 * (file.offsets[b] + w0));
+          buf[words] = 0;
+          for (uint64_t k = i; k < i + n; ++k) {
+            const uint64_t bit = k * w - 64 * w0, s = bit % 64;
+            uint64_t x = buf[bit / 64] >> s;
+            if (s + w > 64) x |= buf[bit / 64 + 1] << (64 - s);
+            x &= mask;
+            const uint64_t v = (b << shift_) | (x & low), c = x >> shift_;
+            if (c >= cells) bad(file);
+            if (v - lo < hi - lo) f(static_cast<uint32_t>(v), static_cast<uint32_t>(c));  // unsigned: below lo wraps around
           }
-          at += n;
+          i += n;
         }
+    }
   }
   unsigned shift() const { return shift_; }
+  // Bits of a pair's cell for a level of `cells` cells.
+  static unsigned pair_cell_bits(uint64_t cells);
 
  private:
   static constexpr uint64_t kReadPairs = 1 << 16;
   struct File {
     std::unique_ptr<io::OffsetFile> file;
-    uint64_t pairs_at = 0;          // byte offset of the first pair
-    std::vector<uint64_t> offsets;  // per bucket and one past, in pairs
+    unsigned cell_bits = 0;
+    uint64_t words_at = 0;          // byte offset of the first bucket's words
+    std::vector<uint64_t> counts;   // pairs per bucket
+    std::vector<uint64_t> offsets;  // per bucket, its first word (from words_at)
   };
   [[noreturn]] static void bad(const File& file);
   std::vector<File> files_;

@@ -234,7 +234,7 @@ TEST(Shard, VertexCellsInRangesAgree) {
         std::vector<uint64_t> counts(stream::kVertexPairBuckets, 0);
         stream::count_vertex_pairs(std::span<const uint32_t>(ids.data() + lo, hi - lo), vertices, counts);
         pairs.push_back(dir.file("pairs-" + std::to_string(u) + ".bin"));
-        stream::VertexPairsWriter w(pairs.back(), vertices, lo, hi, counts);
+        stream::VertexPairsWriter w(pairs.back(), vertices, lo, hi, merged.levels[l].cells, counts);
         for (uint64_t rec = lo; rec < hi; ++rec) w.add(ids[rec], cells[rec]);
         w.commit();
       }
@@ -253,7 +253,10 @@ TEST(Shard, VertexCellsInRangesAgree) {
           stream::write_vertex_cells_unit({level}, stream::order_path(prefix), weld, vertices, records, u, units, progress);
         EXPECT_TRUE(slurp(path) == from_map);
       }
-    // Pairs that miss a map unit's file are refused.
+    // Pairs read as another level's (cells of another width) are refused, as are pairs that miss a map
+    // unit's file.
+    EXPECT_THROW(stream::VertexPairs(pairs, vertices, records).for_each_in(0, vertices, 4 * merged.levels[l].cells + 4, [](uint32_t, uint32_t) {}),
+                 Failure);
     pairs.pop_back();
     EXPECT_THROW(stream::VertexPairs(pairs, vertices, records), Failure);
   }
@@ -1402,8 +1405,8 @@ TEST(Shard, WideLevelsAreClassifiedInUnitsThatAKilledTaskLeavesToTheNext) {
 // spent, and left the shares' stamps holding. A merge under another key (another build's, half done: here
 // its units removed and the mark's key another) could not read them: the next task runs the shares again,
 // and the tasks give one machine's bytes. The merge's plain cells go with the stage's stamp, before the cells
-// by vertex are written, and the records' positions in weight order are spent with it: a clustering at other
-// levels then reads the store's positions.
+// by vertex are written; the records' positions in weight order are spent once the sums are done, before the
+// pairs are written: a clustering at other levels then reads the store's positions.
 TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge) {
   TempDir dir, log;
   const auto args = room_cli_args;
@@ -1420,6 +1423,13 @@ TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge
         args({"simplify", sample_room(), "-o", dir.file("out"), "--work", work, "--shard-grade", std::to_string(i) + "/3"}), log);
     ASSERT_EQ(g.exit_code, 0) << g.err;
   }
+  // Killed as the first map unit is stamped: the records' positions in weight order are still there (the
+  // sums read them).
+  const std::string positions = stream::ordered_positions_path(prefix, true);
+  setenv("LODSTREAM_TEST_KILL_AT", "merge-map-0.json", 1);
+  const test::CliRun killed_in_map = task(0);
+  EXPECT_EQ(killed_in_map.exit_code, 128 + SIGKILL);
+  EXPECT_GT(std::filesystem::file_size(positions), 0u) << "the positions in weight order are spent after the sums";
   setenv("LODSTREAM_TEST_KILL_AT", "merge-pairs-0.json", 1);
   const test::CliRun killed = task(0);
   unsetenv("LODSTREAM_TEST_KILL_AT");
@@ -1433,8 +1443,7 @@ TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge
     EXPECT_TRUE(std::filesystem::exists(stream::cluster_share_stamp(prefix, s))) << "share " << s << "'s stamp holds";
   }
   EXPECT_TRUE(std::filesystem::exists(stream::plain_cells_path(prefix, 0))) << "the map units wrote the plain cells";
-  const std::string positions = stream::ordered_positions_path(prefix, true);
-  EXPECT_GT(std::filesystem::file_size(positions), 0u) << "the positions in weight order stay until the stage's stamp";
+  EXPECT_EQ(std::filesystem::file_size(positions), 0u) << "the positions in weight order are spent before the pairs";
 
   std::filesystem::remove_all(stream::cluster_merge_dir(prefix));
   io::write_file_atomic(spent, "{\"key\": \"another build's merge\"}\n");
@@ -1448,8 +1457,8 @@ TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge
   EXPECT_FALSE(std::filesystem::exists(stream::cluster_shares_dir(prefix)));
   EXPECT_FALSE(std::filesystem::exists(stream::plain_cells_path(prefix, 0)));
   EXPECT_FALSE(stream::vertex_pairs_paths(prefix, 0).empty()) << "the pairs stay for the cells by vertex";
-  // The records' positions in weight order are spent with the stage's stamp: emptied, named still by the
-  // grading stage's stamp, which holds.
+  // The records' positions in weight order stay spent: emptied, named still by the grading stage's stamp,
+  // which holds.
   const std::string grade_stamp = slurp(work + "/grade.json");
   ASSERT_TRUE(std::filesystem::exists(positions));
   EXPECT_EQ(std::filesystem::file_size(positions), 0u) << positions << " is spent";
