@@ -71,10 +71,17 @@ class CellMapWriter {
   uint64_t count_ = 0;
 };
 
-// Reads a CellMapWriter's stream from its start, through mapped windows of the file.
+// Where a record's cell starts in a map: the bits of the records before it, and the cells made before it
+// (its rank among the level's centers in weight order). A reader needs both to enter the stream there;
+// the clustering merge knows them from its centers' bits (stream/cluster_merge.h).
+struct MapEntry {
+  uint64_t bit = 0, cells = 0;
+};
+
+// Reads a CellMapWriter's stream from its start, or from an entry, through mapped windows of the file.
 class CellMapReader {
  public:
-  explicit CellMapReader(const std::string& path) : file_(path) {
+  explicit CellMapReader(const std::string& path, MapEntry entry = {}) : file_(path), bits_read_(entry.bit), count_(entry.cells) {
     if (file_.size() % 8) fail(Status::io_error, path + ": not a cell map (size)");
   }
   // The cells of the next out.size() records. Throws Failure(io_error) past the end of the file.
@@ -122,51 +129,6 @@ class CellMapReader {
   uint64_t window_first_ = 0, window_words_ = 0;
   uint64_t bits_read_ = 0;
   uint64_t count_ = 0;
-};
-
-// A level's cells as one uint32 a record, in weight order: what the clustering merge's map units write
-// beside the packed map for its sums units (stream/cluster_merge.h), which then read their records' cells
-// without decoding the map from its start each.
-class PlainCellReader {
- public:
-  // From record `first` on.
-  PlainCellReader(const std::string& path, uint64_t first) : file_(path), at_(first) {}
-  // The cells of the next out.size() records. Throws Failure(io_error) past the end of the file.
-  void read(std::span<uint32_t> out) {
-    file_.read(at_ * 4, out.size() * 4, out.data());
-    at_ += out.size();
-  }
-  const std::string& path() const { return file_.path(); }
-  // Throws Failure(io_error) unless the file holds exactly `records` cells, every one read.
-  void finish(uint64_t records) const {
-    if (at_ != records || file_.size() != records * 4)
-      fail(Status::io_error, file_.path() + ": does not hold the cells of " + std::to_string(records) + " records");
-  }
-
- private:
-  io::MappedFile file_;
-  uint64_t at_;
-};
-
-// A level's cells in weight order from record `first` on: from its plain cells where `plain_path` names
-// them, else decoded from its packed map at `map_path` (which is read from its first record: `first` must
-// then be 0).
-class CellsReader {
- public:
-  CellsReader(const std::string& map_path, const std::string& plain_path, uint64_t first) {
-    if (!plain_path.empty()) plain_ = std::make_unique<PlainCellReader>(plain_path, first);
-    else if (first != 0) fail(Status::internal, map_path + ": a packed map is read from its first record");
-    else map_ = std::make_unique<CellMapReader>(map_path);
-  }
-  const std::string& path() const { return plain_ ? plain_->path() : map_->path(); }
-  void read(std::span<uint32_t> out) { plain_ ? plain_->read(out) : map_->read(out); }
-  // Throws Failure(io_error) unless the stream held exactly `records` records of `cells` cells (a map) or
-  // the plain cells of `records` records, every one read.
-  void finish(uint64_t records, uint64_t cells) const { plain_ ? plain_->finish(records) : map_->finish(records, cells); }
-
- private:
-  std::unique_ptr<CellMapReader> map_;
-  std::unique_ptr<PlainCellReader> plain_;
 };
 
 }  // namespace lodstream::stream

@@ -37,7 +37,7 @@ namespace {
 
 constexpr uint64_t kReadBuffer = uint64_t{1} << 20;  // bytes of a share's file read at a time
 constexpr uint64_t kInfoFlush = uint64_t{1} << 16;   // centers' positions a map unit writes at a time
-constexpr uint64_t kPlainFlush = uint64_t{1} << 19;  // plain cells a map unit writes at a time (2 MiB)
+constexpr uint64_t kPairsRead = uint64_t{1} << 19;  // records a pairs unit reads at a time (their ids and cells: 4 MiB)
 
 using json = nlohmann::ordered_json;
 
@@ -199,12 +199,12 @@ unsigned merge_unit_count(const ClusterShareInput& in, const ClusterShares& plan
   return static_cast<unsigned>(std::clamp<uint64_t>(asked, 1, std::max<uint64_t>(words, 1)));
 }
 
-// The key every unit's stamp holds. plain_cells, vertex_pairs: the map units write the plain cells and a
-// phase of their own the pairs, packed (a set of units started by a build that did not lacks them, or has
-// pairs of the older layout).
+// The key every unit's stamp holds. map_entries, vertex_pairs: the sums and pairs units enter the maps at
+// their first records (no plain cells), and a phase of their own after the sums writes the pairs, packed (a
+// set of units started by an older build wrote plain cells, or pairs of the older layout, or none).
 json merge_unit_key(const ClusterShareInput& in, const ClusterShares& plan, const json& key) {
   return {{"key", key}, {"split", split_levels(plan)}, {"units", merge_unit_count(in, plan)}, {"records", in.index.records},
-          {"plain_cells", true}, {"vertex_pairs", "after the sums, packed"}};
+          {"map_entries", true}, {"vertex_pairs", "after the sums, packed"}};
 }
 
 struct Merge {
@@ -259,18 +259,21 @@ struct Merge {
     return {{"centers", centers}, {"share_centers", share_centers}};
   }
 
-  std::string plain_cells_path(size_t j) const { return stream::plain_cells_path(in.prefix, split[j]); }
+  // Where record r's cell starts in split level j's map, whose centers' bits are c (cell_map_file.h).
+  static MapEntry entry_at(const RankedBits& c, uint64_t r) { return {map_bits_before(c, r), c.rank(r)}; }
 
-  // Where phase 4's unit summing cells [first, end) of the split levels (their cells one level after another)
-  // starts: at the first of its levels' first cells' centers (sum_cell_info_range); it reads their plain cells.
+  // Where phase 3's unit summing cells [first, end) of the split levels (their cells one level after another)
+  // starts: at the first of its levels' first cells' centers (sum_cell_info_range), each map entered there.
   SumStart sums_start(uint64_t first, uint64_t end, const std::vector<uint64_t>& split_cells) const {
     SumStart start;
     start.record = in.index.records;
+    std::vector<RankedBits> centers;
     for (size_t j = 0, before = 0; j < split.size(); before += split_cells[j], ++j) {
+      centers.push_back(load_centers(j));
       if (first < before + split_cells[j] && end > before)
-        start.record = std::min<uint64_t>(start.record, load_centers(j).select(std::max<uint64_t>(first, before) - before));
-      start.plain.push_back(plain_cells_path(j));
+        start.record = std::min<uint64_t>(start.record, centers[j].select(std::max<uint64_t>(first, before) - before));
     }
+    for (size_t j = 0; j < split.size(); ++j) start.entries.push_back(entry_at(centers[j], start.record));
     return start;
   }
 
@@ -282,7 +285,6 @@ struct Merge {
       io::OffsetFile(cells_path(in.prefix, split[j]), O_WRONLY | O_CREAT | O_TRUNC).resize((bits + 63) / 64 * 8);
       if (centers_info())
         io::OffsetFile(cell_info_path(in.prefix, split[j]), O_WRONLY | O_CREAT | O_TRUNC).resize(c.ones() * center_bytes());
-      io::OffsetFile(plain_cells_path(j), O_WRONLY | O_CREAT | O_TRUNC).resize(in.index.records * 4);
     }
   }
 
@@ -326,16 +328,6 @@ struct Merge {
         info_cell += info.size() / center_bytes();
         info.clear();
       };
-      // The records' plain cells (the pairs and sums units'), a buffer at a time from record `plain_at`.
-      const io::OffsetFile plain_file(plain_cells_path(j), O_WRONLY);
-      std::vector<uint32_t> plain;
-      plain.reserve(kPlainFlush);
-      uint64_t plain_at = lo;
-      auto flush_plain = [&] {
-        plain_file.write(plain.data(), plain.size() * 4, plain_at * 4);
-        plain_at += plain.size();
-        plain.clear();
-      };
       uint64_t bits = 0, made = info_cell;  // the bits put, and the cells made before the record (its rank)
       auto fetch = [&](uint32_t center) { c.prefetch(center); };  // a center earlier in the order, at random
       for_each_decision(in, plan, level, lo, hi, progress, fetch, [&](uint64_t r, uint32_t center, unsigned s) {
@@ -344,8 +336,6 @@ struct Merge {
         const unsigned width = static_cast<unsigned>(std::bit_width(made));
         const uint64_t cell = center == r ? made : c.rank(center);
         put(cell, width);
-        plain.push_back(static_cast<uint32_t>(cell));
-        if (plain.size() >= kPlainFlush) flush_plain();
         bits += width;
         made += center == r;
         if (center == r && info_file) {
@@ -356,7 +346,6 @@ struct Merge {
         }
       });
       if (info_file) flush_info();
-      flush_plain();
       if (bits == 0) continue;
       // Words [first, last] hold bits [start, start + bits); the first is shared unless the unit starts
       // it, the last unless the unit ends it or is the map's end.
@@ -397,34 +386,36 @@ struct Merge {
             fail(Status::io_error, path + ": cannot empty: " + std::strerror(errno));
   }
 
-  // Phase 4, unit u: its records' cells of every split level as (vertex, cell) pairs by vertex range
-  // (stream/vertex_pairs.h; the cells by vertex's), from the plain cells and the order's ids, a buffer at a
-  // time. Apart from phase 2 so that they are written once the shares' decisions are spent: on the 193 M-
-  // triangle city at N = 8 the two made 7.8 GB together.
   json sums_phase(const json& unit_key, const std::vector<uint64_t>& split_cells, unsigned index, Progress& progress) const;
 
+  // Phase 4, unit u: its records' cells of every split level as (vertex, cell) pairs by vertex range
+  // (stream/vertex_pairs.h; the cells by vertex's), from the map entered at its first record and the order's
+  // ids, a buffer at a time. Apart from phase 2 so that they are written once the shares' decisions are
+  // spent: on the 193 M-triangle city at N = 8 the two made 7.8 GB together.
   json pairs_unit(unsigned u, const std::vector<uint64_t>& split_cells, Progress& progress) const {
     const uint64_t lo = units.lo(u), hi = units.hi(u);
     const io::OffsetFile order(in.index.order_path, O_RDONLY);
-    std::vector<uint32_t> ids(kPlainFlush), cells(kPlainFlush);
+    std::vector<uint32_t> ids(kPairsRead), cells(kPairsRead);
     std::vector<uint64_t> bucket_counts(kVertexPairBuckets, 0);  // the same for every split level
-    for (uint64_t r = lo; r < hi; r += kPlainFlush) {
-      const uint64_t n = std::min<uint64_t>(kPlainFlush, hi - r);
+    for (uint64_t r = lo; r < hi; r += kPairsRead) {
+      const uint64_t n = std::min<uint64_t>(kPairsRead, hi - r);
       order.read(ids.data(), 4 * n, 4 * r);
       for (uint64_t i = 0; i < n; ++i)
         if (ids[i] >= in.index.vertices) fail(Status::io_error, in.index.order_path + ": vertex id out of range");
       count_vertex_pairs(std::span<const uint32_t>(ids.data(), n), in.index.vertices, bucket_counts);
     }
     for (size_t j = 0; j < split.size(); ++j) {
-      const io::OffsetFile plain(plain_cells_path(j), O_RDONLY);
+      // The map entered at the unit's first record (the whole map is written: phase 2's shared words too).
+      CellMapReader map(cells_path(in.prefix, split[j]), entry_at(load_centers(j), lo));
       VertexPairsWriter pairs(vertex_pairs_path(in.prefix, split[j], u), in.index.vertices, lo, hi, split_cells[j], bucket_counts);
-      for (uint64_t r = lo; r < hi; r += kPlainFlush) {
+      for (uint64_t r = lo; r < hi; r += kPairsRead) {
         progress.check();
-        const uint64_t n = std::min<uint64_t>(kPlainFlush, hi - r);
+        const uint64_t n = std::min<uint64_t>(kPairsRead, hi - r);
         order.read(ids.data(), 4 * n, 4 * r);
-        plain.read(cells.data(), 4 * n, 4 * r);
+        map.read(std::span<uint32_t>(cells.data(), n));
         for (uint64_t i = 0; i < n; ++i) pairs.add(ids[i], cells[i]);
       }
+      if (hi == in.index.records) map.finish(in.index.records, split_cells[j]);
       pairs.commit();
     }
     return json::object();
@@ -444,24 +435,13 @@ struct Merge {
 
 std::string cluster_merge_dir(const std::string& prefix) { return prefix + "cluster-merge/"; }
 
-std::string plain_cells_path(const std::string& prefix, size_t level) {
-  return cluster_merge_dir(prefix) + fmt::format("map/cells-{}.u32", level);
-}
-
-namespace {
-// Removes the plain cells of every split level from the map units' directory, and with `pairs` the pairs too.
-void remove_map_files(const std::string& prefix, bool pairs) {
+void remove_vertex_pairs(const std::string& prefix) {
   std::error_code ec;
   for (const auto& e : std::filesystem::directory_iterator(cluster_merge_dir(prefix) + "map/", ec)) {
     const std::string name = e.path().filename().string();
-    if ((name.starts_with("cells-") && name.ends_with(".u32")) || (pairs && name.starts_with("pairs-") && name.ends_with(".bin")))
-      std::filesystem::remove(e.path(), ec);
+    if (name.starts_with("pairs-") && name.ends_with(".bin")) std::filesystem::remove(e.path(), ec);
   }
 }
-}  // namespace
-
-void remove_plain_cells(const std::string& prefix) { remove_map_files(prefix, false); }
-void remove_plain_cells_and_pairs(const std::string& prefix) { remove_map_files(prefix, true); }
 
 std::string vertex_pairs_path(const std::string& prefix, size_t level, unsigned unit) {
   return cluster_merge_dir(prefix) + fmt::format("map/pairs-{}-{}.bin", level, unit);
@@ -514,10 +494,10 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
     }
     return out;
   }
-  // A unit at a time on each thread the budget holds: a bit and a half a record, a window of each share's
-  // files (two with centers), and the buffers of the plain cells (a map unit), or of the plain cells, their
-  // ids and their pairs (a pairs unit).
-  const uint64_t buffers = 8 * kPlainFlush + kVertexPairBuckets * VertexPairsWriter::kBufferPairs * 8;
+  // A unit at a time on each thread the budget holds: a bit and a half a record (a level's centers' bits),
+  // a window of each share's files (two with centers) (a map unit), or the buffers of its records' ids and
+  // cells and of their pairs (a pairs unit).
+  const uint64_t buffers = 8 * kPairsRead + kVertexPairBuckets * VertexPairsWriter::kBufferPairs * 8;
   const uint64_t unit_bytes = records * 3 / 16 + uint64_t{plan.count} * (m.centers_info() ? 2 : 1) * kReadBuffer + buffers;
   const uint64_t fit = in.memory_bytes ? std::max<uint64_t>(in.memory_bytes / unit_bytes, 1) : m.units.count;
   const unsigned threads = unit_threads(m.units.count, fit);
@@ -531,7 +511,8 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
                                                         [&](unsigned u) { return m.centers_unit(u, progress); });
   progress.report("cluster", 0.2);
   // An older start's stamps and pairs go (each unit writes its pairs file whole).
-  start_once(map_dir, cells_path(in.prefix, m.split.back()), unit_key, {"merge-map-", "pairs-"}, [&] { m.size_outputs(); });
+  // (and an older build's plain cells, map/cells-L.u32, which the sums and pairs units read until 2026-12-05)
+  start_once(map_dir, cells_path(in.prefix, m.split.back()), unit_key, {"merge-map-", "pairs-", "cells-"}, [&] { m.size_outputs(); });
   const std::vector<json> maps = take_units_on_threads(map_dir, m.units.count, index, threads, "merge-map", unit_key,
                                                      [&](unsigned u) { return m.map_unit(u, centers, progress); });
   m.write_edges(maps);
@@ -546,8 +527,8 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   // The records' positions in weight order are read by nothing after the sums (position_gather.h): spent
   // before the pairs are written.
   if (in.spend_decisions && !in.index.ordered_positions_path.empty()) spend_ordered_positions(in.index.ordered_positions_path);
-  // Phase 4: the pairs by vertex range. Started is its own stamp (the plain cells go with the stage's stamp,
-  // which a process late here may follow).
+  // Phase 4: the pairs by vertex range. Started is its own stamp (start_once's file argument is for a file
+  // the units fill in place; they write their own).
   const std::string pairs_dir = m.dir + "pairs/";
   start_once(pairs_dir, pairs_dir + "start.json", unit_key, {"merge-pairs-"}, [] {});
   const std::vector<json> pairs = take_units_on_threads(pairs_dir, m.units.count, index, threads, "merge-pairs", unit_key,

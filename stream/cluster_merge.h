@@ -19,44 +19,45 @@
 //    every process that has seen every stamp writes them (the OR of their parts: the same value each time).
 //    For center representatives it copies its centers' positions from the shares' .ctr files (its first
 //    center in share s's file: the centers of s in the units before it) into cells-L.info at its first cell.
-//    It also writes its records' cells one uint32 a record into map/cells-L.u32 (plain_cells_path), in place.
 //    Once every map unit is stamped, the shares' decision (and center) files of the split levels are spent
 //    (ClusterShareInput::spend_decisions): emptied, so that they take no disk while the pairs are written
 //    (their names stay, for the shares' stamps, which a process that comes late still reads), the units' key
 //    written first to cluster-shares/spent.json; a merge under another key finds them spent there
 //    (forget_shares_spent_elsewhere), and the shares run again.
-// 3. pairs (unit u, pairs/merge-pairs-u.json): its records' cells, from the plain cells, as (vertex, cell)
-//    pairs by vertex range into map/pairs-L-u.bin (vertex_pairs_path), its own file, the order's ids read
-//    alongside. A phase of its own so that the pairs (8 bytes a record a split level until 2026-12-05, about
-//    5 now that they are packed: vertex_pairs.h) and the shares'
-//    decisions (8 too) are never on disk together: on the 193 M-triangle city at N = 8 they were, with the
-//    plain cells, the shared directory's peak (16.9 GB for a 4.15 GB input).
-// 4. sums (mean and quadric representatives; unit u, sums/merge-sums-u.json), once every map unit is stamped
+// 3. sums (mean and quadric representatives; unit u, sums/merge-sums-u.json), once every map unit is stamped
 //    and the maps' shared words written: the u-th U-th of the split levels' cells (taken one level after
 //    another) summed by one pass over the records in weight order (sum_cell_info_range, stream/cluster_stage.h)
 //    into cells-L.info in place, from the center of its first cell on (a cell's id is its center's rank, so
-//    no record before that center is in one of its cells; the centers' bits give where it is). It reads the
-//    records' cells from the plain cells, not the map: decoding a map is a serial chain through every
-//    record before the unit's start (a record's width is that of the cells made before it), which made
-//    the 8 units of the 193 M-triangle city cost 27 thread-seconds where, reading the plain cells, they
-//    cost 7–8. A cell adds its vertices in weight order, whichever cells are summed beside it, so a unit's
-//    records are one machine's bytes; the cells, not the records, are cut, because partial sums of record
-//    ranges added up would not be.
+//    no record before that center is in one of its cells; the centers' bits give where it is). It enters
+//    each map there (MapEntry, stream/cell_map_file.h: the bits before the record, map_bits_before, and its
+//    rank, both from the centers' bits) rather than decode it from its start, a serial chain through every
+//    record before the unit's (a record's width is that of the cells made before it), which made the 8 units
+//    of the 193 M-triangle city cost 27 thread-seconds. (From 2026-11 to 2026-12-05 the map units wrote each
+//    record's cell as a uint32 beside the map for this, the plain cells: 4 bytes a record a split level on the
+//    shared disk, 1.96 GB on that city, beside the shares' decisions at the merge's peak.) A cell adds its
+//    vertices in weight order, whichever cells are summed beside it, so a unit's records are one machine's
+//    bytes; the cells, not the records, are cut, because partial sums of record ranges added up would not be.
+//    Once every sums unit is stamped, the records' positions in weight order (their last reader) are spent
+//    (position_gather.h).
+// 4. pairs (unit u, pairs/merge-pairs-u.json): its records' cells, from the map entered at its first record,
+//    as (vertex, cell) pairs by vertex range into map/pairs-L-u.bin (vertex_pairs_path), its own file, the
+//    order's ids read alongside. A phase of its own so that the pairs and the shares' decisions are never on
+//    disk together: on the 193 M-triangle city at N = 8 they were (8 bytes a record a split level each), with
+//    the plain cells, the shared directory's peak (16.9 GB for a 4.15 GB input).
 // The centers' bits and the units' stamps stay after the stage: a process that saw the cluster stage
 // unstamped and comes late to the units must find them done, where start_once, missing the bits, would start
 // them afresh from the shares' decision files, which the stage's stamp removes.
 // Invariant: the map and the center info are the bytes of one pass over the records in weight order (the
 // merge before the units, and the whole-scene clustering): every record's cell is the rank of its center,
 // written at the map bits of the records before it.
-// Disk: the plain cells, 4 bytes a record a split level, and the shares' decisions, 8 bytes a record a split
-// level, until the map units are done; then the plain cells and the pairs (the vertex's low bits and the
-// cell, packed: 43 bits or fewer a record on the 193 M-triangle city's levels), the plain cells until the
-// stage's stamp, the pairs until the cells by vertex are written (packed to each level's bits,
-// vertex_cells.h; on that city at N = 8, five split levels, the decisions, plain cells and pairs took 3.91,
-// 1.96 and 3.91 GB and the cells by vertex 2.75 GB before the pairs and the cells by vertex were packed).
+// Disk: the shares' decisions, 8 bytes a record a split level, until the map units are done; then the
+// pairs (the vertex's low bits and the cell, packed: 43 bits or fewer a record on the 193 M-triangle city's
+// levels) until the cells by vertex are written (packed to each level's bits, vertex_cells.h). On that city
+// at N = 8, five split levels, the decisions took 3.91 GB; before 2026-12-05 the plain cells 1.96 GB, the
+// pairs 3.91 GB and the cells by vertex 2.75 GB.
 // Memory: a process runs as many units at once as it has threads and `memory_bytes` holds, each a bit and
-// a half a record of its level, a 1 MiB read buffer of each share's files and 10 MiB of write buffers
-// (plain cells, ids, pairs); a sums unit takes its
+// a half a record of its level, a 1 MiB read buffer of each share's files and 8 MiB of buffers (ids and
+// cells read, pairs written); a sums unit takes its
 // thread's share of `memory_bytes` (at least kMinSumsUnitBytes) and, when its cells' sums (88 bytes a cell)
 // do not fit, sums them in several passes.
 #pragma once
@@ -76,17 +77,10 @@ inline constexpr unsigned kMaxClusterMergeUnits = 256;
 inline constexpr uint64_t kMinSumsUnitBytes = uint64_t{256} << 20;
 
 std::string cluster_merge_dir(const std::string& prefix);  // WORK/cluster-merge/
-// Split level `level`'s cells one uint32 a record in weight order (PlainCellReader, stream/cell_map_file.h),
-// which the map units write beside the packed map: the pairs and sums units (phases 3 and 4) read them rather than decode the
-// map from its start, each of them (the split levels' cells by vertex read the pairs below). They outlive
-// the stage's units; remove_plain_cells removes them with the stage's stamp.
-std::string plain_cells_path(const std::string& prefix, size_t level);
-// Removes the plain cells of every split level (once the stage is stamped: the sums units are done, and the
-// cells by vertex read the pairs), or the plain cells and the pairs (below).
-void remove_plain_cells(const std::string& prefix);
-void remove_plain_cells_and_pairs(const std::string& prefix);
-// Map unit u's cells of split level `level` as (vertex, cell) pairs by vertex range (stream/vertex_pairs.h),
-// which it writes beside the plain cells for the cells by vertex. vertex_pairs_paths: every unit's that is
+// Removes every split level's pairs (once the cells by vertex are written).
+void remove_vertex_pairs(const std::string& prefix);
+// Pairs unit u's cells of split level `level` as (vertex, cell) pairs by vertex range (stream/vertex_pairs.h),
+// for the cells by vertex. vertex_pairs_paths: every unit's that is
 // there, in unit order (empty: none).
 std::string vertex_pairs_path(const std::string& prefix, size_t level, unsigned unit);
 std::vector<std::string> vertex_pairs_paths(const std::string& prefix, size_t level);

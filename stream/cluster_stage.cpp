@@ -189,8 +189,8 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
   const uint64_t window_end = std::min(window.end, all_cells), window_first = std::min(window.first, window_end);
   const uint64_t total_cells = window_end - window_first;
   if (total_cells == 0 && window.in_place) return;  // else the levels' empty files are written below
-  const bool plain = !window.start.plain.empty();
-  const uint64_t first_record = plain ? std::min(window.start.record, records) : 0;
+  const bool entered = !window.start.entries.empty();
+  const uint64_t first_record = entered ? std::min(window.start.record, records) : 0;
   // As many chunks as that takes, rounded up to whole rounds of one per thread, and as even as can be.
   const uint64_t most_per_chunk = std::max<uint64_t>(1, sum_bytes / n_threads / sizeof(CellInfo));
   const uint64_t rounds = std::max<uint64_t>(1, (total_cells + most_per_chunk * n_threads - 1) / (most_per_chunk * n_threads));
@@ -221,18 +221,18 @@ void sum_cells(const io::MappedFile& index, const RecordPositions& positions, ui
   for (size_t round = 0; round < chunks.size(); round += n_threads) {
     const size_t round_end = std::min(chunks.size(), round + n_threads);
     std::vector<std::vector<std::vector<CellInfo>>> sums(round_end - round);
-    std::vector<std::vector<std::unique_ptr<CellsReader>>> chunk_cells(round_end - round);
+    std::vector<std::vector<std::unique_ptr<CellMapReader>>> chunk_cells(round_end - round);
     for (size_t k = round; k < round_end; ++k)
       for (const Range& range : chunks[k]) {
         sums[k - round].emplace_back(range.end - range.first, CellInfo{});
-        chunk_cells[k - round].push_back(std::make_unique<CellsReader>(
-            cells_path(prefix, level_ids[range.level]), plain ? window.start.plain.at(range.level) : std::string(), first_record));
+        chunk_cells[k - round].push_back(std::make_unique<CellMapReader>(
+            cells_path(prefix, level_ids[range.level]), entered ? window.start.entries.at(range.level) : MapEntry{}));
       }
     // Chunk k's sums over records [lo, hi): positions from `shared` (the read way), else fetched per block.
     auto sum_records = [&](size_t k, uint64_t lo, uint64_t hi, const RecordBatch* shared) {
       const std::vector<Range>& chunk = chunks[k];
       std::vector<std::vector<CellInfo>>& outs = sums[k - round];
-      std::vector<std::unique_ptr<CellsReader>>& readers = chunk_cells[k - round];
+      std::vector<std::unique_ptr<CellMapReader>>& readers = chunk_cells[k - round];
       constexpr uint64_t kAhead = 8;
       std::vector<uint32_t> cells(block);
       std::vector<double> grade(block, 0.0);
@@ -570,7 +570,7 @@ void sum_cell_info(const WeightIndex& weights, std::span<const size_t> levels, s
 void sum_cell_info_range(const WeightIndex& weights, std::span<const size_t> levels, std::span<const uint64_t> cells,
                          CellInfoKind info_kind, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,
                          const std::string& prefix, uint64_t first, uint64_t end, unsigned threads, const SumStart& start) {
-  if (!start.plain.empty() && start.plain.size() != levels.size()) fail(Status::internal, "sum_cell_info_range: plain cells a level");
+  if (!start.entries.empty() && start.entries.size() != levels.size()) fail(Status::internal, "sum_cell_info_range: an entry a level");
   sum_cell_info_in(weights, levels, cells, info_kind, memory_bytes, chunk_cap, progress, prefix,
                    {first, end, std::max<size_t>(threads, 1), true, start});
 }

@@ -31,6 +31,7 @@
 #include "lodstream/lodstream.h"
 #include "stream/grade_stage.h"
 #include "stream/position_gather.h"
+#include "stream/cell_map_file.h"
 #include "stream/progress.h"
 #include "stream/work_dir.h"
 
@@ -140,13 +141,13 @@ void sum_cell_info(const WeightIndex& index, std::span<const size_t> levels, std
 // every record); `memory_bytes`: this call's budget.
 // `start`: where the pass begins and what it reads. A level's cells are numbered in their centers' weight
 // order and a cell's center is its first record, so no record before the center of the range's first
-// cell of each level is in one of its cells: start.record may be the first of those centers. start.plain:
-// per level, a file of each record's cell as a uint32 (PlainCellReader, stream/cell_map_file.h), read from
-// start.record on in place of its map; empty: the maps, decoded from their first record (start.record is
-// then ignored: a packed map cannot be entered in the middle without the bits before).
+// cell of each level is in one of its cells: start.record may be the first of those centers. start.entries:
+// per level, where start.record's cell starts in its map (MapEntry, stream/cell_map_file.h), which is read
+// from there; empty: the maps, decoded from their first record (start.record is then ignored: a packed map
+// cannot be entered in the middle without the bits and the cells before).
 struct SumStart {
   uint64_t record = 0;
-  std::vector<std::string> plain;
+  std::vector<MapEntry> entries;
 };
 void sum_cell_info_range(const WeightIndex& index, std::span<const size_t> levels, std::span<const uint64_t> cells,
                          CellInfoKind info, uint64_t memory_bytes, uint64_t chunk_cap, Progress& progress,

@@ -938,12 +938,11 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         if (in_shares)
           for (char b : vertex_cells_written) value["vertex_cells"].push_back(b != 0);
         write_stamp(work.file("cluster.json"), key, files, value);
-        // The shares are spent once the stage is stamped (the whole levels' maps are links to their files).
-        // The merge's plain cells too (the sums units are done; the cells by vertex read the pairs), so that
-        // they are not on disk beside the cells by vertex; and the records' positions in weight order.
+        // The shares are spent once the stage is stamped (the whole levels' maps are links to their files),
+        // and the records' positions in weight order (the clustering merge spends them after its sums; not
+        // when every level is whole).
         if (in_shares) {
           std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
-          stream::remove_plain_cells(prefix);
           stream::spend_ordered_positions(positions_path);
         }
         std::filesystem::remove_all(stream::grade_merge_dir(prefix));  // the grading merge's units' stamps (grade_stage)
@@ -1205,20 +1204,18 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           for (size_t l = 0; l < cells.size(); ++l) files.push_back(stream::vertex_cells_path(prefix, l));
           st.reused = stage_in_units(work.file("shard-vertex-cells.json"), key, files, shard_lock, options.work_dir, [&] {
             std::vector<size_t> levels;  // else written by its cluster share
-            std::vector<stream::VertexCellsSource> sources;  // the clustering merge's pairs and plain cells, where they are
+            std::vector<stream::VertexCellsSource> sources;  // the clustering merge's pairs, where they are
             for (size_t l = 0; l < cells.size(); ++l)
               if (l >= vertex_cells_written.size() || !vertex_cells_written[l]) {
                 levels.push_back(l);
-                const std::string p = stream::plain_cells_path(prefix, l);
-                sources.push_back({std::filesystem::exists(p) ? p : std::string(), stream::vertex_pairs_paths(prefix, l)});
+                sources.push_back({stream::vertex_pairs_paths(prefix, l)});
               }
             return stream::write_vertex_cells_in_units(prefix, canonical, meta.vertices, grade.records, levels, cells, sources, unit_count,
                                                        unit_index, key, plan.stage_bytes, progress);
           });
         });
-        // Every cells-by-vertex unit is done (the stage is stamped): no process reads the plain cells or the
-        // pairs again.
-        stream::remove_plain_cells_and_pairs(prefix);
+        // Every cells-by-vertex unit is done (the stage is stamped): no process reads the pairs again.
+        stream::remove_vertex_pairs(prefix);
         // The wide levels' pass A (stream/wide_units.h), as units that every task takes part in, N of them:
         // a task's, since which levels are wide depends on the task count (a prepare job leaves it to them).
         if (so.shard_count > 0 && !so.shard_prepare)

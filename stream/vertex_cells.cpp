@@ -79,13 +79,12 @@ class RandomFile {
 };
 
 // Calls f(vertex id, cell) for every record of the weight index at `order` (`records` of them), in weight
-// order, its cell from one decoding of the map at `map_path` (`cells` cells), or, where `plain_path` names
-// the clustering merge's plain cells of the same map (stream/cluster_merge.h), read from them; checks both.
+// order, its cell from one decoding of the map at `map_path` (`cells` cells); checks both.
 template <class F>
-void for_each_record_cell(const std::string& map_path, const std::string& plain_path, const io::MappedFile& order,
-                          uint64_t records, uint64_t cells, uint64_t vertices, Progress& progress, F&& f) {
+void for_each_record_cell(const std::string& map_path, const io::MappedFile& order, uint64_t records, uint64_t cells,
+                          uint64_t vertices, Progress& progress, F&& f) {
   constexpr uint64_t kChunk = 1 << 18;
-  CellsReader reader(map_path, plain_path, 0);
+  CellMapReader reader(map_path);
   std::vector<uint32_t> cs(kChunk), ids(kChunk);
   for (uint64_t first = 0; first < records; first += kChunk) {
     progress.check();
@@ -154,7 +153,7 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
     tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
       const uint64_t plo = lo + part * per_part, pn = std::min(n, (part + 1) * per_part) - std::min(n, part * per_part);
       if (pn == 0) return;
-      for_each_record_cell(map_path, {}, order, records, cells, vertices, progress, [&](uint32_t id, uint32_t cell) {
+      for_each_record_cell(map_path, order, records, cells, vertices, progress, [&](uint32_t id, uint32_t cell) {
         if (id - plo < pn) buf[id - lo] = cell;  // unsigned: below plo wraps around
       });
     });
@@ -214,13 +213,12 @@ void write_vertex_cells_unit(const std::vector<VertexCellsLevel>& levels, const 
         pairs.for_each_in(b << shift, std::min(lo, (b + 1) << shift), level.cells, keep_outside);
       }
     } else {
-      // One decoding of the map (or read of the plain cells) in weight order: the unit's vertices' cells and
-      // those canonical vertices'.
+      // One decoding of the map in weight order: the unit's vertices' cells and those canonical vertices'.
       if (!order) {
         order = std::make_unique<io::MappedFile>(order_path);
         if (order->size() != records * 4) fail(Status::io_error, order->path() + ": size does not match the weight index");
       }
-      for_each_record_cell(level.map_path, level.plain_path, *order, records, level.cells, vertices, progress,
+      for_each_record_cell(level.map_path, *order, records, level.cells, vertices, progress,
                            [&](uint32_t id, uint32_t cell) {
                              if (id - lo < hi - lo) buf[id - lo] = cell;  // unsigned: below lo wraps around
                              else if (any_outside) keep_outside(id, cell);
@@ -256,7 +254,7 @@ nlohmann::ordered_json write_vertex_cells_in_units(const std::string& prefix, co
   for (size_t j = 0; j < levels.size(); ++j) {
     VertexCellsLevel& L = unit_levels.emplace_back();
     L.map_path = cells_path(prefix, levels[j]), L.path = vertex_cells_path(prefix, levels[j]), L.cells = cells[levels[j]];
-    if (!sources.empty()) L.plain_path = sources[j].plain_path, L.pairs_paths = sources[j].pairs_paths;
+    if (!sources.empty()) L.pairs_paths = sources[j].pairs_paths;
   }
   // A unit (a range of vertices, every level) at a time on each thread the budget holds: 4 bytes a vertex
   // of its share and at most as much of packed words, a bit and a half a vertex for the canonical vertices

@@ -76,8 +76,7 @@ void write_vertex_cells_of(const std::string& map_path, const std::string& order
 
 // Where one level's cells come from for the units below, and where its cells by vertex go.
 struct VertexCellsSource {
-  std::string plain_path;                // its plain cells (stream/cluster_merge.h), read in place of decoding its map; or ""
-  std::vector<std::string> pairs_paths;  // its pairs by vertex range (stream/vertex_pairs.h), read in place of both; or none
+  std::vector<std::string> pairs_paths;  // its pairs by vertex range (stream/vertex_pairs.h), read in place of its map; or none
 };
 struct VertexCellsLevel : VertexCellsSource {
   std::string map_path;  // its cell map
@@ -88,8 +87,8 @@ struct VertexCellsLevel : VertexCellsSource {
 // Every level of `levels`' file as `units` units by vertex range, for the prepare jobs of a sharded run
 // (stream/units.h): unit u writes the vertices vertex_cells_unit_range(V, u, units) of each level in place. A level
 // with pairs reads only its range's buckets of them, and the buckets holding the canonical vertices before
-// the unit that its welded vertices name; one without, one decoding of the map (or one read of its plain
-// cells) in weight order, keeping those cells. Then its welded vertices take their canonical vertices'.
+// the unit that its welded vertices name; one without, one decoding of the map in weight order, keeping
+// those cells. Then its welded vertices take their canonical vertices'.
 // The same bytes as write_vertex_cells_of. Memory: 4 bytes a vertex of the unit and its packed words, 8 a welded vertex of it,
 // a bit and a half a vertex of the scene.
 void write_vertex_cells_unit(const std::vector<VertexCellsLevel>& levels, const std::string& order_path,

@@ -212,10 +212,9 @@ TEST(Shard, VertexCellsInRangesAgree) {
     EXPECT_TRUE(slurp(path) == from_map);
     // As units (the prepare jobs'), each by vertex range: 1, 3 and 7, run in reverse order (a welded
     // vertex's canonical vertex before its unit is found in the unit's own pass over the map, or in the
-    // buckets of the pairs that hold it); each from the map, from its plain cells (one uint32 a record, as
-    // the clustering merge's map units write them), and from its pairs by vertex range (as they write them
-    // too, here three map units' files, in buckets of a few vertices since the room is small).
-    const std::string plain = dir.file("plain-cells.u32");
+    // buckets of the pairs that hold it); each from the map and from its pairs by vertex range (as the
+    // clustering merge's pairs units write them, here three units' files, in buckets of a few vertices since
+    // the room is small).
     std::vector<std::string> pairs;
     {
       stream::CellMapReader map(stream::cells_path(prefix, l));
@@ -227,8 +226,20 @@ TEST(Shard, VertexCellsInRangesAgree) {
       uint64_t differ = 0;
       for (uint64_t rec = 0; rec < records; ++rec) differ += stream::packed_field(from_map.data(), ids[rec], bits) != cells[rec];
       EXPECT_EQ(differ, 0u) << "records whose vertex's field is not their cell";
-      io::OffsetFile(plain, O_WRONLY | O_CREAT | O_TRUNC).write(cells.data(), 4 * records, 0);
-      io::OffsetFile(stream::order_path(prefix), O_RDONLY).read(ids.data(), 4 * records, 0);
+      // The map entered at a record (the bits and the cells before it, as the merge's sums and pairs units
+      // find them from the centers' bits) reads on as decoded from its start.
+      uint64_t bit = 0, made = 0;
+      for (uint64_t rec = 0; rec < records; ++rec) {
+        if (rec == records / 3 || rec == records / 2 + 7 || rec == records - 1) {
+          stream::CellMapReader entered(stream::cells_path(prefix, l), stream::MapEntry{bit, made});
+          std::vector<uint32_t> rest(records - rec);
+          entered.read(rest);
+          entered.finish(records, merged.levels[l].cells);
+          EXPECT_TRUE(std::equal(rest.begin(), rest.end(), cells.begin() + static_cast<std::ptrdiff_t>(rec))) << "entered at record " << rec;
+        }
+        bit += static_cast<uint64_t>(std::bit_width(made));
+        made += cells[rec] == made;
+      }
       for (uint64_t u = 0; u < 3; ++u) {
         const uint64_t lo = records * u / 3, hi = records * (u + 1) / 3;
         std::vector<uint64_t> counts(stream::kVertexPairBuckets, 0);
@@ -240,15 +251,14 @@ TEST(Shard, VertexCellsInRangesAgree) {
       }
     }
     EXPECT_GT(vertices >> stream::vertex_pair_shift(vertices), 31u) << "the pairs have many buckets";
-    for (int from = 0; from < 3; ++from)
+    for (bool from_pairs : {false, true})
       for (unsigned units : {1u, 3u, 7u}) {
-        SCOPED_TRACE("units " + std::to_string(units) + (from == 0 ? " from the map" : from == 1 ? " from the plain cells" : " from the pairs"));
+        SCOPED_TRACE("units " + std::to_string(units) + (from_pairs ? " from the pairs" : " from the map"));
         std::filesystem::remove(path);
         io::OffsetFile(path, O_WRONLY | O_CREAT | O_TRUNC).resize(from_map.size());
         stream::VertexCellsLevel level;
         level.map_path = stream::cells_path(prefix, l), level.path = path, level.cells = merged.levels[l].cells;
-        if (from == 1) level.plain_path = plain;
-        if (from == 2) level.pairs_paths = pairs;
+        if (from_pairs) level.pairs_paths = pairs;
         for (unsigned u = units; u-- > 0;)
           stream::write_vertex_cells_unit({level}, stream::order_path(prefix), weld, vertices, records, u, units, progress);
         EXPECT_TRUE(slurp(path) == from_map);
@@ -363,8 +373,7 @@ TEST(ClusterShares, ShareTasksThenTasksGiveOneMachinesBytes) {
       EXPECT_FALSE(std::filesystem::exists(stream::cluster_shares_dir(work + "/"))) << "the merge removes the spent shares";
       ASSERT_FALSE(one.levels.empty());
       for (size_t l = 0; l < one.levels.size(); ++l)
-        EXPECT_FALSE(std::filesystem::exists(stream::plain_cells_path(work + "/", l)))
-            << "level " << l << ": the plain cells outlive the cells by vertex";
+        EXPECT_TRUE(stream::vertex_pairs_paths(work + "/", l).empty()) << "level " << l << ": the pairs outlive the cells by vertex";
       if (n >= 3) {
         // A prepare job that reuses the cluster stage (here: the first one's, killed before the cells by vertex
         // were stamped) takes up the same units as the one that ran it, for the split levels only: had it
@@ -1404,9 +1413,9 @@ TEST(Shard, WideLevelsAreClassifiedInUnitsThatAKilledTaskLeavesToTheNext) {
 // (stream/cluster_merge.h): a task killed just before a pairs unit's stamp has emptied them, marked them
 // spent, and left the shares' stamps holding. A merge under another key (another build's, half done: here
 // its units removed and the mark's key another) could not read them: the next task runs the shares again,
-// and the tasks give one machine's bytes. The merge's plain cells go with the stage's stamp, before the cells
-// by vertex are written; the records' positions in weight order are spent once the sums are done, before the
-// pairs are written: a clustering at other levels then reads the store's positions.
+// and the tasks give one machine's bytes. The map units write no plain cells (the sums and pairs units
+// enter the map); the records' positions in weight order are spent once the sums are done, before the pairs
+// are written: a clustering at other levels then reads the store's positions.
 TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge) {
   TempDir dir, log;
   const auto args = room_cli_args;
@@ -1442,20 +1451,19 @@ TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge
     EXPECT_EQ(std::filesystem::file_size(dec), 0u) << dec << " is spent";
     EXPECT_TRUE(std::filesystem::exists(stream::cluster_share_stamp(prefix, s))) << "share " << s << "'s stamp holds";
   }
-  EXPECT_TRUE(std::filesystem::exists(stream::plain_cells_path(prefix, 0))) << "the map units wrote the plain cells";
+  EXPECT_FALSE(std::filesystem::exists(stream::cluster_merge_dir(prefix) + "map/cells-0.u32")) << "the map units write no plain cells";
   EXPECT_EQ(std::filesystem::file_size(positions), 0u) << "the positions in weight order are spent before the pairs";
 
   std::filesystem::remove_all(stream::cluster_merge_dir(prefix));
   io::write_file_atomic(spent, "{\"key\": \"another build's merge\"}\n");
-  // Killed again just before a cells-by-vertex unit's stamp: the stage is stamped, and its plain cells are
-  // gone with the shares (the cells by vertex read the pairs).
+  // Killed again just before a cells-by-vertex unit's stamp: the stage is stamped, and the shares are gone
+  // (the cells by vertex read the pairs).
   setenv("LODSTREAM_TEST_KILL_AT", "vertex-cells-0.json", 1);
   const test::CliRun killed_again = task(0);
   unsetenv("LODSTREAM_TEST_KILL_AT");
   EXPECT_EQ(killed_again.exit_code, 128 + SIGKILL);
   EXPECT_TRUE(std::filesystem::exists(work + "/cluster.json"));
   EXPECT_FALSE(std::filesystem::exists(stream::cluster_shares_dir(prefix)));
-  EXPECT_FALSE(std::filesystem::exists(stream::plain_cells_path(prefix, 0)));
   EXPECT_FALSE(stream::vertex_pairs_paths(prefix, 0).empty()) << "the pairs stay for the cells by vertex";
   // The records' positions in weight order stay spent: emptied, named still by the grading stage's stamp,
   // which holds.
