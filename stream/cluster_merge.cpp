@@ -200,11 +200,12 @@ unsigned merge_unit_count(const ClusterShareInput& in, const ClusterShares& plan
 }
 
 // The key every unit's stamp holds. map_entries, vertex_pairs: the sums and pairs units enter the maps at
-// their first records (no plain cells), and a phase of their own after the sums writes the pairs, packed (a
+// their first records (no plain cells; a map unit's stamp holds where its records begin in each map, for
+// the pairs unit of the same records), and a phase of their own after the sums writes the pairs, packed (a
 // set of units started by an older build wrote plain cells, or pairs of the older layout, or none).
 json merge_unit_key(const ClusterShareInput& in, const ClusterShares& plan, const json& key) {
   return {{"key", key}, {"split", split_levels(plan)}, {"units", merge_unit_count(in, plan)}, {"records", in.index.records},
-          {"map_entries", true}, {"vertex_pairs", "after the sums, packed"}};
+          {"map_entries", "in the map units' stamps"}, {"vertex_pairs", "after the sums, packed"}};
 }
 
 struct Merge {
@@ -263,17 +264,18 @@ struct Merge {
   static MapEntry entry_at(const RankedBits& c, uint64_t r) { return {map_bits_before(c, r), c.rank(r)}; }
 
   // Where phase 3's unit summing cells [first, end) of the split levels (their cells one level after another)
-  // starts: at the first of its levels' first cells' centers (sum_cell_info_range), each map entered there.
+  // starts: at the first of its levels' first cells' centers (sum_cell_info_range), the maps of those levels
+  // entered there (the others are not read).
   SumStart sums_start(uint64_t first, uint64_t end, const std::vector<uint64_t>& split_cells) const {
     SumStart start;
     start.record = in.index.records;
-    std::vector<RankedBits> centers;
-    for (size_t j = 0, before = 0; j < split.size(); before += split_cells[j], ++j) {
-      centers.push_back(load_centers(j));
-      if (first < before + split_cells[j] && end > before)
-        start.record = std::min<uint64_t>(start.record, centers[j].select(std::max<uint64_t>(first, before) - before));
-    }
-    for (size_t j = 0; j < split.size(); ++j) start.entries.push_back(entry_at(centers[j], start.record));
+    std::vector<std::optional<RankedBits>> centers(split.size());
+    for (size_t j = 0, before = 0; j < split.size(); before += split_cells[j], ++j)
+      if (first < before + split_cells[j] && end > before) {
+        centers[j] = load_centers(j);
+        start.record = std::min<uint64_t>(start.record, centers[j]->select(std::max<uint64_t>(first, before) - before));
+      }
+    for (size_t j = 0; j < split.size(); ++j) start.entries.push_back(centers[j] ? entry_at(*centers[j], start.record) : MapEntry{});
     return start;
   }
 
@@ -292,11 +294,12 @@ struct Merge {
   // neighbours returned as [level j, word, bits]), and its centers' positions for center representatives.
   json map_unit(unsigned u, const std::vector<json>& centers_values, Progress& progress) const {
     const uint64_t lo = units.lo(u), hi = units.hi(u), records = in.index.records;
-    json edges = json::array();
+    json edges = json::array(), entries = json::array();
     for (size_t j = 0; j < split.size(); ++j) {
       const size_t level = split[j];
       const RankedBits c = load_centers(j);
       const uint64_t start = map_bits_before(c, lo);
+      entries.push_back({start, lo < records ? c.rank(lo) : 0});  // where the pairs unit enters the map
       std::vector<uint64_t> words(1, 0);  // from word start / 64
       unsigned used = static_cast<unsigned>(start % 64);
       auto put = [&](uint64_t value, unsigned bits) {
@@ -362,7 +365,7 @@ struct Merge {
       if (from < to)
         io::OffsetFile(cells_path(in.prefix, level), O_WRONLY).write(&words[from - first], (to - from) * 8, from * 8);
     }
-    return {{"edges", edges}};
+    return {{"edges", edges}, {"entries", entries}};
   }
 
   // The shares' decisions (and centers) of the split levels, once every map unit is stamped: nothing reads
@@ -392,7 +395,7 @@ struct Merge {
   // (stream/vertex_pairs.h; the cells by vertex's), from the map entered at its first record and the order's
   // ids, a buffer at a time. Apart from phase 2 so that they are written once the shares' decisions are
   // spent: on the 193 M-triangle city at N = 8 the two made 7.8 GB together.
-  json pairs_unit(unsigned u, const std::vector<uint64_t>& split_cells, Progress& progress) const {
+  json pairs_unit(unsigned u, const std::vector<uint64_t>& split_cells, const std::vector<json>& maps, Progress& progress) const {
     const uint64_t lo = units.lo(u), hi = units.hi(u);
     const io::OffsetFile order(in.index.order_path, O_RDONLY);
     std::vector<uint32_t> ids(kPairsRead), cells(kPairsRead);
@@ -405,8 +408,10 @@ struct Merge {
       count_vertex_pairs(std::span<const uint32_t>(ids.data(), n), in.index.vertices, bucket_counts);
     }
     for (size_t j = 0; j < split.size(); ++j) {
-      // The map entered at the unit's first record (the whole map is written: phase 2's shared words too).
-      CellMapReader map(cells_path(in.prefix, split[j]), entry_at(load_centers(j), lo));
+      // The map entered at the unit's first record, where its map unit began (the whole map is written:
+      // phase 2's shared words too).
+      const json& entry = maps.at(u).at("entries").at(j);
+      CellMapReader map(cells_path(in.prefix, split[j]), MapEntry{entry.at(0).get<uint64_t>(), entry.at(1).get<uint64_t>()});
       VertexPairsWriter pairs(vertex_pairs_path(in.prefix, split[j], u), in.index.vertices, lo, hi, split_cells[j], bucket_counts);
       for (uint64_t r = lo; r < hi; r += kPairsRead) {
         progress.check();
@@ -532,7 +537,7 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   const std::string pairs_dir = m.dir + "pairs/";
   start_once(pairs_dir, pairs_dir + "start.json", unit_key, {"merge-pairs-"}, [] {});
   const std::vector<json> pairs = take_units_on_threads(pairs_dir, m.units.count, index, threads, "merge-pairs", unit_key,
-                                                        [&](unsigned u) { return m.pairs_unit(u, split_cells, progress); });
+                                                        [&](unsigned u) { return m.pairs_unit(u, split_cells, maps, progress); });
   out.units["pairs"] = unit_figures(pairs);
   return out;
 }

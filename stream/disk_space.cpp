@@ -129,12 +129,12 @@ uint64_t report_work_bytes(const SceneCounts& c) { return store_bytes(c) + inges
 //   representative (12 to 48 bytes a cell, about 12 cells per 100 vertices over all levels on the city),
 //   and during emit a level emitted in batches' representatives (24 bytes a cell of the finest level,
 //   taken as half the cells); a sharded run's add every level's cells by vertex (at most 4 bytes a stored vertex,
-//   packed to the level's bits, stream/vertex_cells.h) and, until those are written, the clustering merge's plain cells and pairs by
-//   vertex range (4 and at most 8 bytes a record a split level, stream/cluster_merge.h; every level counted; the
-//   shares' decisions, 8 bytes a record a split level too, are emptied before the pairs are written), which
+//   packed to the level's bits, stream/vertex_cells.h) and, until those are written, the clustering merge's pairs by
+//   vertex range (at most 8 bytes a record a split level, packed, stream/cluster_merge.h; every level counted;
+//   the shares' decisions, 8 bytes a record a split level too, are emptied before the pairs are written), which
 //   the tasks remove before the wide levels' units write their outputs (stream/wide_units.h: a bit a
 //   triangle and segment a wide level, and each block's deduplicated outputs; 86 MB for the 193 M-triangle
-//   city's three wide levels, within the 12 bytes a vertex and level so freed).
+//   city's three wide levels, within the 8 bytes a vertex and level so freed).
 // The GLB's binary data and the levels' scratch files are in the output directory (simplify_output_bytes),
 // not here.
 uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative representative, bool sharded) {
@@ -145,7 +145,7 @@ uint64_t simplify_work_bytes(const SceneCounts& c, size_t levels, Representative
                          (representative == Representative::mean ? 8 * v : 0);
   const uint64_t maps = static_cast<uint64_t>(levels) * ((v * static_cast<uint64_t>(std::bit_width(v)) + 7) / 8);
   const uint64_t info = v * 12 / 100 * cell_info_bytes(cell_info_kind(representative), c.single_precision);
-  const uint64_t reps = v * 6 / 100 * 24 + (sharded ? 16 * v * static_cast<uint64_t>(levels) : 0);
+  const uint64_t reps = v * 6 / 100 * 24 + (sharded ? 12 * v * static_cast<uint64_t>(levels) : 0);
   const uint64_t after_ingest = store_bytes(c) + weld + std::max(12 * v, index + maps + info + reps);
   return std::max(store_bytes(c) + ingest_transient_bytes(c), after_ingest);
 }
