@@ -51,7 +51,7 @@
 // merge before the units, and the whole-scene clustering): every record's cell is the rank of its center,
 // written at the map bits of the records before it.
 // Disk: the shares' decisions, 8 bytes a record a split level, until the map units are done; then the
-// pairs (the vertex's low bits and the cell, packed: 43 bits or fewer a record on the 193 M-triangle city's
+// pairs (the vertex's low bits and the cell, packed: 32 to 45 bits a record on the 193 M-triangle city's
 // levels) until the cells by vertex are written (packed to each level's bits, vertex_cells.h). On that city
 // at N = 8, five split levels, the decisions took 3.91 GB; before 2026-12-05 the plain cells 1.96 GB, the
 // pairs 3.91 GB and the cells by vertex 2.75 GB.

@@ -14,8 +14,9 @@
 // (u32 each), then the buckets' pair counts (u64 each), then each bucket's pairs in record order, packed:
 // pair i of a bucket at bit i·w of the bucket's words (w = shift + cell bits), the vertex's low `shift` bits
 // (its bucket gives the rest) and above them its cell in bit_width(cells - 1) bits (at least 1); each bucket
-// starts on a word. (Until 2026-12-05 a u32 vertex and a u32 cell: 64 bits a pair where the 193 M-triangle city's
-// levels take 43 or fewer; the pairs were then the largest item of the shared directory's peak.)
+// starts on a word. (Until 2026-12-05 a u32 vertex and a u32 cell: 64 bits a pair where the 193 M-triangle
+// city's levels take 32 to 45, 60 % of that over its five levels; the pairs were then the largest item of
+// the shared directory's peak.)
 // Invariant: a level's files hold every record of the weight index once, its vertex (the order's id) with
 // its cell, in the bucket of vertex >> shift.
 #pragma once
