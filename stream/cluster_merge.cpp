@@ -41,19 +41,21 @@ constexpr uint64_t kPairsRead = uint64_t{1} << 19;  // records a pairs unit read
 
 using json = nlohmann::ordered_json;
 
-// Reads a file of fixed-size items front to back, from item `first`, a buffer of whole items at a time
-// (pread: a mapped window costs a page fault a page, which on the 193 M-triangle city's 1.6 GB of decisions
-// was a tenth of the map units' time).
+// Reads a file of fixed-size items front to back, from item `first` to item `last` (or the file's end), a
+// buffer of whole items at a time (pread: a mapped window costs a page fault a page, which on the 193 M-
+// triangle city's 1.6 GB of decisions was a tenth of the map units' time). Nothing past `last` is read: the
+// map units free their items as they finish (Merge::free_unit_share_bytes), and a hole reads as zeros.
 class ItemReader {
  public:
-  ItemReader(const std::string& path, size_t item, uint64_t first = 0) : file_(path), item_(item), at_(first * item), end_(at_) {
-    if (file_.size() % item || at_ > file_.size()) fail(Status::io_error, path + ": cut short");
+  ItemReader(const std::string& path, size_t item, uint64_t first = 0, uint64_t last = UINT64_MAX)
+      : file_(path), item_(item), at_(first * item), end_(at_), limit_(std::min<uint64_t>(file_.size(), last == UINT64_MAX ? last : last * item)) {
+    if (file_.size() % item || at_ > limit_) fail(Status::io_error, path + ": cut short");
   }
   // The next item, or null after the last.
   const char* next() {
     if (at_ == end_) {
-      if (at_ >= file_.size()) return nullptr;
-      const uint64_t n = std::min<uint64_t>(file_.size() - at_, kReadBuffer / item_ * item_);
+      if (at_ >= limit_) return nullptr;
+      const uint64_t n = std::min<uint64_t>(limit_ - at_, kReadBuffer / item_ * item_);
       buffer_.resize(n);
       file_.read(at_, n, buffer_.data());
       end_ = at_ + n;
@@ -67,7 +69,7 @@ class ItemReader {
   io::MappedFile file_;
   size_t item_;
   std::vector<char> buffer_;
-  uint64_t at_, end_;
+  uint64_t at_, end_, limit_;
 };
 
 // The records [lo(u), hi(u)) of unit u: whole 64-record words (the last unit's end aside).
@@ -78,28 +80,41 @@ struct Units {
   uint64_t hi(unsigned u) const { return std::min(records, words * (u + 1) / count * 64); }
 };
 
-// Share s's decisions of split level `level` from its first record at or after `lo` (each share's file is
-// in record order: a binary search).
-std::unique_ptr<ItemReader> decisions_from(const ClusterShareInput& in, unsigned s, size_t level, uint64_t lo) {
+// The index of share s's first decision of split level `level` at or after record `lo` (each share's file
+// is in record order: a binary search). Phase 1 only: phase 2 takes it from phase 1's stamps, since the
+// decisions of the units done are freed meanwhile (their holes read as zeros).
+uint64_t decision_index(const ClusterShareInput& in, unsigned s, size_t level, uint64_t lo) {
+  if (lo == 0) return 0;
   const std::string path = cluster_share_decisions_path(in.prefix, s, level);
-  uint64_t first = 0;
-  if (lo > 0) {
-    const io::OffsetFile file(path, O_RDONLY);
-    first = file.partition_point<std::array<uint32_t, 2>>(std::filesystem::file_size(path) / 8,
-                                                          [&](const std::array<uint32_t, 2>& d) { return d[0] < lo; });
-  }
-  return std::make_unique<ItemReader>(path, 8, first);
+  const io::OffsetFile file(path, O_RDONLY);
+  return file.partition_point<std::array<uint32_t, 2>>(std::filesystem::file_size(path) / 8,
+                                                       [&](const std::array<uint32_t, 2>& d) { return d[0] < lo; });
+}
+std::unique_ptr<ItemReader> decisions_from(const ClusterShareInput& in, unsigned s, size_t level, uint64_t index,
+                                           uint64_t last = UINT64_MAX) {
+  return std::make_unique<ItemReader>(cluster_share_decisions_path(in.prefix, s, level), 8, index, last);
+}
+
+// Frees bytes [from, to) of the file at `path` (their blocks: a hole reads as zeros), where the file system
+// can (fallocate's PUNCH_HOLE; else nothing: the bytes stay until the file is emptied).
+void free_bytes(const std::string& path, uint64_t from, uint64_t to) {
+  if (to <= from) return;
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
+  if (fd < 0) return;
+  (void)::fallocate(fd, FALLOC_FL_PUNCH_HOLE | FALLOC_FL_KEEP_SIZE, static_cast<off_t>(from), static_cast<off_t>(to - from));
+  ::close(fd);
 }
 
 // Calls f(record, its center, share) for every record of [lo, hi) of split level `level`, in record order,
-// from the shares' decision files merged by record. Failure(io_error) when a record is decided twice, by no
+// from the shares' decision files merged by record, share s's from its decision first_decisions[s] to
+// next_decisions[s] (the next unit's first; null: to the file's end). Failure(io_error) when a record is decided twice, by no
 // share or past the index's records, or a decision names a later record as its center.
 // ahead(center) is called kDecisionsAhead decisions before f is called with that center, so that a caller
 // who looks the center up at random (its rank among the centers) can fetch it meanwhile.
 constexpr size_t kDecisionsAhead = 16;
 template <class Ahead, class F>
 void for_each_decision(const ClusterShareInput& in, const ClusterShares& plan, size_t level, uint64_t lo, uint64_t hi,
-                       Progress& progress, Ahead&& ahead, F&& f) {
+                       const json& first_decisions, const json* next_decisions, Progress& progress, Ahead&& ahead, F&& f) {
   struct Decision {
     uint64_t record;
     uint32_t center;
@@ -134,7 +149,8 @@ void for_each_decision(const ClusterShareInput& in, const ClusterShares& plan, s
     }
   };
   for (unsigned s = 0; s < plan.count; ++s) {
-    decs.push_back(decisions_from(in, s, level, lo));
+    decs.push_back(decisions_from(in, s, level, first_decisions.at(s).get<uint64_t>(),
+                                  next_decisions ? next_decisions->at(s).get<uint64_t>() : UINT64_MAX));
     advance(s);
     if (held) heads.push(*held), held.reset();
   }
@@ -205,7 +221,8 @@ unsigned merge_unit_count(const ClusterShareInput& in, const ClusterShares& plan
 // set of units started by an older build wrote plain cells, or pairs of the older layout, or none).
 json merge_unit_key(const ClusterShareInput& in, const ClusterShares& plan, const json& key) {
   return {{"key", key}, {"split", split_levels(plan)}, {"units", merge_unit_count(in, plan)}, {"records", in.index.records},
-          {"map_entries", "in the map units' stamps"}, {"vertex_pairs", "after the sums, packed"}};
+          {"map_entries", "in the map units' stamps"}, {"vertex_pairs", "after the sums, packed"},
+          {"decisions", "freed by the map units"}};
 }
 
 struct Merge {
@@ -232,13 +249,14 @@ struct Merge {
   json centers_unit(unsigned u, Progress& progress) const {
     const uint64_t lo = units.lo(u), hi = units.hi(u);
     const io::OffsetFile bits(bits_path, O_WRONLY);
-    json centers = json::array(), share_centers = json::array();
+    json centers = json::array(), share_centers = json::array(), first_decisions = json::array();
     for (size_t j = 0; j < split.size(); ++j) {
       std::vector<uint64_t> words((hi - lo + 63) / 64, 0);
-      std::vector<uint64_t> per_share(plan.count, 0);
+      std::vector<uint64_t> per_share(plan.count, 0), first(plan.count, 0);
       uint64_t n = 0;
       for (unsigned s = 0; s < plan.count; ++s) {
-        const std::unique_ptr<ItemReader> dec = decisions_from(in, s, split[j], lo);
+        first[s] = decision_index(in, s, split[j], lo);
+        const std::unique_ptr<ItemReader> dec = decisions_from(in, s, split[j], first[s]);
         uint64_t seen = 0;
         while (const char* p = dec->next()) {
           uint32_t pair[2];
@@ -256,8 +274,9 @@ struct Merge {
       bits.write(words.data(), words.size() * 8, (j * units.words + lo / 64) * 8);
       centers.push_back(n);
       share_centers.push_back(per_share);
+      first_decisions.push_back(first);
     }
-    return {{"centers", centers}, {"share_centers", share_centers}};
+    return {{"centers", centers}, {"share_centers", share_centers}, {"first_decisions", first_decisions}};
   }
 
   // Where record r's cell starts in split level j's map, whose centers' bits are c (cell_map_file.h).
@@ -290,6 +309,33 @@ struct Merge {
     }
   }
 
+  // Share s's centers of split level j in the units before u (where unit u's begin in its .ctr file).
+  static uint64_t centers_before(const std::vector<json>& centers_values, unsigned u, size_t j, unsigned s) {
+    uint64_t before = 0;
+    for (unsigned v = 0; v < u; ++v) before += centers_values[v].at("share_centers").at(j).at(s).get<uint64_t>();
+    return before;
+  }
+
+  // After map unit u's stamp (stream/units.h: its records are in the map for good), the shares' decisions
+  // (and centers) of its records are read by nothing: freed, so that the decisions give back their disk as
+  // the map units go rather than all at the phase's end (spend_share_files). Their start in each file is
+  // phase 1's stamp's, as phase 2 reads them; the last unit's end is the file's.
+  void free_unit_share_bytes(unsigned u, const std::vector<json>& centers_values) const {
+    if (!in.spend_decisions) return;
+    for (size_t j = 0; j < split.size(); ++j)
+      for (unsigned s = 0; s < plan.count; ++s) {
+        const std::string dec = cluster_share_decisions_path(in.prefix, s, split[j]);
+        std::error_code ec;
+        const uint64_t first = centers_values.at(u).at("first_decisions").at(j).at(s).get<uint64_t>();
+        const uint64_t end = u + 1 < units.count ? centers_values.at(u + 1).at("first_decisions").at(j).at(s).get<uint64_t>()
+                                                 : std::filesystem::file_size(dec, ec) / 8;
+        if (!ec) free_bytes(dec, 8 * first, 8 * end);
+        if (centers_info())
+          free_bytes(cluster_share_centers_path(in.prefix, s, split[j]), centers_before(centers_values, u, j, s) * center_bytes(),
+                     centers_before(centers_values, u + 1, j, s) * center_bytes());
+      }
+  }
+
   // Phase 2, unit u: its records' cells in every split level's map, in place (the words shared with its
   // neighbours returned as [level j, word, bits]), and its centers' positions for center representatives.
   json map_unit(unsigned u, const std::vector<json>& centers_values, Progress& progress) const {
@@ -319,11 +365,9 @@ struct Merge {
       uint64_t info_cell = lo < records ? c.rank(lo) : 0;
       std::unique_ptr<io::OffsetFile> info_file;
       if (centers_info()) {
-        for (unsigned s = 0; s < plan.count; ++s) {
-          uint64_t before = 0;
-          for (unsigned v = 0; v < u; ++v) before += centers_values[v].at("share_centers").at(j).at(s).get<uint64_t>();
-          ctrs.push_back(std::make_unique<ItemReader>(cluster_share_centers_path(in.prefix, s, level), center_bytes(), before));
-        }
+        for (unsigned s = 0; s < plan.count; ++s)
+          ctrs.push_back(std::make_unique<ItemReader>(cluster_share_centers_path(in.prefix, s, level), center_bytes(),
+                                                      centers_before(centers_values, u, j, s)));
         info_file = std::make_unique<io::OffsetFile>(cell_info_path(in.prefix, level), O_WRONLY);
       }
       auto flush_info = [&] {
@@ -333,7 +377,9 @@ struct Merge {
       };
       uint64_t bits = 0, made = info_cell;  // the bits put, and the cells made before the record (its rank)
       auto fetch = [&](uint32_t center) { c.prefetch(center); };  // a center earlier in the order, at random
-      for_each_decision(in, plan, level, lo, hi, progress, fetch, [&](uint64_t r, uint32_t center, unsigned s) {
+      const json* next = u + 1 < units.count ? &centers_values.at(u + 1).at("first_decisions").at(j) : nullptr;
+      for_each_decision(in, plan, level, lo, hi, centers_values.at(u).at("first_decisions").at(j), next, progress, fetch,
+                        [&](uint64_t r, uint32_t center, unsigned s) {
         if (!c.has(center))
           fail(Status::io_error, cluster_share_decisions_path(in.prefix, s, level) + ": a member of a record that is no center");
         const unsigned width = static_cast<unsigned>(std::bit_width(made));
@@ -368,20 +414,29 @@ struct Merge {
     return {{"edges", edges}, {"entries", entries}};
   }
 
-  // The shares' decisions (and centers) of the split levels, once every map unit is stamped: nothing reads
-  // them again, and the pairs units are about to write as many bytes. Emptied, not removed, so that the
-  // shares' stamps, which name them, still hold for a process that comes late (it finds every unit done).
-  // Every process that gets here does it (the same result whoever does); one that comes after the stage's
-  // stamp, which removes the shares' directory, finds nothing left to do.
-  void spend_share_files(const json& unit_key) const {
-    if (!in.spend_decisions) return;
+  // Before phase 2 frees a byte of the shares' files: the units' key, in cluster-shares/spent.json, so that
+  // a merge under another key knows it cannot read them (forget_shares_spent_elsewhere). Returns false when
+  // the shares' directory is gone (another process has stamped the stage: nothing is left to spend).
+  bool mark_shares_spent(const json& unit_key) const {
+    if (!in.spend_decisions) return false;
     std::error_code ec;
     try {
       io::write_file_atomic(spent_path(in.prefix), json{{"key", unit_key}}.dump() + "\n", io::Sync::durable, io::Writers::several);
     } catch (const Failure&) {
-      if (!std::filesystem::exists(cluster_shares_dir(in.prefix), ec)) return;
+      if (!std::filesystem::exists(cluster_shares_dir(in.prefix), ec)) return false;
       throw;
     }
+    return true;
+  }
+
+  // The shares' decisions (and centers) of the split levels, once every map unit is stamped: nothing reads
+  // them again, and the pairs units are about to write as many bytes. Emptied (what the map units freed
+  // as they went, and what a file system without holes kept), not removed, so that the shares' stamps,
+  // which name them, still hold for a process that comes late (it finds every unit done). Every process
+  // that gets here does it (the same result whoever does); one that comes after the stage's stamp, which
+  // removes the shares' directory, finds nothing left to do.
+  void spend_share_files(const json& unit_key) const {
+    if (!mark_shares_spent(unit_key)) return;
     for (unsigned s = 0; s < plan.count; ++s)
       for (size_t level : split)
         for (const std::string& path : {cluster_share_decisions_path(in.prefix, s, level), cluster_share_centers_path(in.prefix, s, level)})
@@ -518,8 +573,10 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   // An older start's stamps and pairs go (each unit writes its pairs file whole).
   // (and an older build's plain cells, map/cells-L.u32, which the sums and pairs units read until 2026-12-05)
   start_once(map_dir, cells_path(in.prefix, m.split.back()), unit_key, {"merge-map-", "pairs-", "cells-"}, [&] { m.size_outputs(); });
-  const std::vector<json> maps = take_units_on_threads(map_dir, m.units.count, index, threads, "merge-map", unit_key,
-                                                     [&](unsigned u) { return m.map_unit(u, centers, progress); });
+  m.mark_shares_spent(unit_key);
+  const std::vector<json> maps = take_units_on_threads(
+      map_dir, m.units.count, index, threads, "merge-map", unit_key, [&](unsigned u) { return m.map_unit(u, centers, progress); },
+      [&](unsigned u) { m.free_unit_share_bytes(u, centers); });
   m.write_edges(maps);
   m.spend_share_files(unit_key);
   std::vector<uint64_t> split_cells(m.split.size(), 0);

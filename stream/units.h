@@ -37,10 +37,15 @@ void write_stamp(const std::string& path, const nlohmann::ordered_json& key, con
 // `dir` (one process a share), reused when its stamp is there, else run, then stamped. run() returns the
 // stamp's files and value; `kill` is the test kill point just before the stamp (empty: none). Returns the
 // stamp's value; with `wait` false, nothing when another process holds the share's lock.
-template <class Run>
+// after(): called once the stamp is written, by the process that ran the share (a step that must not come
+// before the stamp: freeing what only the share read).
+struct NothingAfter {
+  void operator()() const {}
+};
+template <class Run, class After = NothingAfter>
 std::optional<nlohmann::ordered_json> share_unless_held(const std::string& dir, unsigned share, const std::string& stamp,
                                                         const nlohmann::ordered_json& key, const std::string& kill, bool wait,
-                                                        Run&& run) {
+                                                        Run&& run, const After& after = {}) {
   const ShardLock share_lock(dir, fmt::format("share-{}.lock", share), wait);
   if (!share_lock.held()) return std::nullopt;
   nlohmann::ordered_json v;
@@ -50,6 +55,7 @@ std::optional<nlohmann::ordered_json> share_unless_held(const std::string& dir, 
   // tests/slurm_test.sh: a share task killed before its stamp (a later process runs the share again)
   if (!kill.empty()) kill_point(kill);
   write_stamp(stamp, key, files, value);
+  after();
   return value;
 }
 template <class Run>
@@ -61,18 +67,22 @@ nlohmann::ordered_json stamped_share(const std::string& dir, unsigned share, con
 // Units of a stage that every process of a sharded run takes part in, in `dir`, unit u stamped at
 // stamp(u) with `key`: first every unit that no other process holds (from `index` on, so that processes
 // starting together take different units), then every unit in turn, waiting for those another process
-// holds; a unit whose holder died is run here. run(u) returns the unit's stamp's files and value. Returns
-// every unit's stamp value.
-template <class Stamp, class Run>
+// holds; a unit whose holder died is run here. run(u) returns the unit's stamp's files and value; after(u)
+// follows its stamp where this process ran it. Returns every unit's stamp value.
+struct NothingAfterUnit {
+  void operator()(unsigned) const {}
+};
+template <class Stamp, class Run, class After = NothingAfterUnit>
 std::vector<nlohmann::ordered_json> take_units(const std::string& dir, unsigned units, unsigned index, const Stamp& stamp,
-                                               const nlohmann::ordered_json& key, const Run& run) {
+                                               const nlohmann::ordered_json& key, const Run& run, const After& after = {}) {
   std::filesystem::create_directories(dir);
   for (unsigned k = 0; k < units; ++k) {
     const unsigned u = (index + k) % units;
-    share_unless_held(dir, u, stamp(u), key, "", false, [&] { return run(u); });
+    share_unless_held(dir, u, stamp(u), key, "", false, [&] { return run(u); }, [&] { after(u); });
   }
   std::vector<nlohmann::ordered_json> values;
-  for (unsigned u = 0; u < units; ++u) values.push_back(stamped_share(dir, u, stamp(u), key, "", [&] { return run(u); }));
+  for (unsigned u = 0; u < units; ++u)
+    values.push_back(*share_unless_held(dir, u, stamp(u), key, "", true, [&] { return run(u); }, [&] { after(u); }));
   return values;
 }
 
@@ -88,11 +98,12 @@ inline unsigned unit_threads(uint64_t units, uint64_t fit) {
 
 // take_units on `threads` of this process's threads at once, each starting at its own unit (index · threads
 // + t), for units whose stamps are dir/STEM-u.json and which write their outputs in place (no files in the
-// stamp). Each unit's stamp value gets its wall seconds ("seconds") and runner ("by"). Returns every
-// unit's stamp value.
-template <class Run>
+// stamp). Each unit's stamp value gets its wall seconds ("seconds") and runner ("by"); after(u) as
+// take_units'. Returns every unit's stamp value.
+template <class Run, class After = NothingAfterUnit>
 std::vector<nlohmann::ordered_json> take_units_on_threads(const std::string& dir, unsigned units, unsigned index, unsigned threads,
-                                                          const char* stem, const nlohmann::ordered_json& key, const Run& run) {
+                                                          const char* stem, const nlohmann::ordered_json& key, const Run& run,
+                                                          const After& after = {}) {
   std::vector<std::vector<nlohmann::ordered_json>> values(threads);
   tbb::parallel_for(0u, threads, [&](unsigned t) {
     values[t] = take_units(
@@ -103,7 +114,8 @@ std::vector<nlohmann::ordered_json> take_units_on_threads(const std::string& dir
           v["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
           v["by"] = unit_runner();
           return std::pair(std::vector<std::string>{}, std::move(v));
-        });
+        },
+        after);
   });
   return values.front();
 }
