@@ -87,11 +87,14 @@ if [ $slurm -eq 1 ]; then
   python3 -c 'import json,sys; m=json.load(open(sys.argv[1])); print("  one machine stages:", ", ".join("%s %.1f s" % (s["name"], s["seconds"]) for s in m["stages"]))' \
     "$out/one/manifest.json" | tee -a "$out/bench.txt"
   rm -rf "$work" "$out/sharded"
-  # The shared directories' size, sampled while the jobs run: a line a sample, the total (du counts a file
-  # linked twice once), then each entry of the two directories as name=bytes.
+  # The shared directories' size, sampled while the jobs run: a line a sample, the total of the blocks the
+  # disk holds for them (du counts a file linked twice once), their apparent size (the files' lengths,
+  # @apparent=bytes: holes and files sized ahead of being filled count whole; what this bench reported
+  # until 2026-12-06), then each entry of the two directories as name=bytes held.
   ( while :; do
-      { du -sb "$work" "$out/sharded" 2>/dev/null | awk '{s += $1} END {printf "%.0f", s}'
-        du -sb "$work"/* "$out/sharded"/* 2>/dev/null | awk '{n = $2; sub(".*/", "", n); printf " %s=%s", n, $1}'
+      { du -sB1 "$work" "$out/sharded" 2>/dev/null | awk '{s += $1} END {printf "%.0f", s}'
+        du -sb "$work" "$out/sharded" 2>/dev/null | awk '{s += $1} END {printf " @apparent=%.0f", s}'
+        du -sB1 "$work"/* "$out/sharded"/* 2>/dev/null | awk '{n = $2; sub(".*/", "", n); printf " %s=%s", n, $1}'
         echo; } || true
       sleep 2
     done ) >"$logs/shared-bytes.txt" &
@@ -187,10 +190,13 @@ for line in open(sizes).read().replace("\0", " ").splitlines():
     if f and re.fullmatch(r"[0-9.e+]+", f[0]):
         samples.append((int(float(f[0])), {k: int(v) for k, v in (x.split("=", 1) for x in f[1:] if "=" in x)}))
 peak = max(samples, default=(0, {}), key=lambda x: x[0])
-print("  shared directories (work + output), largest sample: %.2f GB (input %.2f GB, %.2fx)" %
+print("  shared directories (work + output), largest sample of the disk they hold: %.2f GB (input %.2f GB, %.2fx)" %
       (peak[0] / 1e9, m["input"]["bytes"] / 1e9, peak[0] / max(m["input"]["bytes"], 1)))
-big = sorted(peak[1].items(), key=lambda x: -x[1])[:6]
+big = sorted(((k, v) for k, v in peak[1].items() if not k.startswith("@")), key=lambda x: -x[1])[:6]
 print("    at that sample: " + ", ".join("%s %.2f GB" % (k, v / 1e9) for k, v in big))
+apparent = max((x[1].get("@apparent", 0) for x in samples), default=0)
+print("    largest apparent size (files' lengths, holes and space sized ahead counted whole, as reported until 2026-12-06): %.2f GB (%.2fx)" %
+      (apparent / 1e9, apparent / max(m["input"]["bytes"], 1)))
 PY
   same_outputs "$out/one" "$out/sharded"
   echo "results in $out/bench.txt"
