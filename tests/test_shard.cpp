@@ -1267,6 +1267,19 @@ std::vector<std::string> room_cli_args(std::vector<std::string> a) {
   return a;
 }
 
+// Through the CLI: `count` tasks of the simplify command line `argv` (with --shard I/count added), one after
+// another, then `lodstream merge` of `out`: each must succeed.
+void run_cli_tasks_and_merge(const std::vector<std::string>& argv, unsigned count, const std::string& out, const TempDir& log) {
+  for (unsigned i = 0; i < count; ++i) {
+    std::vector<std::string> a = argv;
+    a.push_back("--shard"), a.push_back(std::to_string(i) + "/" + std::to_string(count));
+    const test::CliRun t = test::run_cli(a, log);
+    ASSERT_EQ(t.exit_code, 0) << t.err;
+  }
+  const test::CliRun m = test::run_cli({"merge", out}, log);
+  ASSERT_EQ(m.exit_code, 0) << m.err;
+}
+
 // Through the CLI: three tasks started at once on a fresh work directory (the first to take the lock runs
 // the shared stages, the others wait and reuse them), a task killed with SIGKILL just before its summary,
 // merge refusing, the task rerun alone, merge: one machine's bytes.
@@ -1336,14 +1349,8 @@ TEST(Shard, AKilledCentersUnitIsRunByTheNextShare) {
   ASSERT_EQ(next.exit_code, 0) << next.err;
   EXPECT_TRUE(std::filesystem::exists(centers + "level-4.json")) << "the next share ran the unit";
   EXPECT_FALSE(std::filesystem::exists(stream::cluster_share_stamp(work + "/", 0))) << "share 0 is still to run";
-  for (unsigned i = 0; i < 3; ++i) {
-    const test::CliRun t = test::run_cli(args({"simplify", sample_room(), "-o", dir.file("out"), "--work", work, "--shard",
-                                               std::to_string(i) + "/3", "--cluster-shards", "3"}),
-                                         log);
-    ASSERT_EQ(t.exit_code, 0) << t.err;
-  }
-  const test::CliRun m = test::run_cli({"merge", dir.file("out")}, log);
-  ASSERT_EQ(m.exit_code, 0) << m.err;
+  run_cli_tasks_and_merge(args({"simplify", sample_room(), "-o", dir.file("out"), "--work", work, "--cluster-shards", "3"}), 3,
+                          dir.file("out"), log);
   EXPECT_EQ(outputs(dir.file("out")), outputs(dir.file("one")));
 }
 
@@ -1503,14 +1510,8 @@ TEST(Shard, SharesDecisionsAreSpentOnceTheMapIsWrittenAndRunAgainForAnotherMerge
   };
   const test::CliRun one3 = test::run_cli(three_levels({"simplify", sample_room(), "-o", dir.file("one3")}), log);
   ASSERT_EQ(one3.exit_code, 0) << one3.err;
-  for (unsigned i = 0; i < 3; ++i) {
-    const test::CliRun t = test::run_cli(three_levels({"simplify", sample_room(), "-o", dir.file("out3"), "--work", work, "--shard",
-                                                       std::to_string(i) + "/3", "--cluster-shards", "3"}),
-                                         log);
-    ASSERT_EQ(t.exit_code, 0) << t.err;
-  }
-  const test::CliRun m3 = test::run_cli({"merge", dir.file("out3")}, log);
-  ASSERT_EQ(m3.exit_code, 0) << m3.err;
+  run_cli_tasks_and_merge(three_levels({"simplify", sample_room(), "-o", dir.file("out3"), "--work", work, "--cluster-shards", "3"}), 3,
+                          dir.file("out3"), log);
   EXPECT_EQ(outputs(dir.file("out3")), outputs(dir.file("one3")));
   EXPECT_EQ(slurp(work + "/grade.json"), grade_stamp) << "the grading stage ran again";
   EXPECT_EQ(std::filesystem::file_size(positions), 0u);
