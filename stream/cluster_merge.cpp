@@ -17,6 +17,7 @@
 #include <memory>
 #include <optional>
 #include <queue>
+#include <span>
 
 #include <fmt/format.h>
 
@@ -106,15 +107,16 @@ void free_bytes(const std::string& path, uint64_t from, uint64_t to) {
 }
 
 // Calls f(record, its center, share) for every record of [lo, hi) of split level `level`, in record order,
-// from the shares' decision files merged by record, share s's from its decision first_decisions[s] to
-// next_decisions[s] (the next unit's first; null: to the file's end). Failure(io_error) when a record is decided twice, by no
+// from the shares' decision files merged by record, share s's decisions [first[s], last[s]) (last: UINT64_MAX
+// for the file's end). Failure(io_error) when a record is decided twice, by no
 // share or past the index's records, or a decision names a later record as its center.
 // ahead(center) is called kDecisionsAhead decisions before f is called with that center, so that a caller
 // who looks the center up at random (its rank among the centers) can fetch it meanwhile.
 constexpr size_t kDecisionsAhead = 16;
 template <class Ahead, class F>
 void for_each_decision(const ClusterShareInput& in, const ClusterShares& plan, size_t level, uint64_t lo, uint64_t hi,
-                       const json& first_decisions, const json* next_decisions, Progress& progress, Ahead&& ahead, F&& f) {
+                       std::span<const uint64_t> first, std::span<const uint64_t> last, Progress& progress, Ahead&& ahead,
+                       F&& f) {
   struct Decision {
     uint64_t record;
     uint32_t center;
@@ -149,8 +151,7 @@ void for_each_decision(const ClusterShareInput& in, const ClusterShares& plan, s
     }
   };
   for (unsigned s = 0; s < plan.count; ++s) {
-    decs.push_back(decisions_from(in, s, level, first_decisions.at(s).get<uint64_t>(),
-                                  next_decisions ? next_decisions->at(s).get<uint64_t>() : UINT64_MAX));
+    decs.push_back(decisions_from(in, s, level, first[s], last[s]));
     advance(s);
     if (held) heads.push(*held), held.reset();
   }
@@ -309,6 +310,12 @@ struct Merge {
     }
   }
 
+  // Share s's first decision of split level j in unit u (its index in the share's file), from phase 1's
+  // stamps; past the last unit, UINT64_MAX (the file's end).
+  static uint64_t first_decision(const std::vector<json>& centers_values, unsigned u, size_t j, unsigned s) {
+    return u < centers_values.size() ? centers_values[u].at("first_decisions").at(j).at(s).get<uint64_t>() : UINT64_MAX;
+  }
+
   // Share s's centers of split level j in the units before u (where unit u's begin in its .ctr file).
   static uint64_t centers_before(const std::vector<json>& centers_values, unsigned u, size_t j, unsigned s) {
     uint64_t before = 0;
@@ -326,10 +333,9 @@ struct Merge {
       for (unsigned s = 0; s < plan.count; ++s) {
         const std::string dec = cluster_share_decisions_path(in.prefix, s, split[j]);
         std::error_code ec;
-        const uint64_t first = centers_values.at(u).at("first_decisions").at(j).at(s).get<uint64_t>();
-        const uint64_t end = u + 1 < units.count ? centers_values.at(u + 1).at("first_decisions").at(j).at(s).get<uint64_t>()
-                                                 : std::filesystem::file_size(dec, ec) / 8;
-        if (!ec) free_bytes(dec, 8 * first, 8 * end);
+        const uint64_t items = std::filesystem::file_size(dec, ec) / 8;
+        if (!ec)
+          free_bytes(dec, 8 * first_decision(centers_values, u, j, s), 8 * std::min(items, first_decision(centers_values, u + 1, j, s)));
         if (centers_info())
           free_bytes(cluster_share_centers_path(in.prefix, s, split[j]), centers_before(centers_values, u, j, s) * center_bytes(),
                      centers_before(centers_values, u + 1, j, s) * center_bytes());
@@ -344,8 +350,8 @@ struct Merge {
     for (size_t j = 0; j < split.size(); ++j) {
       const size_t level = split[j];
       const RankedBits c = load_centers(j);
-      const uint64_t start = map_bits_before(c, lo);
-      entries.push_back({start, lo < records ? c.rank(lo) : 0});  // where the pairs unit enters the map
+      const uint64_t start = map_bits_before(c, lo), made_before = lo < records ? c.rank(lo) : 0;
+      entries.push_back({start, made_before});  // where the pairs unit enters the map
       std::vector<uint64_t> words(1, 0);  // from word start / 64
       unsigned used = static_cast<unsigned>(start % 64);
       auto put = [&](uint64_t value, unsigned bits) {
@@ -362,7 +368,7 @@ struct Merge {
       // The centers' positions: share s's first center of this unit is its centers in the units before.
       std::vector<std::unique_ptr<ItemReader>> ctrs;
       std::vector<char> info;
-      uint64_t info_cell = lo < records ? c.rank(lo) : 0;
+      uint64_t info_cell = made_before;
       std::unique_ptr<io::OffsetFile> info_file;
       if (centers_info()) {
         for (unsigned s = 0; s < plan.count; ++s)
@@ -377,8 +383,10 @@ struct Merge {
       };
       uint64_t bits = 0, made = info_cell;  // the bits put, and the cells made before the record (its rank)
       auto fetch = [&](uint32_t center) { c.prefetch(center); };  // a center earlier in the order, at random
-      const json* next = u + 1 < units.count ? &centers_values.at(u + 1).at("first_decisions").at(j) : nullptr;
-      for_each_decision(in, plan, level, lo, hi, centers_values.at(u).at("first_decisions").at(j), next, progress, fetch,
+      std::vector<uint64_t> share_from(plan.count), share_to(plan.count);  // each share's decisions of the unit
+      for (unsigned s = 0; s < plan.count; ++s)
+        share_from[s] = first_decision(centers_values, u, j, s), share_to[s] = first_decision(centers_values, u + 1, j, s);
+      for_each_decision(in, plan, level, lo, hi, share_from, share_to, progress, fetch,
                         [&](uint64_t r, uint32_t center, unsigned s) {
         if (!c.has(center))
           fail(Status::io_error, cluster_share_decisions_path(in.prefix, s, level) + ": a member of a record that is no center");
@@ -433,10 +441,10 @@ struct Merge {
   // them again, and the pairs units are about to write as many bytes. Emptied (what the map units freed
   // as they went, and what a file system without holes kept), not removed, so that the shares' stamps,
   // which name them, still hold for a process that comes late (it finds every unit done). Every process
-  // that gets here does it (the same result whoever does); one that comes after the stage's stamp, which
-  // removes the shares' directory, finds nothing left to do.
-  void spend_share_files(const json& unit_key) const {
-    if (!mark_shares_spent(unit_key)) return;
+  // that gets here does it (the same result whoever does; the mark is written before phase 2); one that
+  // comes after the stage's stamp, which removes the shares' directory, finds nothing left to do.
+  void spend_share_files() const {
+    if (!in.spend_decisions) return;
     for (unsigned s = 0; s < plan.count; ++s)
       for (size_t level : split)
         for (const std::string& path : {cluster_share_decisions_path(in.prefix, s, level), cluster_share_centers_path(in.prefix, s, level)})
@@ -541,8 +549,16 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   SplitMerge out;
   std::vector<uint64_t>& cells = out.cells;
   cells.assign(plan.whole_share.size(), 0);
+  // The records' positions in weight order are read by nothing after the sums (and the shares, all run
+  // before the merge): spent (position_gather.h), before the pairs are written.
+  auto spend_positions = [&] {
+    if (in.spend_decisions && !in.index.ordered_positions_path.empty()) spend_ordered_positions(in.index.ordered_positions_path);
+  };
   Merge m{in, plan, split_levels(plan), {}, cluster_merge_dir(in.prefix), ""};
-  if (m.split.empty()) return out;
+  if (m.split.empty()) {
+    spend_positions();
+    return out;
+  }
   const uint64_t records = in.index.records;
   m.units.records = records;
   m.units.words = (records + 63) / 64;
@@ -578,7 +594,7 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
       map_dir, m.units.count, index, threads, "merge-map", unit_key, [&](unsigned u) { return m.map_unit(u, centers, progress); },
       [&](unsigned u) { m.free_unit_share_bytes(u, centers); });
   m.write_edges(maps);
-  m.spend_share_files(unit_key);
+  m.spend_share_files();
   std::vector<uint64_t> split_cells(m.split.size(), 0);
   for (size_t j = 0; j < m.split.size(); ++j) {
     for (const json& v : centers) split_cells[j] += v.at("centers").at(j).get<uint64_t>();
@@ -586,9 +602,7 @@ SplitMerge merge_split_levels(const ClusterShareInput& in, const ClusterShares& 
   }
   out.units = {{"units", m.units.count}, {"centers", unit_figures(centers)}, {"map", unit_figures(maps)}};
   if (!m.centers_info()) out.units["sums"] = m.sums_phase(unit_key, split_cells, index, progress);
-  // The records' positions in weight order are read by nothing after the sums (position_gather.h): spent
-  // before the pairs are written.
-  if (in.spend_decisions && !in.index.ordered_positions_path.empty()) spend_ordered_positions(in.index.ordered_positions_path);
+  spend_positions();
   // Phase 4: the pairs by vertex range. Started is its own stamp (start_once's file argument is for a file
   // the units fill in place; they write their own).
   const std::string pairs_dir = m.dir + "pairs/";

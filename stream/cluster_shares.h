@@ -122,7 +122,8 @@ struct ClusterShareInput {
   bool split_by_records = true;
   // The key the centers units' stamps hold (the caller's share key; empty: the plan's).
   nlohmann::ordered_json key{};
-  // The merge empties the shares' decision files once its map units are done (stream/cluster_merge.h), so
+  // The merge frees the shares' decisions as its map units finish and empties the files once they are all
+  // done, and empties the records' positions in weight order after its sums (stream/cluster_merge.h), so
   // that they take no disk while it writes the pairs. A sharded run sets it; the tests that merge one set of
   // shares several times do not.
   bool spend_decisions = false;

@@ -83,10 +83,10 @@ class PositionGather {
 // passes), a third of its CPU.
 // Invariant: record i holds exactly the bytes the store's column holds for vertex order[i].
 std::string ordered_positions_path(const std::string& prefix, bool single_precision);
-// After the cluster stage of a sharded run is stamped nothing reads the file (the emit reads the store's
-// column), so it is spent: emptied, its name kept because the grading stage's stamp names it (1.17 GB of
-// the 193 M-triangle city's shared directory, gone before the cells by vertex and the tasks' parts are
-// written). A pass that needs positions in weight order again (a clustering at other sizes) finds it empty
+// Once the clustering merge of a sharded run has summed its cells nothing reads the file (the emit reads
+// the store's column), so it is spent (stream/cluster_merge.h): emptied, its name kept because the grading
+// stage's stamp names it (1.17 GB of the 193 M-triangle city's shared directory, gone before the pairs, the
+// cells by vertex and the tasks' parts are written). A pass that needs positions in weight order again (a clustering at other sizes) finds it empty
 // and reads the store's column by id instead (live_ordered_positions), the same positions.
 void spend_ordered_positions(const std::string& path);
 // `path` when it holds positions (not spent, not absent), else "" (read the store's column).

@@ -836,7 +836,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         stream::ClusterShareInput in{index, bounds, sizes, copts, info_kind, fine, plan.stage_bytes, options.chunk_bytes,
                                      prefix, &work};
         in.vertex_cells = true, in.canonical_path = canonical;  // the tasks read them (stream/vertex_cells.h)
-        in.spend_decisions = true;  // emptied once the merge's map is written (stream/cluster_merge.h)
+        // The shares' decisions freed as the merge's map is written, the positions in weight order after its
+        // sums (stream/cluster_merge.h).
+        in.spend_decisions = true;
         const stream::ClusterShares shares = stream::shared_cluster_plan(in, cluster_shares, key, progress);  // under the lock
         ordered_json share_key = key;
         share_key["shares"] = shares.json();
@@ -938,13 +940,9 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         if (in_shares)
           for (char b : vertex_cells_written) value["vertex_cells"].push_back(b != 0);
         write_stamp(work.file("cluster.json"), key, files, value);
-        // The shares are spent once the stage is stamped (the whole levels' maps are links to their files),
-        // and the records' positions in weight order (the clustering merge spends them after its sums; not
-        // when every level is whole).
-        if (in_shares) {
-          std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
-          stream::spend_ordered_positions(positions_path);
-        }
+        // The shares are spent once the stage is stamped (the whole levels' maps are links to their files).
+        // (The records' positions in weight order are spent by the clustering merge, after its sums.)
+        if (in_shares) std::filesystem::remove_all(stream::cluster_shares_dir(prefix));
         std::filesystem::remove_all(stream::grade_merge_dir(prefix));  // the grading merge's units' stamps (grade_stage)
         return cs.cells;
       };

@@ -55,11 +55,7 @@ class RandomFile {
     char w[16];
     if (::pread(fd_, w, bytes, static_cast<off_t>(bit / 64 * 8)) != static_cast<ssize_t>(bytes))
       fail(Status::io_error, partial_ + ": cannot read back");
-    uint64_t x;
-    std::memcpy(&x, w, 8);
-    uint64_t v = x >> (bit % 64);
-    if (bytes == 16) std::memcpy(&x, w + 8, 8), v |= x << (64 - bit % 64);
-    v &= (uint64_t{1} << bits) - 1;
+    const uint64_t v = read_bits(w, bit % 64, bits);
     return v == (uint64_t{1} << bits) - 1 ? kNoCell : static_cast<uint32_t>(v);
   }
   void commit() {

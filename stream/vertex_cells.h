@@ -32,6 +32,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "stream/bit_fields.h"
 #include "stream/progress.h"
 
 namespace lodstream::stream {
@@ -49,16 +50,8 @@ inline uint64_t packed_field_bytes(uint64_t n, unsigned bits) { return (n * bits
 inline uint64_t vertex_cells_bytes(uint64_t vertices, uint64_t cells) { return packed_field_bytes(vertices, vertex_cell_bits(cells)); }
 // `cells` (kNoCell: none) as fields of `bits` bits from bit 0 of `words`, resized to whole words.
 void pack_vertex_cells(std::span<const uint32_t> cells, unsigned bits, std::vector<uint64_t>& words);
-// Field i of `bits` bits (at most 32) of the words at `data` (any alignment), of which the bytes up to the
-// end of the field are readable.
-inline uint64_t packed_field(const char* data, uint64_t i, unsigned bits) {
-  const uint64_t bit = i * bits, s = bit % 64;
-  uint64_t w;
-  std::memcpy(&w, data + bit / 64 * 8, 8);
-  uint64_t x = w >> s;
-  if (s + bits > 64) std::memcpy(&w, data + bit / 64 * 8 + 8, 8), x |= w << (64 - s);
-  return x & ((uint64_t{1} << bits) - 1);
-}
+// Field i of `bits` bits (at most 32) of the words at `data` (read_bits).
+inline uint64_t packed_field(const char* data, uint64_t i, unsigned bits) { return read_bits(data, i * bits, bits); }
 // Unit u of `units`' vertices: [u·V/units, (u+1)·V/units), each end rounded down to a multiple of 64 (but
 // the last, V), so that the unit's fields start on a word.
 std::pair<uint64_t, uint64_t> vertex_cells_unit_range(uint64_t vertices, unsigned unit, unsigned units);

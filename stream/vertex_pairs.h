@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "io/offset_file.h"
+#include "stream/bit_fields.h"
 
 namespace lodstream::stream {
 
@@ -93,20 +94,16 @@ class VertexPairs {
     for (const File& file : files_) {
       if (file.cell_bits != pair_cell_bits(cells)) bad(file);
       const unsigned w = shift_ + file.cell_bits;
-      const uint64_t mask = (uint64_t{1} << w) - 1, low = (uint64_t{1} << shift_) - 1;
+      const uint64_t low = (uint64_t{1} << shift_) - 1;
       for (uint64_t b = lo >> shift_; b < file.counts.size() && (b << shift_) < hi; ++b)
         for (uint64_t i = 0; i < file.counts[b];) {
           // Pairs [i, i + n): the words from the one holding pair i's first bit to the one holding the last's.
           const uint64_t n = std::min<uint64_t>(file.counts[b] - i, kReadPairs), w0 = i * w / 64;
           const uint64_t words = ((i + n) * w + 63) / 64 - w0;
-          buf.resize(words + 1);
+          buf.resize(words);
           file.file->read(buf.data(), 8 * words, file.words_at + 8 * (file.offsets[b] + w0));
-          buf[words] = 0;
           for (uint64_t k = i; k < i + n; ++k) {
-            const uint64_t bit = k * w - 64 * w0, s = bit % 64;
-            uint64_t x = buf[bit / 64] >> s;
-            if (s + w > 64) x |= buf[bit / 64 + 1] << (64 - s);
-            x &= mask;
+            const uint64_t x = read_bits(reinterpret_cast<const char*>(buf.data()), k * w - 64 * w0, w);
             const uint64_t v = (b << shift_) | (x & low), c = x >> shift_;
             if (c >= cells) bad(file);
             if (v - lo < hi - lo) f(static_cast<uint32_t>(v), static_cast<uint32_t>(c));  // unsigned: below lo wraps around
