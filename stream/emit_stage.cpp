@@ -1091,43 +1091,24 @@ std::vector<Block> collapsed_subblocks(const std::vector<Block>& blocks, const s
   return marked_subblocks(blocks, marked);
 }
 
-std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
-                                      const std::string& prefix, std::span<const EmitLevel> group, uint64_t records,
-                                      const core::ClusterOptions& cluster, const EmitOptions& options, Progress& progress,
-                                      EmitScratch& emit_scratch, const EmitSink& sink,
-                                      std::span<const std::pair<uint32_t, uint32_t>> route_batches, BatchRoutes* routes) {
-  const size_t nl = group.size();
-  if (nl == 0) return {};
-  std::vector<LevelState> levels(nl);
-  unsigned bits = 0;
-  for (size_t l = 0; l < nl; ++l) {
-    LevelState& L = levels[l];
-    L.in = group[l];
-    const unsigned b = emit_bits(L.in.cells);
-    L.shift = bits, L.mask = b == 64 ? ~uint64_t{0} : (uint64_t{1} << b) - 1;
-    bits += b;
-  }
-  if (bits > 64) fail(Status::internal, "emit: a group's cluster maps need more than 64 bits per vertex");
-
-  // The group's cluster maps: stored vertex id -> one record holding every level's cell. Each record is
-  // composed from all the levels' cell files at once and written once. The records are random writes (the
-  // weight index is in grade order); the threads split them by vertex range, each range a whole number of
-  // words so that no two threads write one word, and each thread reads every record (sequential, cheap).
-  PackedMap map;
-  // For a task's batched levels, the map is read from each level's cells by vertex (vertex_cells.h), in
-  // vertex order, instead of decoded from the weight-ordered streams: the same records.
-  bool by_file = options.vertex_cells && !routes && !options.count_only && !options.representatives_only;
-  for (const LevelState& L : levels) by_file = by_file && L.in.batched;
-  // The batches of a level (its representatives' passes and its routing) all use the one map: built for
-  // the first, kept in the scratch for the others (map_key names what it was built from, files' sizes and
-  // times included).
-  // So do a process's units of pass A (EmitOptions::classify_unit), which share their group's map.
+// The group's packed map over every stored vertex (one machine's levels, a task's routed or counted ones),
+// decoded from the levels' cluster maps in weight order, the welded vertices taking their canonical ones'
+// records; or, for the next batch of a lone level or the next unit of pass A, the scratch's (map_key).
+// Each record is composed from all the levels' maps at once and written once. The records are random
+// writes (the weight index is in grade order); the threads split them by vertex range, each range a whole
+// number of words so that no two threads write one word, and each thread reads every record (sequential,
+// cheap).
+void whole_packed_map(PackedMap& map, std::span<const LevelState> levels, unsigned bits, const std::string& prefix,
+                      const std::string& canonical_path, const StoreMeta& meta, uint64_t records, bool routes,
+                      const EmitOptions& options, EmitScratch& emit_scratch) {
+  const size_t nl = levels.size();
+  emit_scratch.paged.reset();
   const bool lone_batched = nl == 1 && (levels[0].in.batched || routes || options.representatives_only);
   std::string map_key;
   if (lone_batched) map_key = packed_map_key(prefix, canonical_path, levels[0].in, meta.vertices, records);
   if (options.classify_unit)
     for (const LevelState& L : levels) {
-      const std::string k = packed_map_key(prefix, canonical_path, L.in, meta.vertices, records, by_file);
+      const std::string k = packed_map_key(prefix, canonical_path, L.in, meta.vertices, records);
       if (k.empty()) {
         map_key.clear();
         break;
@@ -1140,37 +1121,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   else map.reset(emit_scratch.map, meta.vertices, bits);
   const size_t parts = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
   const uint64_t per_part = ((meta.vertices + parts - 1) / parts + 63) / 64 * 64;  // 64 records: whole words
-  if (!reuse && by_file) {
-    // Each level's file holds its fields of the record (vertex_cells.h: the same width, all ones for no
-    // cell); the parts' chunks start at multiples of 64 vertices, so on a word of every file.
-    std::vector<std::unique_ptr<io::MappedFile>> files;
-    std::vector<unsigned> field_bits;
-    for (const LevelState& L : levels) {
-      field_bits.push_back(vertex_cell_bits(L.in.cells));
-      files.push_back(std::make_unique<io::MappedFile>(vertex_cells_path(prefix, L.in.level)));
-      if (files.back()->size() != vertex_cells_bytes(meta.vertices, L.in.cells))
-        fail(Status::io_error, files.back()->path() + ": size does not match the store and the level's cells");
-    }
-    tbb::parallel_for(size_t{0}, parts, [&](size_t part) {
-      const uint64_t lo = std::min(meta.vertices, part * per_part), hi = std::min(meta.vertices, lo + per_part);
-      constexpr uint64_t kChunk = 1 << 18;
-      std::vector<io::Window> w(nl);
-      for (uint64_t first = lo; first < hi; first += kChunk) {
-        const uint64_t end = std::min(hi, first + kChunk);
-        for (size_t l = 0; l < nl; ++l)
-          w[l] = files[l]->map(first * field_bits[l] / 8, first * field_bits[l] / 8 + packed_field_bytes(end - first, field_bits[l]));
-        for (uint64_t v = first; v < end; ++v) {
-          uint64_t record = 0;
-          for (size_t l = 0; l < nl; ++l) {
-            const uint64_t c = packed_field(w[l].data(), v - first, field_bits[l]);
-            if (c != levels[l].mask && c >= levels[l].in.cells) fail(Status::io_error, files[l]->path() + ": cell id out of range");
-            record |= c << levels[l].shift;
-          }
-          map.set(v, record);
-        }
-      }
-    });
-  } else if (!reuse) {
+  if (!reuse) {
     io::MappedFile order(order_path(prefix));
     if (order.size() != records * 4) fail(Status::io_error, order.path() + ": size does not match the weight index");
     constexpr uint64_t kChunk = 1 << 18;
@@ -1203,6 +1154,52 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       WeldFile(canonical_path, meta.vertices).for_each_welded([&](uint64_t v, uint32_t canon) { map.set(v, map.get(canon)); });
   }
   emit_scratch.map_key = map_key;
+}
+
+std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreMeta& meta, const std::string& canonical_path,
+                                      const std::string& prefix, std::span<const EmitLevel> group, uint64_t records,
+                                      const core::ClusterOptions& cluster, const EmitOptions& options, Progress& progress,
+                                      EmitScratch& emit_scratch, const EmitSink& sink,
+                                      std::span<const std::pair<uint32_t, uint32_t>> route_batches, BatchRoutes* routes) {
+  const size_t nl = group.size();
+  if (nl == 0) return {};
+  std::vector<LevelState> levels(nl);
+  unsigned bits = 0;
+  for (size_t l = 0; l < nl; ++l) {
+    LevelState& L = levels[l];
+    L.in = group[l];
+    const unsigned b = emit_bits(L.in.cells);
+    L.shift = bits, L.mask = b == 64 ? ~uint64_t{0} : (uint64_t{1} << b) - 1;
+    bits += b;
+  }
+  if (bits > 64) fail(Status::internal, "emit: a group's cluster maps need more than 64 bits per vertex");
+
+  // The group's cluster maps: stored vertex id -> one record holding every level's cell (PackedMap).
+  // A task's batched levels read theirs from each level's cells by vertex (vertex_cells.h), paged
+  // (stream/paged_vertex_map.h): only the pages of 64 vertices that the blocks of each group of run_blocks
+  // (and pass C's batches) touch are held, read before the group runs. The batches of a level and a
+  // process's units of pass A (EmitOptions::classify_unit) keep the one paged map with its pages (map_key
+  // names the files, their sizes and times included). Any other group: whole_packed_map.
+  PackedMap map;
+  bool by_file = options.vertex_cells && !routes && !options.count_only && !options.representatives_only;
+  for (const LevelState& L : levels) by_file = by_file && L.in.batched;
+  PagedVertexMap* paged = nullptr;
+  if (by_file) {
+    std::string key = "paged " + std::to_string(options.paged_map_capacity);
+    for (const LevelState& L : levels) key += "|" + packed_map_key(prefix, canonical_path, L.in, meta.vertices, records, true);
+    if (emit_scratch.map_key != key || !emit_scratch.paged) {
+      emit_scratch.map_key.clear();
+      emit_scratch.paged.reset();
+      std::vector<uint64_t>().swap(emit_scratch.map);  // a whole map from before is not held beside the pages
+      std::vector<PagedVertexMap::Level> files;
+      for (const LevelState& L : levels) files.push_back({vertex_cells_path(prefix, L.in.level), L.in.cells, L.shift});
+      emit_scratch.paged = std::make_unique<PagedVertexMap>(files, meta.vertices, options.paged_map_capacity, options.paged_figures);
+    }
+    emit_scratch.map_key = key;
+    paged = emit_scratch.paged.get();
+  } else {
+    whole_packed_map(map, levels, bits, prefix, canonical_path, meta, records, routes != nullptr, options, emit_scratch);
+  }
 
   StorePositions positions(store_dir, meta);
   positions.acquire();
@@ -1252,7 +1249,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // A vertex's record; every level's field is all ones exactly when the vertex has no cell, so the first
   // level's field tells.
   auto record_of = [&](uint32_t v) {
-    const uint64_t r = map.get(v);
+    const uint64_t r = paged ? paged->get(v) : map.get(v);
     if ((r & levels[0].mask) == levels[0].mask) fail(Status::internal, "emit: vertex " + std::to_string(v) + " has no cell");
     return r;
   };
@@ -1274,6 +1271,17 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       std::vector<BlockOut>& current = outs[k % 2];
       std::vector<BlockOut>& previous = outs[(k + 1) % 2];
       const size_t before = std::min(g, blocks.size());  // the blocks of the groups before g
+      // The paged map's pages of the group's primitives, read before its blocks run (no merge reads it).
+      if (paged && n > 0) {
+        for (size_t i = 0; i < n; ++i) {
+          const Block& b = blocks[g + i];
+          if (segments_and_triangles_only && b.kind == 2) continue;
+          const uint64_t arity = static_cast<uint64_t>(3 - b.kind);
+          const io::Window w = columns[b.kind]->map(b.first * arity * 4, (b.first + b.count) * arity * 4);
+          paged->want(std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), b.count * arity));
+        }
+        paged->load();
+      }
       tbb::task_group merging;
       if (merged < before) merging.run([&] {
         for (size_t i = 0; merged + i < before; ++i) merge(&previous[i * nl]);
@@ -1679,6 +1687,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     auto visit_batch = [&](auto&& visit) {
       ids.resize(batch.size());
       for (size_t i = 0; i < batch.size(); ++i) ids[i] = static_cast<uint32_t>(batch[i]);
+      if (paged) paged->want(ids), paged->load();
       xyz.resize(3 * batch.size());
       gather.gather(ids, xyz.data(), gs);
       size_t l = 0;
@@ -1692,7 +1701,11 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       batch.clear();
     };
     // A pair in the batch: its key, id, position and the gather's slot (8 + 4 + 24 + 4 bytes).
-    const size_t batch_size = static_cast<size_t>(std::max<uint64_t>(options.corner_bytes / 3 / 40, 1024));
+    // With a paged map, no more pairs than its capacity holds pages (a pair's vertex may be on a page of its
+    // own): the batch's pages are held at once. The batches change no sum (they are in pair order).
+    uint64_t batch_pairs = options.corner_bytes / 3 / 40;
+    if (paged) batch_pairs = std::min(batch_pairs, options.paged_map_capacity / (8 * uint64_t{paged->bits()}));
+    const size_t batch_size = static_cast<size_t>(std::max<uint64_t>(batch_pairs, 1024));
     ExternalSorter<uint64_t, std::less<uint64_t>> distinct(dir, "corners-distinct", sort_bytes);
     auto sum_positions = [&](LevelState& L, uint32_t e, bool in_a, const double* p) {
       EdgeSums& s = L.kept_sums[e];

@@ -43,6 +43,7 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -52,6 +53,7 @@
 #include "lodstream/lodstream.h"
 #include "stream/block_bounds.h"
 #include "stream/memory.h"
+#include "stream/paged_vertex_map.h"
 #include "stream/emit_regions.h"
 #include "stream/progress.h"
 #include "stream/scene_store.h"
@@ -83,9 +85,12 @@ struct EmitOptions {
   // cell size of the batch's regions, then of its halo cells (stream/block_bounds.h). The same bytes.
   const BlockBounds* block_bounds = nullptr;
   // Batched levels only: read the group's packed map from the levels' vertex-cells files (written by the
-  // shared stages, stream/vertex_cells.h) instead of decoding every record of the cluster maps. The same
-  // map.
+  // shared stages, stream/vertex_cells.h) instead of decoding every record of the cluster maps, paged
+  // (stream/paged_vertex_map.h): only the pages of the vertices the group's blocks touch, at most
+  // paged_map_capacity bytes of them but a group's own. The same records.
   bool vertex_cells = false;
+  uint64_t paged_map_capacity = 64ull << 20;
+  PagedMapFigures* paged_figures = nullptr;  // where the paged maps' figures are added, if anywhere
   // Batched levels only (a sharded task's, stream/shard.h): form the representatives of the batch's own and
   // halo cells from the cell table and, for quadric representatives, quadrics summed in pass A, instead of
   // reading them from the level's representatives file. The same bytes: pass A visits every triangle that
@@ -129,6 +134,9 @@ struct EmitCounts {
 struct EmitScratch {
   std::vector<uint64_t> map;
   std::string map_key;
+  // A task's paged map (EmitOptions::vertex_cells), kept with its pages for the next batch or unit of the
+  // same levels (map_key).
+  std::unique_ptr<PagedVertexMap> paged;
 };
 
 // Which batches of a batched level visit which primitives (route_batches below): per kind (triangles,

@@ -72,6 +72,7 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
     ordered_json m = tasks[0].at("manifest");
     m.erase("input_primitives_read");  // a task's own figures: the first goes under "shards"
     m.erase("regions");
+    m.erase("paged_map");
     const size_t levels = m.at("levels").size();
     const unsigned count = static_cast<unsigned>(tasks.size());
     SimplifyReport report;
@@ -155,6 +156,7 @@ Result merge(const std::string& output_dir, const Options& options, SimplifyRepo
       const ordered_json& tm = tasks[t].at("manifest");
       shards.push_back({{"index", t}, {"stages", tm.at("stages")}, {"seconds", tm.at("seconds")}, {"peak_rss_bytes", tm.at("peak_rss_bytes")},
                         {"input_primitives_read", tm.value("input_primitives_read", uint64_t{0})}});
+      if (tm.contains("paged_map")) shards.back()["paged_map"] = tm.at("paged_map");
     }
     m["stages"] = stages;
     m["seconds"] = report.seconds;

@@ -247,8 +247,8 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   // Memory of a batched level (as plan_emit_level counts it): pass A's tables for the batch's cells and its
   // halo (half as many again), with their quadrics (the task sums its cells' own), the quadrics of the ring
   // beyond the halo (pass Q: half as many again), its per-cell tables (and the quadrics' index, 4 bytes a
-  // cell) and its share of the blocks in flight; and the group's packed cluster map (read from the
-  // vertex-cells files, stream/vertex_cells.h).
+  // cell) and its share of the blocks in flight; and the group's packed cluster map, paged from the
+  // vertex-cells files (stream/paged_vertex_map.h: at most an eighth of the budget of pages, its page table).
   const bool quadrics = in.options.representative == Representative::quadric;
   const uint64_t per_cell = emit_level_bytes(1, 0, in.options) * 3 / 2 + (quadrics ? sizeof(core::Quadric) / 2 : 0);
   const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), in.options) + emit_corner_bytes(in.budget);
@@ -259,6 +259,8 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   const BlockBounds bounds = read_block_bounds(block_bounds_path(in.prefix), meta);
   std::atomic<uint64_t> read{0};
   emit.block_bounds = &bounds, emit.primitives_read = &read, emit.vertex_cells = true;
+  emit.paged_map_capacity = paged_map_capacity(in.budget, in.options.chunk_bytes);
+  auto map_bytes = [&](unsigned bits) { return paged_map_bytes(meta.vertices, bits, emit.paged_map_capacity); };
 
   // The wide levels whose pass A ran as units (wide_units.h).
   std::set<size_t> classified_levels;
@@ -285,7 +287,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
     std::vector<std::vector<uint32_t>> region_of;
     for (size_t l : group)
       region_of.push_back(load_region_of(in.prefix, l, in.cells[l], cube, cuts[l], in.options.representative, meta.single_precision));
-    if (group.size() > 1 || emit_map_bytes(meta.vertices, bits) + bytes <= in.budget) {
+    if (group.size() > 1 || map_bytes(bits) + bytes <= in.budget) {
       // Wide levels whose pass A ran as units (wide_units.h): read from the units' files.
       std::vector<std::vector<std::string>> classified;
       if (std::all_of(group.begin(), group.end(), [&](size_t l) { return classified_levels.count(l) > 0; })) {
@@ -309,7 +311,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
       for (size_t i = 0; i < group.size(); ++i) add(group[i], c[i]);
       return;
     }
-    const uint64_t room = in.budget - emit_map_bytes(meta.vertices, bits) - level_bytes(first, 0);
+    const uint64_t room = in.budget - map_bytes(bits) - level_bytes(first, 0);
     const uint64_t batch_cells = std::max<uint64_t>(1, room / per_cell);
     for (uint32_t r = runs[first].first; r < runs[first].second;) {
       uint64_t held = cuts[first].cells[r];
@@ -333,7 +335,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
       if (runs[l].first < runs[l].second && wide_level(cuts, l, count) == wide) levels.push_back(l);
     for (size_t i = 0; i < levels.size();) {
       const size_t first = levels[i];
-      const uint64_t alone = emit_map_bytes(meta.vertices, emit_bits(in.cells[first])) + level_bytes(first, largest[first]);
+      const uint64_t alone = map_bytes(emit_bits(in.cells[first])) + level_bytes(first, largest[first]);
       if (alone > in.budget)
         fail(Status::usage, fmt::format("task {} of {}: emitting level {} ({} cells) region by region needs about {} MiB, "
                                         "more than --memory allows ({} MiB for the stage): raise --memory",
@@ -342,12 +344,12 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
       unsigned bits = emit_bits(in.cells[first]);
       uint64_t bytes = level_bytes(first, share[first]);
       size_t j = i + 1;
-      if (emit_map_bytes(meta.vertices, bits) + bytes <= in.budget)
+      if (map_bytes(bits) + bytes <= in.budget)
         for (; j < levels.size(); ++j) {
           const size_t l = levels[j];
           const unsigned b = bits + emit_bits(in.cells[l]);
           const uint64_t w = bytes + level_bytes(l, share[l]);
-          if (b > 64 || emit_map_bytes(meta.vertices, b) + w > in.budget) break;
+          if (b > 64 || map_bytes(b) + w > in.budget) break;
           group.push_back(l), bits = b, bytes = w;
         }
       emit_group(group, bits, bytes);

@@ -751,6 +751,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     ordered_json shard_tiles;  // a sharded run's 3D Tiles options, for merge
     ordered_json shard_store;  // a sharded run's material table and colour flag, for merge's level files
     uint64_t primitives_read = 0;  // a sharded task's emit: the input primitives its passes read
+    stream::PagedMapFigures paged_figures;  // a sharded task's paged maps (stream/paged_vertex_map.h)
     std::vector<std::array<uint32_t, 3>> shard_runs;  // and its run of each level's regions (stream/shard.h)
 
     tbb::task_arena arena(static_cast<int>(plan.threads));
@@ -1176,6 +1177,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
         stream::EmitOptions shard_emit;
         shard_emit.representative = so.representative, shard_emit.crease_degrees = so.crease_degrees;
         shard_emit.work = &work, shard_emit.chunk_bytes = options.chunk_bytes;
+        shard_emit.paged_figures = &paged_figures;
         shard_input = {store_dir, canonical, prefix, &meta, grade.records, copts, shard_emit, plan.stage_bytes, so.tile_triangles,
                        sizes, cells, so.write_tiles};
         // The store's block boxes (stream/block_bounds.h) and every level's cells by vertex
@@ -1418,6 +1420,13 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
     m["work_dir"] = stream::work_dir_json(report.work_dir);
     if (sharded) {
       m["input_primitives_read"] = primitives_read;
+      m["paged_map"] = {{"maps", paged_figures.maps},
+                        {"pages", paged_figures.pages},
+                        {"pages_read", paged_figures.pages_read},
+                        {"reads", paged_figures.reads},
+                        {"drops", paged_figures.drops},
+                        {"largest_group_pages", paged_figures.largest_group},
+                        {"largest_bytes", paged_figures.largest_bytes}};
       m["regions"] = shard_runs;
       write_shard_task(so, report, m, shard_tiles, shard_store);
       *out = std::move(report);

@@ -27,14 +27,17 @@ WideUnitsPlan plan_wide_units(const ShardEmitInput& in, const std::vector<LevelC
     return emit_level_bytes(in.cells[l], meta.primitives(), in.options) + kLevelBytesPerCell * in.cells[l] +
            (meta.triangles + meta.lines + 63) / 64 * 8;
   };
+  // The group's packed map, paged as the units' emit holds it (stream/paged_vertex_map.h).
+  const uint64_t capacity = paged_map_capacity(in.budget, in.options.chunk_bytes);
+  auto map_bytes = [&](unsigned bits) { return paged_map_bytes(meta.vertices, bits, capacity); };
   unsigned bits = 0;
   uint64_t bytes = 0;
   for (size_t l = 0; l < cuts.size(); ++l) {
     if (!wide_level(cuts, l, count)) continue;
     const unsigned b = emit_bits(in.cells[l]);
     const uint64_t w = level_bytes(l);
-    if (emit_map_bytes(meta.vertices, b) + w > in.budget) continue;  // its task classifies it (in batches, if need be)
-    if (plan.groups.empty() || bits + b > 64 || emit_map_bytes(meta.vertices, bits + b) + bytes + w > in.budget) {
+    if (map_bytes(b) + w > in.budget) continue;  // its task classifies it (in batches, if need be)
+    if (plan.groups.empty() || bits + b > 64 || map_bytes(bits + b) + bytes + w > in.budget) {
       plan.groups.emplace_back();
       bits = 0, bytes = 0;
     }
@@ -58,6 +61,7 @@ nlohmann::ordered_json run_wide_units(const ShardEmitInput& in, unsigned index, 
   const uint64_t blocks = emit_block_count(meta);
   EmitOptions options = in.options;
   options.own_representatives = true, options.vertex_cells = true, options.primitives_read = &read;
+  options.paged_map_capacity = paged_map_capacity(in.budget, in.options.chunk_bytes);
   std::vector<ordered_json> values;
   for (size_t g = 0; g < plan.groups.size(); ++g) {
     const std::vector<size_t>& group = plan.groups[g];

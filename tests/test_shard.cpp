@@ -37,6 +37,7 @@
 #include "stream/report_samples.h"
 #include "stream/scene_store.h"
 #include "stream/shard.h"
+#include "stream/paged_vertex_map.h"
 #include "stream/vertex_cells.h"
 #include "stream/wide_units.h"
 #include "stream/vertex_pairs.h"
@@ -177,6 +178,189 @@ TEST(Shard, TasksInBatchesUnderASmallBudgetGiveTheSameBytes) {
   const Result r = run_tasks(dir.file("small"), dir.file("work"), 2, {0, 1}, min_memory_bytes, true, &merged);
   ASSERT_TRUE(r.ok()) << r.message;
   EXPECT_EQ(outputs(dir.file("small")), outputs(dir.file("one")));
+}
+
+// The paged map (stream/paged_vertex_map.h) of three levels' cells by vertex, written as the shared stages
+// write them (pack_vertex_cells), at a capacity of a few pages: every group's records are the fields of
+// every level at their shifts, groups past the held pages drop them, a group larger than the capacity is
+// held whole, and a page not loaded, a cell out of range or a file of the wrong size are refused.
+TEST(PagedMap, GroupsReadTheirPagesAndDropTheRest) {
+  TempDir dir;
+  const uint64_t vertices = 64 * 300 + 17;  // the last page partial
+  const std::vector<uint64_t> cells = {1000, 5, 70000};
+  std::vector<std::vector<uint32_t>> cell(cells.size(), std::vector<uint32_t>(vertices));
+  std::vector<stream::PagedVertexMap::Level> levels;
+  uint64_t seed = 12345;
+  auto next = [&] { return seed = seed * 6364136223846793005ull + 1442695040888963407ull, seed >> 33; };
+  unsigned shift = 0;
+  for (size_t l = 0; l < cells.size(); ++l) {
+    for (uint64_t v = 0; v < vertices; ++v) cell[l][v] = next() % 13 == 0 ? stream::kNoCell : static_cast<uint32_t>(next() % cells[l]);
+    std::vector<uint64_t> words;
+    stream::pack_vertex_cells(cell[l], stream::vertex_cell_bits(cells[l]), words);
+    const std::string path = dir.file("level-" + std::to_string(l) + ".bits");
+    io::write_file_atomic(path, std::string(reinterpret_cast<const char*>(words.data()), words.size() * 8));
+    levels.push_back({path, cells[l], shift});
+    shift += stream::vertex_cell_bits(cells[l]);
+  }
+  const unsigned bits = shift;
+  auto expected = [&](uint64_t v) {
+    uint64_t r = 0;
+    for (size_t l = 0; l < cells.size(); ++l) {
+      const unsigned b = stream::vertex_cell_bits(cells[l]);
+      const uint64_t c = cell[l][v] == stream::kNoCell ? (uint64_t{1} << b) - 1 : cell[l][v];
+      r |= c << levels[l].shift;
+    }
+    return r;
+  };
+  stream::PagedMapFigures figures;
+  stream::PagedVertexMap map(levels, vertices, 8 * bits * 8, &figures);  // 8 pages
+  ASSERT_EQ(map.bits(), bits);
+  uint64_t checked = 0;
+  for (int group = 0; group < 40; ++group) {
+    // Runs of nearby vertices (consecutive pages) and a few far ones; every eighth group 20 pages' worth.
+    std::vector<uint32_t> ids;
+    const uint64_t base = next() % vertices;
+    const int n = group % 8 == 7 ? 20 : 3;
+    for (int k = 0; k < n; ++k) ids.push_back(static_cast<uint32_t>(k < n - 1 ? (base + 64 * k) % vertices : next() % vertices));
+    ids.push_back(static_cast<uint32_t>(vertices - 1));
+    map.want(ids);
+    map.load();
+    for (uint32_t v : ids) {
+      ASSERT_EQ(map.get(v), expected(v)) << "vertex " << v << " of group " << group;
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 100u);
+  EXPECT_EQ(figures.maps, 1u);
+  EXPECT_EQ(figures.pages, (vertices + 63) / 64);
+  EXPECT_GT(figures.drops, 0u) << "groups past the 8 held pages drop them";
+  EXPECT_GE(figures.largest_group, 20u);
+  EXPECT_GE(figures.largest_bytes, 20u * bits * 8) << "a group larger than the capacity is held whole";
+  EXPECT_GT(figures.pages_read, figures.reads / cells.size()) << "runs of consecutive pages are read at once";
+  // A page no group loaded since the last drop.
+  map.want(std::vector<uint32_t>(20, 0)), map.load();
+  std::vector<uint32_t> far;
+  for (uint32_t p = 100; p < 110; ++p) far.push_back(64 * p);
+  map.want(far), map.load();  // 11 pages with page 0: past 8, so page 0 was dropped first
+  try {
+    map.get(0);
+    ADD_FAILURE() << "a page not held must be refused";
+  } catch (const Failure& f) {
+    EXPECT_EQ(f.status(), Status::internal);
+  }
+  // A cell out of its level's range.
+  {
+    std::vector<uint32_t> bad = cell[1];
+    bad[70] = 6;  // level 1 has 5 cells: 3 bits hold 6
+    std::vector<uint64_t> words;
+    stream::pack_vertex_cells(bad, stream::vertex_cell_bits(cells[1]), words);
+    io::write_file_atomic(levels[1].path, std::string(reinterpret_cast<const char*>(words.data()), words.size() * 8));
+    stream::PagedVertexMap m(levels, vertices, 1 << 20);
+    m.want(std::vector<uint32_t>{0});
+    m.load();  // page 0 holds vertices 0..63
+    m.want(std::vector<uint32_t>{70});
+    try {
+      m.load();
+      ADD_FAILURE() << "a cell out of range must be refused";
+    } catch (const Failure& f) {
+      EXPECT_EQ(f.status(), Status::io_error);
+      EXPECT_NE(std::string(f.what()).find("cell id out of range"), std::string::npos) << f.what();
+    }
+  }
+  // A file of another size.
+  try {
+    stream::PagedVertexMap m(levels, vertices + 64, 1 << 20);
+    ADD_FAILURE() << "a file of the wrong size must be refused";
+  } catch (const Failure& f) {
+    EXPECT_EQ(f.status(), Status::io_error);
+  }
+}
+
+// `copies` copies of the sample room side by side along x, 10 m apart, each copy's vertices and faces after
+// the previous copy's: a scene whose blocks of primitives each reach only their own copy's vertex ids.
+std::string rooms_side_by_side(const TempDir& dir, int copies) {
+  const std::string room = slurp(sample_room());
+  const size_t body = room.find("end_header\n") + 11;
+  const uint64_t vertices = 160266, faces = 141261;  // the header's counts (checked below)
+  EXPECT_NE(room.find("element vertex 160266\n"), std::string::npos);
+  EXPECT_NE(room.find("element face 141261\n"), std::string::npos);
+  const char* v = room.data() + body;
+  const char* f = v + 12 * vertices;
+  std::string vs, fs;
+  for (int c = 0; c < copies; ++c) {
+    for (uint64_t i = 0; i < vertices; ++i) {
+      float xyz[3];
+      std::memcpy(xyz, v + 12 * i, 12);
+      xyz[0] += 10.0f * static_cast<float>(c);
+      vs.append(reinterpret_cast<const char*>(xyz), 12);
+    }
+    const char* p = f;
+    for (uint64_t i = 0; i < faces; ++i) {
+      const uint8_t n = static_cast<uint8_t>(*p++);
+      fs.push_back(static_cast<char>(n));
+      for (uint8_t k = 0; k < n; ++k, p += 4) {
+        int32_t id;
+        std::memcpy(&id, p, 4);
+        id += static_cast<int32_t>(vertices) * c;
+        fs.append(reinterpret_cast<const char*>(&id), 4);
+      }
+    }
+    EXPECT_EQ(static_cast<size_t>(p - room.data()), room.size()) << "the room's faces end the file";
+  }
+  const std::string path = dir.file("rooms.ply");
+  io::write_file_atomic(path, fmt::format("ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\n"
+                                          "property float y\nproperty float z\nelement face {}\n"
+                                          "property list uchar int vertex_indices\nend_header\n",
+                                          vertices * copies, faces * copies) +
+                                  vs + fs);
+  return path;
+}
+
+// Tasks whose paged maps hold a few pages (--chunk-bytes caps their capacity: a group's own pages and no
+// more) drop and read pages again group after group, in pass A, the halo pass, pass Q, pass B and pass C's
+// batches (on one thread, 4 blocks a group, over three rooms whose blocks reach only their own room's
+// vertices, so that pass C's corners lie in pages pass B's last group did not hold): one machine's bytes.
+TEST(Shard, TasksDroppingTheirMapsPagesGiveOneMachinesBytes) {
+  TempDir dir;
+  const std::string rooms = rooms_side_by_side(dir, 3);
+  Options o = shared_work(dir);
+  SimplifyReport one;
+  ASSERT_TRUE(simplify(rooms, room_options(dir.file("one")), o, &one).ok());
+  for (const unsigned count : {1u, 2u}) {
+    for (const uint64_t chunk : {uint64_t{0}, uint64_t{16} << 10}) {
+      SCOPED_TRACE(fmt::format("{} tasks, chunk bytes {}", count, chunk));
+      const std::string name = fmt::format("{}-{}", count, chunk);
+      const std::string out = dir.file("sharded-" + name), work = dir.file("work-" + name);
+      for (unsigned i = 0; i < count; ++i) {
+        SimplifyOptions so = room_options(out);
+        so.shard_index = i, so.shard_count = count;
+        Options to;
+        to.work_dir = work, to.check_disk_space = false, to.chunk_bytes = chunk, to.threads = 1;
+        SimplifyReport r;
+        const Result res = simplify(rooms, so, to, &r);
+        ASSERT_TRUE(res.ok()) << res.message;
+      }
+      SimplifyReport merged;
+      ASSERT_TRUE(merge(out, Options{}, &merged).ok());
+      EXPECT_EQ(outputs(out), outputs(dir.file("one")));
+      const nlohmann::json m = nlohmann::json::parse(slurp(out + "/manifest.json"));
+      uint64_t drops = 0, pages_read = 0, pages = 0;
+      for (const auto& t : m.at("shards").at("tasks")) {
+        const auto& p = t.at("paged_map");
+        EXPECT_GT(p.at("maps").get<uint64_t>(), 0u);
+        drops += p.at("drops").get<uint64_t>(), pages_read += p.at("pages_read").get<uint64_t>();
+        pages = p.at("pages");
+        EXPECT_LT(p.at("largest_group_pages").get<uint64_t>(), pages) << "a group reads some of the scene's pages";
+      }
+      EXPECT_EQ(pages, (3 * 160266 + 63) / 64u);
+      if (chunk == 0) {
+        EXPECT_EQ(drops, 0u) << "the rooms' maps fit the default capacity";
+      } else {
+        EXPECT_GT(drops, 0u);
+        EXPECT_GT(pages_read, pages) << "pages dropped are read again";
+      }
+    }
+  }
 }
 
 // The tasks look their vertices' cells up in the vertex-cells files (stream/vertex_cells.h), which the
