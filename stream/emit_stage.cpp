@@ -1260,6 +1260,8 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // g + 1 runs (the others), so the two sets of outputs alternate. Merges stay serial and in block order, so
   // this changes no sum.
   std::unique_ptr<WeldFile> weld;  // mapped during pass B only
+  // With a paged map: each thread's pages of the blocks it looked at, for the group's load.
+  tbb::enumerable_thread_specific<PagedVertexMap::PageSet> page_sets([&] { return PagedVertexMap::PageSet(paged ? meta.vertices : 0); });
   tbb::enumerable_thread_specific<std::vector<Scratch>> scratch([nl] { return std::vector<Scratch>(nl); });
   const size_t concurrent = 4 * static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
   std::vector<BlockOut> outs[2] = {std::vector<BlockOut>(concurrent * nl), std::vector<BlockOut>(concurrent * nl)};
@@ -1273,13 +1275,14 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       const size_t before = std::min(g, blocks.size());  // the blocks of the groups before g
       // The paged map's pages of the group's primitives, read before its blocks run (no merge reads it).
       if (paged && n > 0) {
-        for (size_t i = 0; i < n; ++i) {
+        tbb::parallel_for(size_t{0}, n, [&](size_t i) {
           const Block& b = blocks[g + i];
-          if (segments_and_triangles_only && b.kind == 2) continue;
+          if (segments_and_triangles_only && b.kind == 2) return;
           const uint64_t arity = static_cast<uint64_t>(3 - b.kind);
           const io::Window w = columns[b.kind]->map(b.first * arity * 4, (b.first + b.count) * arity * 4);
-          paged->want(std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), b.count * arity));
-        }
+          page_sets.local().add(std::span<const uint32_t>(reinterpret_cast<const uint32_t*>(w.data()), b.count * arity));
+        });
+        for (PagedVertexMap::PageSet& set : page_sets) paged->want(set), set.clear();
         paged->load();
       }
       tbb::task_group merging;

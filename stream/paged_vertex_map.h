@@ -62,17 +62,43 @@ class PagedVertexMap {
   PagedVertexMap(const PagedVertexMap&) = delete;
   PagedVertexMap& operator=(const PagedVertexMap&) = delete;
 
-  // Notes the pages of `ids` for the next load(). Not thread-safe.
-  void want(std::span<const uint32_t> ids) {
-    for (uint32_t v : ids) {
-      const uint64_t p = v >> 6;
-      if (p == last_) continue;
-      last_ = p;
-      uint64_t& w = wanted_bits_[p / 64];
+  // The distinct pages of some ids, gathered on one thread (a block's), for want(PageSet).
+  class PageSet {
+   public:
+    explicit PageSet(uint64_t vertices) : bits_((vertices + 64 * 64 - 1) / (64 * 64), 0) {}
+    void add(std::span<const uint32_t> ids) {
+      for (uint32_t v : ids) {
+        const uint64_t p = v >> 6;
+        if (p == last_) continue;
+        last_ = p;
+        uint64_t& w = bits_[p / 64];
+        const uint64_t bit = uint64_t{1} << (p % 64);
+        if (w & bit) continue;
+        w |= bit;
+        pages_.push_back(static_cast<uint32_t>(p));
+      }
+    }
+    void clear() {
+      for (uint32_t p : pages_) bits_[p / 64] = 0;
+      pages_.clear(), last_ = UINT64_MAX;
+    }
+    std::span<const uint32_t> pages() const { return pages_; }
+
+   private:
+    friend class PagedVertexMap;
+    std::vector<uint64_t> bits_;  // a bit a page of the scene
+    std::vector<uint32_t> pages_;
+    uint64_t last_ = UINT64_MAX;
+  };
+  // Notes the pages of `ids`, or of `set`, for the next load(). Not thread-safe.
+  void want(std::span<const uint32_t> ids) { wanted_.add(ids); }
+  void want(const PageSet& set) {
+    for (uint32_t p : set.pages_) {
+      uint64_t& w = wanted_.bits_[p / 64];
       const uint64_t bit = uint64_t{1} << (p % 64);
       if (w & bit) continue;
       w |= bit;
-      wanted_.push_back(static_cast<uint32_t>(p));
+      wanted_.pages_.push_back(p);
     }
   }
   // Holds every page wanted since the last load(). Throws Failure(io_error) on a cell out of a level's range.
@@ -93,7 +119,8 @@ class PagedVertexMap {
  private:
   static constexpr uint32_t kNone = UINT32_MAX;
   [[noreturn]] static void missing(uint64_t v);
-  void read_run(uint64_t first, uint64_t end);
+  // Thread-safe for runs of distinct pages.
+  void read_run(uint64_t first, uint64_t end, std::vector<uint64_t>& buffer);
 
   struct File {
     std::unique_ptr<io::MappedFile> file;
@@ -108,10 +135,7 @@ class PagedVertexMap {
   std::vector<uint32_t> slot_;          // per page: its slot in words_, or kNone
   std::vector<uint32_t> held_;          // the held pages, by slot
   std::vector<uint64_t> words_;         // bits_ words a slot, and one word past the last (get() reads one past)
-  std::vector<uint64_t> wanted_bits_;   // a bit a page: wanted since the last load()
-  std::vector<uint32_t> wanted_;        // those pages
-  uint64_t last_ = UINT64_MAX;          // the page of the last id want() saw
-  std::vector<uint64_t> buffer_;        // one level's words of a run
+  PageSet wanted_;                      // the pages wanted since the last load()
   PagedMapFigures own_figures_;
   PagedMapFigures* figures_ = &own_figures_;
 };

@@ -29,7 +29,9 @@
 // - A task run again (resubmitted, or killed and rerun) removes its task-I.json and redoes its emit from
 //   the start, reusing the shared stages; its parts files are written under .partial names and renamed.
 //   Its passes read only the store's blocks whose boxes (written by the shared stages, block_bounds.h) come
-//   near its cells, their halos and rings; its packed maps read every vertex's cells (vertex_cells.h).
+//   near its cells, their halos and rings; its packed maps hold only the pages of 64 vertices that those
+//   blocks reference, read from the cells by vertex (vertex_cells.h) as each group of blocks needs them
+//   (paged_vertex_map.h), so a task's memory does not grow with the scene's vertices.
 #pragma once
 
 #include <array>

@@ -16,7 +16,9 @@
 // (Looking the cells up in the mapped files instead of packing the map did not hold the memory cap: a
 // group of blocks whose primitives reach all over the vertex ids, as the 193 M-triangle city's 484 K
 // segments, stored after its triangles, do, maps every page of every level's file: a task of eight at
-// --memory 1G peaked at 1.9 GiB.)
+// --memory 1G peaked at 1.9 GiB. Since 2026-12-06 a task reads them into a paged map instead,
+// stream/paged_vertex_map.h: the records of the pages of 64 vertices each group of blocks references, read
+// with pread, at most a capacity of them beside a group's own.)
 //
 // Invariant: field v of vertex-cells-L.bits is the field that the packed map of the emit stage
 // (emit_stage.cpp) gives v for level L, so a task that reads these emits the same bytes.

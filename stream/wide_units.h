@@ -12,8 +12,9 @@
 // merges the units' blocks in the whole input's block order (read_classified checks that order).
 //
 // Units: U = N (the tasks), unit u the blocks [u·B/U, (u+1)·B/U) of the B blocks (emit_block_count), for
-// every wide level at once in one pass sharing one packed map (in groups of levels when the map and the
-// levels' working memory do not fit the stage's budget together: a pass a group). Unit u writes one file a
+// every wide level at once in one pass sharing one packed map, paged (stream/paged_vertex_map.h: the pages
+// of the unit's blocks' vertices), in groups of levels when the map and the levels' working memory do not
+// fit the stage's budget together: a pass a group. Unit u writes one file a
 // wide level, WORK/wide-units/unit-u-level-L.bin (about the level's deduplicated outputs of each block, its
 // touched cells' quadrics, and a bit per input triangle and segment), stamped group-g/wide-unit-u.json; a unit
 // whose holder died is run by the process waiting for it.
@@ -38,7 +39,7 @@ struct WideUnitsPlan {
   std::vector<std::vector<size_t>> groups;   // the wide levels, a group a pass of each unit
 };
 // The plan for `count` tasks from the levels' cuts (shard_cuts); no group when no level is wide. A wide
-// level whose packed map and working memory alone do not fit in.budget is left out: its task classifies it.
+// level whose paged map and working memory alone do not fit in.budget is left out: its task classifies it.
 WideUnitsPlan plan_wide_units(const ShardEmitInput& in, const std::vector<LevelCut>& cuts, unsigned count);
 
 std::string wide_units_dir(const std::string& prefix);

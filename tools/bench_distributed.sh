@@ -179,8 +179,12 @@ except (OSError, KeyError, ValueError) as e:
     print("  tasks' step on N nodes: not estimated (%s)" % e)
 m = json.load(open(os.path.join(out, "sharded", "manifest.json")))
 for t in m["shards"]["tasks"]:
-    print("  task %2d: %.1f s, peak %.1f MiB, input primitives read by its emit %d" %
-          (t["index"], t["seconds"], t["peak_rss_bytes"] / 2**20, t["input_primitives_read"]))
+    p = t.get("paged_map")
+    paged = ("; paged maps %d: %d of %d pages read (%d reads), %d drops, largest group %d pages, largest held %.1f MiB" %
+             (p["maps"], p["pages_read"], p["pages"], p["reads"], p["drops"], p["largest_group_pages"], p["largest_bytes"] / 2**20)
+             if p else "")
+    print("  task %2d: %.1f s, peak %.1f MiB, input primitives read by its emit %d%s" %
+          (t["index"], t["seconds"], t["peak_rss_bytes"] / 2**20, t["input_primitives_read"], paged))
 total = m["input"]["triangles"] + m["input"]["lines"] + m["input"]["points"]
 reads = [t["input_primitives_read"] for t in m["shards"]["tasks"]]
 print("  input primitives %d; tasks' reads: sum %.2fx the input, largest %.2fx" % (total, sum(reads) / total, max(reads) / total))
