@@ -18,4 +18,12 @@ inline uint64_t read_bits(const char* data, uint64_t bit, unsigned bits) {
   return x & ((uint64_t{1} << bits) - 1);
 }
 
+// ORs `value` (below 2^bits, bits 1 to 64) into the `bits` bits at bit `bit` of `words`, whose field is
+// zero: the writing counterpart of read_bits, for words filled once.
+inline void or_bits(uint64_t* words, uint64_t bit, uint64_t value, unsigned bits) {
+  const uint64_t s = bit % 64;
+  words[bit / 64] |= value << s;
+  if (s + bits > 64) words[bit / 64 + 1] |= value >> (64 - s);
+}
+
 }  // namespace lodstream::stream

@@ -1274,6 +1274,8 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       std::vector<BlockOut>& previous = outs[(k + 1) % 2];
       const size_t before = std::min(g, blocks.size());  // the blocks of the groups before g
       // The paged map's pages of the group's primitives, read before its blocks run (no merge reads it).
+      // Each block is mapped here and again for its work: a few system calls a block, where keeping the
+      // group's windows would hold 4 blocks' ids a thread at once.
       if (paged && n > 0) {
         tbb::parallel_for(size_t{0}, n, [&](size_t i) {
           const Block& b = blocks[g + i];
@@ -1707,7 +1709,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     // With a paged map, no more pairs than its capacity holds pages (a pair's vertex may be on a page of its
     // own): the batch's pages are held at once. The batches change no sum (they are in pair order).
     uint64_t batch_pairs = options.corner_bytes / 3 / 40;
-    if (paged) batch_pairs = std::min(batch_pairs, options.paged_map_capacity / (8 * uint64_t{paged->bits()}));
+    if (paged) batch_pairs = std::min(batch_pairs, paged->capacity_pages());
     const size_t batch_size = static_cast<size_t>(std::max<uint64_t>(batch_pairs, 1024));
     ExternalSorter<uint64_t, std::less<uint64_t>> distinct(dir, "corners-distinct", sort_bytes);
     auto sum_positions = [&](LevelState& L, uint32_t e, bool in_a, const double* p) {

@@ -8,6 +8,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/status.h"
+#include "stream/bit_fields.h"
 #include "stream/vertex_cells.h"
 
 namespace lodstream::stream {
@@ -114,10 +115,7 @@ void PagedVertexMap::read_run(uint64_t first, uint64_t end, std::vector<uint64_t
     for (uint64_t v = v0; v < v1; ++v) {
       const uint64_t c = read_bits(data, (v - v0) * f.bits, f.bits);
       if (c != f.mask && c >= f.cells) fail(Status::io_error, f.file->path() + ": cell id out of range");
-      const uint64_t field = c << f.shift;
-      const uint64_t bit = (v - v0) * bits_, o = bit % 64;
-      words[bit / 64] |= field << o;
-      if (o + bits_ > 64) words[bit / 64 + 1] |= field >> (64 - o);
+      or_bits(words, (v - v0) * bits_, c << f.shift, bits_);
     }
   }
 }

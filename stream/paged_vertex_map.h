@@ -68,15 +68,18 @@ class PagedVertexMap {
     explicit PageSet(uint64_t vertices) : bits_((vertices + 64 * 64 - 1) / (64 * 64), 0) {}
     void add(std::span<const uint32_t> ids) {
       for (uint32_t v : ids) {
-        const uint64_t p = v >> 6;
+        const uint32_t p = v >> 6;
         if (p == last_) continue;
         last_ = p;
-        uint64_t& w = bits_[p / 64];
-        const uint64_t bit = uint64_t{1} << (p % 64);
-        if (w & bit) continue;
-        w |= bit;
-        pages_.push_back(static_cast<uint32_t>(p));
+        insert(p);
       }
+    }
+    void insert(uint32_t p) {
+      uint64_t& w = bits_[p / 64];
+      const uint64_t bit = uint64_t{1} << (p % 64);
+      if (w & bit) return;
+      w |= bit;
+      pages_.push_back(p);
     }
     void clear() {
       for (uint32_t p : pages_) bits_[p / 64] = 0;
@@ -93,13 +96,7 @@ class PagedVertexMap {
   // Notes the pages of `ids`, or of `set`, for the next load(). Not thread-safe.
   void want(std::span<const uint32_t> ids) { wanted_.add(ids); }
   void want(const PageSet& set) {
-    for (uint32_t p : set.pages_) {
-      uint64_t& w = wanted_.bits_[p / 64];
-      const uint64_t bit = uint64_t{1} << (p % 64);
-      if (w & bit) continue;
-      w |= bit;
-      wanted_.pages_.push_back(p);
-    }
+    for (uint32_t p : set.pages_) wanted_.insert(p);
   }
   // Holds every page wanted since the last load(). Throws Failure(io_error) on a cell out of a level's range.
   void load();
@@ -114,6 +111,7 @@ class PagedVertexMap {
     return x & mask_;
   }
   unsigned bits() const { return bits_; }
+  uint64_t capacity_pages() const { return capacity_pages_; }
   const PagedMapFigures& figures() const { return *figures_; }
 
  private:

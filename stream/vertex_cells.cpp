@@ -108,9 +108,7 @@ void pack_vertex_cells(std::span<const uint32_t> cells, unsigned bits, std::vect
   const uint64_t none = (uint64_t{1} << bits) - 1;
   words.assign(packed_field_bytes(cells.size(), bits) / 8, 0);
   for (uint64_t i = 0; i < cells.size(); ++i) {
-    const uint64_t f = cells[i] == kNoCell ? none : cells[i], bit = i * bits, s = bit % 64;
-    words[bit / 64] |= f << s;
-    if (s + bits > 64) words[bit / 64 + 1] |= f >> (64 - s);
+    or_bits(words.data(), i * bits, cells[i] == kNoCell ? none : cells[i], bits);
   }
 }
 
