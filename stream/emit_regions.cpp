@@ -74,15 +74,41 @@ std::vector<LevelCut> cut_levels(const std::string& prefix, std::span<const uint
   return cuts;
 }
 
-std::vector<uint32_t> load_region_of(const std::string& prefix, size_t level, uint64_t cells, const core::SceneCube& cube,
-                                     const LevelCut& cut, Representative representative, bool single_precision) {
-  std::vector<uint32_t> region_of(cells);
-  for_cell_infos(prefix, level, cells, 0, cells, representative, single_precision, [&](uint64_t first, std::span<const CellInfo> infos) {
+CellRegions load_cell_regions(const std::string& prefix, size_t level, uint64_t cells, const core::SceneCube& cube,
+                              const LevelCut& cut, Representative representative, bool single_precision, uint32_t first,
+                              uint32_t end) {
+  const uint32_t regions = static_cast<uint32_t>(cut.regions.size());
+  if (end == 0 || end > regions) end = regions;
+  CellRegions out;
+  out.first = first, out.end = end;
+  const bool whole = first == 0 && end == regions;
+  uint64_t run_cells = 0;
+  for (uint32_t r = first; r < end; ++r) run_cells += cut.cells[r];
+  out.region.reserve(whole ? cells : run_cells);
+  if (!whole) out.in = RankedBits(cells);
+  std::vector<uint32_t> window;
+  for_cell_infos(prefix, level, cells, 0, cells, representative, single_precision, [&](uint64_t c0, std::span<const CellInfo> infos) {
+    window.resize(infos.size());
     tbb::parallel_for(size_t{0}, infos.size(), [&](size_t i) {
-      region_of[first + i] = core::region_of_code(cut.regions, core::point_code(cube, cell_anchor(infos[i], representative)));
+      window[i] = core::region_of_code(cut.regions, core::point_code(cube, cell_anchor(infos[i], representative)));
     });
+    for (size_t i = 0; i < window.size(); ++i) {
+      if (whole) {
+        out.region.push_back(window[i]);
+      } else if (window[i] >= first && window[i] < end) {
+        out.in.set(c0 + i);
+        out.region.push_back(window[i]);
+      }
+    }
   });
-  return region_of;
+  if (!whole) out.in.count();
+  if (out.region.size() != (whole ? cells : run_cells))
+    fail(Status::internal, "emit: level " + std::to_string(level) + "'s cells do not match its cut");
+  return out;
+}
+
+uint64_t cell_regions_bytes(uint64_t cells, uint64_t run_cells) {
+  return run_cells == cells ? 4 * cells : (cells + 63) / 64 * 12 + 4 * run_cells;
 }
 
 void for_cell_anchors(const std::string& prefix, size_t level, uint64_t cells, Representative representative, bool single_precision,

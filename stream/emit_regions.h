@@ -20,6 +20,7 @@
 #include "core/quadric.h"
 #include "lodstream/lodstream.h"
 #include "stream/progress.h"
+#include "stream/ranked_bits.h"
 #include "stream/scene_store.h"
 
 namespace lodstream::stream {
@@ -54,9 +55,28 @@ std::vector<LevelCut> cut_levels(const std::string& prefix, std::span<const uint
                                  uint64_t max_cells, Representative representative, bool single_precision,
                                  std::span<const core::SideBound> sides = {});
 
-// The index in cut.regions of each cell of level `level`.
-std::vector<uint32_t> load_region_of(const std::string& prefix, size_t level, uint64_t cells, const core::SceneCube& cube,
-                                     const LevelCut& cut, Representative representative, bool single_precision);
+// The regions of a level's cells that lie in a run [first, end) of its cut. One machine loads the whole
+// cut: a region a cell (4 bytes), looked up by cell. A sharded task loads its own run: a bit a cell of the
+// level (`in`, with its rank: 12 bytes a 64 cells) and a region a cell of its run, by rank, so that what it
+// holds for the whole level is about a bit and a half a cell.
+struct CellRegions {
+  uint32_t first = 0, end = 0;
+  RankedBits in;                 // empty when the run is the whole cut (every cell is in it)
+  std::vector<uint32_t> region;  // per cell of the run: by cell when `in` is empty, else by rank in `in`
+  // The index in the cut of cell c's region, or UINT32_MAX when it is not in the run.
+  uint32_t of(uint64_t c) const {
+    if (in.bits.empty()) return region[c];
+    return in.has(c) ? region[in.rank(c)] : UINT32_MAX;
+  }
+  uint64_t bytes() const { return in.bytes() + region.capacity() * 4; }
+};
+
+// The regions of level `level`'s cells in regions [first, end) of its cut (end 0: to the cut's end).
+CellRegions load_cell_regions(const std::string& prefix, size_t level, uint64_t cells, const core::SceneCube& cube,
+                              const LevelCut& cut, Representative representative, bool single_precision,
+                              uint32_t first = 0, uint32_t end = 0);
+// Bytes load_cell_regions holds for a level of `cells` cells whose run holds `run_cells` of them.
+uint64_t cell_regions_bytes(uint64_t cells, uint64_t run_cells);
 
 // Calls visit(cell, anchor) for each cell c of level `level` with wanted(c), in cell order: the position by
 // which the cell is placed in a region, its center vertex's (the mean for the mean representative). Every

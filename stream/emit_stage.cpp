@@ -222,12 +222,12 @@ void cell_rgba(const CellColor& c, const CellWeighted* w, Representative r, uint
   }
 }
 
-// A level's cell colours: per cell an index into `rgba` (UINT32_MAX for a cell that no output vertex of
-// the level, or of the batch, can use), and RGBA per indexed cell.
+// A level's cell colours: a bit per cell for those an output vertex of the level (or of the batch) can use,
+// with its rank, and RGBA per such cell, by rank.
 struct LevelColors {
-  std::vector<uint32_t> index;
+  RankedBits cells;
   std::vector<uint8_t> rgba;
-  const uint8_t* of(uint32_t cell) const { return &rgba[4 * uint64_t{index[cell]}]; }
+  const uint8_t* of(uint32_t cell) const { return &rgba[4 * uint64_t{cells.rank(cell)}]; }
 };
 
 // The group's cluster maps, packed: per stored vertex one record of `bits` bits (at most 64), at bit
@@ -293,14 +293,18 @@ std::string packed_map_key(const std::string& prefix, const std::string& canonic
 // One level of a group: its field in the packed map and what it accumulates.
 struct LevelState {
   EmitLevel in;
-  // Batched levels: per cell 0 (not visited), kOwned (a cell of the batch's regions) or kHalo.
-  std::vector<uint8_t> role;
+  // Batched levels (find_halos): a bit per cell of the level for the batch's own cells (those of its
+  // regions) and one for its halo (the others that share an input primitive with one of its own). What a
+  // batch holds beyond these few bits a cell grows with the batch, not with the level.
+  RankedBits own, halo;
   uint64_t quadric_base = 0;  // representatives_only: the first cell of the range summed
   // The level sums quadrics in pass A (quadric representatives, unless it is batched and reads them).
   bool sums_quadrics = false;
-  // A batched level that sums them (EmitOptions::own_representatives): per cell, its index in `quadrics`
-  // (its own and halo cells, in cell order), else UINT32_MAX.
-  std::vector<uint32_t> quadric_slot;
+  // A batched level that sums them (EmitOptions::own_representatives): its own and halo cells (`touched`)
+  // have their quadrics first, by rank, then those of its ring (`ring`: the cells beyond the halo that
+  // corners of its triangles fall in, pass Q), by rank.
+  bool ranks_quadrics = false;
+  RankedBits touched, ring;
   unsigned shift = 0;
   uint64_t mask = 0;  // field mask after the shift; all ones is "no cell"
   // Pass A.
@@ -312,7 +316,8 @@ struct LevelState {
   std::vector<uint32_t> points;
   std::vector<uint32_t> triangle_materials, edge_materials, point_materials;  // with materials, as BlockOut's
   std::vector<core::Quadric> quadrics;
-  std::vector<uint8_t> used;  // per cell: kByTriangle | kByKeptEdge
+  // Elimination: per cell a bit when a kept triangle uses it, and one when a kept edge does.
+  RankedBits by_triangle, by_kept_edge;
   // One bit per input triangle and segment that collapsed to an edge or a point, so that passes B and C
   // visit only those.
   std::vector<uint64_t> collapsed[2];
@@ -328,20 +333,23 @@ struct LevelState {
   EmitCounts counts;
 };
 
-constexpr uint8_t kOwned = 1, kHalo = 2;
-// Bits of a cell's use in a level (elimination).
-constexpr uint8_t kByTriangle = 1, kByKeptEdge = 2;
+bool owned(const LevelState& L, uint64_t c) { return !L.in.batched || L.own.has(c); }
+// A cell the batch visits: its own or its halo's.
+bool in_batch(const LevelState& L, uint64_t c) { return L.own.has(c) || L.halo.has(c); }
+// A cell a kept triangle or edge uses.
+bool used(const LevelState& L, uint64_t c) { return L.by_triangle.has(c) || L.by_kept_edge.has(c); }
 
-bool owned(const LevelState& L, uint32_t c) { return !L.in.batched || L.role[c] == kOwned; }
-
-// Where cell c's quadric is in L.quadrics.
+// Where cell c's quadric is in L.quadrics (past its end: the cell has none).
 uint64_t quadric_index(const LevelState& L, uint32_t c) {
-  return L.quadric_slot.empty() ? c - L.quadric_base : L.quadric_slot[c];
+  if (!L.ranks_quadrics) return c - L.quadric_base;
+  if (L.touched.has(c)) return L.touched.rank(c);
+  return L.ring.bits.empty() || !L.ring.has(c) ? UINT64_MAX : L.touched.ones() + L.ring.rank(c);
 }
 
 // A cell of the batch's own regions (the others of a batched level are its halo, its ring, or none of its).
 bool in_batch_regions(const LevelState& L, uint64_t c) {
-  return L.in.region_of[c] >= L.in.first_region && L.in.region_of[c] < L.in.end_region;
+  const uint32_t r = L.in.regions->of(c);
+  return r >= L.in.first_region && r < L.in.end_region;
 }
 
 // Adds triangle quadric q to cell c's sum in the block (passes A and Q): a block's sums are formed in store
@@ -391,32 +399,33 @@ std::vector<float> kept_point_sizes(const LevelState& L) {
 bool visited(const LevelState& L, const uint32_t* c, size_t arity) {
   if (!L.in.batched) return true;
   for (size_t k = 0; k < arity; ++k)
-    if (L.role[c[k]]) return true;
+    if (in_batch(L, c[k])) return true;
   return false;
 }
 
 }  // namespace
 
-// The halo of every batched level of the group: marks kHalo every cell that shares an input triangle or
-// segment with a cell of the batch (kOwned). Roles only go from 0 to kHalo during the pass, and a primitive's
-// test reads kOwned only, so the result does not depend on the threads.
+// The halo of every batched level of the group: marks every cell that shares an input triangle or segment
+// with a cell of the batch (L.own) and is not its own. Halo bits only go from 0 to 1 during the pass, and a
+// primitive's test reads the own bits only, so the result does not depend on the threads.
 template <class RunBlocks, class RecordOf, class CellOf>
 void find_halos(std::vector<LevelState>& levels, RunBlocks& run_blocks, RecordOf& record_of, CellOf& cell) {
   bool any = false;
   for (LevelState& L : levels) {
     if (!L.in.batched) continue;
-    L.role.assign(L.in.cells, 0);
+    L.own = RankedBits(L.in.cells), L.halo = RankedBits(L.in.cells);
+    uint64_t owned_cells = 0;
     for (uint64_t c = 0; c < L.in.cells; ++c)
-      if (in_batch_regions(L, c)) L.role[c] = kOwned;
+      if (in_batch_regions(L, c)) L.own.set(c), ++owned_cells;
     // A routed batch: its halo was found while routing (the same rule, over the whole input).
     if (L.in.routes && L.in.routes->halo.size() == L.in.cells) {
       const uint8_t bit = static_cast<uint8_t>(1u << L.in.route_bit);
       for (uint64_t c = 0; c < L.in.cells; ++c)
-        if (L.role[c] != kOwned && (L.in.routes->halo[c] & bit)) L.role[c] = kHalo;
+        if (!L.own.has(c) && (L.in.routes->halo[c] & bit)) L.halo.set(c);
       continue;
     }
     // A batch of every cell (a sharded task's wide level, stream/shard.h) has no halo: no pass for it.
-    if (std::find(L.role.begin(), L.role.end(), uint8_t{0}) == L.role.end()) continue;
+    if (owned_cells == L.in.cells) continue;
     any = true;
   }
   if (!any) return;
@@ -431,10 +440,10 @@ void find_halos(std::vector<LevelState>& levels, RunBlocks& run_blocks, RecordOf
             if (!L.in.batched) continue;
             uint32_t c[3];
             bool touches = false;
-            for (size_t k = 0; k < arity; ++k) c[k] = cell(L, r[k]), touches = touches || L.role[c[k]] == kOwned;
+            for (size_t k = 0; k < arity; ++k) c[k] = cell(L, r[k]), touches = touches || L.own.has(c[k]);
             if (!touches) continue;
             for (size_t k = 0; k < arity; ++k)
-              if (L.role[c[k]] != kOwned) std::atomic_ref<uint8_t>(L.role[c[k]]).store(kHalo, std::memory_order_relaxed);
+              if (!L.own.has(c[k])) L.halo.set_shared(c[k]);
           }
         }
       },
@@ -443,19 +452,42 @@ void find_halos(std::vector<LevelState>& levels, RunBlocks& run_blocks, RecordOf
 
 // The cells a batch of a level needs, numbered in order of first use: triangle corners, then the ends of
 // its kept edges, its kept points, and its cells that only other batches' kept edges use.
+// A bit per cell of the level and a slot per numbered cell (by rank): a batch's slots grow with the batch.
 struct CellSlots {
-  std::vector<uint32_t> slot_of;  // per cell of the level, or UINT32_MAX
-  std::vector<uint32_t> cell;     // per slot
+  RankedBits numbered;                 // per cell of the level: it has a slot
+  std::vector<uint32_t> slot_by_rank;  // per numbered cell, by rank
+  std::vector<uint32_t> cell;          // per slot
   size_t triangle_slots = 0;
   std::vector<uint32_t> triangles;  // 3 slots per triangle of L.triangles
   std::vector<double> rep;          // xyz per slot
+  uint32_t slot_of(uint64_t c) const { return numbered.has(c) ? slot_by_rank[numbered.rank(c)] : UINT32_MAX; }
 };
 
+// Calls f(c) for each cell c of the level whose bit is set in `bits`, in cell order.
+template <class F>
+void for_each_bit(const RankedBits& bits, F&& f) {
+  for (size_t w = 0; w < bits.bits.size(); ++w)
+    for (uint64_t b = bits.bits[w]; b; b &= b - 1) f(64 * uint64_t{w} + static_cast<uint64_t>(std::countr_zero(b)));
+}
+
 void number_cells(const LevelState& L, CellSlots& s) {
-  s.slot_of.assign(L.in.cells, UINT32_MAX);
-  auto use = [&](uint32_t c) {
-    if (s.slot_of[c] == UINT32_MAX) s.slot_of[c] = static_cast<uint32_t>(s.cell.size()), s.cell.push_back(c);
-    return s.slot_of[c];
+  // The cells that take a slot: the corners of the triangles, the ends of the kept edges, the kept points,
+  // and the own cells that a kept edge uses.
+  s.numbered = RankedBits(L.in.cells);
+  for (const auto& t : L.triangles)
+    for (uint32_t c : t) s.numbered.set(c);
+  for (const auto& e : L.kept_edges) s.numbered.set(e[0]), s.numbered.set(e[1]);
+  for (uint32_t c : L.kept_points) s.numbered.set(c);
+  for_each_bit(L.by_kept_edge, [&](uint64_t c) {
+    if (owned(L, c)) s.numbered.set(c);
+  });
+  s.numbered.count();
+  // Their slots, in order of first use.
+  s.slot_by_rank.assign(s.numbered.ones(), UINT32_MAX);
+  auto use = [&](uint64_t c) {
+    uint32_t& slot = s.slot_by_rank[s.numbered.rank(c)];
+    if (slot == UINT32_MAX) slot = static_cast<uint32_t>(s.cell.size()), s.cell.push_back(static_cast<uint32_t>(c));
+    return slot;
   };
   s.triangles.reserve(3 * L.triangles.size());
   for (const auto& t : L.triangles)
@@ -463,8 +495,9 @@ void number_cells(const LevelState& L, CellSlots& s) {
   s.triangle_slots = s.cell.size();
   for (const auto& e : L.kept_edges) use(e[0]), use(e[1]);
   for (uint32_t c : L.kept_points) use(c);
-  for (uint64_t c = 0; c < L.in.cells; ++c)
-    if ((L.used[c] & kByKeptEdge) && owned(L, static_cast<uint32_t>(c))) use(static_cast<uint32_t>(c));
+  for_each_bit(L.by_kept_edge, [&](uint64_t c) {
+    if (owned(L, c)) use(c);
+  });
 }
 
 // The representatives of the slots: read from the level's representatives file (batched levels, so that a
@@ -491,7 +524,7 @@ void load_representatives(const LevelState& L, const std::string& prefix, const 
     const uint64_t first = window * window_cells, end = std::min(cells, first + window_cells);
     io::Window w;
     for (uint64_t c = first; c < end; ++c) {
-      const uint32_t slot = s.slot_of[c];
+      const uint32_t slot = s.slot_of(c);
       if (slot == UINT32_MAX) continue;
       if (from_file) {
         if (!w.data()) w = reps->map(first * record, end * record);
@@ -571,13 +604,13 @@ void build_parts(LevelState& L, const std::vector<float>& thickness, const std::
   number_cells(L, s);
   load_representatives(L, prefix, cluster, options, single_precision, s);
   std::vector<core::Quadric>().swap(L.quadrics);
-  std::vector<uint32_t>().swap(L.quadric_slot);
+  L.ranks_quadrics = false, L.touched = RankedBits(), L.ring = RankedBits();
   BatchVertices v;
   make_vertices(s, options, v);
   std::vector<uint32_t>().swap(s.triangles);
 
   const uint32_t first = L.in.first_region, regions = L.in.end_region - first;
-  auto region = [&](uint32_t c) { return owned(L, c) ? L.in.region_of[c] - first : UINT32_MAX; };
+  auto region = [&](uint32_t c) { return owned(L, c) ? L.in.regions->of(c) - first : UINT32_MAX; };
   const Buckets triangles = bucket(L.triangles.size(), regions, [&](size_t t) {
     const auto& c = L.triangles[t];
     return region(std::min({c[0], c[1], c[2]}));
@@ -615,12 +648,12 @@ void build_parts(LevelState& L, const std::vector<float>& thickness, const std::
       if (materials) mesh.triangle_materials.push_back(L.triangle_materials[t]);
     }
     for (uint32_t e : edges.of(r)) {
-      for (uint32_t c : L.kept_edges[e]) mesh.edges.push_back(add(v.end_vertex[s.slot_of[c]]));
+      for (uint32_t c : L.kept_edges[e]) mesh.edges.push_back(add(v.end_vertex[s.slot_of(c)]));
       mesh.thickness.push_back(thickness[e]);
       if (materials) mesh.edge_materials.push_back(L.kept_edge_materials[e]);
     }
     for (uint32_t p : points.of(r)) {
-      mesh.points.push_back(add(v.end_vertex[s.slot_of[L.kept_points[p]]]));
+      mesh.points.push_back(add(v.end_vertex[s.slot_of(L.kept_points[p])]));
       mesh.point_size.push_back(point_size[p]);
       if (materials) mesh.point_materials.push_back(L.kept_point_materials[p]);
     }
@@ -650,7 +683,7 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
   // about 25 MB whatever its cells, its share of the block outputs and per-thread tables of the blocks in
   // flight (two sets of 4 per thread, 16 here): 24 bytes per primitive in flight.
   // With materials, a material id per output primitive during pass A (about 3 a cell, 4 bytes each).
-  // Vertex colours add nothing at the peak: their pass (sum_cell_colors: 4 bytes a cell, 44 a used cell,
+  // Vertex colours add nothing at the peak: their pass (sum_cell_colors: a bit and a half a cell, 44 bytes a used cell,
   // 84 with the mean) runs after elimination has freed pass A's dedupe tables, and what it keeps (8 bytes a
   // used cell) goes with the level's parts. Measured: the 48.6 M city with colours at --memory 1G emits
   // its finest level whole, as without, within the cap (README, "Materials and colours").
@@ -734,8 +767,8 @@ EmitLevelPlan plan_emit_level(size_t level, uint64_t cells, uint64_t largest_reg
 // once, then every level sums them in a task of its own, streaming its cluster map (cells-L.map, the cell of
 // each record in weight order: no random lookups in the group's packed map). Each cell's sums are formed
 // serially in weight order, so they depend neither on the threads nor on the batches. Memory: the colour
-// column mapped (4 bytes a vertex), per level 4 bytes a cell and 44 a used cell (84 with the mean), and per
-// chunk 4 bytes a record and level.
+// column mapped (4 bytes a vertex), per level 12 bytes a 64 cells and 44 a used cell (84 with the mean), and
+// per chunk 4 bytes a record and level.
 void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const std::string& prefix, uint64_t records,
                      const EmitOptions& options, const std::vector<LevelState>& levels, std::vector<LevelColors>& out) {
   const size_t nl = levels.size();
@@ -744,13 +777,15 @@ void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const 
   std::vector<std::vector<CellWeighted>> weighted(nl);
   for (size_t l = 0; l < nl; ++l) {
     const LevelState& L = levels[l];
-    std::vector<uint32_t>& index = out[l].index;
-    index.assign(L.in.cells, UINT32_MAX);
-    for (uint32_t c : L.kept_points) index[c] = 0;
-    uint32_t n = 0;
-    for (uint64_t c = 0; c < L.in.cells; ++c)
-      if ((L.used[c] || index[c] == 0) && (!L.in.batched || L.role[c])) index[c] = n++;
-      else index[c] = UINT32_MAX;
+    RankedBits& cells = out[l].cells;
+    cells = RankedBits(L.in.cells);
+    for (uint32_t c : L.kept_points) cells.set(c);
+    for (size_t w = 0; w < cells.bits.size(); ++w) {
+      cells.bits[w] |= L.by_triangle.bits[w] | L.by_kept_edge.bits[w];
+      if (L.in.batched) cells.bits[w] &= L.own.bits[w] | L.halo.bits[w];
+    }
+    cells.count();
+    const uint64_t n = cells.ones();
     sums[l].assign(n, CellColor{});
     if (grades) weighted[l].assign(n, CellWeighted{});
   }
@@ -783,11 +818,11 @@ void sum_cell_colors(const std::string& store_dir, const StoreMeta& meta, const 
       tbb::parallel_for(size_t{0}, nl, [&](size_t l) {
         uint32_t* cs = cells.data() + l * kChunk;
         maps[l]->read(std::span<uint32_t>(cs, n));
-        const std::vector<uint32_t>& index = out[l].index;
+        const RankedBits& used_cells = out[l].cells;
         for (uint64_t i = 0; i < n; ++i) {
-          if (cs[i] >= index.size()) fail(Status::io_error, cells_path(prefix, levels[l].in.level) + ": cell id out of range");
-          const uint32_t j = index[cs[i]];
-          if (j == UINT32_MAX) continue;
+          if (cs[i] >= levels[l].in.cells) fail(Status::io_error, cells_path(prefix, levels[l].in.level) + ": cell id out of range");
+          if (!used_cells.has(cs[i])) continue;
+          const uint32_t j = used_cells.rank(cs[i]);
           const uint8_t* c = reinterpret_cast<const uint8_t*>(&chunk_rgba[i]);
           CellColor& s = sums[l][j];
           if (s.count == 0) std::memcpy(s.first, c, 4);
@@ -824,7 +859,7 @@ void route_level(const LevelState& L, std::span<const std::pair<uint32_t, uint32
   std::vector<uint8_t> batch_bit(L.in.cut->regions.size(), 0);  // per region: its batch's bit, or 0
   for (size_t i = 0; i < batches.size(); ++i)
     for (uint32_t r = batches[i].first; r < batches[i].second; ++r) batch_bit[r] = static_cast<uint8_t>(1u << i);
-  auto own = [&](uint32_t c) { return batch_bit[L.in.region_of[c]]; };
+  auto own = [&](uint32_t c) { return batch_bit[L.in.regions->of(c)]; };
   std::vector<uint8_t>& halo = routes.halo;
   halo.assign(L.in.cells, 0);
   run_blocks(
@@ -1334,18 +1369,18 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       if (!options.count_only && !options.representatives_only) L.collapsed[kind].assign((column_count[kind] + 63) / 64, 0);
   }
   find_halos(levels, run_blocks, record_of, cell);
-  // A batched level's quadrics: its own and halo cells', which are all it outputs or uses.
+  // A batched level's quadrics: its own and halo cells', which are all it outputs or uses, by rank.
   for (LevelState& L : levels) {
     if (!L.sums_quadrics || !L.in.batched) continue;
-    L.quadric_slot.assign(L.in.cells, UINT32_MAX);
-    uint32_t n = 0;
-    for (uint64_t c = 0; c < L.in.cells; ++c)
-      if (L.role[c]) L.quadric_slot[c] = n++;
-    L.quadrics.resize(n);
+    L.ranks_quadrics = true;
+    L.touched = RankedBits(L.in.cells);
+    for (size_t w = 0; w < L.touched.bits.size(); ++w) L.touched.bits[w] = L.own.bits[w] | L.halo.bits[w];
+    L.touched.count();
+    L.quadrics.resize(L.touched.ones());
   }
   if (bounded) {
     mark_reach(levels, prefix, options.representative, meta.single_precision,
-               [](const LevelState& L, uint64_t c) { return L.role[c] != 0; }, *reach);
+               [](const LevelState& L, uint64_t c) { return in_batch(L, c); }, *reach);
     blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
   }
   auto classify = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
@@ -1403,7 +1438,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
             for (int k = 0; k < 3; ++k) {
               if ((k > 0 && c[k] == c[0]) || (k > 1 && c[k] == c[1])) continue;
               if (options.representatives_only && (c[k] < L.in.first_cell || c[k] >= L.in.end_cell)) continue;
-              if (L.in.batched && !L.role[c[k]]) continue;  // neither its own nor in its halo
+              if (L.in.batched && !in_batch(L, c[k])) continue;  // neither its own nor in its halo
               add_quadric(o, s, c[k], q);
             }
           }
@@ -1500,20 +1535,22 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
   // per block in store order and merged in block order, as for any other cell.
   bool any_ring = false;
   for (LevelState& L : levels) {
-    if (!L.sums_quadrics || !L.in.batched) continue;
-    uint32_t n = static_cast<uint32_t>(L.quadrics.size());
+    if (!L.ranks_quadrics) continue;
+    L.ring = RankedBits(L.in.cells);
     for (const auto& t : L.triangles)
       for (uint32_t c : t)
-        if (L.quadric_slot[c] == UINT32_MAX) L.quadric_slot[c] = n++, any_ring = true;
-    L.quadrics.resize(n);
+        if (!L.touched.has(c)) L.ring.set(c);
+    L.ring.count();
+    any_ring = any_ring || L.ring.ones() > 0;
+    L.quadrics.resize(L.touched.ones() + L.ring.ones());
   }
   if (any_ring) {
-    auto ring_cell = [](const LevelState& L, uint64_t c) { return !L.role[c] && L.quadric_slot[c] != UINT32_MAX; };
+    auto ring_cell = [](const LevelState& L, uint64_t c) { return L.ring.has(c); };
     const std::vector<Block> classified = blocks;
     if (bounded) {
       reach = std::make_unique<ReachGrid>(cube);
       mark_reach(levels, prefix, options.representative, meta.single_precision,
-                 [&](const LevelState& L, uint64_t c) { return !L.quadric_slot.empty() && ring_cell(L, c); }, *reach);
+                 [&](const LevelState& L, uint64_t c) { return L.ranks_quadrics && ring_cell(L, c); }, *reach);
       blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
     }
     run_blocks(
@@ -1527,7 +1564,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
             core::Quadric q;
             for (size_t l = 0; l < nl; ++l) {
               LevelState& L = levels[l];
-              if (L.quadric_slot.empty()) continue;
+              if (!L.ranks_quadrics) continue;
               const uint32_t c[3] = {cell(L, r[0]), cell(L, r[1]), cell(L, r[2])};
               for (int k = 0; k < 3; ++k) {
                 if ((k > 0 && c[k] == c[0]) || (k > 1 && c[k] == c[1]) || !ring_cell(L, c[k])) continue;
@@ -1555,14 +1592,13 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     L.g_triangles = FlatMap<3, false>();
     L.g_points = FlatMap<1, false>();
     std::vector<uint8_t> on_triangle(L.edges.size(), 0);
-    std::vector<uint8_t>& used = L.used;
-    used.assign(L.in.cells, 0);
+    L.by_triangle = RankedBits(L.in.cells), L.by_kept_edge = RankedBits(L.in.cells);
     // In parallel: the flags only ever go from 0 to 1, so the result does not depend on the threads.
     tbb::parallel_for(tbb::blocked_range<size_t>(0, L.triangles.size(), 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t i = r.begin(); i < r.end(); ++i) {
         const auto& t = L.triangles[i];
         for (int k = 0; k < 3; ++k) {
-          std::atomic_ref<uint8_t>(used[t[k]]).store(kByTriangle, std::memory_order_relaxed);
+          L.by_triangle.set_shared(t[k]);
           if (L.edges.empty()) continue;
           const uint32_t e = L.g_edges.find({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});
           if (e != FlatMap<2>::empty) std::atomic_ref<uint8_t>(on_triangle[e]).store(1, std::memory_order_relaxed);
@@ -1578,7 +1614,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
         if (own) ++L.counts.edges_on_triangles;
         continue;
       }
-      used[L.edges[i][0]] |= kByKeptEdge, used[L.edges[i][1]] |= kByKeptEdge;
+      L.by_kept_edge.set(L.edges[i][0]), L.by_kept_edge.set(L.edges[i][1]);
       if (!own) continue;
       L.k_edges.insert(L.edges[i], static_cast<uint32_t>(L.kept_edges.size()));
       L.kept_edges.push_back(L.edges[i]);
@@ -1589,7 +1625,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     for (size_t i = 0; i < L.points.size(); ++i) {
       const uint32_t c = L.points[i];
       if (!owned(L, c)) continue;
-      if (used[c]) {
+      if (used(L, c)) {
         ++L.counts.points_covered;
         continue;
       }
@@ -1795,7 +1831,7 @@ void route_batches(const std::string& store_dir, const StoreMeta& meta, const st
                    const std::string& prefix, const EmitLevel& level, std::span<const std::pair<uint32_t, uint32_t>> batches,
                    uint64_t records, const core::ClusterOptions& cluster, Progress& progress, EmitScratch& scratch,
                    BatchRoutes& routes) {
-  if (batches.size() > kRouteBatches || !level.cut || !level.region_of)
+  if (batches.size() > kRouteBatches || !level.cut || !level.regions)
     fail(Status::internal, "emit: at most " + std::to_string(kRouteBatches) + " batches of a cut level are routed at once");
   EmitOptions options;
   options.count_only = true;  // nothing beyond the packed map and the two passes

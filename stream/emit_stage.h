@@ -157,13 +157,14 @@ struct EmitLevel {
   size_t level = 0;
   uint64_t cells = 0;
   double cell_size = 0;
-  // Partitioned emit (neither count_only nor representatives_only): the level's cut and the region of each
-  // of its cells; the parts of regions [first_region, end_region) are made. `batched`: those regions are not
+  // Partitioned emit (neither count_only nor representatives_only): the level's cut and the regions of its
+  // cells (at least of those in [first_region, end_region)); the parts of regions [first_region, end_region)
+  // are made. `batched`: those regions are not
   // the whole level: only the input primitives touching a cell of theirs or of their halo (the cells that
   // share an input primitive with one of theirs) are visited, which gives every cell of either its complete
   // neighbourhood, and representatives are read from representatives_path (written before).
   const LevelCut* cut = nullptr;
-  const uint32_t* region_of = nullptr;
+  const CellRegions* regions = nullptr;
   uint32_t first_region = 0, end_region = 0;
   bool batched = false;
   // representatives_only: the cells whose quadrics are summed.
@@ -208,7 +209,7 @@ std::vector<EmitCounts> emit_levels(const std::string& store_dir, const StoreMet
                                     const core::ClusterOptions& cluster, const EmitOptions& options,
                                     Progress& progress, EmitScratch& scratch, const EmitSink& sink);
 
-// Routes `batches` (at most kRouteBatches [first, end) region ranges of `level`, whose cut and region_of are
+// Routes `batches` (at most kRouteBatches [first, end) region ranges of `level`, whose cut and regions are
 // set) in two passes over the input, instead of two per batch: the first marks each cell's halo batches (one
 // byte a cell: the batches, other than its own, that it shares an input triangle or segment with), the second
 // each word's batches. A batch emitted with these routes visits exactly the primitives it visits without them,
@@ -249,9 +250,18 @@ size_t emit_group_end(std::span<const uint64_t> cells, size_t first, uint64_t ve
 // with other levels as emit_group_end allows) when its map, its working memory (emit_level_bytes) and its
 // per-cell tables fit in `budget`; otherwise in batches of regions, each batch's owned cells at most
 // batch_cells, after its representatives are written in ranges of at most reps_range_cells cells. A level
-// holds kLevelBytesPerCell bytes a cell beside its batches: its cells' regions (4), a batch's roles (1) and
-// uses (1) and slots (4), the level files' tables (8).
+// holds kLevelBytesPerCell bytes a cell beside its batches: its cells' regions (4: CellRegions of the
+// whole cut), a batch's bits (about 2, kBatchBitsPer64Cells), its slots (4 a numbered cell, all of them when
+// the level is whole), the level files' tables (8).
 inline constexpr uint64_t kLevelBytesPerCell = 18;
+// What a batched level holds per cell of the whole level, whoever holds its regions and level files: a
+// batch's bits (own and halo cells, those numbering its quadrics and its ring, cells used by a triangle or a
+// kept edge, cells numbered for output, the colours' cells; RankedBits, counts included where they are
+// ranked): 96 bytes a 64 cells.
+inline constexpr uint64_t kBatchBitsPer64Cells = 96;
+// And per cell of a batch (its own, halo and ring cells): its slot by rank (4) and, for its own cells, its
+// region by rank (4: the regions of a sharded task's run, CellRegions).
+inline constexpr uint64_t kBatchCellBytes = 8;
 struct EmitLevelPlan {
   bool batched = false;
   uint64_t batch_cells = 0, reps_range_cells = 0;

@@ -4,22 +4,32 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cstdint>
 #include <vector>
 
 namespace lodstream::stream {
 
-// `before` is filled by count() once every bit is set.
+// `before` is filled by count() once every bit is set (until then it is a plain bit set: 8 bytes a 64 items;
+// with the counts, 12).
 struct RankedBits {
   std::vector<uint64_t> bits;
   std::vector<uint32_t> before;
-  explicit RankedBits(uint64_t n = 0) : bits((n + 63) / 64, 0), before(bits.size(), 0) {}
+  explicit RankedBits(uint64_t n = 0) : bits((n + 63) / 64, 0) {}
   void set(uint64_t i) { bits[i >> 6] |= uint64_t{1} << (i & 63); }
+  // set() from several threads at once (before count()): a bit only ever goes from 0 to 1, so the result does
+  // not depend on their order.
+  void set_shared(uint64_t i) {
+    const uint64_t m = uint64_t{1} << (i & 63);
+    std::atomic_ref<uint64_t> w(bits[i >> 6]);
+    if (!(w.load(std::memory_order_relaxed) & m)) w.fetch_or(m, std::memory_order_relaxed);
+  }
   bool has(uint64_t i) const { return (bits[i >> 6] >> (i & 63)) & 1; }
   // The set bits (after count()).
   uint64_t ones() const { return bits.empty() ? 0 : before.back() + static_cast<uint64_t>(std::popcount(bits.back())); }
   void count() {
+    before.resize(bits.size());
     uint32_t n = 0;
     for (size_t w = 0; w < bits.size(); ++w) before[w] = n, n += static_cast<uint32_t>(std::popcount(bits[w]));
   }

@@ -246,13 +246,17 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   }
   // Memory of a batched level (as plan_emit_level counts it): pass A's tables for the batch's cells and its
   // halo (half as many again), with their quadrics (the task sums its cells' own), the quadrics of the ring
-  // beyond the halo (pass Q: half as many again), its per-cell tables (and the quadrics' index, 4 bytes a
-  // cell) and its share of the blocks in flight; and the group's packed cluster map, paged from the
+  // beyond the halo (pass Q: half as many again), their slots and regions by rank (kBatchCellBytes), and its
+  // share of the blocks in flight; per cell of the whole level only bits: the batch's (kBatchBitsPer64Cells)
+  // and those of the task's regions (CellRegions); and the group's packed cluster map, paged from the
   // vertex-cells files (stream/paged_vertex_map.h: at most an eighth of the budget of pages, its page table).
   const bool quadrics = in.options.representative == Representative::quadric;
-  const uint64_t per_cell = emit_level_bytes(1, 0, in.options) * 3 / 2 + (quadrics ? sizeof(core::Quadric) / 2 : 0);
+  const uint64_t per_cell =
+      (emit_level_bytes(1, 0, in.options) + kBatchCellBytes) * 3 / 2 + (quadrics ? sizeof(core::Quadric) / 2 : 0);
   const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), in.options) + emit_corner_bytes(in.budget);
-  auto level_bytes = [&](size_t l, uint64_t batch) { return (kLevelBytesPerCell + 4) * in.cells[l] + in_flight + per_cell * batch; };
+  auto level_bytes = [&](size_t l, uint64_t batch) {
+    return (in.cells[l] + 63) / 64 * kBatchBitsPer64Cells + cell_regions_bytes(in.cells[l], share[l]) + in_flight + per_cell * batch;
+  };
   EmitOptions emit = in.options;  // its thickness passes hold what in_flight counts for them
   emit.corner_bytes = emit_corner_bytes(in.budget);
   emit.own_representatives = true;
@@ -284,9 +288,11 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   // consecutive regions while they fit.
   auto emit_group = [&](const std::vector<size_t>& group, unsigned bits, uint64_t bytes) {
     const size_t first = group[0];
-    std::vector<std::vector<uint32_t>> region_of;
+    // The regions of the task's own cells (a bit and a half a cell of the level beside them).
+    std::vector<CellRegions> regions;
     for (size_t l : group)
-      region_of.push_back(load_region_of(in.prefix, l, in.cells[l], cube, cuts[l], in.options.representative, meta.single_precision));
+      regions.push_back(load_cell_regions(in.prefix, l, in.cells[l], cube, cuts[l], in.options.representative, meta.single_precision,
+                                          runs[l].first, runs[l].second));
     if (group.size() > 1 || map_bytes(bits) + bytes <= in.budget) {
       // Wide levels whose pass A ran as units (wide_units.h): read from the units' files.
       std::vector<std::vector<std::string>> classified;
@@ -300,7 +306,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
       std::vector<EmitLevel> levels;
       for (size_t i = 0; i < group.size(); ++i) {
         const size_t l = group[i];
-        levels.push_back({l, in.cells[l], in.sizes[l], &cuts[l], region_of[i].data(), runs[l].first, runs[l].second, true});
+        levels.push_back({l, in.cells[l], in.sizes[l], &cuts[l], &regions[i], runs[l].first, runs[l].second, true});
       }
       const std::vector<EmitCounts> c = emit_levels(in.store_dir, meta, in.canonical, in.prefix, levels, in.records, in.cluster,
                                                     emit, progress, scratch, [&](size_t i, RegionPart& part) {
@@ -317,7 +323,7 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
       uint64_t held = cuts[first].cells[r];
       uint32_t e = r + 1;
       while (e < runs[first].second && held + cuts[first].cells[e] <= batch_cells) held += cuts[first].cells[e++];
-      const EmitLevel level{first, in.cells[first], in.sizes[first], &cuts[first], region_of[0].data(), r, e, true};
+      const EmitLevel level{first, in.cells[first], in.sizes[first], &cuts[first], &regions[0], r, e, true};
       const std::vector<EmitCounts> c = emit_levels(in.store_dir, meta, in.canonical, in.prefix, std::span<const EmitLevel>(&level, 1),
                                                     in.records, in.cluster, emit, progress, scratch,
                                                     [&](size_t, RegionPart& part) { writers[first]->add(info(first, part.region), part); });

@@ -1038,7 +1038,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
             }
             stream::write_representatives(store_dir, meta, canonical, prefix, l, cells[l], sizes[l], grade.records, copts,
                                           eo.representative, plans[l].reps_range_cells, progress, scratch);
-            const std::vector<uint32_t> region_of = stream::load_region_of(prefix, l, cells[l], cube, cuts[l], so.representative, meta.single_precision);
+            const stream::CellRegions regions = stream::load_cell_regions(prefix, l, cells[l], cube, cuts[l], so.representative, meta.single_precision);
             // The batches are routed kRouteBatches at a time (two passes over the input), and each batch then
             // reads only the words of the input its routes name.
             const std::vector<std::pair<uint32_t, uint32_t>> batches = stream::region_batches(cuts[l], plans[l].batch_cells);
@@ -1046,7 +1046,7 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
               const std::span<const std::pair<uint32_t, uint32_t>> routed(
                   batches.data() + b0, std::min(stream::kRouteBatches, batches.size() - b0));
               stream::BatchRoutes routes;
-              stream::EmitLevel level{l, cells[l], sizes[l], &cuts[l], region_of.data(), 0, 0, true};
+              stream::EmitLevel level{l, cells[l], sizes[l], &cuts[l], &regions, 0, 0, true};
               stream::route_batches(store_dir, meta, canonical, prefix, level, routed, grade.records, copts, progress, scratch, routes);
               for (size_t i = 0; i < routed.size(); ++i) {
                 level.first_region = routed[i].first, level.end_region = routed[i].second;
@@ -1068,11 +1068,12 @@ Result simplify(const std::string& input, const SimplifyOptions& so, const Optio
           end = static_cast<size_t>(std::find_if(plans.begin() + static_cast<ptrdiff_t>(first), plans.begin() + static_cast<ptrdiff_t>(end),
                                                  [](const stream::EmitLevelPlan& p) { return p.batched; }) -
                                     plans.begin());
-          std::vector<std::vector<uint32_t>> region_of;
+          std::vector<stream::CellRegions> regions;
           std::vector<stream::EmitLevel> group;
-          for (size_t l = first; l < end; ++l) region_of.push_back(stream::load_region_of(prefix, l, cells[l], cube, cuts[l], so.representative, meta.single_precision));
           for (size_t l = first; l < end; ++l)
-            group.push_back({l, cells[l], sizes[l], &cuts[l], region_of[l - first].data(), 0,
+            regions.push_back(stream::load_cell_regions(prefix, l, cells[l], cube, cuts[l], so.representative, meta.single_precision));
+          for (size_t l = first; l < end; ++l)
+            group.push_back({l, cells[l], sizes[l], &cuts[l], &regions[l - first], 0,
                              static_cast<uint32_t>(cuts[l].regions.size()), false});
           const std::vector<stream::EmitCounts> c =
               stream::emit_levels(store_dir, meta, canonical, prefix, group, grade.records, copts, eo, progress, scratch,

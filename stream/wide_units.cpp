@@ -65,14 +65,14 @@ nlohmann::ordered_json run_wide_units(const ShardEmitInput& in, unsigned index, 
   std::vector<ordered_json> values;
   for (size_t g = 0; g < plan.groups.size(); ++g) {
     const std::vector<size_t>& group = plan.groups[g];
-    std::vector<std::vector<uint32_t>> region_of;
+    std::vector<CellRegions> regions_of;
     std::vector<EmitLevel> levels;
     for (size_t l : group)
-      region_of.push_back(load_region_of(in.prefix, l, in.cells[l], cube, cuts[l], in.options.representative, meta.single_precision));
+      regions_of.push_back(load_cell_regions(in.prefix, l, in.cells[l], cube, cuts[l], in.options.representative, meta.single_precision));
     for (size_t i = 0; i < group.size(); ++i) {
       const size_t l = group[i];
       const uint32_t regions = static_cast<uint32_t>(cuts[l].regions.size());
-      levels.push_back({l, in.cells[l], in.sizes[l], &cuts[l], region_of[i].data(), 0, regions, true});
+      levels.push_back({l, in.cells[l], in.sizes[l], &cuts[l], &regions_of[i], 0, regions, true});
     }
     const std::string dir = wide_units_dir(in.prefix) + fmt::format("group-{}/", g);
     ordered_json unit_key = key;

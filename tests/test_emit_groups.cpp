@@ -82,12 +82,13 @@ TEST(EmitGroups, SameMeshesAloneAndGrouped) {
     for (const LevelStats& ls : report.levels) cells.push_back(ls.cells);
     const core::SceneCube cube = stream::scene_cube_of(meta);
     const std::vector<stream::LevelCut> cuts = stream::cut_levels(prefix, cells, cube, 500, rep, meta.single_precision);
-    std::vector<std::vector<uint32_t>> region_of;
+    std::vector<stream::CellRegions> regions;
+    regions.reserve(report.levels.size());  // the levels point into it
     std::vector<stream::EmitLevel> levels;
     unsigned bits = 0;  // of levels 1 to 4
     for (size_t l = 0; l < report.levels.size(); ++l) {
-      region_of.push_back(stream::load_region_of(prefix, l, cells[l], cube, cuts[l], rep, meta.single_precision));
-      levels.push_back({l, cells[l], report.levels[l].cell_size, &cuts[l], region_of[l].data(), 0,
+      regions.push_back(stream::load_cell_regions(prefix, l, cells[l], cube, cuts[l], rep, meta.single_precision));
+      levels.push_back({l, cells[l], report.levels[l].cell_size, &cuts[l], &regions[l], 0,
                         static_cast<uint32_t>(cuts[l].regions.size()), false});
       if (l > 0) bits += stream::emit_bits(report.levels[l].cells);
     }
