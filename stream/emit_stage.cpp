@@ -56,6 +56,36 @@ struct Block {
   uint64_t first = 0, count = 0;
 };
 
+// One bit per input triangle (kind 0) or segment (kind 1) of a level that collapsed to an edge or a point,
+// so that passes B and C visit only those. Held for the blocks of kEmitBlock primitives the group visits, a
+// block's words found through an offset a block (UINT32_MAX: not visited, none of its bits set), so that a
+// task holds a bit a primitive of its share of the input, not of the whole input.
+struct CollapsedBits {
+  static constexpr uint64_t kBlockWords = kEmitBlock / 64;
+  std::vector<uint32_t> first_word;  // per block of the kind: its first word in `words`, or UINT32_MAX
+  std::vector<uint64_t> words;
+  // Words for the blocks of kind `kind` among `visited` (of a column of `count` primitives), all zero.
+  void assign(uint64_t count, const std::vector<Block>& visited, int kind) {
+    first_word.assign((count + kEmitBlock - 1) / kEmitBlock, UINT32_MAX);
+    uint64_t n = 0;
+    for (const Block& b : visited) {
+      if (b.kind != kind || b.count == 0) continue;
+      for (uint64_t i = b.first / kEmitBlock; i <= (b.first + b.count - 1) / kEmitBlock; ++i)
+        if (first_word[i] == UINT32_MAX) first_word[i] = static_cast<uint32_t>(n), n += kBlockWords;
+    }
+    if (n > UINT32_MAX) fail(Status::internal, "emit: more than 2^32 words of collapsed bits");
+    words.assign(n, 0);
+  }
+  // The word of primitives [64 w, 64 w + 64): nullptr when their block is not visited. A block's words are
+  // consecutive.
+  uint64_t* word(uint64_t w) {
+    const uint32_t f = w / kBlockWords < first_word.size() ? first_word[w / kBlockWords] : UINT32_MAX;
+    return f == UINT32_MAX ? nullptr : &words[f + w % kBlockWords];
+  }
+  const uint64_t* word(uint64_t w) const { return const_cast<CollapsedBits*>(this)->word(w); }
+  uint64_t bytes() const { return first_word.capacity() * 4 + words.capacity() * 8; }
+};
+
 struct BlockOut {
   std::vector<std::array<uint32_t, 3>> triangles;  // input winding
   std::vector<std::array<uint32_t, 2>> edges;      // lower cell first
@@ -111,14 +141,22 @@ std::vector<Block> whole_blocks(const uint64_t* column_count) {
 constexpr char kClassifiedMagic[8] = {'L', 'O', 'D', 'C', 'L', 'S', 'A', '3'};
 constexpr uint64_t kEndOfBlocks = UINT64_MAX;
 
+// The collapsed words of block b (visited: within one block of kEmitBlock primitives, at a multiple of 64).
+uint64_t* block_words(CollapsedBits& bits, const Block& b) {
+  uint64_t* w = bits.word(b.first / 64);
+  if (!w) fail(Status::internal, "emit: a block's collapsed bits are not held");
+  return w;
+}
+const uint64_t* block_words(const CollapsedBits& bits, const Block& b) { return block_words(const_cast<CollapsedBits&>(bits), b); }
+
 // A block's header and outputs, as ClassifiedReader reads them.
-void write_block_out(io::FileWriter& f, const Block& b, const BlockOut& o, const std::vector<uint64_t>* collapsed) {
+void write_block_out(io::FileWriter& f, const Block& b, const BlockOut& o, const CollapsedBits* collapsed) {
   put(f, static_cast<uint64_t>(b.kind)), put(f, b.first), put(f, b.count);
   put_array(f, o.triangles), put_array(f, o.triangle_materials);
   put_array(f, o.edges), put_array(f, o.edge_materials), put_array(f, o.edge_masks);
   put_array(f, o.points), put_array(f, o.point_materials), put_array(f, o.point_masks);
   put_array(f, o.quadric_cells), put_array(f, o.quadrics);
-  if (b.kind < 2) f.write(collapsed[b.kind].data() + b.first / 64, (b.count + 63) / 64 * sizeof(uint64_t));
+  if (b.kind < 2) f.write(block_words(collapsed[b.kind], b), (b.count + 63) / 64 * sizeof(uint64_t));
 }
 
 // Reads a unit's file block by block; Failure(io_error) naming the file where it is missing, of another
@@ -139,14 +177,14 @@ class ClassifiedReader : TaskFileReader {
   }
   // A block's outputs (after its header) into `o`, its collapsed bits into `collapsed` (per kind, the
   // level's words of every primitive; none: passed over).
-  void block_out(const Block& b, BlockOut& o, std::vector<uint64_t>* collapsed) {
+  void block_out(const Block& b, BlockOut& o, CollapsedBits* collapsed) {
     values(o.triangles), values(o.triangle_materials);
     values(o.edges), values(o.edge_materials), values(o.edge_masks);
     values(o.points), values(o.point_materials), values(o.point_masks);
     values(o.quadric_cells), values(o.quadrics);
     if (b.kind == 2) return;
     const uint64_t bytes = (b.count + 63) / 64 * sizeof(uint64_t);
-    if (collapsed) read(collapsed[b.kind].data() + b.first / 64, bytes);
+    if (collapsed) read(block_words(collapsed[b.kind], b), bytes);
     else if (std::fseek(f_, static_cast<long>(bytes), SEEK_CUR) != 0) fail(Status::io_error, path_ + ": " + what_ + " is cut short");
   }
 
@@ -318,9 +356,8 @@ struct LevelState {
   std::vector<core::Quadric> quadrics;
   // Elimination: per cell a bit when a kept triangle uses it, and one when a kept edge does.
   RankedBits by_triangle, by_kept_edge;
-  // One bit per input triangle and segment that collapsed to an edge or a point, so that passes B and C
-  // visit only those.
-  std::vector<uint64_t> collapsed[2];
+  // The input triangles and segments that collapsed to an edge or a point (passes B and C visit only those).
+  CollapsedBits collapsed[2];
   // Elimination, passes B and C.
   std::vector<std::array<uint32_t, 2>> kept_edges;  // in edge order; k_edges finds them by cells
   FlatMap<2> k_edges;
@@ -1118,9 +1155,14 @@ std::vector<Block> collapsed_subblocks(const std::vector<Block>& blocks, const s
     const uint64_t subs = (column_count[kind] + kBoundsBlock - 1) / kBoundsBlock;
     marked[kind].assign((subs + 63) / 64, 0);
     for (const LevelState& L : levels) {
-      const std::vector<uint64_t>& bits = L.collapsed[kind];
-      for (uint64_t w = 0; w < bits.size(); ++w)
-        if (bits[w]) marked[kind][w / words / 64] |= uint64_t{1} << (w / words % 64);
+      const CollapsedBits& bits = L.collapsed[kind];
+      for (uint64_t block = 0; block < bits.first_word.size(); ++block) {
+        if (bits.first_word[block] == UINT32_MAX) continue;
+        for (uint64_t j = 0; j < CollapsedBits::kBlockWords; ++j) {
+          const uint64_t w = block * CollapsedBits::kBlockWords + j;  // the word's index in the whole column
+          if (bits.words[bits.first_word[block] + j]) marked[kind][w / words / 64] |= uint64_t{1} << (w / words % 64);
+        }
+      }
     }
   }
   return marked_subblocks(blocks, marked);
@@ -1365,8 +1407,6 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
       L.quadric_base = options.representatives_only ? L.in.first_cell : 0;
       L.quadrics.resize(options.representatives_only ? L.in.end_cell - L.in.first_cell : L.in.cells);
     }
-    for (int kind = 0; kind < 2; ++kind)
-      if (!options.count_only && !options.representatives_only) L.collapsed[kind].assign((column_count[kind] + 63) / 64, 0);
   }
   find_halos(levels, run_blocks, record_of, cell);
   // A batched level's quadrics: its own and halo cells', which are all it outputs or uses, by rank.
@@ -1383,11 +1423,16 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
                [](const LevelState& L, uint64_t c) { return in_batch(L, c); }, *reach);
     blocks = bounded_blocks(*options.block_bounds, *reach, column_count);
   }
+  // The collapsed bits of the blocks pass A visits (from units: of every block).
+  for (LevelState& L : levels)
+    for (int kind = 0; kind < 2; ++kind)
+      if (!options.count_only && !options.representatives_only)
+        L.collapsed[kind].assign(column_count[kind], options.classified ? whole : blocks, kind);
   auto classify = [&](const Block& b, std::span<const uint32_t> ids, BlockOut* outs_l, Scratch* scratch_l) {
     auto mark = [&](LevelState& L, size_t i) {
       if (options.count_only) return;
       const uint64_t p = b.first + i;
-      L.collapsed[b.kind][p / 64] |= uint64_t{1} << (p % 64);
+      *L.collapsed[b.kind].word(p / 64) |= uint64_t{1} << (p % 64);
     };
     // The sub-block bit of the block's q-th primitive (units only: BlockOut::edge_masks).
     auto sub_bit = [&](size_t q) { return static_cast<uint16_t>(1u << ((b.first + q) % kEmitBlock / kBoundsBlock)); };
@@ -1670,7 +1715,8 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
     const uint64_t first_word = b.first / 64, words = (b.count + 63) / 64;  // b.first is a multiple of 64
     for (uint64_t w = first_word; w < first_word + words; ++w) {
       uint64_t any = 0;  // the primitives of this word that collapsed in some level, visited in order
-      for (size_t l = 0; l < nl; ++l) any |= levels[l].collapsed[b.kind][w];
+      for (size_t l = 0; l < nl; ++l)
+        if (const uint64_t* word = levels[l].collapsed[b.kind].word(w)) any |= *word;
       for (; any; any &= any - 1) {
         const uint64_t bit = uint64_t{1} << std::countr_zero(any);
         const uint32_t* v = &ids[(w * 64 + static_cast<uint64_t>(std::countr_zero(any)) - b.first) * arity];
@@ -1680,8 +1726,9 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
         bool fetched = false;
         for (size_t l = 0; l < nl; ++l) {
           LevelState& L = levels[l];
-          uint64_t& word = L.collapsed[b.kind][w];
-          if (!(word & bit)) continue;
+          uint64_t* held = L.collapsed[b.kind].word(w);
+          if (!held || !(*held & bit)) continue;
+          uint64_t& word = *held;
           uint32_t lo = UINT32_MAX, hi = 0;
           for (size_t k = 0; k < arity; ++k) lo = std::min(lo, cell(L, r[k])), hi = std::max(hi, cell(L, r[k]));
           const uint32_t e = L.k_edges.find({lo, hi});
@@ -1790,7 +1837,7 @@ std::vector<EmitCounts> emit_or_route(const std::string& store_dir, const StoreM
 
   for (size_t l = 0; l < nl; ++l) {
     LevelState& L = levels[l];
-    for (auto& b : L.collapsed) std::vector<uint64_t>().swap(b);
+    for (auto& b : L.collapsed) b = CollapsedBits();
     L.k_edges = FlatMap<2>();
     std::vector<float> thickness(L.kept_edges.size());
     for (size_t i = 0; i < L.kept_edges.size(); ++i) {

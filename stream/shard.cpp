@@ -248,14 +248,19 @@ std::vector<EmitCounts> emit_shard(const ShardEmitInput& in, unsigned index, uns
   // halo (half as many again), with their quadrics (the task sums its cells' own), the quadrics of the ring
   // beyond the halo (pass Q: half as many again), their slots and regions by rank (kBatchCellBytes), and its
   // share of the blocks in flight; per cell of the whole level only bits: the batch's (kBatchBitsPer64Cells)
-  // and those of the task's regions (CellRegions); and the group's packed cluster map, paged from the
-  // vertex-cells files (stream/paged_vertex_map.h: at most an eighth of the budget of pages, its page table).
+  // and those of the task's regions (CellRegions); a bit a primitive of the blocks it visits (the collapsed
+  // bits: counted as twice its share of the cells' share of the input, for the blocks its halo reaches);
+  // and the group's packed cluster map, paged from the vertex-cells files (stream/paged_vertex_map.h: at
+  // most an eighth of the budget of pages, its page table).
   const bool quadrics = in.options.representative == Representative::quadric;
   const uint64_t per_cell =
       (emit_level_bytes(1, 0, in.options) + kBatchCellBytes) * 3 / 2 + (quadrics ? sizeof(core::Quadric) / 2 : 0);
   const uint64_t in_flight = emit_level_bytes(0, meta.primitives(), in.options) + emit_corner_bytes(in.budget);
   auto level_bytes = [&](size_t l, uint64_t batch) {
-    return (in.cells[l] + 63) / 64 * kBatchBitsPer64Cells + cell_regions_bytes(in.cells[l], share[l]) + in_flight + per_cell * batch;
+    const double part = in.cells[l] ? 2.0 * static_cast<double>(share[l]) / static_cast<double>(in.cells[l]) : 1.0;
+    const uint64_t collapsed = static_cast<uint64_t>(static_cast<double>(meta.primitives()) * std::min(1.0, part)) / 8 + (64 << 10);
+    return (in.cells[l] + 63) / 64 * kBatchBitsPer64Cells + cell_regions_bytes(in.cells[l], share[l]) + collapsed + in_flight +
+           per_cell * batch;
   };
   EmitOptions emit = in.options;  // its thickness passes hold what in_flight counts for them
   emit.corner_bytes = emit_corner_bytes(in.budget);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#include <tbb/parallel_for.h>
 
 #include "core/floating_cell.h"
 #include "core/mesh.h"
@@ -205,6 +206,69 @@ TEST(EmitGroups, ALevelThatCannotFitStopsWithUsage) {
   // Counting only, no quadrics: 240 bytes a cell.
   const stream::EmitOptions count_only{Representative::quadric, 30, true, true};
   EXPECT_NO_THROW(stream::check_emit_budget(cells, 0, vertices, triangles, need - 80 * 2557792, 0, count_only));
+}
+
+
+// A sharded task's regions of its level (stream/emit_regions.h CellRegions): loaded for a run of the cut,
+// every cell of the run has the region the whole cut gives it and every other cell none, in a bit and a
+// half a cell of the level and a region a cell of the run; the bits set from several threads at once
+// (RankedBits::set_shared, as the halos and the uses are marked) are the bits set one at a time.
+TEST(EmitGroups, ARunsCellRegionsAreTheWholeCutsInABitACell) {
+  test::TempDir tmp;
+  Options o;
+  o.threads = 2;
+  o.work_dir = tmp.file("work");
+  SimplifyOptions so;
+  so.output_dir = tmp.file("out");
+  SimplifyReport report;
+  const Result r = simplify(test::source_dir() + "/tests/data/sample-room.ply", so, o, &report);
+  ASSERT_TRUE(r.ok()) << r.message;
+  stream::StoreMeta meta;
+  ASSERT_TRUE(stream::read_store_meta(o.work_dir + "/store", &meta));
+  const std::string prefix = o.work_dir + "/";
+  std::vector<uint64_t> cells;
+  for (const LevelStats& ls : report.levels) cells.push_back(ls.cells);
+  const core::SceneCube cube = stream::scene_cube_of(meta);
+  const std::vector<stream::LevelCut> cuts = stream::cut_levels(prefix, cells, cube, 200, so.representative, meta.single_precision);
+  ASSERT_GE(cuts[0].regions.size(), 4u);
+  const stream::CellRegions whole = stream::load_cell_regions(prefix, 0, cells[0], cube, cuts[0], so.representative, meta.single_precision);
+  EXPECT_TRUE(whole.in.bits.empty());
+  EXPECT_EQ(whole.bytes(), stream::cell_regions_bytes(cells[0], cells[0]));
+  // A run of the cut from its second region that holds cells to the one before its last (some regions of a
+  // cut hold none).
+  std::vector<uint32_t> full;
+  for (uint32_t i = 0; i < cuts[0].regions.size(); ++i)
+    if (cuts[0].cells[i] > 0) full.push_back(i);
+  ASSERT_GE(full.size(), 3u);
+  const uint32_t first = full[1], end = full.back();
+  const stream::CellRegions run =
+      stream::load_cell_regions(prefix, 0, cells[0], cube, cuts[0], so.representative, meta.single_precision, first, end);
+  uint64_t in_run = 0;
+  for (uint64_t c = 0; c < cells[0]; ++c) {
+    const uint32_t w = whole.of(c);
+    ASSERT_LT(w, cuts[0].regions.size());
+    if (w >= first && w < end) {
+      EXPECT_EQ(run.of(c), w) << "cell " << c;
+      ++in_run;
+    } else {
+      EXPECT_EQ(run.of(c), UINT32_MAX) << "cell " << c;
+    }
+  }
+  uint64_t expected = 0;
+  for (uint32_t i = first; i < end; ++i) expected += cuts[0].cells[i];
+  EXPECT_EQ(in_run, expected);
+  EXPECT_GT(in_run, 0u);
+  EXPECT_LT(in_run, cells[0]);
+  EXPECT_EQ(run.region.size(), in_run);
+  EXPECT_EQ(stream::cell_regions_bytes(cells[0], in_run), (cells[0] + 63) / 64 * 12 + 4 * in_run);
+  EXPECT_LE(run.bytes(), stream::cell_regions_bytes(cells[0], in_run) + 64);
+
+  stream::RankedBits one(100000), shared(100000);
+  for (uint64_t i = 0; i < 100000; i += 3) one.set(i * 7 % 100000);
+  tbb::parallel_for(uint64_t{0}, uint64_t{100000}, [&](uint64_t i) {
+    if (i % 3 == 0) shared.set_shared(i * 7 % 100000), shared.set_shared(i * 7 % 100000);
+  });
+  EXPECT_EQ(shared.bits, one.bits);
 }
 
 }  // namespace
