@@ -36,6 +36,16 @@ void expect_same_mesh(const core::LodMesh& a, const core::LodMesh& b, const std:
 
 using Parts = std::vector<stream::RegionPart>;
 
+// The sample room simplified with representative `rep` (two threads) into tmp's "work" and "out": the tests
+// read the stages' files it leaves in the work directory.
+Result simplify_room(const test::TempDir& tmp, Representative rep, Options& o, SimplifyOptions& so, SimplifyReport& report) {
+  o.threads = 2;
+  o.work_dir = tmp.file("work");
+  so.output_dir = tmp.file("out");
+  so.representative = rep;
+  return simplify(test::source_dir() + "/tests/data/sample-room.ply", so, o, &report);
+}
+
 void expect_same_parts(const Parts& a, const Parts& b, const std::string& what) {
   ASSERT_EQ(a.size(), b.size()) << what;
   for (size_t i = 0; i < a.size(); ++i) {
@@ -62,13 +72,9 @@ TEST(EmitGroups, SameMeshesAloneAndGrouped) {
   for (Representative rep : {Representative::center, Representative::quadric}) {
     test::TempDir tmp;
     Options o;
-    o.threads = 2;
-    o.work_dir = tmp.file("work");
     SimplifyOptions so;
-    so.output_dir = tmp.file("out");
-    so.representative = rep;
     SimplifyReport report;
-    const Result r = simplify(test::source_dir() + "/tests/data/sample-room.ply", so, o, &report);
+    const Result r = simplify_room(tmp, rep, o, so, report);
     ASSERT_TRUE(r.ok()) << r.message;
 
     // The stages' files, as simplify left them in the work directory.
@@ -216,12 +222,9 @@ TEST(EmitGroups, ALevelThatCannotFitStopsWithUsage) {
 TEST(EmitGroups, ARunsCellRegionsAreTheWholeCutsInABitACell) {
   test::TempDir tmp;
   Options o;
-  o.threads = 2;
-  o.work_dir = tmp.file("work");
   SimplifyOptions so;
-  so.output_dir = tmp.file("out");
   SimplifyReport report;
-  const Result r = simplify(test::source_dir() + "/tests/data/sample-room.ply", so, o, &report);
+  const Result r = simplify_room(tmp, SimplifyOptions{}.representative, o, so, report);
   ASSERT_TRUE(r.ok()) << r.message;
   stream::StoreMeta meta;
   ASSERT_TRUE(stream::read_store_meta(o.work_dir + "/store", &meta));
