@@ -720,9 +720,9 @@ uint64_t emit_level_bytes(uint64_t cells, uint64_t primitives, const EmitOptions
   // about 25 MB whatever its cells, its share of the block outputs and per-thread tables of the blocks in
   // flight (two sets of 4 per thread, 16 here): 24 bytes per primitive in flight.
   // With materials, a material id per output primitive during pass A (about 3 a cell, 4 bytes each).
-  // Vertex colours add nothing at the peak: their pass (sum_cell_colors: a bit and a half a cell, 44 bytes a used cell,
-  // 84 with the mean) runs after elimination has freed pass A's dedupe tables, and what it keeps (8 bytes a
-  // used cell) goes with the level's parts. Measured: the 48.6 M city with colours at --memory 1G emits
+  // Vertex colours add nothing at the peak: their pass (sum_cell_colors: a bit and a half a cell, 44 bytes
+  // a used cell, 84 with the mean) runs after elimination has freed pass A's dedupe tables, and what it keeps
+  // (8 bytes a used cell) goes with the level's parts. Measured: the 48.6 M city with colours at --memory 1G emits
   // its finest level whole, as without, within the cap (README, "Materials and colours").
   const bool quadric = options.representative == Representative::quadric && !options.count_only;
   return cells * (240 + (quadric ? sizeof(core::Quadric) : 0) + (options.materials && !options.count_only ? 12 : 0)) +
