@@ -76,14 +76,28 @@ struct CollapsedBits {
     if (n > UINT32_MAX) fail(Status::internal, "emit: more than 2^32 words of collapsed bits");
     words.assign(n, 0);
   }
-  // The word of primitives [64 w, 64 w + 64): nullptr when their block is not visited. A block's words are
-  // consecutive.
-  uint64_t* word(uint64_t w) {
+  // Where the word of primitives [64 w, 64 w + 64) is in `words`, or kNotHeld when their block is not
+  // visited. A block's words are consecutive.
+  static constexpr uint64_t kNotHeld = UINT64_MAX;
+  uint64_t at(uint64_t w) const {
     const uint32_t f = w / kBlockWords < first_word.size() ? first_word[w / kBlockWords] : UINT32_MAX;
-    return f == UINT32_MAX ? nullptr : &words[f + w % kBlockWords];
+    return f == UINT32_MAX ? kNotHeld : f + w % kBlockWords;
   }
-  const uint64_t* word(uint64_t w) const { return const_cast<CollapsedBits*>(this)->word(w); }
-  uint64_t bytes() const { return first_word.capacity() * 4 + words.capacity() * 8; }
+  uint64_t* word(uint64_t w) {
+    const uint64_t i = at(w);
+    return i == kNotHeld ? nullptr : &words[i];
+  }
+  const uint64_t* word(uint64_t w) const {
+    const uint64_t i = at(w);
+    return i == kNotHeld ? nullptr : &words[i];
+  }
+  // Where block b's words are (a visited block: within one block of kEmitBlock primitives, at a multiple
+  // of 64).
+  uint64_t block_at(const Block& b) const {
+    const uint64_t i = at(b.first / 64);
+    if (i == kNotHeld) fail(Status::internal, "emit: a block's collapsed bits are not held");
+    return i;
+  }
 };
 
 struct BlockOut {
@@ -141,14 +155,6 @@ std::vector<Block> whole_blocks(const uint64_t* column_count) {
 constexpr char kClassifiedMagic[8] = {'L', 'O', 'D', 'C', 'L', 'S', 'A', '3'};
 constexpr uint64_t kEndOfBlocks = UINT64_MAX;
 
-// The collapsed words of block b (visited: within one block of kEmitBlock primitives, at a multiple of 64).
-uint64_t* block_words(CollapsedBits& bits, const Block& b) {
-  uint64_t* w = bits.word(b.first / 64);
-  if (!w) fail(Status::internal, "emit: a block's collapsed bits are not held");
-  return w;
-}
-const uint64_t* block_words(const CollapsedBits& bits, const Block& b) { return block_words(const_cast<CollapsedBits&>(bits), b); }
-
 // A block's header and outputs, as ClassifiedReader reads them.
 void write_block_out(io::FileWriter& f, const Block& b, const BlockOut& o, const CollapsedBits* collapsed) {
   put(f, static_cast<uint64_t>(b.kind)), put(f, b.first), put(f, b.count);
@@ -156,7 +162,7 @@ void write_block_out(io::FileWriter& f, const Block& b, const BlockOut& o, const
   put_array(f, o.edges), put_array(f, o.edge_materials), put_array(f, o.edge_masks);
   put_array(f, o.points), put_array(f, o.point_materials), put_array(f, o.point_masks);
   put_array(f, o.quadric_cells), put_array(f, o.quadrics);
-  if (b.kind < 2) f.write(block_words(collapsed[b.kind], b), (b.count + 63) / 64 * sizeof(uint64_t));
+  if (b.kind < 2) f.write(collapsed[b.kind].words.data() + collapsed[b.kind].block_at(b), (b.count + 63) / 64 * sizeof(uint64_t));
 }
 
 // Reads a unit's file block by block; Failure(io_error) naming the file where it is missing, of another
@@ -184,7 +190,7 @@ class ClassifiedReader : TaskFileReader {
     values(o.quadric_cells), values(o.quadrics);
     if (b.kind == 2) return;
     const uint64_t bytes = (b.count + 63) / 64 * sizeof(uint64_t);
-    if (collapsed) read(block_words(collapsed[b.kind], b), bytes);
+    if (collapsed) read(collapsed[b.kind].words.data() + collapsed[b.kind].block_at(b), bytes);
     else if (std::fseek(f_, static_cast<long>(bytes), SEEK_CUR) != 0) fail(Status::io_error, path_ + ": " + what_ + " is cut short");
   }
 
@@ -500,13 +506,6 @@ struct CellSlots {
   uint32_t slot_of(uint64_t c) const { return numbered.has(c) ? slot_by_rank[numbered.rank(c)] : UINT32_MAX; }
 };
 
-// Calls f(c) for each cell c of the level whose bit is set in `bits`, in cell order.
-template <class F>
-void for_each_bit(const RankedBits& bits, F&& f) {
-  for (size_t w = 0; w < bits.bits.size(); ++w)
-    for (uint64_t b = bits.bits[w]; b; b &= b - 1) f(64 * uint64_t{w} + static_cast<uint64_t>(std::countr_zero(b)));
-}
-
 void number_cells(const LevelState& L, CellSlots& s) {
   // The cells that take a slot: the corners of the triangles, the ends of the kept edges, the kept points,
   // and the own cells that a kept edge uses.
@@ -515,7 +514,7 @@ void number_cells(const LevelState& L, CellSlots& s) {
     for (uint32_t c : t) s.numbered.set(c);
   for (const auto& e : L.kept_edges) s.numbered.set(e[0]), s.numbered.set(e[1]);
   for (uint32_t c : L.kept_points) s.numbered.set(c);
-  for_each_bit(L.by_kept_edge, [&](uint64_t c) {
+  L.by_kept_edge.for_each([&](uint64_t c) {
     if (owned(L, c)) s.numbered.set(c);
   });
   s.numbered.count();
@@ -532,7 +531,7 @@ void number_cells(const LevelState& L, CellSlots& s) {
   s.triangle_slots = s.cell.size();
   for (const auto& e : L.kept_edges) use(e[0]), use(e[1]);
   for (uint32_t c : L.kept_points) use(c);
-  for_each_bit(L.by_kept_edge, [&](uint64_t c) {
+  L.by_kept_edge.for_each([&](uint64_t c) {
     if (owned(L, c)) use(c);
   });
 }

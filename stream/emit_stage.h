@@ -34,8 +34,8 @@
 // built once for the level (EmitScratch).
 // Memory: the group's packed cluster maps (bit_width(cells) bits per stored vertex and level, kept in
 // EmitScratch between groups; a sharded task's paged, stream/paged_vertex_map.h: only the pages of the
-// vertices its groups of blocks touch) and per level one bit per input triangle and segment (collapsed to an edge
-// or not), plus what grows with the output: at the peak (classification), the triangle and edge dedupe
+// vertices its groups of blocks touch) and per level one bit per input triangle and segment of the blocks
+// it visits (collapsed to an edge or not), plus what grows with the output: at the peak (classification), the triangle and edge dedupe
 // tables and the quadrics. Elimination runs before the thickness passes: pass B visits only the
 // primitives that collapsed to a kept edge and keeps their distinct corners (a set of {edge, vertex} pairs
 // and a list of them, about 40 bytes a corner); pass C reads that list, not the input.

@@ -48,6 +48,12 @@ struct RankedBits {
     for (uint64_t r = k - before[w]; r > 0; --r) b &= b - 1;
     return 64 * w + static_cast<uint64_t>(std::countr_zero(b));
   }
+  // Calls f(i) for each set bit i, in order.
+  template <class F>
+  void for_each(F&& f) const {
+    for (size_t w = 0; w < bits.size(); ++w)
+      for (uint64_t b = bits[w]; b; b &= b - 1) f(64 * uint64_t{w} + static_cast<uint64_t>(std::countr_zero(b)));
+  }
   uint64_t bytes() const { return bits.capacity() * 8 + before.capacity() * 4; }
 };
 
